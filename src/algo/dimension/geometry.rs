@@ -1,0 +1,184 @@
+//! Geometry of seed 003 on the ellipsoid: where a 2D radar's plot lies for an
+//! assumed target height (it lies on the cone of its slant range and
+//! azimuth, elevation unknown), the horizontal footprint used by dimension
+//! lifting and the direction from the Earth's centre used by dimension
+//! splitting.
+
+use nalgebra::Vector3;
+
+use crate::algo::{
+    AlgoError,
+    geo::{LocalFrame, ecef_to_geodetic, geodetic_to_ecef},
+    polar::polar_to_enu_3d,
+};
+
+/// Mean Earth radius scaling the direction coordinates (m).
+pub const DIRECTION_RADIUS_M: f64 = 6_371_008.8;
+
+/// Elevation at which slant range ρ from a site at geocentric radius `r_site`
+/// reaches geocentric radius `r_target` on a sphere (law of cosines):
+/// sin E = (r_t² − r_s² − ρ²) / (2 r_s ρ).
+pub fn sphere_elevation(range: f64, r_site: f64, r_target: f64) -> Result<f64, AlgoError> {
+    let s = (r_target * r_target - r_site * r_site - range * range) / (2.0 * r_site * range);
+    if !(s.is_finite() && (-1.0..=1.0).contains(&s)) {
+        return Err(AlgoError::DegenerateGeometry {
+            what: "2D plot",
+            reason: "the slant range cannot reach the assumed height",
+        });
+    }
+    Ok(s.asin())
+}
+
+/// ECEF position of a 2D plot (slant range, azimuth) of the radar whose
+/// local frame is `radar`, placed at ellipsoidal height `height`: a start on
+/// the sphere of the site's Gaussian radius √(M N), then Newton steps on the
+/// ellipsoid (dh/dE by central difference) to 1 mm.
+pub fn plot_at_height(
+    radar: &LocalFrame,
+    range: f64,
+    azimuth: f64,
+    height: f64,
+) -> Result<([f64; 3], f64), AlgoError> {
+    let ell = radar.ellipsoid();
+    let (lat, _, hs) = radar.origin_geodetic();
+    let e2 = ell.e2();
+    let w = (1.0 - e2 * lat.sin().powi(2)).sqrt();
+    let gauss = ell.a() * (1.0 - e2).sqrt() / (w * w);
+    let mut el = sphere_elevation(range, gauss + hs, gauss + height)?;
+    let h_of = |el: f64| -> Result<f64, AlgoError> {
+        let p = radar.enu_to_ecef(polar_to_enu_3d(range, azimuth, el)?)?;
+        Ok(ecef_to_geodetic(&ell, p)?.2)
+    };
+    for _ in 0..8 {
+        let h = h_of(el)?;
+        if (h - height).abs() < 1e-3 {
+            break;
+        }
+        let d = 1e-6;
+        let slope = (h_of(el + d)? - h_of(el - d)?) / (2.0 * d);
+        if !(slope.is_finite() && slope.abs() > 1e-9) {
+            return Err(AlgoError::DegenerateGeometry {
+                what: "2D plot",
+                reason: "the height does not change with elevation",
+            });
+        }
+        el = (el - (h - height) / slope).clamp(-1.5, 1.5);
+    }
+    Ok((radar.enu_to_ecef(polar_to_enu_3d(range, azimuth, el)?)?, el))
+}
+
+/// Horizontal footprint: the ENU `[e, n]` in `centre` of the point at height 0
+/// below `ecef` (same latitude and longitude).
+pub fn footprint(centre: &LocalFrame, ecef: [f64; 3]) -> Result<[f64; 2], AlgoError> {
+    let ell = centre.ellipsoid();
+    let (lat, lon, _) = ecef_to_geodetic(&ell, ecef)?;
+    let p = centre.ecef_to_enu(geodetic_to_ecef(&ell, lat, lon, 0.0)?)?;
+    Ok([p[0], p[1]])
+}
+
+/// Direction from the Earth's centre, as `R₀ (ê·u, n̂·u)` with u = p/|p| and
+/// ê, n̂ the east and north axes of `centre` (metres of arc near the centre).
+pub fn direction(centre: &LocalFrame, ecef: [f64; 3]) -> Result<[f64; 2], AlgoError> {
+    let p = Vector3::from(ecef);
+    let r = p.norm();
+    if !(r.is_finite() && r > 0.0) {
+        return Err(AlgoError::DegenerateGeometry {
+            what: "position",
+            reason: "at the Earth's centre",
+        });
+    }
+    let u = p / r;
+    let rot = centre.rotation();
+    Ok([
+        DIRECTION_RADIUS_M * rot.row(0).transpose().dot(&u),
+        DIRECTION_RADIUS_M * rot.row(1).transpose().dot(&u),
+    ])
+}
+
+/// The inverse of [`direction`] with a geocentric distance: the ECEF point.
+pub fn from_direction(
+    centre: &LocalFrame,
+    d: [f64; 2],
+    distance: f64,
+) -> Result<[f64; 3], AlgoError> {
+    let (a, b) = (d[0] / DIRECTION_RADIUS_M, d[1] / DIRECTION_RADIUS_M);
+    let c2 = 1.0 - a * a - b * b;
+    if c2.is_nan() || c2 < 0.0 {
+        return Err(AlgoError::DegenerateGeometry {
+            what: "direction",
+            reason: "not a unit vector",
+        });
+    }
+    let rot = centre.rotation();
+    let u = rot.row(0).transpose() * a
+        + rot.row(1).transpose() * b
+        + rot.row(2).transpose() * c2.sqrt();
+    Ok((u * distance).into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::algo::geo::Ellipsoid;
+
+    #[test]
+    fn sphere_elevation_closed_form() {
+        // R = 6 371 000, site at R, target at R + 7000, ρ = 200 km:
+        // sin E = ((R+7000)² − R² − 200000²)/(2 R 200000)
+        //       = (2·7000·R + 7000² − 4e10)/(2.5484e12)
+        //       = (8.9194e10 + 4.9e7 − 4e10)/2.5484e12 = 0.0193231.
+        let r = 6_371_000.0;
+        let e = sphere_elevation(200_000.0, r, r + 7000.0).unwrap();
+        let expect = ((2.0 * 7000.0 * r + 7000.0f64.powi(2) - 4e10) / (2.0 * r * 2e5)).asin();
+        assert!((e - expect).abs() < 1e-15);
+        assert!((e.sin() - 0.019_323_1).abs() < 1e-7);
+        assert!(sphere_elevation(1000.0, r, r + 7000.0).is_err());
+    }
+
+    #[test]
+    fn two_d_plot_at_long_range_is_not_flat() {
+        // Radar at (30°N, 120°E, 0), target at 7 km height, ρ = 200 km.
+        // Flat Earth: ground range √(ρ² − h²) = √(4e10 − 4.9e7) = 199 877.5 m.
+        // Sphere: central angle γ = acos((r_s² + r_t² − ρ²)/(2 r_s r_t)),
+        // ground range at sea level R γ = 199 775.9 m (≈ 100 m shorter).
+        let ell = Ellipsoid::WGS84;
+        let radar = LocalFrame::new(ell, 30f64.to_radians(), 120f64.to_radians(), 0.0).unwrap();
+        let (p, el) = plot_at_height(&radar, 200_000.0, 0.3, 7000.0).unwrap();
+        let (_, _, h) = ecef_to_geodetic(&ell, p).unwrap();
+        assert!((h - 7000.0).abs() < 1e-2, "height {h}");
+        // Curvature drop ρ²/2R ≈ 3.14 km < 7 km: the elevation is small and
+        // positive, sin E ≈ 0.0193 as on the sphere above.
+        assert!((el.sin() - 0.0193).abs() < 2e-4, "{el}");
+        let fp = footprint(&radar, p).unwrap();
+        let ground = (fp[0].powi(2) + fp[1].powi(2)).sqrt();
+        let flat = (4e10f64 - 4.9e7).sqrt();
+        assert!((flat - 199_877.5).abs() < 0.1);
+        let rs = 6_371_000.0f64;
+        let rt = rs + 7000.0;
+        let gamma = ((rs * rs + rt * rt - 4e10) / (2.0 * rs * rt)).acos();
+        assert!((rs * gamma - 199_775.9).abs() < 0.1, "{}", rs * gamma);
+        // The ellipsoid answer lies within a few tens of metres of the sphere's,
+        // and ~100 m from the flat one.
+        assert!((ground - rs * gamma).abs() < 60.0, "ground {ground}");
+        assert!(flat - ground > 50.0);
+    }
+
+    #[test]
+    fn direction_round_trip_and_closed_form() {
+        // A point straight above the centre has direction (0, 0); a point
+        // 1° of longitude east on the equator: ê·u = sin 1°.
+        let ell = Ellipsoid::WGS84;
+        let centre = LocalFrame::new(ell, 0.0, 0.0, 0.0).unwrap();
+        let up = geodetic_to_ecef(&ell, 0.0, 0.0, 7000.0).unwrap();
+        let d = direction(&centre, up).unwrap();
+        assert!(d[0].abs() < 1e-6 && d[1].abs() < 1e-6);
+        let east = geodetic_to_ecef(&ell, 0.0, 1f64.to_radians(), 7000.0).unwrap();
+        let d = direction(&centre, east).unwrap();
+        assert!((d[0] - DIRECTION_RADIUS_M * 1f64.to_radians().sin()).abs() < 1e-6);
+        let r = Vector3::from(east).norm();
+        let back = from_direction(&centre, d, r).unwrap();
+        for i in 0..3 {
+            assert!((back[i] - east[i]).abs() < 1e-6);
+        }
+    }
+}

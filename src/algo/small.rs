@@ -1,0 +1,254 @@
+//! Small dense linear algebra on the stack, for the hot loops of correlation:
+//! square matrices of dimension n ≤ [`MAX_DIM`] stored row-major in fixed
+//! arrays, so that a test statistic costs no allocation.
+
+use nalgebra::DMatrix;
+
+use crate::algo::AlgoError;
+
+/// Largest state dimension the stack routines handle.
+pub const MAX_DIM: usize = 9;
+
+/// A row-major n×n matrix in a fixed buffer (only the leading n² entries are used).
+pub type Sq = [f64; MAX_DIM * MAX_DIM];
+
+/// The zero buffer.
+pub const ZERO: Sq = [0.0; MAX_DIM * MAX_DIM];
+
+/// d' S⁻¹ d for a symmetric positive definite S (n×n, row-major) by a
+/// Cholesky factorisation; `None` when S is not positive definite or the
+/// result is not finite.
+pub fn quad_form_inv(s: &[f64], d: &[f64], n: usize) -> Option<f64> {
+    debug_assert!(n <= MAX_DIM && s.len() >= n * n && d.len() >= n);
+    // One monomorphised kernel per dimension keeps the factor on the stack
+    // at its exact size (no zeroing of a 9×9 buffer for a 4×4 problem).
+    match n {
+        1 => quad_form_inv_n::<1>(s, d),
+        2 => quad_form_inv_n::<2>(s, d),
+        3 => quad_form_inv_n::<3>(s, d),
+        4 => quad_form_inv_n::<4>(s, d),
+        5 => quad_form_inv_n::<5>(s, d),
+        6 => quad_form_inv_n::<6>(s, d),
+        7 => quad_form_inv_n::<7>(s, d),
+        8 => quad_form_inv_n::<8>(s, d),
+        9 => quad_form_inv_n::<9>(s, d),
+        _ => None,
+    }
+}
+
+/// The lower Cholesky factor of a row-major N×N matrix, or `None` when it is
+/// not positive definite.
+#[allow(clippy::needless_range_loop)] // textbook index form of Cholesky
+fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
+    let mut l = [[0.0f64; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut sum = s[i * N + j];
+            for k in 0..j {
+                sum -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if sum.is_nan() || sum <= 0.0 {
+                    return None;
+                }
+                l[i][i] = sum.sqrt();
+            } else {
+                l[i][j] = sum / l[j][j];
+            }
+        }
+    }
+    Some(l)
+}
+
+#[allow(clippy::needless_range_loop)]
+fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
+    let l = cholesky_n::<N>(s)?;
+    // Forward substitution L y = d; then d' S⁻¹ d = ‖y‖².
+    let mut y = [0.0f64; N];
+    let mut q = 0.0;
+    for i in 0..N {
+        let mut sum = d[i];
+        for k in 0..i {
+            sum -= l[i][k] * y[k];
+        }
+        y[i] = sum / l[i][i];
+        q += y[i] * y[i];
+    }
+    q.is_finite().then_some(q)
+}
+
+/// trace(S⁻¹) of a symmetric positive definite S (n×n, row-major):
+/// with S = L L', trace(S⁻¹) = ‖L⁻¹‖²_F. `None` when S is not positive definite.
+pub fn trace_inverse(s: &[f64], n: usize) -> Option<f64> {
+    debug_assert!(n <= MAX_DIM && s.len() >= n * n);
+    match n {
+        1 => trace_inverse_n::<1>(s),
+        2 => trace_inverse_n::<2>(s),
+        3 => trace_inverse_n::<3>(s),
+        4 => trace_inverse_n::<4>(s),
+        5 => trace_inverse_n::<5>(s),
+        6 => trace_inverse_n::<6>(s),
+        7 => trace_inverse_n::<7>(s),
+        8 => trace_inverse_n::<8>(s),
+        9 => trace_inverse_n::<9>(s),
+        _ => None,
+    }
+}
+
+#[allow(clippy::needless_range_loop)]
+fn trace_inverse_n<const N: usize>(s: &[f64]) -> Option<f64> {
+    let l = cholesky_n::<N>(s)?;
+    // Column c of L⁻¹ solves L y = e_c (y_i = 0 for i < c).
+    let mut total = 0.0;
+    for c in 0..N {
+        let mut y = [0.0f64; N];
+        for i in c..N {
+            let mut sum = if i == c { 1.0 } else { 0.0 };
+            for k in c..i {
+                sum -= l[i][k] * y[k];
+            }
+            y[i] = sum / l[i][i];
+            total += y[i] * y[i];
+        }
+    }
+    total.is_finite().then_some(total)
+}
+
+/// Checks that a row-major n×n matrix is a covariance: finite, symmetric
+/// within [`SYMMETRY_RTOL`](crate::algo::gaussian::SYMMETRY_RTOL) of its
+/// largest entry, and positive definite (a Cholesky factorisation exists).
+/// The flat counterpart of [`check_covariance`](crate::algo::gaussian::check_covariance),
+/// without allocation.
+pub fn check_covariance(what: &'static str, p: &[f64], n: usize) -> Result<(), AlgoError> {
+    if n == 0 || n > MAX_DIM || p.len() != n * n {
+        return Err(AlgoError::DimensionMismatch {
+            what,
+            expected: n * n,
+            found: p.len(),
+        });
+    }
+    if p.iter().any(|v| !v.is_finite()) {
+        return Err(AlgoError::NonFinite { what });
+    }
+    let scale = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut worst = 0.0f64;
+    for i in 0..n {
+        for j in 0..i {
+            worst = worst.max((p[i * n + j] - p[j * n + i]).abs());
+        }
+    }
+    if worst > crate::algo::gaussian::SYMMETRY_RTOL * scale {
+        return Err(AlgoError::NotSymmetric {
+            what,
+            max_abs_asymmetry: worst,
+        });
+    }
+    // d'P⁻¹d with d = 0 succeeds exactly when the factorisation does.
+    quad_form_inv(p, &[0.0; MAX_DIM], n)
+        .map(|_| ())
+        .ok_or(AlgoError::NotPositiveDefinite { what })
+}
+
+/// The entries of a matrix in row-major order (nalgebra stores columns).
+pub fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
+    m.transpose().as_slice().to_vec()
+}
+
+/// A square matrix of dimension ≤ [`MAX_DIM`] in a stack buffer, row-major.
+pub fn to_sq(m: &DMatrix<f64>) -> Sq {
+    let mut s = ZERO;
+    let n = m.nrows();
+    debug_assert!(n <= MAX_DIM && m.ncols() == n);
+    s[..n * n].copy_from_slice(&row_major(m));
+    s
+}
+
+/// c = a · b (n×n, row-major).
+pub fn mul(a: &[f64], b: &[f64], n: usize) -> Sq {
+    let mut c = ZERO;
+    for i in 0..n {
+        for k in 0..n {
+            let aik = a[i * n + k];
+            if aik == 0.0 {
+                continue;
+            }
+            for j in 0..n {
+                c[i * n + j] += aik * b[k * n + j];
+            }
+        }
+    }
+    c
+}
+
+/// c = a · bᵀ (n×n, row-major).
+pub fn mul_t(a: &[f64], b: &[f64], n: usize) -> Sq {
+    let mut c = ZERO;
+    for i in 0..n {
+        for j in 0..n {
+            let mut sum = 0.0;
+            for k in 0..n {
+                sum += a[i * n + k] * b[j * n + k];
+            }
+            c[i * n + j] = sum;
+        }
+    }
+    c
+}
+
+/// The largest eigenvalue of a symmetric positive semi-definite 2×2 or 3×3
+/// block, bounded from above by its trace (exact enough for gating bounds:
+/// the trace is never smaller than the largest eigenvalue).
+pub fn trace_bound(s: &[f64], n: usize, idx: &[usize]) -> f64 {
+    idx.iter().map(|&i| s[i * n + i]).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quadratic_form_by_hand() {
+        // S = [[4, 2], [2, 3]], d = [1, 2]. S⁻¹ = [[3, −2], [−2, 4]] / 8, so
+        // d' S⁻¹ d = (3·1 − 2·2·1·2 + 4·4) / 8 = (3 − 8 + 16) / 8 = 11/8.
+        let q = quad_form_inv(&[4.0, 2.0, 2.0, 3.0], &[1.0, 2.0], 2).unwrap();
+        assert!((q - 11.0 / 8.0).abs() < 1e-15);
+        assert!(quad_form_inv(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0], 2).is_none());
+        assert!(quad_form_inv(&[f64::NAN, 0.0, 0.0, 1.0], &[1.0, 0.0], 2).is_none());
+    }
+
+    #[test]
+    fn covariance_checks() {
+        assert!(check_covariance("p", &[2.0, 1.0, 1.0, 2.0], 2).is_ok());
+        assert!(matches!(
+            check_covariance("p", &[2.0, 1.0, 1.5, 2.0], 2),
+            Err(AlgoError::NotSymmetric { .. })
+        ));
+        assert!(matches!(
+            check_covariance("p", &[1.0, 2.0, 2.0, 1.0], 2),
+            Err(AlgoError::NotPositiveDefinite { .. })
+        ));
+        assert!(matches!(
+            check_covariance("p", &[f64::NAN, 0.0, 0.0, 1.0], 2),
+            Err(AlgoError::NonFinite { .. })
+        ));
+        assert!(check_covariance("p", &[1.0, 0.0, 0.0], 2).is_err());
+    }
+
+    #[test]
+    fn trace_of_the_inverse_by_hand() {
+        // S = [[4, 2], [2, 3]]: S⁻¹ = [[3, −2], [−2, 4]] / 8, trace 7/8.
+        let t = trace_inverse(&[4.0, 2.0, 2.0, 3.0], 2).unwrap();
+        assert!((t - 7.0 / 8.0).abs() < 1e-15);
+        assert!(trace_inverse(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+    }
+
+    #[test]
+    fn products_by_hand() {
+        let a = [1.0, 2.0, 3.0, 4.0];
+        let b = [5.0, 6.0, 7.0, 8.0];
+        // a·b = [[1·5+2·7, 1·6+2·8], [3·5+4·7, 3·6+4·8]] = [[19, 22], [43, 50]]
+        assert_eq!(&mul(&a, &b, 2)[..4], &[19.0, 22.0, 43.0, 50.0]);
+        // a·bᵀ = [[1·5+2·6, 1·7+2·8], [3·5+4·6, 3·7+4·8]] = [[17, 23], [39, 53]]
+        assert_eq!(&mul_t(&a, &b, 2)[..4], &[17.0, 23.0, 39.0, 53.0]);
+    }
+}

@@ -1,0 +1,158 @@
+//! Start-up: binds both listeners, builds the shared state and the routers,
+//! serves until a shutdown signal, then drains in-flight requests.
+
+use std::{future::Future, net::SocketAddr};
+
+use anyhow::Context;
+use tokio::{net::TcpListener, sync::watch};
+use tonic_health::{ServingStatus, server::HealthReporter};
+
+use crate::{config::Settings, grpc, http, state::AppState, telemetry};
+
+/// A built application whose listeners are bound (port 0 resolves here, so
+/// tests learn the real ports before serving starts).
+pub struct Application {
+    http_listener: TcpListener,
+    grpc_listener: TcpListener,
+    state: AppState,
+    rest: axum::Router,
+    grpc: axum::Router,
+    health: HealthReporter,
+}
+
+impl Application {
+    pub async fn build(settings: Settings) -> anyhow::Result<Self> {
+        settings.validate().map_err(anyhow::Error::msg)?;
+        let http_listener = TcpListener::bind(settings.http_addr)
+            .await
+            .with_context(|| format!("binding the REST address {}", settings.http_addr))?;
+        let grpc_listener = TcpListener::bind(settings.grpc_addr)
+            .await
+            .with_context(|| format!("binding the gRPC address {}", settings.grpc_addr))?;
+        let state = AppState::new(settings, telemetry::metrics_handle());
+        let grpc::GrpcServices {
+            router: grpc,
+            health,
+        } = grpc::services(&state).context("building gRPC reflection")?;
+        let rest = http::router(state.clone(), grpc.clone());
+        Ok(Self {
+            http_listener,
+            grpc_listener,
+            state,
+            rest,
+            grpc,
+            health,
+        })
+    }
+
+    pub fn http_addr(&self) -> SocketAddr {
+        self.http_listener
+            .local_addr()
+            .expect("a bound listener has an address")
+    }
+
+    pub fn grpc_addr(&self) -> SocketAddr {
+        self.grpc_listener
+            .local_addr()
+            .expect("a bound listener has an address")
+    }
+
+    pub fn state(&self) -> AppState {
+        self.state.clone()
+    }
+
+    /// Serves both ports until `shutdown` completes, then stops accepting,
+    /// reports not ready, and waits (at most the grace period) for the
+    /// requests in flight to finish.
+    pub async fn run_until<F>(self, shutdown: F) -> anyhow::Result<()>
+    where
+        F: Future<Output = ()> + Send + 'static,
+    {
+        let Self {
+            http_listener,
+            grpc_listener,
+            state,
+            rest,
+            grpc,
+            health,
+        } = self;
+        set_health(&health, ServingStatus::Serving).await;
+        state.set_ready(true);
+        tracing::info!(
+            http = %http_listener.local_addr()?,
+            grpc = %grpc_listener.local_addr()?,
+            "serving REST (and gRPC) on http, gRPC on grpc"
+        );
+
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let stopped = |mut rx: watch::Receiver<bool>| async move {
+            let _ = rx.wait_for(|stop| *stop).await;
+        };
+        let http_server = tokio::spawn(
+            axum::serve(http_listener, rest)
+                .with_graceful_shutdown(stopped(stop_rx.clone()))
+                .into_future(),
+        );
+        let grpc_server = tokio::spawn(
+            axum::serve(grpc_listener, telemetry::with_request_tracing(grpc))
+                .with_graceful_shutdown(stopped(stop_rx))
+                .into_future(),
+        );
+
+        shutdown.await;
+        tracing::info!("shutdown requested: draining in-flight requests");
+        state.set_ready(false);
+        set_health(&health, ServingStatus::NotServing).await;
+        let _ = stop_tx.send(true);
+
+        let grace = state.settings().shutdown_grace();
+        let drained = tokio::time::timeout(grace, async {
+            let (h, g) = tokio::join!(http_server, grpc_server);
+            h.context("REST server task")??;
+            g.context("gRPC server task")??;
+            anyhow::Ok(())
+        })
+        .await;
+        match drained {
+            Ok(result) => result.context("serving")?,
+            Err(_) => tracing::warn!(
+                grace_s = grace.as_secs_f64(),
+                "grace period over: closing remaining connections"
+            ),
+        }
+        tracing::info!("stopped");
+        Ok(())
+    }
+}
+
+async fn set_health(health: &HealthReporter, status: ServingStatus) {
+    health.set_service_status("", status).await;
+    for name in grpc::SERVICE_NAMES {
+        health.set_service_status(*name, status).await;
+    }
+}
+
+/// Completes on Ctrl-C or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot listen for SIGTERM");
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {},
+        () = terminate => {},
+    }
+}

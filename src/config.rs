@@ -1,0 +1,176 @@
+//! Typed settings: embedded defaults, overridden by `FUSION_*` environment
+//! variables, overridden by command-line flags. README.md documents them in
+//! one table; keep the two in step.
+
+use std::{net::SocketAddr, path::PathBuf, time::Duration};
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// The radar fusion service: track-to-track correlation, JPDA, dimension fusion
+/// and AIS–radar bias estimation over REST and gRPC.
+#[derive(Debug, Parser)]
+#[command(name = "radar-fusion", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    #[command(flatten)]
+    pub settings: Settings,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Serve REST and gRPC (the default when no command is given).
+    Serve,
+    /// Print the OpenAPI document the server serves at /openapi.json.
+    Openapi,
+    /// Probe a running server's /healthz and exit 0 when it answers 200
+    /// (the container health check; the runtime image has no curl).
+    Healthcheck {
+        /// Address of the REST server to probe.
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        addr: SocketAddr,
+    },
+    /// Run a seeded Monte Carlo experiment of the papers and write
+    /// DIR/EXPERIMENT.md, .csv and .svg plots (`eval --list` lists them).
+    Eval(EvalArgs),
+}
+
+/// Arguments of `radar-fusion eval`.
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// The experiment to run (see `--list`).
+    #[arg(required_unless_present = "list")]
+    pub experiment: Option<String>,
+    /// List the experiments with a one-line description and exit.
+    #[arg(long)]
+    pub list: bool,
+    /// Number of Monte Carlo runs.
+    #[arg(long, default_value_t = 50)]
+    pub runs: usize,
+    /// Master seed; run i draws from ChaCha stream i of this seed.
+    #[arg(long, default_value_t = 18)]
+    pub seed: u64,
+    /// Output directory (created if needed).
+    #[arg(long, default_value = "eval-out")]
+    pub out: PathBuf,
+    /// Worker threads (0 = all cores); results do not depend on it.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Override the experiment's number of targets.
+    #[arg(long)]
+    pub targets: Option<usize>,
+    /// Override the experiment's number of scans.
+    #[arg(long)]
+    pub scans: Option<usize>,
+    /// Override the σ in metres of the seed 000 initial-position region (denser scenes).
+    #[arg(long)]
+    pub region_sigma_m: Option<u32>,
+    /// Always draw the progress bar on stderr (by default only on a terminal).
+    #[arg(long)]
+    pub progress: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    Text,
+    Json,
+}
+
+/// Every runtime setting of the service.
+#[derive(Debug, Clone, Args)]
+pub struct Settings {
+    /// Address of the REST server (it also answers gRPC on the same port).
+    #[arg(
+        long,
+        env = "FUSION_HTTP_ADDR",
+        default_value = "0.0.0.0:8080",
+        global = true
+    )]
+    pub http_addr: SocketAddr,
+    /// Address of the dedicated gRPC server.
+    #[arg(
+        long,
+        env = "FUSION_GRPC_ADDR",
+        default_value = "0.0.0.0:50051",
+        global = true
+    )]
+    pub grpc_addr: SocketAddr,
+    /// Log filter in `tracing` syntax (for example `info,radar_fusion=debug`).
+    #[arg(long, env = "FUSION_LOG", default_value = "info", global = true)]
+    pub log: String,
+    /// Log line format.
+    #[arg(
+        long,
+        env = "FUSION_LOG_FORMAT",
+        value_enum,
+        default_value = "text",
+        global = true
+    )]
+    pub log_format: LogFormat,
+    /// Longest time a request may take before it is answered 504 / DEADLINE_EXCEEDED.
+    #[arg(
+        long,
+        env = "FUSION_REQUEST_TIMEOUT_S",
+        default_value_t = 30.0,
+        global = true
+    )]
+    pub request_timeout_s: f64,
+    /// Largest request body (REST) or message (gRPC) in bytes; larger ones get 413 / RESOURCE_EXHAUSTED.
+    #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024, global = true)]
+    pub max_body_bytes: usize,
+    /// Most API requests in flight at once over both transports; beyond it requests are
+    /// shed at once with 503 / UNAVAILABLE instead of queueing.
+    #[arg(
+        long,
+        env = "FUSION_MAX_IN_FLIGHT",
+        default_value_t = 512,
+        global = true
+    )]
+    pub max_in_flight: usize,
+    /// Longest time a graceful shutdown waits for in-flight requests.
+    #[arg(
+        long,
+        env = "FUSION_SHUTDOWN_GRACE_S",
+        default_value_t = 30.0,
+        global = true
+    )]
+    pub shutdown_grace_s: f64,
+}
+
+impl Settings {
+    /// Defaults with both servers on port 0 on loopback, for tests.
+    pub fn for_tests() -> Self {
+        let mut s = Cli::parse_from(["radar-fusion"]).settings;
+        s.http_addr = "127.0.0.1:0".parse().expect("literal address");
+        s.grpc_addr = "127.0.0.1:0".parse().expect("literal address");
+        s
+    }
+
+    pub fn request_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.request_timeout_s)
+    }
+
+    pub fn shutdown_grace(&self) -> Duration {
+        Duration::from_secs_f64(self.shutdown_grace_s)
+    }
+
+    /// Rejects settings that cannot work, naming the flag.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v < 1e9 {
+                Ok(())
+            } else {
+                Err(format!("--{name} must be a positive number of seconds"))
+            }
+        };
+        positive("request-timeout-s", self.request_timeout_s)?;
+        positive("shutdown-grace-s", self.shutdown_grace_s)?;
+        if self.max_body_bytes < 1024 {
+            return Err("--max-body-bytes must be at least 1024".into());
+        }
+        if self.max_in_flight == 0 {
+            return Err("--max-in-flight must be at least 1".into());
+        }
+        Ok(())
+    }
+}

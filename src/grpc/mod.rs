@@ -1,0 +1,228 @@
+//! The tonic adapter: gRPC services over the `service` layer, plus the
+//! standard health and reflection services. The router it builds is served on
+//! the dedicated gRPC port and, by content type, on the REST port too.
+
+pub mod ais_radar;
+pub mod correlation;
+pub mod dimension;
+pub mod error;
+pub mod jpda;
+
+use std::time::Instant;
+
+use axum::{
+    Router,
+    extract::{MatchedPath, Request, State},
+    middleware::{self, Next},
+    response::Response,
+};
+use tonic::{Code, Status, service::Routes};
+use tonic_health::server::HealthReporter;
+
+use crate::{
+    proto::{
+        ais_radar_service_server::AisRadarServiceServer,
+        correlation_service_server::CorrelationServiceServer,
+        dimension_service_server::DimensionServiceServer, jpda_service_server::JpdaServiceServer,
+    },
+    state::AppState,
+};
+use ais_radar::AisRadarGrpc;
+use correlation::CorrelationGrpc;
+use dimension::DimensionGrpc;
+use jpda::JpdaGrpc;
+
+/// A row-major `Matrix` as nested rows; `None` (with a violation naming
+/// `field`) when its values do not fill rows × cols.
+pub(crate) fn rows(
+    v: &mut crate::service::Violations,
+    field: &str,
+    m: &crate::proto::Matrix,
+) -> Option<Vec<Vec<f64>>> {
+    let (r, c) = (m.rows as usize, m.cols as usize);
+    if r == 0 || c == 0 || r.checked_mul(c) != Some(m.values.len()) {
+        v.add(
+            field,
+            format!(
+                "rows × cols = {} × {} does not match {} values",
+                m.rows,
+                m.cols,
+                m.values.len()
+            ),
+        );
+        return None;
+    }
+    Some(m.values.chunks(c).map(<[f64]>::to_vec).collect())
+}
+
+/// Nested rows as a row-major `Matrix`.
+pub(crate) fn matrix(rows: &[Vec<f64>]) -> crate::proto::Matrix {
+    crate::proto::Matrix {
+        rows: rows.len() as u32,
+        cols: rows.first().map_or(0, Vec::len) as u32,
+        values: rows.iter().flatten().copied().collect(),
+    }
+}
+
+/// The gRPC services with their health reporter (kept to mark the services
+/// not serving while the process drains).
+pub struct GrpcServices {
+    pub router: Router,
+    pub health: HealthReporter,
+}
+
+/// Builds the gRPC router: the fusion services behind the in-flight limit and
+/// the timeout, health and reflection outside them, all counted in metrics.
+/// Unknown services and methods answer UNIMPLEMENTED.
+pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::server::Error> {
+    let limit = state.settings().max_body_bytes;
+    let correlation = CorrelationServiceServer::new(CorrelationGrpc)
+        .max_decoding_message_size(limit)
+        .max_encoding_message_size(usize::MAX);
+    let ais_radar = AisRadarServiceServer::new(AisRadarGrpc)
+        .max_decoding_message_size(limit)
+        .max_encoding_message_size(usize::MAX);
+    let jpda = JpdaServiceServer::new(JpdaGrpc)
+        .max_decoding_message_size(limit)
+        .max_encoding_message_size(usize::MAX);
+    let dimension = DimensionServiceServer::new(DimensionGrpc)
+        .max_decoding_message_size(limit)
+        .max_encoding_message_size(usize::MAX);
+    let (health, health_service) = tonic_health::server::health_reporter();
+    let reflection_v1 = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()?;
+    let reflection_v1alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()?;
+    let router = Routes::new(correlation)
+        .add_service(ais_radar)
+        .add_service(jpda)
+        .add_service(dimension)
+        .add_service(health_service)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha)
+        .prepare()
+        .into_axum_router()
+        .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn(record_metrics));
+    Ok(GrpcServices { router, health })
+}
+
+/// Names of the services whose health is reported (besides the overall "").
+pub const SERVICE_NAMES: &[&str] = &[
+    "radar.fusion.v1.CorrelationService",
+    "radar.fusion.v1.AisRadarService",
+    "radar.fusion.v1.JpdaService",
+    "radar.fusion.v1.DimensionService",
+];
+
+/// Sheds a call with UNAVAILABLE when `max_in_flight` requests are being
+/// served, and bounds its duration with DEADLINE_EXCEEDED. Health checks and
+/// reflection pass freely, so that probes answer under load.
+async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let path = req.uri().path();
+    if path.starts_with("/grpc.health.") || path.starts_with("/grpc.reflection.") {
+        return next.run(req).await;
+    }
+    let Some(_permit) = state.try_admit() else {
+        metrics::counter!("requests_shed_total", "transport" => "grpc").increment(1);
+        return Status::unavailable("too many requests in flight; retry shortly").into_http();
+    };
+    let timeout = state.settings().request_timeout();
+    match tokio::time::timeout(timeout, next.run(req)).await {
+        Ok(response) => size_limit_is_resource_exhausted(response),
+        Err(_) => Status::deadline_exceeded(format!(
+            "the call took longer than the configured limit of {} s (FUSION_REQUEST_TIMEOUT_S)",
+            timeout.as_secs_f64()
+        ))
+        .into_http(),
+    }
+}
+
+/// tonic answers a message over `max_decoding_message_size` with OUT_OF_RANGE;
+/// the gRPC status-code guide (and grpc-go, grpc-java) use RESOURCE_EXHAUSTED
+/// for it, as our REST side uses 413. The status arrives in the headers of a
+/// trailers-only response or in the trailers, so both are rewritten.
+fn size_limit_is_resource_exhausted(response: Response) -> Response {
+    let (mut parts, body) = response.into_parts();
+    remap_size_status(&mut parts.headers);
+    Response::from_parts(parts, axum::body::Body::new(RemapTrailers(body)))
+}
+
+fn remap_size_status(headers: &mut axum::http::HeaderMap) {
+    let out_of_range = headers
+        .get("grpc-status")
+        .is_some_and(|v| v.as_bytes() == b"11");
+    // grpc-message is percent-encoded on the wire.
+    let contains = |m: &[u8], needle: &[u8]| m.windows(needle.len()).any(|w| w == needle);
+    let too_large = headers.get("grpc-message").is_some_and(|v| {
+        contains(v.as_bytes(), b"too large") || contains(v.as_bytes(), b"too%20large")
+    });
+    if out_of_range && too_large {
+        headers.insert("grpc-status", axum::http::HeaderValue::from_static("8"));
+    }
+}
+
+/// A response body whose trailers go through [`remap_size_status`].
+struct RemapTrailers(axum::body::Body);
+
+impl http_body::Body for RemapTrailers {
+    type Data = axum::body::Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
+        let polled = std::pin::Pin::new(&mut self.0).poll_frame(cx);
+        polled.map(|frame| {
+            frame.map(|frame| {
+                frame.map(|frame| match frame.into_trailers() {
+                    Ok(mut trailers) => {
+                        remap_size_status(&mut trailers);
+                        http_body::Frame::trailers(trailers)
+                    }
+                    Err(frame) => frame,
+                })
+            })
+        })
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.0.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        self.0.size_hint()
+    }
+}
+
+/// Counts calls and records latency per gRPC method. The status is read from
+/// the response headers, where tonic puts it for every unary error
+/// (trailers-only response); a call without one there completed with OK.
+async fn record_metrics(req: Request, next: Next) -> Response {
+    let start = Instant::now();
+    let known = req.extensions().get::<MatchedPath>().is_some();
+    let path = req.uri().path().to_string();
+    let response = next.run(req).await;
+    let code = response
+        .headers()
+        .get("grpc-status")
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<i32>().ok())
+        .map_or(Code::Ok, Code::from_i32);
+    // Unknown services and methods share one label so the label set stays bounded.
+    let method = if known && code != Code::Unimplemented {
+        path
+    } else {
+        "unknown".to_string()
+    };
+    metrics::counter!("grpc_requests_total", "method" => method.clone(), "code" => format!("{code:?}"))
+        .increment(1);
+    metrics::histogram!("grpc_request_duration_seconds", "method" => method)
+        .record(start.elapsed().as_secs_f64());
+    response
+}

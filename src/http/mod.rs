@@ -1,0 +1,156 @@
+//! The axum adapter: DTOs (serde + utoipa), routes, the OpenAPI document and
+//! the mapping of service errors to problem details. It calls the `service`
+//! layer and nothing else of the application.
+
+pub mod ais_radar;
+pub mod correlation;
+pub mod dimension;
+pub mod jpda;
+pub mod ops;
+pub mod problem;
+pub mod rules;
+
+use std::time::Instant;
+
+use axum::{
+    Router,
+    extract::{DefaultBodyLimit, MatchedPath, Request, State},
+    http::{StatusCode, header},
+    middleware::{self, Next},
+    response::{IntoResponse, Response},
+    routing::{get, post},
+};
+use serde::Serialize;
+use tower::ServiceExt;
+use tower_http::{compression::CompressionLayer, timeout::TimeoutLayer};
+use utoipa::{OpenApi, ToSchema};
+use utoipa_swagger_ui::SwaggerUi;
+
+use crate::state::AppState;
+use problem::Problem;
+
+/// Where the time of a request went.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Timing {
+    /// Microseconds spent in the numerical computation.
+    #[schema(example = 3.2)]
+    pub compute_us: f64,
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "Radar fusion service",
+        description = "Fusion centre of a radar network: track-to-track correlation, JPDA, \
+            2D/3D dimension fusion and AIS–radar bias estimation. Errors are RFC 9457 \
+            problem details naming the offending field. The same operations are served \
+            over gRPC (package radar.fusion.v1)."
+    ),
+    paths(correlation::correlate, jpda::update, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
+    components(schemas(Problem, problem::ProblemField)),
+    tags(
+        (name = "correlation", description = "Track-to-track correlation (seed 000)"),
+        (name = "jpda", description = "Joint probabilistic data association (seed 002)"),
+        (name = "dimension", description = "Fusion of 2D and 3D radar tracks (seed 003)"),
+        (name = "ais-radar", description = "AIS–radar association and radar bias estimation (seed 004)"),
+        (name = "operations", description = "Health, readiness and metrics"),
+    )
+)]
+pub struct ApiDoc;
+
+/// The OpenAPI document as checked in at `openapi/openapi.json`.
+pub fn openapi_json() -> String {
+    let mut json = ApiDoc::openapi()
+        .to_pretty_json()
+        .expect("the OpenAPI document serialises");
+    json.push('\n');
+    json
+}
+
+/// The REST router: API routes behind the in-flight limit, the timeout and the
+/// body limit; operational routes and the docs outside them; requests with a
+/// gRPC content type handed to `grpc`, so one port serves both.
+pub fn router(state: AppState, grpc: Router) -> Router {
+    let settings = state.settings().clone();
+    let api = Router::new()
+        .route("/v1/correlation/rules/evaluate", post(rules::evaluate))
+        .route("/v1/correlation/rules/recommend", post(rules::recommend))
+        .route("/v1/correlation/tracks", post(correlation::correlate))
+        .route("/v1/ais-radar/associate", post(ais_radar::associate))
+        .route("/v1/jpda/update", post(jpda::update))
+        .route("/v1/dimension/fuse", post(dimension::fuse))
+        .layer(DefaultBodyLimit::max(settings.max_body_bytes))
+        .layer(TimeoutLayer::with_status_code(
+            StatusCode::GATEWAY_TIMEOUT,
+            settings.request_timeout(),
+        ))
+        .layer(middleware::from_fn_with_state(state.clone(), admit));
+
+    let router = Router::new()
+        .merge(api)
+        .route("/healthz", get(ops::healthz))
+        .route("/readyz", get(ops::readyz))
+        .route("/metrics", get(ops::metrics))
+        .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(middleware::from_fn(record_metrics))
+        .with_state(state)
+        .layer(CompressionLayer::new())
+        .layer(middleware::from_fn(problem::problem_for_bare_errors))
+        .layer(middleware::from_fn_with_state(grpc, dispatch_grpc));
+    crate::telemetry::with_request_tracing(router)
+}
+
+/// Sheds an API request with 503 when `max_in_flight` are being served.
+async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    match state.try_admit() {
+        Some(_permit) => next.run(req).await,
+        None => {
+            metrics::counter!("requests_shed_total", "transport" => "http").increment(1);
+            Problem::for_status(StatusCode::SERVICE_UNAVAILABLE).into_response()
+        }
+    }
+}
+
+/// Hands requests with a gRPC content type to the gRPC router.
+async fn dispatch_grpc(State(grpc): State<Router>, req: Request, next: Next) -> Response {
+    let is_grpc = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/grpc"));
+    if is_grpc {
+        match grpc.oneshot(req).await {
+            Ok(response) => response,
+            Err(never) => match never {},
+        }
+    } else {
+        next.run(req).await
+    }
+}
+
+/// Counts requests and records their latency per route (the route template,
+/// so the label set stays bounded).
+async fn record_metrics(req: Request, next: Next) -> Response {
+    let start = Instant::now();
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
+    let method = req.method().to_string();
+    let response = next.run(req).await;
+    let status = response.status().as_u16().to_string();
+    metrics::counter!("http_requests_total", "method" => method.clone(), "route" => route.clone(), "status" => status)
+        .increment(1);
+    metrics::histogram!("http_request_duration_seconds", "method" => method, "route" => route)
+        .record(start.elapsed().as_secs_f64());
+    response
+}
+
+async fn not_found() -> Problem {
+    Problem::for_status(StatusCode::NOT_FOUND)
+}
+
+async fn method_not_allowed() -> Problem {
+    Problem::for_status(StatusCode::METHOD_NOT_ALLOWED)
+}

@@ -1,0 +1,337 @@
+//! RFC 9457 problem details: the one error body of the REST API, the JSON
+//! extractor whose rejections use it, and the middleware that gives a problem
+//! body to the bare error responses of the framework and the tower layers
+//! (405, 413, 504, 503).
+
+use axum::{
+    body::Bytes,
+    extract::{FromRequest, Request, rejection::BytesRejection},
+    http::{HeaderValue, StatusCode, header},
+    middleware::Next,
+    response::{IntoResponse, Response},
+};
+use serde::{Serialize, de::DeserializeOwned};
+use utoipa::ToSchema;
+
+use crate::service::{FieldViolation, ServiceError};
+
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+/// A problem details body (RFC 9457) with the field violations of API.md.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Problem {
+    /// A URI naming the kind of problem.
+    #[schema(example = "urn:radar-fusion:problem:invalid-input")]
+    #[serde(rename = "type")]
+    pub kind: String,
+    #[schema(example = "Invalid input")]
+    pub title: String,
+    #[schema(example = 422)]
+    pub status: u16,
+    #[schema(example = "the request has 1 invalid field(s)")]
+    pub detail: String,
+    /// One entry per offending field, with its path in the request.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub errors: Vec<ProblemField>,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct ProblemField {
+    #[schema(example = "rules[0].l")]
+    pub field: String,
+    #[schema(example = "must be between 1 and r = 4")]
+    pub message: String,
+}
+
+impl Problem {
+    pub fn new(status: StatusCode, kind: &str, title: &str, detail: impl Into<String>) -> Self {
+        Self {
+            kind: format!("urn:radar-fusion:problem:{kind}"),
+            title: title.to_string(),
+            status: status.as_u16(),
+            detail: detail.into(),
+            errors: Vec::new(),
+        }
+    }
+
+    fn invalid(status: StatusCode, detail: impl Into<String>, errors: Vec<ProblemField>) -> Self {
+        Self {
+            errors,
+            ..Self::new(status, "invalid-input", "Invalid input", detail)
+        }
+    }
+
+    /// The problem for a status the framework or a layer produced without a body.
+    pub fn for_status(status: StatusCode) -> Self {
+        let (kind, title, detail) = match status {
+            StatusCode::NOT_FOUND => ("not-found", "Not found", "no such route"),
+            StatusCode::METHOD_NOT_ALLOWED => (
+                "method-not-allowed",
+                "Method not allowed",
+                "the route does not accept this method",
+            ),
+            StatusCode::PAYLOAD_TOO_LARGE => (
+                "payload-too-large",
+                "Payload too large",
+                "the request body exceeds the configured limit (FUSION_MAX_BODY_BYTES)",
+            ),
+            StatusCode::GATEWAY_TIMEOUT => (
+                "timeout",
+                "Request timed out",
+                "the request took longer than the configured limit (FUSION_REQUEST_TIMEOUT_S)",
+            ),
+            StatusCode::SERVICE_UNAVAILABLE => (
+                "overloaded",
+                "Service overloaded",
+                "too many requests in flight; retry shortly",
+            ),
+            _ => (
+                "http-error",
+                status.canonical_reason().unwrap_or("Error"),
+                "",
+            ),
+        };
+        Self::new(status, kind, title, detail)
+    }
+}
+
+impl IntoResponse for Problem {
+    fn into_response(self) -> Response {
+        let status = StatusCode::from_u16(self.status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+        let retry = status == StatusCode::SERVICE_UNAVAILABLE;
+        let mut response = (status, axum::Json(self)).into_response();
+        let headers = response.headers_mut();
+        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if retry {
+            headers.insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+        }
+        response
+    }
+}
+
+impl From<ServiceError> for Problem {
+    fn from(e: ServiceError) -> Self {
+        match e {
+            ServiceError::InvalidInput(violations) => Problem::invalid(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                format!("the request has {} invalid field(s)", violations.len()),
+                violations.into_iter().map(ProblemField::from).collect(),
+            ),
+            ServiceError::Internal(detail) => {
+                // Logged once here, never sent.
+                tracing::error!(%detail, "internal error");
+                Problem::new(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    "internal",
+                    "Internal error",
+                    "the service failed unexpectedly; the incident is logged",
+                )
+            }
+        }
+    }
+}
+
+impl From<FieldViolation> for ProblemField {
+    fn from(v: FieldViolation) -> Self {
+        Self {
+            field: v.field,
+            message: v.message,
+        }
+    }
+}
+
+/// A JSON body whose every rejection is a problem naming the field:
+/// 415 without a JSON content type, 413 over the body limit, 400 for JSON that
+/// does not parse, 422 for a value of the wrong type or a missing field.
+pub struct ApiJson<T>(pub T);
+
+impl<S, T> FromRequest<S> for ApiJson<T>
+where
+    S: Send + Sync,
+    T: DeserializeOwned,
+{
+    type Rejection = Problem;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Problem> {
+        let is_json = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.split(';').next())
+            .map(|mime| {
+                let mime = mime.trim().to_ascii_lowercase();
+                mime == "application/json" || mime.ends_with("+json")
+            })
+            .unwrap_or(false);
+        if !is_json {
+            return Err(Problem::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported-media-type",
+                "Unsupported media type",
+                "send the body as application/json",
+            ));
+        }
+        let bytes = Bytes::from_request(req, state)
+            .await
+            .map_err(|rejection| match rejection {
+                BytesRejection::FailedToBufferBody(e)
+                    if e.status() == StatusCode::PAYLOAD_TOO_LARGE =>
+                {
+                    Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE)
+                }
+                other => Problem::new(
+                    StatusCode::BAD_REQUEST,
+                    "malformed-body",
+                    "Malformed body",
+                    other.body_text(),
+                ),
+            })?;
+        parse_json(&bytes).map(ApiJson)
+    }
+}
+
+/// Parses a JSON body, naming the field of a type error by its path.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Problem> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|err| {
+        let path = err.path().to_string();
+        let inner = err.into_inner();
+        match inner.classify() {
+            serde_json::error::Category::Data => {
+                let message = strip_position(&inner.to_string());
+                let field = field_of(&path, &message);
+                Problem::invalid(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    format!("{field}: {message}"),
+                    vec![ProblemField { field, message }],
+                )
+            }
+            _ => malformed(&inner),
+        }
+    })?;
+    de.end().map_err(|e| malformed(&e))?;
+    Ok(value)
+}
+
+fn malformed(e: &serde_json::Error) -> Problem {
+    Problem::new(
+        StatusCode::BAD_REQUEST,
+        "malformed-json",
+        "Malformed JSON",
+        format!(
+            "the body is not valid JSON ({}, line {}, column {}); note that JSON has no NaN or Infinity",
+            strip_position(&e.to_string()),
+            e.line(),
+            e.column()
+        ),
+    )
+}
+
+/// The field a serde data error is about: its path, extended by the field
+/// name for a missing field (serde reports that one at the parent).
+fn field_of(path: &str, message: &str) -> String {
+    let parent = if path == "." { "" } else { path };
+    let named = message
+        .strip_prefix("missing field `")
+        .and_then(|rest| rest.split('`').next());
+    match (parent, named) {
+        ("", Some(name)) => name.to_string(),
+        (parent, Some(name)) => format!("{parent}.{name}"),
+        ("", None) => "body".to_string(),
+        (parent, None) => parent.to_string(),
+    }
+}
+
+/// serde_json appends " at line L column C"; the problem says it separately.
+fn strip_position(message: &str) -> String {
+    match message.rfind(" at line ") {
+        Some(i) => message[..i].to_string(),
+        None => message.to_string(),
+    }
+}
+
+/// Gives a problem body to error responses that have none: axum's 405, the
+/// body limit's 413, the timeout's 504, the load shedder's 503.
+pub async fn problem_for_bare_errors(req: Request, next: Next) -> Response {
+    let response = next.run(req).await;
+    let status = response.status();
+    let has_problem = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(PROBLEM_JSON.as_bytes()));
+    let is_grpc = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/grpc"));
+    if (status.is_client_error() || status.is_server_error()) && !has_problem && !is_grpc {
+        let mut problem = Problem::for_status(status).into_response();
+        // Keep headers such as Allow (405) from the original response.
+        for (name, value) in response.headers() {
+            if name != header::CONTENT_TYPE && name != header::CONTENT_LENGTH {
+                problem.headers_mut().insert(name.clone(), value.clone());
+            }
+        }
+        return problem;
+    }
+    response
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        l: u32,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Outer {
+        alpha: f64,
+        rules: Vec<Inner>,
+    }
+
+    fn problem(body: &str) -> Problem {
+        parse_json::<Outer>(body.as_bytes()).unwrap_err()
+    }
+
+    #[test]
+    fn missing_nested_field_is_named_by_its_path() {
+        let p = problem(r#"{"alpha": 0.1, "rules": [{"l": 1}, {}]}"#);
+        assert_eq!(p.status, 422);
+        assert_eq!(p.errors[0].field, "rules[1].l");
+    }
+
+    #[test]
+    fn wrong_type_and_unknown_field_are_named() {
+        assert_eq!(
+            problem(r#"{"alpha": "x", "rules": []}"#).errors[0].field,
+            "alpha"
+        );
+        assert_eq!(
+            problem(r#"{"alpha": 0.1, "rules": [], "beta": 1}"#).errors[0].field,
+            "beta"
+        );
+        assert_eq!(problem(r#"[1]"#).errors[0].field, "body");
+    }
+
+    #[test]
+    fn syntax_errors_and_non_finite_numbers_are_malformed_json() {
+        for body in [
+            r#"{"alpha": NaN, "rules": []}"#,
+            r#"{"alpha": Infinity, "rules": []}"#,
+            r#"{"alpha": 1e999, "rules": []}"#,
+            r#"{"alpha": 0.1"#,
+            r#"{"alpha": 0.1, "rules": []} trailing"#,
+            "",
+        ] {
+            let p = problem(body);
+            assert_eq!(p.status, 400, "{body}: {p:?}");
+            assert!(p.kind.ends_with("malformed-json"));
+        }
+    }
+}

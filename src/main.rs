@@ -1,0 +1,79 @@
+//! The `radar-fusion` binary: parse the configuration, build the application,
+//! serve until SIGTERM. Everything else lives in the library.
+
+use clap::Parser;
+use radar_fusion::{
+    app::{Application, shutdown_signal},
+    config::{Cli, Command, EvalArgs},
+    http, sim, telemetry,
+};
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command.unwrap_or(Command::Serve) {
+        Command::Openapi => {
+            print!("{}", http::openapi_json());
+            Ok(())
+        }
+        Command::Healthcheck { addr } => healthcheck(addr).await,
+        Command::Eval(args) => eval(args),
+        Command::Serve => {
+            telemetry::init_logging(&cli.settings.log, cli.settings.log_format);
+            let app = Application::build(cli.settings).await?;
+            app.run_until(shutdown_signal()).await
+        }
+    }
+}
+
+/// `eval`: list the experiments, or run one and write its files.
+fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    use sim::experiments::{EvalOptions, listing, run_and_write};
+    use sim::montecarlo::Progress;
+    let Some(name) = args.experiment.filter(|_| !args.list) else {
+        print!("{}", listing());
+        return Ok(());
+    };
+    let mut opts = EvalOptions::new(args.runs, args.seed);
+    opts.runner.threads = args.threads;
+    opts.runner.progress = if args.progress {
+        Progress::Always
+    } else {
+        Progress::Auto
+    };
+    opts.targets = args.targets;
+    opts.scans = args.scans;
+    opts.region_sigma_m = args.region_sigma_m;
+    let started = std::time::Instant::now();
+    let written = run_and_write(&name, &opts, &args.out)?;
+    for p in written {
+        println!("{}", p.display());
+    }
+    eprintln!(
+        "{name}: {} runs in {:.2} s",
+        args.runs,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// GET /healthz over a plain HTTP/1.0 connection; fails unless the status is 200.
+async fn healthcheck(addr: std::net::SocketAddr) -> anyhow::Result<()> {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let probe = async {
+        let mut stream = tokio::net::TcpStream::connect(addr).await?;
+        stream
+            .write_all(b"GET /healthz HTTP/1.0\r\nHost: localhost\r\n\r\n")
+            .await?;
+        let mut head = vec![0u8; 64];
+        let n = stream.read(&mut head).await?;
+        anyhow::Ok(String::from_utf8_lossy(&head[..n]).into_owned())
+    };
+    let head = tokio::time::timeout(std::time::Duration::from_secs(3), probe).await??;
+    anyhow::ensure!(
+        head.starts_with("HTTP/1.0 200") || head.starts_with("HTTP/1.1 200"),
+        "unhealthy: {}",
+        head.lines().next().unwrap_or("")
+    );
+    Ok(())
+}

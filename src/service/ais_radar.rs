@@ -1,0 +1,550 @@
+//! AIS–radar association and radar bias estimation (seed 004): validates a
+//! request (radar site, radar tracks in polar or local Cartesian form, AIS as
+//! decoded reports and/or raw NMEA lines), projects AIS positions onto the
+//! radar's Gauss–Krüger plane, runs `algo::bias::associate`, and returns the
+//! association, the bias with its covariance and the compensated tracks.
+
+use std::{collections::BTreeMap, time::Instant};
+
+use super::{ServiceError, Violations, micros_since};
+use crate::algo::{
+    bias::{
+        associate::{self, AisPoint, Config, Path, RadarSample, Seeding},
+        cfar::CfarConfig,
+        nmea,
+        projection::LocalPlane,
+    },
+    geo::Ellipsoid,
+};
+
+/// Below this many associated ships the response warns that the bias is
+/// barely determined: one ship fits any (Δρ, Δθ) exactly, two fit it with no
+/// redundancy across ships.
+pub const MIN_PAIRS_FOR_A_SEPARABLE_BIAS: usize = 3;
+/// Most radar samples plus AIS reports in one request.
+pub const MAX_POINTS: usize = 1_000_000;
+/// Most radar tracks × AIS reports (the time-alignment table) in one request.
+pub const MAX_PAIR_SAMPLES: usize = 20_000_000;
+/// Most NMEA lines in one request.
+pub const MAX_NMEA_LINES: usize = 200_000;
+
+#[derive(Debug, Clone, Default)]
+pub struct AssociateInput {
+    pub site: Option<SiteInput>,
+    /// `wgs84` (default), `grs80` or `krasovsky_1940`.
+    pub ellipsoid: Option<String>,
+    pub radar_tracks: Vec<TrackInput>,
+    pub ais_reports: Vec<AisReportInput>,
+    pub nmea: Vec<String>,
+    pub options: Option<OptionsInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct SiteInput {
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct TrackInput {
+    pub id: Option<String>,
+    pub samples: Vec<SampleInput>,
+}
+
+/// A radar sample: either (range_m, azimuth_deg) or (east_m, north_m).
+#[derive(Debug, Clone, Default)]
+pub struct SampleInput {
+    pub t: Option<f64>,
+    pub range_m: Option<f64>,
+    pub azimuth_deg: Option<f64>,
+    pub east_m: Option<f64>,
+    pub north_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct AisReportInput {
+    pub mmsi: Option<u32>,
+    pub t: Option<f64>,
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct OptionsInput {
+    pub max_gap_s: Option<f64>,
+    pub gate_m: Option<f64>,
+    /// `auto` (default), `cfar` or `search`.
+    pub seeding: Option<String>,
+    pub max_iterations: Option<u32>,
+    pub max_range_bias_m: Option<f64>,
+    pub max_azimuth_bias_deg: Option<f64>,
+    pub cfar_window: Option<u32>,
+    pub cfar_guard: Option<u32>,
+    pub cfar_k: Option<f64>,
+    pub cfar_h: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairOut {
+    pub radar_track_id: String,
+    pub mmsi: u32,
+    pub distance_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssociationOut {
+    pub radar_track_id: String,
+    pub mmsi: u32,
+    pub distance_before_m: f64,
+    pub distance_after_m: f64,
+    pub common_samples: usize,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct BiasOut {
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    /// [[m², m·deg], [m·deg, deg²]].
+    pub covariance: [[f64; 2]; 2],
+    pub pairs_used: usize,
+    pub samples_used: usize,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompensatedSample {
+    pub t: f64,
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    pub east_m: f64,
+    pub north_m: f64,
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompensatedTrack {
+    pub id: String,
+    pub samples: Vec<CompensatedSample>,
+}
+
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct NmeaSummary {
+    pub lines: usize,
+    pub sentences: usize,
+    pub messages: usize,
+    pub positions: usize,
+    /// (message type, count) of the messages that carry no position.
+    pub skipped_by_type: Vec<(u8, usize)>,
+    /// (0-based line, message).
+    pub errors: Vec<(usize, String)>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct AssociateOutput {
+    /// `cfar`, `bias_search` or `none`.
+    pub path: &'static str,
+    pub s1_m: Option<f64>,
+    pub s2_m: Option<f64>,
+    pub credible_pairs: Vec<PairOut>,
+    pub bias: Option<BiasOut>,
+    pub iterations: usize,
+    pub converged: bool,
+    pub associations: Vec<AssociationOut>,
+    pub unassociated_radar_tracks: Vec<String>,
+    pub unassociated_mmsis: Vec<u32>,
+    pub compensated_tracks: Vec<CompensatedTrack>,
+    pub mean_error_before_m: Option<f64>,
+    pub mean_error_after_m: Option<f64>,
+    pub nmea: NmeaSummary,
+    pub compute_us: f64,
+    pub warnings: Vec<String>,
+}
+
+/// The wire word of a path.
+pub fn path_name(p: Path) -> &'static str {
+    match p {
+        Path::Cfar => "cfar",
+        Path::BiasSearch => "bias_search",
+        Path::None => "none",
+    }
+}
+
+fn finite_in(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
+    let x = v.required(field, x)?;
+    if !(x.is_finite() && (lo..=hi).contains(&x)) {
+        v.add(
+            field,
+            format!("must be a finite number between {lo} and {hi}"),
+        );
+        return None;
+    }
+    Some(x)
+}
+
+fn optional_positive(v: &mut Violations, field: &str, x: Option<f64>, default: f64) -> f64 {
+    match x {
+        None => default,
+        Some(x) if x.is_finite() && x > 0.0 => x,
+        Some(_) => {
+            v.add(field, "must be a finite number > 0");
+            default
+        }
+    }
+}
+
+fn config(v: &mut Violations, o: Option<OptionsInput>) -> Config {
+    let o = o.unwrap_or_default();
+    let d = Config::default();
+    let seeding = match o.seeding.as_deref() {
+        None | Some("auto") => Seeding::Auto,
+        Some("cfar") => Seeding::Cfar,
+        Some("search") => Seeding::Search,
+        Some(other) => {
+            v.add(
+                "options.seeding",
+                format!("must be auto, cfar or search, got {other:?}"),
+            );
+            Seeding::Auto
+        }
+    };
+    let cfg = Config {
+        max_gap: optional_positive(v, "options.max_gap_s", o.max_gap_s, d.max_gap),
+        gate: optional_positive(v, "options.gate_m", o.gate_m, d.gate),
+        seeding,
+        max_iterations: o.max_iterations.map_or(d.max_iterations, |x| x as usize),
+        max_range_bias: o.max_range_bias_m.unwrap_or(d.max_range_bias),
+        max_azimuth_bias: o
+            .max_azimuth_bias_deg
+            .map_or(d.max_azimuth_bias, f64::to_radians),
+        cfar: CfarConfig {
+            window: o.cfar_window.map_or(d.cfar.window, |x| x as usize),
+            guard: o.cfar_guard.map_or(d.cfar.guard, |x| x as usize),
+            k: o.cfar_k.unwrap_or(d.cfar.k),
+            h: o.cfar_h.unwrap_or(d.cfar.h),
+        },
+        ..d
+    };
+    // Parameter names of the numerical core map to the options' wire names.
+    if let Err(e) = associate::validate_config(&cfg) {
+        let field = match e.what() {
+            "window" | "guard" | "k" | "h" => format!("options.cfar_{}", e.what()),
+            other => format!("options.{other}"),
+        };
+        let message = match &e {
+            crate::algo::AlgoError::InvalidParameter { reason, .. } => reason.clone(),
+            other => other.to_string(),
+        };
+        v.add(field, message);
+    }
+    cfg
+}
+
+/// Validates, decodes, projects and associates.
+pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError> {
+    let mut v = Violations::new();
+    let site = v.required("site", input.site);
+    let (lat0, lon0) = match site {
+        Some(s) => (
+            finite_in(&mut v, "site.lat_deg", s.lat_deg, -89.9, 89.9),
+            finite_in(&mut v, "site.lon_deg", s.lon_deg, -180.0, 180.0),
+        ),
+        None => (None, None),
+    };
+    let ellipsoid = match input.ellipsoid.as_deref() {
+        None | Some("wgs84") => Ellipsoid::WGS84,
+        Some("grs80") => Ellipsoid::GRS80,
+        Some("krasovsky_1940") => Ellipsoid::KRASOVSKY_1940,
+        Some(other) => {
+            v.add(
+                "ellipsoid",
+                format!("must be wgs84, grs80 or krasovsky_1940, got {other:?}"),
+            );
+            Ellipsoid::WGS84
+        }
+    };
+    let cfg = config(&mut v, input.options);
+    let points = input
+        .radar_tracks
+        .iter()
+        .map(|t| t.samples.len())
+        .sum::<usize>()
+        + input.ais_reports.len();
+    if points > MAX_POINTS {
+        v.add(
+            "radar_tracks",
+            format!("at most {MAX_POINTS} samples and AIS reports per request"),
+        );
+    }
+    if input.nmea.len() > MAX_NMEA_LINES {
+        v.add(
+            "nmea",
+            format!("at most {MAX_NMEA_LINES} lines per request"),
+        );
+    }
+    // Radar tracks.
+    let mut ids = Vec::with_capacity(input.radar_tracks.len());
+    let mut tracks = Vec::with_capacity(input.radar_tracks.len());
+    for (i, t) in input.radar_tracks.iter().enumerate() {
+        let f = format!("radar_tracks[{i}]");
+        match &t.id {
+            Some(id) if !id.is_empty() => {
+                if ids.contains(id) {
+                    v.add(format!("{f}.id"), format!("duplicate track id {id:?}"));
+                }
+                ids.push(id.clone());
+            }
+            _ => {
+                v.add(format!("{f}.id"), "is required");
+                ids.push(String::new());
+            }
+        }
+        if t.samples.len() < 2 {
+            v.add(format!("{f}.samples"), "a track needs at least 2 samples");
+        }
+        let mut samples = Vec::with_capacity(t.samples.len());
+        let mut last_t = f64::NEG_INFINITY;
+        for (k, s) in t.samples.iter().enumerate() {
+            let sf = format!("{f}.samples[{k}]");
+            let time = finite_in(&mut v, &format!("{sf}.t"), s.t, -1e12, 1e12);
+            if let Some(time) = time {
+                if time <= last_t {
+                    v.add(format!("{sf}.t"), "times must be strictly increasing");
+                }
+                last_t = time;
+            }
+            let polar = s.range_m.is_some() || s.azimuth_deg.is_some();
+            let cart = s.east_m.is_some() || s.north_m.is_some();
+            let pos = match (polar, cart) {
+                (true, false) => {
+                    let r = finite_in(&mut v, &format!("{sf}.range_m"), s.range_m, 0.0, 1e7);
+                    let a = finite_in(
+                        &mut v,
+                        &format!("{sf}.azimuth_deg"),
+                        s.azimuth_deg,
+                        -360.0,
+                        360.0,
+                    );
+                    r.zip(a)
+                        .map(|(r, a)| (r, a.to_radians().rem_euclid(std::f64::consts::TAU)))
+                }
+                (false, true) => {
+                    let e = finite_in(&mut v, &format!("{sf}.east_m"), s.east_m, -1e7, 1e7);
+                    let n = finite_in(&mut v, &format!("{sf}.north_m"), s.north_m, -1e7, 1e7);
+                    e.zip(n).map(|(e, n)| associate::plane_to_polar([e, n]))
+                }
+                _ => {
+                    v.add(
+                        sf,
+                        "give either range_m and azimuth_deg, or east_m and north_m",
+                    );
+                    None
+                }
+            };
+            if let (Some(t), Some((range, azimuth))) = (time, pos) {
+                samples.push(RadarSample { t, range, azimuth });
+            }
+        }
+        tracks.push(samples);
+    }
+    // AIS reports (decoded and from NMEA), grouped by MMSI.
+    let decoded = nmea::decode(&input.nmea);
+    let mut reports: Vec<(u32, f64, f64, f64)> = Vec::new();
+    for (k, r) in input.ais_reports.iter().enumerate() {
+        let f = format!("ais_reports[{k}]");
+        let mmsi = v.required(&format!("{f}.mmsi"), r.mmsi);
+        let t = finite_in(&mut v, &format!("{f}.t"), r.t, -1e12, 1e12);
+        let lat = finite_in(&mut v, &format!("{f}.lat_deg"), r.lat_deg, -90.0, 90.0);
+        let lon = finite_in(&mut v, &format!("{f}.lon_deg"), r.lon_deg, -180.0, 180.0);
+        if let (Some(m), Some(t), Some(la), Some(lo)) = (mmsi, t, lat, lon) {
+            reports.push((m, t, la, lo));
+        }
+    }
+    let ais_total = reports.len() + decoded.positions.len();
+    if tracks.len().saturating_mul(ais_total) > MAX_PAIR_SAMPLES {
+        v.add(
+            "radar_tracks",
+            format!(
+                "{} tracks × {ais_total} AIS reports exceed {MAX_PAIR_SAMPLES}; split the request by area or time",
+                tracks.len()
+            ),
+        );
+    }
+    v.finish()?;
+    let (lat0, lon0) = (lat0.expect("validated"), lon0.expect("validated"));
+
+    let start = Instant::now();
+    let mut warnings = Vec::new();
+    let mut nmea_errors: Vec<(usize, String)> = decoded
+        .errors
+        .iter()
+        .map(|e| (e.line, e.message.clone()))
+        .collect();
+    let mut untimed = 0;
+    for p in &decoded.positions {
+        match p.t {
+            Some(t) => reports.push((p.mmsi, t, p.lat_deg, p.lon_deg)),
+            None => {
+                untimed += 1;
+                nmea_errors.push((
+                    p.line,
+                    "position report without a receive time (tag block c:) is not used".into(),
+                ));
+            }
+        }
+    }
+    nmea_errors.sort_by_key(|e| e.0);
+    if untimed > 0 {
+        warnings.push(format!(
+            "{untimed} NMEA position report(s) had no tag-block time and were not used"
+        ));
+    }
+    if !nmea_errors.is_empty() {
+        warnings.push(format!(
+            "{} NMEA line(s) could not be used; see nmea.errors",
+            nmea_errors.len()
+        ));
+    }
+    let plane = LocalPlane::new(ellipsoid, lat0.to_radians(), lon0.to_radians())
+        .map_err(|e| Violations::from_param("site.", e))?;
+    let mut by_mmsi: BTreeMap<u32, Vec<AisPoint>> = BTreeMap::new();
+    for &(m, t, la, lo) in &reports {
+        by_mmsi.entry(m).or_default().push(AisPoint {
+            t,
+            position: plane.forward(la.to_radians(), lo.to_radians()),
+        });
+    }
+    let mut duplicates = 0;
+    for pts in by_mmsi.values_mut() {
+        pts.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let before = pts.len();
+        pts.dedup_by(|a, b| a.t == b.t);
+        duplicates += before - pts.len();
+    }
+    if duplicates > 0 {
+        warnings.push(format!(
+            "{duplicates} AIS report(s) repeated an MMSI's time and were dropped"
+        ));
+    }
+    let mmsis: Vec<u32> = by_mmsi.keys().copied().collect();
+    let ships: Vec<Vec<AisPoint>> = by_mmsi.into_values().collect();
+    if ships.is_empty() {
+        warnings.push("no AIS positions: nothing to associate, the bias is not estimated".into());
+    }
+    if tracks.is_empty() {
+        warnings.push("no radar tracks: nothing to associate".into());
+    }
+
+    let out = associate::associate(&tracks, &ships, &cfg);
+    if out.path == Path::None && !ships.is_empty() && !tracks.is_empty() {
+        warnings.push("no radar track could be associated with an AIS ship; the bias is not estimated and the tracks are returned uncompensated".into());
+    }
+    if !out.converged {
+        warnings.push(format!(
+            "the association still changed after {} iterations",
+            out.iterations
+        ));
+    }
+    if let (Some(c), Some(s)) = out.gated_by_seed
+        && s > c
+    {
+        warnings.push(format!(
+            "CA-CFAR credible pairs led to {c} associations, the bias search to {s}; the search result is reported"
+        ));
+    }
+    if let Some(e) = &out.estimate
+        && e.pairs < MIN_PAIRS_FOR_A_SEPARABLE_BIAS
+    {
+        warnings.push(format!(
+            "the bias rests on {} associated ship(s): with fewer than {MIN_PAIRS_FOR_A_SEPARABLE_BIAS} a \
+             common radar bias cannot be told apart from the ships' own AIS or radar errors, and \
+             the association is only as good as the bias search's first guess",
+            e.pairs
+        ));
+    }
+    let bias = out.estimate.map(|e| e.bias).unwrap_or_default();
+    let compensated_tracks = tracks
+        .iter()
+        .zip(&ids)
+        .map(|(t, id)| CompensatedTrack {
+            id: id.clone(),
+            samples: t
+                .iter()
+                .map(|s| {
+                    let c = associate::compensate(s, bias);
+                    let p = associate::polar_to_plane(c.range, c.azimuth);
+                    let (la, lo) = plane.inverse(p);
+                    CompensatedSample {
+                        t: c.t,
+                        range_m: c.range,
+                        azimuth_deg: c.azimuth.to_degrees(),
+                        east_m: p[0],
+                        north_m: p[1],
+                        lat_deg: la.to_degrees(),
+                        lon_deg: lo.to_degrees(),
+                    }
+                })
+                .collect(),
+        })
+        .collect();
+    let associated_r: Vec<usize> = out.associations.iter().map(|a| a.radar).collect();
+    let associated_a: Vec<usize> = out.associations.iter().map(|a| a.ais).collect();
+    let deg = 180.0 / std::f64::consts::PI;
+    Ok(AssociateOutput {
+        path: path_name(out.path),
+        s1_m: out.thresholds.map(|t| t.s1),
+        s2_m: out.thresholds.map(|t| t.s2),
+        credible_pairs: out
+            .credible_pairs
+            .iter()
+            .map(|&(i, j, d)| PairOut {
+                radar_track_id: ids[i].clone(),
+                mmsi: mmsis[j],
+                distance_m: d,
+            })
+            .collect(),
+        bias: out.estimate.map(|e| BiasOut {
+            range_m: e.bias.range,
+            azimuth_deg: e.bias.azimuth * deg,
+            covariance: [
+                [e.covariance[0][0], e.covariance[0][1] * deg],
+                [e.covariance[1][0] * deg, e.covariance[1][1] * deg * deg],
+            ],
+            pairs_used: e.pairs,
+            samples_used: e.samples,
+        }),
+        iterations: out.iterations,
+        converged: out.converged,
+        associations: out
+            .associations
+            .iter()
+            .map(|a| AssociationOut {
+                radar_track_id: ids[a.radar].clone(),
+                mmsi: mmsis[a.ais],
+                distance_before_m: a.distance_before,
+                distance_after_m: a.distance_after,
+                common_samples: a.common,
+            })
+            .collect(),
+        unassociated_radar_tracks: (0..ids.len())
+            .filter(|i| !associated_r.contains(i))
+            .map(|i| ids[i].clone())
+            .collect(),
+        unassociated_mmsis: (0..mmsis.len())
+            .filter(|j| !associated_a.contains(j))
+            .map(|j| mmsis[j])
+            .collect(),
+        compensated_tracks,
+        mean_error_before_m: out.mean_error_before,
+        mean_error_after_m: out.mean_error_after,
+        nmea: NmeaSummary {
+            lines: decoded.lines,
+            sentences: decoded.sentences,
+            messages: decoded.messages,
+            positions: decoded.positions.len(),
+            skipped_by_type: decoded.skipped_by_type.into_iter().collect(),
+            errors: nmea_errors,
+        },
+        compute_us: micros_since(start),
+        warnings,
+    })
+}

@@ -1,0 +1,1232 @@
+//! Batch track-to-track correlation (seed 000 and the classic baselines):
+//! validates a request of M ≥ 1 nodes' local tracks, aligns them to common
+//! instants, correlates every node pair with `algo::correlation::engine`,
+//! groups the pairs consistently across nodes and fuses each group into a
+//! system track.
+//!
+//! Alignment rule: all report times are sorted and cut into clusters no wider
+//! than the tolerance; each cluster is one instant, at the cluster's latest
+//! time. A track takes its latest sample inside the cluster and, in `predict`
+//! mode, is predicted forward to the instant with the motion model (F, Q);
+//! in `nearest` mode it is used as reported. A track without a sample in a
+//! cluster is absent at that instant. In `interpolate` mode a track is present
+//! at every instant between two of its samples at most `max_gap_s` apart,
+//! with state and covariance interpolated linearly; it is never extrapolated.
+
+use std::{collections::HashMap, time::Instant};
+
+use nalgebra::{DMatrix, DVector};
+
+use super::{ServiceError, Violations, covariance_message, micros_since};
+use crate::algo::{
+    correlation::{
+        engine::{
+            self, Config, Decision, Method, PairCorrelator, PairReport, Pruning, Reason,
+            Resolution, RuleSpec, Statistic,
+        },
+        fusion,
+        grouping::{self, Link},
+        rules::LrRule,
+        scene::{Scene, Track},
+    },
+    motion::{ConstantVelocity, MotionModel, ProcessNoise},
+    small,
+};
+
+/// Most nodes in one request.
+pub const MAX_NODES: usize = 64;
+/// Most samples (over all tracks and nodes) in one request.
+pub const MAX_SAMPLES: usize = 4_000_000;
+/// Default significance level of the first threshold.
+pub const DEFAULT_ALPHA: f64 = 0.05;
+/// Default alignment tolerance.
+pub const DEFAULT_TOLERANCE_S: f64 = 0.5;
+
+/// A correlation request as a client sent it, before validation.
+#[derive(Debug, Clone, Default)]
+pub struct CorrelateInput {
+    pub state_layout: Vec<String>,
+    pub method: Option<MethodInput>,
+    pub motion_model: Option<MotionModelInput>,
+    pub alignment: Option<AlignmentInput>,
+    /// H of the local filters, needed to turn reported gains K into I − K H.
+    pub measurement_matrix: Option<Vec<Vec<f64>>>,
+    pub nodes: Vec<NodeInput>,
+    /// `grid` (default) or `none` (brute force over all pairs; same result).
+    pub pruning: Option<String>,
+    /// Fuse correlated groups into system tracks (default true).
+    pub fuse: Option<bool>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct MethodInput {
+    pub kind: Option<String>,
+    pub alpha: Option<f64>,
+    pub rule: Option<RuleInput>,
+    pub schedule: Option<Vec<RuleInput>>,
+    pub dynamic_schedule: Option<bool>,
+    pub statistic: Option<String>,
+    pub window: Option<u32>,
+    pub k: Option<u32>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct RuleInput {
+    pub l: Option<u32>,
+    pub r: Option<u32>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct MotionModelInput {
+    /// Only `constant_velocity` for now.
+    pub kind: Option<String>,
+    /// `dwna`, `cwna` or `velocity_proportional`.
+    pub process_noise: Option<String>,
+    pub sigma_a_mps2: Option<f64>,
+    pub q_m2ps3: Option<f64>,
+    pub factor: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct AlignmentInput {
+    /// `predict` (default with a motion model), `interpolate` or `nearest`.
+    pub mode: Option<String>,
+    /// `interpolate`: the widest gap between two samples interpolated across.
+    pub max_gap_s: Option<f64>,
+    pub tolerance_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct NodeInput {
+    pub id: Option<String>,
+    pub tracks: Vec<TrackInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct TrackInput {
+    pub id: Option<String>,
+    pub samples: Vec<SampleInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct SampleInput {
+    pub t: Option<f64>,
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    pub gain: Option<Vec<Vec<f64>>>,
+}
+
+/// The method names of the API.
+pub const METHODS: &[&str] = &[
+    "weighted",
+    "modified",
+    "independent_double_threshold",
+    "dependent_double_threshold",
+    "double_threshold_assignment",
+    "nearest_neighbour",
+    "k_nearest_neighbour",
+    "global_assignment",
+];
+
+/// The result of a correlation request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorrelateOutput {
+    pub method: String,
+    pub statistic: Statistic,
+    pub thresholds: Thresholds,
+    /// `reported`, `recomputed` or `not_used` (weighted statistic).
+    pub gains: &'static str,
+    pub instants: Vec<f64>,
+    pub pairs: Vec<PairOutput>,
+    /// Pairs never within the gate in their current window (not listed).
+    pub omitted_pairs: u64,
+    pub unpaired: Vec<(String, Vec<String>)>,
+    pub groups: Vec<GroupOutput>,
+    pub conflicts: Vec<ConflictOutput>,
+    pub timing: CorrelateTiming,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Thresholds {
+    pub alpha: f64,
+    /// The first threshold δ, χ² quantile with `dof` degrees of freedom.
+    pub delta: f64,
+    pub dof: u32,
+    pub rule: Option<(u32, u32)>,
+    pub schedule: Vec<(u32, u32)>,
+    pub window: Option<u32>,
+    pub k: Option<u32>,
+}
+
+/// A track named by its node id and track id.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct TrackName {
+    pub node: String,
+    pub track: String,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairOutput {
+    pub a: TrackName,
+    pub b: TrackName,
+    pub decision: Decision,
+    pub reason: Reason,
+    pub trial: bool,
+    pub m: u32,
+    pub c: u32,
+    pub samples: u32,
+    pub mean_statistic: f64,
+    pub last_statistic: f64,
+    pub decided_at: Option<f64>,
+}
+
+/// How a system track's estimate was formed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FusionKind {
+    BarShalomCampo,
+    CovarianceIntersection,
+    Single,
+    None,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupOutput {
+    pub id: u32,
+    pub members: Vec<TrackName>,
+    pub t: f64,
+    /// In the request's state layout.
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    pub fusion: FusionKind,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConflictOutput {
+    pub a: TrackName,
+    pub b: TrackName,
+    pub node: String,
+    pub tracks: (String, String),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorrelateTiming {
+    pub compute_us: f64,
+    pub align_us: f64,
+    pub correlate_us: f64,
+    pub fuse_us: f64,
+}
+
+/// Cross-covariance of each correlated pair ((node, track), (node, track)) at
+/// its last common instant: (instant index, row-major P_ab).
+type CrossCovariances = HashMap<((usize, usize), (usize, usize)), (usize, Vec<f64>)>;
+
+/// How a track's samples are carried to the common instants.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum AlignMode {
+    /// The latest sample of the cluster, predicted forward with the model.
+    Predict,
+    /// The latest sample of the cluster, as reported.
+    Nearest,
+    /// Linear interpolation between the samples around the instant, at most
+    /// this many seconds apart; never extrapolated.
+    Interpolate { max_gap: f64 },
+}
+
+/// Default widest gap interpolated across.
+pub const DEFAULT_MAX_GAP_S: f64 = 10.0;
+
+/// A validated request.
+struct Plan {
+    layout: Layout,
+    method_name: String,
+    config: Config,
+    model: Option<ConstantVelocity>,
+    alignment: AlignMode,
+    tolerance: f64,
+    h: Option<DMatrix<f64>>,
+    fuse: bool,
+}
+
+/// The request's state layout and its permutation to the canonical
+/// interleaved order `[x, vx, y, vy(, z, vz)]` or `[x, y(, z)]`.
+#[derive(Debug, Clone)]
+struct Layout {
+    /// canonical[i] = index in the request's layout.
+    from_request: Vec<usize>,
+    dim: usize,
+    axes: usize,
+    has_velocity: bool,
+}
+
+impl Layout {
+    fn parse(names: &[String]) -> Result<Self, String> {
+        let canon_cv: &[&[&str]] = &[&["x", "vx", "y", "vy"], &["x", "vx", "y", "vy", "z", "vz"]];
+        let canon_pos: &[&[&str]] = &[&["x", "y"], &["x", "y", "z"]];
+        let mut sorted: Vec<&str> = names.iter().map(String::as_str).collect();
+        sorted.sort_unstable();
+        let mut dedup = sorted.clone();
+        dedup.dedup();
+        if dedup.len() != sorted.len() {
+            return Err("names a component twice".into());
+        }
+        for (canon, has_velocity) in [(canon_cv, true), (canon_pos, false)] {
+            for c in canon {
+                let mut want: Vec<&str> = c.to_vec();
+                want.sort_unstable();
+                if want == sorted {
+                    let from_request = c
+                        .iter()
+                        .map(|n| names.iter().position(|m| m == n).expect("same set"))
+                        .collect();
+                    let axes = if has_velocity { c.len() / 2 } else { c.len() };
+                    return Ok(Self {
+                        from_request,
+                        dim: c.len(),
+                        axes,
+                        has_velocity,
+                    });
+                }
+            }
+        }
+        Err(
+            "must be a permutation of [x, vx, y, vy], [x, vx, y, vy, z, vz], [x, y] or [x, y, z]"
+                .into(),
+        )
+    }
+
+    /// Position indices in the canonical order.
+    fn positions(&self) -> Vec<usize> {
+        if self.has_velocity {
+            (0..self.axes).map(|a| 2 * a).collect()
+        } else {
+            (0..self.axes).collect()
+        }
+    }
+
+    fn vector_to_canonical(&self, v: &[f64]) -> Vec<f64> {
+        self.from_request.iter().map(|&i| v[i]).collect()
+    }
+
+    fn matrix_to_canonical(&self, m: &[Vec<f64>]) -> Vec<f64> {
+        let n = self.dim;
+        let mut out = vec![0.0; n * n];
+        for (i, &ri) in self.from_request.iter().enumerate() {
+            for (j, &rj) in self.from_request.iter().enumerate() {
+                out[i * n + j] = m[ri][rj];
+            }
+        }
+        out
+    }
+
+    fn vector_to_request(&self, v: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.dim];
+        for (i, &ri) in self.from_request.iter().enumerate() {
+            out[ri] = v[i];
+        }
+        out
+    }
+
+    fn matrix_to_request(&self, m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+        let mut out = vec![vec![0.0; self.dim]; self.dim];
+        for (i, &ri) in self.from_request.iter().enumerate() {
+            for (j, &rj) in self.from_request.iter().enumerate() {
+                out[ri][rj] = m[(i, j)];
+            }
+        }
+        out
+    }
+}
+
+/// Correlates the request's nodes.
+pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError> {
+    let start = Instant::now();
+    let plan = validate(&input)?;
+    let dim = plan.layout.dim;
+
+    // Alignment.
+    let t_align = Instant::now();
+    let (scene, gains_reported, mut warnings) = align(&input, &plan)?;
+    let align_us = micros_since(t_align);
+
+    // Correlation of every node pair.
+    let t_corr = Instant::now();
+    let node_ids: Vec<String> = input
+        .nodes
+        .iter()
+        .map(|n| n.id.clone().unwrap_or_default())
+        .collect();
+    let track_ids: Vec<Vec<String>> = input
+        .nodes
+        .iter()
+        .map(|n| {
+            n.tracks
+                .iter()
+                .map(|t| t.id.clone().unwrap_or_default())
+                .collect()
+        })
+        .collect();
+    let name = |node: usize, track: usize| TrackName {
+        node: node_ids[node].clone(),
+        track: track_ids[node][track].clone(),
+    };
+    let model_ref: Option<&dyn MotionModel> = plan.model.as_ref().map(|m| m as &dyn MotionModel);
+    let mut pairs = Vec::new();
+    let mut links = Vec::new();
+    let mut cross: CrossCovariances = HashMap::new();
+    let mut omitted = 0u64;
+    let mut delta = f64::NAN;
+    let mut singular = 0usize;
+    let n_nodes = scene.nodes().len();
+    for na in 0..n_nodes {
+        for nb in na + 1..n_nodes {
+            let mut correlator = PairCorrelator::new(&scene, na, nb, &plan.config, model_ref)
+                .map_err(|e| Violations::from_param("method.", e))?;
+            delta = correlator.delta();
+            correlator.run();
+            singular += correlator.singular_tests;
+            let total = (scene.nodes()[na].len() * scene.nodes()[nb].len()) as u64;
+            let reports = correlator.reports();
+            let mut listed = 0u64;
+            for r in reports {
+                if r.decision == Decision::Correlated {
+                    links.push(Link {
+                        a: (na, r.a),
+                        b: (nb, r.b),
+                        m: r.m,
+                        mean_statistic: r.mean_statistic,
+                    });
+                    if let Some(c) = &r.cross_covariance {
+                        cross.insert(((na, r.a), (nb, r.b)), (r.last_common, c.clone()));
+                    }
+                }
+                if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
+                    listed += 1;
+                    pairs.push(pair_output(&r, name(na, r.a), name(nb, r.b), scene.times()));
+                }
+            }
+            omitted += total - listed;
+        }
+    }
+    if singular > 0 {
+        warnings.push(format!(
+            "{singular} test(s) of the modified statistic had P_a + P_b − P_ab − P_ab' not \
+             positive definite (the reported covariances, gains and motion model are not \
+             consistent with one another); the weighted statistic was used for them"
+        ));
+    }
+    let grouping = grouping::group(&links);
+    let correlate_us = micros_since(t_corr);
+
+    // System tracks.
+    let t_fuse = Instant::now();
+    let mut groups = Vec::new();
+    for (id, members) in grouping.groups.iter().enumerate() {
+        let fused = if plan.fuse {
+            fuse_group(&scene, members, &cross, dim)
+        } else {
+            None
+        };
+        let (t, state, covariance, kind) = match fused {
+            Some((k, f, kind)) => (
+                scene.times()[k],
+                plan.layout.vector_to_request(f.x.as_slice()),
+                plan.layout.matrix_to_request(&f.p),
+                kind,
+            ),
+            None => (f64::NAN, Vec::new(), Vec::new(), FusionKind::None),
+        };
+        groups.push(GroupOutput {
+            id: id as u32,
+            members: members.iter().map(|&(n, t)| name(n, t)).collect(),
+            t,
+            state,
+            covariance,
+            fusion: kind,
+        });
+    }
+    let fuse_us = micros_since(t_fuse);
+
+    let grouped: std::collections::HashSet<(usize, usize)> =
+        grouping.groups.iter().flatten().copied().collect();
+    let unpaired = (0..n_nodes)
+        .map(|n| {
+            let ids = (0..scene.nodes()[n].len())
+                .filter(|&t| !grouped.contains(&(n, t)))
+                .map(|t| track_ids[n][t].clone())
+                .collect();
+            (node_ids[n].clone(), ids)
+        })
+        .collect();
+    let conflicts = grouping
+        .conflicts
+        .iter()
+        .map(|c| ConflictOutput {
+            a: name(c.link.a.0, c.link.a.1),
+            b: name(c.link.b.0, c.link.b.1),
+            node: node_ids[c.node].clone(),
+            tracks: (
+                track_ids[c.node][c.tracks.0].clone(),
+                track_ids[c.node][c.tracks.1].clone(),
+            ),
+        })
+        .collect();
+    if n_nodes < 2 {
+        warnings.push("only one node: there is nothing to correlate".into());
+    }
+
+    let (rule, schedule, window, k) = match &plan.config.method {
+        Method::DoubleThreshold { rules, .. } => match rules {
+            RuleSpec::Fixed(r) => (Some((r.l(), r.r())), Vec::new(), None, None),
+            RuleSpec::Schedule(s) => (None, s.iter().map(|r| (r.l(), r.r())).collect(), None, None),
+        },
+        Method::NearestNeighbour { window } | Method::GlobalAssignment { window } => {
+            (None, Vec::new(), Some(*window as u32), None)
+        }
+        Method::KNearestNeighbour { k, window } => {
+            (None, Vec::new(), Some(*window as u32), Some(*k as u32))
+        }
+    };
+    if delta.is_nan() {
+        delta = crate::algo::gating::chi2_threshold(dim, plan.config.alpha)
+            .map_err(|e| ServiceError::Internal(e.to_string()))?;
+    }
+    Ok(CorrelateOutput {
+        method: plan.method_name.clone(),
+        statistic: plan.config.statistic,
+        thresholds: Thresholds {
+            alpha: plan.config.alpha,
+            delta,
+            dof: dim as u32,
+            rule,
+            schedule,
+            window,
+            k,
+        },
+        gains: match plan.config.statistic {
+            Statistic::Weighted => "not_used",
+            Statistic::Modified if gains_reported => "reported",
+            Statistic::Modified => "recomputed",
+        },
+        instants: scene.times().to_vec(),
+        pairs,
+        omitted_pairs: omitted,
+        unpaired,
+        groups,
+        conflicts,
+        timing: CorrelateTiming {
+            compute_us: micros_since(start),
+            align_us,
+            correlate_us,
+            fuse_us,
+        },
+        warnings,
+    })
+}
+
+fn pair_output(r: &PairReport, a: TrackName, b: TrackName, times: &[f64]) -> PairOutput {
+    PairOutput {
+        a,
+        b,
+        decision: r.decision,
+        reason: r.reason,
+        trial: r.trial,
+        m: r.m,
+        c: r.c,
+        samples: r.samples,
+        mean_statistic: r.mean_statistic,
+        last_statistic: r.last_statistic,
+        decided_at: r.decided_at.map(|k| times[k]),
+    }
+}
+
+/// Fuses a group at the latest instant where most of its members are present:
+/// Bar-Shalom–Campo for two members with a known cross-covariance at that
+/// instant, covariance intersection otherwise.
+fn fuse_group(
+    scene: &Scene,
+    members: &[(usize, usize)],
+    cross: &CrossCovariances,
+    dim: usize,
+) -> Option<(usize, fusion::Fused, FusionKind)> {
+    let count = |k: usize| {
+        members
+            .iter()
+            .filter(|&&(n, t)| scene.track(n, t).is_present(k))
+            .count()
+    };
+    let instants = scene.times().len();
+    let best = (0..instants).rev().max_by_key(|&k| (count(k), k))?;
+    let present: Vec<(usize, usize)> = members
+        .iter()
+        .copied()
+        .filter(|&(n, t)| scene.track(n, t).is_present(best))
+        .collect();
+    let est = |&(n, t): &(usize, usize)| {
+        let tr = scene.track(n, t);
+        (
+            DVector::from_column_slice(tr.x(best, dim)),
+            DMatrix::from_row_slice(dim, dim, tr.p(best, dim)),
+        )
+    };
+    match present.as_slice() {
+        [] => None,
+        [one] => {
+            let (x, p) = est(one);
+            Some((
+                best,
+                fusion::Fused {
+                    x,
+                    p,
+                    weights: Vec::new(),
+                },
+                FusionKind::Single,
+            ))
+        }
+        [a, b] => {
+            let (xa, pa) = est(a);
+            let (xb, pb) = est(b);
+            if let Some((k, c)) = cross.get(&(*a, *b))
+                && *k == best
+            {
+                let p12 = DMatrix::from_row_slice(dim, dim, c);
+                if let Ok(f) = fusion::bar_shalom_campo(&xa, &pa, &xb, &pb, &p12) {
+                    return Some((best, f, FusionKind::BarShalomCampo));
+                }
+            }
+            fusion::covariance_intersection(&[(xa, pa), (xb, pb)])
+                .ok()
+                .map(|f| (best, f, FusionKind::CovarianceIntersection))
+        }
+        many => {
+            let list: Vec<_> = many.iter().map(est).collect();
+            fusion::covariance_intersection(&list)
+                .ok()
+                .map(|f| (best, f, FusionKind::CovarianceIntersection))
+        }
+    }
+}
+
+fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
+    let mut v = Violations::new();
+    let layout = match Layout::parse(&input.state_layout) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            v.add("state_layout", e);
+            None
+        }
+    };
+    let method = input.method.clone().unwrap_or_default();
+    let kind = method.kind.clone().unwrap_or_default();
+    if method.kind.is_none() {
+        v.add(
+            "method.kind",
+            format!("is required: one of {}", METHODS.join(", ")),
+        );
+    } else if !METHODS.contains(&kind.as_str()) {
+        v.add(
+            "method.kind",
+            format!("unknown method '{kind}': one of {}", METHODS.join(", ")),
+        );
+    }
+    let alpha = method.alpha.unwrap_or(DEFAULT_ALPHA);
+    v.param(
+        "method.",
+        crate::algo::correlation::rules::check_alpha(alpha),
+    );
+    let statistic = match (kind.as_str(), method.statistic.as_deref()) {
+        ("modified" | "dependent_double_threshold", None | Some("modified")) => Statistic::Modified,
+        ("weighted" | "independent_double_threshold", None | Some("weighted")) => {
+            Statistic::Weighted
+        }
+        (
+            "modified" | "dependent_double_threshold" | "weighted" | "independent_double_threshold",
+            Some(_),
+        ) => {
+            v.add(
+                "method.statistic",
+                format!("'{kind}' fixes the statistic; leave it out"),
+            );
+            Statistic::Weighted
+        }
+        (_, None | Some("weighted")) => Statistic::Weighted,
+        (_, Some("modified")) => Statistic::Modified,
+        (_, Some(other)) => {
+            v.add(
+                "method.statistic",
+                format!("unknown statistic '{other}': weighted or modified"),
+            );
+            Statistic::Weighted
+        }
+    };
+    let rule_of = |v: &mut Violations, field: &str, r: &RuleInput| -> Option<LrRule> {
+        let l = v.required(&format!("{field}.l"), r.l);
+        let rr = v.required(&format!("{field}.r"), r.r);
+        match (l, rr) {
+            (Some(l), Some(rr)) => v.param(&format!("{field}."), LrRule::new(l, rr)),
+            _ => None,
+        }
+    };
+    let rules = if method.rule.is_some()
+        && (method.schedule.is_some() || method.dynamic_schedule == Some(true))
+    {
+        v.add(
+            "method.schedule",
+            "give either rule or a schedule, not both",
+        );
+        None
+    } else if let Some(r) = &method.rule {
+        rule_of(&mut v, "method.rule", r).map(RuleSpec::Fixed)
+    } else if let Some(s) = &method.schedule {
+        let parsed: Vec<Option<LrRule>> = s
+            .iter()
+            .enumerate()
+            .map(|(i, r)| rule_of(&mut v, &format!("method.schedule[{i}]"), r))
+            .collect();
+        if s.is_empty() {
+            v.add("method.schedule", "must hold at least one rule");
+        }
+        parsed
+            .into_iter()
+            .collect::<Option<Vec<_>>>()
+            .map(RuleSpec::Schedule)
+    } else if method.dynamic_schedule == Some(true) {
+        Some(RuleSpec::Schedule(engine::default_schedule()))
+    } else {
+        Some(RuleSpec::Fixed(LrRule::new(6, 8).expect("valid")))
+    };
+    let window = method.window.unwrap_or(match kind.as_str() {
+        "k_nearest_neighbour" => 5,
+        _ => 1,
+    }) as usize;
+    let k = method.k.unwrap_or(3) as usize;
+    let one = LrRule::new(1, 1).expect("valid");
+    let config_method = match kind.as_str() {
+        "weighted" | "modified" => Some(Method::DoubleThreshold {
+            rules: RuleSpec::Fixed(one),
+            resolution: Resolution::Greedy,
+        }),
+        "independent_double_threshold" | "dependent_double_threshold" => {
+            rules.map(|rules| Method::DoubleThreshold {
+                rules,
+                resolution: Resolution::Greedy,
+            })
+        }
+        "double_threshold_assignment" => rules.map(|rules| Method::DoubleThreshold {
+            rules,
+            resolution: Resolution::Assignment,
+        }),
+        "nearest_neighbour" => Some(Method::NearestNeighbour { window }),
+        "global_assignment" => Some(Method::GlobalAssignment { window }),
+        "k_nearest_neighbour" => Some(Method::KNearestNeighbour { k, window }),
+        _ => None,
+    };
+    if matches!(kind.as_str(), "weighted" | "modified")
+        && (method.rule.is_some() || method.schedule.is_some())
+    {
+        v.add(
+            "method.rule",
+            format!("'{kind}' is the classic 1/1 test; use independent_double_threshold or dependent_double_threshold for an L/R rule"),
+        );
+    }
+    if let Some(w) = method.window
+        && !(1..=64).contains(&w)
+    {
+        v.add("method.window", "must be between 1 and 64");
+    }
+    if let Some(kk) = method.k
+        && (kk == 0 || kk as usize > window)
+    {
+        v.add(
+            "method.k",
+            format!("must be between 1 and window = {window}"),
+        );
+    }
+
+    // Motion model.
+    let model = match (&input.motion_model, &layout) {
+        (None, _) | (_, None) => None,
+        (Some(m), Some(layout)) => motion_model(&mut v, m, layout),
+    };
+    if statistic == Statistic::Modified && input.motion_model.is_none() {
+        v.add(
+            "motion_model",
+            "is required by the modified statistic (the cross-covariance recursion of eq. 13)",
+        );
+    }
+    let alignment = input.alignment.clone().unwrap_or_default();
+    let tolerance = alignment.tolerance_s.unwrap_or(DEFAULT_TOLERANCE_S);
+    if !(tolerance.is_finite() && tolerance >= 0.0) {
+        v.add("alignment.tolerance_s", "must be a finite number ≥ 0");
+    }
+    let max_gap = alignment.max_gap_s.unwrap_or(DEFAULT_MAX_GAP_S);
+    let mode = match alignment.mode.as_deref() {
+        None if input.motion_model.is_some() => AlignMode::Predict,
+        None | Some("nearest") => AlignMode::Nearest,
+        Some("predict") => {
+            if input.motion_model.is_none() {
+                v.add("alignment.mode", "predict needs a motion_model");
+            }
+            AlignMode::Predict
+        }
+        Some("interpolate") => {
+            if !(max_gap.is_finite() && max_gap > 0.0) {
+                v.add("alignment.max_gap_s", "must be a finite number > 0");
+            }
+            AlignMode::Interpolate { max_gap }
+        }
+        Some(other) => {
+            v.add(
+                "alignment.mode",
+                format!("unknown mode '{other}': predict, interpolate or nearest"),
+            );
+            AlignMode::Nearest
+        }
+    };
+    let pruning = match input.pruning.as_deref() {
+        None | Some("grid") => Pruning::Grid,
+        Some("none") => Pruning::None,
+        Some(other) => {
+            v.add(
+                "pruning",
+                format!("unknown pruning '{other}': grid or none"),
+            );
+            Pruning::Grid
+        }
+    };
+
+    // H for gains.
+    let h = match (&input.measurement_matrix, &layout) {
+        (Some(rows), Some(layout)) => {
+            let ok = !rows.is_empty()
+                && rows
+                    .iter()
+                    .all(|r| r.len() == layout.dim && r.iter().all(|x| x.is_finite()));
+            if ok {
+                let m = rows.len();
+                let flat: Vec<f64> = rows
+                    .iter()
+                    .flat_map(|r| layout.vector_to_canonical(r))
+                    .collect();
+                Some(DMatrix::from_row_slice(m, layout.dim, &flat))
+            } else {
+                v.add(
+                    "measurement_matrix",
+                    format!(
+                        "must be a non-empty matrix of finite numbers with {} columns",
+                        layout.dim
+                    ),
+                );
+                None
+            }
+        }
+        _ => None,
+    };
+
+    // Nodes and tracks.
+    if input.nodes.is_empty() {
+        v.add("nodes", "must hold at least one node");
+    } else if input.nodes.len() > MAX_NODES {
+        v.add("nodes", format!("at most {MAX_NODES} nodes per request"));
+    }
+    let total: usize = input
+        .nodes
+        .iter()
+        .flat_map(|n| n.tracks.iter())
+        .map(|t| t.samples.len())
+        .sum();
+    if total > MAX_SAMPLES {
+        v.add(
+            "nodes",
+            format!("{total} samples exceed the limit of {MAX_SAMPLES} per request"),
+        );
+    }
+    let mut node_ids = HashMap::new();
+    for (ni, node) in input.nodes.iter().enumerate() {
+        let field = format!("nodes[{ni}]");
+        match node.id.as_deref() {
+            None | Some("") => v.add(format!("{field}.id"), "is required"),
+            Some(id) => {
+                if let Some(prev) = node_ids.insert(id.to_string(), ni) {
+                    v.add(
+                        format!("{field}.id"),
+                        format!("duplicates nodes[{prev}].id '{id}'"),
+                    );
+                }
+            }
+        }
+        if node.tracks.is_empty() {
+            v.add(format!("{field}.tracks"), "must hold at least one track");
+        }
+        let mut track_ids = HashMap::new();
+        for (ti, track) in node.tracks.iter().enumerate() {
+            let tfield = format!("{field}.tracks[{ti}]");
+            match track.id.as_deref() {
+                None | Some("") => v.add(format!("{tfield}.id"), "is required"),
+                Some(id) => {
+                    if let Some(prev) = track_ids.insert(id.to_string(), ti) {
+                        v.add(
+                            format!("{tfield}.id"),
+                            format!("duplicates {field}.tracks[{prev}].id '{id}'"),
+                        );
+                    }
+                }
+            }
+            if track.samples.is_empty() {
+                v.add(format!("{tfield}.samples"), "must hold at least one sample");
+            }
+            let mut last_t = f64::NEG_INFINITY;
+            for (si, s) in track.samples.iter().enumerate() {
+                // Built only when a violation needs it (this loop runs per sample).
+                let sfield = || format!("{tfield}.samples[{si}]");
+                match s.t {
+                    None => v.add(format!("{}.t", sfield()), "is required"),
+                    Some(t) if !t.is_finite() => v.add(format!("{}.t", sfield()), "must be finite"),
+                    Some(t) if t <= last_t => v.add(
+                        format!("{}.t", sfield()),
+                        "samples must be in strictly increasing time order",
+                    ),
+                    Some(t) => last_t = t,
+                }
+                let Some(layout) = &layout else { continue };
+                let n = layout.dim;
+                if s.state.len() != n {
+                    v.add(
+                        format!("{}.state", sfield()),
+                        format!("has {} components, state_layout has {n}", s.state.len()),
+                    );
+                } else if s.state.iter().any(|x| !x.is_finite()) {
+                    v.add(format!("{}.state", sfield()), "contains a non-finite value");
+                }
+                if s.covariance.len() != n || s.covariance.iter().any(|r| r.len() != n) {
+                    v.add(
+                        format!("{}.covariance", sfield()),
+                        format!("must be {n}×{n}"),
+                    );
+                } else {
+                    // Symmetry and definiteness do not depend on the order of
+                    // the components: check the request's order on the stack.
+                    let mut flat = small::ZERO;
+                    for (i, row) in s.covariance.iter().enumerate() {
+                        flat[i * n..(i + 1) * n].copy_from_slice(row);
+                    }
+                    if let Err(e) = small::check_covariance("covariance", &flat[..n * n], n) {
+                        v.add(format!("{}.covariance", sfield()), covariance_message(&e));
+                    }
+                }
+                if let Some(g) = &s.gain {
+                    match &h {
+                        None if input.measurement_matrix.is_none() => v.add(
+                            format!("{}.gain", sfield()),
+                            "a gain needs the request's measurement_matrix H",
+                        ),
+                        None => {}
+                        Some(h) => {
+                            let m = h.nrows();
+                            if g.len() != n
+                                || g.iter()
+                                    .any(|r| r.len() != m || r.iter().any(|x| !x.is_finite()))
+                            {
+                                v.add(
+                                    format!("{}.gain", sfield()),
+                                    format!("must be {n}×{m} (state × measurement) finite numbers"),
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    v.finish()?;
+    let layout = layout.expect("validated");
+    let config_method = config_method.expect("validated");
+    Ok(Plan {
+        layout,
+        method_name: kind,
+        config: Config {
+            method: config_method,
+            statistic,
+            alpha,
+            pruning,
+        },
+        model,
+        alignment: mode,
+        tolerance,
+        h,
+        fuse: input.fuse.unwrap_or(true),
+    })
+}
+
+fn motion_model(
+    v: &mut Violations,
+    m: &MotionModelInput,
+    layout: &Layout,
+) -> Option<ConstantVelocity> {
+    match m.kind.as_deref() {
+        None | Some("constant_velocity") => {}
+        Some(other) => {
+            v.add(
+                "motion_model.kind",
+                format!("unknown model '{other}': constant_velocity"),
+            );
+            return None;
+        }
+    }
+    if !layout.has_velocity {
+        v.add(
+            "motion_model",
+            "a constant-velocity model needs velocities in state_layout",
+        );
+        return None;
+    }
+    let noise = match m.process_noise.as_deref() {
+        None | Some("dwna") => m
+            .sigma_a_mps2
+            .map(|sigma_a| ProcessNoise::Dwna { sigma_a })
+            .or_else(|| {
+                v.add(
+                    "motion_model.sigma_a_mps2",
+                    "is required for dwna process noise",
+                );
+                None
+            }),
+        Some("cwna") => m.q_m2ps3.map(|q| ProcessNoise::Cwna { q }).or_else(|| {
+            v.add("motion_model.q_m2ps3", "is required for cwna process noise");
+            None
+        }),
+        Some("velocity_proportional") => Some(ProcessNoise::VelocityProportional {
+            factor: m.factor.unwrap_or(0.05),
+        }),
+        Some(other) => {
+            v.add(
+                "motion_model.process_noise",
+                format!("unknown process noise '{other}': dwna, cwna or velocity_proportional"),
+            );
+            None
+        }
+    }?;
+    v.param("motion_model.", ConstantVelocity::new(layout.axes, noise))
+}
+
+/// Builds the aligned scene; returns it, whether gains were reported, and warnings.
+fn align(input: &CorrelateInput, plan: &Plan) -> Result<(Scene, bool, Vec<String>), ServiceError> {
+    let layout = &plan.layout;
+    let dim = layout.dim;
+    let mut times: Vec<f64> = input
+        .nodes
+        .iter()
+        .flat_map(|n| n.tracks.iter())
+        .flat_map(|t| t.samples.iter())
+        .filter_map(|s| s.t)
+        .collect();
+    times.sort_by(f64::total_cmp);
+    // Clusters no wider than the tolerance; the instant is the latest time.
+    let mut clusters: Vec<(f64, f64)> = Vec::new();
+    for t in times {
+        match clusters.last_mut() {
+            Some((start, end)) if t - *start <= plan.tolerance => *end = t,
+            _ => clusters.push((t, t)),
+        }
+    }
+    let instants: Vec<f64> = clusters.iter().map(|c| c.1).collect();
+    let mut scene = Scene::new(dim, layout.positions(), instants.clone())
+        .map_err(|e| ServiceError::Internal(e.to_string()))?;
+    let mut gains_reported = false;
+    let mut predicted = 0usize;
+    let mut interpolated = 0usize;
+    let mut dropped = 0usize;
+    let eye = DMatrix::<f64>::identity(dim, dim);
+    for (ni, node) in input.nodes.iter().enumerate() {
+        let mut tracks = Vec::with_capacity(node.tracks.len());
+        for (ti, track) in node.tracks.iter().enumerate() {
+            let mut out = Track::new(instants.len(), dim);
+            if let AlignMode::Interpolate { max_gap } = plan.alignment {
+                interpolated +=
+                    interpolate_track(&mut out, &track.samples, &instants, layout, max_gap);
+                tracks.push(out);
+                continue;
+            }
+            let mut ci = 0;
+            let samples = &track.samples;
+            let mut si = 0;
+            while si < samples.len() {
+                let t = samples[si].t.expect("validated");
+                while clusters[ci].1 < t {
+                    ci += 1;
+                }
+                // The latest sample of this track inside cluster ci.
+                let mut last = si;
+                while last + 1 < samples.len()
+                    && samples[last + 1].t.expect("validated") <= clusters[ci].1
+                {
+                    last += 1;
+                }
+                dropped += last - si;
+                let s = &samples[last];
+                let ts = s.t.expect("validated");
+                let mut x = layout.vector_to_canonical(&s.state);
+                let mut p = layout.matrix_to_canonical(&s.covariance);
+                let dt = instants[ci] - ts;
+                if dt > 0.0 && plan.alignment == AlignMode::Predict {
+                    let model = plan.model.as_ref().expect("predict needs a model");
+                    let (xp, pp) = model
+                        .predict(
+                            &DVector::from_column_slice(&x),
+                            &DMatrix::from_row_slice(dim, dim, &p),
+                            dt,
+                        )
+                        .map_err(|e| {
+                            Violations::from_param(
+                                &format!("nodes[{ni}].tracks[{ti}].samples[{last}]."),
+                                e,
+                            )
+                        })?;
+                    x = xp.as_slice().to_vec();
+                    p = small::row_major(&pp);
+                    predicted += 1;
+                }
+                out.set(ci, &x, &p);
+                if let (Some(g), Some(h)) = (&s.gain, &plan.h) {
+                    let m = h.nrows();
+                    let k_flat: Vec<f64> = g.iter().flatten().copied().collect();
+                    // K rows follow the request's layout: permute them.
+                    let k_req = DMatrix::from_row_slice(dim, m, &k_flat);
+                    let mut k = DMatrix::zeros(dim, m);
+                    for (i, &ri) in layout.from_request.iter().enumerate() {
+                        k.set_row(i, &k_req.row(ri));
+                    }
+                    let factor = &eye - &k * h;
+                    out.set_gain_factor(ci, &small::row_major(&factor));
+                    gains_reported = true;
+                }
+                si = last + 1;
+            }
+            tracks.push(out);
+        }
+        scene
+            .add_node(tracks)
+            .map_err(|e| ServiceError::Internal(e.to_string()))?;
+    }
+    let mut warnings = Vec::new();
+    if predicted > 0 {
+        warnings.push(format!(
+            "{predicted} sample(s) were predicted forward (at most {} s) to a common instant",
+            plan.tolerance
+        ));
+    }
+    if interpolated > 0 {
+        warnings.push(format!(
+            "{interpolated} estimate(s) were interpolated linearly between two samples of their \
+             track to a common instant"
+        ));
+    }
+    if dropped > 0 {
+        warnings.push(format!(
+            "{dropped} sample(s) were superseded by a later sample of the same track within one \
+             alignment instant (tolerance {} s) and ignored",
+            plan.tolerance
+        ));
+    }
+    Ok((scene, gains_reported, warnings))
+}
+
+/// Fills `out` at every instant that lies between two samples of the track
+/// no more than `max_gap` apart (or on a sample): the state and covariance are
+/// interpolated linearly, x = (1 − w) x_a + w x_b, P = (1 − w) P_a + w P_b
+/// (a convex combination of positive definite matrices stays positive
+/// definite). Never extrapolates. Returns the number of interpolated
+/// estimates (those not on a sample).
+fn interpolate_track(
+    out: &mut Track,
+    samples: &[SampleInput],
+    instants: &[f64],
+    layout: &Layout,
+    max_gap: f64,
+) -> usize {
+    let times: Vec<f64> = samples.iter().map(|s| s.t.expect("validated")).collect();
+    let mut count = 0;
+    for (k, &t) in instants.iter().enumerate() {
+        // The first sample at or after t.
+        let b = times.partition_point(|&ts| ts < t);
+        if b < times.len() && times[b] == t {
+            let s = &samples[b];
+            out.set(
+                k,
+                &layout.vector_to_canonical(&s.state),
+                &layout.matrix_to_canonical(&s.covariance),
+            );
+            continue;
+        }
+        if b == 0 || b == times.len() || times[b] - times[b - 1] > max_gap {
+            continue;
+        }
+        let (sa, sb) = (&samples[b - 1], &samples[b]);
+        let w = (t - times[b - 1]) / (times[b] - times[b - 1]);
+        let (xa, xb) = (
+            layout.vector_to_canonical(&sa.state),
+            layout.vector_to_canonical(&sb.state),
+        );
+        let (pa, pb) = (
+            layout.matrix_to_canonical(&sa.covariance),
+            layout.matrix_to_canonical(&sb.covariance),
+        );
+        let x: Vec<f64> = xa
+            .iter()
+            .zip(&xb)
+            .map(|(a, b)| (1.0 - w) * a + w * b)
+            .collect();
+        let p: Vec<f64> = pa
+            .iter()
+            .zip(&pb)
+            .map(|(a, b)| (1.0 - w) * a + w * b)
+            .collect();
+        out.set(k, &x, &p);
+        count += 1;
+    }
+    count
+}
+
+/// Wire name of a statistic: the one vocabulary of REST and gRPC.
+pub fn statistic_name(s: Statistic) -> &'static str {
+    match s {
+        Statistic::Weighted => "weighted",
+        Statistic::Modified => "modified",
+    }
+}
+
+pub fn decision_name(d: Decision) -> &'static str {
+    match d {
+        Decision::Correlated => "correlated",
+        Decision::NotCorrelated => "not_correlated",
+        Decision::Undecided => "undecided",
+    }
+}
+
+pub fn reason_name(r: Reason) -> &'static str {
+    match r {
+        Reason::Testing => "testing",
+        Reason::Threshold => "threshold",
+        Reason::EarlyDecision => "early_decision",
+        Reason::EarlyStop => "early_stop",
+        Reason::AmbiguityMaxM => "ambiguity_max_m",
+        Reason::AmbiguityMinMeanStatistic => "ambiguity_min_mean_statistic",
+        Reason::AmbiguityLost => "ambiguity_lost",
+        Reason::Assignment => "assignment",
+        Reason::BelowRule => "below_rule",
+        Reason::Revoked => "revoked",
+        Reason::Gate => "gate",
+        Reason::NearestNeighbour => "nearest_neighbour",
+        Reason::Conflict => "conflict",
+        Reason::KOfN => "k_of_n",
+    }
+}
+
+pub fn fusion_name(f: FusionKind) -> &'static str {
+    match f {
+        FusionKind::BarShalomCampo => "bar_shalom_campo",
+        FusionKind::CovarianceIntersection => "covariance_intersection",
+        FusionKind::Single => "single",
+        FusionKind::None => "none",
+    }
+}

@@ -1,0 +1,674 @@
+//! Dimension fusion of seed 003: local tracks of 2D and 3D radars correlated
+//! by the modified K-nearest-neighbour test and fused into 3D system tracks,
+//! by mapping, dimension lifting and/or dimension splitting
+//! (`algo::dimension`).
+
+use std::{collections::HashSet, time::Instant};
+
+use super::{FieldViolation, ServiceError, Violations, micros_since};
+use crate::algo::{
+    AlgoError,
+    dimension::{self, Config, Filter, KnnParams, LocalTrack, Method, Period, Plot, Radar},
+    gating::chi2_threshold,
+    geo::{Ellipsoid, LocalFrame},
+};
+
+/// Most radars per request.
+pub const MAX_RADARS: usize = 64;
+/// Most local tracks per request, over all radars.
+pub const MAX_TRACKS: usize = 2_000;
+/// Most plots per request, over all tracks.
+pub const MAX_PLOTS: usize = 200_000;
+/// Most pair samples to test per request: Σ over pairs of tracks of
+/// different radars of their plot counts (the K-NN tests are exhaustive).
+pub const MAX_PAIR_SAMPLES: usize = 5_000_000;
+/// The method names of the API.
+pub const METHODS: &[&str] = &["mapping", "lifting", "splitting"];
+/// The filter names of the API.
+pub const FILTERS: &[&str] = &["alpha_beta", "kalman"];
+/// The state layout of every system-track sample.
+pub const STATE_LAYOUT: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
+
+pub const DEFAULT_WINDOW: u32 = 4;
+pub const DEFAULT_SIGMA_A_MPS2: f64 = 5.0;
+pub const DEFAULT_N0: u32 = 5;
+pub const DEFAULT_K: u32 = 3;
+pub const DEFAULT_PRESET_ALTITUDE_M: f64 = 5_000.0;
+pub const DEFAULT_ALTITUDE_SIGMA_M: f64 = 5_000.0;
+pub const DEFAULT_GATE_SIGMAS: f64 = 3.0;
+pub const DEFAULT_SIGNIFICANCE: f64 = 0.01;
+
+/// A dimension-fusion request as a client sent it, before validation.
+#[derive(Debug, Clone, Default)]
+pub struct FuseInput {
+    /// The fusion centre (ENU origin); absent: the first radar's site.
+    pub origin: Option<SiteInput>,
+    /// Empty: all three methods.
+    pub methods: Vec<String>,
+    pub filter: Option<String>,
+    pub window: Option<u32>,
+    pub sigma_a_mps2: Option<f64>,
+    pub n0: Option<u32>,
+    pub k: Option<u32>,
+    pub preset_altitude_m: Option<f64>,
+    pub altitude_sigma_m: Option<f64>,
+    pub gate_sigmas: Option<f64>,
+    pub significance: Option<f64>,
+    pub radars: Vec<RadarInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct SiteInput {
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+    pub height_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct RadarInput {
+    pub id: Option<String>,
+    /// `2d` or `3d`.
+    pub kind: Option<String>,
+    pub site: Option<SiteInput>,
+    pub sigma_range_m: Option<f64>,
+    pub sigma_azimuth_deg: Option<f64>,
+    pub sigma_elevation_deg: Option<f64>,
+    pub scan_period_s: Option<f64>,
+    pub tracks: Vec<TrackInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct TrackInput {
+    pub id: Option<String>,
+    pub plots: Vec<PlotInput>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct PlotInput {
+    pub t: Option<f64>,
+    pub range_m: Option<f64>,
+    pub azimuth_deg: Option<f64>,
+    pub elevation_deg: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct FuseOutput {
+    pub results: Vec<MethodOutput>,
+    pub compute_us: f64,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct MethodOutput {
+    pub method: &'static str,
+    pub pairs: Vec<PairOutput>,
+    /// Tracks in no system track with another radar's track.
+    pub uncorrelated: Vec<TrackRef>,
+    pub system_tracks: Vec<SystemTrackOutput>,
+    pub compute_us: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TrackRef {
+    pub radar: String,
+    pub track: String,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairOutput {
+    pub a: TrackRef,
+    pub b: TrackRef,
+    /// `association`, `check`, `hold` or `rejected`.
+    pub period: &'static str,
+    pub correlated: bool,
+    pub tests: u32,
+    pub hits: u32,
+    pub misses: u32,
+    pub check_counter: i32,
+    pub check_tests: u32,
+    pub revocations: u32,
+    /// Mean d'S⁻¹d; `None` when the tracks never overlapped in time.
+    pub mean_statistic: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct SystemTrackOutput {
+    pub id: String,
+    pub members: Vec<TrackRef>,
+    /// False: only 2D radars see it, its height is the nominal preset.
+    pub altitude_known: bool,
+    pub samples: Vec<SystemSample>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct SystemSample {
+    pub t: f64,
+    /// `[x, vx, y, vy, z, vz]` in the centre's ENU frame.
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// `None` when the altitude is unknown.
+    pub height_m: Option<f64>,
+}
+
+/// The wire name of a period.
+pub fn period_name(p: Period) -> &'static str {
+    match p {
+        Period::Association => "association",
+        Period::Check => "check",
+        Period::Hold => "hold",
+        Period::Rejected => "rejected",
+    }
+}
+
+fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Mapping => "mapping",
+        Method::Lifting => "lifting",
+        Method::Splitting => "splitting",
+    }
+}
+
+struct Plan {
+    centre: LocalFrame,
+    methods: Vec<Method>,
+    config: Config,
+    radars: Vec<Radar>,
+    tracks: Vec<LocalTrack>,
+    refs: Vec<TrackRef>,
+    warnings: Vec<String>,
+}
+
+/// Validates, then runs every requested method.
+pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
+    let plan = validate(&input)?;
+    let start = Instant::now();
+    let mut results = Vec::new();
+    for &method in &plan.methods {
+        let t0 = Instant::now();
+        let out = dimension::fuse(
+            &plan.centre,
+            &plan.radars,
+            &plan.tracks,
+            method,
+            &plan.config,
+        )
+        .map_err(computation_error)?;
+        let r = |i: usize| plan.refs[i].clone();
+        let pairs = out
+            .pairs
+            .iter()
+            .map(|p| PairOutput {
+                a: r(p.a),
+                b: r(p.b),
+                period: period_name(p.state.period),
+                correlated: p.state.correlated(),
+                tests: p.state.tests,
+                hits: p.state.hits,
+                misses: p.state.misses,
+                check_counter: p.state.counter,
+                check_tests: p.state.check_tests,
+                revocations: p.state.revocations,
+                mean_statistic: p.mean_statistic.is_finite().then_some(p.mean_statistic),
+            })
+            .collect();
+        let mut uncorrelated = Vec::new();
+        let mut system_tracks = Vec::new();
+        for (n, st) in out.system_tracks.iter().enumerate() {
+            if st.members.len() == 1 {
+                uncorrelated.push(r(st.members[0]));
+            }
+            let mut samples = Vec::with_capacity(st.samples.len());
+            for s in &st.samples {
+                let (lat, lon, h) = plan
+                    .centre
+                    .enu_to_geodetic([s.x[0], s.x[2], s.x[4]])
+                    .map_err(computation_error)?;
+                samples.push(SystemSample {
+                    t: s.t,
+                    state: s.x.iter().copied().collect(),
+                    covariance: (0..6)
+                        .map(|i| s.p.row(i).iter().copied().collect())
+                        .collect(),
+                    lat_deg: lat.to_degrees(),
+                    lon_deg: lon.to_degrees(),
+                    height_m: st.altitude_known.then_some(h),
+                });
+            }
+            system_tracks.push(SystemTrackOutput {
+                id: format!("S{}", n + 1),
+                members: st.members.iter().map(|&i| r(i)).collect(),
+                altitude_known: st.altitude_known,
+                samples,
+            });
+        }
+        let mut warnings_here = Vec::new();
+        if out.conflicts > 0 {
+            warnings_here.push(format!(
+                "{}: {} correlated link(s) dropped because they would put two tracks of one radar \
+                 in one system track",
+                method_name(method),
+                out.conflicts
+            ));
+        }
+        results.push((
+            MethodOutput {
+                method: method_name(method),
+                pairs,
+                uncorrelated,
+                system_tracks,
+                compute_us: micros_since(t0),
+            },
+            warnings_here,
+        ));
+    }
+    let compute_us = micros_since(start);
+    let mut warnings = plan.warnings;
+    let results = results
+        .into_iter()
+        .map(|(r, w)| {
+            warnings.extend(w);
+            r
+        })
+        .collect();
+    Ok(FuseOutput {
+        results,
+        compute_us,
+        warnings,
+    })
+}
+
+/// A failure of the numerical core after validation: the geometry of the data
+/// (a 2D slant range that cannot reach the assumed height, a covariance that
+/// lost definiteness), reported against the request.
+fn computation_error(e: AlgoError) -> ServiceError {
+    let message = match &e {
+        AlgoError::DegenerateGeometry { .. } => format!(
+            "a 2D plot's slant range cannot reach the assumed height, or a position is degenerate: {e}"
+        ),
+        other => format!("the fusion failed numerically: {other}"),
+    };
+    ServiceError::InvalidInput(vec![FieldViolation {
+        field: "radars".into(),
+        message,
+    }])
+}
+
+fn finite_in(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
+    let x = v.required(field, x)?;
+    if !(x.is_finite() && x >= lo && x <= hi) {
+        v.add(field, format!("must lie in [{lo}, {hi}], got {x}"));
+        return None;
+    }
+    Some(x)
+}
+
+fn positive(v: &mut Violations, field: &str, x: Option<f64>) -> Option<f64> {
+    let x = v.required(field, x)?;
+    if !(x.is_finite() && x > 0.0) {
+        v.add(field, format!("must be finite and > 0, got {x}"));
+        return None;
+    }
+    Some(x)
+}
+
+fn site(v: &mut Violations, f: &str, s: &SiteInput) -> Option<LocalFrame> {
+    let lat = finite_in(v, &format!("{f}.lat_deg"), s.lat_deg, -90.0, 90.0);
+    let lon = finite_in(v, &format!("{f}.lon_deg"), s.lon_deg, -180.0, 180.0);
+    let h = finite_in(
+        v,
+        &format!("{f}.height_m"),
+        s.height_m,
+        -11_000.0,
+        100_000.0,
+    );
+    let (lat, lon, h) = (lat?, lon?, h?);
+    if lat.abs() == 90.0 {
+        v.add(
+            format!("{f}.lat_deg"),
+            "a site at a pole has no azimuth reference",
+        );
+        return None;
+    }
+    v.check(
+        f,
+        LocalFrame::new(Ellipsoid::WGS84, lat.to_radians(), lon.to_radians(), h),
+    )
+}
+
+fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
+    let mut v = Violations::new();
+    let mut warnings = Vec::new();
+
+    let mut methods = Vec::new();
+    if input.methods.is_empty() {
+        methods = vec![Method::Mapping, Method::Lifting, Method::Splitting];
+    }
+    for (i, m) in input.methods.iter().enumerate() {
+        let method = match m.as_str() {
+            "mapping" => Method::Mapping,
+            "lifting" => Method::Lifting,
+            "splitting" => Method::Splitting,
+            other => {
+                v.add(
+                    format!("methods[{i}]"),
+                    format!("unknown method '{other}': one of {}", METHODS.join(", ")),
+                );
+                continue;
+            }
+        };
+        if methods.contains(&method) {
+            v.add(format!("methods[{i}]"), format!("duplicate method '{m}'"));
+        } else {
+            methods.push(method);
+        }
+    }
+
+    let window = input.window.unwrap_or(DEFAULT_WINDOW);
+    if !(3..=5).contains(&window) {
+        v.add(
+            "window",
+            format!("must lie in 3..=5 (seed 003 §2.1), got {window}"),
+        );
+    }
+    let sigma_a = input.sigma_a_mps2.unwrap_or(DEFAULT_SIGMA_A_MPS2);
+    if !(sigma_a.is_finite() && sigma_a > 0.0) {
+        v.add(
+            "sigma_a_mps2",
+            format!("must be finite and > 0, got {sigma_a}"),
+        );
+    }
+    let filter = match input.filter.as_deref() {
+        None | Some("alpha_beta") => Filter::AlphaBeta {
+            window: window as usize,
+        },
+        Some("kalman") => Filter::Kalman { sigma_a },
+        Some(other) => {
+            v.add(
+                "filter",
+                format!("unknown filter '{other}': one of {}", FILTERS.join(", ")),
+            );
+            Filter::AlphaBeta { window: 4 }
+        }
+    };
+    let n0 = input.n0.unwrap_or(DEFAULT_N0);
+    let k = input.k.unwrap_or(DEFAULT_K);
+    if !(2..=1000).contains(&n0) {
+        v.add("n0", format!("must lie in 2..=1000, got {n0}"));
+    } else if !(n0.div_ceil(2)..=n0).contains(&k) {
+        v.add(
+            "k",
+            format!(
+                "must lie in ⌈N₀/2⌉..=N₀ = {}..={n0}, got {k}",
+                n0.div_ceil(2)
+            ),
+        );
+    }
+    let preset = input.preset_altitude_m.unwrap_or(DEFAULT_PRESET_ALTITUDE_M);
+    if !(preset.is_finite() && (-1000.0..=100_000.0).contains(&preset)) {
+        v.add(
+            "preset_altitude_m",
+            format!("must lie in [-1000, 100000], got {preset}"),
+        );
+    }
+    let altitude_sigma = input.altitude_sigma_m.unwrap_or(DEFAULT_ALTITUDE_SIGMA_M);
+    if !(altitude_sigma.is_finite() && altitude_sigma > 0.0) {
+        v.add(
+            "altitude_sigma_m",
+            format!("must be finite and > 0, got {altitude_sigma}"),
+        );
+    }
+    let gate_sigmas = input.gate_sigmas.unwrap_or(DEFAULT_GATE_SIGMAS);
+    if !(gate_sigmas.is_finite() && gate_sigmas > 0.0) {
+        v.add(
+            "gate_sigmas",
+            format!("must be finite and > 0, got {gate_sigmas}"),
+        );
+    }
+    let significance = input.significance.unwrap_or(DEFAULT_SIGNIFICANCE);
+    let chi2 = if significance > 0.0 && significance < 1.0 {
+        v.param(
+            "",
+            chi2_threshold(2, significance).and_then(|a| Ok((a, chi2_threshold(3, significance)?))),
+        )
+    } else {
+        v.add(
+            "significance",
+            format!("must lie in (0, 1), got {significance}"),
+        );
+        None
+    };
+
+    // Radars and tracks.
+    if input.radars.is_empty() {
+        v.add("radars", "must hold at least one radar");
+    } else if input.radars.len() > MAX_RADARS {
+        v.add("radars", format!("at most {MAX_RADARS} radars per request"));
+    }
+    let n_tracks: usize = input.radars.iter().map(|r| r.tracks.len()).sum();
+    if n_tracks > MAX_TRACKS {
+        v.add(
+            "radars",
+            format!("at most {MAX_TRACKS} tracks per request, got {n_tracks}"),
+        );
+    }
+    let n_plots: usize = input
+        .radars
+        .iter()
+        .flat_map(|r| &r.tracks)
+        .map(|t| t.plots.len())
+        .sum();
+    if n_plots > MAX_PLOTS {
+        v.add(
+            "radars",
+            format!("at most {MAX_PLOTS} plots per request, got {n_plots}"),
+        );
+    }
+    if n_tracks <= MAX_TRACKS {
+        let lens: Vec<(usize, usize)> = input
+            .radars
+            .iter()
+            .enumerate()
+            .flat_map(|(ri, r)| r.tracks.iter().map(move |t| (ri, t.plots.len())))
+            .collect();
+        let mut total = 0usize;
+        for (i, a) in lens.iter().enumerate() {
+            for b in &lens[i + 1..] {
+                if a.0 != b.0 {
+                    total = total.saturating_add(a.1 + b.1);
+                }
+            }
+        }
+        if total > MAX_PAIR_SAMPLES {
+            v.add(
+                "radars",
+                format!(
+                    "the pairs of tracks of different radars hold {total} plots to test, \
+                     at most {MAX_PAIR_SAMPLES} per request"
+                ),
+            );
+        }
+    }
+    let mut radars = Vec::new();
+    let mut tracks = Vec::new();
+    let mut refs = Vec::new();
+    let mut radar_ids = HashSet::new();
+    for (ri, r) in input.radars.iter().enumerate().take(MAX_RADARS) {
+        let f = format!("radars[{ri}]");
+        let id = match &r.id {
+            None => {
+                v.add(format!("{f}.id"), "is required");
+                String::new()
+            }
+            Some(id) if id.is_empty() => {
+                v.add(format!("{f}.id"), "must not be empty");
+                String::new()
+            }
+            Some(id) => {
+                if !radar_ids.insert(id.clone()) {
+                    v.add(format!("{f}.id"), format!("duplicate radar id '{id}'"));
+                }
+                id.clone()
+            }
+        };
+        let three_d = match r.kind.as_deref() {
+            Some("2d") => Some(false),
+            Some("3d") => Some(true),
+            None => {
+                v.add(format!("{f}.kind"), "is required");
+                None
+            }
+            Some(other) => {
+                v.add(
+                    format!("{f}.kind"),
+                    format!("unknown kind '{other}': one of 2d, 3d"),
+                );
+                None
+            }
+        };
+        let frame = match &r.site {
+            None => {
+                v.add(format!("{f}.site"), "is required");
+                None
+            }
+            Some(s) => site(&mut v, &format!("{f}.site"), s),
+        };
+        let sr = positive(&mut v, &format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = positive(
+            &mut v,
+            &format!("{f}.sigma_azimuth_deg"),
+            r.sigma_azimuth_deg,
+        );
+        let se = match (three_d, r.sigma_elevation_deg) {
+            (Some(true), s) => positive(&mut v, &format!("{f}.sigma_elevation_deg"), s),
+            (Some(false), Some(_)) => {
+                v.add(
+                    format!("{f}.sigma_elevation_deg"),
+                    "a 2D radar measures no elevation",
+                );
+                None
+            }
+            _ => Some(0.0),
+        };
+        let scan = positive(&mut v, &format!("{f}.scan_period_s"), r.scan_period_s);
+        let mut track_ids = HashSet::new();
+        for (ti, t) in r.tracks.iter().enumerate() {
+            let ft = format!("{f}.tracks[{ti}]");
+            let tid = match &t.id {
+                None => {
+                    v.add(format!("{ft}.id"), "is required");
+                    String::new()
+                }
+                Some(tid) => {
+                    if tid.is_empty() {
+                        v.add(format!("{ft}.id"), "must not be empty");
+                    } else if !track_ids.insert(tid.clone()) {
+                        v.add(
+                            format!("{ft}.id"),
+                            format!("duplicate track id '{tid}' in radar '{id}'"),
+                        );
+                    }
+                    tid.clone()
+                }
+            };
+            if t.plots.is_empty() {
+                v.add(format!("{ft}.plots"), "must hold at least one plot");
+            } else if t.plots.len() < 3 {
+                warnings.push(format!(
+                    "radar '{id}' track '{tid}': fewer than 3 plots, too short to be tested"
+                ));
+            }
+            let mut plots = Vec::with_capacity(t.plots.len());
+            let mut last_t = f64::NEG_INFINITY;
+            for (pi, p) in t.plots.iter().enumerate() {
+                let fp = format!("{ft}.plots[{pi}]");
+                let time = v.required(&format!("{fp}.t"), p.t);
+                if let Some(time) = time {
+                    if !time.is_finite() {
+                        v.add(format!("{fp}.t"), "must be finite");
+                    } else if time <= last_t {
+                        v.add(
+                            format!("{fp}.t"),
+                            format!("times must increase: {time} after {last_t}"),
+                        );
+                    } else {
+                        last_t = time;
+                    }
+                }
+                let range = finite_in(&mut v, &format!("{fp}.range_m"), p.range_m, 0.0, 1e7);
+                if range == Some(0.0) {
+                    v.add(format!("{fp}.range_m"), "must be > 0");
+                }
+                let az = finite_in(
+                    &mut v,
+                    &format!("{fp}.azimuth_deg"),
+                    p.azimuth_deg,
+                    -360.0,
+                    360.0,
+                );
+                let el = match (three_d, p.elevation_deg) {
+                    (Some(false), Some(_)) => {
+                        v.add(
+                            format!("{fp}.elevation_deg"),
+                            "a 2D radar gives no elevation",
+                        );
+                        None
+                    }
+                    (Some(true), e) => {
+                        finite_in(&mut v, &format!("{fp}.elevation_deg"), e, -90.0, 90.0).map(Some)
+                    }
+                    _ => Some(None),
+                };
+                if let (Some(time), Some(range), Some(az), Some(el)) = (time, range, az, el) {
+                    plots.push(Plot {
+                        t: time,
+                        range,
+                        azimuth: az.to_radians(),
+                        elevation: el.map(f64::to_radians),
+                    });
+                }
+            }
+            tracks.push(LocalTrack { radar: ri, plots });
+            refs.push(TrackRef {
+                radar: id.clone(),
+                track: tid,
+            });
+        }
+        if let (Some(frame), Some(three_d), Some(sr), Some(sa), Some(se), Some(scan)) =
+            (frame, three_d, sr, sa, se, scan)
+        {
+            radars.push(Radar {
+                frame,
+                three_d,
+                sigma_range: sr,
+                sigma_azimuth: sa.to_radians(),
+                sigma_elevation: se.to_radians(),
+                scan_period: scan,
+            });
+        }
+    }
+    let centre = match &input.origin {
+        Some(o) => site(&mut v, "origin", o),
+        None => radars.first().map(|r| r.frame),
+    };
+    v.finish()?;
+    let (chi2_2, chi2_3) = chi2.expect("validated");
+    Ok(Plan {
+        centre: centre.expect("validated"),
+        methods,
+        config: Config {
+            filter,
+            knn: KnnParams { n0, k },
+            preset_altitude: preset,
+            altitude_sigma,
+            gate_sigmas,
+            chi2_2,
+            chi2_3,
+        },
+        radars,
+        tracks,
+        refs,
+        warnings,
+    })
+}

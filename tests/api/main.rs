@@ -1,0 +1,13 @@
+//! Black-box tests through the real servers: one test binary, one
+//! `spawn_app` helper that starts REST and gRPC on port 0.
+
+mod ais_radar;
+mod correlation;
+mod dimension;
+mod errors;
+mod fuzz;
+mod grpc;
+mod helpers;
+mod jpda;
+mod ops;
+mod rules;

@@ -1,0 +1,182 @@
+//! Operations: health, readiness, metrics, the OpenAPI document and docs page,
+//! compression, request ids, load shedding and graceful shutdown.
+
+use radar_fusion::{http::openapi_json, proto as pb};
+use serde_json::json;
+use tonic::Code;
+
+use crate::helpers::{assert_problem, spawn_app, spawn_app_with};
+
+#[tokio::test]
+async fn liveness_and_readiness() {
+    let app = spawn_app().await;
+    let r = app.client.get(app.url("/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(
+        r.json::<serde_json::Value>().await.unwrap(),
+        json!({"status": "ok"})
+    );
+    let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    app.state.set_ready(false);
+    let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+}
+
+#[tokio::test]
+async fn metrics_count_routes_and_grpc_methods() {
+    let app = spawn_app().await;
+    app.post_json(
+        "/v1/correlation/rules/evaluate",
+        &json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]}),
+    )
+    .await;
+    let _ = app
+        .correlation()
+        .await
+        .evaluate_rules(pb::EvaluateRulesRequest {
+            alpha: None,
+            rules: vec![],
+        })
+        .await;
+    let text = app
+        .client
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains(r#"http_requests_total{method="POST",route="/v1/correlation/rules/evaluate",status="200"}"#),
+        "{text}"
+    );
+    assert!(
+        text.contains("http_request_duration_seconds_bucket"),
+        "{text}"
+    );
+    assert!(
+        text.contains(r#"grpc_requests_total{method="/radar.fusion.v1.CorrelationService/EvaluateRules",code="InvalidArgument"}"#),
+        "{text}"
+    );
+    assert!(
+        text.contains("grpc_request_duration_seconds_bucket"),
+        "{text}"
+    );
+}
+
+#[tokio::test]
+async fn openapi_is_served_and_the_checked_in_copy_is_current() {
+    let app = spawn_app().await;
+    let served: serde_json::Value = app
+        .client
+        .get(app.url("/openapi.json"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let generated: serde_json::Value = serde_json::from_str(&openapi_json()).unwrap();
+    assert_eq!(served, generated);
+    assert!(served["openapi"].as_str().unwrap().starts_with("3."));
+    assert!(served["paths"]["/v1/correlation/rules/evaluate"]["post"].is_object());
+
+    let checked_in =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json"))
+            .expect("openapi/openapi.json exists");
+    assert!(
+        checked_in == openapi_json(),
+        "openapi/openapi.json is stale: regenerate it with \
+         `cargo run -- openapi > openapi/openapi.json`"
+    );
+}
+
+#[tokio::test]
+async fn docs_page_is_served() {
+    let app = spawn_app().await;
+    let r = app.client.get(app.url("/docs/")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let html = r.text().await.unwrap();
+    assert!(html.contains("swagger-ui"), "{html}");
+    let r = app
+        .client
+        .get(app.url("/docs/swagger-initializer.js"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert!(r.text().await.unwrap().contains("/openapi.json"));
+}
+
+#[tokio::test]
+async fn responses_are_gzipped_on_request_and_carry_a_request_id() {
+    let app = spawn_app().await;
+    let r = app
+        .client
+        .get(app.url("/openapi.json"))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["content-encoding"], "gzip");
+    assert!(!r.headers()["x-request-id"].is_empty());
+
+    let r = app
+        .client
+        .get(app.url("/healthz"))
+        .header("x-request-id", "trace-me-42")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["x-request-id"], "trace-me-42");
+}
+
+#[tokio::test]
+async fn excess_requests_are_shed_with_503_and_unavailable() {
+    let app = spawn_app_with(|s| s.max_in_flight = 1).await;
+    let held = app.state.try_admit().expect("the only slot");
+    let r = app
+        .post_json(
+            "/v1/correlation/rules/evaluate",
+            &json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]}),
+        )
+        .await;
+    assert_eq!(r.headers()["retry-after"], "1");
+    assert_problem(r, 503).await;
+    let status = app
+        .correlation()
+        .await
+        .evaluate_rules(pb::EvaluateRulesRequest {
+            alpha: Some(0.05),
+            rules: vec![pb::LrRule {
+                l: Some(1),
+                r: Some(1),
+            }],
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), Code::Unavailable);
+    // Probes are not shed.
+    let r = app.client.get(app.url("/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+
+    drop(held);
+    let r = app
+        .post_json(
+            "/v1/correlation/rules/evaluate",
+            &json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]}),
+        )
+        .await;
+    assert_eq!(r.status(), 200);
+}
+
+#[tokio::test]
+async fn graceful_shutdown_stops_serving_and_reports_not_ready() {
+    let app = spawn_app().await;
+    let (addr, state) = (app.http_addr, app.state.clone());
+    app.stop().await.expect("clean shutdown");
+    assert!(!state.is_ready());
+    assert!(tokio::net::TcpStream::connect(addr).await.is_err());
+}
