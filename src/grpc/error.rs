@@ -27,5 +27,11 @@ pub fn to_status(e: ServiceError) -> Status {
             tracing::error!(%detail, "internal error");
             Status::internal("the service failed unexpectedly; the incident is logged")
         }
+        ServiceError::NotFound(detail) => Status::not_found(detail),
+        ServiceError::Conflict(detail) => Status::failed_precondition(detail),
+        ServiceError::QuotaExceeded(detail) | ServiceError::TooLarge(detail) => {
+            Status::resource_exhausted(detail)
+        }
+        ServiceError::Unavailable(detail) => Status::unavailable(detail),
     }
 }

@@ -127,6 +127,33 @@ impl From<ServiceError> for Problem {
                     "the service failed unexpectedly; the incident is logged",
                 )
             }
+            ServiceError::NotFound(detail) => {
+                Problem::new(StatusCode::NOT_FOUND, "not-found", "Not found", detail)
+            }
+            ServiceError::Conflict(detail) => Problem::new(
+                StatusCode::CONFLICT,
+                "sequence-conflict",
+                "Batch out of sequence",
+                detail,
+            ),
+            ServiceError::QuotaExceeded(detail) => Problem::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "quota-exceeded",
+                "Quota exceeded",
+                detail,
+            ),
+            ServiceError::TooLarge(detail) => Problem::new(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                "too-large",
+                "Request too large",
+                detail,
+            ),
+            ServiceError::Unavailable(detail) => Problem::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "store-unavailable",
+                "Session store unavailable",
+                detail,
+            ),
         }
     }
 }

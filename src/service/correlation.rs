@@ -219,11 +219,11 @@ pub struct CorrelateTiming {
 
 /// Cross-covariance of each correlated pair ((node, track), (node, track)) at
 /// its last common instant: (instant index, row-major P_ab).
-type CrossCovariances = HashMap<((usize, usize), (usize, usize)), (usize, Vec<f64>)>;
+pub(super) type CrossCovariances = HashMap<((usize, usize), (usize, usize)), (usize, Vec<f64>)>;
 
 /// How a track's samples are carried to the common instants.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum AlignMode {
+pub(super) enum AlignMode {
     /// The latest sample of the cluster, predicted forward with the model.
     Predict,
     /// The latest sample of the cluster, as reported.
@@ -237,26 +237,26 @@ enum AlignMode {
 pub const DEFAULT_MAX_GAP_S: f64 = 10.0;
 
 /// A validated request.
-struct Plan {
-    layout: Layout,
-    method_name: String,
-    config: Config,
-    model: Option<ConstantVelocity>,
-    alignment: AlignMode,
-    tolerance: f64,
-    h: Option<DMatrix<f64>>,
-    fuse: bool,
+pub(super) struct Plan {
+    pub(super) layout: Layout,
+    pub(super) method_name: String,
+    pub(super) config: Config,
+    pub(super) model: Option<ConstantVelocity>,
+    pub(super) alignment: AlignMode,
+    pub(super) tolerance: f64,
+    pub(super) h: Option<DMatrix<f64>>,
+    pub(super) fuse: bool,
 }
 
 /// The request's state layout and its permutation to the canonical
 /// interleaved order `[x, vx, y, vy(, z, vz)]` or `[x, y(, z)]`.
 #[derive(Debug, Clone)]
-struct Layout {
+pub(super) struct Layout {
     /// canonical[i] = index in the request's layout.
-    from_request: Vec<usize>,
-    dim: usize,
-    axes: usize,
-    has_velocity: bool,
+    pub(super) from_request: Vec<usize>,
+    pub(super) dim: usize,
+    pub(super) axes: usize,
+    pub(super) has_velocity: bool,
 }
 
 impl Layout {
@@ -296,7 +296,7 @@ impl Layout {
     }
 
     /// Position indices in the canonical order.
-    fn positions(&self) -> Vec<usize> {
+    pub(super) fn positions(&self) -> Vec<usize> {
         if self.has_velocity {
             (0..self.axes).map(|a| 2 * a).collect()
         } else {
@@ -304,11 +304,11 @@ impl Layout {
         }
     }
 
-    fn vector_to_canonical(&self, v: &[f64]) -> Vec<f64> {
+    pub(super) fn vector_to_canonical(&self, v: &[f64]) -> Vec<f64> {
         self.from_request.iter().map(|&i| v[i]).collect()
     }
 
-    fn matrix_to_canonical(&self, m: &[Vec<f64>]) -> Vec<f64> {
+    pub(super) fn matrix_to_canonical(&self, m: &[Vec<f64>]) -> Vec<f64> {
         let n = self.dim;
         let mut out = vec![0.0; n * n];
         for (i, &ri) in self.from_request.iter().enumerate() {
@@ -319,7 +319,7 @@ impl Layout {
         out
     }
 
-    fn vector_to_request(&self, v: &[f64]) -> Vec<f64> {
+    pub(super) fn vector_to_request(&self, v: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.dim];
         for (i, &ri) in self.from_request.iter().enumerate() {
             out[ri] = v[i];
@@ -327,7 +327,7 @@ impl Layout {
         out
     }
 
-    fn matrix_to_request(&self, m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    pub(super) fn matrix_to_request(&self, m: &DMatrix<f64>) -> Vec<Vec<f64>> {
         let mut out = vec![vec![0.0; self.dim]; self.dim];
         for (i, &ri) in self.from_request.iter().enumerate() {
             for (j, &rj) in self.from_request.iter().enumerate() {
@@ -402,7 +402,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
                 }
                 if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
                     listed += 1;
-                    pairs.push(pair_output(&r, name(na, r.a), name(nb, r.b), scene.times()));
+                    pairs.push(pair_output(&r, name(na, r.a), name(nb, r.b)));
                 }
             }
             omitted += total - listed;
@@ -429,7 +429,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
         };
         let (t, state, covariance, kind) = match fused {
             Some((k, f, kind)) => (
-                scene.times()[k],
+                scene.time(k),
                 plan.layout.vector_to_request(f.x.as_slice()),
                 plan.layout.matrix_to_request(&f.p),
                 kind,
@@ -524,7 +524,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
     })
 }
 
-fn pair_output(r: &PairReport, a: TrackName, b: TrackName, times: &[f64]) -> PairOutput {
+pub(super) fn pair_output(r: &PairReport, a: TrackName, b: TrackName) -> PairOutput {
     PairOutput {
         a,
         b,
@@ -536,14 +536,14 @@ fn pair_output(r: &PairReport, a: TrackName, b: TrackName, times: &[f64]) -> Pai
         samples: r.samples,
         mean_statistic: r.mean_statistic,
         last_statistic: r.last_statistic,
-        decided_at: r.decided_at.map(|k| times[k]),
+        decided_at: r.decided_time,
     }
 }
 
 /// Fuses a group at the latest instant where most of its members are present:
 /// Bar-Shalom–Campo for two members with a known cross-covariance at that
 /// instant, covariance intersection otherwise.
-fn fuse_group(
+pub(super) fn fuse_group(
     scene: &Scene,
     members: &[(usize, usize)],
     cross: &CrossCovariances,
@@ -555,8 +555,9 @@ fn fuse_group(
             .filter(|&&(n, t)| scene.track(n, t).is_present(k))
             .count()
     };
-    let instants = scene.times().len();
-    let best = (0..instants).rev().max_by_key(|&k| (count(k), k))?;
+    let best = (scene.first()..scene.end())
+        .rev()
+        .max_by_key(|&k| (count(k), k))?;
     let present: Vec<(usize, usize)> = members
         .iter()
         .copied()
@@ -607,8 +608,21 @@ fn fuse_group(
     }
 }
 
-fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
-    let mut v = Violations::new();
+/// The validated configuration of a request, before its nodes.
+struct ConfigParts {
+    layout: Option<Layout>,
+    kind: String,
+    config_method: Option<Method>,
+    statistic: Statistic,
+    alpha: f64,
+    pruning: Pruning,
+    model: Option<ConstantVelocity>,
+    mode: AlignMode,
+    tolerance: f64,
+    h: Option<DMatrix<f64>>,
+}
+
+fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
     let layout = match Layout::parse(&input.state_layout) {
         Ok(l) => Some(l),
         Err(e) => {
@@ -676,12 +690,12 @@ fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
         );
         None
     } else if let Some(r) = &method.rule {
-        rule_of(&mut v, "method.rule", r).map(RuleSpec::Fixed)
+        rule_of(v, "method.rule", r).map(RuleSpec::Fixed)
     } else if let Some(s) = &method.schedule {
         let parsed: Vec<Option<LrRule>> = s
             .iter()
             .enumerate()
-            .map(|(i, r)| rule_of(&mut v, &format!("method.schedule[{i}]"), r))
+            .map(|(i, r)| rule_of(v, &format!("method.schedule[{i}]"), r))
             .collect();
         if s.is_empty() {
             v.add("method.schedule", "must hold at least one rule");
@@ -746,7 +760,7 @@ fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
     // Motion model.
     let model = match (&input.motion_model, &layout) {
         (None, _) | (_, None) => None,
-        (Some(m), Some(layout)) => motion_model(&mut v, m, layout),
+        (Some(m), Some(layout)) => motion_model(v, m, layout),
     };
     if statistic == Statistic::Modified && input.motion_model.is_none() {
         v.add(
@@ -823,6 +837,63 @@ fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
         _ => None,
     };
 
+    ConfigParts {
+        layout,
+        kind,
+        config_method,
+        statistic,
+        alpha,
+        pruning,
+        model,
+        mode,
+        tolerance,
+        h,
+    }
+}
+
+fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
+    let ConfigParts {
+        layout,
+        kind,
+        config_method,
+        statistic,
+        alpha,
+        pruning,
+        model,
+        mode,
+        tolerance,
+        h,
+    } = parts;
+    Plan {
+        layout: layout.expect("validated"),
+        method_name: kind,
+        config: Config {
+            method: config_method.expect("validated"),
+            statistic,
+            alpha,
+            pruning,
+        },
+        model,
+        alignment: mode,
+        tolerance,
+        h,
+        fuse: fuse.unwrap_or(true),
+    }
+}
+
+/// Validates the configuration of a request without its nodes (a
+/// streaming session's configuration).
+pub(super) fn validate_plan(input: &CorrelateInput) -> Result<Plan, ServiceError> {
+    let mut v = Violations::new();
+    let parts = validate_config(input, &mut v);
+    v.finish()?;
+    Ok(plan_of(parts, input.fuse))
+}
+
+fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
+    let mut v = Violations::new();
+    let parts = validate_config(input, &mut v);
+    let (layout, h) = (&parts.layout, &parts.h);
     // Nodes and tracks.
     if input.nodes.is_empty() {
         v.add("nodes", "must hold at least one node");
@@ -888,74 +959,77 @@ fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
                     ),
                     Some(t) => last_t = t,
                 }
-                let Some(layout) = &layout else { continue };
-                let n = layout.dim;
-                if s.state.len() != n {
-                    v.add(
-                        format!("{}.state", sfield()),
-                        format!("has {} components, state_layout has {n}", s.state.len()),
+                if let Some(layout) = &layout {
+                    check_sample(
+                        &mut v,
+                        &sfield(),
+                        s,
+                        layout,
+                        h.as_ref(),
+                        input.measurement_matrix.is_some(),
                     );
-                } else if s.state.iter().any(|x| !x.is_finite()) {
-                    v.add(format!("{}.state", sfield()), "contains a non-finite value");
-                }
-                if s.covariance.len() != n || s.covariance.iter().any(|r| r.len() != n) {
-                    v.add(
-                        format!("{}.covariance", sfield()),
-                        format!("must be {n}×{n}"),
-                    );
-                } else {
-                    // Symmetry and definiteness do not depend on the order of
-                    // the components: check the request's order on the stack.
-                    let mut flat = small::ZERO;
-                    for (i, row) in s.covariance.iter().enumerate() {
-                        flat[i * n..(i + 1) * n].copy_from_slice(row);
-                    }
-                    if let Err(e) = small::check_covariance("covariance", &flat[..n * n], n) {
-                        v.add(format!("{}.covariance", sfield()), covariance_message(&e));
-                    }
-                }
-                if let Some(g) = &s.gain {
-                    match &h {
-                        None if input.measurement_matrix.is_none() => v.add(
-                            format!("{}.gain", sfield()),
-                            "a gain needs the request's measurement_matrix H",
-                        ),
-                        None => {}
-                        Some(h) => {
-                            let m = h.nrows();
-                            if g.len() != n
-                                || g.iter()
-                                    .any(|r| r.len() != m || r.iter().any(|x| !x.is_finite()))
-                            {
-                                v.add(
-                                    format!("{}.gain", sfield()),
-                                    format!("must be {n}×{m} (state × measurement) finite numbers"),
-                                );
-                            }
-                        }
-                    }
                 }
             }
         }
     }
     v.finish()?;
-    let layout = layout.expect("validated");
-    let config_method = config_method.expect("validated");
-    Ok(Plan {
-        layout,
-        method_name: kind,
-        config: Config {
-            method: config_method,
-            statistic,
-            alpha,
-            pruning,
-        },
-        model,
-        alignment: mode,
-        tolerance,
-        h,
-        fuse: input.fuse.unwrap_or(true),
-    })
+    Ok(plan_of(parts, input.fuse))
+}
+
+/// The checks of one reported sample besides its time: state length and
+/// finiteness, covariance shape and definiteness, gain shape. `sfield` is
+/// the sample's field path.
+pub(super) fn check_sample(
+    v: &mut Violations,
+    sfield: &str,
+    s: &SampleInput,
+    layout: &Layout,
+    h: Option<&DMatrix<f64>>,
+    has_h: bool,
+) {
+    let n = layout.dim;
+    if s.state.len() != n {
+        v.add(
+            format!("{}.state", sfield),
+            format!("has {} components, state_layout has {n}", s.state.len()),
+        );
+    } else if s.state.iter().any(|x| !x.is_finite()) {
+        v.add(format!("{}.state", sfield), "contains a non-finite value");
+    }
+    if s.covariance.len() != n || s.covariance.iter().any(|r| r.len() != n) {
+        v.add(format!("{}.covariance", sfield), format!("must be {n}×{n}"));
+    } else {
+        // Symmetry and definiteness do not depend on the order of
+        // the components: check the request's order on the stack.
+        let mut flat = small::ZERO;
+        for (i, row) in s.covariance.iter().enumerate() {
+            flat[i * n..(i + 1) * n].copy_from_slice(row);
+        }
+        if let Err(e) = small::check_covariance("covariance", &flat[..n * n], n) {
+            v.add(format!("{}.covariance", sfield), covariance_message(&e));
+        }
+    }
+    if let Some(g) = &s.gain {
+        match h {
+            None if !has_h => v.add(
+                format!("{}.gain", sfield),
+                "a gain needs the request's measurement_matrix H",
+            ),
+            None => {}
+            Some(h) => {
+                let m = h.nrows();
+                if g.len() != n
+                    || g.iter()
+                        .any(|r| r.len() != m || r.iter().any(|x| !x.is_finite()))
+                {
+                    v.add(
+                        format!("{}.gain", sfield),
+                        format!("must be {n}×{m} (state × measurement) finite numbers"),
+                    );
+                }
+            }
+        }
+    }
 }
 
 fn motion_model(

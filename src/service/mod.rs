@@ -7,6 +7,7 @@ pub mod correlation;
 pub mod dimension;
 pub mod jpda;
 pub mod rules;
+pub mod session;
 
 use std::time::Instant;
 
@@ -30,6 +31,23 @@ pub enum ServiceError {
     /// A bug or an unexpected failure; the detail is logged, never sent.
     #[error("internal error: {0}")]
     Internal(String),
+    /// The resource named does not exist (or belongs to another tenant).
+    #[error("not found: {0}")]
+    NotFound(String),
+    /// The request conflicts with the resource's state (a batch sequence
+    /// number that skips ahead).
+    #[error("conflict: {0}")]
+    Conflict(String),
+    /// A quota is used up (sessions per tenant, tracks per session).
+    #[error("quota exceeded: {0}")]
+    QuotaExceeded(String),
+    /// The request is larger than a limit allows (reports per batch).
+    #[error("too large: {0}")]
+    TooLarge(String),
+    /// A backend the request needs (the session store) is unreachable; the
+    /// client may retry after the given number of seconds.
+    #[error("unavailable: {0}")]
+    Unavailable(String),
 }
 
 /// Collects field violations while a request is validated, so that a client

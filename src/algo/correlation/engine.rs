@@ -33,6 +33,7 @@ use crate::algo::{
     gating::chi2_threshold,
     motion::MotionModel,
     small::{self, MAX_DIM, Sq},
+    wire::{Reader, Writer},
 };
 
 /// The test statistic compared with the first threshold.
@@ -170,6 +171,8 @@ pub struct PairReport {
     pub last_statistic: f64,
     /// Instant index at which the current decision was taken.
     pub decided_at: Option<usize>,
+    /// Time of that instant.
+    pub decided_time: Option<f64>,
     /// Last common instant of the two tracks.
     pub last_common: usize,
     /// Cross-covariance P_ab at the last common instant (modified statistic),
@@ -233,9 +236,236 @@ struct Pair {
     sum_posdiff: f64,
     cycle_done: bool,
     decided_at: Option<usize>,
+    decided_time: Option<f64>,
     hist: VecDeque<Sample>,
     cross: Option<Sq>,
     last_common: Option<usize>,
+}
+
+/// The evolving state of a [`PairCorrelator`] (its candidate pairs with
+/// their counters, history windows and cross-covariances, the decided
+/// partners and the next instant), detached from the scene so that a
+/// streaming session can keep it between batches and persist it.
+#[derive(Debug, Clone, Default)]
+pub struct CorrelatorState {
+    pairs: Vec<Pair>,
+    partner_a: Vec<Option<u32>>,
+    partner_b: Vec<Option<u32>>,
+    next: usize,
+    singular_tests: usize,
+}
+
+/// Which node of a correlated pair a track belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    A,
+    B,
+}
+
+const STATUSES: [Status; 3] = [Status::Testing, Status::Stopped, Status::Decided];
+const REASONS: [Reason; 14] = [
+    Reason::Testing,
+    Reason::Threshold,
+    Reason::EarlyDecision,
+    Reason::EarlyStop,
+    Reason::AmbiguityMaxM,
+    Reason::AmbiguityMinMeanStatistic,
+    Reason::AmbiguityLost,
+    Reason::Assignment,
+    Reason::BelowRule,
+    Reason::Revoked,
+    Reason::Gate,
+    Reason::NearestNeighbour,
+    Reason::Conflict,
+    Reason::KOfN,
+];
+
+fn bad(reason: &str) -> AlgoError {
+    AlgoError::InvalidParameter {
+        what: "state",
+        reason: format!("corrupt correlator state: {reason}"),
+    }
+}
+
+impl CorrelatorState {
+    /// The next instant (global index) the correlator will process.
+    pub fn next(&self) -> usize {
+        self.next
+    }
+
+    /// Every candidate pair as (track in a, track in b, decided correlated,
+    /// trial system track), in the order held.
+    pub fn links(&self) -> impl Iterator<Item = (usize, usize, bool, bool)> + '_ {
+        self.pairs.iter().map(|p| {
+            (
+                p.a as usize,
+                p.b as usize,
+                p.status == Status::Decided,
+                p.trial,
+            )
+        })
+    }
+
+    /// Candidate pairs held.
+    pub fn pair_count(&self) -> usize {
+        self.pairs.len()
+    }
+
+    /// Forgets every pair of track `t` on `side` (a retired track): its
+    /// decided partner, if any, becomes free.
+    pub fn release(&mut self, side: Side, t: usize) {
+        let t = t as u32;
+        let gone = |p: &Pair| match side {
+            Side::A => p.a == t,
+            Side::B => p.b == t,
+        };
+        if !self.pairs.iter().any(gone) {
+            return;
+        }
+        let mut remap = vec![None; self.pairs.len()];
+        let mut kept = Vec::with_capacity(self.pairs.len());
+        for (i, p) in std::mem::take(&mut self.pairs).into_iter().enumerate() {
+            if !gone(&p) {
+                remap[i] = Some(kept.len() as u32);
+                kept.push(p);
+            }
+        }
+        self.pairs = kept;
+        for slot in self.partner_a.iter_mut().chain(self.partner_b.iter_mut()) {
+            *slot = slot.and_then(|pi| remap[pi as usize]);
+        }
+    }
+
+    /// Appends the state to `w` (the format of [`CorrelatorState::decode`]);
+    /// matrices hold `dim` × `dim` values.
+    pub fn encode(&self, w: &mut Writer, dim: usize) {
+        w.usize(self.next);
+        w.usize(self.singular_tests);
+        for partners in [&self.partner_a, &self.partner_b] {
+            w.usize(partners.len());
+            for p in partners {
+                w.opt(*p, |w, v| w.u32(v));
+            }
+        }
+        w.usize(self.pairs.len());
+        for p in &self.pairs {
+            w.u32(p.a);
+            w.u32(p.b);
+            w.u8(STATUSES
+                .iter()
+                .position(|&s| s == p.status)
+                .expect("listed") as u8);
+            w.u8(REASONS.iter().position(|&r| r == p.reason).expect("listed") as u8);
+            w.bool(p.trial);
+            w.u32(p.l);
+            w.u32(p.m);
+            w.u32(p.c);
+            w.f64(p.sum_stat);
+            w.f64(p.sum_posdiff);
+            w.bool(p.cycle_done);
+            w.opt(p.decided_at, Writer::usize);
+            w.opt(p.decided_time, Writer::f64);
+            w.usize(p.hist.len());
+            for h in &p.hist {
+                w.u32(h.k);
+                w.f64(h.stat);
+                w.f64(h.posdiff);
+                w.bool(h.hit);
+            }
+            w.opt(p.cross.as_ref(), |w, c| {
+                for &v in &c[..dim * dim] {
+                    w.f64(v);
+                }
+            });
+            w.opt(p.last_common, Writer::usize);
+        }
+    }
+
+    /// Reads a state written by [`CorrelatorState::encode`], checking every
+    /// index so that a corrupt buffer cannot make the engine panic later.
+    pub fn decode(r: &mut Reader<'_>, dim: usize) -> Result<Self, AlgoError> {
+        let next = r.usize()?;
+        let singular_tests = r.usize()?;
+        let mut partners = [Vec::new(), Vec::new()];
+        for list in &mut partners {
+            let n = r.len(1)?;
+            *list = (0..n)
+                .map(|_| r.opt(Reader::u32))
+                .collect::<Result<_, _>>()?;
+        }
+        let [partner_a, partner_b] = partners;
+        let n = r.len(40)?;
+        let mut pairs = Vec::with_capacity(n);
+        for _ in 0..n {
+            let a = r.u32()?;
+            let b = r.u32()?;
+            let status = *STATUSES
+                .get(r.u8()? as usize)
+                .ok_or_else(|| bad("status"))?;
+            let reason = *REASONS.get(r.u8()? as usize).ok_or_else(|| bad("reason"))?;
+            let trial = r.bool()?;
+            let (l, m, c) = (r.u32()?, r.u32()?, r.u32()?);
+            let (sum_stat, sum_posdiff) = (r.f64()?, r.f64()?);
+            let cycle_done = r.bool()?;
+            let decided_at = r.opt(Reader::usize)?;
+            let decided_time = r.opt(Reader::f64)?;
+            let h = r.len(21)?;
+            let mut hist = VecDeque::with_capacity(h);
+            for _ in 0..h {
+                hist.push_back(Sample {
+                    k: r.u32()?,
+                    stat: r.f64()?,
+                    posdiff: r.f64()?,
+                    hit: r.bool()?,
+                });
+            }
+            let cross = r.opt(|r| {
+                let mut c = small::ZERO;
+                for v in &mut c[..dim * dim] {
+                    *v = r.f64()?;
+                }
+                Ok(c)
+            })?;
+            let last_common = r.opt(Reader::usize)?;
+            if a as usize >= partner_a.len() || b as usize >= partner_b.len() {
+                return Err(bad("pair names an unknown track"));
+            }
+            pairs.push(Pair {
+                a,
+                b,
+                status,
+                reason,
+                trial,
+                l,
+                m,
+                c,
+                sum_stat,
+                sum_posdiff,
+                cycle_done,
+                decided_at,
+                decided_time,
+                hist,
+                cross,
+                last_common,
+            });
+        }
+        let n_pairs = pairs.len();
+        if partner_a
+            .iter()
+            .chain(&partner_b)
+            .flatten()
+            .any(|&pi| pi as usize >= n_pairs)
+        {
+            return Err(bad("partner names an unknown pair"));
+        }
+        Ok(Self {
+            pairs,
+            partner_a,
+            partner_b,
+            next,
+            singular_tests,
+        })
+    }
 }
 
 impl<'a> PairCorrelator<'a> {
@@ -323,6 +553,51 @@ impl<'a> PairCorrelator<'a> {
         Ok(me)
     }
 
+    /// A correlator that continues from `state` over `scene`, which holds
+    /// the instants from `state.next()` on (and possibly earlier ones, for
+    /// the replay of newly gated pairs) and may have gained tracks.
+    pub fn resume(
+        scene: &'a Scene,
+        na: usize,
+        nb: usize,
+        cfg: &'a Config,
+        model: Option<&'a dyn MotionModel>,
+        state: CorrelatorState,
+    ) -> Result<Self, AlgoError> {
+        let mut me = Self::new(scene, na, nb, cfg, model)?;
+        let (ta, tb) = (me.adj_a.len(), me.adj_b.len());
+        if state.partner_a.len() > ta || state.partner_b.len() > tb {
+            return Err(bad("more tracks than the scene holds"));
+        }
+        if state.next < scene.first() {
+            return Err(bad("instants missing from the scene"));
+        }
+        me.partner_a = state.partner_a;
+        me.partner_a.resize(ta, None);
+        me.partner_b = state.partner_b;
+        me.partner_b.resize(tb, None);
+        me.next = state.next;
+        me.singular_tests = state.singular_tests;
+        for (pi, p) in state.pairs.iter().enumerate() {
+            me.index.insert((p.a, p.b), pi as u32);
+            me.adj_a[p.a as usize].push(pi as u32);
+            me.adj_b[p.b as usize].push(pi as u32);
+        }
+        me.pairs = state.pairs;
+        Ok(me)
+    }
+
+    /// The state to resume from later.
+    pub fn into_state(self) -> CorrelatorState {
+        CorrelatorState {
+            pairs: self.pairs,
+            partner_a: self.partner_a,
+            partner_b: self.partner_b,
+            next: self.next,
+            singular_tests: self.singular_tests,
+        }
+    }
+
     /// The χ² first threshold δ (eq. 14) with n_x degrees of freedom.
     pub fn delta(&self) -> f64 {
         self.delta
@@ -338,10 +613,15 @@ impl<'a> PairCorrelator<'a> {
         while self.step() {}
     }
 
+    /// Processes the instants before global index `end`.
+    pub fn run_until(&mut self, end: usize) {
+        while self.next < end && self.step() {}
+    }
+
     /// Processes the next instant; false when there is none.
     pub fn step(&mut self) -> bool {
         let k = self.next;
-        if k >= self.scene.times().len() {
+        if k >= self.scene.end() {
             return false;
         }
         self.materialise(k);
@@ -427,6 +707,7 @@ impl<'a> PairCorrelator<'a> {
             mean_position_difference: if samples == 0 { f64::NAN } else { mean_pos },
             last_statistic: p.hist.back().map_or(f64::NAN, |s| s.stat),
             decided_at: p.decided_at,
+            decided_time: p.decided_time,
             last_common: p.last_common.unwrap_or(0),
             cross_covariance: p.cross.map(|c| c[..self.dim * self.dim].to_vec()),
         }
@@ -476,6 +757,7 @@ impl<'a> PairCorrelator<'a> {
                 sum_posdiff: 0.0,
                 cycle_done: false,
                 decided_at: None,
+                decided_time: None,
                 hist: VecDeque::with_capacity(self.hist_len + 1),
                 cross: None,
                 last_common: None,
@@ -483,7 +765,9 @@ impl<'a> PairCorrelator<'a> {
             self.index.insert((a, b), pi);
             self.adj_a[a as usize].push(pi);
             self.adj_b[b as usize].push(pi);
-            for j in 0..k {
+            // Instants before the scene's window are gone (a streaming
+            // session keeps a bounded history): the replay starts there.
+            for j in self.scene.first()..k {
                 if self.both_present(pi, j) {
                     self.advance(pi, j);
                     self.close_cycle(pi);
@@ -755,8 +1039,10 @@ impl<'a> PairCorrelator<'a> {
             (p.a, p.b, p.last_common, p.cross)
         };
         let new = match (prev, cross) {
-            (Some(kp), Some(c)) => {
-                let dt = self.scene.times()[k] - self.scene.times()[kp];
+            // A last common instant before the held window restarts the
+            // recursion from P_ab = 0 (streaming sessions only).
+            (Some(kp), Some(c)) if kp >= self.scene.first() => {
+                let dt = self.scene.time(k) - self.scene.time(kp);
                 let (ta, tb) = (self.track_a(a), self.track_b(b));
                 let mean: DVector<f64> = DVector::from_iterator(
                     dim,
@@ -774,8 +1060,9 @@ impl<'a> PairCorrelator<'a> {
                 for i in 0..dim * dim {
                     mid[i] += q[i];
                 }
-                let fa = self.factors_a[a as usize][k];
-                let fb = self.factors_b[b as usize][k];
+                let first = self.scene.first();
+                let fa = self.factors_a[a as usize][k - first];
+                let fb = self.factors_b[b as usize][k - first];
                 let left = match fa {
                     Some(fa) => small::mul(&fa, &mid, dim),
                     None => mid,
@@ -801,6 +1088,7 @@ impl<'a> PairCorrelator<'a> {
         p.reason = reason;
         p.trial = false;
         p.decided_at = Some(k);
+        p.decided_time = Some(self.scene.time(k));
         let (a, b) = (p.a as usize, p.b as usize);
         self.partner_a[a] = Some(pi);
         self.partner_b[b] = Some(pi);
@@ -811,6 +1099,7 @@ impl<'a> PairCorrelator<'a> {
         p.status = Status::Testing;
         p.reason = reason;
         p.decided_at = None;
+        p.decided_time = None;
         p.cycle_done = true;
         let (a, b) = (p.a as usize, p.b as usize);
         if self.partner_a[a] == Some(pi) {
@@ -1222,12 +1511,12 @@ fn filter_factors(
 ) -> Result<Vec<Vec<Option<Sq>>>, AlgoError> {
     let dim = scene.dim();
     let model = model.expect("checked by the caller");
-    let times = scene.times();
+    let (first, end) = (scene.first(), scene.end());
     let mut out = Vec::with_capacity(scene.nodes()[node].len());
     for track in &scene.nodes()[node] {
-        let mut per = vec![None; times.len()];
+        let mut per = vec![None; end - first];
         let mut prev: Option<usize> = None;
-        for (k, slot) in per.iter_mut().enumerate() {
+        for (k, slot) in (first..end).zip(per.iter_mut()) {
             if !track.is_present(k) {
                 continue;
             }
@@ -1236,22 +1525,43 @@ fn filter_factors(
                 s[..dim * dim].copy_from_slice(g);
                 *slot = Some(s);
             } else if let Some(kp) = prev {
-                let x = DVector::from_column_slice(track.x(kp, dim));
-                let p_prev = DMatrix::from_row_slice(dim, dim, track.p(kp, dim));
-                let (_, p_pred) = model.predict(&x, &p_prev, times[k] - times[kp])?;
-                let p_now = DMatrix::from_row_slice(dim, dim, track.p(k, dim));
-                // A = P(k|k) P⁻¹ = (P⁻¹ P(k|k))' since both are symmetric.
-                if let Some(chol) = p_pred.cholesky() {
-                    let at = chol.solve(&p_now);
-                    let a = at.transpose();
-                    *slot = Some(small::to_sq(&a));
-                }
+                *slot = filter_factor(
+                    model,
+                    track.x(kp, dim),
+                    track.p(kp, dim),
+                    track.p(k, dim),
+                    scene.time(k) - scene.time(kp),
+                )?;
             }
             prev = Some(k);
         }
         out.push(per);
     }
     Ok(out)
+}
+
+/// The filter factor A = I − K H of a track at one sample, recovered from
+/// its covariances when the gain was not reported: P(k|k) = A P(k|k−1), so
+/// A = P(k|k) P(k|k−1)⁻¹ with P(k|k−1) the previous covariance `p_prev`
+/// (at state `x_prev`) predicted over `dt`. `None` when the prediction is
+/// not positive definite.
+pub fn filter_factor(
+    model: &dyn MotionModel,
+    x_prev: &[f64],
+    p_prev: &[f64],
+    p_now: &[f64],
+    dt: f64,
+) -> Result<Option<Sq>, AlgoError> {
+    let dim = x_prev.len();
+    let x = DVector::from_column_slice(x_prev);
+    let p_prev = DMatrix::from_row_slice(dim, dim, p_prev);
+    let (_, p_pred) = model.predict(&x, &p_prev, dt)?;
+    let p_now = DMatrix::from_row_slice(dim, dim, p_now);
+    // A = P(k|k) P⁻¹ = (P⁻¹ P(k|k))' since both are symmetric.
+    Ok(p_pred.cholesky().map(|chol| {
+        let at = chol.solve(&p_now);
+        small::to_sq(&at.transpose())
+    }))
 }
 
 /// A multiplicative hasher for the engine's small integer keys (pair and

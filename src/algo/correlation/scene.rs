@@ -1,14 +1,25 @@
 //! The input of track-to-track correlation: local tracks of several nodes,
 //! already aligned to common instants (the service does the alignment), in
 //! flat row-major buffers so that the hot loops do not allocate.
+//!
+//! Instants have global indices. A batch scene holds instants 0..n; a
+//! streaming session appends instants with [`Scene::push_instant`] and drops
+//! old ones with [`Scene::trim_before`], so it holds the window
+//! [`Scene::first`]..[`Scene::end`]; a track is absent outside the window.
 
-use crate::algo::{AlgoError, small::MAX_DIM};
+use crate::algo::{
+    AlgoError,
+    small::MAX_DIM,
+    wire::{Reader, Writer},
+};
 
 /// Aligned local tracks of every node.
 #[derive(Debug, Clone)]
 pub struct Scene {
     dim: usize,
     pos: Vec<usize>,
+    /// Global index of `times[0]`.
+    first: usize,
     times: Vec<f64>,
     nodes: Vec<Vec<Track>>,
 }
@@ -16,6 +27,8 @@ pub struct Scene {
 /// One local track: its estimate and covariance at each instant where present.
 #[derive(Debug, Clone)]
 pub struct Track {
+    /// Global index of `present[0]`.
+    first: usize,
     present: Vec<bool>,
     x: Vec<f64>,
     p: Vec<f64>,
@@ -48,6 +61,7 @@ impl Scene {
         Ok(Self {
             dim,
             pos,
+            first: 0,
             times,
             nodes: Vec::new(),
         })
@@ -83,8 +97,157 @@ impl Scene {
         &self.pos
     }
 
+    /// The instants held, from [`Scene::first`] on.
     pub fn times(&self) -> &[f64] {
         &self.times
+    }
+
+    /// Global index of the first instant held.
+    pub fn first(&self) -> usize {
+        self.first
+    }
+
+    /// One past the global index of the last instant held.
+    pub fn end(&self) -> usize {
+        self.first + self.times.len()
+    }
+
+    /// Time of the held instant `k` (global index).
+    pub fn time(&self, k: usize) -> f64 {
+        self.times[k - self.first]
+    }
+
+    /// Appends an instant after the last one (every track absent there);
+    /// returns its global index.
+    pub fn push_instant(&mut self, t: f64) -> Result<usize, AlgoError> {
+        if !t.is_finite() || self.times.last().is_some_and(|&last| t <= last) {
+            return Err(AlgoError::InvalidParameter {
+                what: "times",
+                reason: "instants must be finite and strictly increasing".into(),
+            });
+        }
+        self.times.push(t);
+        let dim = self.dim;
+        for track in self.nodes.iter_mut().flatten() {
+            track.grow(dim);
+        }
+        Ok(self.end() - 1)
+    }
+
+    /// Drops every instant before global index `k`.
+    pub fn trim_before(&mut self, k: usize) {
+        let k = k.min(self.end());
+        if k <= self.first {
+            return;
+        }
+        let n = k - self.first;
+        self.times.drain(..n);
+        let dim = self.dim;
+        for track in self.nodes.iter_mut().flatten() {
+            track.drop_front(n, dim);
+        }
+        self.first = k;
+    }
+
+    /// Appends an empty node (streaming); returns its index.
+    pub fn push_node(&mut self) -> usize {
+        self.nodes.push(Vec::new());
+        self.nodes.len() - 1
+    }
+
+    /// Appends a track absent everywhere to `node`; returns its index.
+    pub fn push_track(&mut self, node: usize) -> usize {
+        let mut track = Track::new(self.times.len(), self.dim);
+        track.first = self.first;
+        self.nodes[node].push(track);
+        self.nodes[node].len() - 1
+    }
+
+    /// Marks a track absent at every held instant (its slot can be reused).
+    pub fn clear_track(&mut self, node: usize, track: usize) {
+        let t = &mut self.nodes[node][track];
+        t.present.fill(false);
+        t.gain_factor = None;
+    }
+
+    pub fn track_mut(&mut self, node: usize, track: usize) -> &mut Track {
+        &mut self.nodes[node][track]
+    }
+
+    /// Appends the scene to `w`. Covariances and filter factors are stored
+    /// only at the instants where a track is present.
+    pub fn encode(&self, w: &mut Writer) {
+        let dim = self.dim;
+        w.usize(dim);
+        w.usize(self.pos.len());
+        for &i in &self.pos {
+            w.usize(i);
+        }
+        w.usize(self.first);
+        w.f64s(&self.times);
+        w.usize(self.nodes.len());
+        for node in &self.nodes {
+            w.usize(node.len());
+            for t in node {
+                let n = t.present.len();
+                for k in 0..n {
+                    w.bool(t.present[k]);
+                    if t.present[k] {
+                        t.x[k * dim..(k + 1) * dim].iter().for_each(|&v| w.f64(v));
+                        t.p[k * dim * dim..(k + 1) * dim * dim]
+                            .iter()
+                            .for_each(|&v| w.f64(v));
+                        let g = t
+                            .gain_factor
+                            .as_ref()
+                            .map(|g| &g[k * dim * dim..(k + 1) * dim * dim])
+                            .filter(|g| g[0].is_finite());
+                        w.opt(g, |w, g| g.iter().for_each(|&v| w.f64(v)));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Reads a scene written by [`Scene::encode`].
+    pub fn decode(r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+        let dim = r.usize()?;
+        let npos = r.len(8)?;
+        let pos = (0..npos)
+            .map(|_| r.usize())
+            .collect::<Result<Vec<_>, _>>()?;
+        let first = r.usize()?;
+        let times = r.f64s()?;
+        let mut scene = Scene::new(dim, pos, times)?;
+        scene.first = first;
+        let n_nodes = r.len(8)?;
+        for _ in 0..n_nodes {
+            let node = scene.push_node();
+            let n_tracks = r.len(scene.times.len())?;
+            for _ in 0..n_tracks {
+                let ti = scene.push_track(node);
+                for k in first..scene.end() {
+                    if !r.bool()? {
+                        continue;
+                    }
+                    let x = (0..dim).map(|_| r.f64()).collect::<Result<Vec<_>, _>>()?;
+                    let p = (0..dim * dim)
+                        .map(|_| r.f64())
+                        .collect::<Result<Vec<_>, _>>()?;
+                    let g = r.opt(|r| {
+                        (0..dim * dim)
+                            .map(|_| r.f64())
+                            .collect::<Result<Vec<_>, _>>()
+                    })?;
+                    let track = scene.track_mut(node, ti);
+                    track.set(k, &x, &p);
+                    if let Some(g) = g {
+                        track.set_gain_factor(k, &g);
+                    }
+                }
+            }
+        }
+        Ok(scene)
     }
 
     pub fn nodes(&self) -> &[Vec<Track>] {
@@ -100,6 +263,7 @@ impl Track {
     /// A track absent at every one of `instants` instants.
     pub fn new(instants: usize, dim: usize) -> Self {
         Self {
+            first: 0,
             present: vec![false; instants],
             x: vec![0.0; instants * dim],
             p: vec![0.0; instants * dim * dim],
@@ -107,10 +271,30 @@ impl Track {
         }
     }
 
+    fn grow(&mut self, dim: usize) {
+        self.present.push(false);
+        self.x.extend(std::iter::repeat_n(0.0, dim));
+        self.p.extend(std::iter::repeat_n(0.0, dim * dim));
+        if let Some(g) = &mut self.gain_factor {
+            g.extend(std::iter::repeat_n(f64::NAN, dim * dim));
+        }
+    }
+
+    fn drop_front(&mut self, n: usize, dim: usize) {
+        self.present.drain(..n);
+        self.x.drain(..n * dim);
+        self.p.drain(..n * dim * dim);
+        if let Some(g) = &mut self.gain_factor {
+            g.drain(..n * dim * dim);
+        }
+        self.first += n;
+    }
+
     /// Sets the estimate at instant `k`; `p` is row-major. The caller has
     /// checked finiteness and positive definiteness.
     pub fn set(&mut self, k: usize, x: &[f64], p: &[f64]) {
         let dim = x.len();
+        let k = k - self.first;
         self.present[k] = true;
         self.x[k * dim..(k + 1) * dim].copy_from_slice(x);
         self.p[k * dim * dim..(k + 1) * dim * dim].copy_from_slice(p);
@@ -120,6 +304,7 @@ impl Track {
     /// used by the cross-covariance recursion of seed 000 eq. 13.
     pub fn set_gain_factor(&mut self, k: usize, factor: &[f64]) {
         let n2 = factor.len();
+        let k = k - self.first;
         let instants = self.present.len();
         let g = self
             .gain_factor
@@ -127,27 +312,32 @@ impl Track {
         g[k * n2..(k + 1) * n2].copy_from_slice(factor);
     }
 
+    /// Whether the track has an estimate at global instant `k` (false
+    /// outside the held window).
     pub fn is_present(&self, k: usize) -> bool {
-        self.present[k]
+        k >= self.first && self.present.get(k - self.first).copied().unwrap_or(false)
     }
 
     pub fn x(&self, k: usize, dim: usize) -> &[f64] {
+        let k = k - self.first;
         &self.x[k * dim..(k + 1) * dim]
     }
 
     pub fn p(&self, k: usize, dim: usize) -> &[f64] {
+        let k = k - self.first;
         &self.p[k * dim * dim..(k + 1) * dim * dim]
     }
 
     /// The reported I − K H at instant `k`, if the client sent gains for it.
     pub fn gain_factor(&self, k: usize, dim: usize) -> Option<&[f64]> {
         let g = self.gain_factor.as_ref()?;
+        let k = k - self.first;
         let s = &g[k * dim * dim..(k + 1) * dim * dim];
         s[0].is_finite().then_some(s)
     }
 
     /// The last instant before `k` where the track is present.
     pub fn previous(&self, k: usize) -> Option<usize> {
-        (0..k).rev().find(|&j| self.present[j])
+        (self.first..k).rev().find(|&j| self.is_present(j))
     }
 }

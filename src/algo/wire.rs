@@ -1,0 +1,218 @@
+//! A minimal little-endian binary writer and reader for persisted state
+//! (streaming sessions). Every read is bounds-checked: a truncated or corrupt
+//! buffer gives an error, never a panic.
+
+use super::AlgoError;
+
+/// Appends values to a byte buffer.
+#[derive(Debug, Default)]
+pub struct Writer {
+    pub buf: Vec<u8>,
+}
+
+impl Writer {
+    pub fn u8(&mut self, v: u8) {
+        self.buf.push(v);
+    }
+
+    pub fn bool(&mut self, v: bool) {
+        self.buf.push(u8::from(v));
+    }
+
+    pub fn u32(&mut self, v: u32) {
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+
+    pub fn u64(&mut self, v: u64) {
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+
+    /// A length or an index, stored as u64.
+    pub fn usize(&mut self, v: usize) {
+        self.u64(v as u64);
+    }
+
+    pub fn f64(&mut self, v: f64) {
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+
+    pub fn f64s(&mut self, v: &[f64]) {
+        self.usize(v.len());
+        for &x in v {
+            self.f64(x);
+        }
+    }
+
+    pub fn str(&mut self, v: &str) {
+        self.usize(v.len());
+        self.buf.extend_from_slice(v.as_bytes());
+    }
+
+    pub fn bytes(&mut self, v: &[u8]) {
+        self.usize(v.len());
+        self.buf.extend_from_slice(v);
+    }
+
+    /// `None` as 0, `Some` as 1 followed by the value.
+    pub fn opt<T>(&mut self, v: Option<T>, f: impl FnOnce(&mut Self, T)) {
+        match v {
+            None => self.u8(0),
+            Some(x) => {
+                self.u8(1);
+                f(self, x);
+            }
+        }
+    }
+}
+
+/// Reads values back in the order they were written.
+#[derive(Debug)]
+pub struct Reader<'a> {
+    buf: &'a [u8],
+}
+
+fn corrupt(reason: &str) -> AlgoError {
+    AlgoError::InvalidParameter {
+        what: "state",
+        reason: format!("corrupt encoded state: {reason}"),
+    }
+}
+
+impl<'a> Reader<'a> {
+    pub fn new(buf: &'a [u8]) -> Self {
+        Self { buf }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.buf.is_empty()
+    }
+
+    fn take(&mut self, n: usize) -> Result<&'a [u8], AlgoError> {
+        if self.buf.len() < n {
+            return Err(corrupt("truncated"));
+        }
+        let (head, tail) = self.buf.split_at(n);
+        self.buf = tail;
+        Ok(head)
+    }
+
+    pub fn u8(&mut self) -> Result<u8, AlgoError> {
+        Ok(self.take(1)?[0])
+    }
+
+    pub fn bool(&mut self) -> Result<bool, AlgoError> {
+        match self.u8()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            _ => Err(corrupt("bad boolean")),
+        }
+    }
+
+    pub fn u32(&mut self) -> Result<u32, AlgoError> {
+        let b = self.take(4)?;
+        Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
+    }
+
+    pub fn u64(&mut self) -> Result<u64, AlgoError> {
+        let b = self.take(8)?;
+        Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+
+    /// A length or index; lengths are bounded by the bytes left so that a
+    /// corrupt length cannot make the caller allocate without bound.
+    pub fn usize(&mut self) -> Result<usize, AlgoError> {
+        usize::try_from(self.u64()?).map_err(|_| corrupt("index out of range"))
+    }
+
+    /// A count of items each at least `item_bytes` long.
+    pub fn len(&mut self, item_bytes: usize) -> Result<usize, AlgoError> {
+        let n = self.usize()?;
+        if n.saturating_mul(item_bytes.max(1)) > self.buf.len() {
+            return Err(corrupt("length beyond the buffer"));
+        }
+        Ok(n)
+    }
+
+    pub fn f64(&mut self) -> Result<f64, AlgoError> {
+        let b = self.take(8)?;
+        Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+
+    pub fn f64s(&mut self) -> Result<Vec<f64>, AlgoError> {
+        let n = self.len(8)?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+
+    pub fn str(&mut self) -> Result<String, AlgoError> {
+        let n = self.len(1)?;
+        String::from_utf8(self.take(n)?.to_vec()).map_err(|_| corrupt("bad UTF-8"))
+    }
+
+    pub fn bytes(&mut self) -> Result<Vec<u8>, AlgoError> {
+        let n = self.len(1)?;
+        Ok(self.take(n)?.to_vec())
+    }
+
+    pub fn opt<T>(
+        &mut self,
+        f: impl FnOnce(&mut Self) -> Result<T, AlgoError>,
+    ) -> Result<Option<T>, AlgoError> {
+        match self.u8()? {
+            0 => Ok(None),
+            1 => f(self).map(Some),
+            _ => Err(corrupt("bad option tag")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_round_trip_and_truncation_is_an_error() {
+        let mut w = Writer::default();
+        w.u8(7);
+        w.bool(true);
+        w.u32(0xdead_beef);
+        w.u64(u64::MAX);
+        w.f64(-1.5e-300);
+        w.f64s(&[1.0, f64::INFINITY]);
+        w.str("n1/τ");
+        w.opt(Some(3u32), |w, v| w.u32(v));
+        w.opt(None::<u32>, |w, v| w.u32(v));
+        let mut r = Reader::new(&w.buf);
+        assert_eq!(r.u8().unwrap(), 7);
+        assert!(r.bool().unwrap());
+        assert_eq!(r.u32().unwrap(), 0xdead_beef);
+        assert_eq!(r.u64().unwrap(), u64::MAX);
+        assert_eq!(r.f64().unwrap(), -1.5e-300);
+        assert_eq!(r.f64s().unwrap(), vec![1.0, f64::INFINITY]);
+        assert_eq!(r.str().unwrap(), "n1/τ");
+        assert_eq!(r.opt(|r| r.u32()).unwrap(), Some(3));
+        assert_eq!(r.opt(|r| r.u32()).unwrap(), None);
+        assert!(r.is_empty());
+        for cut in 0..w.buf.len() {
+            let mut r = Reader::new(&w.buf[..cut]);
+            let all = (|| {
+                r.u8()?;
+                r.bool()?;
+                r.u32()?;
+                r.u64()?;
+                r.f64()?;
+                r.f64s()?;
+                r.str()?;
+                r.opt(|r| r.u32())?;
+                r.opt(|r| r.u32())
+            })();
+            assert!(all.is_err(), "cut at {cut} must fail");
+        }
+    }
+
+    #[test]
+    fn a_huge_length_is_rejected_without_allocating() {
+        let mut w = Writer::default();
+        w.u64(u64::MAX / 2);
+        assert!(Reader::new(&w.buf).f64s().is_err());
+    }
+}
