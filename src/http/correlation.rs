@@ -254,63 +254,85 @@ pub async fn correlate(
     State(_state): State<AppState>,
     ApiJson(req): ApiJson<CorrelateTracksRequest>,
 ) -> Result<Json<CorrelateTracksResponse>, Problem> {
-    let input = svc::CorrelateInput {
-        state_layout: req.state_layout,
+    let nodes = req
+        .nodes
+        .into_iter()
+        .map(|n| svc::NodeInput {
+            id: Some(n.id),
+            tracks: n
+                .tracks
+                .into_iter()
+                .map(|t| svc::TrackInput {
+                    id: Some(t.id),
+                    samples: t.samples.into_iter().map(sample_in).collect(),
+                })
+                .collect(),
+        })
+        .collect();
+    let input = config_in(
+        req.state_layout,
+        req.method,
+        req.motion_model,
+        req.alignment,
+        req.measurement_matrix,
+        nodes,
+        req.pruning,
+        req.fuse,
+    );
+    let out = service::offload(move || svc::correlate(input)).await?;
+    Ok(Json(response(out)))
+}
+
+pub(super) fn sample_in(s: TrackSample) -> svc::SampleInput {
+    svc::SampleInput {
+        t: Some(s.t),
+        state: s.state,
+        covariance: s.covariance,
+        gain: s.gain,
+    }
+}
+
+/// The service input of a correlation configuration (batch or session).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn config_in(
+    state_layout: Vec<String>,
+    method: CorrelationMethod,
+    motion_model: Option<MotionModel>,
+    alignment: Option<Alignment>,
+    measurement_matrix: Option<Vec<Vec<f64>>>,
+    nodes: Vec<svc::NodeInput>,
+    pruning: Option<String>,
+    fuse: Option<bool>,
+) -> svc::CorrelateInput {
+    svc::CorrelateInput {
+        state_layout,
         method: Some(svc::MethodInput {
-            kind: Some(req.method.kind),
-            alpha: req.method.alpha,
-            rule: req.method.rule.map(rule_in),
-            schedule: req
-                .method
-                .schedule
-                .map(|s| s.into_iter().map(rule_in).collect()),
-            dynamic_schedule: req.method.dynamic_schedule,
-            statistic: req.method.statistic,
-            window: req.method.window,
-            k: req.method.k,
+            kind: Some(method.kind),
+            alpha: method.alpha,
+            rule: method.rule.map(rule_in),
+            schedule: method.schedule.map(|s| s.into_iter().map(rule_in).collect()),
+            dynamic_schedule: method.dynamic_schedule,
+            statistic: method.statistic,
+            window: method.window,
+            k: method.k,
         }),
-        motion_model: req.motion_model.map(|m| svc::MotionModelInput {
+        motion_model: motion_model.map(|m| svc::MotionModelInput {
             kind: m.kind,
             process_noise: m.process_noise,
             sigma_a_mps2: m.sigma_a_mps2,
             q_m2ps3: m.q_m2ps3,
             factor: m.factor,
         }),
-        alignment: req.alignment.map(|a| svc::AlignmentInput {
+        alignment: alignment.map(|a| svc::AlignmentInput {
             mode: a.mode,
             tolerance_s: a.tolerance_s,
             max_gap_s: a.max_gap_s,
         }),
-        measurement_matrix: req.measurement_matrix,
-        nodes: req
-            .nodes
-            .into_iter()
-            .map(|n| svc::NodeInput {
-                id: Some(n.id),
-                tracks: n
-                    .tracks
-                    .into_iter()
-                    .map(|t| svc::TrackInput {
-                        id: Some(t.id),
-                        samples: t
-                            .samples
-                            .into_iter()
-                            .map(|s| svc::SampleInput {
-                                t: Some(s.t),
-                                state: s.state,
-                                covariance: s.covariance,
-                                gain: s.gain,
-                            })
-                            .collect(),
-                    })
-                    .collect(),
-            })
-            .collect(),
-        pruning: req.pruning,
-        fuse: req.fuse,
-    };
-    let out = service::offload(move || svc::correlate(input)).await?;
-    Ok(Json(response(out)))
+        measurement_matrix,
+        nodes,
+        pruning,
+        fuse,
+    }
 }
 
 fn rule_in(r: LrRule) -> svc::RuleInput {
@@ -320,14 +342,41 @@ fn rule_in(r: LrRule) -> svc::RuleInput {
     }
 }
 
-fn track_ref(t: svc::TrackName) -> TrackRef {
+pub(super) fn pair_result(p: svc::PairOutput) -> PairResult {
+    PairResult {
+        a: track_ref(p.a),
+        b: track_ref(p.b),
+        decision: decision_name(p.decision),
+        reason: reason_name(p.reason),
+        trial: p.trial,
+        m: p.m,
+        c: p.c,
+        samples: p.samples,
+        mean_statistic: finite(p.mean_statistic),
+        last_statistic: finite(p.last_statistic),
+        decided_at_t: p.decided_at,
+    }
+}
+
+pub(super) fn system_track(g: svc::GroupOutput) -> SystemTrack {
+    SystemTrack {
+        id: g.id,
+        members: g.members.into_iter().map(track_ref).collect(),
+        t: finite(g.t),
+        state: g.state,
+        covariance: g.covariance,
+        fusion: fusion_name(g.fusion),
+    }
+}
+
+pub(super) fn track_ref(t: svc::TrackName) -> TrackRef {
     TrackRef {
         node: t.node,
         track: t.track,
     }
 }
 
-fn finite(x: f64) -> Option<f64> {
+pub(super) fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
 
@@ -354,19 +403,7 @@ fn response(out: svc::CorrelateOutput) -> CorrelateTracksResponse {
         pairs: out
             .pairs
             .into_iter()
-            .map(|p| PairResult {
-                a: track_ref(p.a),
-                b: track_ref(p.b),
-                decision: decision_name(p.decision),
-                reason: reason_name(p.reason),
-                trial: p.trial,
-                m: p.m,
-                c: p.c,
-                samples: p.samples,
-                mean_statistic: finite(p.mean_statistic),
-                last_statistic: finite(p.last_statistic),
-                decided_at_t: p.decided_at,
-            })
+            .map(pair_result)
             .collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out
@@ -377,14 +414,7 @@ fn response(out: svc::CorrelateOutput) -> CorrelateTracksResponse {
         system_tracks: out
             .groups
             .into_iter()
-            .map(|g| SystemTrack {
-                id: g.id,
-                members: g.members.into_iter().map(track_ref).collect(),
-                t: finite(g.t),
-                state: g.state,
-                covariance: g.covariance,
-                fusion: fusion_name(g.fusion),
-            })
+            .map(system_track)
             .collect(),
         conflicts: out
             .conflicts
