@@ -33,8 +33,7 @@ pub async fn healthz() -> Json<HealthStatus> {
     })
 }
 
-/// Readiness: the service accepts traffic (not while starting or draining, nor
-/// while its session store does not answer).
+/// Readiness: the service accepts traffic (not while starting, draining, or without its session store).
 #[utoipa::path(get, path = "/readyz", tag = "operations",
     responses(
         (status = 200, description = "Ready", body = HealthStatus),
