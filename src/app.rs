@@ -1,13 +1,22 @@
 //! Start-up: binds both listeners, builds the shared state and the routers,
 //! serves until a shutdown signal, then drains in-flight requests.
 
-use std::{future::Future, net::SocketAddr};
+use std::{future::Future, net::SocketAddr, time::Duration};
 
 use anyhow::Context;
 use tokio::{net::TcpListener, sync::watch};
 use tonic_health::{ServingStatus, server::HealthReporter};
 
-use crate::{config::Settings, grpc, http, state::AppState, telemetry};
+use crate::{
+    config::Settings,
+    grpc, http,
+    state::{AppState, Readiness},
+    store::SessionStore,
+    telemetry,
+};
+
+/// How often the gRPC health status is recomputed from readiness (session store ping).
+const HEALTH_CHECK_EVERY: Duration = Duration::from_secs(1);
 
 /// A built application whose listeners are bound (port 0 resolves here, so
 /// tests learn the real ports before serving starts).
@@ -29,7 +38,11 @@ impl Application {
         let grpc_listener = TcpListener::bind(settings.grpc_addr)
             .await
             .with_context(|| format!("binding the gRPC address {}", settings.grpc_addr))?;
-        let state = AppState::new(settings, telemetry::metrics_handle());
+        let store = SessionStore::connect(&settings.store_settings())
+            .await
+            .context("building the session store")?;
+        tracing::info!(backend = store.backend(), "session store");
+        let state = AppState::new(settings, telemetry::metrics_handle(), store);
         let grpc::GrpcServices {
             router: grpc,
             health,
@@ -76,8 +89,12 @@ impl Application {
             grpc,
             health,
         } = self;
-        set_health(&health, ServingStatus::Serving).await;
+        // The first health status is set before readiness is reported, so a
+        // probe that sees ready also sees the matching gRPC status.
+        let store_ok = state.store().ping().await.is_ok();
+        set_health(&health, serving_status(store_ok)).await;
         state.set_ready(true);
+        let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
         tracing::info!(
             http = %http_listener.local_addr()?,
             grpc = %grpc_listener.local_addr()?,
@@ -102,6 +119,8 @@ impl Application {
         shutdown.await;
         tracing::info!("shutdown requested: draining in-flight requests");
         state.set_ready(false);
+        monitor.abort();
+        let _ = monitor.await;
         set_health(&health, ServingStatus::NotServing).await;
         let _ = stop_tx.send(true);
 
@@ -129,6 +148,28 @@ async fn set_health(health: &HealthReporter, status: ServingStatus) {
     health.set_service_status("", status).await;
     for name in grpc::SERVICE_NAMES {
         health.set_service_status(*name, status).await;
+    }
+}
+
+/// Keeps the gRPC health status in step with readiness (started, not draining,
+/// session store answering), checked every [`HEALTH_CHECK_EVERY`]; runs until aborted.
+async fn follow_readiness(state: AppState, health: HealthReporter, mut reported: bool) {
+    loop {
+        tokio::time::sleep(HEALTH_CHECK_EVERY).await;
+        let ready = state.check_ready().await == Readiness::Ready;
+        if ready != reported {
+            set_health(&health, serving_status(ready)).await;
+            tracing::info!(ready, "readiness changed");
+            reported = ready;
+        }
+    }
+}
+
+fn serving_status(serving: bool) -> ServingStatus {
+    if serving {
+        ServingStatus::Serving
+    } else {
+        ServingStatus::NotServing
     }
 }
 

@@ -6,6 +6,8 @@ use std::{net::SocketAddr, path::PathBuf, time::Duration};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use crate::store::StoreSettings;
+
 /// The radar fusion service: track-to-track correlation, JPDA, dimension fusion
 /// and AIS–radar bias estimation over REST and gRPC.
 #[derive(Debug, Parser)]
@@ -135,6 +137,42 @@ pub struct Settings {
         global = true
     )]
     pub shutdown_grace_s: f64,
+    /// Where streaming sessions keep their state: `memory` (this process only)
+    /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas).
+    #[arg(
+        long,
+        env = "FUSION_SESSION_STORE",
+        default_value = "memory",
+        global = true
+    )]
+    pub session_store: String,
+    /// Prefix of every Redis key of the session store.
+    #[arg(
+        long,
+        env = "FUSION_SESSION_KEY_PREFIX",
+        default_value = "radar-fusion",
+        global = true
+    )]
+    pub session_key_prefix: String,
+    /// Most live sessions one tenant may hold at once.
+    #[arg(
+        long,
+        env = "FUSION_MAX_SESSIONS_PER_TENANT",
+        default_value_t = 100,
+        global = true
+    )]
+    pub max_sessions_per_tenant: usize,
+    /// Memory session store: most bytes of session state held in total.
+    #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES", default_value_t = 512 * 1024 * 1024, global = true)]
+    pub session_memory_bytes: usize,
+    /// Longest time one session-store (Redis) command may take before it fails.
+    #[arg(
+        long,
+        env = "FUSION_STORE_TIMEOUT_S",
+        default_value_t = 1.0,
+        global = true
+    )]
+    pub store_timeout_s: f64,
 }
 
 impl Settings {
@@ -154,6 +192,17 @@ impl Settings {
         Duration::from_secs_f64(self.shutdown_grace_s)
     }
 
+    /// The session store's settings.
+    pub fn store_settings(&self) -> StoreSettings {
+        StoreSettings {
+            url: self.session_store.clone(),
+            key_prefix: self.session_key_prefix.clone(),
+            max_sessions_per_tenant: self.max_sessions_per_tenant,
+            max_memory_bytes: self.session_memory_bytes,
+            timeout: Duration::from_secs_f64(self.store_timeout_s),
+        }
+    }
+
     /// Rejects settings that cannot work, naming the flag.
     pub fn validate(&self) -> Result<(), String> {
         let positive = |name: &str, v: f64| {
@@ -171,6 +220,62 @@ impl Settings {
         if self.max_in_flight == 0 {
             return Err("--max-in-flight must be at least 1".into());
         }
+        positive("store-timeout-s", self.store_timeout_s)?;
+        let store = self.session_store.as_str();
+        if store != "memory" && !store.starts_with("redis://") && !store.starts_with("rediss://")
+        {
+            return Err(format!(
+                "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
+                 starting with redis:// or rediss://, not {store:?}"
+            ));
+        }
+        if self.session_key_prefix.is_empty() {
+            return Err("--session-key-prefix must not be empty".into());
+        }
+        if self.max_sessions_per_tenant == 0 {
+            return Err("--max-sessions-per-tenant must be at least 1".into());
+        }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(args: &[&str]) -> Settings {
+        let mut argv = vec!["radar-fusion"];
+        argv.extend_from_slice(args);
+        Cli::parse_from(argv).settings
+    }
+
+    #[test]
+    fn session_store_defaults_and_settings() {
+        let s = with(&[]);
+        assert_eq!(s.validate(), Ok(()));
+        let store = s.store_settings();
+        assert_eq!(store.url, "memory");
+        assert_eq!(store.key_prefix, "radar-fusion");
+        assert_eq!(store.max_sessions_per_tenant, 100);
+        assert_eq!(store.max_memory_bytes, 512 * 1024 * 1024);
+        assert_eq!(store.timeout, Duration::from_secs(1));
+        let s = with(&[
+            "--session-store",
+            "redis://127.0.0.1:6379/0",
+            "--store-timeout-s",
+            "0.25",
+        ]);
+        assert_eq!(s.validate(), Ok(()));
+        assert_eq!(s.store_settings().timeout, Duration::from_millis(250));
+    }
+
+    #[test]
+    fn a_bad_session_store_names_the_flag() {
+        let err = with(&["--session-store", "postgres://x"]).validate().unwrap_err();
+        assert!(err.contains("--session-store"), "{err}");
+        let err = with(&["--store-timeout-s", "0"]).validate().unwrap_err();
+        assert!(err.contains("--store-timeout-s"), "{err}");
+        let err = with(&["--max-sessions-per-tenant", "0"]).validate().unwrap_err();
+        assert!(err.contains("--max-sessions-per-tenant"), "{err}");
     }
 }

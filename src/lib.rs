@@ -13,4 +13,5 @@ pub mod proto;
 pub mod service;
 pub mod sim;
 pub mod state;
+pub mod store;
 pub mod telemetry;

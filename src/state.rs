@@ -1,5 +1,5 @@
-//! The state shared by both adapters: settings, readiness, the in-flight limit
-//! and the metrics handle. One `AppState` is built at start-up and cloned
+//! The state shared by both adapters: settings, readiness, the in-flight limit,
+//! the metrics handle and the session store. One `AppState` is built at start-up and cloned
 //! (cheaply, it is an `Arc`) into every server.
 
 use std::sync::{
@@ -10,7 +10,7 @@ use std::sync::{
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use crate::config::Settings;
+use crate::{config::Settings, store::SessionStore};
 
 #[derive(Clone)]
 pub struct AppState {
@@ -22,10 +22,11 @@ struct Inner {
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
     metrics: PrometheusHandle,
+    store: SessionStore,
 }
 
 impl AppState {
-    pub fn new(settings: Settings, metrics: PrometheusHandle) -> Self {
+    pub fn new(settings: Settings, metrics: PrometheusHandle, store: SessionStore) -> Self {
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {
@@ -33,6 +34,7 @@ impl AppState {
                 ready: AtomicBool::new(false),
                 in_flight,
                 metrics,
+                store,
             }),
         }
     }
@@ -41,7 +43,8 @@ impl AppState {
         &self.inner.settings
     }
 
-    /// Whether the service should receive traffic (`/readyz`, gRPC health).
+    /// Whether the service is started and not draining. Readiness for traffic
+    /// (`/readyz`, gRPC health) also needs the session store: [`Self::check_ready`].
     pub fn is_ready(&self) -> bool {
         self.inner.ready.load(Ordering::Acquire)
     }
@@ -59,4 +62,32 @@ impl AppState {
     pub fn metrics(&self) -> &PrometheusHandle {
         &self.inner.metrics
     }
+
+    /// Where streaming sessions keep their state.
+    pub fn store(&self) -> &SessionStore {
+        &self.inner.store
+    }
+
+    /// Whether the service should receive traffic now: started, not draining,
+    /// and its session store answers a ping (within the store timeout).
+    pub async fn check_ready(&self) -> Readiness {
+        if !self.is_ready() {
+            return Readiness::NotReady("starting or shutting down");
+        }
+        match self.store().ping().await {
+            Ok(()) => Readiness::Ready,
+            Err(e) => {
+                tracing::warn!(error = %e, backend = self.store().backend(), "session store ping failed");
+                Readiness::NotReady("session store unavailable")
+            }
+        }
+    }
+}
+
+/// The answer of [`AppState::check_ready`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Readiness {
+    Ready,
+    /// Not ready, with a reason safe to show to a probe.
+    NotReady(&'static str),
 }

@@ -10,37 +10,50 @@ use axum::{
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use crate::state::AppState;
+use crate::state::{AppState, Readiness};
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct HealthStatus {
     /// `ok`, `ready` or `not_ready`.
     #[schema(example = "ok")]
     pub status: &'static str,
+    /// Why the service is not ready (`/readyz` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(example = "session store unavailable")]
+    pub reason: Option<&'static str>,
 }
 
 /// Liveness: the process is up and serving.
 #[utoipa::path(get, path = "/healthz", tag = "operations",
     responses((status = 200, description = "Alive", body = HealthStatus)))]
 pub async fn healthz() -> Json<HealthStatus> {
-    Json(HealthStatus { status: "ok" })
+    Json(HealthStatus {
+        status: "ok",
+        reason: None,
+    })
 }
 
-/// Readiness: the service accepts traffic (false while starting or draining).
+/// Readiness: the service accepts traffic (not while starting, draining, or without its session store).
 #[utoipa::path(get, path = "/readyz", tag = "operations",
     responses(
         (status = 200, description = "Ready", body = HealthStatus),
         (status = 503, description = "Not ready", body = HealthStatus)))]
 pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<HealthStatus>) {
-    if state.is_ready() {
-        (StatusCode::OK, Json(HealthStatus { status: "ready" }))
-    } else {
-        (
+    match state.check_ready().await {
+        Readiness::Ready => (
+            StatusCode::OK,
+            Json(HealthStatus {
+                status: "ready",
+                reason: None,
+            }),
+        ),
+        Readiness::NotReady(reason) => (
             StatusCode::SERVICE_UNAVAILABLE,
             Json(HealthStatus {
                 status: "not_ready",
+                reason: Some(reason),
             }),
-        )
+        ),
     }
 }
 

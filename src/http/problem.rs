@@ -278,14 +278,15 @@ fn strip_position(message: &str) -> String {
 }
 
 /// Gives a problem body to error responses that have none: axum's 405, the
-/// body limit's 413, the timeout's 504, the load shedder's 503.
+/// body limit's 413, the timeout's 504, the load shedder's 503. A JSON body
+/// of our own (`/readyz`'s 503 `not_ready`) is kept.
 pub async fn problem_for_bare_errors(req: Request, next: Next) -> Response {
     let response = next.run(req).await;
     let status = response.status();
-    let has_problem = response
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .is_some_and(|v| v.as_bytes().starts_with(PROBLEM_JSON.as_bytes()));
+    let has_problem = response.headers().get(header::CONTENT_TYPE).is_some_and(|v| {
+        v.as_bytes().starts_with(PROBLEM_JSON.as_bytes())
+            || v.as_bytes().starts_with(b"application/json")
+    });
     let is_grpc = response
         .headers()
         .get(header::CONTENT_TYPE)

@@ -180,3 +180,50 @@ async fn graceful_shutdown_stops_serving_and_reports_not_ready() {
     assert!(!state.is_ready());
     assert!(tokio::net::TcpStream::connect(addr).await.is_err());
 }
+
+#[tokio::test]
+async fn not_ready_while_the_session_store_is_unreachable() {
+    use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
+
+    // A port nobody listens on: connecting still works (Redis is lazy).
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let app = spawn_app_with(|s| {
+        s.session_store = format!("redis://127.0.0.1:{port}/0");
+        s.store_timeout_s = 0.3;
+    })
+    .await;
+    assert_eq!(app.state.store().backend(), "redis");
+    let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert_eq!(
+        r.json::<serde_json::Value>().await.unwrap(),
+        json!({"status": "not_ready", "reason": "session store unavailable"})
+    );
+    // Liveness does not depend on the store.
+    let r = app.client.get(app.url("/healthz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let status = HealthClient::new(app.channel().await)
+        .check(HealthCheckRequest { service: "".into() })
+        .await
+        .expect("health check answers")
+        .into_inner()
+        .status;
+    // 2 = NOT_SERVING in grpc.health.v1.
+    assert_eq!(status, 2);
+}
+
+#[tokio::test]
+async fn ready_with_the_memory_store() {
+    let app = spawn_app().await;
+    assert_eq!(app.state.store().backend(), "memory");
+    let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(
+        r.json::<serde_json::Value>().await.unwrap(),
+        json!({"status": "ready"})
+    );
+}

@@ -1,0 +1,173 @@
+//! The session store: where streaming correlation sessions keep their state
+//! between requests. The state is an opaque, already encoded byte string; the
+//! store versions it (optimistic concurrency by compare-and-set), expires it
+//! after an idle time-to-live, bounds the number of sessions per tenant and
+//! keeps tenants apart. Two backends behind one enum: `memory` (one process)
+//! and `redis` (shared by replicas, survives restarts of the service).
+
+pub mod memory;
+pub mod redis;
+
+use std::time::Duration;
+
+/// A session store; every method is the same for both backends.
+pub enum SessionStore {
+    Memory(memory::MemoryStore),
+    Redis(redis::RedisStore),
+}
+
+/// How to build a [`SessionStore`] (from `config::Settings::store_settings`).
+#[derive(Debug, Clone)]
+pub struct StoreSettings {
+    /// `memory`, or `redis://host:port/db` (`rediss://` for TLS).
+    pub url: String,
+    /// Prefix of every Redis key (`{prefix}:{tenant}:…`).
+    pub key_prefix: String,
+    /// Most live sessions one tenant may hold.
+    pub max_sessions_per_tenant: usize,
+    /// Memory backend: bound on the total bytes of session data held.
+    pub max_memory_bytes: usize,
+    /// Redis backend: longest time one command may take before `Unavailable`.
+    pub timeout: Duration,
+}
+
+/// A session's state as stored.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Stored {
+    pub version: u64,
+    pub data: Vec<u8>,
+}
+
+/// One live session of a tenant, as listed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SessionMeta {
+    pub id: String,
+    pub version: u64,
+    pub bytes: usize,
+    pub ttl_remaining: Duration,
+}
+
+/// The result of [`SessionStore::compare_and_set`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CasOutcome {
+    /// Written; the session now has this version.
+    Stored { version: u64 },
+    /// Not written: the session has another version than expected.
+    Conflict { current: u64 },
+    /// Not written: no such live session.
+    Missing,
+}
+
+#[derive(thiserror::Error, Debug, Clone, PartialEq, Eq)]
+pub enum StoreError {
+    /// The backend cannot be reached or did not answer in time.
+    #[error("session store unavailable: {reason}")]
+    Unavailable { reason: String },
+    /// The tenant already holds the most live sessions allowed.
+    #[error("too many sessions: at most {limit} per tenant")]
+    TooManySessions { limit: usize },
+    /// The memory backend holds as many bytes as allowed.
+    #[error("session store full: at most {limit_bytes} bytes of session data")]
+    MemoryFull { limit_bytes: usize },
+    /// `create` of an id that is live already.
+    #[error("a session with this id exists already")]
+    AlreadyExists,
+    /// The backend holds something that is not a session as this store writes it.
+    #[error("corrupt session record: {reason}")]
+    Corrupt { reason: String },
+}
+
+impl SessionStore {
+    /// Builds the store `settings.url` names. Redis is connected lazily, so
+    /// this succeeds while Redis is down; calls then fail with `Unavailable`
+    /// until it is back, and the connection recovers by itself.
+    pub async fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+        if settings.url == "memory" {
+            Ok(Self::Memory(memory::MemoryStore::new(settings)))
+        } else {
+            redis::RedisStore::connect(settings).map(Self::Redis)
+        }
+    }
+
+    /// `memory` or `redis`.
+    pub fn backend(&self) -> &'static str {
+        match self {
+            Self::Memory(_) => "memory",
+            Self::Redis(_) => "redis",
+        }
+    }
+
+    /// Creates a session at version 1 that expires after `ttl` unless updated.
+    /// `AlreadyExists` when the id is live; `TooManySessions` when the tenant
+    /// holds `max_sessions_per_tenant` live sessions (checked atomically).
+    pub async fn create(
+        &self,
+        tenant: &str,
+        id: &str,
+        data: Vec<u8>,
+        ttl: Duration,
+    ) -> Result<u64, StoreError> {
+        match self {
+            Self::Memory(s) => s.create(tenant, id, data, ttl),
+            Self::Redis(s) => s.create(tenant, id, data, ttl).await,
+        }
+    }
+
+    /// The live session `id` of `tenant`, or `None` (unknown, expired, or
+    /// another tenant's).
+    pub async fn get(&self, tenant: &str, id: &str) -> Result<Option<Stored>, StoreError> {
+        match self {
+            Self::Memory(s) => Ok(s.get(tenant, id)),
+            Self::Redis(s) => s.get(tenant, id).await,
+        }
+    }
+
+    /// Atomically replaces the data when the session's version is
+    /// `expected_version`; the new version is `expected_version + 1` and the
+    /// time-to-live restarts at `ttl` (idle expiry).
+    pub async fn compare_and_set(
+        &self,
+        tenant: &str,
+        id: &str,
+        expected_version: u64,
+        data: Vec<u8>,
+        ttl: Duration,
+    ) -> Result<CasOutcome, StoreError> {
+        match self {
+            Self::Memory(s) => s.compare_and_set(tenant, id, expected_version, data, ttl),
+            Self::Redis(s) => {
+                s.compare_and_set(tenant, id, expected_version, data, ttl)
+                    .await
+            }
+        }
+    }
+
+    /// Deletes the session; `false` when there was no live session to delete.
+    pub async fn delete(&self, tenant: &str, id: &str) -> Result<bool, StoreError> {
+        match self {
+            Self::Memory(s) => Ok(s.delete(tenant, id)),
+            Self::Redis(s) => s.delete(tenant, id).await,
+        }
+    }
+
+    /// The tenant's live sessions, sorted by id.
+    pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, StoreError> {
+        match self {
+            Self::Memory(s) => Ok(s.list(tenant)),
+            Self::Redis(s) => s.list(tenant).await,
+        }
+    }
+
+    /// Whether the backend answers (readiness); the memory store always does.
+    pub async fn ping(&self) -> Result<(), StoreError> {
+        match self {
+            Self::Memory(_) => Ok(()),
+            Self::Redis(s) => s.ping().await,
+        }
+    }
+}
+
+/// A time-to-live as whole milliseconds, at least 1 (Redis rejects 0).
+pub(crate) fn ttl_ms(ttl: Duration) -> u64 {
+    u64::try_from(ttl.as_millis()).unwrap_or(u64::MAX).max(1)
+}

@@ -1,0 +1,335 @@
+//! The Redis session store, shared by every replica of the service.
+//!
+//! Keys (tenant and id escaped by [`escape`], so `:` in them cannot make two
+//! names collide):
+//! - `{prefix}:{tenant}:s:{id}` — a hash, `v` the version in decimal, `d` the
+//!   data, expiring after the session's TTL (PEXPIRE);
+//! - `{prefix}:{tenant}:idx` — a sorted set of the tenant's escaped ids scored
+//!   by their expiry time in Unix milliseconds (Redis's clock), for counting
+//!   and listing live sessions; expired members are removed before use.
+//!
+//! `create`, `compare_and_set`, `delete` and `list` are Lua scripts, so each
+//! is atomic. The list script reads the session keys it finds in the index,
+//! which a Redis Cluster would not allow across slots: this store targets a
+//! single Redis (or a primary with replicas). Every command is bounded by the
+//! configured timeout and fails with `Unavailable`; the `ConnectionManager`
+//! reconnects by itself when Redis comes back.
+
+use std::{future::Future, time::Duration};
+
+use redis::{
+    Client, RedisError, Script,
+    aio::{ConnectionManager, ConnectionManagerConfig},
+};
+
+use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
+
+pub struct RedisStore {
+    conn: ConnectionManager,
+    prefix: String,
+    max_sessions_per_tenant: usize,
+    timeout: Duration,
+    create: Script,
+    cas: Script,
+    delete: Script,
+    list: Script,
+}
+
+/// Redis's clock in Unix milliseconds, as a Lua expression's prelude.
+const NOW_MS: &str = r"
+local t = redis.call('TIME')
+local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)
+";
+
+/// Keeps the index alive at least as long as the session just written.
+const EXTEND_INDEX: &str = r"
+if redis.call('PTTL', KEYS[2]) < tonumber(ARGV[3]) then
+  redis.call('PEXPIRE', KEYS[2], ARGV[3])
+end
+";
+
+/// KEYS: session, index. ARGV: escaped id, data, ttl ms, limit.
+/// Returns 1 created, -1 exists, -2 too many sessions.
+const CREATE: &str = r"
+redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
+if redis.call('EXISTS', KEYS[1]) == 1 then return -1 end
+if redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return -2 end
+redis.call('HSET', KEYS[1], 'v', '1', 'd', ARGV[2])
+redis.call('PEXPIRE', KEYS[1], ARGV[3])
+redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
+";
+
+/// KEYS: session, index. ARGV: escaped id, data, ttl ms, expected version,
+/// new version. Returns {0, ''} missing, {1, new} stored, {2, current} conflict.
+const CAS: &str = r"
+local v = redis.call('HGET', KEYS[1], 'v')
+if not v then return {0, ''} end
+if v ~= ARGV[4] then return {2, v} end
+redis.call('HSET', KEYS[1], 'v', ARGV[5], 'd', ARGV[2])
+redis.call('PEXPIRE', KEYS[1], ARGV[3])
+redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
+";
+
+/// KEYS: session, index. ARGV: escaped id. Returns the number of keys deleted.
+const DELETE: &str = r"
+local n = redis.call('DEL', KEYS[1])
+redis.call('ZREM', KEYS[2], ARGV[1])
+return n
+";
+
+/// KEYS: index. ARGV: the session key prefix `{prefix}:{tenant}:s:`.
+/// Returns {escaped id, version, data bytes, pttl} per live session.
+const LIST: &str = r"
+redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
+local out = {}
+for _, m in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do
+  local k = ARGV[1] .. m
+  local v = redis.call('HGET', k, 'v')
+  if v then
+    table.insert(out, {m, v, redis.call('HSTRLEN', k, 'd'), redis.call('PTTL', k)})
+  else
+    redis.call('ZREM', KEYS[1], m)
+  end
+end
+return out
+";
+
+impl RedisStore {
+    /// A store over a lazily connected, self-reconnecting connection: this
+    /// fails only when the URL is not a Redis URL, never because Redis is down.
+    pub fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+        let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
+            reason: format!("invalid Redis URL: {e}"),
+        })?;
+        // One quick retry, then fail: the next command starts a new attempt, so
+        // a Redis that comes back is found again within one command or two.
+        let config = ConnectionManagerConfig::new()
+            .set_connection_timeout(Some(settings.timeout))
+            .set_response_timeout(Some(settings.timeout))
+            .set_number_of_retries(1)
+            .set_min_delay(Duration::from_millis(50))
+            .set_max_delay(Duration::from_millis(200));
+        let conn = ConnectionManager::new_lazy_with_config(client, config).map_err(unavailable)?;
+        Ok(Self {
+            conn,
+            prefix: settings.key_prefix.clone(),
+            max_sessions_per_tenant: settings.max_sessions_per_tenant,
+            timeout: settings.timeout,
+            create: Script::new(&format!("{NOW_MS}{CREATE}{EXTEND_INDEX}return 1")),
+            cas: Script::new(&format!(
+                "{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}"
+            )),
+            delete: Script::new(DELETE),
+            list: Script::new(&format!("{NOW_MS}{LIST}")),
+        })
+    }
+
+    pub async fn create(
+        &self,
+        tenant: &str,
+        id: &str,
+        data: Vec<u8>,
+        ttl: Duration,
+    ) -> Result<u64, StoreError> {
+        let mut conn = self.conn.clone();
+        let mut call = self.create.key(self.session_key(tenant, id));
+        call.key(self.index_key(tenant))
+            .arg(escape(id))
+            .arg(data)
+            .arg(ttl_ms(ttl))
+            .arg(self.max_sessions_per_tenant);
+        match self.bounded(call.invoke_async::<i64>(&mut conn)).await? {
+            1 => Ok(1),
+            -1 => Err(StoreError::AlreadyExists),
+            -2 => Err(StoreError::TooManySessions {
+                limit: self.max_sessions_per_tenant,
+            }),
+            other => Err(corrupt(format!("create script answered {other}"))),
+        }
+    }
+
+    pub async fn get(&self, tenant: &str, id: &str) -> Result<Option<Stored>, StoreError> {
+        let mut conn = self.conn.clone();
+        let key = self.session_key(tenant, id);
+        let (version, data): (Option<String>, Option<Vec<u8>>) = self
+            .bounded(redis::cmd("HMGET").arg(&key).arg("v").arg("d").query_async(&mut conn))
+            .await?;
+        match (version, data) {
+            (None, None) => Ok(None),
+            (Some(v), Some(data)) => Ok(Some(Stored {
+                version: parse_version(&v)?,
+                data,
+            })),
+            _ => Err(corrupt(format!("{key} lacks field v or d"))),
+        }
+    }
+
+    pub async fn compare_and_set(
+        &self,
+        tenant: &str,
+        id: &str,
+        expected_version: u64,
+        data: Vec<u8>,
+        ttl: Duration,
+    ) -> Result<CasOutcome, StoreError> {
+        let Some(new_version) = expected_version.checked_add(1) else {
+            return Err(corrupt("version overflow".into()));
+        };
+        let mut conn = self.conn.clone();
+        let mut call = self.cas.key(self.session_key(tenant, id));
+        call.key(self.index_key(tenant))
+            .arg(escape(id))
+            .arg(data)
+            .arg(ttl_ms(ttl))
+            .arg(expected_version.to_string())
+            .arg(new_version.to_string());
+        let (status, version): (i64, String) =
+            self.bounded(call.invoke_async(&mut conn)).await?;
+        match status {
+            0 => Ok(CasOutcome::Missing),
+            1 => Ok(CasOutcome::Stored {
+                version: parse_version(&version)?,
+            }),
+            2 => Ok(CasOutcome::Conflict {
+                current: parse_version(&version)?,
+            }),
+            other => Err(corrupt(format!("compare-and-set script answered {other}"))),
+        }
+    }
+
+    pub async fn delete(&self, tenant: &str, id: &str) -> Result<bool, StoreError> {
+        let mut conn = self.conn.clone();
+        let mut call = self.delete.key(self.session_key(tenant, id));
+        call.key(self.index_key(tenant)).arg(escape(id));
+        let deleted: i64 = self.bounded(call.invoke_async(&mut conn)).await?;
+        Ok(deleted > 0)
+    }
+
+    pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, StoreError> {
+        let mut conn = self.conn.clone();
+        let mut call = self.list.key(self.index_key(tenant));
+        call.arg(self.session_key(tenant, ""));
+        let rows: Vec<(String, String, i64, i64)> =
+            self.bounded(call.invoke_async(&mut conn)).await?;
+        let mut sessions = rows
+            .into_iter()
+            .map(|(id, version, bytes, pttl)| {
+                Ok(SessionMeta {
+                    id: unescape(&id).ok_or_else(|| corrupt(format!("bad index member {id:?}")))?,
+                    version: parse_version(&version)?,
+                    bytes: usize::try_from(bytes).unwrap_or(0),
+                    ttl_remaining: Duration::from_millis(u64::try_from(pttl).unwrap_or(0)),
+                })
+            })
+            .collect::<Result<Vec<_>, StoreError>>()?;
+        sessions.sort_by(|a, b| a.id.cmp(&b.id));
+        Ok(sessions)
+    }
+
+    pub async fn ping(&self) -> Result<(), StoreError> {
+        let mut conn = self.conn.clone();
+        let _: String = self
+            .bounded(redis::cmd("PING").query_async(&mut conn))
+            .await?;
+        Ok(())
+    }
+
+    fn session_key(&self, tenant: &str, id: &str) -> String {
+        format!("{}:{}:s:{}", self.prefix, escape(tenant), escape(id))
+    }
+
+    fn index_key(&self, tenant: &str) -> String {
+        format!("{}:{}:idx", self.prefix, escape(tenant))
+    }
+
+    /// Runs one command within the timeout; errors and timeouts are `Unavailable`
+    /// except a key of the wrong type, which is `Corrupt`.
+    async fn bounded<T>(
+        &self,
+        command: impl Future<Output = Result<T, RedisError>>,
+    ) -> Result<T, StoreError> {
+        match tokio::time::timeout(self.timeout, command).await {
+            Ok(Ok(value)) => Ok(value),
+            Ok(Err(e)) if e.code() == Some("WRONGTYPE") => Err(corrupt(e.to_string())),
+            Ok(Err(e)) => Err(unavailable(e)),
+            Err(_) => Err(StoreError::Unavailable {
+                reason: format!(
+                    "Redis did not answer within {} ms",
+                    self.timeout.as_millis()
+                ),
+            }),
+        }
+    }
+}
+
+/// Escapes `%` and `:` (`%25`, `%3A`), so that escaped tenants and ids never
+/// contain the key separator and distinct names give distinct keys.
+pub fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '%' => out.push_str("%25"),
+            ':' => out.push_str("%3A"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// The inverse of [`escape`]; `None` for a string `escape` cannot produce.
+pub fn unescape(s: &str) -> Option<String> {
+    let mut out = String::with_capacity(s.len());
+    let mut rest = s;
+    while let Some(i) = rest.find('%') {
+        out.push_str(&rest[..i]);
+        let code = rest.get(i + 1..i + 3)?;
+        out.push(match code {
+            "25" => '%',
+            "3A" => ':',
+            _ => return None,
+        });
+        rest = &rest[i + 3..];
+    }
+    if rest.contains(':') {
+        return None;
+    }
+    out.push_str(rest);
+    Some(out)
+}
+
+fn parse_version(v: &str) -> Result<u64, StoreError> {
+    v.parse()
+        .map_err(|_| corrupt(format!("version {v:?} is not a number")))
+}
+
+fn corrupt(reason: String) -> StoreError {
+    StoreError::Corrupt { reason }
+}
+
+fn unavailable(e: RedisError) -> StoreError {
+    StoreError::Unavailable {
+        reason: e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escaping_is_injective_and_reversible() {
+        let names = ["a", "a:b", "a%3Ab", "a%b", "%", ":", "", "x:s:y", "ü:%25"];
+        let escaped: Vec<String> = names.iter().map(|n| escape(n)).collect();
+        for (n, e) in names.iter().zip(&escaped) {
+            assert!(!e.contains(':'), "{e}");
+            assert_eq!(unescape(e).as_deref(), Some(*n));
+        }
+        let mut unique = escaped.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), names.len());
+        assert_eq!(escape("a:b%"), "a%3Ab%25");
+        assert_eq!(unescape("%zz"), None);
+        assert_eq!(unescape("a:b"), None);
+    }
+}

@@ -1,0 +1,554 @@
+//! The session store: one suite run against both backends (memory, and Redis
+//! on 127.0.0.1:6379 under a key prefix unique to the run), plus memory-only
+//! bounds and a Redis outage-and-recovery test on a redis-server of its own.
+//!
+//! Redis tests fail loudly when Redis is not running, unless
+//! `FUSION_SKIP_REDIS_TESTS=1` is set.
+
+use std::{
+    net::{SocketAddr, TcpListener, TcpStream},
+    process::{Child, Command, Stdio},
+    sync::{
+        Arc,
+        atomic::{AtomicU64, Ordering},
+    },
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+};
+
+use radar_fusion::store::{CasOutcome, SessionStore, StoreError, StoreSettings, Stored};
+
+const REDIS_ADDR: &str = "127.0.0.1:6379";
+const LONG: Duration = Duration::from_secs(60);
+/// A TTL short enough to wait out; tests then sleep at least twice as long.
+const SHORT: Duration = Duration::from_millis(300);
+
+// ---------------------------------------------------------------- harness
+
+fn settings(url: &str) -> StoreSettings {
+    static RUN: AtomicU64 = AtomicU64::new(0);
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .expect("clock after 1970")
+        .as_nanos();
+    StoreSettings {
+        url: url.to_string(),
+        key_prefix: format!(
+            "radar-fusion-test:{}-{nanos}-{}",
+            std::process::id(),
+            RUN.fetch_add(1, Ordering::Relaxed)
+        ),
+        max_sessions_per_tenant: 100,
+        max_memory_bytes: 1 << 20,
+        timeout: Duration::from_secs(1),
+    }
+}
+
+async fn memory(configure: impl FnOnce(&mut StoreSettings)) -> Arc<SessionStore> {
+    let mut s = settings("memory");
+    configure(&mut s);
+    let store = SessionStore::connect(&s).await.expect("memory store");
+    assert_eq!(store.backend(), "memory");
+    Arc::new(store)
+}
+
+fn skip_redis() -> bool {
+    std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1")
+}
+
+/// A Redis store on 127.0.0.1:6379 with a fresh key prefix, or `None` (with a
+/// loud warning) when Redis is down and `FUSION_SKIP_REDIS_TESTS=1`.
+async fn redis(configure: impl FnOnce(&mut StoreSettings)) -> Option<Arc<SessionStore>> {
+    let addr: SocketAddr = REDIS_ADDR.parse().expect("literal address");
+    if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_err() {
+        let message = "Redis is not running on 127.0.0.1:6379: start it with \
+             `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
+        if skip_redis() {
+            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n");
+            return None;
+        }
+        panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
+    }
+    let mut s = settings("redis://127.0.0.1:6379/0");
+    configure(&mut s);
+    let store = SessionStore::connect(&s).await.expect("redis store");
+    assert_eq!(store.backend(), "redis");
+    store.ping().await.expect("Redis answers PING");
+    Some(Arc::new(store))
+}
+
+/// Declares a memory test and a Redis test running the same suite function.
+macro_rules! both_backends {
+    ($suite:ident, $memory:ident, $redis:ident) => {
+        both_backends!($suite, $memory, $redis, |_s: &mut StoreSettings| {});
+    };
+    ($suite:ident, $memory:ident, $redis:ident, $configure:expr) => {
+        #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+        async fn $memory() {
+            $suite(&memory($configure).await).await;
+        }
+
+        #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+        async fn $redis() {
+            if let Some(store) = redis($configure).await {
+                $suite(&store).await;
+            }
+        }
+    };
+}
+
+both_backends!(crud, crud_memory, crud_redis);
+both_backends!(cas, cas_memory, cas_redis);
+both_backends!(tenants_are_isolated, tenants_memory, tenants_redis);
+both_backends!(ids_are_not_confused, ids_memory, ids_redis);
+both_backends!(ttl_expires_and_cas_refreshes, ttl_memory, ttl_redis);
+both_backends!(
+    sessions_per_tenant_are_bounded,
+    limit_memory,
+    limit_redis,
+    |s: &mut StoreSettings| s.max_sessions_per_tenant = 3
+);
+both_backends!(concurrent_cas_loses_no_update, concurrent_memory, concurrent_redis);
+
+// ---------------------------------------------------------------- the suite
+
+async fn crud(store: &Arc<SessionStore>) {
+    assert_eq!(store.get("default", "a").await.unwrap(), None);
+    assert_eq!(store.list("default").await.unwrap(), vec![]);
+    assert!(!store.delete("default", "a").await.unwrap());
+
+    assert_eq!(store.create("default", "b", b"bee".to_vec(), LONG).await, Ok(1));
+    assert_eq!(store.create("default", "a", vec![0, 255, 7], LONG).await, Ok(1));
+    assert_eq!(store.create("default", "c", vec![], LONG).await, Ok(1));
+    assert_eq!(
+        store.create("default", "a", b"again".to_vec(), LONG).await,
+        Err(StoreError::AlreadyExists)
+    );
+    assert_eq!(
+        store.get("default", "a").await.unwrap(),
+        Some(Stored {
+            version: 1,
+            data: vec![0, 255, 7]
+        })
+    );
+    assert_eq!(
+        store.get("default", "c").await.unwrap(),
+        Some(Stored {
+            version: 1,
+            data: vec![]
+        })
+    );
+
+    let listed = store.list("default").await.unwrap();
+    let ids: Vec<&str> = listed.iter().map(|m| m.id.as_str()).collect();
+    assert_eq!(ids, ["a", "b", "c"], "sorted by id");
+    let bytes: Vec<usize> = listed.iter().map(|m| m.bytes).collect();
+    assert_eq!(bytes, [3, 3, 0]);
+    for m in &listed {
+        assert_eq!(m.version, 1);
+        assert!(m.ttl_remaining > Duration::ZERO && m.ttl_remaining <= LONG, "{m:?}");
+    }
+
+    assert!(store.delete("default", "b").await.unwrap());
+    assert!(!store.delete("default", "b").await.unwrap());
+    assert_eq!(store.get("default", "b").await.unwrap(), None);
+    let ids: Vec<String> = store
+        .list("default")
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| m.id)
+        .collect();
+    assert_eq!(ids, ["a", "c"]);
+    // A deleted id can be created again, from version 1.
+    assert_eq!(store.create("default", "b", b"new".to_vec(), LONG).await, Ok(1));
+    store.ping().await.unwrap();
+}
+
+async fn cas(store: &Arc<SessionStore>) {
+    let t = "default";
+    assert_eq!(
+        store.compare_and_set(t, "x", 1, b"v2".to_vec(), LONG).await,
+        Ok(CasOutcome::Missing)
+    );
+    store.create(t, "x", b"v1".to_vec(), LONG).await.unwrap();
+    assert_eq!(
+        store.compare_and_set(t, "x", 1, b"v2".to_vec(), LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    // A writer still holding version 1 loses and learns the current version.
+    assert_eq!(
+        store.compare_and_set(t, "x", 1, b"stale".to_vec(), LONG).await,
+        Ok(CasOutcome::Conflict { current: 2 })
+    );
+    assert_eq!(
+        store.compare_and_set(t, "x", 3, b"future".to_vec(), LONG).await,
+        Ok(CasOutcome::Conflict { current: 2 })
+    );
+    assert_eq!(
+        store.get(t, "x").await.unwrap(),
+        Some(Stored {
+            version: 2,
+            data: b"v2".to_vec()
+        })
+    );
+    for expected in 2..10 {
+        let data = format!("v{}", expected + 1).into_bytes();
+        assert_eq!(
+            store.compare_and_set(t, "x", expected, data, LONG).await,
+            Ok(CasOutcome::Stored {
+                version: expected + 1
+            })
+        );
+    }
+    let now = store.get(t, "x").await.unwrap().unwrap();
+    assert_eq!((now.version, now.data), (10, b"v10".to_vec()));
+    let listed = store.list(t).await.unwrap();
+    assert_eq!((listed[0].version, listed[0].bytes), (10, 3));
+    // A larger value replaces a smaller one entirely.
+    let big = vec![42u8; 10_000];
+    assert_eq!(
+        store.compare_and_set(t, "x", 10, big.clone(), LONG).await,
+        Ok(CasOutcome::Stored { version: 11 })
+    );
+    assert_eq!(store.get(t, "x").await.unwrap().unwrap().data, big);
+    store.delete(t, "x").await.unwrap();
+    assert_eq!(
+        store.compare_and_set(t, "x", 11, vec![], LONG).await,
+        Ok(CasOutcome::Missing)
+    );
+}
+
+async fn tenants_are_isolated(store: &Arc<SessionStore>) {
+    store.create("acme", "s1", b"acme's".to_vec(), LONG).await.unwrap();
+    assert_eq!(store.get("default", "s1").await.unwrap(), None);
+    assert_eq!(store.list("default").await.unwrap(), vec![]);
+    assert!(!store.delete("default", "s1").await.unwrap());
+    assert_eq!(
+        store.compare_and_set("default", "s1", 1, b"x".to_vec(), LONG).await,
+        Ok(CasOutcome::Missing)
+    );
+    // The same id in another tenant is another session.
+    assert_eq!(
+        store.create("default", "s1", b"default's".to_vec(), LONG).await,
+        Ok(1)
+    );
+    assert_eq!(
+        store.compare_and_set("default", "s1", 1, b"d2".to_vec(), LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    assert_eq!(
+        store.get("acme", "s1").await.unwrap(),
+        Some(Stored {
+            version: 1,
+            data: b"acme's".to_vec()
+        })
+    );
+    assert!(store.delete("default", "s1").await.unwrap());
+    assert_eq!(store.list("acme").await.unwrap().len(), 1);
+    assert_eq!(store.list("default").await.unwrap(), vec![]);
+}
+
+/// Separators and escapes in tenants and ids never make two names one key.
+async fn ids_are_not_confused(store: &Arc<SessionStore>) {
+    let names = [
+        ("a", "b:s:c"),
+        ("a:b", "c"),
+        ("a", "b"),
+        ("a%3Ab", "c"),
+        ("a", "b%3As%3Ac"),
+        ("a:s", "x"),
+        ("", ""),
+        ("ü", "ü:%"),
+    ];
+    for (i, (tenant, id)) in names.iter().enumerate() {
+        store
+            .create(tenant, id, vec![i as u8], LONG)
+            .await
+            .unwrap_or_else(|e| panic!("{tenant:?}/{id:?}: {e}"));
+    }
+    for (i, (tenant, id)) in names.iter().enumerate() {
+        let got = store.get(tenant, id).await.unwrap().expect("stored");
+        assert_eq!(got.data, vec![i as u8], "{tenant:?}/{id:?}");
+    }
+    let ids: Vec<String> = store
+        .list("a")
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| m.id)
+        .collect();
+    assert_eq!(ids, ["b", "b%3As%3Ac", "b:s:c"]);
+    let ids: Vec<String> = store.list("ü").await.unwrap().into_iter().map(|m| m.id).collect();
+    assert_eq!(ids, ["ü:%"]);
+}
+
+async fn ttl_expires_and_cas_refreshes(store: &Arc<SessionStore>) {
+    let t = "default";
+    store.create(t, "short", b"s".to_vec(), SHORT).await.unwrap();
+    store.create(t, "kept", b"k".to_vec(), SHORT).await.unwrap();
+    let ttl = store.list(t).await.unwrap()[0].ttl_remaining;
+    assert!(ttl > Duration::ZERO && ttl <= SHORT, "{ttl:?}");
+    // The update restarts the idle time with its own TTL.
+    assert_eq!(
+        store.compare_and_set(t, "kept", 1, b"k2".to_vec(), LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    tokio::time::sleep(SHORT * 2).await;
+    assert_eq!(store.get(t, "short").await.unwrap(), None);
+    assert_eq!(
+        store.compare_and_set(t, "short", 1, b"late".to_vec(), LONG).await,
+        Ok(CasOutcome::Missing)
+    );
+    assert!(!store.delete(t, "short").await.unwrap());
+    assert_eq!(store.get(t, "kept").await.unwrap().unwrap().version, 2);
+    let ids: Vec<String> = store.list(t).await.unwrap().into_iter().map(|m| m.id).collect();
+    assert_eq!(ids, ["kept"]);
+    // An expired id can be created afresh.
+    assert_eq!(store.create(t, "short", b"again".to_vec(), LONG).await, Ok(1));
+    // And a CAS can shorten the TTL too: it sets it, it does not only extend it.
+    assert_eq!(
+        store.compare_and_set(t, "kept", 2, b"k3".to_vec(), SHORT).await,
+        Ok(CasOutcome::Stored { version: 3 })
+    );
+    tokio::time::sleep(SHORT * 2).await;
+    assert_eq!(store.get(t, "kept").await.unwrap(), None);
+}
+
+/// Run with `max_sessions_per_tenant = 3`.
+async fn sessions_per_tenant_are_bounded(store: &Arc<SessionStore>) {
+    let t = "acme";
+    store.create(t, "long", vec![1], LONG).await.unwrap();
+    store.create(t, "short1", vec![2], SHORT).await.unwrap();
+    store.create(t, "short2", vec![3], SHORT).await.unwrap();
+    assert_eq!(
+        store.create(t, "fourth", vec![4], LONG).await,
+        Err(StoreError::TooManySessions { limit: 3 })
+    );
+    // Other tenants have their own allowance.
+    store.create("default", "fourth", vec![4], LONG).await.unwrap();
+    // A deleted session frees its place.
+    assert!(store.delete(t, "short2").await.unwrap());
+    store.create(t, "fourth", vec![4], LONG).await.unwrap();
+    assert_eq!(
+        store.create(t, "fifth", vec![5], LONG).await,
+        Err(StoreError::TooManySessions { limit: 3 })
+    );
+    // Expired sessions do not count.
+    tokio::time::sleep(SHORT * 2).await;
+    store.create(t, "fifth", vec![5], LONG).await.unwrap();
+    assert_eq!(
+        store.create(t, "sixth", vec![6], LONG).await,
+        Err(StoreError::TooManySessions { limit: 3 })
+    );
+    let ids: Vec<String> = store.list(t).await.unwrap().into_iter().map(|m| m.id).collect();
+    assert_eq!(ids, ["fifth", "fourth", "long"]);
+}
+
+/// Many tasks increment a counter held in the data, each by read, CAS and
+/// retry on conflict: no increment may be lost.
+async fn concurrent_cas_loses_no_update(store: &Arc<SessionStore>) {
+    const TASKS: u64 = 8;
+    const EACH: u64 = 25;
+    let t = "default";
+    store.create(t, "counter", 0u64.to_le_bytes().to_vec(), LONG).await.unwrap();
+    let mut tasks = tokio::task::JoinSet::new();
+    for _ in 0..TASKS {
+        let store = Arc::clone(store);
+        tasks.spawn(async move {
+            let mut conflicts = 0u64;
+            for _ in 0..EACH {
+                loop {
+                    let cur = store.get(t, "counter").await.unwrap().expect("counter");
+                    let n = u64::from_le_bytes(cur.data.try_into().expect("8 bytes"));
+                    let next = (n + 1).to_le_bytes().to_vec();
+                    match store.compare_and_set(t, "counter", cur.version, next, LONG).await {
+                        Ok(CasOutcome::Stored { version }) => {
+                            assert_eq!(version, cur.version + 1);
+                            break;
+                        }
+                        Ok(CasOutcome::Conflict { current }) => {
+                            assert!(current > cur.version);
+                            conflicts += 1;
+                        }
+                        other => panic!("unexpected {other:?}"),
+                    }
+                }
+            }
+            conflicts
+        });
+    }
+    let mut conflicts = 0;
+    while let Some(done) = tasks.join_next().await {
+        conflicts += done.expect("task finished");
+    }
+    let last = store.get(t, "counter").await.unwrap().unwrap();
+    let n = u64::from_le_bytes(last.data.try_into().unwrap());
+    assert_eq!(n, TASKS * EACH, "{conflicts} conflicts");
+    assert_eq!(last.version, 1 + TASKS * EACH);
+}
+
+// ---------------------------------------------------------------- memory only
+
+#[tokio::test]
+async fn memory_bound_counts_live_bytes_and_frees_expired_ones() {
+    let store = memory(|s| s.max_memory_bytes = 100).await;
+    let SessionStore::Memory(inner) = &*store else {
+        unreachable!()
+    };
+    store.create("a", "x", vec![0; 60], SHORT).await.unwrap();
+    store.create("b", "y", vec![0; 30], LONG).await.unwrap();
+    assert_eq!(inner.bytes(), 90);
+    assert_eq!(
+        store.create("a", "z", vec![0; 11], LONG).await,
+        Err(StoreError::MemoryFull { limit_bytes: 100 })
+    );
+    store.create("a", "z", vec![0; 10], LONG).await.unwrap();
+    // Growing a session counts only the difference; shrinking frees bytes.
+    assert_eq!(
+        store.compare_and_set("b", "y", 1, vec![0; 31], LONG).await,
+        Err(StoreError::MemoryFull { limit_bytes: 100 })
+    );
+    assert_eq!(store.get("b", "y").await.unwrap().unwrap().version, 1);
+    assert_eq!(
+        store.compare_and_set("b", "y", 1, vec![0; 20], LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    assert_eq!(inner.bytes(), 90);
+    assert!(store.delete("a", "z").await.unwrap());
+    assert_eq!(inner.bytes(), 80);
+    // Expired sessions of any tenant are evicted before refusing.
+    tokio::time::sleep(SHORT * 2).await;
+    store.create("b", "w", vec![0; 80], LONG).await.unwrap();
+    assert_eq!(inner.bytes(), 100);
+    assert_eq!(store.get("a", "x").await.unwrap(), None);
+}
+
+// ---------------------------------------------------------------- Redis outage
+
+/// A redis-server child process on a port of its own, killed on drop.
+struct RedisServer {
+    port: u16,
+    child: Option<Child>,
+}
+
+impl RedisServer {
+    fn start(port: u16) -> Self {
+        let child = Command::new("redis-server")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+            .args(["--save", "", "--appendonly", "no"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("redis-server is on PATH (apt-get install redis-server)");
+        Self {
+            port,
+            child: Some(child),
+        }
+    }
+
+    fn stop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    fn url(&self) -> String {
+        format!("redis://127.0.0.1:{}/0", self.port)
+    }
+}
+
+impl Drop for RedisServer {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+fn free_port() -> u16 {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind port 0");
+    listener.local_addr().expect("bound").port()
+}
+
+/// Polls `ping` until it succeeds; panics after `limit`.
+async fn wait_until_up(store: &SessionStore, limit: Duration) {
+    let start = Instant::now();
+    loop {
+        match store.ping().await {
+            Ok(()) => return,
+            Err(e) if start.elapsed() > limit => {
+                panic!("store did not recover within {limit:?}: {e}")
+            }
+            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
+    }
+}
+
+async fn assert_unavailable_fast<T: std::fmt::Debug>(
+    what: &str,
+    timeout: Duration,
+    call: impl std::future::Future<Output = Result<T, StoreError>>,
+) {
+    let start = Instant::now();
+    let result = call.await;
+    let took = start.elapsed();
+    assert!(
+        matches!(result, Err(StoreError::Unavailable { .. })),
+        "{what}: {result:?}"
+    );
+    assert!(took <= timeout * 2, "{what} took {took:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn redis_outage_fails_fast_and_recovers() {
+    if Command::new("redis-server").arg("--version").output().is_err() {
+        let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
+        if skip_redis() {
+            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
+            return;
+        }
+        panic!("{message}");
+    }
+    let port = free_port();
+    let mut s = settings(&format!("redis://127.0.0.1:{port}/0"));
+    s.timeout = Duration::from_millis(500);
+    let timeout = s.timeout;
+
+    // Redis down at start: connecting still succeeds, calls fail fast.
+    let store = SessionStore::connect(&s).await.expect("connects lazily");
+    assert_unavailable_fast("ping", timeout, store.ping()).await;
+    assert_unavailable_fast("get", timeout, store.get("t", "a")).await;
+
+    let mut server = RedisServer::start(port);
+    assert_eq!(server.url(), s.url);
+    wait_until_up(&store, Duration::from_secs(10)).await;
+    assert_eq!(store.create("t", "a", b"1".to_vec(), LONG).await, Ok(1));
+
+    // Redis goes away.
+    server.stop();
+    assert_unavailable_fast("ping", timeout, store.ping()).await;
+    assert_unavailable_fast("get", timeout, store.get("t", "a")).await;
+    assert_unavailable_fast(
+        "create",
+        timeout,
+        store.create("t", "b", b"2".to_vec(), LONG),
+    )
+    .await;
+    assert_unavailable_fast(
+        "cas",
+        timeout,
+        store.compare_and_set("t", "a", 1, b"2".to_vec(), LONG),
+    )
+    .await;
+    assert_unavailable_fast("list", timeout, store.list("t")).await;
+    assert_unavailable_fast("delete", timeout, store.delete("t", "a")).await;
+
+    // Redis comes back (empty): the store reconnects by itself.
+    let _server = RedisServer::start(port);
+    wait_until_up(&store, Duration::from_secs(10)).await;
+    assert_eq!(store.get("t", "a").await, Ok(None));
+    assert_eq!(store.create("t", "b", b"2".to_vec(), LONG).await, Ok(1));
+    assert_eq!(
+        store.compare_and_set("t", "b", 1, b"3".to_vec(), LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+}
