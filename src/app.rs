@@ -7,7 +7,7 @@ use anyhow::Context;
 use tokio::{net::TcpListener, sync::watch};
 use tonic_health::{ServingStatus, server::HealthReporter};
 
-use crate::{config::Settings, grpc, http, state::AppState, telemetry};
+use crate::{auth::ApiKeys, config::Settings, grpc, http, state::AppState, telemetry};
 
 /// A built application whose listeners are bound (port 0 resolves here, so
 /// tests learn the real ports before serving starts).
@@ -23,13 +23,24 @@ pub struct Application {
 impl Application {
     pub async fn build(settings: Settings) -> anyhow::Result<Self> {
         settings.validate().map_err(anyhow::Error::msg)?;
+        let api_keys = ApiKeys::from_settings(&settings).map_err(anyhow::Error::msg)?;
+        if api_keys.is_open() {
+            tracing::warn!(
+                "no API keys configured: the service is open, every request acts as tenant `default`"
+            );
+        } else {
+            tracing::info!(
+                tenants = api_keys.tenant_count(),
+                "API keys configured: requests must authenticate"
+            );
+        }
         let http_listener = TcpListener::bind(settings.http_addr)
             .await
             .with_context(|| format!("binding the REST address {}", settings.http_addr))?;
         let grpc_listener = TcpListener::bind(settings.grpc_addr)
             .await
             .with_context(|| format!("binding the gRPC address {}", settings.grpc_addr))?;
-        let state = AppState::new(settings, telemetry::metrics_handle());
+        let state = AppState::new(settings, api_keys, telemetry::metrics_handle());
         let grpc::GrpcServices {
             router: grpc,
             health,

@@ -135,6 +135,45 @@ pub struct Settings {
         global = true
     )]
     pub shutdown_grace_s: f64,
+    /// API keys as comma-separated `key=tenant` pairs (key at least 8 characters,
+    /// tenant `[A-Za-z0-9_-]{1,64}`). With no key configured anywhere the service
+    /// is open and every request acts as tenant `default`.
+    #[arg(long, env = "FUSION_API_KEYS", hide_env_values = true, global = true)]
+    pub api_keys: Option<Secret>,
+    /// A file of API keys, one `key=tenant` per line (`#` starts a comment);
+    /// combined with `--api-keys`.
+    #[arg(long, env = "FUSION_API_KEYS_FILE", global = true)]
+    pub api_keys_file: Option<PathBuf>,
+}
+
+/// A setting that must not appear in logs: `Debug` prints `***`.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("***")
+    }
+}
+
+impl std::str::FromStr for Secret {
+    type Err = std::convert::Infallible;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(Self(s.to_string()))
+    }
+}
+
+impl From<&str> for Secret {
+    fn from(s: &str) -> Self {
+        Self(s.to_string())
+    }
 }
 
 impl Settings {

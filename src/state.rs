@@ -1,5 +1,5 @@
-//! The state shared by both adapters: settings, readiness, the in-flight limit
-//! and the metrics handle. One `AppState` is built at start-up and cloned
+//! The state shared by both adapters: settings, the API keys, readiness, the
+//! in-flight limit and the metrics handle. One `AppState` is built at start-up and cloned
 //! (cheaply, it is an `Arc`) into every server.
 
 use std::sync::{
@@ -10,7 +10,7 @@ use std::sync::{
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use crate::config::Settings;
+use crate::{auth::ApiKeys, config::Settings};
 
 #[derive(Clone)]
 pub struct AppState {
@@ -19,17 +19,19 @@ pub struct AppState {
 
 struct Inner {
     settings: Settings,
+    api_keys: ApiKeys,
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
     metrics: PrometheusHandle,
 }
 
 impl AppState {
-    pub fn new(settings: Settings, metrics: PrometheusHandle) -> Self {
+    pub fn new(settings: Settings, api_keys: ApiKeys, metrics: PrometheusHandle) -> Self {
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {
                 settings,
+                api_keys,
                 ready: AtomicBool::new(false),
                 in_flight,
                 metrics,
@@ -39,6 +41,11 @@ impl AppState {
 
     pub fn settings(&self) -> &Settings {
         &self.inner.settings
+    }
+
+    /// The API keys both adapters authenticate requests with.
+    pub fn api_keys(&self) -> &ApiKeys {
+        &self.inner.api_keys
     }
 
     /// Whether the service should receive traffic (`/readyz`, gRPC health).

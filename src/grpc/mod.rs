@@ -20,6 +20,7 @@ use tonic::{Code, Status, service::Routes};
 use tonic_health::server::HealthReporter;
 
 use crate::{
+    auth::AuthError,
     proto::{
         ais_radar_service_server::AisRadarServiceServer,
         correlation_service_server::CorrelationServiceServer,
@@ -71,8 +72,8 @@ pub struct GrpcServices {
     pub health: HealthReporter,
 }
 
-/// Builds the gRPC router: the fusion services behind the in-flight limit and
-/// the timeout, health and reflection outside them, all counted in metrics.
+/// Builds the gRPC router: the fusion services behind authentication, the
+/// in-flight limit and the timeout, health and reflection outside them, all counted in metrics.
 /// Unknown services and methods answer UNIMPLEMENTED.
 pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::server::Error> {
     let limit = state.settings().max_body_bytes;
@@ -107,6 +108,7 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
         .prepare()
         .into_axum_router()
         .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn_with_state(state.clone(), authenticate))
         .layer(middleware::from_fn(record_metrics));
     Ok(GrpcServices { router, health })
 }
@@ -123,8 +125,7 @@ pub const SERVICE_NAMES: &[&str] = &[
 /// served, and bounds its duration with DEADLINE_EXCEEDED. Health checks and
 /// reflection pass freely, so that probes answer under load.
 async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let path = req.uri().path();
-    if path.starts_with("/grpc.health.") || path.starts_with("/grpc.reflection.") {
+    if is_health_or_reflection(req.uri().path()) {
         return next.run(req).await;
     }
     let Some(_permit) = state.try_admit() else {
@@ -139,6 +140,56 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
             timeout.as_secs_f64()
         ))
         .into_http(),
+    }
+}
+
+/// Health checks and reflection: outside authentication and the in-flight limit.
+fn is_health_or_reflection(path: &str) -> bool {
+    path.starts_with("/grpc.health.") || path.starts_with("/grpc.reflection.")
+}
+
+/// Answers UNAUTHENTICATED to a call without a valid key (when keys are
+/// configured) in the metadata `authorization: Bearer <key>` or, failing that,
+/// `x-api-key: <key>`; otherwise puts its `Tenant` into the request extensions,
+/// which tonic hands to the service (`request.extensions().get::<Tenant>()`).
+/// Health checks and reflection need no key.
+async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    if is_health_or_reflection(req.uri().path()) {
+        return next.run(req).await;
+    }
+    let keys = state.api_keys();
+    let headers = req.headers();
+    let text = |name: &str| {
+        headers
+            .get(name)
+            .map(|v| v.to_str().map_err(|_| AuthError::Malformed))
+    };
+    let authenticated = match (text("authorization"), text("x-api-key")) {
+        (Some(Err(e)), _) | (None, Some(Err(e))) => Err(e),
+        (Some(Ok(value)), _) => keys.authenticate(Some(value)),
+        (None, Some(Ok(key))) => keys.authenticate_key(Some(key.trim())),
+        (None, None) => keys.authenticate(None),
+    };
+    match authenticated {
+        Ok(tenant) => {
+            req.extensions_mut().insert(tenant);
+            next.run(req).await
+        }
+        Err(error) => {
+            metrics::counter!("auth_failures_total", "transport" => "grpc").increment(1);
+            let message = match error {
+                AuthError::Missing => {
+                    "an API key is required: send the metadata `authorization: Bearer <key>` \
+                     or `x-api-key: <key>`"
+                }
+                AuthError::Malformed => {
+                    "malformed credentials: expected the metadata `authorization: Bearer <key>` \
+                     or `x-api-key: <key>`"
+                }
+                AuthError::UnknownKey => "the API key is not valid",
+            };
+            Status::unauthenticated(message).into_http()
+        }
     }
 }
 

@@ -15,7 +15,7 @@ use std::time::Instant;
 use axum::{
     Router,
     extract::{DefaultBodyLimit, MatchedPath, Request, State},
-    http::{StatusCode, header},
+    http::{HeaderValue, StatusCode, header},
     middleware::{self, Next},
     response::{IntoResponse, Response},
     routing::{get, post},
@@ -26,7 +26,7 @@ use tower_http::{compression::CompressionLayer, timeout::TimeoutLayer};
 use utoipa::{OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::state::AppState;
+use crate::{auth::AuthError, state::AppState};
 use problem::Problem;
 
 /// Where the time of a request went.
@@ -48,6 +48,7 @@ pub struct Timing {
     ),
     paths(correlation::correlate, jpda::update, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
     components(schemas(Problem, problem::ProblemField)),
+    modifiers(&BearerAuth),
     tags(
         (name = "correlation", description = "Track-to-track correlation (seed 000)"),
         (name = "jpda", description = "Joint probabilistic data association (seed 002)"),
@@ -58,6 +59,76 @@ pub struct Timing {
 )]
 pub struct ApiDoc;
 
+/// The name of the bearer security scheme in the OpenAPI document.
+const BEARER: &str = "bearer";
+
+/// Declares the bearer (API key) security scheme and applies it, with its 401
+/// answer, to every `/v1/` operation; the operational routes stay open.
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::{
+            ContentBuilder, HeaderBuilder, ObjectBuilder, Ref, ResponseBuilder, Type,
+            security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme},
+        };
+        openapi
+            .components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme(
+                BEARER,
+                SecurityScheme::Http(
+                    HttpBuilder::new()
+                        .scheme(HttpAuthScheme::Bearer)
+                        .description(Some(
+                            "An API key configured with --api-keys or --api-keys-file, sent as \
+                             `Authorization: Bearer <key>`. Not required when the service runs \
+                             without keys (every request is then tenant `default`).",
+                        ))
+                        .build(),
+                ),
+            );
+        let unauthorized = ResponseBuilder::new()
+            .description("Missing, malformed or unknown API key")
+            .content(
+                problem::PROBLEM_JSON,
+                ContentBuilder::new()
+                    .schema(Some(Ref::from_schema_name("Problem")))
+                    .build(),
+            )
+            .header(
+                "WWW-Authenticate",
+                HeaderBuilder::new()
+                    .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
+                    .description(Some("`Bearer realm=\"radar-fusion\"`, with `error` for a bad key"))
+                    .build(),
+            )
+            .build();
+        for (path, item) in &mut openapi.paths.paths {
+            if !path.starts_with("/v1/") {
+                continue;
+            }
+            let operations = [
+                &mut item.get,
+                &mut item.put,
+                &mut item.post,
+                &mut item.delete,
+                &mut item.patch,
+            ];
+            for operation in operations.into_iter().flatten() {
+                operation.security = Some(vec![SecurityRequirement::new(
+                    BEARER,
+                    Vec::<String>::new(),
+                )]);
+                operation
+                    .responses
+                    .responses
+                    .insert("401".to_string(), unauthorized.clone().into());
+            }
+        }
+    }
+}
+
 /// The OpenAPI document as checked in at `openapi/openapi.json`.
 pub fn openapi_json() -> String {
     let mut json = ApiDoc::openapi()
@@ -67,8 +138,8 @@ pub fn openapi_json() -> String {
     json
 }
 
-/// The REST router: API routes behind the in-flight limit, the timeout and the
-/// body limit; operational routes and the docs outside them; requests with a
+/// The REST router: API routes behind authentication, the in-flight limit,
+/// the timeout and the body limit; operational routes and the docs outside them; requests with a
 /// gRPC content type handed to `grpc`, so one port serves both.
 pub fn router(state: AppState, grpc: Router) -> Router {
     let settings = state.settings().clone();
@@ -84,7 +155,8 @@ pub fn router(state: AppState, grpc: Router) -> Router {
             StatusCode::GATEWAY_TIMEOUT,
             settings.request_timeout(),
         ))
-        .layer(middleware::from_fn_with_state(state.clone(), admit));
+        .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn_with_state(state.clone(), authenticate));
 
     let router = Router::new()
         .merge(api)
@@ -100,6 +172,31 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .layer(middleware::from_fn(problem::problem_for_bare_errors))
         .layer(middleware::from_fn_with_state(grpc, dispatch_grpc));
     crate::telemetry::with_request_tracing(router)
+}
+
+/// Answers 401 to an API request without a valid `Authorization: Bearer <key>`
+/// (when keys are configured), before it takes an in-flight slot; otherwise
+/// puts its `Tenant` into the request extensions (`Extension<Tenant>`).
+async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    let authenticated = match req
+        .headers()
+        .get(header::AUTHORIZATION)
+        .map(HeaderValue::to_str)
+    {
+        Some(Err(_)) => Err(AuthError::Malformed),
+        Some(Ok(value)) => state.api_keys().authenticate(Some(value)),
+        None => state.api_keys().authenticate(None),
+    };
+    match authenticated {
+        Ok(tenant) => {
+            req.extensions_mut().insert(tenant);
+            next.run(req).await
+        }
+        Err(error) => {
+            metrics::counter!("auth_failures_total", "transport" => "http").increment(1);
+            problem::unauthenticated(error)
+        }
+    }
 }
 
 /// Sheds an API request with 503 when `max_in_flight` are being served.
