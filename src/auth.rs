@@ -320,7 +320,10 @@ mod tests {
                 "--api-keys entry 1: the key must be printable",
             ),
             ("k1secret=", "--api-keys entry 1: the tenant must match"),
-            ("k1secret=ac me", "--api-keys entry 1: the tenant must match"),
+            (
+                "k1secret=ac me",
+                "--api-keys entry 1: the tenant must match",
+            ),
             ("k1secret=acmé", "--api-keys entry 1: the tenant must match"),
             (
                 &format!("k1secret={}", "a".repeat(65)),

@@ -277,3 +277,70 @@ async fn record_metrics(req: Request, next: Next) -> Response {
         .record(start.elapsed().as_secs_f64());
     response
 }
+
+#[cfg(test)]
+mod tests {
+    use axum::{body::Body, routing::post};
+    use tower::ServiceExt;
+
+    use super::*;
+    use crate::{
+        auth::{ApiKeys, Tenant},
+        config::Settings,
+    };
+
+    /// The tenant a tonic service would see: tonic builds its `Request` from
+    /// the http request, extensions included.
+    async fn tenant_seen(metadata: &[(&str, &str)]) -> Result<String, String> {
+        let mut settings = Settings::for_tests();
+        settings.api_keys = Some("k1secret=acme,k2secret=globex".into());
+        let api_keys = ApiKeys::from_settings(&settings).unwrap();
+        let state = AppState::new(settings, api_keys, crate::telemetry::metrics_handle());
+        let app = Router::new()
+            .route(
+                "/radar.fusion.v1.CorrelationService/EvaluateRules",
+                post(|req: Request| async move {
+                    let request = tonic::Request::from_http(req);
+                    request
+                        .extensions()
+                        .get::<Tenant>()
+                        .map_or_else(String::new, |t| t.0.clone())
+                }),
+            )
+            .layer(middleware::from_fn_with_state(state, authenticate));
+        let mut request = axum::http::Request::builder()
+            .method("POST")
+            .uri("/radar.fusion.v1.CorrelationService/EvaluateRules");
+        for (name, value) in metadata {
+            request = request.header(*name, *value);
+        }
+        let response = app
+            .oneshot(request.body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        if let Some(code) = response.headers().get("grpc-status") {
+            return Err(code.to_str().unwrap().to_string());
+        }
+        let body = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        Ok(String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[tokio::test]
+    async fn services_see_the_tenant_of_the_key() {
+        let bearer = tenant_seen(&[("authorization", "Bearer k1secret")]).await;
+        assert_eq!(bearer.as_deref(), Ok("acme"));
+        let api_key = tenant_seen(&[("x-api-key", "k2secret")]).await;
+        assert_eq!(api_key.as_deref(), Ok("globex"));
+        // `authorization` wins over `x-api-key`.
+        let both = tenant_seen(&[
+            ("authorization", "Bearer k1secret"),
+            ("x-api-key", "k2secret"),
+        ])
+        .await;
+        assert_eq!(both.as_deref(), Ok("acme"));
+        // 16 = UNAUTHENTICATED.
+        assert_eq!(tenant_seen(&[]).await, Err("16".to_string()));
+    }
+}

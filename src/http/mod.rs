@@ -100,7 +100,9 @@ impl utoipa::Modify for BearerAuth {
                 "WWW-Authenticate",
                 HeaderBuilder::new()
                     .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
-                    .description(Some("`Bearer realm=\"radar-fusion\"`, with `error` for a bad key"))
+                    .description(Some(
+                        "`Bearer realm=\"radar-fusion\"`, with `error` for a bad key",
+                    ))
                     .build(),
             )
             .build();
@@ -116,10 +118,8 @@ impl utoipa::Modify for BearerAuth {
                 &mut item.patch,
             ];
             for operation in operations.into_iter().flatten() {
-                operation.security = Some(vec![SecurityRequirement::new(
-                    BEARER,
-                    Vec::<String>::new(),
-                )]);
+                operation.security =
+                    Some(vec![SecurityRequirement::new(BEARER, Vec::<String>::new())]);
                 operation
                     .responses
                     .responses
@@ -250,4 +250,55 @@ async fn not_found() -> Problem {
 
 async fn method_not_allowed() -> Problem {
     Problem::for_status(StatusCode::METHOD_NOT_ALLOWED)
+}
+
+#[cfg(test)]
+mod tests {
+    use axum::{Extension, body::Body};
+
+    use super::*;
+    use crate::{
+        auth::{ApiKeys, Tenant},
+        config::Settings,
+    };
+
+    fn state(keys: Option<&str>) -> AppState {
+        let mut settings = Settings::for_tests();
+        settings.api_keys = keys.map(Into::into);
+        let api_keys = ApiKeys::from_settings(&settings).unwrap();
+        AppState::new(settings, api_keys, crate::telemetry::metrics_handle())
+    }
+
+    async fn tenant_seen(state: AppState, authorization: Option<&str>) -> (StatusCode, String) {
+        let app = Router::new()
+            .route(
+                "/v1/whoami",
+                get(|Extension(tenant): Extension<Tenant>| async move { tenant.0 }),
+            )
+            .layer(middleware::from_fn_with_state(state, authenticate));
+        let mut request = axum::http::Request::builder().uri("/v1/whoami");
+        if let Some(value) = authorization {
+            request = request.header(header::AUTHORIZATION, value);
+        }
+        let response = app
+            .oneshot(request.body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        let status = response.status();
+        let body = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        (status, String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[tokio::test]
+    async fn handlers_see_the_tenant_of_the_key() {
+        let keyed = state(Some("k1secret=acme,k2secret=globex"));
+        let seen = tenant_seen(keyed.clone(), Some("Bearer k2secret")).await;
+        assert_eq!(seen, (StatusCode::OK, "globex".to_string()));
+        let (status, _) = tenant_seen(keyed, None).await;
+        assert_eq!(status, StatusCode::UNAUTHORIZED);
+        let open = tenant_seen(state(None), None).await;
+        assert_eq!(open, (StatusCode::OK, "default".to_string()));
+    }
 }
