@@ -8,6 +8,7 @@ use tokio::{net::TcpListener, sync::watch};
 use tonic_health::{ServingStatus, server::HealthReporter};
 
 use crate::{
+    auth::ApiKeys,
     config::Settings,
     grpc, http,
     state::{AppState, Readiness},
@@ -32,6 +33,17 @@ pub struct Application {
 impl Application {
     pub async fn build(settings: Settings) -> anyhow::Result<Self> {
         settings.validate().map_err(anyhow::Error::msg)?;
+        let api_keys = ApiKeys::from_settings(&settings).map_err(anyhow::Error::msg)?;
+        if api_keys.is_open() {
+            tracing::warn!(
+                "no API keys configured: the service is open, every request acts as tenant `default`"
+            );
+        } else {
+            tracing::info!(
+                tenants = api_keys.tenant_count(),
+                "API keys configured: requests must authenticate"
+            );
+        }
         let http_listener = TcpListener::bind(settings.http_addr)
             .await
             .with_context(|| format!("binding the REST address {}", settings.http_addr))?;
@@ -42,7 +54,7 @@ impl Application {
             .await
             .context("building the session store")?;
         tracing::info!(backend = store.backend(), "session store");
-        let state = AppState::new(settings, telemetry::metrics_handle(), store);
+        let state = AppState::new(settings, api_keys, telemetry::metrics_handle(), store);
         let grpc::GrpcServices {
             router: grpc,
             health,

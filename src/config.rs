@@ -173,6 +173,61 @@ pub struct Settings {
         global = true
     )]
     pub store_timeout_s: f64,
+    /// Most live tracks one streaming session may hold.
+    #[arg(
+        long,
+        env = "FUSION_MAX_TRACKS_PER_SESSION",
+        default_value_t = 10_000,
+        global = true
+    )]
+    pub max_tracks_per_session: usize,
+    /// Most track reports in one batch pushed to a session.
+    #[arg(
+        long,
+        env = "FUSION_MAX_BATCH_REPORTS",
+        default_value_t = 100_000,
+        global = true
+    )]
+    pub max_batch_reports: usize,
+    /// API keys as comma-separated `key=tenant` pairs (key at least 8 characters,
+    /// tenant `[A-Za-z0-9_-]{1,64}`). With no key configured anywhere the service
+    /// is open and every request acts as tenant `default`.
+    #[arg(long, env = "FUSION_API_KEYS", hide_env_values = true, global = true)]
+    pub api_keys: Option<Secret>,
+    /// A file of API keys, one `key=tenant` per line (`#` starts a comment);
+    /// combined with `--api-keys`.
+    #[arg(long, env = "FUSION_API_KEYS_FILE", global = true)]
+    pub api_keys_file: Option<PathBuf>,
+}
+
+/// A setting that must not appear in logs: `Debug` prints `***`.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("***")
+    }
+}
+
+impl std::str::FromStr for Secret {
+    type Err = std::convert::Infallible;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(Self(s.to_string()))
+    }
+}
+
+impl From<&str> for Secret {
+    fn from(s: &str) -> Self {
+        Self(s.to_string())
+    }
 }
 
 impl Settings {
@@ -182,6 +237,14 @@ impl Settings {
         s.http_addr = "127.0.0.1:0".parse().expect("literal address");
         s.grpc_addr = "127.0.0.1:0".parse().expect("literal address");
         s
+    }
+
+    /// The limits of one streaming session.
+    pub fn session_limits(&self) -> crate::service::session::Limits {
+        crate::service::session::Limits {
+            max_tracks: self.max_tracks_per_session,
+            max_batch_reports: self.max_batch_reports,
+        }
     }
 
     pub fn request_timeout(&self) -> Duration {
@@ -221,6 +284,12 @@ impl Settings {
             return Err("--max-in-flight must be at least 1".into());
         }
         positive("store-timeout-s", self.store_timeout_s)?;
+        if self.max_tracks_per_session == 0 {
+            return Err("--max-tracks-per-session must be at least 1".into());
+        }
+        if self.max_batch_reports == 0 {
+            return Err("--max-batch-reports must be at least 1".into());
+        }
         let store = self.session_store.as_str();
         if store != "memory" && !store.starts_with("redis://") && !store.starts_with("rediss://")
         {

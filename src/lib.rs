@@ -6,6 +6,7 @@
 
 pub mod algo;
 pub mod app;
+pub mod auth;
 pub mod config;
 pub mod grpc;
 pub mod http;

@@ -1,5 +1,5 @@
-//! The state shared by both adapters: settings, readiness, the in-flight limit,
-//! the metrics handle and the session store. One `AppState` is built at start-up and cloned
+//! The state shared by both adapters: settings, the API keys, readiness, the
+//! in-flight limit, the metrics handle and the session store. One `AppState` is built at start-up and cloned
 //! (cheaply, it is an `Arc`) into every server.
 
 use std::sync::{
@@ -10,7 +10,7 @@ use std::sync::{
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use crate::{config::Settings, store::SessionStore};
+use crate::{auth::ApiKeys, config::Settings, store::SessionStore};
 
 #[derive(Clone)]
 pub struct AppState {
@@ -19,6 +19,7 @@ pub struct AppState {
 
 struct Inner {
     settings: Settings,
+    api_keys: ApiKeys,
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
     metrics: PrometheusHandle,
@@ -26,11 +27,17 @@ struct Inner {
 }
 
 impl AppState {
-    pub fn new(settings: Settings, metrics: PrometheusHandle, store: SessionStore) -> Self {
+    pub fn new(
+        settings: Settings,
+        api_keys: ApiKeys,
+        metrics: PrometheusHandle,
+        store: SessionStore,
+    ) -> Self {
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {
                 settings,
+                api_keys,
                 ready: AtomicBool::new(false),
                 in_flight,
                 metrics,
@@ -41,6 +48,11 @@ impl AppState {
 
     pub fn settings(&self) -> &Settings {
         &self.inner.settings
+    }
+
+    /// The API keys both adapters authenticate requests with.
+    pub fn api_keys(&self) -> &ApiKeys {
+        &self.inner.api_keys
     }
 
     /// Whether the service is started and not draining. Readiness for traffic

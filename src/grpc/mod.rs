@@ -20,6 +20,7 @@ use tonic::{Code, Status, service::Routes};
 use tonic_health::server::HealthReporter;
 
 use crate::{
+    auth::AuthError,
     proto::{
         ais_radar_service_server::AisRadarServiceServer,
         correlation_service_server::CorrelationServiceServer,
@@ -71,8 +72,8 @@ pub struct GrpcServices {
     pub health: HealthReporter,
 }
 
-/// Builds the gRPC router: the fusion services behind the in-flight limit and
-/// the timeout, health and reflection outside them, all counted in metrics.
+/// Builds the gRPC router: the fusion services behind authentication, the
+/// in-flight limit and the timeout, health and reflection outside them, all counted in metrics.
 /// Unknown services and methods answer UNIMPLEMENTED.
 pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::server::Error> {
     let limit = state.settings().max_body_bytes;
@@ -107,6 +108,7 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
         .prepare()
         .into_axum_router()
         .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn_with_state(state.clone(), authenticate))
         .layer(middleware::from_fn(record_metrics));
     Ok(GrpcServices { router, health })
 }
@@ -123,8 +125,7 @@ pub const SERVICE_NAMES: &[&str] = &[
 /// served, and bounds its duration with DEADLINE_EXCEEDED. Health checks and
 /// reflection pass freely, so that probes answer under load.
 async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let path = req.uri().path();
-    if path.starts_with("/grpc.health.") || path.starts_with("/grpc.reflection.") {
+    if is_health_or_reflection(req.uri().path()) {
         return next.run(req).await;
     }
     let Some(_permit) = state.try_admit() else {
@@ -139,6 +140,56 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
             timeout.as_secs_f64()
         ))
         .into_http(),
+    }
+}
+
+/// Health checks and reflection: outside authentication and the in-flight limit.
+fn is_health_or_reflection(path: &str) -> bool {
+    path.starts_with("/grpc.health.") || path.starts_with("/grpc.reflection.")
+}
+
+/// Answers UNAUTHENTICATED to a call without a valid key (when keys are
+/// configured) in the metadata `authorization: Bearer <key>` or, failing that,
+/// `x-api-key: <key>`; otherwise puts its `Tenant` into the request extensions,
+/// which tonic hands to the service (`request.extensions().get::<Tenant>()`).
+/// Health checks and reflection need no key.
+async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    if is_health_or_reflection(req.uri().path()) {
+        return next.run(req).await;
+    }
+    let keys = state.api_keys();
+    let headers = req.headers();
+    let text = |name: &str| {
+        headers
+            .get(name)
+            .map(|v| v.to_str().map_err(|_| AuthError::Malformed))
+    };
+    let authenticated = match (text("authorization"), text("x-api-key")) {
+        (Some(Err(e)), _) | (None, Some(Err(e))) => Err(e),
+        (Some(Ok(value)), _) => keys.authenticate(Some(value)),
+        (None, Some(Ok(key))) => keys.authenticate_key(Some(key.trim())),
+        (None, None) => keys.authenticate(None),
+    };
+    match authenticated {
+        Ok(tenant) => {
+            req.extensions_mut().insert(tenant);
+            next.run(req).await
+        }
+        Err(error) => {
+            metrics::counter!("auth_failures_total", "transport" => "grpc").increment(1);
+            let message = match error {
+                AuthError::Missing => {
+                    "an API key is required: send the metadata `authorization: Bearer <key>` \
+                     or `x-api-key: <key>`"
+                }
+                AuthError::Malformed => {
+                    "malformed credentials: expected the metadata `authorization: Bearer <key>` \
+                     or `x-api-key: <key>`"
+                }
+                AuthError::UnknownKey => "the API key is not valid",
+            };
+            Status::unauthenticated(message).into_http()
+        }
     }
 }
 
@@ -225,4 +276,71 @@ async fn record_metrics(req: Request, next: Next) -> Response {
     metrics::histogram!("grpc_request_duration_seconds", "method" => method)
         .record(start.elapsed().as_secs_f64());
     response
+}
+
+#[cfg(test)]
+mod tests {
+    use axum::{body::Body, routing::post};
+    use tower::ServiceExt;
+
+    use super::*;
+    use crate::{
+        auth::{ApiKeys, Tenant},
+        config::Settings,
+    };
+
+    /// The tenant a tonic service would see: tonic builds its `Request` from
+    /// the http request, extensions included.
+    async fn tenant_seen(metadata: &[(&str, &str)]) -> Result<String, String> {
+        let mut settings = Settings::for_tests();
+        settings.api_keys = Some("k1secret=acme,k2secret=globex".into());
+        let api_keys = ApiKeys::from_settings(&settings).unwrap();
+        let state = AppState::new(settings, api_keys, crate::telemetry::metrics_handle());
+        let app = Router::new()
+            .route(
+                "/radar.fusion.v1.CorrelationService/EvaluateRules",
+                post(|req: Request| async move {
+                    let request = tonic::Request::from_http(req);
+                    request
+                        .extensions()
+                        .get::<Tenant>()
+                        .map_or_else(String::new, |t| t.0.clone())
+                }),
+            )
+            .layer(middleware::from_fn_with_state(state, authenticate));
+        let mut request = axum::http::Request::builder()
+            .method("POST")
+            .uri("/radar.fusion.v1.CorrelationService/EvaluateRules");
+        for (name, value) in metadata {
+            request = request.header(*name, *value);
+        }
+        let response = app
+            .oneshot(request.body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        if let Some(code) = response.headers().get("grpc-status") {
+            return Err(code.to_str().unwrap().to_string());
+        }
+        let body = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        Ok(String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[tokio::test]
+    async fn services_see_the_tenant_of_the_key() {
+        let bearer = tenant_seen(&[("authorization", "Bearer k1secret")]).await;
+        assert_eq!(bearer.as_deref(), Ok("acme"));
+        let api_key = tenant_seen(&[("x-api-key", "k2secret")]).await;
+        assert_eq!(api_key.as_deref(), Ok("globex"));
+        // `authorization` wins over `x-api-key`.
+        let both = tenant_seen(&[
+            ("authorization", "Bearer k1secret"),
+            ("x-api-key", "k2secret"),
+        ])
+        .await;
+        assert_eq!(both.as_deref(), Ok("acme"));
+        // 16 = UNAUTHENTICATED.
+        assert_eq!(tenant_seen(&[]).await, Err("16".to_string()));
+    }
 }

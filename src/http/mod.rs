@@ -9,13 +9,14 @@ pub mod jpda;
 pub mod ops;
 pub mod problem;
 pub mod rules;
+pub mod sessions;
 
 use std::time::Instant;
 
 use axum::{
     Router,
     extract::{DefaultBodyLimit, MatchedPath, Request, State},
-    http::{StatusCode, header},
+    http::{HeaderValue, StatusCode, header},
     middleware::{self, Next},
     response::{IntoResponse, Response},
     routing::{get, post},
@@ -26,7 +27,7 @@ use tower_http::{compression::CompressionLayer, timeout::TimeoutLayer};
 use utoipa::{OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::state::AppState;
+use crate::{auth::AuthError, state::AppState};
 use problem::Problem;
 
 /// Where the time of a request went.
@@ -46,10 +47,12 @@ pub struct Timing {
             problem details naming the offending field. The same operations are served \
             over gRPC (package radar.fusion.v1)."
     ),
-    paths(correlation::correlate, jpda::update, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
+    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
     components(schemas(Problem, problem::ProblemField)),
+    modifiers(&BearerAuth),
     tags(
         (name = "correlation", description = "Track-to-track correlation (seed 000)"),
+        (name = "sessions", description = "Streaming correlation sessions: state carried across batches"),
         (name = "jpda", description = "Joint probabilistic data association (seed 002)"),
         (name = "dimension", description = "Fusion of 2D and 3D radar tracks (seed 003)"),
         (name = "ais-radar", description = "AIS–radar association and radar bias estimation (seed 004)"),
@@ -57,6 +60,76 @@ pub struct Timing {
     )
 )]
 pub struct ApiDoc;
+
+/// The name of the bearer security scheme in the OpenAPI document.
+const BEARER: &str = "bearer";
+
+/// Declares the bearer (API key) security scheme and applies it, with its 401
+/// answer, to every `/v1/` operation; the operational routes stay open.
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::{
+            ContentBuilder, HeaderBuilder, ObjectBuilder, Ref, ResponseBuilder, Type,
+            security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme},
+        };
+        openapi
+            .components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme(
+                BEARER,
+                SecurityScheme::Http(
+                    HttpBuilder::new()
+                        .scheme(HttpAuthScheme::Bearer)
+                        .description(Some(
+                            "An API key configured with --api-keys or --api-keys-file, sent as \
+                             `Authorization: Bearer <key>`. Not required when the service runs \
+                             without keys (every request is then tenant `default`).",
+                        ))
+                        .build(),
+                ),
+            );
+        let unauthorized = ResponseBuilder::new()
+            .description("Missing, malformed or unknown API key")
+            .content(
+                problem::PROBLEM_JSON,
+                ContentBuilder::new()
+                    .schema(Some(Ref::from_schema_name("Problem")))
+                    .build(),
+            )
+            .header(
+                "WWW-Authenticate",
+                HeaderBuilder::new()
+                    .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
+                    .description(Some(
+                        "`Bearer realm=\"radar-fusion\"`, with `error` for a bad key",
+                    ))
+                    .build(),
+            )
+            .build();
+        for (path, item) in &mut openapi.paths.paths {
+            if !path.starts_with("/v1/") {
+                continue;
+            }
+            let operations = [
+                &mut item.get,
+                &mut item.put,
+                &mut item.post,
+                &mut item.delete,
+                &mut item.patch,
+            ];
+            for operation in operations.into_iter().flatten() {
+                operation.security =
+                    Some(vec![SecurityRequirement::new(BEARER, Vec::<String>::new())]);
+                operation
+                    .responses
+                    .responses
+                    .insert("401".to_string(), unauthorized.clone().into());
+            }
+        }
+    }
+}
 
 /// The OpenAPI document as checked in at `openapi/openapi.json`.
 pub fn openapi_json() -> String {
@@ -67,8 +140,8 @@ pub fn openapi_json() -> String {
     json
 }
 
-/// The REST router: API routes behind the in-flight limit, the timeout and the
-/// body limit; operational routes and the docs outside them; requests with a
+/// The REST router: API routes behind authentication, the in-flight limit,
+/// the timeout and the body limit; operational routes and the docs outside them; requests with a
 /// gRPC content type handed to `grpc`, so one port serves both.
 pub fn router(state: AppState, grpc: Router) -> Router {
     let settings = state.settings().clone();
@@ -78,13 +151,20 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .route("/v1/correlation/tracks", post(correlation::correlate))
         .route("/v1/ais-radar/associate", post(ais_radar::associate))
         .route("/v1/jpda/update", post(jpda::update))
+        .route("/v1/sessions", post(sessions::create).get(sessions::list))
+        .route(
+            "/v1/sessions/{id}",
+            get(sessions::get).delete(sessions::delete),
+        )
+        .route("/v1/sessions/{id}/batches", post(sessions::push))
         .route("/v1/dimension/fuse", post(dimension::fuse))
         .layer(DefaultBodyLimit::max(settings.max_body_bytes))
         .layer(TimeoutLayer::with_status_code(
             StatusCode::GATEWAY_TIMEOUT,
             settings.request_timeout(),
         ))
-        .layer(middleware::from_fn_with_state(state.clone(), admit));
+        .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn_with_state(state.clone(), authenticate));
 
     let router = Router::new()
         .merge(api)
@@ -100,6 +180,31 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .layer(middleware::from_fn(problem::problem_for_bare_errors))
         .layer(middleware::from_fn_with_state(grpc, dispatch_grpc));
     crate::telemetry::with_request_tracing(router)
+}
+
+/// Answers 401 to an API request without a valid `Authorization: Bearer <key>`
+/// (when keys are configured), before it takes an in-flight slot; otherwise
+/// puts its `Tenant` into the request extensions (`Extension<Tenant>`).
+async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    let authenticated = match req
+        .headers()
+        .get(header::AUTHORIZATION)
+        .map(HeaderValue::to_str)
+    {
+        Some(Err(_)) => Err(AuthError::Malformed),
+        Some(Ok(value)) => state.api_keys().authenticate(Some(value)),
+        None => state.api_keys().authenticate(None),
+    };
+    match authenticated {
+        Ok(tenant) => {
+            req.extensions_mut().insert(tenant);
+            next.run(req).await
+        }
+        Err(error) => {
+            metrics::counter!("auth_failures_total", "transport" => "http").increment(1);
+            problem::unauthenticated(error)
+        }
+    }
 }
 
 /// Sheds an API request with 503 when `max_in_flight` are being served.
@@ -153,4 +258,55 @@ async fn not_found() -> Problem {
 
 async fn method_not_allowed() -> Problem {
     Problem::for_status(StatusCode::METHOD_NOT_ALLOWED)
+}
+
+#[cfg(test)]
+mod tests {
+    use axum::{Extension, body::Body};
+
+    use super::*;
+    use crate::{
+        auth::{ApiKeys, Tenant},
+        config::Settings,
+    };
+
+    fn state(keys: Option<&str>) -> AppState {
+        let mut settings = Settings::for_tests();
+        settings.api_keys = keys.map(Into::into);
+        let api_keys = ApiKeys::from_settings(&settings).unwrap();
+        AppState::new(settings, api_keys, crate::telemetry::metrics_handle())
+    }
+
+    async fn tenant_seen(state: AppState, authorization: Option<&str>) -> (StatusCode, String) {
+        let app = Router::new()
+            .route(
+                "/v1/whoami",
+                get(|Extension(tenant): Extension<Tenant>| async move { tenant.0 }),
+            )
+            .layer(middleware::from_fn_with_state(state, authenticate));
+        let mut request = axum::http::Request::builder().uri("/v1/whoami");
+        if let Some(value) = authorization {
+            request = request.header(header::AUTHORIZATION, value);
+        }
+        let response = app
+            .oneshot(request.body(Body::empty()).unwrap())
+            .await
+            .unwrap();
+        let status = response.status();
+        let body = axum::body::to_bytes(response.into_body(), 1 << 16)
+            .await
+            .unwrap();
+        (status, String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[tokio::test]
+    async fn handlers_see_the_tenant_of_the_key() {
+        let keyed = state(Some("k1secret=acme,k2secret=globex"));
+        let seen = tenant_seen(keyed.clone(), Some("Bearer k2secret")).await;
+        assert_eq!(seen, (StatusCode::OK, "globex".to_string()));
+        let (status, _) = tenant_seen(keyed, None).await;
+        assert_eq!(status, StatusCode::UNAUTHORIZED);
+        let open = tenant_seen(state(None), None).await;
+        assert_eq!(open, (StatusCode::OK, "default".to_string()));
+    }
 }

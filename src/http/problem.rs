@@ -13,7 +13,10 @@ use axum::{
 use serde::{Serialize, de::DeserializeOwned};
 use utoipa::ToSchema;
 
-use crate::service::{FieldViolation, ServiceError};
+use crate::{
+    auth::AuthError,
+    service::{FieldViolation, ServiceError},
+};
 
 pub const PROBLEM_JSON: &str = "application/problem+json";
 
@@ -64,6 +67,11 @@ impl Problem {
     /// The problem for a status the framework or a layer produced without a body.
     pub fn for_status(status: StatusCode) -> Self {
         let (kind, title, detail) = match status {
+            StatusCode::UNAUTHORIZED => (
+                "unauthenticated",
+                "Unauthenticated",
+                "a valid API key is required: send `Authorization: Bearer <key>`",
+            ),
             StatusCode::NOT_FOUND => ("not-found", "Not found", "no such route"),
             StatusCode::METHOD_NOT_ALLOWED => (
                 "method-not-allowed",
@@ -93,6 +101,28 @@ impl Problem {
         };
         Self::new(status, kind, title, detail)
     }
+}
+
+/// The 401 answer to a request without valid credentials: a problem of type
+/// `unauthenticated` and a `WWW-Authenticate: Bearer` challenge (RFC 6750 §3).
+pub fn unauthenticated(error: AuthError) -> Response {
+    let challenge = match error {
+        AuthError::Missing => r#"Bearer realm="radar-fusion""#,
+        AuthError::Malformed => r#"Bearer realm="radar-fusion", error="invalid_request""#,
+        AuthError::UnknownKey => r#"Bearer realm="radar-fusion", error="invalid_token""#,
+    };
+    let problem = Problem::new(
+        StatusCode::UNAUTHORIZED,
+        "unauthenticated",
+        "Unauthenticated",
+        error.to_string(),
+    );
+    let mut response = problem.into_response();
+    response.headers_mut().insert(
+        header::WWW_AUTHENTICATE,
+        HeaderValue::from_static(challenge),
+    );
+    response
 }
 
 impl IntoResponse for Problem {

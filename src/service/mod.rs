@@ -8,6 +8,7 @@ pub mod dimension;
 pub mod jpda;
 pub mod rules;
 pub mod session;
+pub mod sessions;
 
 use std::time::Instant;
 
