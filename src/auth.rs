@@ -287,6 +287,8 @@ mod tests {
             Err(AuthError::Malformed)
         );
         assert_eq!(k.authenticate(Some("Bearer ")), Err(AuthError::Malformed));
+        assert_eq!(k.authenticate(Some("")), Err(AuthError::Malformed));
+        assert_eq!(k.authenticate_key(Some("")), Err(AuthError::Malformed));
         assert_eq!(
             k.authenticate(Some("Bearer k1secreT")),
             Err(AuthError::UnknownKey)
