@@ -310,7 +310,9 @@ pub(super) fn config_in(
             kind: Some(method.kind),
             alpha: method.alpha,
             rule: method.rule.map(rule_in),
-            schedule: method.schedule.map(|s| s.into_iter().map(rule_in).collect()),
+            schedule: method
+                .schedule
+                .map(|s| s.into_iter().map(rule_in).collect()),
             dynamic_schedule: method.dynamic_schedule,
             statistic: method.statistic,
             window: method.window,
@@ -400,22 +402,14 @@ fn response(out: svc::CorrelateOutput) -> CorrelateTracksResponse {
         },
         gains: out.gains,
         instants: out.instants,
-        pairs: out
-            .pairs
-            .into_iter()
-            .map(pair_result)
-            .collect(),
+        pairs: out.pairs.into_iter().map(pair_result).collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out
             .unpaired
             .into_iter()
             .map(|(node, tracks)| UnpairedTracks { node, tracks })
             .collect(),
-        system_tracks: out
-            .groups
-            .into_iter()
-            .map(system_track)
-            .collect(),
+        system_tracks: out.groups.into_iter().map(system_track).collect(),
         conflicts: out
             .conflicts
             .into_iter()

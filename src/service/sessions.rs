@@ -85,7 +85,11 @@ pub async fn create(
     session.view(&id, version, bytes)
 }
 
-pub async fn get(store: &SessionStore, tenant: &str, id: &str) -> Result<SessionView, ServiceError> {
+pub async fn get(
+    store: &SessionStore,
+    tenant: &str,
+    id: &str,
+) -> Result<SessionView, ServiceError> {
     check_id(id)?;
     let stored = store.get(tenant, id).await?.ok_or_else(|| not_found(id))?;
     let id = id.to_string();
@@ -160,7 +164,10 @@ pub async fn push(
             Err(duplicate) => return Ok(duplicate),
             Ok(applied) => applied,
         };
-        match store.compare_and_set(tenant, id, version, data, ttl).await? {
+        match store
+            .compare_and_set(tenant, id, version, data, ttl)
+            .await?
+        {
             CasOutcome::Stored { version } => {
                 update.version = version;
                 return Ok(update);
@@ -168,7 +175,11 @@ pub async fn push(
             CasOutcome::Missing => return Err(not_found(id)),
             CasOutcome::Conflict { .. } => {
                 metrics::counter!("fusion_session_cas_conflicts_total").increment(1);
-                tracing::debug!(session = id, attempt, "lost a compare-and-set race; retrying");
+                tracing::debug!(
+                    session = id,
+                    attempt,
+                    "lost a compare-and-set race; retrying"
+                );
             }
         }
     }

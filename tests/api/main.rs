@@ -12,3 +12,4 @@ mod helpers;
 mod jpda;
 mod ops;
 mod rules;
+mod sessions;

@@ -1,0 +1,302 @@
+//! Streaming sessions over REST against the real server (memory store):
+//! the batch endpoint's decisions from N batches, retries, sequence gaps,
+//! limits, tenant isolation and deletion.
+
+use serde_json::{Value, json};
+
+use crate::helpers::{spawn_app, spawn_app_with};
+
+/// Two radars, six straight targets, radar b reporting 0.3 s after radar a;
+/// targets 0 and 1 cross mid-way.
+fn scenario() -> (Value, Vec<Value>) {
+    let mut reports = Vec::new();
+    let mut nodes = Vec::new();
+    for (node, offset, bias) in [("a", 0.0, 0.0), ("b", 0.3, 15.0)] {
+        let mut tracks = Vec::new();
+        for target in 0..6 {
+            let (x0, y0, vx, vy) = match target {
+                0 => (0.0, 0.0, 120.0, 10.0),
+                1 => (2400.0, 200.0, -120.0, -10.0),
+                t => (f64::from(t) * 5000.0, 7000.0, 30.0, -60.0),
+            };
+            let mut samples = Vec::new();
+            for scan in 0..15 {
+                let t = f64::from(scan) * 2.0 + offset;
+                // Deterministic "noise": a different fixed pattern per radar.
+                let e = bias * (f64::from(scan * 7 + target) % 5.0 - 2.0) / 2.0;
+                let sample = json!({
+                    "t": t,
+                    "state": [x0 + vx * t + e, vx, y0 + vy * t - e, vy],
+                    "covariance": [[400.0, 0.0, 0.0, 0.0], [0.0, 25.0, 0.0, 0.0],
+                                   [0.0, 0.0, 400.0, 0.0], [0.0, 0.0, 0.0, 25.0]],
+                });
+                let mut report = sample.clone();
+                report["node"] = json!(node);
+                report["track"] = json!(format!("{node}{target}"));
+                reports.push(report);
+                samples.push(sample);
+            }
+            tracks.push(json!({"id": format!("{node}{target}"), "samples": samples}));
+        }
+        nodes.push(json!({"id": node, "tracks": tracks}));
+    }
+    reports.sort_by(|a, b| {
+        a["t"]
+            .as_f64()
+            .unwrap()
+            .total_cmp(&b["t"].as_f64().unwrap())
+    });
+    let batch = json!({
+        "state_layout": ["x", "vx", "y", "vy"],
+        "method": {"kind": "independent_double_threshold", "rule": {"l": 3, "r": 4}},
+        "motion_model": {"process_noise": "dwna", "sigma_a_mps2": 1.0},
+        "alignment": {"tolerance_s": 0.5},
+        "nodes": nodes,
+    });
+    (batch, reports)
+}
+
+fn session_config(batch: &Value) -> Value {
+    let mut c = batch.clone();
+    c["nodes"] = json!(["a", "b"]);
+    c["history_instants"] = json!(64);
+    c
+}
+
+#[tokio::test]
+async fn batches_over_rest_give_the_batch_endpoints_decisions() {
+    let app = spawn_app().await;
+    let (batch, reports) = scenario();
+    let expected = app.post_ok("/v1/correlation/tracks", &batch).await;
+
+    let created = app.post_json("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(created.status(), 201);
+    let location = created.headers()["location"].to_str().unwrap().to_string();
+    let session: Value = created.json().await.unwrap();
+    let id = session["id"].as_str().unwrap().to_string();
+    assert_eq!(location, format!("/v1/sessions/{id}"));
+    assert_eq!(id.len(), 32);
+
+    let mut changes = Vec::new();
+    for (i, chunk) in reports.chunks(7).enumerate() {
+        let body = json!({"sequence": i + 1, "reports": chunk});
+        let u = app
+            .post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+        assert_eq!(u["duplicate"], false);
+        changes.extend(u["changes"].as_array().unwrap().iter().cloned());
+        // A retried batch is acknowledged, not applied twice.
+        let again = app
+            .post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+        assert_eq!(again["duplicate"], true, "{again}");
+        assert_eq!(again["version"], u["version"]);
+    }
+    let n = reports.chunks(7).count();
+    let last = app
+        .post_ok(
+            &format!("/v1/sessions/{id}/batches"),
+            &json!({"sequence": n + 1, "flush": true}),
+        )
+        .await;
+    changes.extend(last["changes"].as_array().unwrap().iter().cloned());
+
+    let state: Value = app
+        .client
+        .get(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(state["pairs"], expected["pairs"]);
+    assert_eq!(state["system_tracks"], expected["system_tracks"]);
+    assert_eq!(
+        state["instants_processed"].as_u64().unwrap() as usize,
+        expected["instants"].as_array().unwrap().len()
+    );
+    let correlated: Vec<_> = changes
+        .iter()
+        .filter(|c| c["change"] == "correlated")
+        .collect();
+    let decided = expected["pairs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["decision"] == "correlated")
+        .count();
+    assert!(decided >= 5, "{expected}");
+    assert!(correlated.len() >= decided, "{changes:?}");
+
+    // A batch that skips ahead is refused with 409 and changes nothing.
+    let gap = app
+        .post_json(
+            &format!("/v1/sessions/{id}/batches"),
+            &json!({"sequence": n + 5, "flush": true}),
+        )
+        .await;
+    assert_eq!(gap.status(), 409);
+    let problem: Value = gap.json().await.unwrap();
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains(&format!("{}", n + 2))
+    );
+
+    // Listing, deleting.
+    let list: Value = app
+        .client
+        .get(app.url("/v1/sessions"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["sessions"][0]["id"], id);
+    let del = app
+        .client
+        .delete(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(del.status(), 204);
+    let gone = app
+        .client
+        .get(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(gone.status(), 404);
+}
+
+#[tokio::test]
+async fn bad_batches_name_the_field_and_change_nothing() {
+    let app = spawn_app_with(|s| {
+        s.max_batch_reports = 5;
+        s.max_tracks_per_session = 3;
+        s.max_sessions_per_tenant = 1;
+    })
+    .await;
+    let (batch, reports) = scenario();
+    let session: Value = app
+        .post_json("/v1/sessions", &session_config(&batch))
+        .await
+        .json()
+        .await
+        .unwrap();
+    let id = session["id"].as_str().unwrap();
+    let url = format!("/v1/sessions/{id}/batches");
+
+    let mut bad = reports[0].clone();
+    bad["node"] = json!("nope");
+    bad["covariance"][1][1] = json!(-3.0);
+    let r = app.post_json(&url, &json!({"reports": [bad]})).await;
+    assert_eq!(r.status(), 422);
+    let p: Value = r.json().await.unwrap();
+    let fields: Vec<&str> = p["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["field"].as_str().unwrap())
+        .collect();
+    assert_eq!(fields, ["reports[0].node", "reports[0].covariance"]);
+
+    let r = app
+        .post_json(&url, &json!({"reports": &reports[..6]}))
+        .await;
+    assert_eq!(r.status(), 413);
+    let r = app
+        .post_json(&url, &json!({"reports": &reports[..5]}))
+        .await;
+    assert_eq!(r.status(), 429, "5 reports of 5 tracks exceed 3 tracks");
+
+    let state: Value = app
+        .client
+        .get(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(state["batches"], 0);
+    assert_eq!(state["version"], 1);
+
+    // One session per tenant here.
+    let r = app.post_json("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(r.status(), 429);
+    // A bad configuration names its field.
+    let mut cfg = session_config(&batch);
+    cfg["nodes"] = json!(["a"]);
+    cfg["alignment"]["mode"] = json!("interpolate");
+    let r = app.post_json("/v1/sessions", &cfg).await;
+    assert_eq!(r.status(), 422);
+    let text = r.text().await.unwrap();
+    assert!(
+        text.contains("\"nodes\"") && text.contains("alignment.mode"),
+        "{text}"
+    );
+    // Ids that cannot exist are 404, not 400 or 500.
+    for bad_id in ["x", "../../etc", "0123456789abcdef0123456789abcdeg"] {
+        let r = app
+            .client
+            .get(app.url(&format!("/v1/sessions/{bad_id}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 404, "{bad_id}");
+    }
+}
+
+#[tokio::test]
+async fn tenants_cannot_see_each_others_sessions() {
+    let app = spawn_app_with(|s| {
+        s.api_keys = Some("key-of-acme-1=acme,key-of-globex=globex".into());
+    })
+    .await;
+    let (batch, reports) = scenario();
+    let as_tenant = |key: &'static str, req: reqwest::RequestBuilder| req.bearer_auth(key);
+    let created: Value = as_tenant("key-of-acme-1", app.client.post(app.url("/v1/sessions")))
+        .json(&session_config(&batch))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id = created["id"].as_str().unwrap();
+    let path = format!("/v1/sessions/{id}");
+    for (method, url) in [
+        (reqwest::Method::GET, path.clone()),
+        (reqwest::Method::DELETE, path.clone()),
+        (reqwest::Method::POST, format!("{path}/batches")),
+    ] {
+        let r = as_tenant(
+            "key-of-globex",
+            app.client.request(method.clone(), app.url(&url)),
+        )
+        .json(&json!({"reports": &reports[..2]}))
+        .send()
+        .await
+        .unwrap();
+        assert_eq!(r.status(), 404, "{method} {url}");
+    }
+    let list: Value = as_tenant("key-of-globex", app.client.get(app.url("/v1/sessions")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list["sessions"], json!([]));
+    let own = as_tenant("key-of-acme-1", app.client.get(app.url(&path)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(own.status(), 200);
+    let anonymous = app.client.get(app.url(&path)).send().await.unwrap();
+    assert_eq!(anonymous.status(), 401);
+}
