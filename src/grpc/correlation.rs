@@ -80,7 +80,7 @@ impl CorrelationService for CorrelationGrpc {
 }
 
 /// Converts a request; a malformed matrix is reported by its field path.
-fn correlate_input(req: pb::CorrelateTracksRequest) -> Result<corr::CorrelateInput, ServiceError> {
+pub(super) fn correlate_input(req: pb::CorrelateTracksRequest) -> Result<corr::CorrelateInput, ServiceError> {
     let mut v = Violations::new();
     let method = req.method.map(|m| corr::MethodInput {
         kind: m.kind,
@@ -164,15 +164,42 @@ fn rule_in(r: pb::LrRule) -> corr::RuleInput {
     corr::RuleInput { l: r.l, r: r.r }
 }
 
-fn track_ref(t: corr::TrackName) -> pb::TrackRef {
+pub(super) fn track_ref(t: corr::TrackName) -> pb::TrackRef {
     pb::TrackRef {
         node: t.node,
         track: t.track,
     }
 }
 
-fn finite(x: f64) -> Option<f64> {
+pub(super) fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
+}
+
+pub(super) fn pair_result(p: corr::PairOutput) -> pb::PairResult {
+    pb::PairResult {
+        a: Some(track_ref(p.a)),
+        b: Some(track_ref(p.b)),
+        decision: decision_name(p.decision).into(),
+        reason: reason_name(p.reason).into(),
+        trial: p.trial,
+        m: p.m,
+        c: p.c,
+        samples: p.samples,
+        mean_statistic: finite(p.mean_statistic),
+        last_statistic: finite(p.last_statistic),
+        decided_at_t: p.decided_at,
+    }
+}
+
+pub(super) fn system_track(g: corr::GroupOutput) -> pb::SystemTrack {
+    pb::SystemTrack {
+        id: g.id,
+        members: g.members.into_iter().map(track_ref).collect(),
+        t: finite(g.t),
+        state: g.state,
+        covariance: Some(matrix(&g.covariance)),
+        fusion: fusion_name(g.fusion).into(),
+    }
 }
 
 fn correlate_response(out: corr::CorrelateOutput) -> pb::CorrelateTracksResponse {
@@ -197,19 +224,7 @@ fn correlate_response(out: corr::CorrelateOutput) -> pb::CorrelateTracksResponse
         pairs: out
             .pairs
             .into_iter()
-            .map(|p| pb::PairResult {
-                a: Some(track_ref(p.a)),
-                b: Some(track_ref(p.b)),
-                decision: decision_name(p.decision).into(),
-                reason: reason_name(p.reason).into(),
-                trial: p.trial,
-                m: p.m,
-                c: p.c,
-                samples: p.samples,
-                mean_statistic: finite(p.mean_statistic),
-                last_statistic: finite(p.last_statistic),
-                decided_at_t: p.decided_at,
-            })
+            .map(pair_result)
             .collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out
@@ -220,14 +235,7 @@ fn correlate_response(out: corr::CorrelateOutput) -> pb::CorrelateTracksResponse
         system_tracks: out
             .groups
             .into_iter()
-            .map(|g| pb::SystemTrack {
-                id: g.id,
-                members: g.members.into_iter().map(track_ref).collect(),
-                t: finite(g.t),
-                state: g.state,
-                covariance: Some(matrix(&g.covariance)),
-                fusion: fusion_name(g.fusion).into(),
-            })
+            .map(system_track)
             .collect(),
         conflicts: out
             .conflicts

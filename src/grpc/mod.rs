@@ -7,6 +7,7 @@ pub mod correlation;
 pub mod dimension;
 pub mod error;
 pub mod jpda;
+pub mod sessions;
 
 use std::time::Instant;
 
@@ -25,6 +26,7 @@ use crate::{
         ais_radar_service_server::AisRadarServiceServer,
         correlation_service_server::CorrelationServiceServer,
         dimension_service_server::DimensionServiceServer, jpda_service_server::JpdaServiceServer,
+        session_service_server::SessionServiceServer,
     },
     state::AppState,
 };
@@ -32,6 +34,7 @@ use ais_radar::AisRadarGrpc;
 use correlation::CorrelationGrpc;
 use dimension::DimensionGrpc;
 use jpda::JpdaGrpc;
+use sessions::SessionGrpc;
 
 /// A row-major `Matrix` as nested rows; `None` (with a violation naming
 /// `field`) when its values do not fill rows × cols.
@@ -90,6 +93,11 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
     let dimension = DimensionServiceServer::new(DimensionGrpc)
         .max_decoding_message_size(limit)
         .max_encoding_message_size(usize::MAX);
+    let sessions = SessionServiceServer::new(SessionGrpc {
+        state: state.clone(),
+    })
+    .max_decoding_message_size(limit)
+    .max_encoding_message_size(usize::MAX);
     let (health, health_service) = tonic_health::server::health_reporter();
     let reflection_v1 = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
@@ -103,6 +111,7 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
         .add_service(ais_radar)
         .add_service(jpda)
         .add_service(dimension)
+        .add_service(sessions)
         .add_service(health_service)
         .add_service(reflection_v1)
         .add_service(reflection_v1alpha)
@@ -120,6 +129,7 @@ pub const SERVICE_NAMES: &[&str] = &[
     "radar.fusion.v1.AisRadarService",
     "radar.fusion.v1.JpdaService",
     "radar.fusion.v1.DimensionService",
+    "radar.fusion.v1.SessionService",
 ];
 
 /// Sheds a call with UNAVAILABLE when `max_in_flight` requests are being
