@@ -222,8 +222,7 @@ impl Settings {
         }
         positive("store-timeout-s", self.store_timeout_s)?;
         let store = self.session_store.as_str();
-        if store != "memory" && !store.starts_with("redis://") && !store.starts_with("rediss://")
-        {
+        if store != "memory" && !store.starts_with("redis://") && !store.starts_with("rediss://") {
             return Err(format!(
                 "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
                  starting with redis:// or rediss://, not {store:?}"
@@ -271,11 +270,15 @@ mod tests {
 
     #[test]
     fn a_bad_session_store_names_the_flag() {
-        let err = with(&["--session-store", "postgres://x"]).validate().unwrap_err();
+        let err = with(&["--session-store", "postgres://x"])
+            .validate()
+            .unwrap_err();
         assert!(err.contains("--session-store"), "{err}");
         let err = with(&["--store-timeout-s", "0"]).validate().unwrap_err();
         assert!(err.contains("--store-timeout-s"), "{err}");
-        let err = with(&["--max-sessions-per-tenant", "0"]).validate().unwrap_err();
+        let err = with(&["--max-sessions-per-tenant", "0"])
+            .validate()
+            .unwrap_err();
         assert!(err.contains("--max-sessions-per-tenant"), "{err}");
     }
 }

@@ -63,7 +63,9 @@ async fn redis(configure: impl FnOnce(&mut StoreSettings)) -> Option<Arc<Session
         let message = "Redis is not running on 127.0.0.1:6379: start it with \
              `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
         if skip_redis() {
-            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n");
+            eprintln!(
+                "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
+            );
             return None;
         }
         panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
@@ -107,7 +109,11 @@ both_backends!(
     limit_redis,
     |s: &mut StoreSettings| s.max_sessions_per_tenant = 3
 );
-both_backends!(concurrent_cas_loses_no_update, concurrent_memory, concurrent_redis);
+both_backends!(
+    concurrent_cas_loses_no_update,
+    concurrent_memory,
+    concurrent_redis
+);
 
 // ---------------------------------------------------------------- the suite
 
@@ -116,8 +122,14 @@ async fn crud(store: &Arc<SessionStore>) {
     assert_eq!(store.list("default").await.unwrap(), vec![]);
     assert!(!store.delete("default", "a").await.unwrap());
 
-    assert_eq!(store.create("default", "b", b"bee".to_vec(), LONG).await, Ok(1));
-    assert_eq!(store.create("default", "a", vec![0, 255, 7], LONG).await, Ok(1));
+    assert_eq!(
+        store.create("default", "b", b"bee".to_vec(), LONG).await,
+        Ok(1)
+    );
+    assert_eq!(
+        store.create("default", "a", vec![0, 255, 7], LONG).await,
+        Ok(1)
+    );
     assert_eq!(store.create("default", "c", vec![], LONG).await, Ok(1));
     assert_eq!(
         store.create("default", "a", b"again".to_vec(), LONG).await,
@@ -145,7 +157,10 @@ async fn crud(store: &Arc<SessionStore>) {
     assert_eq!(bytes, [3, 3, 0]);
     for m in &listed {
         assert_eq!(m.version, 1);
-        assert!(m.ttl_remaining > Duration::ZERO && m.ttl_remaining <= LONG, "{m:?}");
+        assert!(
+            m.ttl_remaining > Duration::ZERO && m.ttl_remaining <= LONG,
+            "{m:?}"
+        );
     }
 
     assert!(store.delete("default", "b").await.unwrap());
@@ -160,7 +175,10 @@ async fn crud(store: &Arc<SessionStore>) {
         .collect();
     assert_eq!(ids, ["a", "c"]);
     // A deleted id can be created again, from version 1.
-    assert_eq!(store.create("default", "b", b"new".to_vec(), LONG).await, Ok(1));
+    assert_eq!(
+        store.create("default", "b", b"new".to_vec(), LONG).await,
+        Ok(1)
+    );
     store.ping().await.unwrap();
 }
 
@@ -177,11 +195,15 @@ async fn cas(store: &Arc<SessionStore>) {
     );
     // A writer still holding version 1 loses and learns the current version.
     assert_eq!(
-        store.compare_and_set(t, "x", 1, b"stale".to_vec(), LONG).await,
+        store
+            .compare_and_set(t, "x", 1, b"stale".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Conflict { current: 2 })
     );
     assert_eq!(
-        store.compare_and_set(t, "x", 3, b"future".to_vec(), LONG).await,
+        store
+            .compare_and_set(t, "x", 3, b"future".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Conflict { current: 2 })
     );
     assert_eq!(
@@ -219,21 +241,30 @@ async fn cas(store: &Arc<SessionStore>) {
 }
 
 async fn tenants_are_isolated(store: &Arc<SessionStore>) {
-    store.create("acme", "s1", b"acme's".to_vec(), LONG).await.unwrap();
+    store
+        .create("acme", "s1", b"acme's".to_vec(), LONG)
+        .await
+        .unwrap();
     assert_eq!(store.get("default", "s1").await.unwrap(), None);
     assert_eq!(store.list("default").await.unwrap(), vec![]);
     assert!(!store.delete("default", "s1").await.unwrap());
     assert_eq!(
-        store.compare_and_set("default", "s1", 1, b"x".to_vec(), LONG).await,
+        store
+            .compare_and_set("default", "s1", 1, b"x".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Missing)
     );
     // The same id in another tenant is another session.
     assert_eq!(
-        store.create("default", "s1", b"default's".to_vec(), LONG).await,
+        store
+            .create("default", "s1", b"default's".to_vec(), LONG)
+            .await,
         Ok(1)
     );
     assert_eq!(
-        store.compare_and_set("default", "s1", 1, b"d2".to_vec(), LONG).await,
+        store
+            .compare_and_set("default", "s1", 1, b"d2".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Stored { version: 2 })
     );
     assert_eq!(
@@ -278,36 +309,60 @@ async fn ids_are_not_confused(store: &Arc<SessionStore>) {
         .map(|m| m.id)
         .collect();
     assert_eq!(ids, ["b", "b%3As%3Ac", "b:s:c"]);
-    let ids: Vec<String> = store.list("ü").await.unwrap().into_iter().map(|m| m.id).collect();
+    let ids: Vec<String> = store
+        .list("ü")
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| m.id)
+        .collect();
     assert_eq!(ids, ["ü:%"]);
 }
 
 async fn ttl_expires_and_cas_refreshes(store: &Arc<SessionStore>) {
     let t = "default";
-    store.create(t, "short", b"s".to_vec(), SHORT).await.unwrap();
+    store
+        .create(t, "short", b"s".to_vec(), SHORT)
+        .await
+        .unwrap();
     store.create(t, "kept", b"k".to_vec(), SHORT).await.unwrap();
     let ttl = store.list(t).await.unwrap()[0].ttl_remaining;
     assert!(ttl > Duration::ZERO && ttl <= SHORT, "{ttl:?}");
     // The update restarts the idle time with its own TTL.
     assert_eq!(
-        store.compare_and_set(t, "kept", 1, b"k2".to_vec(), LONG).await,
+        store
+            .compare_and_set(t, "kept", 1, b"k2".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Stored { version: 2 })
     );
     tokio::time::sleep(SHORT * 2).await;
     assert_eq!(store.get(t, "short").await.unwrap(), None);
     assert_eq!(
-        store.compare_and_set(t, "short", 1, b"late".to_vec(), LONG).await,
+        store
+            .compare_and_set(t, "short", 1, b"late".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Missing)
     );
     assert!(!store.delete(t, "short").await.unwrap());
     assert_eq!(store.get(t, "kept").await.unwrap().unwrap().version, 2);
-    let ids: Vec<String> = store.list(t).await.unwrap().into_iter().map(|m| m.id).collect();
+    let ids: Vec<String> = store
+        .list(t)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| m.id)
+        .collect();
     assert_eq!(ids, ["kept"]);
     // An expired id can be created afresh.
-    assert_eq!(store.create(t, "short", b"again".to_vec(), LONG).await, Ok(1));
+    assert_eq!(
+        store.create(t, "short", b"again".to_vec(), LONG).await,
+        Ok(1)
+    );
     // And a CAS can shorten the TTL too: it sets it, it does not only extend it.
     assert_eq!(
-        store.compare_and_set(t, "kept", 2, b"k3".to_vec(), SHORT).await,
+        store
+            .compare_and_set(t, "kept", 2, b"k3".to_vec(), SHORT)
+            .await,
         Ok(CasOutcome::Stored { version: 3 })
     );
     tokio::time::sleep(SHORT * 2).await;
@@ -325,7 +380,10 @@ async fn sessions_per_tenant_are_bounded(store: &Arc<SessionStore>) {
         Err(StoreError::TooManySessions { limit: 3 })
     );
     // Other tenants have their own allowance.
-    store.create("default", "fourth", vec![4], LONG).await.unwrap();
+    store
+        .create("default", "fourth", vec![4], LONG)
+        .await
+        .unwrap();
     // A deleted session frees its place.
     assert!(store.delete(t, "short2").await.unwrap());
     store.create(t, "fourth", vec![4], LONG).await.unwrap();
@@ -340,7 +398,13 @@ async fn sessions_per_tenant_are_bounded(store: &Arc<SessionStore>) {
         store.create(t, "sixth", vec![6], LONG).await,
         Err(StoreError::TooManySessions { limit: 3 })
     );
-    let ids: Vec<String> = store.list(t).await.unwrap().into_iter().map(|m| m.id).collect();
+    let ids: Vec<String> = store
+        .list(t)
+        .await
+        .unwrap()
+        .into_iter()
+        .map(|m| m.id)
+        .collect();
     assert_eq!(ids, ["fifth", "fourth", "long"]);
 }
 
@@ -350,7 +414,10 @@ async fn concurrent_cas_loses_no_update(store: &Arc<SessionStore>) {
     const TASKS: u64 = 8;
     const EACH: u64 = 25;
     let t = "default";
-    store.create(t, "counter", 0u64.to_le_bytes().to_vec(), LONG).await.unwrap();
+    store
+        .create(t, "counter", 0u64.to_le_bytes().to_vec(), LONG)
+        .await
+        .unwrap();
     let mut tasks = tokio::task::JoinSet::new();
     for _ in 0..TASKS {
         let store = Arc::clone(store);
@@ -361,7 +428,10 @@ async fn concurrent_cas_loses_no_update(store: &Arc<SessionStore>) {
                     let cur = store.get(t, "counter").await.unwrap().expect("counter");
                     let n = u64::from_le_bytes(cur.data.try_into().expect("8 bytes"));
                     let next = (n + 1).to_le_bytes().to_vec();
-                    match store.compare_and_set(t, "counter", cur.version, next, LONG).await {
+                    match store
+                        .compare_and_set(t, "counter", cur.version, next, LONG)
+                        .await
+                    {
                         Ok(CasOutcome::Stored { version }) => {
                             assert_eq!(version, cur.version + 1);
                             break;
@@ -500,7 +570,11 @@ async fn assert_unavailable_fast<T: std::fmt::Debug>(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn redis_outage_fails_fast_and_recovers() {
-    if Command::new("redis-server").arg("--version").output().is_err() {
+    if Command::new("redis-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
         let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
         if skip_redis() {
             eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
@@ -548,7 +622,9 @@ async fn redis_outage_fails_fast_and_recovers() {
     assert_eq!(store.get("t", "a").await, Ok(None));
     assert_eq!(store.create("t", "b", b"2".to_vec(), LONG).await, Ok(1));
     assert_eq!(
-        store.compare_and_set("t", "b", 1, b"3".to_vec(), LONG).await,
+        store
+            .compare_and_set("t", "b", 1, b"3".to_vec(), LONG)
+            .await,
         Ok(CasOutcome::Stored { version: 2 })
     );
 }

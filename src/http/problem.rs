@@ -256,10 +256,13 @@ fn strip_position(message: &str) -> String {
 pub async fn problem_for_bare_errors(req: Request, next: Next) -> Response {
     let response = next.run(req).await;
     let status = response.status();
-    let has_problem = response.headers().get(header::CONTENT_TYPE).is_some_and(|v| {
-        v.as_bytes().starts_with(PROBLEM_JSON.as_bytes())
-            || v.as_bytes().starts_with(b"application/json")
-    });
+    let has_problem = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| {
+            v.as_bytes().starts_with(PROBLEM_JSON.as_bytes())
+                || v.as_bytes().starts_with(b"application/json")
+        });
     let is_grpc = response
         .headers()
         .get(header::CONTENT_TYPE)

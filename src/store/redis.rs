@@ -116,9 +116,7 @@ impl RedisStore {
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
             create: Script::new(&format!("{NOW_MS}{CREATE}{EXTEND_INDEX}return 1")),
-            cas: Script::new(&format!(
-                "{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}"
-            )),
+            cas: Script::new(&format!("{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}")),
             delete: Script::new(DELETE),
             list: Script::new(&format!("{NOW_MS}{LIST}")),
         })
@@ -152,7 +150,13 @@ impl RedisStore {
         let mut conn = self.conn.clone();
         let key = self.session_key(tenant, id);
         let (version, data): (Option<String>, Option<Vec<u8>>) = self
-            .bounded(redis::cmd("HMGET").arg(&key).arg("v").arg("d").query_async(&mut conn))
+            .bounded(
+                redis::cmd("HMGET")
+                    .arg(&key)
+                    .arg("v")
+                    .arg("d")
+                    .query_async(&mut conn),
+            )
             .await?;
         match (version, data) {
             (None, None) => Ok(None),
@@ -183,8 +187,7 @@ impl RedisStore {
             .arg(ttl_ms(ttl))
             .arg(expected_version.to_string())
             .arg(new_version.to_string());
-        let (status, version): (i64, String) =
-            self.bounded(call.invoke_async(&mut conn)).await?;
+        let (status, version): (i64, String) = self.bounded(call.invoke_async(&mut conn)).await?;
         match status {
             0 => Ok(CasOutcome::Missing),
             1 => Ok(CasOutcome::Stored {
