@@ -103,7 +103,13 @@ impl Application {
         } = self;
         // The first health status is set before readiness is reported, so a
         // probe that sees ready also sees the matching gRPC status.
-        let store_ok = state.store().ping().await.is_ok();
+        let store_ok = match state.store().ping().await {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(error = %e, "session store unavailable at start: not ready");
+                false
+            }
+        };
         set_health(&health, serving_status(store_ok)).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
@@ -168,10 +174,14 @@ async fn set_health(health: &HealthReporter, status: ServingStatus) {
 async fn follow_readiness(state: AppState, health: HealthReporter, mut reported: bool) {
     loop {
         tokio::time::sleep(HEALTH_CHECK_EVERY).await;
-        let ready = state.check_ready().await == Readiness::Ready;
+        let readiness = state.check_ready().await;
+        let ready = readiness == Readiness::Ready;
         if ready != reported {
             set_health(&health, serving_status(ready)).await;
-            tracing::info!(ready, "readiness changed");
+            match readiness {
+                Readiness::Ready => tracing::info!("ready again"),
+                Readiness::NotReady(reason) => tracing::warn!(reason, "not ready"),
+            }
             reported = ready;
         }
     }

@@ -89,7 +89,8 @@ impl AppState {
         match self.store().ping().await {
             Ok(()) => Readiness::Ready,
             Err(e) => {
-                tracing::warn!(error = %e, backend = self.store().backend(), "session store ping failed");
+                // Probes ask often: the change of readiness is logged by `app`.
+                tracing::debug!(error = %e, backend = self.store().backend(), "session store ping failed");
                 Readiness::NotReady("session store unavailable")
             }
         }
