@@ -80,7 +80,9 @@ impl CorrelationService for CorrelationGrpc {
 }
 
 /// Converts a request; a malformed matrix is reported by its field path.
-pub(super) fn correlate_input(req: pb::CorrelateTracksRequest) -> Result<corr::CorrelateInput, ServiceError> {
+pub(super) fn correlate_input(
+    req: pb::CorrelateTracksRequest,
+) -> Result<corr::CorrelateInput, ServiceError> {
     let mut v = Violations::new();
     let method = req.method.map(|m| corr::MethodInput {
         kind: m.kind,
@@ -221,22 +223,14 @@ fn correlate_response(out: corr::CorrelateOutput) -> pb::CorrelateTracksResponse
         }),
         gains: out.gains.into(),
         instants: out.instants,
-        pairs: out
-            .pairs
-            .into_iter()
-            .map(pair_result)
-            .collect(),
+        pairs: out.pairs.into_iter().map(pair_result).collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out
             .unpaired
             .into_iter()
             .map(|(node, tracks)| pb::UnpairedTracks { node, tracks })
             .collect(),
-        system_tracks: out
-            .groups
-            .into_iter()
-            .map(system_track)
-            .collect(),
+        system_tracks: out.groups.into_iter().map(system_track).collect(),
         conflicts: out
             .conflicts
             .into_iter()

@@ -15,8 +15,7 @@ use crate::{
     auth::{DEFAULT_TENANT, Tenant},
     proto::{self as pb, session_service_server::SessionService, stream_request::Kind},
     service::{
-        ServiceError, Violations,
-        correlation as corr,
+        ServiceError, Violations, correlation as corr,
         session::{self as domain, ChangeKind},
         sessions,
     },

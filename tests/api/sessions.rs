@@ -300,3 +300,137 @@ async fn tenants_cannot_see_each_others_sessions() {
     let anonymous = app.client.get(app.url(&path)).send().await.unwrap();
     assert_eq!(anonymous.status(), 401);
 }
+
+fn pb_report(r: &Value) -> radar_fusion::proto::TrackReport {
+    use radar_fusion::proto as pb;
+    let cov: Vec<f64> = r["covariance"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| row.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+        .collect();
+    pb::TrackReport {
+        node: r["node"].as_str().unwrap().into(),
+        track: r["track"].as_str().unwrap().into(),
+        sample: Some(pb::TrackSample {
+            t: r["t"].as_f64(),
+            state: r["state"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect(),
+            covariance: Some(pb::Matrix {
+                rows: 4,
+                cols: 4,
+                values: cov,
+            }),
+            gain: None,
+        }),
+    }
+}
+
+#[tokio::test]
+async fn grpc_stream_matches_rest_and_a_dropped_stream_leaves_the_session_consistent() {
+    use radar_fusion::proto::{self as pb, session_service_client::SessionServiceClient};
+    let app = spawn_app().await;
+    let (batch, reports) = scenario();
+    let mut client = SessionServiceClient::new(app.channel().await);
+    let open = pb::CreateSessionRequest {
+        state_layout: ["x", "vx", "y", "vy"].map(String::from).to_vec(),
+        method: Some(pb::CorrelationMethod {
+            kind: Some("independent_double_threshold".into()),
+            rule: Some(pb::LrRule {
+                l: Some(3),
+                r: Some(4),
+            }),
+            ..Default::default()
+        }),
+        motion_model: Some(pb::MotionModel {
+            process_noise: Some("dwna".into()),
+            sigma_a_mps2: Some(1.0),
+            ..Default::default()
+        }),
+        alignment: Some(pb::Alignment {
+            tolerance_s: Some(0.5),
+            ..Default::default()
+        }),
+        nodes: vec!["a".into(), "b".into()],
+        history_instants: Some(64),
+        ..Default::default()
+    };
+    let chunks: Vec<Vec<Value>> = reports.chunks(7).map(<[Value]>::to_vec).collect();
+    let half = chunks.len() / 2;
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Open(open)),
+    })
+    .await
+    .unwrap();
+    let mut updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .unwrap()
+        .into_inner();
+    let opened = updates.message().await.unwrap().unwrap();
+    let id = opened.session_id.clone();
+    assert_eq!(id.len(), 32);
+    for (i, chunk) in chunks[..half].iter().enumerate() {
+        tx.send(pb::StreamRequest {
+            kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+                sequence: Some(i as u64 + 1),
+                reports: chunk.iter().map(pb_report).collect(),
+                ..Default::default()
+            })),
+        })
+        .await
+        .unwrap();
+        let u = updates.message().await.unwrap().unwrap();
+        assert_eq!(u.sequence, Some(i as u64 + 1));
+        assert!(!u.duplicate);
+    }
+    // The client disconnects mid-stream.
+    drop(tx);
+    drop(updates);
+    let state = client
+        .get_session(pb::GetSessionRequest {
+            session_id: id.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(state.batches as usize, half);
+    assert_eq!(state.last_sequence, Some(half as u64));
+    // The rest over REST, on the same session: the batch endpoint's result.
+    for (i, chunk) in chunks.iter().enumerate().skip(half) {
+        app.post_ok(
+            &format!("/v1/sessions/{id}/batches"),
+            &json!({"sequence": i + 1, "reports": chunk}),
+        )
+        .await;
+    }
+    app.post_ok(
+        &format!("/v1/sessions/{id}/batches"),
+        &json!({"sequence": chunks.len() + 1, "flush": true}),
+    )
+    .await;
+    let expected = app.post_ok("/v1/correlation/tracks", &batch).await;
+    let rest: Value = app
+        .client
+        .get(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(rest["pairs"], expected["pairs"]);
+    // Unknown session over gRPC: NOT_FOUND.
+    let err = client
+        .get_session(pb::GetSessionRequest {
+            session_id: "0".repeat(32),
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound);
+}
