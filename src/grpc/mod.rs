@@ -301,7 +301,17 @@ mod tests {
         let mut settings = Settings::for_tests();
         settings.api_keys = Some("k1secret=acme,k2secret=globex".into());
         let api_keys = ApiKeys::from_settings(&settings).unwrap();
-        let state = AppState::new(settings, api_keys, crate::telemetry::metrics_handle());
+        let state = {
+            let store = crate::store::SessionStore::Memory(crate::store::memory::MemoryStore::new(
+                &settings.store_settings(),
+            ));
+            AppState::new(
+                settings,
+                api_keys,
+                crate::telemetry::metrics_handle(),
+                store,
+            )
+        };
         let app = Router::new()
             .route(
                 "/radar.fusion.v1.CorrelationService/EvaluateRules",

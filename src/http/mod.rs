@@ -271,7 +271,17 @@ mod tests {
         let mut settings = Settings::for_tests();
         settings.api_keys = keys.map(Into::into);
         let api_keys = ApiKeys::from_settings(&settings).unwrap();
-        AppState::new(settings, api_keys, crate::telemetry::metrics_handle())
+        {
+            let store = crate::store::SessionStore::Memory(crate::store::memory::MemoryStore::new(
+                &settings.store_settings(),
+            ));
+            AppState::new(
+                settings,
+                api_keys,
+                crate::telemetry::metrics_handle(),
+                store,
+            )
+        }
     }
 
     async fn tenant_seen(state: AppState, authorization: Option<&str>) -> (StatusCode, String) {
