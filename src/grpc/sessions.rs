@@ -16,7 +16,7 @@ use crate::{
     proto::{self as pb, session_service_server::SessionService, stream_request::Kind},
     service::{
         ServiceError, Violations, correlation as corr,
-        session::{self as domain, ChangeKind},
+        session::{self as domain, change_name},
         sessions,
     },
     state::AppState,
@@ -99,15 +99,6 @@ fn batch_in(req: pb::PushBatchRequest) -> Result<domain::BatchInput, ServiceErro
         reports,
         flush: req.flush,
     })
-}
-
-fn change_name(c: ChangeKind) -> &'static str {
-    match c {
-        ChangeKind::Correlated => "correlated",
-        ChangeKind::Released => "released",
-        ChangeKind::TrialFormed => "trial_formed",
-        ChangeKind::TrialEnded => "trial_ended",
-    }
 }
 
 fn update_out(u: domain::BatchUpdate) -> pb::BatchUpdate {

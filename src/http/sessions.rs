@@ -20,7 +20,7 @@ use crate::{
     auth::Tenant,
     service::{
         correlation as corr,
-        session::{self as domain, ChangeKind},
+        session::{self as domain, change_name},
         sessions,
     },
     state::AppState,
@@ -211,15 +211,6 @@ pub(crate) fn batch_in(req: PushBatchRequest) -> domain::BatchInput {
                 }),
             })
             .collect(),
-    }
-}
-
-pub(crate) fn change_name(c: ChangeKind) -> &'static str {
-    match c {
-        ChangeKind::Correlated => "correlated",
-        ChangeKind::Released => "released",
-        ChangeKind::TrialFormed => "trial_formed",
-        ChangeKind::TrialEnded => "trial_ended",
     }
 }
 

@@ -389,17 +389,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
             let reports = correlator.reports();
             let mut listed = 0u64;
             for r in reports {
-                if r.decision == Decision::Correlated {
-                    links.push(Link {
-                        a: (na, r.a),
-                        b: (nb, r.b),
-                        m: r.m,
-                        mean_statistic: r.mean_statistic,
-                    });
-                    if let Some(c) = &r.cross_covariance {
-                        cross.insert(((na, r.a), (nb, r.b)), (r.last_common, c.clone()));
-                    }
-                }
+                collect_link(&r, na, nb, &mut links, &mut cross);
                 if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
                     listed += 1;
                     pairs.push(pair_output(&r, name(na, r.a), name(nb, r.b)));
@@ -522,6 +512,28 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
         },
         warnings,
     })
+}
+
+/// Records a correlated pair of nodes `na`, `nb` as a grouping link, with
+/// its cross-covariance for the fusion.
+pub(super) fn collect_link(
+    r: &PairReport,
+    na: usize,
+    nb: usize,
+    links: &mut Vec<Link>,
+    cross: &mut CrossCovariances,
+) {
+    if r.decision == Decision::Correlated {
+        links.push(Link {
+            a: (na, r.a),
+            b: (nb, r.b),
+            m: r.m,
+            mean_statistic: r.mean_statistic,
+        });
+        if let Some(c) = &r.cross_covariance {
+            cross.insert(((na, r.a), (nb, r.b)), (r.last_common, c.clone()));
+        }
+    }
 }
 
 pub(super) fn pair_output(r: &PairReport, a: TrackName, b: TrackName) -> PairOutput {

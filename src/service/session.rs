@@ -111,6 +111,16 @@ pub enum ChangeKind {
     TrialEnded,
 }
 
+/// The API word of a change.
+pub fn change_name(c: ChangeKind) -> &'static str {
+    match c {
+        ChangeKind::Correlated => "correlated",
+        ChangeKind::Released => "released",
+        ChangeKind::TrialFormed => "trial_formed",
+        ChangeKind::TrialEnded => "trial_ended",
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairChange {
     pub a: TrackName,
@@ -594,17 +604,7 @@ impl Session {
                     .map_err(internal)?;
             singular += c.singular_tests;
             for r in c.reports() {
-                if r.decision == Decision::Correlated {
-                    links.push(Link {
-                        a: (na, r.a),
-                        b: (nb, r.b),
-                        m: r.m,
-                        mean_statistic: r.mean_statistic,
-                    });
-                    if let Some(cc) = &r.cross_covariance {
-                        cross.insert(((na, r.a), (nb, r.b)), (r.last_common, cc.clone()));
-                    }
-                }
+                correlation::collect_link(&r, na, nb, &mut links, &mut cross);
                 if r.last_common >= first_new && r.last_common < end {
                     reports_out.push((na, nb, r));
                 }
@@ -827,17 +827,7 @@ impl Session {
             )
             .map_err(internal)?;
             for r in c.reports() {
-                if r.decision == Decision::Correlated {
-                    links.push(Link {
-                        a: (na, r.a),
-                        b: (nb, r.b),
-                        m: r.m,
-                        mean_statistic: r.mean_statistic,
-                    });
-                    if let Some(cc) = &r.cross_covariance {
-                        cross.insert(((na, r.a), (nb, r.b)), (r.last_common, cc.clone()));
-                    }
-                }
+                correlation::collect_link(&r, na, nb, &mut links, &mut cross);
                 if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
                     pairs.push(correlation::pair_output(
                         &r,
