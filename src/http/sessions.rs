@@ -58,9 +58,9 @@ pub struct CreateSessionRequest {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PushBatchRequest {
-    /// The client's sequence number: after the first batch each must be the
-    /// previous + 1; a number already applied is acknowledged again without
-    /// being applied (safe retries); one that skips ahead gets 409.
+    /// The client's sequence number: the first sequenced batch carries 1, each
+    /// later one the previous + 1; a number already applied is acknowledged
+    /// again without being applied (safe retries); one that skips ahead gets 409.
     pub sequence: Option<u64>,
     #[serde(default)]
     pub reports: Vec<TrackReport>,

@@ -29,7 +29,7 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 use nalgebra::{DMatrix, DVector};
 
 use super::{
-    ServiceError, Violations,
+    FieldViolation, ServiceError, Violations,
     correlation::{
         self, AlignMode, AlignmentInput, CorrelateInput, CrossCovariances, GroupOutput,
         MethodInput, MotionModelInput, NodeInput, PairOutput, Plan, RuleInput, SampleInput,
@@ -75,8 +75,8 @@ pub struct SessionSpec {
 /// One batch of track reports.
 #[derive(Debug, Clone, Default)]
 pub struct BatchInput {
-    /// The client's sequence number: consecutive after the first batch; a
-    /// batch already applied is acknowledged again without being applied.
+    /// The client's sequence number: 1, 2, 3, …; a batch already applied is
+    /// acknowledged again without being applied.
     pub sequence: Option<u64>,
     pub reports: Vec<ReportInput>,
     /// Close the open instant now instead of waiting for a later report.
@@ -356,18 +356,35 @@ impl Session {
     }
 
     /// Whether a batch with this sequence number was applied already
-    /// (`Ok(true)`), is next (`Ok(false)`), or skips ahead (an error naming
-    /// the expected number).
+    /// (`Ok(true)`), is next (`Ok(false)`), or skips ahead (a conflict naming
+    /// the expected number). Sequences start at 1, so that the first batch of
+    /// two concurrent writers cannot be mistaken for a duplicate; 0 is invalid.
     pub fn check_sequence(&self, sequence: Option<u64>) -> Result<bool, ServiceError> {
-        match (sequence, self.last_sequence) {
-            (None, _) | (Some(_), None) => Ok(false),
-            (Some(s), Some(last)) if s <= last => Ok(true),
-            (Some(s), Some(last)) if s == last + 1 => Ok(false),
-            (Some(s), Some(last)) => Err(ServiceError::Conflict(format!(
-                "batch sequence {s} skips ahead: the session has applied {last}, so the next \
+        let Some(s) = sequence else {
+            return Ok(false);
+        };
+        if s == 0 {
+            return Err(ServiceError::InvalidInput(vec![FieldViolation {
+                field: "sequence".into(),
+                message: "must be at least 1 (the first batch carries 1)".into(),
+            }]));
+        }
+        let last = self.last_sequence.unwrap_or(0);
+        if s <= last {
+            Ok(true)
+        } else if s == last + 1 {
+            Ok(false)
+        } else {
+            Err(ServiceError::Conflict(format!(
+                "batch sequence {s} skips ahead: the session has applied {}, so the next \
                  batch must carry {}",
+                if last == 0 {
+                    "no sequenced batch".to_string()
+                } else {
+                    last.to_string()
+                },
                 last + 1
-            ))),
+            )))
         }
     }
 
@@ -1439,16 +1456,28 @@ mod tests {
     #[test]
     fn sequences_are_checked() {
         let mut s = session_of(&scenario(), 8);
-        assert!(!s.check_sequence(Some(10)).unwrap());
-        s.apply(
-            "s",
-            BatchInput {
-                sequence: Some(10),
-                ..Default::default()
-            },
-            &LIMITS,
-        )
-        .unwrap();
+        // A new session expects 1: a later number is a gap, 0 is invalid.
+        assert!(matches!(
+            s.check_sequence(Some(2)),
+            Err(ServiceError::Conflict(_))
+        ));
+        assert!(matches!(
+            s.check_sequence(Some(0)),
+            Err(ServiceError::InvalidInput(ref v)) if v[0].field == "sequence"
+        ));
+        assert!(!s.check_sequence(Some(1)).unwrap());
+        assert!(!s.check_sequence(None).unwrap());
+        for sequence in 1..=10 {
+            s.apply(
+                "s",
+                BatchInput {
+                    sequence: Some(sequence),
+                    ..Default::default()
+                },
+                &LIMITS,
+            )
+            .unwrap();
+        }
         assert!(s.check_sequence(Some(10)).unwrap());
         assert!(s.check_sequence(Some(3)).unwrap());
         assert!(!s.check_sequence(Some(11)).unwrap());

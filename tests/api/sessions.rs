@@ -212,6 +212,17 @@ async fn bad_batches_name_the_field_and_change_nothing() {
         .post_json(&url, &json!({"reports": &reports[..5]}))
         .await;
     assert_eq!(r.status(), 429, "5 reports of 5 tracks exceed 3 tracks");
+    // Sequences start at 1: 0 names its field, 2 on a new session is a gap
+    // (so that a concurrent writer's batch 1 is never taken for a duplicate).
+    let r = app
+        .post_json(&url, &json!({"sequence": 0, "reports": &reports[..1]}))
+        .await;
+    assert_eq!(r.status(), 422);
+    assert!(r.text().await.unwrap().contains("\"field\":\"sequence\""));
+    let r = app
+        .post_json(&url, &json!({"sequence": 2, "reports": &reports[..1]}))
+        .await;
+    assert_eq!(r.status(), 409);
 
     let state: Value = app
         .client
