@@ -4,6 +4,7 @@
 use std::{future::Future, net::SocketAddr, time::Duration};
 
 use anyhow::Context;
+use axum::serve::ListenerExt;
 use tokio::{net::TcpListener, sync::watch};
 use tonic_health::{ServingStatus, server::HealthReporter};
 
@@ -123,6 +124,16 @@ impl Application {
         let stopped = |mut rx: watch::Receiver<bool>| async move {
             let _ = rx.wait_for(|stop| *stop).await;
         };
+        // Small HTTP/2 frames (headers, trailers, a stream's updates) must not
+        // wait for the peer's delayed ACK: without TCP_NODELAY a gRPC stream
+        // update of a few frames took 40 ms more (Nagle's algorithm).
+        let nodelay = |tcp: &mut tokio::net::TcpStream| {
+            if let Err(e) = tcp.set_nodelay(true) {
+                tracing::warn!(error = %e, "TCP_NODELAY could not be set");
+            }
+        };
+        let (http_listener, grpc_listener) =
+            (http_listener.tap_io(nodelay), grpc_listener.tap_io(nodelay));
         let http_server = tokio::spawn(
             axum::serve(http_listener, rest)
                 .with_graceful_shutdown(stopped(stop_rx.clone()))
