@@ -194,7 +194,9 @@ fn redis_is_up() -> bool {
     let message = "Redis is not running on 127.0.0.1:6379: start it with \
          `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
     if skip_redis() {
-        eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n");
+        eprintln!(
+            "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
+        );
         return false;
     }
     panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
@@ -340,7 +342,10 @@ fn assert_same_outcome(state: &Value, reference: &Value) {
     let got = outcome(state);
     if &got != reference {
         for (field, want) in reference.as_object().unwrap() {
-            assert_eq!(&got[field], want, "field {field} differs from the single-instance run");
+            assert_eq!(
+                &got[field], want,
+                "field {field} differs from the single-instance run"
+            );
         }
     }
 }
@@ -464,7 +469,10 @@ async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
 
     let start = Arc::new(tokio::sync::Barrier::new(2));
     let pusher = |app: &App| {
-        let (url, client) = (app.url(&format!("/v1/sessions/{id}/batches")), app.client.clone());
+        let (url, client) = (
+            app.url(&format!("/v1/sessions/{id}/batches")),
+            app.client.clone(),
+        );
         let (bodies, start) = (Arc::clone(&bodies), Arc::clone(&start));
         tokio::spawn(async move {
             start.wait().await;
@@ -474,7 +482,11 @@ async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
                 let mut attempts = 0;
                 loop {
                     attempts += 1;
-                    assert!(attempts <= 200, "batch {} never went through", body["sequence"]);
+                    assert!(
+                        attempts <= 200,
+                        "batch {} never went through",
+                        body["sequence"]
+                    );
                     let r = client.post(&url).json(body).send().await.unwrap();
                     let status = r.status().as_u16();
                     if status == 200 {
@@ -506,7 +518,11 @@ async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
     eprintln!("concurrent pushers: A {ra:?}, B {rb:?} (applied, duplicate, refused)");
     assert_eq!(ra.0 + ra.1, n);
     assert_eq!(rb.0 + rb.1, n);
-    assert_eq!(ra.0 + rb.0, n, "every batch applied exactly once: A {ra:?}, B {rb:?}");
+    assert_eq!(
+        ra.0 + rb.0,
+        n,
+        "every batch applied exactly once: A {ra:?}, B {rb:?}"
+    );
     // Each client pushes in order, so the session is never behind by more
     // than the batch pushed: a gap (409) cannot happen.
     assert!(
@@ -524,9 +540,7 @@ async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
     let conflicts = counter(&page, "fusion_session_cas_conflicts_total").unwrap_or(0.0);
     // The counter is process-wide (other tests run beside this one), and
     // whether the two pushers collide depends on scheduling: only report it.
-    eprintln!(
-        "fusion_session_cas_conflicts_total: {conflicts_before} before, {conflicts} after"
-    );
+    eprintln!("fusion_session_cas_conflicts_total: {conflicts_before} before, {conflicts} after");
     assert!(conflicts >= conflicts_before);
     a.delete(&id).await;
 }
@@ -639,7 +653,14 @@ impl RedisServer {
         std::fs::create_dir_all(&dir).expect("redis data directory");
         let child = Command::new("redis-server")
             .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
-            .args(["--save", "", "--appendonly", "yes", "--appendfsync", "always"])
+            .args([
+                "--save",
+                "",
+                "--appendonly",
+                "yes",
+                "--appendfsync",
+                "always",
+            ])
             .arg("--dir")
             .arg(&dir)
             .stdout(Stdio::null())
@@ -775,7 +796,10 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
         let problem: Value = r.json().await.unwrap();
         assert_eq!(problem["status"], 503);
         assert!(
-            problem["type"].as_str().unwrap().starts_with("urn:radar-fusion:problem:"),
+            problem["type"]
+                .as_str()
+                .unwrap()
+                .starts_with("urn:radar-fusion:problem:"),
             "{problem}"
         );
         assert!(problem["detail"].is_string(), "{problem}");
@@ -784,6 +808,20 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
         assert_eq!(r.status(), 503);
         assert!(start.elapsed() < FAST);
     }
+    // Creating, listing and deleting fail the same way.
+    let start = Instant::now();
+    let r = a.post("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers()["retry-after"], "1");
+    assert_eq!(b.get("/v1/sessions").await.status(), 503);
+    let r = b
+        .client
+        .delete(b.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 503);
+    assert!(start.elapsed() < FAST * 3, "took {:?}", start.elapsed());
     // gRPC: UNAVAILABLE, quickly.
     let mut grpc = b.sessions().await;
     let start = Instant::now();
@@ -791,7 +829,11 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
         .push_batch(pb_batch(&id, &bodies[k]))
         .await
         .unwrap_err();
-    assert!(start.elapsed() < FAST, "gRPC push took {:?}", start.elapsed());
+    assert!(
+        start.elapsed() < FAST,
+        "gRPC push took {:?}",
+        start.elapsed()
+    );
     assert_eq!(err.code(), tonic::Code::Unavailable, "{err:?}");
     // Not ready while Redis is away.
     for app in [&a, &b] {
