@@ -738,11 +738,9 @@ async fn wait_readyz(app: &App, status: u16, limit: Duration) {
     }
 }
 
-/// How long a failing call may take: generous against a 0.5 s store timeout.
-const FAST: Duration = Duration::from_secs(3);
-
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
+/// A private redis-server on a free port, or `None` (with a loud warning)
+/// when `redis-server` is not on PATH and `FUSION_SKIP_REDIS_TESTS=1`.
+fn private_redis() -> Option<RedisServer> {
     if Command::new("redis-server")
         .arg("--version")
         .output()
@@ -751,20 +749,32 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
         let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
         if skip_redis() {
             eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
-            return;
+            return None;
         }
         panic!("{message}");
     }
-    let reference = single_instance_outcome().await;
+    static RUN: AtomicU64 = AtomicU64::new(0);
     let nanos = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .unwrap()
         .as_nanos();
     let dir = std::env::temp_dir().join(format!(
-        "radar-fusion-sessions-redis-{}-{nanos}",
-        std::process::id()
+        "radar-fusion-sessions-redis-{}-{nanos}-{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
     ));
-    let mut redis = RedisServer::start(free_port(), dir);
+    Some(RedisServer::start(free_port(), dir))
+}
+
+/// How long a failing call may take: generous against a 0.5 s store timeout.
+const FAST: Duration = Duration::from_secs(3);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
+    let Some(mut redis) = private_redis() else {
+        return;
+    };
+    let reference = single_instance_outcome().await;
     let (a, b) = two_instances(&redis.url(), |s| s.store_timeout_s = 0.5).await;
     wait_readyz(&a, 200, Duration::from_secs(5)).await;
     wait_readyz(&b, 200, Duration::from_secs(5)).await;
@@ -1074,4 +1084,60 @@ async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other(
     }
     assert_same_outcome(&a.state(&id).await, &reference);
     b.delete(&id).await;
+}
+
+/// Sends a signal to the redis-server child (`STOP` or `CONT`).
+fn signal(redis: &RedisServer, name: &str) {
+    let pid = redis.child.as_ref().expect("running").id().to_string();
+    let status = Command::new("kill")
+        .args([&format!("-{name}"), &pid])
+        .status()
+        .expect("kill(1) runs");
+    assert!(status.success(), "kill -{name} {pid}");
+}
+
+/// A Redis that stops answering (SIGSTOP) rather than going away: requests
+/// still fail fast, bounded by the store timeout, and recover when it resumes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
+    let Some(redis) = private_redis() else {
+        return;
+    };
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(&redis.url(), |s| s.store_timeout_s = 0.5).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    let k = 5;
+    for body in &bodies[..k] {
+        b.push(&id, body).await;
+    }
+    let before = a.state(&id).await;
+
+    signal(&redis, "STOP");
+    for app in [&a, &b] {
+        let start = Instant::now();
+        let r = app
+            .post(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+            .await;
+        assert!(start.elapsed() < FAST, "push took {:?}", start.elapsed());
+        assert_eq!(r.status(), 503);
+        assert_eq!(r.headers()["retry-after"], "1");
+        let start = Instant::now();
+        assert_eq!(app.get("/readyz").await.status(), 503);
+        assert!(start.elapsed() < FAST, "readyz took {:?}", start.elapsed());
+    }
+    signal(&redis, "CONT");
+
+    wait_readyz(&a, 200, Duration::from_secs(10)).await;
+    wait_readyz(&b, 200, Duration::from_secs(10)).await;
+    // The failed pushes timed out on their read: nothing was written.
+    assert_eq!(b.state(&id).await, before);
+    for (i, body) in bodies.iter().enumerate().skip(k) {
+        let to = if i % 2 == 0 { &a } else { &b };
+        let u = to.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    assert_same_outcome(&a.state(&id).await, &reference);
+    a.delete(&id).await;
 }
