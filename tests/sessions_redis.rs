@@ -1,0 +1,1143 @@
+//! Streaming sessions shared by two real service instances on one Redis:
+//! alternating and concurrent pushes, a batch retried on the other instance,
+//! idle expiry, a Redis outage and recovery (on a redis-server of its own),
+//! tenant isolation over gRPC, and a gRPC stream dropped mid-way and continued
+//! over REST on the other instance. Every final state is compared with the
+//! same batches pushed to a single instance on the memory store (which equals
+//! the batch endpoint's decisions).
+//!
+//! The tests use Redis on 127.0.0.1:6379, each under a key prefix of its own
+//! shared by its two instances; they fail loudly when Redis is not running (or,
+//! for the outage test, when `redis-server` is not on PATH), unless
+//! `FUSION_SKIP_REDIS_TESTS=1` is set.
+
+use std::{
+    net::{SocketAddr, TcpListener, TcpStream},
+    path::PathBuf,
+    process::{Child, Command, Stdio},
+    sync::{
+        Arc,
+        atomic::{AtomicU64, Ordering},
+    },
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+};
+
+use radar_fusion::{
+    app::Application,
+    config::Settings,
+    proto::{self as pb, session_service_client::SessionServiceClient},
+};
+use serde_json::{Value, json};
+use tokio::{sync::oneshot, task::JoinHandle};
+use tonic::transport::Channel;
+
+const REDIS_URL: &str = "redis://127.0.0.1:6379/0";
+const REDIS_ADDR: &str = "127.0.0.1:6379";
+/// Reports per pushed batch.
+const CHUNK: usize = 8;
+
+// ---------------------------------------------------------------- harness
+
+/// One running instance of the service (REST and gRPC on port 0).
+struct App {
+    base: String,
+    grpc_addr: SocketAddr,
+    client: reqwest::Client,
+    shutdown: Option<oneshot::Sender<()>>,
+    server: Option<JoinHandle<anyhow::Result<()>>>,
+}
+
+impl App {
+    fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    async fn post(&self, path: &str, body: &Value) -> reqwest::Response {
+        self.client
+            .post(self.url(path))
+            .json(body)
+            .send()
+            .await
+            .expect("request sent")
+    }
+
+    async fn post_ok(&self, path: &str, body: &Value) -> Value {
+        let response = self.post(path, body).await;
+        let status = response.status();
+        let text = response.text().await.expect("body");
+        assert_eq!(status, 200, "POST {path}: {text}");
+        serde_json::from_str(&text).expect("JSON response")
+    }
+
+    async fn get(&self, path: &str) -> reqwest::Response {
+        self.client
+            .get(self.url(path))
+            .send()
+            .await
+            .expect("request sent")
+    }
+
+    async fn get_ok(&self, path: &str) -> Value {
+        let response = self.get(path).await;
+        let status = response.status();
+        let text = response.text().await.expect("body");
+        assert_eq!(status, 200, "GET {path}: {text}");
+        serde_json::from_str(&text).expect("JSON response")
+    }
+
+    /// Creates a session over REST and returns its id.
+    async fn create(&self, config: &Value) -> String {
+        let response = self.post("/v1/sessions", config).await;
+        assert_eq!(response.status(), 201);
+        let body: Value = response.json().await.unwrap();
+        body["id"].as_str().expect("id").to_string()
+    }
+
+    async fn push(&self, id: &str, body: &Value) -> Value {
+        self.post_ok(&format!("/v1/sessions/{id}/batches"), body)
+            .await
+    }
+
+    async fn state(&self, id: &str) -> Value {
+        self.get_ok(&format!("/v1/sessions/{id}")).await
+    }
+
+    async fn sessions(&self) -> SessionServiceClient<Channel> {
+        let channel = Channel::from_shared(format!("http://{}", self.grpc_addr))
+            .expect("valid uri")
+            .connect()
+            .await
+            .expect("gRPC connects");
+        SessionServiceClient::new(channel)
+    }
+
+    async fn delete(&self, id: &str) {
+        let response = self
+            .client
+            .delete(self.url(&format!("/v1/sessions/{id}")))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(response.status(), 204);
+    }
+
+    async fn stop(mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        if let Some(server) = self.server.take() {
+            server.await.expect("server task").expect("server stops");
+        }
+    }
+}
+
+impl Drop for App {
+    fn drop(&mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+    }
+}
+
+async fn spawn_app(configure: impl FnOnce(&mut Settings)) -> App {
+    let mut settings = Settings::for_tests();
+    // Short grace: a test's leftover connections must not hold it up.
+    settings.shutdown_grace_s = 1.0;
+    configure(&mut settings);
+    let app = Application::build(settings).await.expect("app builds");
+    let (http_addr, grpc_addr, state) = (app.http_addr(), app.grpc_addr(), app.state());
+    let (tx, rx) = oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async move {
+        let _ = rx.await;
+    }));
+    for _ in 0..400 {
+        if state.is_ready() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    assert!(state.is_ready(), "the instance did not start");
+    App {
+        base: format!("http://{http_addr}"),
+        grpc_addr,
+        client: reqwest::Client::new(),
+        shutdown: Some(tx),
+        server: Some(server),
+    }
+}
+
+/// A key prefix unique to the test (process id, clock, counter).
+fn key_prefix() -> String {
+    static RUN: AtomicU64 = AtomicU64::new(0);
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .expect("clock after 1970")
+        .as_nanos();
+    format!(
+        "radar-fusion-test:sessions-redis:{}-{nanos}-{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+fn skip_redis() -> bool {
+    std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1")
+}
+
+/// Whether Redis runs on 127.0.0.1:6379; `false` (with a loud warning) only
+/// when it does not and `FUSION_SKIP_REDIS_TESTS=1`; panics otherwise.
+fn redis_is_up() -> bool {
+    let addr: SocketAddr = REDIS_ADDR.parse().expect("literal address");
+    if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_ok() {
+        return true;
+    }
+    let message = "Redis is not running on 127.0.0.1:6379: start it with \
+         `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
+    if skip_redis() {
+        eprintln!(
+            "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
+        );
+        return false;
+    }
+    panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
+}
+
+/// Two instances on one Redis under one fresh key prefix.
+async fn two_instances(url: &str, configure: impl Fn(&mut Settings)) -> (App, App) {
+    let prefix = key_prefix();
+    let settings = |s: &mut Settings| {
+        s.session_store = url.to_string();
+        s.session_key_prefix = prefix.clone();
+        configure(s);
+    };
+    let a = spawn_app(settings).await;
+    let b = spawn_app(settings).await;
+    (a, b)
+}
+
+// ---------------------------------------------------------------- scenario
+
+/// Two radars, six straight targets, radar b reporting 0.3 s after radar a;
+/// targets 0 and 1 cross mid-way (as in tests/api/sessions.rs).
+fn scenario() -> (Value, Vec<Value>) {
+    let mut reports = Vec::new();
+    let mut nodes = Vec::new();
+    for (node, offset, bias) in [("a", 0.0, 0.0), ("b", 0.3, 15.0)] {
+        let mut tracks = Vec::new();
+        for target in 0..6 {
+            let (x0, y0, vx, vy) = match target {
+                0 => (0.0, 0.0, 120.0, 10.0),
+                1 => (2400.0, 200.0, -120.0, -10.0),
+                t => (f64::from(t) * 5000.0, 7000.0, 30.0, -60.0),
+            };
+            let mut samples = Vec::new();
+            for scan in 0..15 {
+                let t = f64::from(scan) * 2.0 + offset;
+                let e = bias * (f64::from(scan * 7 + target) % 5.0 - 2.0) / 2.0;
+                let sample = json!({
+                    "t": t,
+                    "state": [x0 + vx * t + e, vx, y0 + vy * t - e, vy],
+                    "covariance": [[400.0, 0.0, 0.0, 0.0], [0.0, 25.0, 0.0, 0.0],
+                                   [0.0, 0.0, 400.0, 0.0], [0.0, 0.0, 0.0, 25.0]],
+                });
+                let mut report = sample.clone();
+                report["node"] = json!(node);
+                report["track"] = json!(format!("{node}{target}"));
+                reports.push(report);
+                samples.push(sample);
+            }
+            tracks.push(json!({"id": format!("{node}{target}"), "samples": samples}));
+        }
+        nodes.push(json!({"id": node, "tracks": tracks}));
+    }
+    reports.sort_by(|a, b| {
+        a["t"]
+            .as_f64()
+            .unwrap()
+            .total_cmp(&b["t"].as_f64().unwrap())
+    });
+    let batch = json!({
+        "state_layout": ["x", "vx", "y", "vy"],
+        "method": {"kind": "independent_double_threshold", "rule": {"l": 3, "r": 4}},
+        "motion_model": {"process_noise": "dwna", "sigma_a_mps2": 1.0},
+        "alignment": {"tolerance_s": 0.5},
+        "nodes": nodes,
+    });
+    (batch, reports)
+}
+
+/// The session configuration of the scenario; sessions left behind by a
+/// failed test expire from Redis within two minutes.
+fn session_config(batch: &Value) -> Value {
+    let mut c = batch.clone();
+    c["nodes"] = json!(["a", "b"]);
+    c["history_instants"] = json!(64);
+    c["idle_expiry_s"] = json!(120.0);
+    c
+}
+
+/// The batch request bodies: sequences 1..=n of `CHUNK` reports, then n + 1, a flush.
+fn batch_bodies(reports: &[Value]) -> Vec<Value> {
+    let mut bodies: Vec<Value> = reports
+        .chunks(CHUNK)
+        .enumerate()
+        .map(|(i, chunk)| json!({"sequence": i + 1, "reports": chunk}))
+        .collect();
+    bodies.push(json!({"sequence": bodies.len() + 1, "flush": true}));
+    bodies
+}
+
+/// The parts of a session's state that the batches determine (not its id or
+/// creation time); `version` included: one per applied batch, plus one.
+fn outcome(state: &Value) -> Value {
+    let mut out = serde_json::Map::new();
+    for field in [
+        "version",
+        "last_sequence",
+        "batches",
+        "instants_processed",
+        "last_instant_t",
+        "pending_reports",
+        "reports_accepted",
+        "reports_late",
+        "nodes",
+        "pairs",
+        "system_tracks",
+    ] {
+        assert!(state.get(field).is_some(), "state without {field}: {state}");
+        out.insert(field.to_string(), state[field].clone());
+    }
+    Value::Object(out)
+}
+
+/// The reference: every batch pushed in order to one instance on the memory
+/// store; checked against the batch endpoint's decisions.
+async fn single_instance_outcome() -> Value {
+    let app = spawn_app(|_| {}).await;
+    let (batch, reports) = scenario();
+    let id = app.create(&session_config(&batch)).await;
+    for body in batch_bodies(&reports) {
+        let u = app.push(&id, &body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    let state = app.state(&id).await;
+    let expected = app.post_ok("/v1/correlation/tracks", &batch).await;
+    assert_eq!(state["pairs"], expected["pairs"]);
+    assert_eq!(state["system_tracks"], expected["system_tracks"]);
+    let decided = expected["pairs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["decision"] == "correlated")
+        .count();
+    assert!(decided >= 5, "a scenario worth checking: {expected}");
+    let n = batch_bodies(&reports).len() as u64;
+    assert_eq!(state["batches"], n);
+    assert_eq!(state["version"], n + 1);
+    app.stop().await;
+    outcome(&state)
+}
+
+fn assert_same_outcome(state: &Value, reference: &Value) {
+    let got = outcome(state);
+    if &got != reference {
+        for (field, want) in reference.as_object().unwrap() {
+            assert_eq!(
+                &got[field], want,
+                "field {field} differs from the single-instance run"
+            );
+        }
+    }
+}
+
+fn pb_report(r: &Value) -> pb::TrackReport {
+    let cov: Vec<f64> = r["covariance"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| row.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+        .collect();
+    pb::TrackReport {
+        node: r["node"].as_str().unwrap().into(),
+        track: r["track"].as_str().unwrap().into(),
+        sample: Some(pb::TrackSample {
+            t: r["t"].as_f64(),
+            state: r["state"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect(),
+            covariance: Some(pb::Matrix {
+                rows: 4,
+                cols: 4,
+                values: cov,
+            }),
+            gain: None,
+        }),
+    }
+}
+
+/// A gRPC push request of one REST batch body.
+fn pb_batch(id: &str, body: &Value) -> pb::PushBatchRequest {
+    pb::PushBatchRequest {
+        session_id: id.to_string(),
+        sequence: body["sequence"].as_u64(),
+        reports: body["reports"]
+            .as_array()
+            .map(|r| r.iter().map(pb_report).collect())
+            .unwrap_or_default(),
+        flush: body["flush"].as_bool().unwrap_or(false),
+    }
+}
+
+/// The scenario's session configuration over gRPC.
+fn pb_open() -> pb::CreateSessionRequest {
+    pb::CreateSessionRequest {
+        state_layout: ["x", "vx", "y", "vy"].map(String::from).to_vec(),
+        method: Some(pb::CorrelationMethod {
+            kind: Some("independent_double_threshold".into()),
+            rule: Some(pb::LrRule {
+                l: Some(3),
+                r: Some(4),
+            }),
+            ..Default::default()
+        }),
+        motion_model: Some(pb::MotionModel {
+            process_noise: Some("dwna".into()),
+            sigma_a_mps2: Some(1.0),
+            ..Default::default()
+        }),
+        alignment: Some(pb::Alignment {
+            tolerance_s: Some(0.5),
+            ..Default::default()
+        }),
+        nodes: vec!["a".into(), "b".into()],
+        history_instants: Some(64),
+        idle_expiry_s: Some(120.0),
+        ..Default::default()
+    }
+}
+
+// ---------------------------------------------------------------- tests
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn batches_alternating_between_instances_give_the_single_instance_result() {
+    if !redis_is_up() {
+        return;
+    }
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    for (i, body) in bodies.iter().enumerate() {
+        let to = if i % 2 == 0 { &a } else { &b };
+        let u = to.push(&id, body).await;
+        assert_eq!(u["duplicate"], false, "batch {}", i + 1);
+        assert_eq!(u["version"], i as u64 + 2, "batch {}", i + 1);
+    }
+    let (on_a, on_b) = (a.state(&id).await, b.state(&id).await);
+    assert_eq!(on_a, on_b, "both instances see one session");
+    assert_same_outcome(&on_a, &reference);
+    b.delete(&id).await;
+    assert_eq!(a.get(&format!("/v1/sessions/{id}")).await.status(), 404);
+}
+
+/// The value of an unlabelled counter in a Prometheus text page, if present.
+fn counter(page: &str, name: &str) -> Option<f64> {
+    page.lines()
+        .filter(|l| !l.starts_with('#'))
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
+    if !redis_is_up() {
+        return;
+    }
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = Arc::new(batch_bodies(&reports));
+    let conflicts_before = counter(
+        &a.get("/metrics").await.text().await.unwrap(),
+        "fusion_session_cas_conflicts_total",
+    )
+    .unwrap_or(0.0);
+
+    let start = Arc::new(tokio::sync::Barrier::new(2));
+    let pusher = |app: &App| {
+        let (url, client) = (
+            app.url(&format!("/v1/sessions/{id}/batches")),
+            app.client.clone(),
+        );
+        let (bodies, start) = (Arc::clone(&bodies), Arc::clone(&start));
+        tokio::spawn(async move {
+            start.wait().await;
+            // (applied, duplicates, refusals: 409 or 503)
+            let (mut applied, mut duplicates, mut refused) = (0u64, 0u64, Vec::new());
+            for body in bodies.iter() {
+                let mut attempts = 0;
+                loop {
+                    attempts += 1;
+                    assert!(
+                        attempts <= 200,
+                        "batch {} never went through",
+                        body["sequence"]
+                    );
+                    let r = client.post(&url).json(body).send().await.unwrap();
+                    let status = r.status().as_u16();
+                    if status == 200 {
+                        let u: Value = r.json().await.unwrap();
+                        assert_eq!(u["sequence"], body["sequence"]);
+                        if u["duplicate"] == true {
+                            duplicates += 1;
+                        } else {
+                            applied += 1;
+                        }
+                        break;
+                    }
+                    let text = r.text().await.unwrap();
+                    assert!(
+                        status == 409 || status == 503,
+                        "batch {}: {status} {text}",
+                        body["sequence"]
+                    );
+                    refused.push(status);
+                    tokio::time::sleep(Duration::from_millis(5)).await;
+                }
+            }
+            (applied, duplicates, refused)
+        })
+    };
+    let (ta, tb) = (pusher(&a), pusher(&b));
+    let (ra, rb) = (ta.await.unwrap(), tb.await.unwrap());
+    let n = bodies.len() as u64;
+    eprintln!("concurrent pushers: A {ra:?}, B {rb:?} (applied, duplicate, refused)");
+    assert_eq!(ra.0 + ra.1, n);
+    assert_eq!(rb.0 + rb.1, n);
+    assert_eq!(
+        ra.0 + rb.0,
+        n,
+        "every batch applied exactly once: A {ra:?}, B {rb:?}"
+    );
+    // Each client pushes in order, so the session is never behind by more
+    // than the batch pushed: a gap (409) cannot happen.
+    assert!(
+        !ra.2.contains(&409) && !rb.2.contains(&409),
+        "A {ra:?}, B {rb:?}"
+    );
+
+    let state = b.state(&id).await;
+    assert_eq!(state["batches"], n, "the flush batch counts too");
+    assert_eq!(state["last_sequence"], n);
+    assert_same_outcome(&state, &reference);
+    assert_eq!(a.state(&id).await, state);
+
+    let page = a.get("/metrics").await.text().await.unwrap();
+    let conflicts = counter(&page, "fusion_session_cas_conflicts_total").unwrap_or(0.0);
+    // The counter is process-wide (other tests run beside this one), and
+    // whether the two pushers collide depends on scheduling: only report it.
+    eprintln!("fusion_session_cas_conflicts_total: {conflicts_before} before, {conflicts} after");
+    assert!(conflicts >= conflicts_before);
+    a.delete(&id).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_retried_on_the_other_instance_is_acknowledged_not_applied() {
+    if !redis_is_up() {
+        return;
+    }
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    let k = 5;
+    for body in &bodies[..k] {
+        a.push(&id, body).await;
+    }
+    let before = a.state(&id).await;
+    assert_eq!(before["batches"], k as u64);
+    // The client timed out on A and retries batch k on B; then batch k - 1.
+    for retried in [k, k - 1] {
+        let again = b.push(&id, &bodies[retried - 1]).await;
+        assert_eq!(again["duplicate"], true, "{again}");
+        assert_eq!(again["version"], before["version"]);
+        assert_eq!(again["changes"], json!([]));
+    }
+    // And the same over gRPC on B.
+    let again = b
+        .sessions()
+        .await
+        .push_batch(pb_batch(&id, &bodies[k - 1]))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(again.duplicate);
+    assert_eq!(Some(again.version), before["version"].as_u64());
+    let after = b.state(&id).await;
+    assert_eq!(after, before, "a duplicate changes nothing");
+    // The rest on B, from k + 1: the single-instance result.
+    for body in &bodies[k..] {
+        let u = b.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    assert_same_outcome(&a.state(&id).await, &reference);
+    a.delete(&id).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_idle_session_expires_on_both_instances_and_pushes_keep_it_alive() {
+    if !redis_is_up() {
+        return;
+    }
+    const IDLE: f64 = 1.5;
+    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (batch, reports) = scenario();
+    let mut config = session_config(&batch);
+    config["idle_expiry_s"] = json!(IDLE);
+    let id = a.create(&config).await;
+    let path = format!("/v1/sessions/{id}");
+    let bodies = batch_bodies(&reports);
+
+    // Pushes at 0.8 s intervals keep it alive well past 1.5 s.
+    for body in &bodies[..3] {
+        tokio::time::sleep(Duration::from_secs_f64(IDLE * 0.5)).await;
+        let u = b.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    let last_push = Instant::now();
+    let state = a.state(&id).await;
+    assert_eq!(state["batches"], 3);
+    assert_eq!(state["idle_expiry_s"], IDLE);
+    let list = b.get_ok("/v1/sessions").await;
+    assert_eq!(list["sessions"][0]["id"], id.as_str());
+
+    // Then no batch: reads do not keep it alive; it is gone on both instances.
+    tokio::time::sleep(Duration::from_secs_f64(IDLE * 0.5)).await;
+    assert_eq!(b.get(&path).await.status(), 200);
+    let wait = Duration::from_secs_f64(IDLE + 0.7).saturating_sub(last_push.elapsed());
+    tokio::time::sleep(wait).await;
+    for app in [&a, &b] {
+        assert_eq!(app.get(&path).await.status(), 404);
+        let list = app.get_ok("/v1/sessions").await;
+        assert_eq!(list["sessions"], json!([]));
+    }
+    let late = b.post(&format!("{path}/batches"), &bodies[3]).await;
+    assert_eq!(late.status(), 404);
+    let err = a
+        .sessions()
+        .await
+        .push_batch(pb_batch(&id, &bodies[3]))
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound);
+}
+
+// ---------------------------------------------------------------- Redis outage
+
+/// A redis-server child process on a port of its own with an append-only
+/// file in a directory of its own (so that its data survives a restart);
+/// killed on drop.
+struct RedisServer {
+    port: u16,
+    dir: PathBuf,
+    child: Option<Child>,
+}
+
+impl RedisServer {
+    fn start(port: u16, dir: PathBuf) -> Self {
+        std::fs::create_dir_all(&dir).expect("redis data directory");
+        let child = Command::new("redis-server")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+            .args([
+                "--save",
+                "",
+                "--appendonly",
+                "yes",
+                "--appendfsync",
+                "always",
+            ])
+            .arg("--dir")
+            .arg(&dir)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("redis-server is on PATH (apt-get install redis-server)");
+        let server = Self {
+            port,
+            dir,
+            child: Some(child),
+        };
+        server.wait_accepting();
+        server
+    }
+
+    fn wait_accepting(&self) {
+        let addr: SocketAddr = format!("127.0.0.1:{}", self.port).parse().unwrap();
+        let start = Instant::now();
+        while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "redis-server did not start on port {}",
+                self.port
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Kills the server at once (SIGKILL): no shutdown save.
+    fn kill(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    /// Starts it again on the same port and directory.
+    fn restart(&mut self) {
+        self.kill();
+        *self = Self::start(self.port, std::mem::take(&mut self.dir));
+    }
+
+    fn url(&self) -> String {
+        format!("redis://127.0.0.1:{}/0", self.port)
+    }
+}
+
+impl Drop for RedisServer {
+    fn drop(&mut self) {
+        self.kill();
+        if !self.dir.as_os_str().is_empty() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+fn free_port() -> u16 {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind port 0");
+    listener.local_addr().expect("bound").port()
+}
+
+/// Polls `/readyz` until it answers `status`; panics after `limit`.
+async fn wait_readyz(app: &App, status: u16, limit: Duration) {
+    let start = Instant::now();
+    loop {
+        let got = app.get("/readyz").await.status().as_u16();
+        if got == status {
+            return;
+        }
+        assert!(
+            start.elapsed() < limit,
+            "/readyz still {got}, not {status}, after {limit:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// A private redis-server on a free port, or `None` (with a loud warning)
+/// when `redis-server` is not on PATH and `FUSION_SKIP_REDIS_TESTS=1`.
+fn private_redis() -> Option<RedisServer> {
+    if Command::new("redis-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
+        if skip_redis() {
+            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
+            return None;
+        }
+        panic!("{message}");
+    }
+    static RUN: AtomicU64 = AtomicU64::new(0);
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    let dir = std::env::temp_dir().join(format!(
+        "radar-fusion-sessions-redis-{}-{nanos}-{}",
+        std::process::id(),
+        RUN.fetch_add(1, Ordering::Relaxed)
+    ));
+    Some(RedisServer::start(free_port(), dir))
+}
+
+/// How long a failing call may take: generous against a 0.5 s store timeout.
+const FAST: Duration = Duration::from_secs(3);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
+    let Some(mut redis) = private_redis() else {
+        return;
+    };
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(&redis.url(), |s| s.store_timeout_s = 0.5).await;
+    wait_readyz(&a, 200, Duration::from_secs(5)).await;
+    wait_readyz(&b, 200, Duration::from_secs(5)).await;
+
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    let k = 7;
+    for (i, body) in bodies[..k].iter().enumerate() {
+        let to = if i % 2 == 0 { &a } else { &b };
+        to.push(&id, body).await;
+    }
+    let before = b.state(&id).await;
+    assert_eq!(before["last_sequence"], k as u64);
+
+    redis.kill();
+
+    // REST: 503 with Retry-After and a problem body, quickly, on both instances.
+    for app in [&a, &b] {
+        let start = Instant::now();
+        let r = app
+            .post(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+            .await;
+        let took = start.elapsed();
+        assert!(took < FAST, "push took {took:?}");
+        assert_eq!(r.status(), 503);
+        assert_eq!(r.headers()["retry-after"], "1");
+        assert_eq!(r.headers()["content-type"], "application/problem+json");
+        let problem: Value = r.json().await.unwrap();
+        assert_eq!(problem["status"], 503);
+        assert!(
+            problem["type"]
+                .as_str()
+                .unwrap()
+                .starts_with("urn:radar-fusion:problem:"),
+            "{problem}"
+        );
+        assert!(problem["detail"].is_string(), "{problem}");
+        let start = Instant::now();
+        let r = app.get(&format!("/v1/sessions/{id}")).await;
+        assert_eq!(r.status(), 503);
+        assert!(start.elapsed() < FAST);
+    }
+    // Creating, listing and deleting fail the same way.
+    let start = Instant::now();
+    let r = a.post("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers()["retry-after"], "1");
+    assert_eq!(b.get("/v1/sessions").await.status(), 503);
+    let r = b
+        .client
+        .delete(b.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 503);
+    assert!(start.elapsed() < FAST * 3, "took {:?}", start.elapsed());
+    // gRPC: UNAVAILABLE, quickly.
+    let mut grpc = b.sessions().await;
+    let start = Instant::now();
+    let err = grpc
+        .push_batch(pb_batch(&id, &bodies[k]))
+        .await
+        .unwrap_err();
+    assert!(
+        start.elapsed() < FAST,
+        "gRPC push took {:?}",
+        start.elapsed()
+    );
+    assert_eq!(err.code(), tonic::Code::Unavailable, "{err:?}");
+    // Not ready while Redis is away.
+    for app in [&a, &b] {
+        let start = Instant::now();
+        let r = app.get("/readyz").await;
+        assert!(start.elapsed() < FAST);
+        assert_eq!(r.status(), 503);
+        let body: Value = r.json().await.unwrap();
+        assert_eq!(body["status"], "not_ready");
+    }
+
+    // Redis comes back with its append-only file: both instances recover by
+    // themselves and the session is where it was, with no half-applied batch.
+    redis.restart();
+    wait_readyz(&a, 200, Duration::from_secs(10)).await;
+    wait_readyz(&b, 200, Duration::from_secs(10)).await;
+    assert_eq!(a.state(&id).await, before);
+    assert_eq!(b.state(&id).await, before);
+    // The client retries the failed batch, then carries on, on both instances.
+    let retried = grpc
+        .push_batch(pb_batch(&id, &bodies[k]))
+        .await
+        .expect("gRPC works again on the same channel")
+        .into_inner();
+    assert!(!retried.duplicate, "the failed batch had not been applied");
+    for (i, body) in bodies.iter().enumerate().skip(k + 1) {
+        let to = if i % 2 == 0 { &a } else { &b };
+        let u = to.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    assert_same_outcome(&a.state(&id).await, &reference);
+    b.delete(&id).await;
+    a.stop().await;
+    b.stop().await;
+}
+
+// ---------------------------------------------------------------- gRPC
+
+fn with_key<T>(message: T, header: &'static str, value: &str) -> tonic::Request<T> {
+    let mut request = tonic::Request::new(message);
+    request
+        .metadata_mut()
+        .insert(header, value.parse().expect("ASCII metadata"));
+    request
+}
+
+/// Tenant acme's key as `x-api-key` metadata.
+fn acme<T>(message: T) -> tonic::Request<T> {
+    with_key(message, "x-api-key", "key-of-acme-1")
+}
+
+/// Tenant globex's key as `authorization: Bearer` metadata.
+fn globex<T>(message: T) -> tonic::Request<T> {
+    with_key(message, "authorization", "Bearer key-of-globex")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tenants_cannot_reach_each_others_sessions_over_grpc() {
+    if !redis_is_up() {
+        return;
+    }
+    let (a, b) = two_instances(REDIS_URL, |s| {
+        s.api_keys = Some("key-of-acme-1=acme,key-of-globex=globex".into());
+    })
+    .await;
+    let (_, reports) = scenario();
+    let bodies = batch_bodies(&reports);
+
+    let mut on_a = a.sessions().await;
+    let created = on_a
+        .create_session(acme(pb_open()))
+        .await
+        .unwrap()
+        .into_inner();
+    let id = created.id.clone();
+    assert_eq!(created.version, 1);
+
+    let mut on_b = b.sessions().await;
+    let get = || pb::GetSessionRequest {
+        session_id: id.clone(),
+    };
+    let err = on_b.get_session(globex(get())).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound, "{err:?}");
+    let err = on_b
+        .push_batch(globex(pb_batch(&id, &bodies[0])))
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound, "{err:?}");
+    let err = on_b
+        .delete_session(globex(pb::DeleteSessionRequest {
+            session_id: id.clone(),
+        }))
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound, "{err:?}");
+    let listed = on_b
+        .list_sessions(globex(pb::ListSessionsRequest {}))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(listed.sessions.is_empty(), "{listed:?}");
+    // A stream attached by the other tenant is refused too.
+    let (tx, rx) = tokio::sync::mpsc::channel(1);
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Attach(id.clone())),
+    })
+    .await
+    .unwrap();
+    let outcome = match on_b
+        .stream(globex(tokio_stream::wrappers::ReceiverStream::new(rx)))
+        .await
+    {
+        Ok(response) => response.into_inner().message().await.map(|_| ()),
+        Err(status) => Err(status),
+    };
+    assert_eq!(
+        outcome.unwrap_err().code(),
+        tonic::Code::NotFound,
+        "attach by another tenant"
+    );
+    // No key at all: UNAUTHENTICATED, on either instance.
+    for client in [&mut on_a, &mut on_b] {
+        let err = client.get_session(get()).await.unwrap_err();
+        assert_eq!(err.code(), tonic::Code::Unauthenticated);
+        let err = client
+            .list_sessions(pb::ListSessionsRequest {})
+            .await
+            .unwrap_err();
+        assert_eq!(err.code(), tonic::Code::Unauthenticated);
+    }
+    // Over REST too, the other tenant gets 404.
+    let r = b
+        .client
+        .get(b.url(&format!("/v1/sessions/{id}")))
+        .bearer_auth("key-of-globex")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 404);
+
+    // The owner reaches it through either instance, and nothing changed.
+    let pushed = on_b
+        .push_batch(acme(pb_batch(&id, &bodies[0])))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(!pushed.duplicate);
+    assert_eq!(pushed.version, 2);
+    let state = on_a.get_session(acme(get())).await.unwrap().into_inner();
+    assert_eq!((state.batches, state.version), (1, 2));
+    let listed = on_b
+        .list_sessions(acme(pb::ListSessionsRequest {}))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(listed.sessions.len(), 1);
+    assert_eq!(listed.sessions[0].id, id);
+    on_b.delete_session(acme(pb::DeleteSessionRequest {
+        session_id: id.clone(),
+    }))
+    .await
+    .unwrap();
+    let err = on_a.get_session(acme(get())).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other() {
+    if !redis_is_up() {
+        return;
+    }
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (_, reports) = scenario();
+    let bodies = batch_bodies(&reports);
+    let half = bodies.len() / 2;
+
+    let mut client = a.sessions().await;
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Open(pb_open())),
+    })
+    .await
+    .unwrap();
+    let mut updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .unwrap()
+        .into_inner();
+    let opened = updates.message().await.unwrap().expect("opened");
+    let id = opened.session_id.clone();
+    assert_eq!(opened.version, 1);
+    for body in &bodies[..half] {
+        tx.send(pb::StreamRequest {
+            kind: Some(pb::stream_request::Kind::Batch(pb_batch("", body))),
+        })
+        .await
+        .unwrap();
+        let u = updates.message().await.unwrap().expect("update");
+        assert_eq!(u.sequence, body["sequence"].as_u64());
+        assert!(!u.duplicate);
+    }
+    // The client disconnects mid-stream.
+    drop(tx);
+    drop(updates);
+    drop(client);
+
+    // Instance B sees the session as the stream left it.
+    let state = b.state(&id).await;
+    assert_eq!(state["batches"], half as u64);
+    assert_eq!(state["last_sequence"], half as u64);
+    assert_eq!(state["version"], half as u64 + 1);
+    // A stream attached on B learns where to go on from.
+    let mut on_b = b.sessions().await;
+    let (tx, rx) = tokio::sync::mpsc::channel(1);
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Attach(id.clone())),
+    })
+    .await
+    .unwrap();
+    let mut attached = on_b
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .unwrap()
+        .into_inner();
+    let ack = attached.message().await.unwrap().expect("attached");
+    assert_eq!(ack.session_id, id);
+    assert_eq!(ack.sequence, Some(half as u64));
+    drop(tx);
+    drop(attached);
+
+    // The rest over REST on B, retrying the last streamed batch first.
+    let again = b.push(&id, &bodies[half - 1]).await;
+    assert_eq!(again["duplicate"], true);
+    for body in &bodies[half..] {
+        let u = b.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    assert_same_outcome(&a.state(&id).await, &reference);
+    b.delete(&id).await;
+}
+
+/// Sends a signal to the redis-server child (`STOP` or `CONT`).
+fn signal(redis: &RedisServer, name: &str) {
+    let pid = redis.child.as_ref().expect("running").id().to_string();
+    let status = Command::new("kill")
+        .args([&format!("-{name}"), &pid])
+        .status()
+        .expect("kill(1) runs");
+    assert!(status.success(), "kill -{name} {pid}");
+}
+
+/// A Redis that stops answering (SIGSTOP) rather than going away: requests
+/// still fail fast, bounded by the store timeout, and recover when it resumes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
+    let Some(redis) = private_redis() else {
+        return;
+    };
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(&redis.url(), |s| s.store_timeout_s = 0.5).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    let k = 5;
+    for body in &bodies[..k] {
+        b.push(&id, body).await;
+    }
+    let before = a.state(&id).await;
+
+    signal(&redis, "STOP");
+    for app in [&a, &b] {
+        let start = Instant::now();
+        let r = app
+            .post(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+            .await;
+        assert!(start.elapsed() < FAST, "push took {:?}", start.elapsed());
+        assert_eq!(r.status(), 503);
+        assert_eq!(r.headers()["retry-after"], "1");
+        let start = Instant::now();
+        assert_eq!(app.get("/readyz").await.status(), 503);
+        assert!(start.elapsed() < FAST, "readyz took {:?}", start.elapsed());
+    }
+    signal(&redis, "CONT");
+
+    wait_readyz(&a, 200, Duration::from_secs(10)).await;
+    wait_readyz(&b, 200, Duration::from_secs(10)).await;
+    // The failed pushes timed out on their read: nothing was written.
+    assert_eq!(b.state(&id).await, before);
+    for (i, body) in bodies.iter().enumerate().skip(k) {
+        let to = if i % 2 == 0 { &a } else { &b };
+        let u = to.push(&id, body).await;
+        assert_eq!(u["duplicate"], false);
+    }
+    assert_same_outcome(&a.state(&id).await, &reference);
+    a.delete(&id).await;
+}
