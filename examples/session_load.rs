@@ -25,14 +25,14 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail, ensure};
-use rand::{RngExt, SeedableRng};
-use rand_distr::StandardNormal;
 use radar_fusion::{
     app::Application,
     config::Settings,
     proto::{self as pb, session_service_client::SessionServiceClient},
     store::SessionStore,
 };
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
 use serde_json::{Value, json};
 use tokio::sync::oneshot;
 use tonic::transport::Channel;
@@ -64,17 +64,17 @@ fn parse_args() -> anyhow::Result<Args> {
             "--batches" => args.batches = value.parse()?,
             "--warmup" => args.warmup = value.parse()?,
             "--sessions" => {
-                args.sessions = list()
-                    .iter()
-                    .map(|s| s.parse())
-                    .collect::<Result<_, _>>()?
+                args.sessions = list().iter().map(|s| s.parse()).collect::<Result<_, _>>()?
             }
             "--stores" => args.stores = list(),
             "--transports" => args.transports = list(),
             _ => bail!("unknown flag {flag}"),
         }
     }
-    ensure!(args.warmup < args.batches, "--warmup must be below --batches");
+    ensure!(
+        args.warmup < args.batches,
+        "--warmup must be below --batches"
+    );
     Ok(args)
 }
 

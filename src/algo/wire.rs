@@ -71,7 +71,7 @@ pub struct Reader<'a> {
     buf: &'a [u8],
 }
 
-fn corrupt(reason: &str) -> AlgoError {
+pub fn corrupt(reason: &str) -> AlgoError {
     AlgoError::InvalidParameter {
         what: "state",
         reason: format!("corrupt encoded state: {reason}"),

@@ -102,9 +102,12 @@ pub struct PairChange {
 pub struct BatchUpdate {
     pub session_id: String,
     pub sequence: Option<u64>,
-    /// The session's version after the batch.
+    /// The session's version after the batch (for a duplicate: the session's
+    /// current version).
     pub version: u64,
-    /// True when the batch had been applied before and was not applied again.
+    /// True when the batch had been applied before and was not applied
+    /// again. A retry of the last batch carries that batch's update again
+    /// (changes, pairs, system tracks); an older one carries no changes.
     pub duplicate: bool,
     /// Instants closed and correlated by this batch.
     pub instants: Vec<f64>,

@@ -31,7 +31,7 @@ use nalgebra::{DMatrix, DVector};
 use super::{
     FieldViolation, ServiceError, Violations,
     correlation::{
-        self, AlignMode, AlignmentInput, CorrelateInput, CrossCovariances, GroupOutput,
+        self, AlignMode, AlignmentInput, CorrelateInput, CrossCovariances, FusionKind, GroupOutput,
         MethodInput, MotionModelInput, NodeInput, PairOutput, Plan, RuleInput, SampleInput,
         TrackName,
     },
@@ -45,12 +45,15 @@ use crate::algo::{
     },
     motion::MotionModel,
     small,
-    wire::{Reader, Writer},
+    wire::{self, Reader, Writer},
 };
 
 /// First byte of every encoded session; a later release that changes the
-/// format bumps it and keeps a decoder for the older ones.
-pub const FORMAT_VERSION: u8 = 1;
+/// format bumps it and keeps a decoder for the older ones. Format 1: the
+/// first release. Format 2: covariances stored as upper triangles when
+/// symmetric (scene format 2), and the last sequenced batch's update kept
+/// for the replay of a retried batch.
+pub const FORMAT_VERSION: u8 = 2;
 /// Default idle expiry of a session.
 pub const DEFAULT_IDLE_EXPIRY_S: f64 = 3600.0;
 /// Default time (data time) after which a silent track is retired.
@@ -230,6 +233,9 @@ pub struct Session {
     instants_processed: u64,
     reports_accepted: u64,
     reports_late: u64,
+    /// The update of the last batch when it carried a sequence number: the
+    /// answer replayed to a retry of that batch (its `version` is not kept).
+    last_update: Option<BatchUpdate>,
 }
 
 fn internal(e: AlgoError) -> ServiceError {
@@ -320,6 +326,7 @@ impl Session {
             instants_processed: 0,
             reports_accepted: 0,
             reports_late: 0,
+            last_update: None,
             plan,
             spec,
         })
@@ -695,7 +702,7 @@ impl Session {
             self.last_sequence = batch.sequence;
         }
         self.batches += 1;
-        Ok(BatchUpdate {
+        let update = BatchUpdate {
             session_id: id.to_string(),
             sequence: batch.sequence,
             version: 0,
@@ -707,7 +714,53 @@ impl Session {
             system_tracks,
             retired,
             warnings,
-        })
+        };
+        self.last_update = batch.sequence.map(|_| update.clone());
+        Ok(update)
+    }
+
+    /// The answer to a batch whose sequence number was applied before
+    /// ([`Session::check_sequence`] said so): nothing is applied. A retry of
+    /// the last batch gets that batch's update again (the same changes,
+    /// pairs and system tracks), so a client whose answer was lost loses
+    /// nothing; an older number gets an empty acknowledgement. `version` is
+    /// the session's current version.
+    pub fn duplicate_ack(&self, id: &str, sequence: u64, version: u64) -> BatchUpdate {
+        let last = self.last_sequence.unwrap_or_default();
+        let replay = self
+            .last_update
+            .as_ref()
+            .filter(|u| u.sequence == Some(sequence) && sequence == last);
+        let mut update = match replay {
+            Some(u) => {
+                let mut u = u.clone();
+                u.warnings.push(format!(
+                    "batch {sequence} was applied before: this is its update again; \
+                     it was not applied twice"
+                ));
+                u
+            }
+            None => BatchUpdate {
+                session_id: String::new(),
+                sequence: Some(sequence),
+                version,
+                duplicate: true,
+                instants: Vec::new(),
+                pending_reports: self.pending.len() as u32,
+                changes: Vec::new(),
+                pairs: Vec::new(),
+                system_tracks: Vec::new(),
+                retired: Vec::new(),
+                warnings: vec![format!(
+                    "batch {sequence} was applied before (the session has applied up to \
+                     {last}): acknowledged, not applied again"
+                )],
+            },
+        };
+        update.session_id = id.to_string();
+        update.version = version;
+        update.duplicate = true;
+        update
     }
 
     /// The slot of a track, allocating one (reusing a freed slot) for a new id.
@@ -928,6 +981,7 @@ impl Session {
             w.f64s(&p.p);
             w.opt(p.factor.as_deref(), Writer::f64s);
         }
+        w.opt(self.last_update.as_ref(), encode_update);
         w.buf
     }
 
@@ -937,9 +991,9 @@ impl Session {
         let corrupt = |e: AlgoError| ServiceError::Internal(format!("stored session: {e}"));
         let mut r = Reader::new(buf);
         let version = r.u8().map_err(corrupt)?;
-        if version != FORMAT_VERSION {
+        if !(1..=FORMAT_VERSION).contains(&version) {
             return Err(ServiceError::Internal(format!(
-                "stored session has format {version}; this release reads {FORMAT_VERSION}"
+                "stored session has format {version}; this release reads 1 to {FORMAT_VERSION}"
             )));
         }
         let spec = decode_spec(&mut r).map_err(corrupt)?;
@@ -961,7 +1015,8 @@ impl Session {
         let reports_accepted = r.u64().map_err(corrupt)?;
         let reports_late = r.u64().map_err(corrupt)?;
         let closed_start = r.opt(Reader::f64).map_err(corrupt)?;
-        let scene = Scene::decode(&mut r).map_err(corrupt)?;
+        // Session format 1 holds scene format 1, format 2 scene format 2.
+        let scene = Scene::decode(&mut r, version).map_err(corrupt)?;
         if scene.nodes().len() != n || scene.dim() != plan.layout.dim {
             return Err(ServiceError::Internal("stored session: scene shape".into()));
         }
@@ -1017,6 +1072,11 @@ impl Session {
                 factor,
             });
         }
+        let last_update = if version >= 2 {
+            r.opt(decode_update).map_err(corrupt)?
+        } else {
+            None
+        };
         if !r.is_empty() {
             return Err(ServiceError::Internal(
                 "stored session: trailing bytes".into(),
@@ -1041,6 +1101,7 @@ impl Session {
             instants_processed,
             reports_accepted,
             reports_late,
+            last_update,
         })
     }
 }
@@ -1065,6 +1126,152 @@ fn gain_factor(g: &[Vec<f64>], h: &DMatrix<f64>, layout: &correlation::Layout) -
 
 fn opt_str(w: &mut Writer, v: &Option<String>) {
     w.opt(v.as_deref(), Writer::str);
+}
+
+/// Stable codes of the enums kept in an encoded update (append only).
+const DECISIONS: [Decision; 3] = [
+    Decision::Correlated,
+    Decision::NotCorrelated,
+    Decision::Undecided,
+];
+const FUSION_KINDS: [FusionKind; 4] = [
+    FusionKind::BarShalomCampo,
+    FusionKind::CovarianceIntersection,
+    FusionKind::Single,
+    FusionKind::None,
+];
+const CHANGE_KINDS: [ChangeKind; 4] = [
+    ChangeKind::Correlated,
+    ChangeKind::Released,
+    ChangeKind::TrialFormed,
+    ChangeKind::TrialEnded,
+];
+
+fn code_of<T: PartialEq>(list: &[T], v: &T) -> u8 {
+    list.iter()
+        .position(|x| x == v)
+        .expect("every variant is listed") as u8
+}
+
+fn of_code<T: Copy>(list: &[T], r: &mut Reader<'_>, what: &str) -> Result<T, AlgoError> {
+    let c = r.u8()?;
+    list.get(usize::from(c))
+        .copied()
+        .ok_or_else(|| wire::corrupt(&format!("unknown {what} code {c}")))
+}
+
+fn encode_name(w: &mut Writer, n: &TrackName) {
+    w.str(&n.node);
+    w.str(&n.track);
+}
+
+fn decode_name(r: &mut Reader<'_>) -> Result<TrackName, AlgoError> {
+    Ok(TrackName {
+        node: r.str()?,
+        track: r.str()?,
+    })
+}
+
+fn decode_list<'a, T>(
+    r: &mut Reader<'a>,
+    f: impl Fn(&mut Reader<'a>) -> Result<T, AlgoError>,
+) -> Result<Vec<T>, AlgoError> {
+    let n = r.len(1)?;
+    (0..n).map(|_| f(r)).collect()
+}
+
+/// Appends a batch update (all but its session id, version and duplicate flag).
+fn encode_update(w: &mut Writer, u: &BatchUpdate) {
+    w.opt(u.sequence, Writer::u64);
+    w.f64s(&u.instants);
+    w.u32(u.pending_reports);
+    w.usize(u.changes.len());
+    for c in &u.changes {
+        encode_name(w, &c.a);
+        encode_name(w, &c.b);
+        w.u8(code_of(&CHANGE_KINDS, &c.change));
+    }
+    w.usize(u.pairs.len());
+    for p in &u.pairs {
+        encode_name(w, &p.a);
+        encode_name(w, &p.b);
+        w.u8(code_of(&DECISIONS, &p.decision));
+        w.u8(code_of(&engine::REASONS, &p.reason));
+        w.bool(p.trial);
+        w.u32(p.m);
+        w.u32(p.c);
+        w.u32(p.samples);
+        w.f64(p.mean_statistic);
+        w.f64(p.last_statistic);
+        w.opt(p.decided_at, Writer::f64);
+    }
+    w.usize(u.system_tracks.len());
+    for g in &u.system_tracks {
+        w.u32(g.id);
+        w.usize(g.members.len());
+        g.members.iter().for_each(|m| encode_name(w, m));
+        w.f64(g.t);
+        w.f64s(&g.state);
+        w.usize(g.covariance.len());
+        g.covariance.iter().for_each(|row| w.f64s(row));
+        w.u8(code_of(&FUSION_KINDS, &g.fusion));
+    }
+    w.usize(u.retired.len());
+    u.retired.iter().for_each(|n| encode_name(w, n));
+    w.usize(u.warnings.len());
+    u.warnings.iter().for_each(|s| w.str(s));
+}
+
+/// Reads a batch update written by [`encode_update`].
+fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+    let sequence = r.opt(Reader::u64)?;
+    let instants = r.f64s()?;
+    let pending_reports = r.u32()?;
+    let changes = decode_list(r, |r| {
+        Ok(PairChange {
+            a: decode_name(r)?,
+            b: decode_name(r)?,
+            change: of_code(&CHANGE_KINDS, r, "change")?,
+        })
+    })?;
+    let pairs = decode_list(r, |r| {
+        Ok(PairOutput {
+            a: decode_name(r)?,
+            b: decode_name(r)?,
+            decision: of_code(&DECISIONS, r, "decision")?,
+            reason: of_code(&engine::REASONS, r, "reason")?,
+            trial: r.bool()?,
+            m: r.u32()?,
+            c: r.u32()?,
+            samples: r.u32()?,
+            mean_statistic: r.f64()?,
+            last_statistic: r.f64()?,
+            decided_at: r.opt(Reader::f64)?,
+        })
+    })?;
+    let system_tracks = decode_list(r, |r| {
+        Ok(GroupOutput {
+            id: r.u32()?,
+            members: decode_list(r, decode_name)?,
+            t: r.f64()?,
+            state: r.f64s()?,
+            covariance: decode_list(r, Reader::f64s)?,
+            fusion: of_code(&FUSION_KINDS, r, "fusion")?,
+        })
+    })?;
+    Ok(BatchUpdate {
+        session_id: String::new(),
+        sequence,
+        version: 0,
+        duplicate: false,
+        instants,
+        pending_reports,
+        changes,
+        pairs,
+        system_tracks,
+        retired: decode_list(r, decode_name)?,
+        warnings: decode_list(r, Reader::str)?,
+    })
 }
 
 fn encode_spec(w: &mut Writer, spec: &SessionSpec) {
@@ -1559,5 +1766,106 @@ mod tests {
         let mut wrong = bytes.clone();
         wrong[0] = 99;
         assert!(Session::decode(&wrong).is_err());
+    }
+
+    /// A session written by the first release (format 1) — the scenario's
+    /// first half in sequenced batches of 16, history 8 — still reads, and
+    /// continues exactly as a session that never left this release.
+    #[test]
+    fn a_format_1_session_reads_and_continues_like_a_current_one() {
+        let old = include_bytes!("../../tests/fixtures/session_v1.bin");
+        assert_eq!(old[0], 1);
+        let input = scenario();
+        let reports = reports_of(&input);
+        let half = reports.len() / 2;
+        let push = |s: &mut Session, i: usize, chunk: &[ReportInput]| {
+            s.apply(
+                "s",
+                BatchInput {
+                    sequence: Some(i as u64 + 1),
+                    reports: chunk.to_vec(),
+                    flush: false,
+                },
+                &LIMITS,
+            )
+            .unwrap();
+        };
+        let mut now = session_of(&input, 8);
+        for (i, chunk) in reports[..half].chunks(16).enumerate() {
+            push(&mut now, i, chunk);
+        }
+        let mut read = Session::decode(old).unwrap();
+        assert_eq!(read.view("s", 0, 0).unwrap(), now.view("s", 0, 0).unwrap());
+        assert!(read.last_update.is_none(), "format 1 kept no update");
+        // Re-encoded in the current format: smaller (covariance triangles),
+        // and equal to the current session's encoding but for the update
+        // the current one kept.
+        let current = now.encode();
+        assert_eq!(current[0], FORMAT_VERSION);
+        assert!(
+            current.len() < old.len(),
+            "{} vs {}",
+            current.len(),
+            old.len()
+        );
+        for (j, chunk) in reports[half..].chunks(16).enumerate() {
+            push(&mut read, half.div_ceil(16) + j, chunk);
+            push(&mut now, half.div_ceil(16) + j, chunk);
+        }
+        assert_eq!(read.encode(), now.encode());
+        assert_eq!(read.view("s", 0, 0).unwrap(), now.view("s", 0, 0).unwrap());
+    }
+
+    #[test]
+    fn a_retried_last_batch_gets_its_update_again() {
+        let input = scenario();
+        let reports = reports_of(&input);
+        let mut s = session_of(&input, 8);
+        let mut updates = Vec::new();
+        for (i, chunk) in reports[..64].chunks(16).enumerate() {
+            let u = s
+                .apply(
+                    "s",
+                    BatchInput {
+                        sequence: Some(i as u64 + 1),
+                        reports: chunk.to_vec(),
+                        flush: false,
+                    },
+                    &LIMITS,
+                )
+                .unwrap();
+            updates.push(u);
+            // Through the store's round trip.
+            s = Session::decode(&s.encode()).unwrap();
+        }
+        let last = updates.last().unwrap();
+        assert!(!last.pairs.is_empty() && !last.system_tracks.is_empty());
+        assert!(s.check_sequence(Some(4)).unwrap());
+        let replay = s.duplicate_ack("s", 4, 9);
+        assert!(replay.duplicate);
+        assert_eq!(replay.version, 9);
+        assert_eq!(replay.sequence, Some(4));
+        assert_eq!(replay.instants, last.instants);
+        assert_eq!(replay.changes, last.changes);
+        assert_eq!(replay.pairs, last.pairs);
+        assert_eq!(replay.system_tracks, last.system_tracks);
+        assert_eq!(replay.retired, last.retired);
+        assert_eq!(replay.pending_reports, last.pending_reports);
+        assert_eq!(replay.warnings.len(), last.warnings.len() + 1);
+        // An older batch: an empty acknowledgement.
+        let older = s.duplicate_ack("s", 2, 9);
+        assert!(older.duplicate && older.changes.is_empty() && older.pairs.is_empty());
+        // After a batch without a sequence number there is nothing to replay.
+        s.apply(
+            "s",
+            BatchInput {
+                reports: reports[64..70].to_vec(),
+                ..Default::default()
+            },
+            &LIMITS,
+        )
+        .unwrap();
+        let s = Session::decode(&s.encode()).unwrap();
+        assert!(s.duplicate_ack("s", 4, 10).pairs.is_empty());
     }
 }

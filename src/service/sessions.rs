@@ -137,24 +137,8 @@ pub async fn push(
         let outcome = offload(move || {
             let mut session = Session::decode(&stored.data)?;
             if session.check_sequence(batch2.sequence)? {
-                return Ok(Err(BatchUpdate {
-                    session_id: id2,
-                    sequence: batch2.sequence,
-                    version,
-                    duplicate: true,
-                    instants: Vec::new(),
-                    pending_reports: 0,
-                    changes: Vec::new(),
-                    pairs: Vec::new(),
-                    system_tracks: Vec::new(),
-                    retired: Vec::new(),
-                    warnings: vec![format!(
-                        "batch {} was applied before (the session has applied up to {}): \
-                         acknowledged, not applied again",
-                        batch2.sequence.unwrap_or_default(),
-                        session.last_sequence().unwrap_or_default()
-                    )],
-                }));
+                let sequence = batch2.sequence.unwrap_or_default();
+                return Ok(Err(session.duplicate_ack(&id2, sequence, version)));
             }
             let update = session.apply(&id2, (*batch2).clone(), &limits)?;
             Ok(Ok((update, session.encode(), ttl(&session))))

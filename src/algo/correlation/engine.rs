@@ -263,7 +263,7 @@ pub enum Side {
 }
 
 const STATUSES: [Status; 3] = [Status::Testing, Status::Stopped, Status::Decided];
-const REASONS: [Reason; 14] = [
+pub const REASONS: [Reason; 14] = [
     Reason::Testing,
     Reason::Threshold,
     Reason::EarlyDecision,
