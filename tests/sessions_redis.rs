@@ -12,14 +12,9 @@
 //! `FUSION_SKIP_REDIS_TESTS=1` is set.
 
 use std::{
-    net::{SocketAddr, TcpListener, TcpStream},
-    path::PathBuf,
-    process::{Child, Command, Stdio},
-    sync::{
-        Arc,
-        atomic::{AtomicU64, Ordering},
-    },
-    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+    net::SocketAddr,
+    sync::Arc,
+    time::{Duration, Instant},
 };
 
 use radar_fusion::{
@@ -31,8 +26,10 @@ use serde_json::{Value, json};
 use tokio::{sync::oneshot, task::JoinHandle};
 use tonic::transport::Channel;
 
-const REDIS_URL: &str = "redis://127.0.0.1:6379/0";
-const REDIS_ADDR: &str = "127.0.0.1:6379";
+#[path = "common/redis.rs"]
+mod redis_harness;
+
+use redis_harness::{REDIS_URL, RedisServer, redis_is_up, redis_server_available, unique};
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
 
@@ -166,45 +163,9 @@ async fn spawn_app(configure: impl FnOnce(&mut Settings)) -> App {
     }
 }
 
-/// A key prefix unique to the test (process id, clock, counter).
-fn key_prefix() -> String {
-    static RUN: AtomicU64 = AtomicU64::new(0);
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .expect("clock after 1970")
-        .as_nanos();
-    format!(
-        "radar-fusion-test:sessions-redis:{}-{nanos}-{}",
-        std::process::id(),
-        RUN.fetch_add(1, Ordering::Relaxed)
-    )
-}
-
-fn skip_redis() -> bool {
-    std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1")
-}
-
-/// Whether Redis runs on 127.0.0.1:6379; `false` (with a loud warning) only
-/// when it does not and `FUSION_SKIP_REDIS_TESTS=1`; panics otherwise.
-fn redis_is_up() -> bool {
-    let addr: SocketAddr = REDIS_ADDR.parse().expect("literal address");
-    if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_ok() {
-        return true;
-    }
-    let message = "Redis is not running on 127.0.0.1:6379: start it with \
-         `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
-    if skip_redis() {
-        eprintln!(
-            "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
-        );
-        return false;
-    }
-    panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
-}
-
 /// Two instances on one Redis under one fresh key prefix.
 async fn two_instances(url: &str, configure: impl Fn(&mut Settings)) -> (App, App) {
-    let prefix = key_prefix();
+    let prefix = unique("radar-fusion-test:sessions-redis:");
     let settings = |s: &mut Settings| {
         s.session_store = url.to_string();
         s.session_key_prefix = prefix.clone();
@@ -663,89 +624,6 @@ async fn an_idle_session_expires_on_both_instances_and_pushes_keep_it_alive() {
 
 // ---------------------------------------------------------------- Redis outage
 
-/// A redis-server child process on a port of its own with an append-only
-/// file in a directory of its own (so that its data survives a restart);
-/// killed on drop.
-struct RedisServer {
-    port: u16,
-    dir: PathBuf,
-    child: Option<Child>,
-}
-
-impl RedisServer {
-    fn start(port: u16, dir: PathBuf) -> Self {
-        std::fs::create_dir_all(&dir).expect("redis data directory");
-        let child = Command::new("redis-server")
-            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
-            .args([
-                "--save",
-                "",
-                "--appendonly",
-                "yes",
-                "--appendfsync",
-                "always",
-            ])
-            .arg("--dir")
-            .arg(&dir)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("redis-server is on PATH (apt-get install redis-server)");
-        let server = Self {
-            port,
-            dir,
-            child: Some(child),
-        };
-        server.wait_accepting();
-        server
-    }
-
-    fn wait_accepting(&self) {
-        let addr: SocketAddr = format!("127.0.0.1:{}", self.port).parse().unwrap();
-        let start = Instant::now();
-        while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
-            assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "redis-server did not start on port {}",
-                self.port
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    /// Kills the server at once (SIGKILL): no shutdown save.
-    fn kill(&mut self) {
-        if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-
-    /// Starts it again on the same port and directory.
-    fn restart(&mut self) {
-        self.kill();
-        *self = Self::start(self.port, std::mem::take(&mut self.dir));
-    }
-
-    fn url(&self) -> String {
-        format!("redis://127.0.0.1:{}/0", self.port)
-    }
-}
-
-impl Drop for RedisServer {
-    fn drop(&mut self) {
-        self.kill();
-        if !self.dir.as_os_str().is_empty() {
-            let _ = std::fs::remove_dir_all(&self.dir);
-        }
-    }
-}
-
-fn free_port() -> u16 {
-    let listener = TcpListener::bind("127.0.0.1:0").expect("bind port 0");
-    listener.local_addr().expect("bound").port()
-}
-
 /// Polls `/readyz` until it answers `status`; panics after `limit`.
 async fn wait_readyz(app: &App, status: u16, limit: Duration) {
     let start = Instant::now();
@@ -762,32 +640,10 @@ async fn wait_readyz(app: &App, status: u16, limit: Duration) {
     }
 }
 
-/// A private redis-server on a free port, or `None` (with a loud warning)
-/// when `redis-server` is not on PATH and `FUSION_SKIP_REDIS_TESTS=1`.
+/// A private, persistent redis-server on a free port, or `None` (with a loud
+/// warning) when `redis-server` is not on PATH and `FUSION_SKIP_REDIS_TESTS=1`.
 fn private_redis() -> Option<RedisServer> {
-    if Command::new("redis-server")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
-        if skip_redis() {
-            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
-            return None;
-        }
-        panic!("{message}");
-    }
-    static RUN: AtomicU64 = AtomicU64::new(0);
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos();
-    let dir = std::env::temp_dir().join(format!(
-        "radar-fusion-sessions-redis-{}-{nanos}-{}",
-        std::process::id(),
-        RUN.fetch_add(1, Ordering::Relaxed)
-    ));
-    Some(RedisServer::start(free_port(), dir))
+    redis_server_available().then(RedisServer::persistent)
 }
 
 /// How long a failing call may take: generous against a 0.5 s store timeout.
@@ -1111,15 +967,6 @@ async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other(
 }
 
 /// Sends a signal to the redis-server child (`STOP` or `CONT`).
-fn signal(redis: &RedisServer, name: &str) {
-    let pid = redis.child.as_ref().expect("running").id().to_string();
-    let status = Command::new("kill")
-        .args([&format!("-{name}"), &pid])
-        .status()
-        .expect("kill(1) runs");
-    assert!(status.success(), "kill -{name} {pid}");
-}
-
 /// A Redis that stops answering (SIGSTOP) rather than going away: requests
 /// still fail fast, bounded by the store timeout, and recover when it resumes.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -1138,7 +985,7 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
     }
     let before = a.state(&id).await;
 
-    signal(&redis, "STOP");
+    redis.signal("STOP");
     for app in [&a, &b] {
         let start = Instant::now();
         let r = app
@@ -1151,7 +998,7 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
         assert_eq!(app.get("/readyz").await.status(), 503);
         assert!(start.elapsed() < FAST, "readyz took {:?}", start.elapsed());
     }
-    signal(&redis, "CONT");
+    redis.signal("CONT");
 
     wait_readyz(&a, 200, Duration::from_secs(10)).await;
     wait_readyz(&b, 200, Duration::from_secs(10)).await;

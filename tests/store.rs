@@ -6,18 +6,18 @@
 //! `FUSION_SKIP_REDIS_TESTS=1` is set.
 
 use std::{
-    net::{SocketAddr, TcpListener, TcpStream},
-    process::{Child, Command, Stdio},
-    sync::{
-        Arc,
-        atomic::{AtomicU64, Ordering},
-    },
-    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+    sync::Arc,
+    time::{Duration, Instant},
 };
 
 use radar_fusion::store::{CasOutcome, SessionStore, StoreError, StoreSettings, Stored};
 
-const REDIS_ADDR: &str = "127.0.0.1:6379";
+#[path = "common/redis.rs"]
+mod redis_harness;
+
+use redis_harness::{
+    REDIS_URL, RedisServer, free_port, redis_is_up, redis_server_available, unique,
+};
 const LONG: Duration = Duration::from_secs(60);
 /// A TTL short enough to wait out; tests then sleep at least twice as long.
 const SHORT: Duration = Duration::from_millis(300);
@@ -25,18 +25,9 @@ const SHORT: Duration = Duration::from_millis(300);
 // ---------------------------------------------------------------- harness
 
 fn settings(url: &str) -> StoreSettings {
-    static RUN: AtomicU64 = AtomicU64::new(0);
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .expect("clock after 1970")
-        .as_nanos();
     StoreSettings {
         url: url.to_string(),
-        key_prefix: format!(
-            "radar-fusion-test:{}-{nanos}-{}",
-            std::process::id(),
-            RUN.fetch_add(1, Ordering::Relaxed)
-        ),
+        key_prefix: unique("radar-fusion-test:"),
         max_sessions_per_tenant: 100,
         max_memory_bytes: 1 << 20,
         timeout: Duration::from_secs(1),
@@ -51,26 +42,13 @@ async fn memory(configure: impl FnOnce(&mut StoreSettings)) -> Arc<SessionStore>
     Arc::new(store)
 }
 
-fn skip_redis() -> bool {
-    std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1")
-}
-
 /// A Redis store on 127.0.0.1:6379 with a fresh key prefix, or `None` (with a
 /// loud warning) when Redis is down and `FUSION_SKIP_REDIS_TESTS=1`.
 async fn redis(configure: impl FnOnce(&mut StoreSettings)) -> Option<Arc<SessionStore>> {
-    let addr: SocketAddr = REDIS_ADDR.parse().expect("literal address");
-    if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_err() {
-        let message = "Redis is not running on 127.0.0.1:6379: start it with \
-             `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
-        if skip_redis() {
-            eprintln!(
-                "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
-            );
-            return None;
-        }
-        panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
+    if !redis_is_up() {
+        return None;
     }
-    let mut s = settings("redis://127.0.0.1:6379/0");
+    let mut s = settings(REDIS_URL);
     configure(&mut s);
     let store = SessionStore::connect(&s).await.expect("redis store");
     assert_eq!(store.backend(), "redis");
@@ -495,50 +473,6 @@ async fn memory_bound_counts_live_bytes_and_frees_expired_ones() {
 
 // ---------------------------------------------------------------- Redis outage
 
-/// A redis-server child process on a port of its own, killed on drop.
-struct RedisServer {
-    port: u16,
-    child: Option<Child>,
-}
-
-impl RedisServer {
-    fn start(port: u16) -> Self {
-        let child = Command::new("redis-server")
-            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
-            .args(["--save", "", "--appendonly", "no"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("redis-server is on PATH (apt-get install redis-server)");
-        Self {
-            port,
-            child: Some(child),
-        }
-    }
-
-    fn stop(&mut self) {
-        if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-
-    fn url(&self) -> String {
-        format!("redis://127.0.0.1:{}/0", self.port)
-    }
-}
-
-impl Drop for RedisServer {
-    fn drop(&mut self) {
-        self.stop();
-    }
-}
-
-fn free_port() -> u16 {
-    let listener = TcpListener::bind("127.0.0.1:0").expect("bind port 0");
-    listener.local_addr().expect("bound").port()
-}
-
 /// Polls `ping` until it succeeds; panics after `limit`.
 async fn wait_until_up(store: &SessionStore, limit: Duration) {
     let start = Instant::now();
@@ -570,17 +504,8 @@ async fn assert_unavailable_fast<T: std::fmt::Debug>(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn redis_outage_fails_fast_and_recovers() {
-    if Command::new("redis-server")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
-        if skip_redis() {
-            eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
-            return;
-        }
-        panic!("{message}");
+    if !redis_server_available() {
+        return;
     }
     let port = free_port();
     let mut s = settings(&format!("redis://127.0.0.1:{port}/0"));
@@ -592,13 +517,13 @@ async fn redis_outage_fails_fast_and_recovers() {
     assert_unavailable_fast("ping", timeout, store.ping()).await;
     assert_unavailable_fast("get", timeout, store.get("t", "a")).await;
 
-    let mut server = RedisServer::start(port);
+    let mut server = RedisServer::start(port, None);
     assert_eq!(server.url(), s.url);
     wait_until_up(&store, Duration::from_secs(10)).await;
     assert_eq!(store.create("t", "a", b"1".to_vec(), LONG).await, Ok(1));
 
     // Redis goes away.
-    server.stop();
+    server.kill();
     assert_unavailable_fast("ping", timeout, store.ping()).await;
     assert_unavailable_fast("get", timeout, store.get("t", "a")).await;
     assert_unavailable_fast(
@@ -617,7 +542,7 @@ async fn redis_outage_fails_fast_and_recovers() {
     assert_unavailable_fast("delete", timeout, store.delete("t", "a")).await;
 
     // Redis comes back (empty): the store reconnects by itself.
-    let _server = RedisServer::start(port);
+    let _server = RedisServer::start(port, None);
     wait_until_up(&store, Duration::from_secs(10)).await;
     assert_eq!(store.get("t", "a").await, Ok(None));
     assert_eq!(store.create("t", "b", b"2".to_vec(), LONG).await, Ok(1));
