@@ -727,10 +727,12 @@ impl Session {
     /// the session's current version.
     pub fn duplicate_ack(&self, id: &str, sequence: u64, version: u64) -> BatchUpdate {
         let last = self.last_sequence.unwrap_or_default();
+        // `last_update` is kept only for a sequenced batch, so its sequence
+        // is the session's last one.
         let replay = self
             .last_update
             .as_ref()
-            .filter(|u| u.sequence == Some(sequence) && sequence == last);
+            .filter(|u| u.sequence == Some(sequence));
         let mut update = match replay {
             Some(u) => {
                 let mut u = u.clone();
