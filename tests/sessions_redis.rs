@@ -12,19 +12,22 @@
 //! `FUSION_SKIP_REDIS_TESTS=1` is set.
 
 use std::{
-    net::SocketAddr,
     sync::Arc,
     time::{Duration, Instant},
 };
 
 use radar_fusion::{
-    app::Application,
     config::Settings,
     proto::{self as pb, session_service_client::SessionServiceClient},
 };
 use serde_json::{Value, json};
-use tokio::{sync::oneshot, task::JoinHandle};
 use tonic::transport::Channel;
+
+#[path = "api/helpers.rs"]
+#[allow(dead_code)] // the API suite's harness; this suite uses part of it
+mod helpers;
+
+use helpers::TestApp as App;
 
 #[path = "common/redis.rs"]
 mod redis_harness;
@@ -39,37 +42,19 @@ const CHUNK: usize = 8;
 
 // ---------------------------------------------------------------- harness
 
-/// One running instance of the service (REST and gRPC on port 0).
-struct App {
-    base: String,
-    grpc_addr: SocketAddr,
-    client: reqwest::Client,
-    shutdown: Option<oneshot::Sender<()>>,
-    server: Option<JoinHandle<anyhow::Result<()>>>,
+/// Session calls on a running instance (the API suite's `TestApp`).
+trait SessionCalls {
+    async fn get(&self, path: &str) -> reqwest::Response;
+    async fn get_ok(&self, path: &str) -> Value;
+    /// Creates a session over REST and returns its id.
+    async fn create(&self, config: &Value) -> String;
+    async fn push(&self, id: &str, body: &Value) -> Value;
+    async fn state(&self, id: &str) -> Value;
+    async fn sessions(&self) -> SessionServiceClient<Channel>;
+    async fn delete(&self, id: &str);
 }
 
-impl App {
-    fn url(&self, path: &str) -> String {
-        format!("{}{}", self.base, path)
-    }
-
-    async fn post(&self, path: &str, body: &Value) -> reqwest::Response {
-        self.client
-            .post(self.url(path))
-            .json(body)
-            .send()
-            .await
-            .expect("request sent")
-    }
-
-    async fn post_ok(&self, path: &str, body: &Value) -> Value {
-        let response = self.post(path, body).await;
-        let status = response.status();
-        let text = response.text().await.expect("body");
-        assert_eq!(status, 200, "POST {path}: {text}");
-        serde_json::from_str(&text).expect("JSON response")
-    }
-
+impl SessionCalls for App {
     async fn get(&self, path: &str) -> reqwest::Response {
         self.client
             .get(self.url(path))
@@ -86,9 +71,8 @@ impl App {
         serde_json::from_str(&text).expect("JSON response")
     }
 
-    /// Creates a session over REST and returns its id.
     async fn create(&self, config: &Value) -> String {
-        let response = self.post("/v1/sessions", config).await;
+        let response = self.post_json("/v1/sessions", config).await;
         assert_eq!(response.status(), 201);
         let body: Value = response.json().await.unwrap();
         body["id"].as_str().expect("id").to_string()
@@ -104,12 +88,7 @@ impl App {
     }
 
     async fn sessions(&self) -> SessionServiceClient<Channel> {
-        let channel = Channel::from_shared(format!("http://{}", self.grpc_addr))
-            .expect("valid uri")
-            .connect()
-            .await
-            .expect("gRPC connects");
-        SessionServiceClient::new(channel)
+        SessionServiceClient::new(self.channel().await)
     }
 
     async fn delete(&self, id: &str) {
@@ -121,50 +100,17 @@ impl App {
             .unwrap();
         assert_eq!(response.status(), 204);
     }
-
-    async fn stop(mut self) {
-        if let Some(tx) = self.shutdown.take() {
-            let _ = tx.send(());
-        }
-        if let Some(server) = self.server.take() {
-            server.await.expect("server task").expect("server stops");
-        }
-    }
-}
-
-impl Drop for App {
-    fn drop(&mut self) {
-        if let Some(tx) = self.shutdown.take() {
-            let _ = tx.send(());
-        }
-    }
 }
 
 async fn spawn_app(configure: impl FnOnce(&mut Settings)) -> App {
-    let mut settings = Settings::for_tests();
-    // Short grace: a test's leftover connections must not hold it up.
-    settings.shutdown_grace_s = 1.0;
-    configure(&mut settings);
-    let app = Application::build(settings).await.expect("app builds");
-    let (http_addr, grpc_addr, state) = (app.http_addr(), app.grpc_addr(), app.state());
-    let (tx, rx) = oneshot::channel::<()>();
-    let server = tokio::spawn(app.run_until(async move {
-        let _ = rx.await;
-    }));
-    for _ in 0..400 {
-        if state.is_ready() {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-    assert!(state.is_ready(), "the instance did not start");
-    App {
-        base: format!("http://{http_addr}"),
-        grpc_addr,
-        client: reqwest::Client::new(),
-        shutdown: Some(tx),
-        server: Some(server),
-    }
+    let app = helpers::spawn_app_with(|s| {
+        // Short grace: a test's leftover connections must not hold it up.
+        s.shutdown_grace_s = 1.0;
+        configure(s);
+    })
+    .await;
+    assert!(app.state.is_ready(), "the instance did not start");
+    app
 }
 
 /// Two instances on one Redis under one fresh key prefix.
@@ -246,7 +192,7 @@ async fn single_instance_outcome() -> Value {
     let n = batch_bodies(&reports).len() as u64;
     assert_eq!(state["batches"], n);
     assert_eq!(state["version"], n + 1);
-    app.stop().await;
+    app.stop().await.expect("server stops");
     outcome(&state)
 }
 
@@ -514,7 +460,7 @@ async fn an_idle_session_expires_on_both_instances_and_pushes_keep_it_alive() {
         let list = app.get_ok("/v1/sessions").await;
         assert_eq!(list["sessions"], json!([]));
     }
-    let late = b.post(&format!("{path}/batches"), &bodies[3]).await;
+    let late = b.post_json(&format!("{path}/batches"), &bodies[3]).await;
     assert_eq!(late.status(), 404);
     let err = a
         .sessions()
@@ -579,7 +525,7 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
     for app in [&a, &b] {
         let start = Instant::now();
         let r = app
-            .post(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+            .post_json(&format!("/v1/sessions/{id}/batches"), &bodies[k])
             .await;
         let took = start.elapsed();
         assert!(took < FAST, "push took {took:?}");
@@ -603,7 +549,7 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
     }
     // Creating, listing and deleting fail the same way.
     let start = Instant::now();
-    let r = a.post("/v1/sessions", &session_config(&batch)).await;
+    let r = a.post_json("/v1/sessions", &session_config(&batch)).await;
     assert_eq!(r.status(), 503);
     assert_eq!(r.headers()["retry-after"], "1");
     assert_eq!(b.get("/v1/sessions").await.status(), 503);
@@ -659,8 +605,8 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
     }
     assert_same_outcome(&a.state(&id).await, &reference);
     b.delete(&id).await;
-    a.stop().await;
-    b.stop().await;
+    a.stop().await.expect("server stops");
+    b.stop().await.expect("server stops");
 }
 
 // ---------------------------------------------------------------- gRPC
@@ -892,7 +838,7 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
     for app in [&a, &b] {
         let start = Instant::now();
         let r = app
-            .post(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+            .post_json(&format!("/v1/sessions/{id}/batches"), &bodies[k])
             .await;
         assert!(start.elapsed() < FAST, "push took {:?}", start.elapsed());
         assert_eq!(r.status(), 503);

@@ -42,8 +42,10 @@ impl TestApp {
     /// POSTs a JSON body, expects 200 and returns the JSON response.
     pub async fn post_ok(&self, path: &str, body: &serde_json::Value) -> serde_json::Value {
         let response = self.post_json(path, body).await;
-        assert_eq!(response.status(), 200, "POST {path}");
-        response.json().await.expect("JSON response")
+        let status = response.status();
+        let text = response.text().await.expect("body");
+        assert_eq!(status, 200, "POST {path}: {text}");
+        serde_json::from_str(&text).expect("JSON response")
     }
 
     /// A gRPC client of the dedicated gRPC port.
