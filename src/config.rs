@@ -165,6 +165,12 @@ pub struct Settings {
     /// Memory session store: most bytes of session state held in total.
     #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES", default_value_t = 512 * 1024 * 1024, global = true)]
     pub session_memory_bytes: usize,
+    /// Decoded sessions kept in process in front of the store, bounded by
+    /// their encoded size in bytes (0: none). A push to a session this
+    /// replica wrote last then skips the read and the decode; the
+    /// compare-and-set on the version still guards every write.
+    #[arg(long, env = "FUSION_SESSION_CACHE_BYTES", default_value_t = 256 * 1024 * 1024, global = true)]
+    pub session_cache_bytes: usize,
     /// Longest time one session-store (Redis) command may take before it fails.
     #[arg(
         long,

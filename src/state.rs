@@ -10,7 +10,9 @@ use std::sync::{
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use crate::{auth::ApiKeys, config::Settings, store::SessionStore};
+use crate::{
+    auth::ApiKeys, config::Settings, service::session::persist::Sessions, store::SessionStore,
+};
 
 #[derive(Clone)]
 pub struct AppState {
@@ -23,7 +25,7 @@ struct Inner {
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
     metrics: PrometheusHandle,
-    store: SessionStore,
+    sessions: Sessions,
 }
 
 impl AppState {
@@ -33,6 +35,7 @@ impl AppState {
         metrics: PrometheusHandle,
         store: SessionStore,
     ) -> Self {
+        let sessions = Sessions::new(store, settings.session_cache_bytes);
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {
@@ -41,7 +44,7 @@ impl AppState {
                 ready: AtomicBool::new(false),
                 in_flight,
                 metrics,
-                store,
+                sessions,
             }),
         }
     }
@@ -77,7 +80,13 @@ impl AppState {
 
     /// Where streaming sessions keep their state.
     pub fn store(&self) -> &SessionStore {
-        &self.inner.store
+        self.inner.sessions.store()
+    }
+
+    /// The sessions of every kind: the store and the cache of decoded
+    /// sessions in front of it.
+    pub fn sessions(&self) -> &Sessions {
+        &self.inner.sessions
     }
 
     /// Whether the service should receive traffic now: started, not draining,

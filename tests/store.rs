@@ -101,16 +101,27 @@ async fn crud(store: &Arc<SessionStore>) {
     assert!(!store.delete("default", "a").await.unwrap());
 
     assert_eq!(
-        store.create("default", "b", b"bee".to_vec(), LONG).await,
+        store
+            .create("default", "b", "correlation", b"bee".to_vec(), LONG)
+            .await,
         Ok(1)
     );
     assert_eq!(
-        store.create("default", "a", vec![0, 255, 7], LONG).await,
+        store
+            .create("default", "a", "correlation", vec![0, 255, 7], LONG)
+            .await,
         Ok(1)
     );
-    assert_eq!(store.create("default", "c", vec![], LONG).await, Ok(1));
     assert_eq!(
-        store.create("default", "a", b"again".to_vec(), LONG).await,
+        store
+            .create("default", "c", "correlation", vec![], LONG)
+            .await,
+        Ok(1)
+    );
+    assert_eq!(
+        store
+            .create("default", "a", "correlation", b"again".to_vec(), LONG)
+            .await,
         Err(StoreError::AlreadyExists)
     );
     assert_eq!(
@@ -154,7 +165,9 @@ async fn crud(store: &Arc<SessionStore>) {
     assert_eq!(ids, ["a", "c"]);
     // A deleted id can be created again, from version 1.
     assert_eq!(
-        store.create("default", "b", b"new".to_vec(), LONG).await,
+        store
+            .create("default", "b", "correlation", b"new".to_vec(), LONG)
+            .await,
         Ok(1)
     );
     store.ping().await.unwrap();
@@ -166,7 +179,10 @@ async fn cas(store: &Arc<SessionStore>) {
         store.compare_and_set(t, "x", 1, b"v2".to_vec(), LONG).await,
         Ok(CasOutcome::Missing)
     );
-    store.create(t, "x", b"v1".to_vec(), LONG).await.unwrap();
+    store
+        .create(t, "x", "correlation", b"v1".to_vec(), LONG)
+        .await
+        .unwrap();
     assert_eq!(
         store.compare_and_set(t, "x", 1, b"v2".to_vec(), LONG).await,
         Ok(CasOutcome::Stored { version: 2 })
@@ -220,7 +236,7 @@ async fn cas(store: &Arc<SessionStore>) {
 
 async fn tenants_are_isolated(store: &Arc<SessionStore>) {
     store
-        .create("acme", "s1", b"acme's".to_vec(), LONG)
+        .create("acme", "s1", "correlation", b"acme's".to_vec(), LONG)
         .await
         .unwrap();
     assert_eq!(store.get("default", "s1").await.unwrap(), None);
@@ -235,7 +251,7 @@ async fn tenants_are_isolated(store: &Arc<SessionStore>) {
     // The same id in another tenant is another session.
     assert_eq!(
         store
-            .create("default", "s1", b"default's".to_vec(), LONG)
+            .create("default", "s1", "correlation", b"default's".to_vec(), LONG)
             .await,
         Ok(1)
     );
@@ -271,7 +287,7 @@ async fn ids_are_not_confused(store: &Arc<SessionStore>) {
     ];
     for (i, (tenant, id)) in names.iter().enumerate() {
         store
-            .create(tenant, id, vec![i as u8], LONG)
+            .create(tenant, id, "correlation", vec![i as u8], LONG)
             .await
             .unwrap_or_else(|e| panic!("{tenant:?}/{id:?}: {e}"));
     }
@@ -300,10 +316,13 @@ async fn ids_are_not_confused(store: &Arc<SessionStore>) {
 async fn ttl_expires_and_cas_refreshes(store: &Arc<SessionStore>) {
     let t = "default";
     store
-        .create(t, "short", b"s".to_vec(), SHORT)
+        .create(t, "short", "correlation", b"s".to_vec(), SHORT)
         .await
         .unwrap();
-    store.create(t, "kept", b"k".to_vec(), SHORT).await.unwrap();
+    store
+        .create(t, "kept", "correlation", b"k".to_vec(), SHORT)
+        .await
+        .unwrap();
     let ttl = store.list(t).await.unwrap()[0].ttl_remaining;
     assert!(ttl > Duration::ZERO && ttl <= SHORT, "{ttl:?}");
     // The update restarts the idle time with its own TTL.
@@ -333,7 +352,9 @@ async fn ttl_expires_and_cas_refreshes(store: &Arc<SessionStore>) {
     assert_eq!(ids, ["kept"]);
     // An expired id can be created afresh.
     assert_eq!(
-        store.create(t, "short", b"again".to_vec(), LONG).await,
+        store
+            .create(t, "short", "correlation", b"again".to_vec(), LONG)
+            .await,
         Ok(1)
     );
     // And a CAS can shorten the TTL too: it sets it, it does not only extend it.
@@ -350,30 +371,47 @@ async fn ttl_expires_and_cas_refreshes(store: &Arc<SessionStore>) {
 /// Run with `max_sessions_per_tenant = 3`.
 async fn sessions_per_tenant_are_bounded(store: &Arc<SessionStore>) {
     let t = "acme";
-    store.create(t, "long", vec![1], LONG).await.unwrap();
-    store.create(t, "short1", vec![2], SHORT).await.unwrap();
-    store.create(t, "short2", vec![3], SHORT).await.unwrap();
+    store
+        .create(t, "long", "correlation", vec![1], LONG)
+        .await
+        .unwrap();
+    store
+        .create(t, "short1", "correlation", vec![2], SHORT)
+        .await
+        .unwrap();
+    store
+        .create(t, "short2", "correlation", vec![3], SHORT)
+        .await
+        .unwrap();
     assert_eq!(
-        store.create(t, "fourth", vec![4], LONG).await,
+        store
+            .create(t, "fourth", "correlation", vec![4], LONG)
+            .await,
         Err(StoreError::TooManySessions { limit: 3 })
     );
     // Other tenants have their own allowance.
     store
-        .create("default", "fourth", vec![4], LONG)
+        .create("default", "fourth", "correlation", vec![4], LONG)
         .await
         .unwrap();
     // A deleted session frees its place.
     assert!(store.delete(t, "short2").await.unwrap());
-    store.create(t, "fourth", vec![4], LONG).await.unwrap();
+    store
+        .create(t, "fourth", "correlation", vec![4], LONG)
+        .await
+        .unwrap();
     assert_eq!(
-        store.create(t, "fifth", vec![5], LONG).await,
+        store.create(t, "fifth", "correlation", vec![5], LONG).await,
         Err(StoreError::TooManySessions { limit: 3 })
     );
     // Expired sessions do not count.
     tokio::time::sleep(SHORT * 2).await;
-    store.create(t, "fifth", vec![5], LONG).await.unwrap();
+    store
+        .create(t, "fifth", "correlation", vec![5], LONG)
+        .await
+        .unwrap();
     assert_eq!(
-        store.create(t, "sixth", vec![6], LONG).await,
+        store.create(t, "sixth", "correlation", vec![6], LONG).await,
         Err(StoreError::TooManySessions { limit: 3 })
     );
     let ids: Vec<String> = store
@@ -393,7 +431,13 @@ async fn concurrent_cas_loses_no_update(store: &Arc<SessionStore>) {
     const EACH: u64 = 25;
     let t = "default";
     store
-        .create(t, "counter", 0u64.to_le_bytes().to_vec(), LONG)
+        .create(
+            t,
+            "counter",
+            "correlation",
+            0u64.to_le_bytes().to_vec(),
+            LONG,
+        )
         .await
         .unwrap();
     let mut tasks = tokio::task::JoinSet::new();
@@ -443,14 +487,25 @@ async fn memory_bound_counts_live_bytes_and_frees_expired_ones() {
     let SessionStore::Memory(inner) = &*store else {
         unreachable!()
     };
-    store.create("a", "x", vec![0; 60], SHORT).await.unwrap();
-    store.create("b", "y", vec![0; 30], LONG).await.unwrap();
+    store
+        .create("a", "x", "correlation", vec![0; 60], SHORT)
+        .await
+        .unwrap();
+    store
+        .create("b", "y", "correlation", vec![0; 30], LONG)
+        .await
+        .unwrap();
     assert_eq!(inner.bytes(), 90);
     assert_eq!(
-        store.create("a", "z", vec![0; 11], LONG).await,
+        store
+            .create("a", "z", "correlation", vec![0; 11], LONG)
+            .await,
         Err(StoreError::MemoryFull { limit_bytes: 100 })
     );
-    store.create("a", "z", vec![0; 10], LONG).await.unwrap();
+    store
+        .create("a", "z", "correlation", vec![0; 10], LONG)
+        .await
+        .unwrap();
     // Growing a session counts only the difference; shrinking frees bytes.
     assert_eq!(
         store.compare_and_set("b", "y", 1, vec![0; 31], LONG).await,
@@ -466,7 +521,10 @@ async fn memory_bound_counts_live_bytes_and_frees_expired_ones() {
     assert_eq!(inner.bytes(), 80);
     // Expired sessions of any tenant are evicted before refusing.
     tokio::time::sleep(SHORT * 2).await;
-    store.create("b", "w", vec![0; 80], LONG).await.unwrap();
+    store
+        .create("b", "w", "correlation", vec![0; 80], LONG)
+        .await
+        .unwrap();
     assert_eq!(inner.bytes(), 100);
     assert_eq!(store.get("a", "x").await.unwrap(), None);
 }
@@ -520,7 +578,12 @@ async fn redis_outage_fails_fast_and_recovers() {
     let mut server = RedisServer::start(port, None);
     assert_eq!(server.url(), s.url);
     wait_until_up(&store, Duration::from_secs(10)).await;
-    assert_eq!(store.create("t", "a", b"1".to_vec(), LONG).await, Ok(1));
+    assert_eq!(
+        store
+            .create("t", "a", "correlation", b"1".to_vec(), LONG)
+            .await,
+        Ok(1)
+    );
 
     // Redis goes away.
     server.kill();
@@ -529,7 +592,7 @@ async fn redis_outage_fails_fast_and_recovers() {
     assert_unavailable_fast(
         "create",
         timeout,
-        store.create("t", "b", b"2".to_vec(), LONG),
+        store.create("t", "b", "correlation", b"2".to_vec(), LONG),
     )
     .await;
     assert_unavailable_fast(
@@ -545,7 +608,12 @@ async fn redis_outage_fails_fast_and_recovers() {
     let _server = RedisServer::start(port, None);
     wait_until_up(&store, Duration::from_secs(10)).await;
     assert_eq!(store.get("t", "a").await, Ok(None));
-    assert_eq!(store.create("t", "b", b"2".to_vec(), LONG).await, Ok(1));
+    assert_eq!(
+        store
+            .create("t", "b", "correlation", b"2".to_vec(), LONG)
+            .await,
+        Ok(1)
+    );
     assert_eq!(
         store
             .compare_and_set("t", "b", 1, b"3".to_vec(), LONG)

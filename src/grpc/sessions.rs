@@ -1,10 +1,12 @@
 //! gRPC `SessionService`: the unary session calls and the bidirectional
-//! batch stream, over the same service layer as `/v1/sessions`.
+//! batch stream, over the same service layer as `/v1/sessions`. Each batch
+//! of a stream is held to the limits of a unary call (an in-flight slot, the
+//! request timeout) and a failed batch is answered inside the stream.
 
 use std::pin::Pin;
 
 use tokio_stream::{Stream, StreamExt};
-use tonic::{Request, Response, Status, Streaming};
+use tonic::{Code, Request, Response, Status, Streaming};
 
 use super::{
     correlation::{correlate_input, finite, pair_result, system_track, track_ref},
@@ -16,8 +18,11 @@ use crate::{
     proto::{self as pb, session_service_server::SessionService, stream_request::Kind},
     service::{
         ServiceError, Violations, correlation as corr,
-        session::{self as domain, change_name},
-        sessions,
+        session::{
+            Batch, KindName, Spec, Update, View,
+            correlation::{self as domain, CorrelationSession, change_name},
+            persist::AnyView,
+        },
     },
     state::AppState,
 };
@@ -34,7 +39,20 @@ fn tenant<T>(request: &Request<T>) -> String {
         .map_or_else(|| DEFAULT_TENANT.to_string(), |t| t.0.clone())
 }
 
-fn spec_in(req: pb::CreateSessionRequest) -> Result<domain::SessionSpec, ServiceError> {
+/// A create request: the kind it names and its configuration.
+enum KindSpec {
+    Correlation(Spec<domain::SessionSpec>),
+}
+
+fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
+    match KindName::parse(Some(&req.kind), "kind")? {
+        KindName::Correlation => Ok(KindSpec::Correlation(correlation_spec_in(req)?)),
+    }
+}
+
+fn correlation_spec_in(
+    req: pb::CreateSessionRequest,
+) -> Result<Spec<domain::SessionSpec>, ServiceError> {
     let mut config = correlate_input(pb::CorrelateTracksRequest {
         state_layout: req.state_layout,
         method: req.method,
@@ -53,15 +71,17 @@ fn spec_in(req: pb::CreateSessionRequest) -> Result<domain::SessionSpec, Service
             tracks: Vec::new(),
         })
         .collect();
-    Ok(domain::SessionSpec {
-        config,
+    Ok(Spec {
         idle_expiry_s: req.idle_expiry_s,
-        retire_after_s: req.retire_after_s,
-        history_instants: req.history_instants,
+        body: domain::SessionSpec {
+            config,
+            retire_after_s: req.retire_after_s,
+            history_instants: req.history_instants,
+        },
     })
 }
 
-fn batch_in(req: pb::PushBatchRequest) -> Result<domain::BatchInput, ServiceError> {
+fn batch_in(req: pb::PushBatchRequest) -> Result<Batch<domain::BatchInput>, ServiceError> {
     let mut v = Violations::new();
     let reports = req
         .reports
@@ -94,22 +114,26 @@ fn batch_in(req: pb::PushBatchRequest) -> Result<domain::BatchInput, ServiceErro
         })
         .collect();
     v.finish()?;
-    Ok(domain::BatchInput {
+    Ok(Batch {
         sequence: req.sequence,
-        reports,
-        flush: req.flush,
+        body: domain::BatchInput {
+            reports,
+            flush: req.flush,
+        },
     })
 }
 
-fn update_out(u: domain::BatchUpdate) -> pb::BatchUpdate {
+fn update_out(u: Update<domain::BatchUpdate>) -> pb::BatchUpdate {
+    let (b, warnings) = (u.body, u.warnings);
     pb::BatchUpdate {
         session_id: u.session_id,
         sequence: u.sequence,
         version: u.version,
         duplicate: u.duplicate,
-        instants: u.instants,
-        pending_reports: u.pending_reports,
-        changes: u
+        error: None,
+        instants: b.instants,
+        pending_reports: b.pending_reports,
+        changes: b
             .changes
             .into_iter()
             .map(|c| pb::PairChange {
@@ -118,30 +142,38 @@ fn update_out(u: domain::BatchUpdate) -> pb::BatchUpdate {
                 change: change_name(c.change).into(),
             })
             .collect(),
-        pairs: u.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: u.system_tracks.into_iter().map(system_track).collect(),
-        retired: u.retired.into_iter().map(track_ref).collect(),
-        warnings: u.warnings,
+        pairs: b.pairs.into_iter().map(pair_result).collect(),
+        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
+        retired: b.retired.into_iter().map(track_ref).collect(),
+        warnings,
     }
 }
 
-fn view_out(v: domain::SessionView) -> pb::SessionState {
+fn view_out(v: AnyView) -> pb::SessionState {
+    match v {
+        AnyView::Correlation(v) => correlation_view_out(v),
+    }
+}
+
+fn correlation_view_out(v: View<domain::SessionView>) -> pb::SessionState {
+    let b = v.body;
     pb::SessionState {
         id: v.id,
+        kind: v.kind.into(),
         version: v.version,
         created_unix_ms: v.created_unix_ms,
         last_sequence: v.last_sequence,
         batches: v.batches,
-        instants_processed: v.instants_processed,
-        last_instant_t: v.last_instant.and_then(finite),
-        pending_reports: v.pending_reports,
-        reports_accepted: v.reports_accepted,
-        reports_late: v.reports_late,
+        instants_processed: b.instants_processed,
+        last_instant_t: b.last_instant.and_then(finite),
+        pending_reports: b.pending_reports,
+        reports_accepted: b.reports_accepted,
+        reports_late: b.reports_late,
         idle_expiry_s: v.idle_expiry_s,
-        retire_after_s: v.retire_after_s,
-        history_instants: v.history_instants,
-        method: v.method,
-        nodes: v
+        retire_after_s: b.retire_after_s,
+        history_instants: b.history_instants,
+        method: b.method,
+        nodes: b
             .nodes
             .into_iter()
             .map(|n| pb::SessionNode {
@@ -156,14 +188,14 @@ fn view_out(v: domain::SessionView) -> pb::SessionState {
                     .collect(),
             })
             .collect(),
-        pairs: v.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: v.system_tracks.into_iter().map(system_track).collect(),
+        pairs: b.pairs.into_iter().map(pair_result).collect(),
+        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         encoded_bytes: v.encoded_bytes as u64,
     }
 }
 
 /// The acknowledgement of opening or attaching a stream.
-fn opened(view: &domain::SessionView) -> pb::BatchUpdate {
+fn opened(view: &pb::SessionState) -> pb::BatchUpdate {
     pb::BatchUpdate {
         session_id: view.id.clone(),
         sequence: view.last_sequence,
@@ -171,6 +203,30 @@ fn opened(view: &domain::SessionView) -> pb::BatchUpdate {
         pending_reports: view.pending_reports,
         ..Default::default()
     }
+}
+
+async fn create(state: &AppState, tenant: &str, spec: KindSpec) -> Result<AnyView, ServiceError> {
+    let sessions = state.sessions();
+    Ok(match spec {
+        KindSpec::Correlation(spec) => {
+            AnyView::Correlation(sessions.create::<CorrelationSession>(tenant, spec).await?)
+        }
+    })
+}
+
+async fn push(
+    state: &AppState,
+    tenant: &str,
+    id: &str,
+    req: pb::PushBatchRequest,
+) -> Result<pb::BatchUpdate, ServiceError> {
+    let batch = batch_in(req)?;
+    let limits = state.settings().session_limits();
+    let update = state
+        .sessions()
+        .push::<CorrelationSession>(tenant, id, batch, limits)
+        .await?;
+    Ok(update_out(update))
 }
 
 type UpdateStream = Pin<Box<dyn Stream<Item = Result<pb::BatchUpdate, Status>> + Send>>;
@@ -183,7 +239,7 @@ impl SessionService for SessionGrpc {
     ) -> Result<Response<pb::SessionState>, Status> {
         let tenant = tenant(&request);
         let spec = spec_in(request.into_inner()).map_err(to_status)?;
-        let view = sessions::create(self.state.store(), &tenant, spec)
+        let view = create(&self.state, &tenant, spec)
             .await
             .map_err(to_status)?;
         Ok(Response::new(view_out(view)))
@@ -195,7 +251,10 @@ impl SessionService for SessionGrpc {
     ) -> Result<Response<pb::SessionState>, Status> {
         let tenant = tenant(&request);
         let id = request.into_inner().session_id;
-        let view = sessions::get(self.state.store(), &tenant, &id)
+        let view = self
+            .state
+            .sessions()
+            .get(&tenant, &id)
             .await
             .map_err(to_status)?;
         Ok(Response::new(view_out(view)))
@@ -206,7 +265,10 @@ impl SessionService for SessionGrpc {
         request: Request<pb::ListSessionsRequest>,
     ) -> Result<Response<pb::ListSessionsResponse>, Status> {
         let tenant = tenant(&request);
-        let metas = sessions::list(self.state.store(), &tenant)
+        let metas = self
+            .state
+            .sessions()
+            .list(&tenant)
             .await
             .map_err(to_status)?;
         Ok(Response::new(pb::ListSessionsResponse {
@@ -214,6 +276,7 @@ impl SessionService for SessionGrpc {
                 .into_iter()
                 .map(|m| pb::SessionSummary {
                     id: m.id,
+                    kind: m.kind,
                     version: m.version,
                     encoded_bytes: m.bytes as u64,
                     expires_in_s: m.ttl_remaining.as_secs_f64(),
@@ -228,7 +291,9 @@ impl SessionService for SessionGrpc {
     ) -> Result<Response<pb::DeleteSessionResponse>, Status> {
         let tenant = tenant(&request);
         let id = request.into_inner().session_id;
-        sessions::delete(self.state.store(), &tenant, &id)
+        self.state
+            .sessions()
+            .delete(&tenant, &id)
             .await
             .map_err(to_status)?;
         Ok(Response::new(pb::DeleteSessionResponse {}))
@@ -241,12 +306,10 @@ impl SessionService for SessionGrpc {
         let tenant = tenant(&request);
         let req = request.into_inner();
         let id = req.session_id.clone();
-        let batch = batch_in(req).map_err(to_status)?;
-        let limits = self.state.settings().session_limits();
-        let update = sessions::push(self.state.store(), &tenant, &id, batch, limits)
+        let update = push(&self.state, &tenant, &id, req)
             .await
             .map_err(to_status)?;
-        Ok(Response::new(update_out(update)))
+        Ok(Response::new(update))
     }
 
     type StreamStream = UpdateStream;
@@ -258,6 +321,9 @@ impl SessionService for SessionGrpc {
         let tenant = tenant(&request);
         let mut inbound = request.into_inner();
         let state = self.state.clone();
+        // A few answers ahead at most: a client that does not read makes
+        // `send` wait, this task stops reading, and HTTP/2 flow control
+        // holds the client's writes. Nothing buffers without bound.
         let (tx, rx) = tokio::sync::mpsc::channel::<Result<pb::BatchUpdate, Status>>(4);
         tokio::spawn(async move {
             let mut session: Option<String> = None;
@@ -268,8 +334,9 @@ impl SessionService for SessionGrpc {
                     Err(_) => break,
                     Ok(m) => handle(&state, &tenant, &mut session, m).await,
                 };
-                let failed = result.is_err();
-                if tx.send(result).await.is_err() || failed {
+                // Only a failed open or attach ends the stream.
+                let fatal = result.is_err();
+                if tx.send(result).await.is_err() || fatal {
                     break;
                 }
             }
@@ -279,6 +346,9 @@ impl SessionService for SessionGrpc {
     }
 }
 
+/// Answers one message of a stream: `Err` ends the stream (a failed open or
+/// attach, a message out of place); a batch's own failure is an answer
+/// with `error` set.
 async fn handle(
     state: &AppState,
     tenant: &str,
@@ -288,32 +358,16 @@ async fn handle(
     match (m.kind, session.as_ref()) {
         (Some(Kind::Open(req)), None) => {
             let spec = spec_in(req).map_err(to_status)?;
-            let view = sessions::create(state.store(), tenant, spec)
-                .await
-                .map_err(to_status)?;
+            let view = view_out(create(state, tenant, spec).await.map_err(to_status)?);
             *session = Some(view.id.clone());
             Ok(opened(&view))
         }
         (Some(Kind::Attach(id)), None) => {
-            let view = sessions::get(state.store(), tenant, &id)
-                .await
-                .map_err(to_status)?;
+            let view = view_out(state.sessions().get(tenant, &id).await.map_err(to_status)?);
             *session = Some(view.id.clone());
             Ok(opened(&view))
         }
-        (Some(Kind::Batch(req)), Some(id)) => {
-            let batch = batch_in(req).map_err(to_status)?;
-            let update = sessions::push(
-                state.store(),
-                tenant,
-                id,
-                batch,
-                state.settings().session_limits(),
-            )
-            .await
-            .map_err(to_status)?;
-            Ok(update_out(update))
-        }
+        (Some(Kind::Batch(req)), Some(id)) => Ok(stream_batch(state, tenant, id, req).await),
         (Some(Kind::Batch(_)), None) => Err(Status::failed_precondition(
             "the stream's first message must open or attach a session",
         )),
@@ -321,5 +375,87 @@ async fn handle(
             "the stream is already bound to a session",
         )),
         (None, _) => Err(Status::invalid_argument("kind: is required")),
+    }
+}
+
+/// One batch of a stream, held to the limits of a unary call: an in-flight
+/// slot (none free: UNAVAILABLE, shed, not queued) and the request timeout
+/// (DEADLINE_EXCEEDED). A failure is the batch's answer, not the stream's end.
+async fn stream_batch(
+    state: &AppState,
+    tenant: &str,
+    id: &str,
+    req: pb::PushBatchRequest,
+) -> pb::BatchUpdate {
+    let sequence = req.sequence;
+    let failed = |status: Status| pb::BatchUpdate {
+        session_id: id.to_string(),
+        sequence,
+        error: Some(stream_error(&status)),
+        ..Default::default()
+    };
+    let Some(_permit) = state.try_admit() else {
+        metrics::counter!("requests_shed_total", "transport" => "grpc").increment(1);
+        return failed(Status::unavailable(
+            "too many requests in flight; retry this batch shortly",
+        ));
+    };
+    let timeout = state.settings().request_timeout();
+    match tokio::time::timeout(timeout, push(state, tenant, id, req)).await {
+        Ok(Ok(update)) => update,
+        Ok(Err(e)) => failed(to_status(e)),
+        Err(_) => failed(Status::deadline_exceeded(format!(
+            "the batch took longer than the configured limit of {} s \
+             (FUSION_REQUEST_TIMEOUT_S); its outcome is unknown: retry it with the same \
+             sequence number",
+            timeout.as_secs_f64()
+        ))),
+    }
+}
+
+/// A status as the stream's per-batch error, with the bad fields of a
+/// `BadRequest` detail.
+fn stream_error(status: &Status) -> pb::StreamError {
+    use tonic_types::StatusExt;
+    let violations = status
+        .get_details_bad_request()
+        .map(|b| {
+            b.field_violations
+                .into_iter()
+                .map(|v| pb::FieldViolation {
+                    field: v.field,
+                    description: v.description,
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    pb::StreamError {
+        code: status.code() as i32,
+        code_name: code_name(status.code()).into(),
+        message: status.message().into(),
+        violations,
+    }
+}
+
+/// The name of a gRPC status code, as in the gRPC specification.
+fn code_name(code: Code) -> &'static str {
+    match code {
+        Code::Ok => "OK",
+        Code::Cancelled => "CANCELLED",
+        Code::Unknown => "UNKNOWN",
+        Code::InvalidArgument => "INVALID_ARGUMENT",
+        Code::DeadlineExceeded => "DEADLINE_EXCEEDED",
+        Code::NotFound => "NOT_FOUND",
+        Code::AlreadyExists => "ALREADY_EXISTS",
+        Code::PermissionDenied => "PERMISSION_DENIED",
+        Code::ResourceExhausted => "RESOURCE_EXHAUSTED",
+        Code::FailedPrecondition => "FAILED_PRECONDITION",
+        Code::Aborted => "ABORTED",
+        Code::OutOfRange => "OUT_OF_RANGE",
+        Code::Unimplemented => "UNIMPLEMENTED",
+        Code::Internal => "INTERNAL",
+        Code::Unavailable => "UNAVAILABLE",
+        Code::DataLoss => "DATA_LOSS",
+        Code::Unauthenticated => "UNAUTHENTICATED",
     }
 }

@@ -1,4 +1,6 @@
-//! REST routes of streaming correlation sessions under `/v1/sessions`.
+//! REST routes of streaming sessions under `/v1/sessions`: every kind of
+//! session is created, listed, read and deleted here; a batch goes to the
+//! kind of its session (a correlation batch carries `reports`).
 
 use axum::{
     Extension, Json,
@@ -20,17 +22,24 @@ use crate::{
     auth::Tenant,
     service::{
         correlation as corr,
-        session::{self as domain, change_name},
-        sessions,
+        session::{
+            Batch, KindName, Spec, Update, View,
+            correlation::{self as domain, CorrelationSession, change_name},
+            persist::AnyView,
+        },
     },
     state::AppState,
 };
 
-/// A streaming correlation session: the batch correlation's configuration,
-/// the node ids, and the session's own settings.
+/// A streaming session. `kind` names what it does (`correlation`, the
+/// default: the batch correlation's configuration, the node ids, and the
+/// session's own settings).
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateSessionRequest {
+    /// `correlation` (default).
+    #[schema(example = "correlation")]
+    pub kind: Option<String>,
     #[schema(example = json!(["x", "vx", "y", "vy"]))]
     pub state_layout: Vec<String>,
     pub method: CorrelationMethod,
@@ -137,6 +146,8 @@ pub struct SessionNode {
 #[derive(Debug, Serialize, ToSchema)]
 pub struct SessionState {
     pub id: String,
+    /// The session's kind: `correlation`.
+    pub kind: &'static str,
     pub version: u64,
     pub created_unix_ms: u64,
     pub last_sequence: Option<u64>,
@@ -160,6 +171,8 @@ pub struct SessionState {
 #[derive(Debug, Serialize, ToSchema)]
 pub struct SessionSummary {
     pub id: String,
+    /// The session's kind.
+    pub kind: String,
     pub version: u64,
     pub encoded_bytes: usize,
     pub expires_in_s: f64,
@@ -170,7 +183,7 @@ pub struct SessionList {
     pub sessions: Vec<SessionSummary>,
 }
 
-pub(crate) fn spec_in(req: CreateSessionRequest) -> domain::SessionSpec {
+fn correlation_spec_in(req: CreateSessionRequest) -> Spec<domain::SessionSpec> {
     let nodes = req
         .nodes
         .into_iter()
@@ -179,53 +192,58 @@ pub(crate) fn spec_in(req: CreateSessionRequest) -> domain::SessionSpec {
             tracks: Vec::new(),
         })
         .collect();
-    domain::SessionSpec {
-        config: config_in(
-            req.state_layout,
-            req.method,
-            req.motion_model,
-            req.alignment,
-            req.measurement_matrix,
-            nodes,
-            req.pruning,
-            req.fuse,
-        ),
+    Spec {
         idle_expiry_s: req.idle_expiry_s,
-        retire_after_s: req.retire_after_s,
-        history_instants: req.history_instants,
+        body: domain::SessionSpec {
+            config: config_in(
+                req.state_layout,
+                req.method,
+                req.motion_model,
+                req.alignment,
+                req.measurement_matrix,
+                nodes,
+                req.pruning,
+                req.fuse,
+            ),
+            retire_after_s: req.retire_after_s,
+            history_instants: req.history_instants,
+        },
     }
 }
 
-pub(crate) fn batch_in(req: PushBatchRequest) -> domain::BatchInput {
-    domain::BatchInput {
+fn batch_in(req: PushBatchRequest) -> Batch<domain::BatchInput> {
+    Batch {
         sequence: req.sequence,
-        flush: req.flush,
-        reports: req
-            .reports
-            .into_iter()
-            .map(|r| domain::ReportInput {
-                node: Some(r.node),
-                track: Some(r.track),
-                sample: sample_in(TrackSample {
-                    t: r.t,
-                    state: r.state,
-                    covariance: r.covariance,
-                    gain: r.gain,
-                }),
-            })
-            .collect(),
+        body: domain::BatchInput {
+            flush: req.flush,
+            reports: req
+                .reports
+                .into_iter()
+                .map(|r| domain::ReportInput {
+                    node: Some(r.node),
+                    track: Some(r.track),
+                    sample: sample_in(TrackSample {
+                        t: r.t,
+                        state: r.state,
+                        covariance: r.covariance,
+                        gain: r.gain,
+                    }),
+                })
+                .collect(),
+        },
     }
 }
 
-fn update_out(u: domain::BatchUpdate) -> BatchUpdate {
+fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
+    let b = u.body;
     BatchUpdate {
         session_id: u.session_id,
         sequence: u.sequence,
         version: u.version,
         duplicate: u.duplicate,
-        instants: u.instants,
-        pending_reports: u.pending_reports,
-        changes: u
+        instants: b.instants,
+        pending_reports: b.pending_reports,
+        changes: b
             .changes
             .into_iter()
             .map(|c| PairChange {
@@ -234,30 +252,38 @@ fn update_out(u: domain::BatchUpdate) -> BatchUpdate {
                 change: change_name(c.change),
             })
             .collect(),
-        pairs: u.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: u.system_tracks.into_iter().map(system_track).collect(),
-        retired: u.retired.into_iter().map(track_ref).collect(),
+        pairs: b.pairs.into_iter().map(pair_result).collect(),
+        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
+        retired: b.retired.into_iter().map(track_ref).collect(),
         warnings: u.warnings,
     }
 }
 
-fn view_out(v: domain::SessionView) -> SessionState {
+fn view_out(v: AnyView) -> SessionState {
+    match v {
+        AnyView::Correlation(v) => correlation_view_out(v),
+    }
+}
+
+fn correlation_view_out(v: View<domain::SessionView>) -> SessionState {
+    let b = v.body;
     SessionState {
         id: v.id,
+        kind: v.kind,
         version: v.version,
         created_unix_ms: v.created_unix_ms,
         last_sequence: v.last_sequence,
         batches: v.batches,
-        instants_processed: v.instants_processed,
-        last_instant_t: v.last_instant.and_then(finite),
-        pending_reports: v.pending_reports,
-        reports_accepted: v.reports_accepted,
-        reports_late: v.reports_late,
+        instants_processed: b.instants_processed,
+        last_instant_t: b.last_instant.and_then(finite),
+        pending_reports: b.pending_reports,
+        reports_accepted: b.reports_accepted,
+        reports_late: b.reports_late,
         idle_expiry_s: v.idle_expiry_s,
-        retire_after_s: v.retire_after_s,
-        history_instants: v.history_instants,
-        method: v.method,
-        nodes: v
+        retire_after_s: b.retire_after_s,
+        history_instants: b.history_instants,
+        method: b.method,
+        nodes: b
             .nodes
             .into_iter()
             .map(|n| SessionNode {
@@ -272,8 +298,8 @@ fn view_out(v: domain::SessionView) -> SessionState {
                     .collect(),
             })
             .collect(),
-        pairs: v.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: v.system_tracks.into_iter().map(system_track).collect(),
+        pairs: b.pairs.into_iter().map(pair_result).collect(),
+        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         encoded_bytes: v.encoded_bytes,
     }
 }
@@ -292,12 +318,20 @@ pub async fn create(
     Extension(tenant): Extension<Tenant>,
     ApiJson(req): ApiJson<CreateSessionRequest>,
 ) -> Result<impl IntoResponse, Problem> {
-    let view = sessions::create(state.store(), &tenant.0, spec_in(req)).await?;
+    let view = match KindName::parse(req.kind.as_deref(), "kind")? {
+        KindName::Correlation => AnyView::Correlation(
+            state
+                .sessions()
+                .create::<CorrelationSession>(&tenant.0, correlation_spec_in(req))
+                .await?,
+        ),
+    };
+    let view = view_out(view);
     let location = format!("/v1/sessions/{}", view.id);
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
-        Json(view_out(view)),
+        Json(view),
     ))
 }
 
@@ -311,12 +345,13 @@ pub async fn list(
     State(state): State<AppState>,
     Extension(tenant): Extension<Tenant>,
 ) -> Result<Json<SessionList>, Problem> {
-    let metas = sessions::list(state.store(), &tenant.0).await?;
+    let metas = state.sessions().list(&tenant.0).await?;
     Ok(Json(SessionList {
         sessions: metas
             .into_iter()
             .map(|m| SessionSummary {
                 id: m.id,
+                kind: m.kind,
                 version: m.version,
                 encoded_bytes: m.bytes,
                 expires_in_s: m.ttl_remaining.as_secs_f64(),
@@ -338,7 +373,7 @@ pub async fn get(
     Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
 ) -> Result<Json<SessionState>, Problem> {
-    let view = sessions::get(state.store(), &tenant.0, &id).await?;
+    let view = state.sessions().get(&tenant.0, &id).await?;
     Ok(Json(view_out(view)))
 }
 
@@ -355,7 +390,7 @@ pub async fn delete(
     Extension(tenant): Extension<Tenant>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, Problem> {
-    sessions::delete(state.store(), &tenant.0, &id).await?;
+    state.sessions().delete(&tenant.0, &id).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -368,7 +403,7 @@ pub async fn delete(
         (status = 404, description = "No such session for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The sequence number skips ahead", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Too many reports in the batch", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid reports", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid reports, or a batch of another kind than the session's", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Too many tracks in the session", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "Session store unreachable", body = Problem, content_type = "application/problem+json"),
     ))]
@@ -379,6 +414,9 @@ pub async fn push(
     ApiJson(req): ApiJson<PushBatchRequest>,
 ) -> Result<Json<BatchUpdate>, Problem> {
     let limits = state.settings().session_limits();
-    let update = sessions::push(state.store(), &tenant.0, &id, batch_in(req), limits).await?;
+    let update = state
+        .sessions()
+        .push::<CorrelationSession>(&tenant.0, &id, batch_in(req), limits)
+        .await?;
     Ok(Json(update_out(update)))
 }

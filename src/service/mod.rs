@@ -8,7 +8,6 @@ pub mod dimension;
 pub mod jpda;
 pub mod rules;
 pub mod session;
-pub mod sessions;
 
 use std::time::Instant;
 
@@ -59,6 +58,14 @@ pub struct Violations(Vec<FieldViolation>);
 impl Violations {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The invalid-input error of one violation of `field`.
+    pub fn single(field: impl Into<String>, message: impl Into<String>) -> ServiceError {
+        ServiceError::InvalidInput(vec![FieldViolation {
+            field: field.into(),
+            message: message.into(),
+        }])
     }
 
     /// Records a violation of `field`.

@@ -29,6 +29,7 @@ struct Inner {
 
 struct Entry {
     version: u64,
+    kind: String,
     data: Vec<u8>,
     expires_at: Instant,
 }
@@ -55,6 +56,7 @@ impl MemoryStore {
         &self,
         tenant: &str,
         id: &str,
+        kind: &str,
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<u64, StoreError> {
@@ -76,6 +78,7 @@ impl MemoryStore {
             id.to_string(),
             Entry {
                 version: 1,
+                kind: kind.to_string(),
                 data,
                 expires_at: expiry(now, ttl),
             },
@@ -123,11 +126,9 @@ impl MemoryStore {
             .get_mut(tenant)
             .and_then(|m| m.get_mut(id))
             .expect("the entry was live a moment ago under the same lock");
-        *entry = Entry {
-            version,
-            data,
-            expires_at: expiry(now, ttl),
-        };
+        entry.version = version;
+        entry.data = data;
+        entry.expires_at = expiry(now, ttl);
         Ok(CasOutcome::Stored { version })
     }
 
@@ -161,6 +162,7 @@ impl MemoryStore {
                 .map(|(id, e)| SessionMeta {
                     id: id.clone(),
                     version: e.version,
+                    kind: e.kind.clone(),
                     bytes: e.data.len(),
                     ttl_remaining: e.expires_at.saturating_duration_since(now),
                 })

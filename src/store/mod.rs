@@ -43,6 +43,9 @@ pub struct Stored {
 pub struct SessionMeta {
     pub id: String,
     pub version: u64,
+    /// The session's kind, as given at creation (`correlation` for a session
+    /// created before kinds existed).
+    pub kind: String,
     pub bytes: usize,
     pub ttl_remaining: Duration,
 }
@@ -97,19 +100,21 @@ impl SessionStore {
         }
     }
 
-    /// Creates a session at version 1 that expires after `ttl` unless updated.
+    /// Creates a session of `kind` (a label the store keeps for listing) at
+    /// version 1 that expires after `ttl` unless updated.
     /// `AlreadyExists` when the id is live; `TooManySessions` when the tenant
     /// holds `max_sessions_per_tenant` live sessions (checked atomically).
     pub async fn create(
         &self,
         tenant: &str,
         id: &str,
+        kind: &str,
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<u64, StoreError> {
         match self {
-            Self::Memory(s) => s.create(tenant, id, data, ttl),
-            Self::Redis(s) => s.create(tenant, id, data, ttl).await,
+            Self::Memory(s) => s.create(tenant, id, kind, data, ttl),
+            Self::Redis(s) => s.create(tenant, id, kind, data, ttl).await,
         }
     }
 

@@ -3,7 +3,8 @@
 //! Keys (tenant and id escaped by [`escape`], so `:` in them cannot make two
 //! names collide):
 //! - `{prefix}:{tenant}:s:{id}` — a hash, `v` the version in decimal, `d` the
-//!   data, expiring after the session's TTL (PEXPIRE);
+//!   data, `k` the session's kind (absent in sessions written before kinds
+//!   existed: `correlation`), expiring after the session's TTL (PEXPIRE);
 //! - `{prefix}:{tenant}:idx` — a sorted set of the tenant's escaped ids scored
 //!   by their expiry time in Unix milliseconds (Redis's clock), for counting
 //!   and listing live sessions; expired members are removed before use.
@@ -48,13 +49,13 @@ if redis.call('PTTL', KEYS[2]) < tonumber(ARGV[3]) then
 end
 ";
 
-/// KEYS: session, index. ARGV: escaped id, data, ttl ms, limit.
+/// KEYS: session, index. ARGV: escaped id, data, ttl ms, limit, kind.
 /// Returns 1 created, -1 exists, -2 too many sessions.
 const CREATE: &str = r"
 redis.call('ZREMRANGEBYSCORE', KEYS[2], '-inf', now)
 if redis.call('EXISTS', KEYS[1]) == 1 then return -1 end
 if redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return -2 end
-redis.call('HSET', KEYS[1], 'v', '1', 'd', ARGV[2])
+redis.call('HSET', KEYS[1], 'v', '1', 'd', ARGV[2], 'k', ARGV[5])
 redis.call('PEXPIRE', KEYS[1], ARGV[3])
 redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
 ";
@@ -78,7 +79,7 @@ return n
 ";
 
 /// KEYS: index. ARGV: the session key prefix `{prefix}:{tenant}:s:`.
-/// Returns {escaped id, version, data bytes, pttl} per live session.
+/// Returns {escaped id, version, data bytes, pttl, kind} per live session.
 const LIST: &str = r"
 redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
 local out = {}
@@ -86,7 +87,8 @@ for _, m in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do
   local k = ARGV[1] .. m
   local v = redis.call('HGET', k, 'v')
   if v then
-    table.insert(out, {m, v, redis.call('HSTRLEN', k, 'd'), redis.call('PTTL', k)})
+    local kind = redis.call('HGET', k, 'k') or 'correlation'
+    table.insert(out, {m, v, redis.call('HSTRLEN', k, 'd'), redis.call('PTTL', k), kind})
   else
     redis.call('ZREM', KEYS[1], m)
   end
@@ -126,6 +128,7 @@ impl RedisStore {
         &self,
         tenant: &str,
         id: &str,
+        kind: &str,
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<u64, StoreError> {
@@ -135,7 +138,8 @@ impl RedisStore {
             .arg(escape(id))
             .arg(data)
             .arg(ttl_ms(ttl))
-            .arg(self.max_sessions_per_tenant);
+            .arg(self.max_sessions_per_tenant)
+            .arg(kind);
         match self.bounded(call.invoke_async::<i64>(&mut conn)).await? {
             1 => Ok(1),
             -1 => Err(StoreError::AlreadyExists),
@@ -212,14 +216,15 @@ impl RedisStore {
         let mut conn = self.conn.clone();
         let mut call = self.list.key(self.index_key(tenant));
         call.arg(self.session_key(tenant, ""));
-        let rows: Vec<(String, String, i64, i64)> =
+        let rows: Vec<(String, String, i64, i64, String)> =
             self.bounded(call.invoke_async(&mut conn)).await?;
         let mut sessions = rows
             .into_iter()
-            .map(|(id, version, bytes, pttl)| {
+            .map(|(id, version, bytes, pttl, kind)| {
                 Ok(SessionMeta {
                     id: unescape(&id).ok_or_else(|| corrupt(format!("bad index member {id:?}")))?,
                     version: parse_version(&version)?,
+                    kind,
                     bytes: usize::try_from(bytes).unwrap_or(0),
                     ttl_remaining: Duration::from_millis(u64::try_from(pttl).unwrap_or(0)),
                 })
