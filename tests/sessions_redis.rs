@@ -872,3 +872,69 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
     assert_same_outcome(&a.state(&id).await, &reference);
     a.delete(&id).await;
 }
+
+/// A stream batch that outlives the request timeout (its Redis hung, the
+/// store timeout longer than the request's) answers DEADLINE_EXCEEDED inside
+/// the stream, which stays open; once Redis resumes, the same batch retried
+/// with its sequence number is applied exactly once in all (the hung write
+/// may have landed: then the retry is acknowledged as a duplicate), and the
+/// stream goes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_batch_past_the_request_timeout_answers_deadline_exceeded_and_the_stream_goes_on()
+{
+    let Some(redis) = private_redis() else {
+        return;
+    };
+    let (a, _b) = two_instances(&redis.url(), |s| {
+        s.store_timeout_s = 5.0;
+        s.request_timeout_s = 0.3;
+    })
+    .await;
+    let (batch, reports) = scenario();
+    let bodies = batch_bodies(&reports);
+    let id = a.create(&session_config(&batch)).await;
+    let mut client = a.sessions().await;
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    let mut updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .unwrap()
+        .into_inner();
+    let send = |body: &Value| pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Batch(pb_batch("", body))),
+    };
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Attach(id.clone())),
+    })
+    .await
+    .unwrap();
+    updates.message().await.unwrap().expect("attached");
+    tx.send(send(&bodies[0])).await.unwrap();
+    let first = updates.message().await.unwrap().expect("update");
+    assert!(first.error.is_none());
+
+    redis.signal("STOP");
+    tx.send(send(&bodies[1])).await.unwrap();
+    let timed_out = updates
+        .message()
+        .await
+        .unwrap()
+        .expect("answered, not ended");
+    let error = timed_out.error.expect("timed out");
+    assert_eq!(error.code_name, "DEADLINE_EXCEEDED");
+    assert!(error.message.contains("same sequence number"), "{error:?}");
+    redis.signal("CONT");
+    wait_readyz(&a, 200, Duration::from_secs(10)).await;
+
+    tx.send(send(&bodies[1])).await.unwrap();
+    let retried = updates.message().await.unwrap().expect("update");
+    assert!(retried.error.is_none(), "{retried:?}");
+    tx.send(send(&bodies[2])).await.unwrap();
+    let next = updates.message().await.unwrap().expect("update");
+    assert!(next.error.is_none() && !next.duplicate, "{next:?}");
+    let state = a.state(&id).await;
+    assert_eq!(
+        (state["batches"].as_u64(), state["version"].as_u64()),
+        (Some(3), Some(4))
+    );
+}

@@ -342,3 +342,131 @@ async fn grpc_stream_matches_rest_and_a_dropped_stream_leaves_the_session_consis
         .unwrap_err();
     assert_eq!(err.code(), tonic::Code::NotFound);
 }
+
+/// Each batch of a gRPC stream is held to the limits of a unary call: with
+/// `--max-in-flight 1` and the one slot taken, a batch is shed (its answer
+/// carries UNAVAILABLE, nothing queues); a bad batch gets its error inside
+/// the stream; the stream stays open and the next good batch is applied.
+#[tokio::test]
+async fn grpc_stream_batches_are_shed_and_fail_one_by_one_and_the_stream_goes_on() {
+    use radar_fusion::proto::{self as pb, session_service_client::SessionServiceClient};
+    let app = spawn_app_with(|s| s.max_in_flight = 1).await;
+    let (_, reports) = scenario();
+    let mut client = SessionServiceClient::new(app.channel().await);
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    let batch = |sequence: u64, reports: &[Value]| pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+            sequence: Some(sequence),
+            reports: reports.iter().map(pb_report).collect(),
+            ..Default::default()
+        })),
+    };
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Open(pb_open())),
+    })
+    .await
+    .unwrap();
+    let mut updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .unwrap()
+        .into_inner();
+    let id = updates.message().await.unwrap().unwrap().session_id;
+
+    // Another request holds the only in-flight slot.
+    let held = app.state.try_admit().expect("the slot is free");
+    tx.send(batch(1, &reports[..4])).await.unwrap();
+    let shed = updates
+        .message()
+        .await
+        .unwrap()
+        .expect("answered, not ended");
+    let error = shed.error.expect("shed");
+    assert_eq!(
+        (error.code, error.code_name.as_str()),
+        (tonic::Code::Unavailable as i32, "UNAVAILABLE")
+    );
+    assert_eq!(shed.sequence, Some(1));
+    drop(held);
+
+    // A bad batch: its error, with the field, inside the stream.
+    let mut bad = batch(1, &reports[..4]);
+    if let Some(pb::stream_request::Kind::Batch(b)) = &mut bad.kind {
+        b.reports[2].node = "nowhere".into();
+    }
+    tx.send(bad).await.unwrap();
+    let failed = updates.message().await.unwrap().expect("answered");
+    let error = failed.error.expect("refused");
+    assert_eq!(error.code_name, "INVALID_ARGUMENT");
+    assert_eq!(error.violations[0].field, "reports[2].node");
+
+    // A gap: FAILED_PRECONDITION, in the stream too.
+    tx.send(batch(5, &reports[..4])).await.unwrap();
+    let gap = updates.message().await.unwrap().expect("answered");
+    assert_eq!(gap.error.expect("gap").code_name, "FAILED_PRECONDITION");
+
+    // The stream goes on: the shed and refused batch 1 is applied now.
+    tx.send(batch(1, &reports[..4])).await.unwrap();
+    let ok = updates.message().await.unwrap().expect("answered");
+    assert!(ok.error.is_none() && !ok.duplicate, "{ok:?}");
+    assert_eq!((ok.sequence, ok.version), (Some(1), 2));
+    let state = client
+        .get_session(pb::GetSessionRequest { session_id: id })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!((state.kind.as_str(), state.batches), ("correlation", 1));
+}
+
+/// `kind` at creation: `correlation` is the default and may be named; an
+/// unknown kind is a 422 naming `kind` (INVALID_ARGUMENT over gRPC); the
+/// session, its summary in the list, and the gRPC state say the kind.
+#[tokio::test]
+async fn sessions_say_their_kind_and_an_unknown_kind_is_refused() {
+    use radar_fusion::proto::{self as pb, session_service_client::SessionServiceClient};
+    let app = spawn_app().await;
+    let (batch, _) = scenario();
+    let mut config = session_config(&batch);
+    let created = app.post_json("/v1/sessions", &config).await;
+    assert_eq!(created.status(), 201);
+    let created: Value = created.json().await.unwrap();
+    assert_eq!(created["kind"], "correlation");
+    config["kind"] = json!("correlation");
+    let named = app.post_json("/v1/sessions", &config).await;
+    assert_eq!(named.status(), 201);
+    let named: Value = named.json().await.unwrap();
+    assert_eq!(named["kind"], "correlation");
+    config["kind"] = json!("tea_making");
+    let problem =
+        crate::helpers::assert_problem(app.post_json("/v1/sessions", &config).await, 422).await;
+    assert_eq!(crate::helpers::problem_fields(&problem), ["kind"]);
+    let list: Value = app
+        .client
+        .get(app.url("/v1/sessions"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let kinds: Vec<&str> = list["sessions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["correlation", "correlation"]);
+
+    let mut client = SessionServiceClient::new(app.channel().await);
+    let mut open = pb_open();
+    open.kind = "tea_making".into();
+    let err = client.create_session(open).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::InvalidArgument);
+    assert_eq!(crate::helpers::grpc_fields(&err), ["kind"]);
+    let listed = client
+        .list_sessions(pb::ListSessionsRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(listed.sessions.iter().all(|s| s.kind == "correlation"));
+}
