@@ -19,7 +19,7 @@ use super::{
 };
 use crate::{
     service::{ServiceError, offload},
-    store::{CasOutcome, SessionMeta, SessionStore, StoreError},
+    store::{CasOutcome, SessionMeta, SessionStore, StoreError, Stored},
 };
 
 /// How many times a push re-reads the session after losing a race.
@@ -136,12 +136,7 @@ impl Sessions {
 
     /// A session of any kind.
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
-        check_id(id)?;
-        let stored = self
-            .store
-            .get(tenant, id)
-            .await?
-            .ok_or_else(|| not_found(id))?;
+        let stored = self.read(tenant, id).await?;
         let id = id.to_string();
         offload(move || {
             let tag = stored_kind(&stored.data)?;
@@ -168,14 +163,18 @@ impl Sessions {
         tenant: &str,
         id: &str,
     ) -> Result<View<K::View>, ServiceError> {
-        check_id(id)?;
-        let stored = self
-            .store
-            .get(tenant, id)
-            .await?
-            .ok_or_else(|| not_found(id))?;
+        let stored = self.read(tenant, id).await?;
         let id = id.to_string();
         offload(move || view_of::<K>(&id, &stored.data, stored.version)).await
+    }
+
+    /// The stored session `id`, or 404.
+    async fn read(&self, tenant: &str, id: &str) -> Result<Stored, ServiceError> {
+        check_id(id)?;
+        self.store
+            .get(tenant, id)
+            .await?
+            .ok_or_else(|| not_found(id))
     }
 
     pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, ServiceError> {
@@ -208,13 +207,15 @@ impl Sessions {
         let mut attempt = 0;
         while attempt < MAX_ATTEMPTS {
             let (version, session, source) = match self.cache.take::<Envelope<K>>(tenant, id) {
-                Some((version, session)) => (version, Some(session), Source::Cache),
+                Some((version, session)) => {
+                    metrics::counter!("fusion_session_cache_total", "outcome" => "hit")
+                        .increment(1);
+                    (version, Some(session), Source::Cache)
+                }
                 None => {
-                    let stored = self
-                        .store
-                        .get(tenant, id)
-                        .await?
-                        .ok_or_else(|| not_found(id))?;
+                    metrics::counter!("fusion_session_cache_total", "outcome" => "miss")
+                        .increment(1);
+                    let stored = self.read(tenant, id).await?;
                     (stored.version, None, Source::Store(stored.data))
                 }
             };
@@ -245,6 +246,8 @@ impl Sessions {
                 // fresh read. It was taken out of the cache, so the next
                 // attempt reads the store.
                 _ if from_cache && !matches!(worked, Ok(Ok(_))) => {
+                    metrics::counter!("fusion_session_cache_total", "outcome" => "unconfirmed")
+                        .increment(1);
                     attempt += 1;
                     continue;
                 }
@@ -278,6 +281,10 @@ impl Sessions {
                 CasOutcome::Missing => return Err(not_found(id)),
                 CasOutcome::Conflict { .. } => {
                     metrics::counter!("fusion_session_cas_conflicts_total").increment(1);
+                    if from_cache {
+                        metrics::counter!("fusion_session_cache_total", "outcome" => "stale")
+                            .increment(1);
+                    }
                     tracing::debug!(
                         session = id,
                         attempt,

@@ -61,6 +61,20 @@ impl Push for Session {
     }
 }
 
+/// Applies the sequenced batch `sequence` of `reports`, which must succeed.
+fn push_sequenced(s: &mut Session, sequence: u64, reports: &[ReportInput]) {
+    s.push(
+        "s",
+        TestBatch {
+            sequence: Some(sequence),
+            reports: reports.to_vec(),
+            flush: false,
+        },
+        &LIMITS,
+    )
+    .unwrap();
+}
+
 fn decode(bytes: &[u8]) -> Result<Session, DecodeError> {
     Session::decode(bytes)
 }
@@ -200,16 +214,7 @@ fn run_session(input: &CorrelateInput, size: usize, history: u32) -> SessionView
     let mut bytes = session_of(input, history).encode();
     for (i, chunk) in reports.chunks(size).enumerate() {
         let mut s = decode(&bytes).unwrap();
-        s.push(
-            "s",
-            TestBatch {
-                sequence: Some(i as u64 + 1),
-                reports: chunk.to_vec(),
-                flush: false,
-            },
-            &LIMITS,
-        )
-        .unwrap();
+        push_sequenced(&mut s, i as u64 + 1, chunk);
         bytes = s.encode();
     }
     let mut s = decode(&bytes).unwrap();
@@ -449,21 +454,9 @@ fn a_format_1_session_reads_and_continues_like_a_current_one() {
     let reports = reports_of(&input);
     let half = reports.len() / 2;
     let push = |s: &mut Session, i: usize, chunk: &[ReportInput]| {
-        s.push(
-            "s",
-            TestBatch {
-                sequence: Some(i as u64 + 1),
-                reports: chunk.to_vec(),
-                flush: false,
-            },
-            &LIMITS,
-        )
-        .unwrap();
+        push_sequenced(s, i as u64 + 1, chunk);
     };
-    let mut now = session_of(&input, 8);
-    for (i, chunk) in reports[..half].chunks(16).enumerate() {
-        push(&mut now, i, chunk);
-    }
+    let mut now = first_half_session();
     let mut read = decode(old).unwrap();
     assert_eq!(read.view("s", 0, 0).unwrap(), now.view("s", 0, 0).unwrap());
     assert!(read.last_update.is_none(), "format 1 kept no update");
@@ -494,16 +487,7 @@ fn first_half_session() -> Session {
     let half = reports.len() / 2;
     let mut now = session_of(&input, 8);
     for (i, chunk) in reports[..half].chunks(16).enumerate() {
-        now.push(
-            "s",
-            TestBatch {
-                sequence: Some(i as u64 + 1),
-                reports: chunk.to_vec(),
-                flush: false,
-            },
-            &LIMITS,
-        )
-        .unwrap();
+        push_sequenced(&mut now, i as u64 + 1, chunk);
     }
     now
 }
@@ -596,16 +580,7 @@ fn a_format_2_session_reads_and_continues_like_a_current_one() {
     assert_eq!(read.encode(), current);
     for (j, chunk) in reports[half..].chunks(16).enumerate() {
         for s in [&mut read, &mut now] {
-            s.push(
-                "s",
-                TestBatch {
-                    sequence: Some(last + 1 + j as u64),
-                    reports: chunk.to_vec(),
-                    flush: false,
-                },
-                &LIMITS,
-            )
-            .unwrap();
+            push_sequenced(s, last + 1 + j as u64, chunk);
         }
     }
     assert_eq!(read.encode(), now.encode());
