@@ -128,9 +128,12 @@ pub fn associate_cartesian(
             let mut s = &h * &track.p * h.transpose() + &plot.r;
             symmetrize(&mut s);
             let chol = cholesky("innovation covariance", &s)?;
-            let w = chol.l().solve_lower_triangular(&nu).ok_or(AlgoError::NotPositiveDefinite {
-                what: "innovation covariance",
-            })?;
+            let w = chol
+                .l()
+                .solve_lower_triangular(&nu)
+                .ok_or(AlgoError::NotPositiveDefinite {
+                    what: "innovation covariance",
+                })?;
             let d2 = w.norm_squared();
             if d2 <= gates[k - 2] {
                 let ln_det: f64 = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
@@ -174,7 +177,11 @@ pub fn associate_cartesian(
     for (t, track) in tracks.iter_mut().enumerate() {
         let row = &hyps[t];
         let b = &beta[t];
-        let pairs: Vec<(usize, f64)> = row.iter().map(|h| h.measurement).zip(b[1..].iter().copied()).collect();
+        let pairs: Vec<(usize, f64)> = row
+            .iter()
+            .map(|h| h.measurement)
+            .zip(b[1..].iter().copied())
+            .collect();
         hit.push(best(b[0], &pairs));
         if b[0] >= 1.0 {
             continue;
@@ -265,7 +272,10 @@ fn hard(hyps: &[Vec<Hypothesis>], chosen: Vec<(usize, usize)>) -> Vec<Vec<f64>> 
         })
         .collect();
     for (t, j) in chosen {
-        let k = hyps[t].iter().position(|h| h.measurement == j).expect("a gated pair");
+        let k = hyps[t]
+            .iter()
+            .position(|h| h.measurement == j)
+            .expect("a gated pair");
         beta[t][0] = 0.0;
         beta[t][k + 1] = 1.0;
     }
@@ -311,12 +321,13 @@ fn soft(
             miss,
             count_factor: None,
         };
-        let marginals = if config.method == Method::Amsjpda || tracks.len() > config.max_exact_tracks {
-            amsjpda_marginals(&problem)
-        } else {
-            exact_marginals(&problem, config.max_hypotheses)
-                .unwrap_or_else(|_| amsjpda_marginals(&problem))
-        };
+        let marginals =
+            if config.method == Method::Amsjpda || tracks.len() > config.max_exact_tracks {
+                amsjpda_marginals(&problem)
+            } else {
+                exact_marginals(&problem, config.max_hypotheses)
+                    .unwrap_or_else(|_| amsjpda_marginals(&problem))
+            };
         for (local, &t) in tracks.iter().enumerate() {
             beta[t].clone_from(&marginals.beta[local]);
         }
@@ -340,7 +351,10 @@ fn clusters(hyps: &[Vec<Hypothesis>], n: usize, m: usize) -> Vec<(Vec<usize>, Ve
             if owner[h.measurement] == usize::MAX {
                 owner[h.measurement] = t;
             } else {
-                let (a, b) = (find(&mut parent, owner[h.measurement]), find(&mut parent, t));
+                let (a, b) = (
+                    find(&mut parent, owner[h.measurement]),
+                    find(&mut parent, t),
+                );
                 if a != b {
                     parent[a.max(b)] = a.min(b);
                 }
@@ -367,7 +381,9 @@ fn clusters(hyps: &[Vec<Hypothesis>], n: usize, m: usize) -> Vec<(Vec<usize>, Ve
 }
 
 /// Moment-matched Gaussian of a mixture Σ w_i N(x_i, P_i) with Σ w_i = 1.
-fn reduce(comps: &[(f64, DVector<f64>, DMatrix<f64>)]) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+fn reduce(
+    comps: &[(f64, DVector<f64>, DMatrix<f64>)],
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let total: f64 = comps.iter().map(|c| c.0).sum();
     let n = comps[0].1.len();
     let mut x = DVector::zeros(n);
@@ -442,7 +458,11 @@ mod tests {
         assert_eq!(out.used, vec![true]);
         assert!((tracks[0].x[0] - 5.0 * b1).abs() < 1e-9);
         let want = b0 * 100.0 + b1 * 50.0 + b0 * b1 * 25.0;
-        assert!((tracks[0].p[(0, 0)] - want).abs() < 1e-9, "{}", tracks[0].p[(0, 0)]);
+        assert!(
+            (tracks[0].p[(0, 0)] - want).abs() < 1e-9,
+            "{}",
+            tracks[0].p[(0, 0)]
+        );
     }
 
     #[test]
@@ -457,7 +477,11 @@ mod tests {
                 p: DMatrix::identity(4, 4) * 100.0,
             },
         ];
-        let plots = [plot(35.0, 0.0, 100.0), plot(5.0, 0.0, 100.0), plot(1e4, 0.0, 100.0)];
+        let plots = [
+            plot(35.0, 0.0, 100.0),
+            plot(5.0, 0.0, 100.0),
+            plot(1e4, 0.0, 100.0),
+        ];
         let out = associate_cartesian(
             &mut tracks,
             &plots,
@@ -472,7 +496,7 @@ mod tests {
         // Kalman with gain 1/2: 0 → 2.5 and 40 → 37.5.
         assert!((tracks[0].x[0] - 2.5).abs() < 1e-12);
         assert!((tracks[1].x[0] - 37.5).abs() < 1e-12);
-        assert!((&tracks[0].p.view((0, 0), (1, 1)) - dmatrix![50.0]).amax() < 1e-12);
+        assert!((tracks[0].p.view((0, 0), (1, 1)) - dmatrix![50.0]).amax() < 1e-12);
     }
 
     #[test]

@@ -236,7 +236,10 @@ impl TrackerConfig {
     /// Checks every option; the error names the option.
     pub fn validate(&self) -> Result<(), AlgoError> {
         if !(self.axes == 2 || self.axes == 3) {
-            return Err(invalid("axes", format!("must be 2 or 3, got {}", self.axes)));
+            return Err(invalid(
+                "axes",
+                format!("must be 2 or 3, got {}", self.axes),
+            ));
         }
         if self.radars.is_empty() {
             return Err(invalid("radars", "at least one radar is needed".into()));
@@ -282,7 +285,10 @@ impl TrackerConfig {
             (true, Some(el)) => {
                 finite("elevation", el)?;
                 if el.abs() >= std::f64::consts::FRAC_PI_2 {
-                    return Err(invalid("elevation", format!("must lie in (-pi/2, pi/2), got {el}")));
+                    return Err(invalid(
+                        "elevation",
+                        format!("must lie in (-pi/2, pi/2), got {el}"),
+                    ));
                 }
             }
             (true, None) => return Err(invalid("elevation", "required from a 3D radar".into())),
@@ -322,7 +328,10 @@ fn validate_radar(r: &RadarSpec, axes: usize) -> Result<(), AlgoError> {
     positive("scan_period", r.scan_period)?;
     let pd = r.detection_probability;
     if !(pd > 0.0 && pd <= 1.0) {
-        return Err(invalid("detection_probability", format!("must lie in (0, 1], got {pd}")));
+        return Err(invalid(
+            "detection_probability",
+            format!("must lie in (0, 1], got {pd}"),
+        ));
     }
     positive("clutter_density", r.clutter_density)?;
     Ok(())
@@ -332,7 +341,10 @@ fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
     if !(2 <= i.confirm_m && i.confirm_m <= i.confirm_n && i.confirm_n <= 64) {
         return Err(invalid(
             "confirm_m_of_n",
-            format!("need 2 <= M <= N <= 64, got {}/{}", i.confirm_m, i.confirm_n),
+            format!(
+                "need 2 <= M <= N <= 64, got {}/{}",
+                i.confirm_m, i.confirm_n
+            ),
         ));
     }
     match i.velocity {
@@ -355,7 +367,10 @@ fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
     positive("min_dt", i.min_dt)?;
     positive("max_dt", i.max_dt)?;
     if i.max_dt < i.min_dt {
-        return Err(invalid("max_dt", format!("must be >= min_dt = {}", i.min_dt)));
+        return Err(invalid(
+            "max_dt",
+            format!("must be >= min_dt = {}", i.min_dt),
+        ));
     }
     Ok(())
 }

@@ -125,7 +125,8 @@ impl Initiator {
                 let k = root.z.len().min(plot.z.len());
                 if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
                     let (x, p) = two_point(root, plot, dt, cfg);
-                    self.tentatives.push(new_tentative(next_id, x, p, t, root, plot));
+                    self.tentatives
+                        .push(new_tentative(next_id, x, p, t, root, plot));
                     out.started += 1;
                     paired_root[i] = true;
                     paired_plot[j] = true;
@@ -133,7 +134,8 @@ impl Initiator {
             }
         }
         let mut keep = paired_root.iter().map(|p| !p);
-        self.roots.retain(|_| keep.next().expect("one flag per root"));
+        self.roots
+            .retain(|_| keep.next().expect("one flag per root"));
         for (j, plot) in plots.into_iter().enumerate() {
             if !taken[j] && !paired_plot[j] {
                 self.roots.push(plot);
@@ -315,7 +317,9 @@ mod tests {
         let mut confirmed_at = None;
         for k in 0..5 {
             let t = k as f64;
-            let out = ini.step(t, vec![plot(t, 10.0 * t, 100.0)], &c, &mut id).unwrap();
+            let out = ini
+                .step(t, vec![plot(t, 10.0 * t, 100.0)], &c, &mut id)
+                .unwrap();
             if k == 1 {
                 assert_eq!(out.started, 1);
                 assert_eq!(ini.tentatives.len(), 1);
@@ -341,8 +345,10 @@ mod tests {
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id).unwrap();
-        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, &mut id).unwrap();
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+            .unwrap();
+        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, &mut id)
+            .unwrap();
         let a = ini.step(2.0, vec![], &c, &mut id).unwrap();
         assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
         let b = ini.step(3.0, vec![], &c, &mut id).unwrap();
@@ -374,17 +380,22 @@ mod tests {
             v_min: [100.0, -100.0, 0.0],
             v_max: [800.0, 100.0, 0.0],
         };
-        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 0.0), 5.0, &axis).unwrap();
+        let d =
+            velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 0.0), 5.0, &axis).unwrap();
         assert_eq!(d, 0.0);
-        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 600.0), 5.0, &axis).unwrap();
+        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 600.0), 5.0, &axis)
+            .unwrap();
         assert!((d - 5000.0).abs() < 1e-9);
 
         // And no tentative is started from such a pair.
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id).unwrap();
-        let out = ini.step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, &mut id).unwrap();
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+            .unwrap();
+        let out = ini
+            .step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, &mut id)
+            .unwrap();
         assert_eq!(out.started, 0);
         assert_eq!(ini.roots.len(), 2); // the new plot is a root; the old one waits
     }
@@ -423,7 +434,10 @@ mod tests {
     struct Lcg(u64);
     impl Lcg {
         fn uniform(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (self.0 >> 11) as f64 / (1u64 << 53) as f64
         }
     }

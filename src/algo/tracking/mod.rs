@@ -113,7 +113,10 @@ enum Source {
     /// Serial mode: one radar's raw plots (polar EKF).
     Radar { index: usize, plots: Vec<Plot> },
     /// Parallel mode: fused Cartesian plots with their clutter densities.
-    Fused { clutter: Vec<f64>, detection_probability: f64 },
+    Fused {
+        clutter: Vec<f64>,
+        detection_probability: f64,
+    },
 }
 
 impl Tracker {
@@ -139,7 +142,11 @@ impl Tracker {
 
     /// The resolved mode: `Mode::Parallel` or `Mode::Serial`.
     pub fn mode(&self) -> Mode {
-        if self.parallel { Mode::Parallel } else { Mode::Serial }
+        if self.parallel {
+            Mode::Parallel
+        } else {
+            Mode::Serial
+        }
     }
 
     pub fn counters(&self) -> Counters {
@@ -295,7 +302,12 @@ impl Tracker {
     }
 
     /// Steps 3–5: the plots of fusion instant k.
-    fn parallel_frame(&mut self, k: i64, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
+    fn parallel_frame(
+        &mut self,
+        k: i64,
+        frame: Vec<Plot>,
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
         let t = self.instant_time(k);
         let registered = frame
             .iter()
@@ -306,7 +318,10 @@ impl Tracker {
         radars.sort_unstable();
         radars.dedup();
         let specs: Vec<&RadarSpec> = radars.iter().map(|&i| &self.config.radars[i]).collect();
-        let miss: f64 = specs.iter().map(|r| 1.0 - r.detection_probability).product();
+        let miss: f64 = specs
+            .iter()
+            .map(|r| 1.0 - r.detection_probability)
+            .product();
         let clutter = fused.iter().map(|f| cartesian_clutter(f, &specs)).collect();
         self.counters.fused_plots += fused.len() as u64;
         let source = Source::Fused {
@@ -383,7 +398,9 @@ impl Tracker {
             .zip(used)
             .filter_map(|(p, used)| (!used).then_some(p))
             .collect();
-        let initiated = self.initiator.step(t, leftovers, &self.config, &mut self.next_id)?;
+        let initiated = self
+            .initiator
+            .step(t, leftovers, &self.config, &mut self.next_id)?;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for track in initiated.confirmed {

@@ -36,7 +36,10 @@ pub fn associate_and_fuse(
     plots: &[CartesianPlot],
     gate_probability: f64,
 ) -> Result<Vec<CartesianPlot>, AlgoError> {
-    let mut radars: Vec<usize> = plots.iter().flat_map(|p| p.radars.iter().copied()).collect();
+    let mut radars: Vec<usize> = plots
+        .iter()
+        .flat_map(|p| p.radars.iter().copied())
+        .collect();
     radars.sort_unstable();
     radars.dedup();
     let gates = [
@@ -156,7 +159,10 @@ mod tests {
     #[test]
     fn a_plot_outside_the_gate_stays_alone() {
         // d² = 50²/(100 + 100) = 12.5 > 9.21: two clusters, unchanged.
-        let plots = vec![p2(0, 0.0, 0.0, [100.0, 100.0]), p2(1, 50.0, 0.0, [100.0, 100.0])];
+        let plots = vec![
+            p2(0, 0.0, 0.0, [100.0, 100.0]),
+            p2(1, 50.0, 0.0, [100.0, 100.0]),
+        ];
         let fused = associate_and_fuse(&plots, 0.99).unwrap();
         assert_eq!(fused, plots);
     }

@@ -67,7 +67,11 @@ pub fn polar_measurement(radar: &RadarSpec, plot: &Plot) -> PolarMeasurement {
 }
 
 /// Step 1: the plot as a fusion-frame position at its own time.
-pub fn register(radar: &RadarSpec, radar_index: usize, plot: &Plot) -> Result<CartesianPlot, AlgoError> {
+pub fn register(
+    radar: &RadarSpec,
+    radar_index: usize,
+    plot: &Plot,
+) -> Result<CartesianPlot, AlgoError> {
     to_cartesian(radar, radar_index, plot.t, &polar_measurement(radar, plot))
 }
 

@@ -176,7 +176,10 @@ mod tests {
         assert_eq!(t.misses_in_last(4), 3);
         assert_eq!(t.hits_in_last(64), 3);
         assert_eq!(t.misses_in_last(64), 3); // only 6 frames lived
-        assert_eq!((t.hits, t.misses, t.consecutive_misses, t.age), (3, 3, 2, 6));
+        assert_eq!(
+            (t.hits, t.misses, t.consecutive_misses, t.age),
+            (3, 3, 2, 6)
+        );
     }
 
     #[test]
