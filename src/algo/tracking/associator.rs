@@ -225,7 +225,8 @@ pub fn cartesian_clutter(plot: &CartesianPlot, radars: &[&RadarSpec]) -> f64 {
             };
             r.clutter_density / det
         })
-        .sum()
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE)
 }
 
 struct Hypothesis {
