@@ -27,7 +27,6 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
-use crate::algo::gating::chi2_threshold;
 use crate::algo::gaussian::{check_covariance, cholesky, symmetrize};
 use crate::algo::jpda::{
     self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
@@ -36,7 +35,7 @@ use crate::algo::jpda::{
 use crate::algo::kalman::{self, PositionLayout};
 use crate::algo::tracking::config::{Plot, RadarSpec};
 use crate::algo::tracking::registration::CartesianPlot;
-use crate::algo::tracking::track::position_selector;
+use crate::algo::tracking::track::{chi2_gates, position_selector};
 
 /// What the association of one frame decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,10 +111,7 @@ pub fn associate_cartesian(
     gate_probability: f64,
     config: &Config,
 ) -> Result<Outcome, AlgoError> {
-    let gates = [
-        chi2_threshold(2, 1.0 - gate_probability)?,
-        chi2_threshold(3, 1.0 - gate_probability)?,
-    ];
+    let gates = chi2_gates(gate_probability)?;
     // Hypothesise: every gated (track, plot) pair with its Kalman update.
     let mut hyps: Vec<Vec<Hypothesis>> = Vec::with_capacity(tracks.len());
     for track in tracks.iter() {

@@ -34,12 +34,11 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
-use crate::algo::gating::chi2_threshold;
 use crate::algo::gaussian::{mahalanobis_sq, symmetrize};
 use crate::algo::kalman;
 use crate::algo::tracking::config::{TrackerConfig, VelocityGate};
 use crate::algo::tracking::registration::CartesianPlot;
-use crate::algo::tracking::track::{Track, position_selector};
+use crate::algo::tracking::track::{Track, chi2_gates, position_selector};
 
 /// Roots and tentative tracks, carried between frames.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -69,10 +68,7 @@ impl Initiator {
         next_id: &mut u64,
     ) -> Result<Initiated, AlgoError> {
         let init = &cfg.initiation;
-        let gates = [
-            chi2_threshold(2, 1.0 - init.gate_probability)?,
-            chi2_threshold(3, 1.0 - init.gate_probability)?,
-        ];
+        let gates = chi2_gates(init.gate_probability)?;
         let mut out = Initiated::default();
         let mut taken = vec![false; plots.len()];
 
@@ -274,6 +270,7 @@ fn new_tentative(
 mod tests {
     use super::*;
     use crate::algo::tracking::config::RadarSpec;
+    use crate::algo::tracking::tests::Lcg;
     use nalgebra::dvector;
 
     fn cfg() -> TrackerConfig {
@@ -428,17 +425,5 @@ mod tests {
         }
         assert!(started > 0, "the clutter should start some candidates");
         assert_eq!(confirmed, 0);
-    }
-
-    /// Knuth's MMIX linear congruential generator (tests only).
-    struct Lcg(u64);
-    impl Lcg {
-        fn uniform(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
     }
 }

@@ -24,9 +24,9 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
-use crate::algo::gating::chi2_threshold;
 use crate::algo::gaussian::{cholesky, mahalanobis_sq, symmetrize};
 use crate::algo::tracking::registration::CartesianPlot;
+use crate::algo::tracking::track::chi2_gates;
 
 /// Associates the plots of one fusion instant across radars and fuses the
 /// associated ones. `plots` each come from one radar; the output lists the
@@ -42,10 +42,7 @@ pub fn associate_and_fuse(
         .collect();
     radars.sort_unstable();
     radars.dedup();
-    let gates = [
-        chi2_threshold(2, 1.0 - gate_probability)?,
-        chi2_threshold(3, 1.0 - gate_probability)?,
-    ];
+    let gates = chi2_gates(gate_probability)?;
     let mut clusters: Vec<CartesianPlot> = Vec::new();
     for radar in radars {
         let batch: Vec<&CartesianPlot> = plots.iter().filter(|p| p.radars[0] == radar).collect();

@@ -6,6 +6,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::algo::error::AlgoError;
+use crate::algo::gating::chi2_threshold;
 use crate::algo::kalman;
 use crate::algo::motion::{cv_transition, dwna_process_noise};
 
@@ -142,6 +143,12 @@ pub fn predict(
 /// (e, n(, u)) of an interleaved state with `axes` axes.
 pub fn position_selector(k: usize, axes: usize) -> DMatrix<f64> {
     DMatrix::from_fn(k, 2 * axes, |i, j| if j == 2 * i { 1.0 } else { 0.0 })
+}
+
+/// The χ² thresholds γ of a gate with probability `p` for 2 and 3 degrees
+/// of freedom (positions in the plane or in space): index `dim − 2`.
+pub fn chi2_gates(p: f64) -> Result<[f64; 2], AlgoError> {
+    Ok([chi2_threshold(2, 1.0 - p)?, chi2_threshold(3, 1.0 - p)?])
 }
 
 fn window(n: u32) -> u64 {
