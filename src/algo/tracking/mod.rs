@@ -45,6 +45,7 @@ mod track;
 #[cfg(test)]
 mod tests;
 
+pub use codec::FORMAT_VERSION;
 pub use config::{Deletion, Initiation, Mode, Plot, RadarSpec, TrackerConfig, VelocityGate};
 pub use registration::{CartesianPlot, Doppler};
 pub use track::{TrackOutput, TrackStatus};
