@@ -14,6 +14,7 @@ pub mod kalman;
 pub mod motion;
 pub mod polar;
 pub mod small;
+pub mod tracking;
 pub mod wire;
 
 pub use error::AlgoError;
