@@ -38,6 +38,12 @@ impl Writer {
 
     pub fn f64s(&mut self, v: &[f64]) {
         self.usize(v.len());
+        self.f64_run(v);
+    }
+
+    /// The values alone, without a length (the reader knows how many).
+    pub fn f64_run(&mut self, v: &[f64]) {
+        self.buf.reserve(8 * v.len());
         for &x in v {
             self.f64(x);
         }

@@ -197,6 +197,12 @@ impl Scene {
         w.usize(self.first);
         w.f64s(&self.times);
         w.usize(self.nodes.len());
+        // One reservation for the whole scene (an upper bound: every instant
+        // of every track present, full covariance and gain), instead of the
+        // buffer doubling and copying itself as it grows.
+        let tracks: usize = self.nodes.iter().map(Vec::len).sum();
+        w.buf
+            .reserve(tracks * (8 + self.times.len() * (1 + 8 * (dim + 2 * dim * dim))));
         for node in &self.nodes {
             w.usize(node.len());
             for t in node {
@@ -222,16 +228,16 @@ impl Scene {
                         tag |= TAG_GAIN;
                     }
                     w.u8(tag);
-                    t.x[k * dim..(k + 1) * dim].iter().for_each(|&v| w.f64(v));
+                    w.f64_run(&t.x[k * dim..(k + 1) * dim]);
                     if symmetric {
                         for i in 0..dim {
-                            p[i * dim + i..(i + 1) * dim].iter().for_each(|&v| w.f64(v));
+                            w.f64_run(&p[i * dim + i..(i + 1) * dim]);
                         }
                     } else {
-                        p.iter().for_each(|&v| w.f64(v));
+                        w.f64_run(p);
                     }
                     if let Some(g) = g {
-                        g.iter().for_each(|&v| w.f64(v));
+                        w.f64_run(g);
                     }
                 }
             }
