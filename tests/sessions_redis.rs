@@ -35,7 +35,7 @@ mod redis_harness;
 #[path = "common/sessions.rs"]
 mod data;
 
-use data::{pb_report, scenario};
+use data::{open_stream, pb_report, scenario};
 use redis_harness::{REDIS_URL, RedisServer, redis_is_up, redis_server_available, unique};
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
@@ -45,7 +45,6 @@ const CHUNK: usize = 8;
 /// Session calls on a running instance (the API suite's `TestApp`).
 trait SessionCalls {
     async fn get(&self, path: &str) -> reqwest::Response;
-    async fn get_ok(&self, path: &str) -> Value;
     /// Creates a session over REST and returns its id.
     async fn create(&self, config: &Value) -> String;
     async fn push(&self, id: &str, body: &Value) -> Value;
@@ -61,14 +60,6 @@ impl SessionCalls for App {
             .send()
             .await
             .expect("request sent")
-    }
-
-    async fn get_ok(&self, path: &str) -> Value {
-        let response = self.get(path).await;
-        let status = response.status();
-        let text = response.text().await.expect("body");
-        assert_eq!(status, 200, "GET {path}: {text}");
-        serde_json::from_str(&text).expect("JSON response")
     }
 
     async fn create(&self, config: &Value) -> String {
@@ -751,17 +742,8 @@ async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other(
     let half = bodies.len() / 2;
 
     let mut client = a.sessions().await;
-    let (tx, rx) = tokio::sync::mpsc::channel(4);
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Open(pb_open())),
-    })
-    .await
-    .unwrap();
-    let mut updates = client
-        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .unwrap()
-        .into_inner();
+    let (tx, mut updates) =
+        open_stream(&mut client, pb::stream_request::Kind::Open(pb_open())).await;
     let opened = updates.message().await.unwrap().expect("opened");
     let id = opened.session_id.clone();
     assert_eq!(opened.version, 1);
@@ -787,17 +769,8 @@ async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other(
     assert_eq!(state["version"], half as u64 + 1);
     // A stream attached on B learns where to go on from.
     let mut on_b = b.sessions().await;
-    let (tx, rx) = tokio::sync::mpsc::channel(1);
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Attach(id.clone())),
-    })
-    .await
-    .unwrap();
-    let mut attached = on_b
-        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .unwrap()
-        .into_inner();
+    let (tx, mut attached) =
+        open_stream(&mut on_b, pb::stream_request::Kind::Attach(id.clone())).await;
     let ack = attached.message().await.unwrap().expect("attached");
     assert_eq!(ack.session_id, id);
     assert_eq!(ack.sequence, Some(half as u64));
@@ -894,20 +867,11 @@ async fn a_stream_batch_past_the_request_timeout_answers_deadline_exceeded_and_t
     let bodies = batch_bodies(&reports);
     let id = a.create(&session_config(&batch)).await;
     let mut client = a.sessions().await;
-    let (tx, rx) = tokio::sync::mpsc::channel(4);
-    let mut updates = client
-        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .unwrap()
-        .into_inner();
+    let (tx, mut updates) =
+        open_stream(&mut client, pb::stream_request::Kind::Attach(id.clone())).await;
     let send = |body: &Value| pb::StreamRequest {
         kind: Some(pb::stream_request::Kind::Batch(pb_batch("", body))),
     };
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Attach(id.clone())),
-    })
-    .await
-    .unwrap();
     updates.message().await.unwrap().expect("attached");
     tx.send(send(&bodies[0])).await.unwrap();
     let first = updates.message().await.unwrap().expect("update");

@@ -195,13 +195,15 @@ fn correlation_view_out(v: View<domain::SessionView>) -> pb::SessionState {
 }
 
 /// The acknowledgement of opening or attaching a stream.
-fn opened(view: &pb::SessionState) -> pb::BatchUpdate {
-    pb::BatchUpdate {
-        session_id: view.id.clone(),
-        sequence: view.last_sequence,
-        version: view.version,
-        pending_reports: view.pending_reports,
-        ..Default::default()
+fn opened(view: &AnyView) -> pb::BatchUpdate {
+    match view {
+        AnyView::Correlation(v) => pb::BatchUpdate {
+            session_id: v.id.clone(),
+            sequence: v.last_sequence,
+            version: v.version,
+            pending_reports: v.body.pending_reports,
+            ..Default::default()
+        },
     }
 }
 
@@ -358,14 +360,14 @@ async fn handle(
     match (m.kind, session.as_ref()) {
         (Some(Kind::Open(req)), None) => {
             let spec = spec_in(req).map_err(to_status)?;
-            let view = view_out(create(state, tenant, spec).await.map_err(to_status)?);
-            *session = Some(view.id.clone());
-            Ok(opened(&view))
+            let ack = opened(&create(state, tenant, spec).await.map_err(to_status)?);
+            *session = Some(ack.session_id.clone());
+            Ok(ack)
         }
         (Some(Kind::Attach(id)), None) => {
-            let view = view_out(state.sessions().get(tenant, &id).await.map_err(to_status)?);
-            *session = Some(view.id.clone());
-            Ok(opened(&view))
+            let ack = opened(&state.sessions().get(tenant, &id).await.map_err(to_status)?);
+            *session = Some(ack.session_id.clone());
+            Ok(ack)
         }
         (Some(Kind::Batch(req)), Some(id)) => Ok(stream_batch(state, tenant, id, req).await),
         (Some(Kind::Batch(_)), None) => Err(Status::failed_precondition(

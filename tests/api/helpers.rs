@@ -48,6 +48,20 @@ impl TestApp {
         serde_json::from_str(&text).expect("JSON response")
     }
 
+    /// GETs `path`, expects 200 and returns the JSON response.
+    pub async fn get_ok(&self, path: &str) -> serde_json::Value {
+        let response = self
+            .client
+            .get(self.url(path))
+            .send()
+            .await
+            .expect("request sent");
+        let status = response.status();
+        let text = response.text().await.expect("body");
+        assert_eq!(status, 200, "GET {path}: {text}");
+        serde_json::from_str(&text).expect("JSON response")
+    }
+
     /// A gRPC client of the dedicated gRPC port.
     pub async fn correlation(&self) -> CorrelationServiceClient<Channel> {
         grpc_client(self.grpc_addr).await

@@ -9,7 +9,7 @@ use crate::helpers::{spawn_app, spawn_app_with};
 #[path = "../common/sessions.rs"]
 mod data;
 
-use data::{pb_open, pb_report, scenario, session_config};
+use data::{open_stream, pb_open, pb_report, scenario, session_config};
 
 #[tokio::test]
 async fn batches_over_rest_give_the_batch_endpoints_decisions() {
@@ -94,15 +94,7 @@ async fn batches_over_rest_give_the_batch_endpoints_decisions() {
     );
 
     // Listing, deleting.
-    let list: Value = app
-        .client
-        .get(app.url("/v1/sessions"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let list = app.get_ok("/v1/sessions").await;
     assert_eq!(list["sessions"][0]["id"], id);
     let del = app
         .client
@@ -269,17 +261,7 @@ async fn grpc_stream_matches_rest_and_a_dropped_stream_leaves_the_session_consis
     let open = pb_open();
     let chunks: Vec<Vec<Value>> = reports.chunks(7).map(<[Value]>::to_vec).collect();
     let half = chunks.len() / 2;
-    let (tx, rx) = tokio::sync::mpsc::channel(8);
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Open(open)),
-    })
-    .await
-    .unwrap();
-    let mut updates = client
-        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .unwrap()
-        .into_inner();
+    let (tx, mut updates) = open_stream(&mut client, pb::stream_request::Kind::Open(open)).await;
     let opened = updates.message().await.unwrap().unwrap();
     let id = opened.session_id.clone();
     assert_eq!(id.len(), 32);
@@ -323,15 +305,7 @@ async fn grpc_stream_matches_rest_and_a_dropped_stream_leaves_the_session_consis
     )
     .await;
     let expected = app.post_ok("/v1/correlation/tracks", &batch).await;
-    let rest: Value = app
-        .client
-        .get(app.url(&format!("/v1/sessions/{id}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let rest = app.get_ok(&format!("/v1/sessions/{id}")).await;
     assert_eq!(rest["pairs"], expected["pairs"]);
     // Unknown session over gRPC: NOT_FOUND.
     let err = client
@@ -353,7 +327,6 @@ async fn grpc_stream_batches_are_shed_and_fail_one_by_one_and_the_stream_goes_on
     let app = spawn_app_with(|s| s.max_in_flight = 1).await;
     let (_, reports) = scenario();
     let mut client = SessionServiceClient::new(app.channel().await);
-    let (tx, rx) = tokio::sync::mpsc::channel(8);
     let batch = |sequence: u64, reports: &[Value]| pb::StreamRequest {
         kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
             sequence: Some(sequence),
@@ -361,16 +334,8 @@ async fn grpc_stream_batches_are_shed_and_fail_one_by_one_and_the_stream_goes_on
             ..Default::default()
         })),
     };
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Open(pb_open())),
-    })
-    .await
-    .unwrap();
-    let mut updates = client
-        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
-        .await
-        .unwrap()
-        .into_inner();
+    let (tx, mut updates) =
+        open_stream(&mut client, pb::stream_request::Kind::Open(pb_open())).await;
     let id = updates.message().await.unwrap().unwrap().session_id;
 
     // Another request holds the only in-flight slot.
@@ -440,15 +405,7 @@ async fn sessions_say_their_kind_and_an_unknown_kind_is_refused() {
     let problem =
         crate::helpers::assert_problem(app.post_json("/v1/sessions", &config).await, 422).await;
     assert_eq!(crate::helpers::problem_fields(&problem), ["kind"]);
-    let list: Value = app
-        .client
-        .get(app.url("/v1/sessions"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let list = app.get_ok("/v1/sessions").await;
     let kinds: Vec<&str> = list["sessions"]
         .as_array()
         .unwrap()

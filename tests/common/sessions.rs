@@ -116,3 +116,24 @@ pub fn pb_open() -> pb::CreateSessionRequest {
         ..Default::default()
     }
 }
+
+/// A bidirectional session stream whose first message is `first` (`Open`
+/// or `Attach`): the sender for the following messages and the answers.
+pub async fn open_stream(
+    client: &mut pb::session_service_client::SessionServiceClient<tonic::transport::Channel>,
+    first: pb::stream_request::Kind,
+) -> (
+    tokio::sync::mpsc::Sender<pb::StreamRequest>,
+    tonic::Streaming<pb::BatchUpdate>,
+) {
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    tx.send(pb::StreamRequest { kind: Some(first) })
+        .await
+        .expect("the stream takes its first message");
+    let updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await
+        .expect("the stream opens")
+        .into_inner();
+    (tx, updates)
+}

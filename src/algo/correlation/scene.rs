@@ -197,12 +197,20 @@ impl Scene {
         w.usize(self.first);
         w.f64s(&self.times);
         w.usize(self.nodes.len());
-        // One reservation for the whole scene (an upper bound: every instant
-        // of every track present, full covariance and gain), instead of the
-        // buffer doubling and copying itself as it grows.
-        let tracks: usize = self.nodes.iter().map(Vec::len).sum();
-        w.buf
-            .reserve(tracks * (8 + self.times.len() * (1 + 8 * (dim + 2 * dim * dim))));
+        // One reservation for the whole scene instead of the buffer doubling
+        // and copying itself as it grows: a tag per instant, and for each
+        // present one at most the state, a full covariance and the gain.
+        let bytes: usize = self
+            .nodes
+            .iter()
+            .flatten()
+            .map(|t| {
+                let present = t.present.iter().filter(|&&p| p).count();
+                let per = dim + dim * dim + t.gain_factor.as_ref().map_or(0, |_| dim * dim);
+                8 + t.present.len() + present * 8 * per
+            })
+            .sum();
+        w.buf.reserve(bytes);
         for node in &self.nodes {
             w.usize(node.len());
             for t in node {

@@ -286,7 +286,7 @@ fn prepare(tracks: &[TrackEstimate], scan: &Scan) -> Result<Prepared, AlgoError>
             row
         })
         .collect();
-    let clusters = clusters(&hits, scan.measurements.len());
+    let clusters = clusters(&hits, scan.measurements.len(), |h| h.measurement);
     Ok(Prepared {
         lin,
         hits,
@@ -522,9 +522,14 @@ fn unit_ball_volume(dim: usize) -> f64 {
 }
 
 /// Connected components of tracks linked by shared gated measurements:
-/// (tracks ascending, measurements ascending). Tracks without gated
-/// measurements form clusters of their own.
-fn clusters(hits: &[Vec<Hit>], measurements: usize) -> Vec<(Vec<usize>, Vec<usize>)> {
+/// (tracks ascending, measurements ascending). `hits[t]` are track t's gated
+/// hypotheses, `measurement` names the measurement of one. Tracks without
+/// gated measurements form clusters of their own.
+pub(crate) fn clusters<H>(
+    hits: &[Vec<H>],
+    measurements: usize,
+    measurement: impl Fn(&H) -> usize,
+) -> Vec<(Vec<usize>, Vec<usize>)> {
     let n = hits.len();
     let mut parent: Vec<usize> = (0..n).collect();
     fn find(parent: &mut [usize], mut x: usize) -> usize {
@@ -537,7 +542,7 @@ fn clusters(hits: &[Vec<Hit>], measurements: usize) -> Vec<(Vec<usize>, Vec<usiz
     let mut owner = vec![usize::MAX; measurements];
     for (t, row) in hits.iter().enumerate() {
         for h in row {
-            let j = h.measurement;
+            let j = measurement(h);
             if owner[j] == usize::MAX {
                 owner[j] = t;
             } else {

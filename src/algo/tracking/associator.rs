@@ -288,10 +288,9 @@ fn soft(
     p_g: f64,
     config: &Config,
 ) -> Vec<Vec<f64>> {
-    let n = hyps.len();
     let mut beta: Vec<Vec<f64>> = hyps.iter().map(|row| vec![0.0; row.len() + 1]).collect();
     let ln_b = (1.0 - p_d * p_g).ln();
-    for (tracks, meas) in clusters(hyps, n, measurements) {
+    for (tracks, meas) in jpda::clusters(hyps, measurements, |h| h.measurement) {
         let mut gates = Vec::with_capacity(tracks.len());
         let mut miss = Vec::with_capacity(tracks.len());
         for &t in &tracks {
@@ -330,51 +329,6 @@ fn soft(
         }
     }
     beta
-}
-
-/// Connected components (tracks ascending, measurements ascending).
-fn clusters(hyps: &[Vec<Hypothesis>], n: usize, m: usize) -> Vec<(Vec<usize>, Vec<usize>)> {
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
-    let mut owner = vec![usize::MAX; m];
-    for (t, row) in hyps.iter().enumerate() {
-        for h in row {
-            if owner[h.measurement] == usize::MAX {
-                owner[h.measurement] = t;
-            } else {
-                let (a, b) = (
-                    find(&mut parent, owner[h.measurement]),
-                    find(&mut parent, t),
-                );
-                if a != b {
-                    parent[a.max(b)] = a.min(b);
-                }
-            }
-        }
-    }
-    let mut out: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
-    let mut index = vec![usize::MAX; n];
-    for t in 0..n {
-        let r = find(&mut parent, t);
-        if index[r] == usize::MAX {
-            index[r] = out.len();
-            out.push((Vec::new(), Vec::new()));
-        }
-        out[index[r]].0.push(t);
-    }
-    for (j, &t) in owner.iter().enumerate() {
-        if t != usize::MAX {
-            let r = find(&mut parent, t);
-            out[index[r]].1.push(j);
-        }
-    }
-    out
 }
 
 /// Moment-matched Gaussian of a mixture Σ w_i N(x_i, P_i) with Σ w_i = 1.

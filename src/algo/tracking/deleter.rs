@@ -34,19 +34,11 @@ mod tests {
     use nalgebra::{DMatrix, dvector};
 
     fn track(frames: &[bool], var: f64) -> Track {
-        let mut t = Track {
-            id: 0,
-            x: dvector![0.0, 0.0, 0.0, 0.0],
-            p: DMatrix::identity(4, 4) * var,
-            t: 0.0,
-            history: 0,
-            age: 0,
-            hits: 0,
-            misses: 0,
-            consecutive_misses: 0,
-            radars: vec![],
-            last_update: 0.0,
-        };
+        let mut t = Track::fresh(
+            0,
+            dvector![0.0, 0.0, 0.0, 0.0],
+            DMatrix::identity(4, 4) * var,
+        );
         for &h in frames {
             t.record(h.then(Vec::new));
         }

@@ -65,6 +65,24 @@ pub(crate) struct Track {
 }
 
 impl Track {
+    /// A track at time 0 with no frames recorded (for tests).
+    #[cfg(test)]
+    pub(crate) fn fresh(id: u64, x: DVector<f64>, p: DMatrix<f64>) -> Self {
+        Self {
+            id,
+            x,
+            p,
+            t: 0.0,
+            history: 0,
+            age: 0,
+            hits: 0,
+            misses: 0,
+            consecutive_misses: 0,
+            radars: vec![],
+            last_update: 0.0,
+        }
+    }
+
     /// Records a frame: a hit with the radars of the plot(s), or a miss.
     pub fn record(&mut self, hit: Option<Vec<usize>>) {
         self.history <<= 1;
@@ -162,19 +180,7 @@ mod tests {
 
     #[test]
     fn history_counts_a_sliding_window() {
-        let mut t = Track {
-            id: 1,
-            x: dvector![0.0, 0.0],
-            p: DMatrix::identity(2, 2),
-            t: 0.0,
-            history: 0,
-            age: 0,
-            hits: 0,
-            misses: 0,
-            consecutive_misses: 0,
-            radars: vec![],
-            last_update: 0.0,
-        };
+        let mut t = Track::fresh(1, dvector![0.0, 0.0], DMatrix::identity(2, 2));
         // Frames: hit, hit, miss, hit, miss, miss → newest first 0 0 1 0 1 1.
         for h in [true, true, false, true, false, false] {
             t.record(h.then(|| vec![0]));

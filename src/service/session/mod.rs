@@ -409,6 +409,8 @@ impl<K: SessionKind> Envelope<K> {
             K::encode_update(&kept.body, w);
         });
         self.state.encode(&mut w);
+        // The store keeps this buffer as it is: no spare capacity.
+        w.buf.shrink_to_fit();
         w.buf
     }
 

@@ -89,11 +89,11 @@ fn not_found(id: &str) -> ServiceError {
     ServiceError::NotFound(format!("no session '{id}'"))
 }
 
-/// Where a push's decoded session came from.
-enum Source {
+/// Where a push's decoded session comes from.
+enum Source<K: SessionKind> {
     /// The cache: trusted only if the compare-and-set on its version succeeds.
-    Cache,
-    /// A fresh read of the store: its bytes.
+    Cache(Envelope<K>),
+    /// A fresh read of the store: its bytes, decoded off the async workers.
     Store(Vec<u8>),
 }
 
@@ -206,28 +206,27 @@ impl Sessions {
         let batch = Arc::new(batch);
         let mut attempt = 0;
         while attempt < MAX_ATTEMPTS {
-            let (version, session, source) = match self.cache.take::<Envelope<K>>(tenant, id) {
+            let (version, source) = match self.cache.take::<Envelope<K>>(tenant, id) {
                 Some((version, session)) => {
                     metrics::counter!("fusion_session_cache_total", "outcome" => "hit")
                         .increment(1);
-                    (version, Some(session), Source::Cache)
+                    (version, Source::Cache(session))
                 }
                 None => {
                     metrics::counter!("fusion_session_cache_total", "outcome" => "miss")
                         .increment(1);
                     let stored = self.read(tenant, id).await?;
-                    (stored.version, None, Source::Store(stored.data))
+                    (stored.version, Source::Store(stored.data))
                 }
             };
             let (batch2, id2) = (Arc::clone(&batch), id.to_string());
-            let from_cache = matches!(source, Source::Cache);
+            let from_cache = matches!(source, Source::Cache(_));
             let worked = offload(move || {
-                let mut session = match (session, source) {
-                    (Some(s), _) => s,
-                    (None, Source::Store(data)) => {
+                let mut session = match source {
+                    Source::Cache(s) => s,
+                    Source::Store(data) => {
                         Envelope::<K>::decode(&data).map_err(|e| e.for_request::<K>(&id2))?
                     }
-                    (None, Source::Cache) => unreachable!("a cached push has its session"),
                 };
                 match session.admit(&id2, batch2.sequence, version)? {
                     Admission::Duplicate(ack) => Ok(Err(ack)),

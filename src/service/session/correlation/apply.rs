@@ -18,20 +18,20 @@ use crate::{
     service::{
         ServiceError, Violations,
         correlation::{self, CrossCovariances},
-        session::{Limits, SessionKind},
+        session::Limits,
     },
 };
 
 impl CorrelationSession {
-    /// Applies one batch. On error the session is unchanged only if the
-    /// caller discards it: the caller works on a decoded copy.
+    /// Applies one batch (its size already checked by the envelope). On
+    /// error the session is unchanged only if the caller discards it: the
+    /// caller works on a decoded copy.
     pub(super) fn apply_batch(
         &mut self,
         batch: &BatchInput,
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<BatchUpdate, ServiceError> {
-        CorrelationSession::check_size(batch, limits)?;
         let tol = self.plan.tolerance;
         let mut v = Violations::new();
         // Validate every report before touching the state.
