@@ -7,7 +7,7 @@ use std::collections::HashMap;
 
 use super::{
     BatchUpdate, ChangeKind, CorrelationSession, FORMAT_VERSION, PairChange, SessionSpec,
-    state::{Pending, Slot, plan_of},
+    state::{Pending, Slot, node_ids, plan_of},
 };
 use crate::{
     algo::{
@@ -24,13 +24,9 @@ use crate::{
             AlignmentInput, CorrelateInput, FusionKind, GroupOutput, MethodInput, MotionModelInput,
             NodeInput, PairOutput, RuleInput, TrackName,
         },
-        session::{Envelope, Kept},
+        session::{Envelope, Kept, corrupt},
     },
 };
-
-fn corrupt(e: AlgoError) -> ServiceError {
-    ServiceError::Internal(format!("stored session: {e}"))
-}
 
 /// Appends the session's payload (format 3).
 pub(super) fn encode(s: &CorrelationSession, w: &mut Writer) {
@@ -155,12 +151,7 @@ fn decode_tail(
     closed_start: Option<f64>,
 ) -> Result<CorrelationSession, ServiceError> {
     let plan = plan_of(&spec)?;
-    let node_ids: Vec<String> = spec
-        .config
-        .nodes
-        .iter()
-        .map(|n| n.id.clone().unwrap_or_default())
-        .collect();
+    let node_ids = node_ids(&spec);
     let n = node_ids.len();
     let scene = Scene::decode(r, scene_format).map_err(corrupt)?;
     if scene.nodes().len() != n || scene.dim() != plan.layout.dim {

@@ -120,12 +120,7 @@ impl CorrelationSession {
             }
         }
         v.finish()?;
-        let node_ids: Vec<String> = spec
-            .config
-            .nodes
-            .iter()
-            .map(|n| n.id.clone().unwrap_or_default())
-            .collect();
+        let node_ids = node_ids(&spec);
         let mut scene =
             Scene::new(plan.layout.dim, plan.layout.positions(), Vec::new()).map_err(internal)?;
         for _ in &node_ids {
@@ -350,6 +345,15 @@ impl CorrelationSession {
             system_tracks,
         })
     }
+}
+
+/// The node ids of a configuration, in order.
+pub(super) fn node_ids(spec: &SessionSpec) -> Vec<String> {
+    spec.config
+        .nodes
+        .iter()
+        .map(|n| n.id.clone().unwrap_or_default())
+        .collect()
 }
 
 pub(super) fn plan_of(spec: &SessionSpec) -> Result<Plan, ServiceError> {
