@@ -11,6 +11,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "proto/radar/fusion/v1/correlation.proto",
         "proto/radar/fusion/v1/dimension.proto",
         "proto/radar/fusion/v1/jpda.proto",
+        "proto/radar/fusion/v1/plot_fusion.proto",
         "proto/radar/fusion/v1/session.proto",
     ];
     let fds = protox::compile(files, ["proto"])?;

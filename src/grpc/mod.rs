@@ -7,6 +7,7 @@ pub mod correlation;
 pub mod dimension;
 pub mod error;
 pub mod jpda;
+pub mod plot_fusion;
 pub mod sessions;
 
 use std::time::Instant;
@@ -26,6 +27,7 @@ use crate::{
         ais_radar_service_server::AisRadarServiceServer,
         correlation_service_server::CorrelationServiceServer,
         dimension_service_server::DimensionServiceServer, jpda_service_server::JpdaServiceServer,
+        plot_fusion_service_server::PlotFusionServiceServer,
         session_service_server::SessionServiceServer,
     },
     state::AppState,
@@ -34,6 +36,7 @@ use ais_radar::AisRadarGrpc;
 use correlation::CorrelationGrpc;
 use dimension::DimensionGrpc;
 use jpda::JpdaGrpc;
+use plot_fusion::PlotFusionGrpc;
 use sessions::SessionGrpc;
 
 /// A row-major `Matrix` as nested rows; `None` (with a violation naming
@@ -90,6 +93,9 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
     let jpda = JpdaServiceServer::new(JpdaGrpc)
         .max_decoding_message_size(limit)
         .max_encoding_message_size(usize::MAX);
+    let plot_fusion = PlotFusionServiceServer::new(PlotFusionGrpc)
+        .max_decoding_message_size(limit)
+        .max_encoding_message_size(usize::MAX);
     let dimension = DimensionServiceServer::new(DimensionGrpc)
         .max_decoding_message_size(limit)
         .max_encoding_message_size(usize::MAX);
@@ -110,6 +116,7 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
     let router = Routes::new(correlation)
         .add_service(ais_radar)
         .add_service(jpda)
+        .add_service(plot_fusion)
         .add_service(dimension)
         .add_service(sessions)
         .add_service(health_service)
@@ -128,6 +135,7 @@ pub const SERVICE_NAMES: &[&str] = &[
     "radar.fusion.v1.CorrelationService",
     "radar.fusion.v1.AisRadarService",
     "radar.fusion.v1.JpdaService",
+    "radar.fusion.v1.PlotFusionService",
     "radar.fusion.v1.DimensionService",
     "radar.fusion.v1.SessionService",
 ];

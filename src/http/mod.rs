@@ -7,6 +7,7 @@ pub mod correlation;
 pub mod dimension;
 pub mod jpda;
 pub mod ops;
+pub mod plot_fusion;
 pub mod problem;
 pub mod rules;
 pub mod sessions;
@@ -43,17 +44,18 @@ pub struct Timing {
     info(
         title = "Radar fusion service",
         description = "Fusion centre of a radar network: track-to-track correlation, JPDA, \
-            2D/3D dimension fusion and AIS–radar bias estimation. Errors are RFC 9457 \
+            multi-radar plot-fusion tracking, 2D/3D dimension fusion and AIS–radar bias estimation. Errors are RFC 9457 \
             problem details naming the offending field. The same operations are served \
             over gRPC (package radar.fusion.v1)."
     ),
-    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
+    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, plot_fusion::track, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
     components(schemas(Problem, problem::ProblemField)),
     modifiers(&BearerAuth),
     tags(
         (name = "correlation", description = "Track-to-track correlation (seed 000)"),
         (name = "sessions", description = "Streaming correlation sessions: state carried across batches"),
         (name = "jpda", description = "Joint probabilistic data association (seed 002)"),
+        (name = "plot-fusion", description = "Multi-radar plot fusion tracker (seed 001)"),
         (name = "dimension", description = "Fusion of 2D and 3D radar tracks (seed 003)"),
         (name = "ais-radar", description = "AIS–radar association and radar bias estimation (seed 004)"),
         (name = "operations", description = "Health, readiness and metrics"),
@@ -151,6 +153,7 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .route("/v1/correlation/tracks", post(correlation::correlate))
         .route("/v1/ais-radar/associate", post(ais_radar::associate))
         .route("/v1/jpda/update", post(jpda::update))
+        .route("/v1/plot-fusion/track", post(plot_fusion::track))
         .route("/v1/sessions", post(sessions::create).get(sessions::list))
         .route(
             "/v1/sessions/{id}",

@@ -6,6 +6,7 @@ pub mod ais_radar;
 pub mod correlation;
 pub mod dimension;
 pub mod jpda;
+pub mod plot_fusion;
 pub mod rules;
 pub mod session;
 

@@ -11,5 +11,6 @@ mod grpc;
 mod helpers;
 mod jpda;
 mod ops;
+mod plot_fusion;
 mod rules;
 mod sessions;

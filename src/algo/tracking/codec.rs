@@ -182,6 +182,7 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     }
     w.f64(c.default_height);
     w.f64(c.default_height_sigma);
+    w.f64(c.sigma_tangential_speed);
 }
 
 fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
@@ -265,6 +266,7 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         sigma_a,
         default_height: r.f64()?,
         default_height_sigma: r.f64()?,
+        sigma_tangential_speed: r.f64()?,
     })
 }
 

@@ -168,6 +168,13 @@ pub struct TrackerConfig {
     pub default_height: f64,
     /// Standard deviation of `default_height` (m), > 0.
     pub default_height_sigma: f64,
+    /// Parallel mode: σ (m/s) of a target's speed across its line of sight,
+    /// ≥ 0. Step 3 holds the plot's angles while moving it to the fusion
+    /// instant, so a target crossing the line of sight at speed v_t is
+    /// displaced by v_t·|t − τ| that the radial velocity cannot see; the
+    /// extrapolated plot's covariance gets (σ_t·|t − τ|)² across the line of
+    /// sight to stay consistent (0: the patent's covariance, optimistic).
+    pub sigma_tangential_speed: f64,
 }
 
 impl TrackerConfig {
@@ -176,7 +183,7 @@ impl TrackerConfig {
     /// 2·10⁶ hypothesis edges); gates 0.99; confirmation 3-of-4 with a speed
     /// band [0, 600] m/s, pairing 1 s to twice the longest scan period;
     /// deletion after 3 consecutive misses; σ_a = 1 m/s² per axis; default
-    /// height 0 ± 1000 m.
+    /// height 0 ± 1000 m; tangential speed σ 100 m/s.
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
         let min_period = radars
             .iter()
@@ -220,6 +227,7 @@ impl TrackerConfig {
             sigma_a: [1.0; 3],
             default_height: 0.0,
             default_height_sigma: 1000.0,
+            sigma_tangential_speed: 100.0,
         }
     }
 
@@ -268,6 +276,7 @@ impl TrackerConfig {
         }
         finite("default_height", self.default_height)?;
         positive("default_height_sigma", self.default_height_sigma)?;
+        non_negative("sigma_tangential_speed", self.sigma_tangential_speed)?;
         Ok(())
     }
 

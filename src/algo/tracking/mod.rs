@@ -166,12 +166,7 @@ impl Tracker {
 
     /// Confirmed tracks then tentative tracks, each by ascending id.
     pub fn tracks(&self) -> Vec<TrackOutput> {
-        let mut confirmed: Vec<TrackOutput> = self
-            .tracks
-            .iter()
-            .map(|t| t.output(TrackStatus::Confirmed))
-            .collect();
-        confirmed.sort_by_key(|t| t.id);
+        let mut confirmed = self.confirmed_tracks();
         let mut tentative: Vec<TrackOutput> = self
             .initiator
             .tentatives
@@ -186,6 +181,18 @@ impl Tracker {
     /// Accepts plots (any order; sorted by time inside, stably), processes
     /// every frame that is complete, and buffers the rest.
     pub fn process(&mut self, plots: &[Plot]) -> Result<StepReport, AlgoError> {
+        self.process_with(plots, false, &mut |_| {})
+    }
+
+    /// [`Tracker::process`], then [`Tracker::flush`] when `flush`, calling
+    /// `after_frame` with the tracker after every processed frame (for a
+    /// track history). Plots already sorted by time are inserted in O(1).
+    pub fn process_with(
+        &mut self,
+        plots: &[Plot],
+        flush: bool,
+        after_frame: &mut dyn FnMut(&Self),
+    ) -> Result<StepReport, AlgoError> {
         for plot in plots {
             self.config.validate_plot(plot)?;
             if self.parallel {
@@ -200,19 +207,32 @@ impl Tracker {
                 continue;
             }
             self.counters.plots += 1;
-            let at = self.pending.partition_point(|p| p.t <= plot.t);
-            self.pending.insert(at, *plot);
+            if self.pending.last().is_none_or(|p| p.t <= plot.t) {
+                self.pending.push(*plot);
+            } else {
+                let at = self.pending.partition_point(|p| p.t <= plot.t);
+                self.pending.insert(at, *plot);
+            }
         }
-        self.drain(false, &mut report)?;
+        self.drain(flush, &mut report, after_frame)?;
         Ok(report)
     }
 
     /// Processes every buffered plot, closing the last frame. Plots that
     /// arrive later for that frame will be late.
     pub fn flush(&mut self) -> Result<StepReport, AlgoError> {
-        let mut report = StepReport::default();
-        self.drain(true, &mut report)?;
-        Ok(report)
+        self.process_with(&[], true, &mut |_| {})
+    }
+
+    /// The confirmed tracks by ascending id.
+    pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
+        let mut confirmed: Vec<TrackOutput> = self
+            .tracks
+            .iter()
+            .map(|t| t.output(TrackStatus::Confirmed))
+            .collect();
+        confirmed.sort_by_key(|t| t.id);
+        confirmed
     }
 
     /// The tracker as bytes (configuration included), for
@@ -255,7 +275,12 @@ impl Tracker {
     }
 
     /// Processes the complete frames at the head of `pending` (all with `flush`).
-    fn drain(&mut self, flush: bool, report: &mut StepReport) -> Result<(), AlgoError> {
+    fn drain(
+        &mut self,
+        flush: bool,
+        report: &mut StepReport,
+        after_frame: &mut dyn FnMut(&Self),
+    ) -> Result<(), AlgoError> {
         while !self.pending.is_empty() {
             let first = self.pending[0];
             let len = if self.parallel {
@@ -281,6 +306,7 @@ impl Tracker {
             } else {
                 self.serial_frame(frame, report)?;
             }
+            after_frame(self);
         }
         report.pending = self.pending.len();
         Ok(())
@@ -312,7 +338,15 @@ impl Tracker {
         let t = self.instant_time(k);
         let registered = frame
             .iter()
-            .map(|p| extrapolate(&self.config.radars[p.radar], p.radar, p, t))
+            .map(|p| {
+                extrapolate(
+                    &self.config.radars[p.radar],
+                    p.radar,
+                    p,
+                    t,
+                    self.config.sigma_tangential_speed,
+                )
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let fused = associate_and_fuse(&registered, self.config.plot_gate_probability)?;
         let mut radars: Vec<usize> = frame.iter().map(|p| p.radar).collect();

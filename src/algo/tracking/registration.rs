@@ -18,7 +18,8 @@
 //! radar's line of sight by ṙ (t − τ), the angles held ("only the radial
 //! displacement can be obtained; the target's angles are assumed
 //! unchanged"). The range variance grows by (t − τ)² σ_ṙ²; the converted
-//! covariance is then J R′ J′ at the extrapolated range. If the
+//! covariance is then J R′ J′ at the extrapolated range, plus the unseen
+//! cross-range motion (see [`extrapolate`]). If the
 //! extrapolated range would not be positive (a target passing over the
 //! radar within one period) the plot keeps its measured range.
 
@@ -77,13 +78,20 @@ pub fn register(
 
 /// Steps 1 and 3: the plot moved to time `t` along its radar's line of
 /// sight (range ρ + ṙ (t − τ), angles held, σ_ρ² + (t − τ)² σ_ṙ²). Needs the
-/// plot's radial velocity and the radar's σ_ṙ.
+/// plot's radial velocity and the radar's σ_ṙ. The angles held hide the
+/// motion across the line of sight: `sigma_tangential_speed` σ_t adds
+/// (σ_t (t − τ))² (I − u u') to the covariance (u the unit line of sight;
+/// for a 2D plot its horizontal direction). The patent omits this term
+/// (σ_t = 0), which makes plots moved by seconds overconfident by hundreds
+/// of metres across the beam.
 pub fn extrapolate(
     radar: &RadarSpec,
     radar_index: usize,
-    plot: &Plot,
+    plot_in: &Plot,
     t: f64,
+    sigma_tangential_speed: f64,
 ) -> Result<CartesianPlot, AlgoError> {
+    let plot = plot_in;
     let (Some(v), Some(sigma_v)) = (plot.radial_velocity, radar.sigma_radial_velocity) else {
         return Err(AlgoError::InvalidParameter {
             what: "radial_velocity",
@@ -97,7 +105,20 @@ pub fn extrapolate(
         polar.range = range;
     }
     polar.sigma_range = polar.sigma_range.hypot(dt * sigma_v);
-    to_cartesian(radar, radar_index, t, &polar)
+    let mut plot = to_cartesian(radar, radar_index, t, &polar)?;
+    // The unseen motion across the line of sight: (σ_t Δt)² (I − u u').
+    let cross = (dt * sigma_tangential_speed).powi(2);
+    if cross > 0.0 {
+        let u = line_of_sight(plot_in)?;
+        let n = plot.z.len();
+        for i in 0..n {
+            for j in 0..n {
+                let identity = if i == j { 1.0 } else { 0.0 };
+                plot.r[(i, j)] += cross * (identity - u[i] * u[j]);
+            }
+        }
+    }
+    Ok(plot)
 }
 
 /// The radial velocity re-expressed about the fusion centre (step 1), or
@@ -210,16 +231,28 @@ mod tests {
         // ρ' = 1000 + 20 = 1020, position [1220, 0];
         // σ_ρ'² = 10² + 2²·1² = 104 along x (east); cross-range 1020²·1e-6.
         let r = radar_2d([200.0, 0.0, 0.0]);
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0).unwrap();
         assert_eq!(c.t, 2.0);
         assert!((c.z[0] - 1220.0).abs() < 1e-9 && c.z[1].abs() < 1e-9);
         assert!((c.r[(0, 0)] - 104.0).abs() < 1e-9);
         assert!((c.r[(1, 1)] - 1020.0f64.powi(2) * 1e-6).abs() < 1e-9);
         // Backwards in time as well: ρ' = 1000 − 10 = 990 at t = −1.
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), -1.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), -1.0, 0.0).unwrap();
         assert!((c.z[0] - 1190.0).abs() < 1e-9);
         assert!((c.r[(0, 0)] - 101.0).abs() < 1e-9);
-        assert!(extrapolate(&r, 0, &plot(1000.0, 0.0, None), 1.0).is_err());
+        assert!(extrapolate(&r, 0, &plot(1000.0, 0.0, None), 1.0, 0.0).is_err());
+    }
+
+    #[test]
+    fn unseen_cross_range_motion_grows_the_covariance_across_the_beam_only() {
+        // θ = 90° (due east): the line of sight is x, across it is y.
+        // σ_t = 50 m/s over Δt = 2 s adds (50·2)² = 10⁴ m² to P_yy only:
+        // P_yy = 1020²·1e-6 + 10⁴, P_xx = 104 as without it.
+        let r = radar_2d([200.0, 0.0, 0.0]);
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 50.0).unwrap();
+        assert!((c.r[(0, 0)] - 104.0).abs() < 1e-9);
+        assert!((c.r[(1, 1)] - (1020.0f64.powi(2) * 1e-6 + 1e4)).abs() < 1e-6);
+        assert!(c.r[(0, 1)].abs() < 1e-9);
     }
 
     #[test]

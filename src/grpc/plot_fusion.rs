@@ -1,0 +1,175 @@
+//! gRPC `PlotFusionService`: conversions from prost types to the service
+//! input and back. The tracking is the service layer's, shared with REST.
+
+use tonic::{Request, Response, Status};
+
+use super::{error::to_status, matrix};
+use crate::{
+    algo::tracking::Counters,
+    proto::{self as pb, plot_fusion_service_server::PlotFusionService},
+    service::{self, plot_fusion as svc},
+};
+
+#[derive(Debug, Clone, Default)]
+pub struct PlotFusionGrpc;
+
+#[tonic::async_trait]
+impl PlotFusionService for PlotFusionGrpc {
+    async fn track(
+        &self,
+        request: Request<pb::PlotFusionRequest>,
+    ) -> Result<Response<pb::PlotFusionResponse>, Status> {
+        let req = request.into_inner();
+        let input = svc::TrackInput {
+            spec: spec_in(req.origin, req.radars, req.tracker),
+            plots: plots_in(req.plots),
+            history: req.history,
+        };
+        let out = service::offload(move || svc::track(input))
+            .await
+            .map_err(to_status)?;
+        Ok(Response::new(pb::PlotFusionResponse {
+            mode: out.mode.into(),
+            state_layout: out.state_layout.iter().map(|s| s.to_string()).collect(),
+            tracks: out.tracks.into_iter().map(track_out).collect(),
+            deleted: out.deleted.into_iter().map(track_out).collect(),
+            history: out
+                .history
+                .unwrap_or_default()
+                .into_iter()
+                .map(|e| pb::TrackHistoryEntry {
+                    t: e.t,
+                    tracks: e.tracks.into_iter().map(track_out).collect(),
+                })
+                .collect(),
+            counters: Some(counters_out(out.counters)),
+            timing: Some(pb::Timing {
+                compute_us: out.compute_us,
+            }),
+            warnings: out.warnings,
+        }))
+    }
+}
+
+fn geo_in(g: pb::GeoPoint) -> svc::GeoInput {
+    svc::GeoInput {
+        lat_deg: g.lat_deg,
+        lon_deg: g.lon_deg,
+        height_m: g.height_m,
+    }
+}
+
+pub(crate) fn spec_in(
+    origin: Option<pb::GeoPoint>,
+    radars: Vec<pb::PlotRadar>,
+    tracker: Option<pb::TrackerOptions>,
+) -> svc::SpecInput {
+    let t = tracker.unwrap_or_default();
+    let nonempty = |v: Vec<f64>| (!v.is_empty()).then_some(v);
+    svc::SpecInput {
+        origin: origin.map(geo_in),
+        radars: radars
+            .into_iter()
+            .map(|r| svc::RadarInput {
+                id: Some(r.id),
+                kind: (!r.kind.is_empty()).then_some(r.kind),
+                site: r.site.map(|s| svc::SiteInput {
+                    geodetic: (s.lat_deg.is_some() || s.lon_deg.is_some()).then_some(
+                        svc::GeoInput {
+                            lat_deg: s.lat_deg,
+                            lon_deg: s.lon_deg,
+                            height_m: s.height_m,
+                        },
+                    ),
+                    position_m: nonempty(s.position_m),
+                }),
+                sigma_range_m: r.sigma_range_m,
+                sigma_azimuth_deg: r.sigma_azimuth_deg,
+                sigma_elevation_deg: r.sigma_elevation_deg,
+                sigma_radial_velocity_mps: r.sigma_radial_velocity_mps,
+                scan_period_s: r.scan_period_s,
+                p_detection: r.p_detection,
+                clutter_density: r.clutter_density,
+            })
+            .collect(),
+        tracker: svc::TrackerInput {
+            dimensions: t.dimensions,
+            mode: t.mode,
+            fusion_period_s: t.fusion_period_s,
+            fusion_epoch_s: t.fusion_epoch_s,
+            time_tolerance_s: t.time_tolerance_s,
+            association: t.association,
+            max_exact_cluster_tracks: t.max_exact_cluster_tracks,
+            plot_gate_probability: t.plot_gate_probability,
+            track_gate_probability: t.track_gate_probability,
+            initiation: t.initiation.map(|i| svc::InitiationInput {
+                m: i.m,
+                n: i.n,
+                v_min_mps: i.v_min_mps,
+                v_max_mps: i.v_max_mps,
+                v_min_axis_mps: nonempty(i.v_min_axis_mps),
+                v_max_axis_mps: nonempty(i.v_max_axis_mps),
+                gate_probability: i.gate_probability,
+                min_dt_s: i.min_dt_s,
+                max_dt_s: i.max_dt_s,
+            }),
+            deletion: t.deletion.map(|d| svc::DeletionInput {
+                max_consecutive_misses: d.max_consecutive_misses,
+                m: d.m,
+                n: d.n,
+                max_position_sigma_m: d.max_position_sigma_m,
+            }),
+            sigma_a_mps2: t.sigma_a_mps2,
+            sigma_a_vertical_mps2: t.sigma_a_vertical_mps2,
+            default_height_m: t.default_height_m,
+            default_height_sigma_m: t.default_height_sigma_m,
+            sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
+        },
+    }
+}
+
+pub(crate) fn plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
+    plots
+        .into_iter()
+        .map(|p| svc::PlotInput {
+            radar_id: Some(p.radar_id),
+            t: p.t,
+            range_m: p.range_m,
+            azimuth_deg: p.azimuth_deg,
+            elevation_deg: p.elevation_deg,
+            radial_velocity_mps: p.radial_velocity_mps,
+        })
+        .collect()
+}
+
+pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
+    pb::FusedTrack {
+        id: t.id,
+        status: t.status.into(),
+        t: t.t,
+        state: t.state,
+        covariance: Some(matrix(&t.covariance)),
+        lat_deg: t.lat_deg,
+        lon_deg: t.lon_deg,
+        height_m: t.height_m,
+        radars: t.radars,
+        hits: t.hits,
+        misses: t.misses,
+        consecutive_misses: t.consecutive_misses,
+        age: t.age,
+        last_update_t: t.last_update_t,
+    }
+}
+
+pub(crate) fn counters_out(c: Counters) -> pb::TrackerCounters {
+    pb::TrackerCounters {
+        plots: c.plots,
+        late: c.late,
+        frames: c.frames,
+        fused_plots: c.fused_plots,
+        started: c.started,
+        confirmed: c.confirmed,
+        dropped: c.dropped,
+        deleted: c.deleted,
+    }
+}

@@ -1,0 +1,412 @@
+//! REST route of the multi-radar plot-fusion tracker (seed 001):
+//! `POST /v1/plot-fusion/track`. The network and tracker DTOs are shared
+//! with `plot_fusion` sessions (`http::sessions`).
+
+use axum::{Json, extract::State};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::{
+    Timing,
+    problem::{ApiJson, Problem},
+};
+use crate::{
+    algo::tracking::Counters,
+    service::{self, plot_fusion as svc},
+    state::AppState,
+};
+
+/// A WGS84 position (height above the ellipsoid, default 0).
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct GeoPoint {
+    #[schema(example = 52.0)]
+    pub lat_deg: f64,
+    #[schema(example = 4.0)]
+    pub lon_deg: f64,
+    pub height_m: Option<f64>,
+}
+
+/// A radar site: WGS84 (`lat_deg`, `lon_deg`, `height_m`) or a local
+/// `position_m: [east, north(, up)]` about `origin` (the radar's axes are
+/// then taken as the fusion frame's).
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotRadarSite {
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+    pub height_m: Option<f64>,
+    #[schema(example = json!([-200.0, 0.0, 0.0]))]
+    pub position_m: Option<Vec<f64>>,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotRadar {
+    #[schema(example = "r1")]
+    pub id: String,
+    /// `2d` or `3d`.
+    #[schema(example = "2d")]
+    pub kind: String,
+    pub site: PlotRadarSite,
+    #[schema(example = 100.0)]
+    pub sigma_range_m: Option<f64>,
+    #[schema(example = 0.2)]
+    pub sigma_azimuth_deg: Option<f64>,
+    /// 3D radars.
+    pub sigma_elevation_deg: Option<f64>,
+    /// Present for a radar that measures the radial (Doppler) velocity.
+    pub sigma_radial_velocity_mps: Option<f64>,
+    #[schema(example = 4.0)]
+    pub scan_period_s: Option<f64>,
+    /// P_D in (0, 1], default 0.9.
+    pub p_detection: Option<f64>,
+    /// False plots per m·rad (2D) or m·rad² (3D), default 1e-7.
+    pub clutter_density: Option<f64>,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotIn {
+    #[schema(example = "r1")]
+    pub radar_id: String,
+    #[schema(example = 0.0)]
+    pub t: f64,
+    #[schema(example = 42000.0)]
+    pub range_m: f64,
+    /// Clockwise from north at the radar.
+    #[schema(example = 37.5)]
+    pub azimuth_deg: f64,
+    /// Required from a 3D radar, absent from a 2D radar.
+    pub elevation_deg: Option<f64>,
+    /// Positive receding; only from a radar with `sigma_radial_velocity_mps`.
+    pub radial_velocity_mps: Option<f64>,
+}
+
+/// Logic-based track initiation (seed 001 step 7).
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotInitiation {
+    /// Confirmation M of M-of-N (default 3).
+    pub m: Option<u32>,
+    /// Confirmation N (default 4).
+    pub n: Option<u32>,
+    /// Speed band between a root plot and its second plot (default 0–600 m/s).
+    pub v_min_mps: Option<f64>,
+    pub v_max_mps: Option<f64>,
+    /// Per-axis band `[east, north(, up)]` instead of the speed band.
+    pub v_min_axis_mps: Option<Vec<f64>>,
+    pub v_max_axis_mps: Option<Vec<f64>>,
+    /// χ² gate probability of the initiation tests (default 0.99).
+    pub gate_probability: Option<f64>,
+    /// Shortest time from a root to its second plot (default 1 s).
+    pub min_dt_s: Option<f64>,
+    /// Longest (default twice the longest scan period).
+    pub max_dt_s: Option<f64>,
+}
+
+/// Track deletion: any rule given deletes (default: 3 consecutive misses).
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotDeletion {
+    pub max_consecutive_misses: Option<u32>,
+    /// M_d of an M_d-of-N_d miss rule.
+    pub m: Option<u32>,
+    pub n: Option<u32>,
+    /// Delete when √(P_xx + P_yy) exceeds this.
+    pub max_position_sigma_m: Option<f64>,
+}
+
+/// The tracker's options; every one has a default.
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerOptions {
+    /// 2 or 3 (default 3 when any radar is 3d, else 2).
+    pub dimensions: Option<u32>,
+    /// `auto` (default: parallel when every radar gives Doppler), `parallel` or `serial`.
+    #[schema(example = "auto")]
+    pub mode: Option<String>,
+    /// Parallel mode: period of the fusion instants (default the shortest scan period).
+    pub fusion_period_s: Option<f64>,
+    /// Parallel mode: time of fusion instant 0 (default 0).
+    pub fusion_epoch_s: Option<f64>,
+    /// Serial mode: plots of one radar within this time are one scan group (default 0).
+    pub time_tolerance_s: Option<f64>,
+    /// Plot-to-track association: `exact` JPDA (default), `amsjpda`,
+    /// `global_nearest_neighbour` or `nearest_neighbour`.
+    pub association: Option<String>,
+    /// Clusters with more tracks are computed by AMSJPDA (default 12).
+    pub max_exact_cluster_tracks: Option<u32>,
+    /// χ² gate probability of plot-to-plot association (default 0.99).
+    pub plot_gate_probability: Option<f64>,
+    /// Gate probability P_G of plot-to-track association (default 0.99).
+    pub track_gate_probability: Option<f64>,
+    pub initiation: Option<PlotInitiation>,
+    pub deletion: Option<PlotDeletion>,
+    /// White-noise acceleration σ per horizontal axis (default 1 m/s²).
+    pub sigma_a_mps2: Option<f64>,
+    /// Vertical σ (default `sigma_a_mps2`).
+    pub sigma_a_vertical_mps2: Option<f64>,
+    /// Height (fusion frame) assumed for targets seen by 2D radars: their
+    /// slant ranges are made horizontal with it, and 3D tracks started from
+    /// 2D plots get it (default 0 m; set it to the traffic's height for
+    /// aircraft, or 2D ranges are too long by about Δh²/2ρ).
+    pub default_height_m: Option<f64>,
+    /// Its σ (default 1000 m).
+    pub default_height_sigma_m: Option<f64>,
+    /// Parallel mode: σ of the target speed across the line of sight, for
+    /// the plots moved to a fusion instant with their angles held (default
+    /// 100 m/s; 0 is the patent's covariance).
+    pub sigma_tangential_speed_mps: Option<f64>,
+}
+
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlotFusionRequest {
+    /// The fusion centre: the ENU frame of the tracks; absent: the first
+    /// radar site given in WGS84 (none: tracks carry no lat/lon).
+    pub origin: Option<GeoPoint>,
+    pub radars: Vec<PlotRadar>,
+    /// In any order; the service sorts them by time.
+    pub plots: Vec<PlotIn>,
+    pub tracker: Option<TrackerOptions>,
+    /// Also return the confirmed tracks after every processing instant.
+    #[serde(default)]
+    pub history: bool,
+}
+
+/// A track at the end of the data (or when deleted).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct FusedTrack {
+    pub id: u64,
+    /// `tentative`, `confirmed` or `deleted`.
+    pub status: &'static str,
+    pub t: f64,
+    /// In the fusion ENU frame, layout `state_layout`.
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lat_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lon_deg: Option<f64>,
+    /// 3D trackers only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub height_m: Option<f64>,
+    /// Radars whose plots updated the track at its last update.
+    pub radars: Vec<String>,
+    pub hits: u32,
+    pub misses: u32,
+    pub consecutive_misses: u32,
+    /// Frames since the track started.
+    pub age: u32,
+    pub last_update_t: f64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TrackHistoryEntry {
+    pub t: f64,
+    /// The confirmed tracks after this processing instant.
+    pub tracks: Vec<FusedTrack>,
+}
+
+/// Running totals.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TrackerCounters {
+    /// Plots accepted.
+    pub plots: u64,
+    /// Late plots dropped.
+    pub late: u64,
+    /// Processing instants (scan groups or fusion instants).
+    pub frames: u64,
+    /// Fused plots made by parallel mode.
+    pub fused_plots: u64,
+    /// Tentative tracks started, confirmed and dropped; confirmed tracks deleted.
+    pub started: u64,
+    pub confirmed: u64,
+    pub dropped: u64,
+    pub deleted: u64,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlotFusionResponse {
+    /// The mode used: `parallel` or `serial`.
+    pub mode: &'static str,
+    pub state_layout: Vec<&'static str>,
+    /// Confirmed then tentative tracks at the end of the data.
+    pub tracks: Vec<FusedTrack>,
+    /// Confirmed tracks deleted during the data, as they were when deleted.
+    pub deleted: Vec<FusedTrack>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub history: Option<Vec<TrackHistoryEntry>>,
+    pub counters: TrackerCounters,
+    pub timing: Timing,
+    pub warnings: Vec<String>,
+}
+
+pub(crate) fn spec_in(
+    origin: Option<GeoPoint>,
+    radars: Vec<PlotRadar>,
+    tracker: Option<TrackerOptions>,
+) -> svc::SpecInput {
+    let t = tracker.unwrap_or_default();
+    svc::SpecInput {
+        origin: origin.map(geo_in),
+        radars: radars
+            .into_iter()
+            .map(|r| svc::RadarInput {
+                id: Some(r.id),
+                kind: Some(r.kind),
+                site: Some(svc::SiteInput {
+                    geodetic: (r.site.lat_deg.is_some() || r.site.lon_deg.is_some()).then_some(
+                        svc::GeoInput {
+                            lat_deg: r.site.lat_deg,
+                            lon_deg: r.site.lon_deg,
+                            height_m: r.site.height_m,
+                        },
+                    ),
+                    position_m: r.site.position_m,
+                }),
+                sigma_range_m: r.sigma_range_m,
+                sigma_azimuth_deg: r.sigma_azimuth_deg,
+                sigma_elevation_deg: r.sigma_elevation_deg,
+                sigma_radial_velocity_mps: r.sigma_radial_velocity_mps,
+                scan_period_s: r.scan_period_s,
+                p_detection: r.p_detection,
+                clutter_density: r.clutter_density,
+            })
+            .collect(),
+        tracker: svc::TrackerInput {
+            dimensions: t.dimensions,
+            mode: t.mode,
+            fusion_period_s: t.fusion_period_s,
+            fusion_epoch_s: t.fusion_epoch_s,
+            time_tolerance_s: t.time_tolerance_s,
+            association: t.association,
+            max_exact_cluster_tracks: t.max_exact_cluster_tracks,
+            plot_gate_probability: t.plot_gate_probability,
+            track_gate_probability: t.track_gate_probability,
+            initiation: t.initiation.map(|i| svc::InitiationInput {
+                m: i.m,
+                n: i.n,
+                v_min_mps: i.v_min_mps,
+                v_max_mps: i.v_max_mps,
+                v_min_axis_mps: i.v_min_axis_mps,
+                v_max_axis_mps: i.v_max_axis_mps,
+                gate_probability: i.gate_probability,
+                min_dt_s: i.min_dt_s,
+                max_dt_s: i.max_dt_s,
+            }),
+            deletion: t.deletion.map(|d| svc::DeletionInput {
+                max_consecutive_misses: d.max_consecutive_misses,
+                m: d.m,
+                n: d.n,
+                max_position_sigma_m: d.max_position_sigma_m,
+            }),
+            sigma_a_mps2: t.sigma_a_mps2,
+            sigma_a_vertical_mps2: t.sigma_a_vertical_mps2,
+            default_height_m: t.default_height_m,
+            default_height_sigma_m: t.default_height_sigma_m,
+            sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
+        },
+    }
+}
+
+fn geo_in(g: GeoPoint) -> svc::GeoInput {
+    svc::GeoInput {
+        lat_deg: Some(g.lat_deg),
+        lon_deg: Some(g.lon_deg),
+        height_m: g.height_m,
+    }
+}
+
+pub(crate) fn plots_in(plots: Vec<PlotIn>) -> Vec<svc::PlotInput> {
+    plots
+        .into_iter()
+        .map(|p| svc::PlotInput {
+            radar_id: Some(p.radar_id),
+            t: Some(p.t),
+            range_m: Some(p.range_m),
+            azimuth_deg: Some(p.azimuth_deg),
+            elevation_deg: p.elevation_deg,
+            radial_velocity_mps: p.radial_velocity_mps,
+        })
+        .collect()
+}
+
+pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
+    FusedTrack {
+        id: t.id,
+        status: t.status,
+        t: t.t,
+        state: t.state,
+        covariance: t.covariance,
+        lat_deg: t.lat_deg,
+        lon_deg: t.lon_deg,
+        height_m: t.height_m,
+        radars: t.radars,
+        hits: t.hits,
+        misses: t.misses,
+        consecutive_misses: t.consecutive_misses,
+        age: t.age,
+        last_update_t: t.last_update_t,
+    }
+}
+
+pub(crate) fn counters_out(c: Counters) -> TrackerCounters {
+    TrackerCounters {
+        plots: c.plots,
+        late: c.late,
+        frames: c.frames,
+        fused_plots: c.fused_plots,
+        started: c.started,
+        confirmed: c.confirmed,
+        dropped: c.dropped,
+        deleted: c.deleted,
+    }
+}
+
+/// Tracks targets from the plots of several radars (seed 001): spatial
+/// registration, parallel (Doppler) or serial fusion, JPDA/EKF, logic
+/// initiation and deletion.
+#[utoipa::path(
+    post,
+    path = "/v1/plot-fusion/track",
+    tag = "plot-fusion",
+    request_body = PlotFusionRequest,
+    responses(
+        (status = 200, description = "Tracks at the end of the data", body = PlotFusionResponse),
+        (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Too many plots", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid field values", body = Problem, content_type = "application/problem+json"),
+    )
+)]
+pub async fn track(
+    State(_state): State<AppState>,
+    ApiJson(req): ApiJson<PlotFusionRequest>,
+) -> Result<Json<PlotFusionResponse>, Problem> {
+    let input = svc::TrackInput {
+        spec: spec_in(req.origin, req.radars, req.tracker),
+        plots: plots_in(req.plots),
+        history: req.history,
+    };
+    let out = service::offload(move || svc::track(input)).await?;
+    Ok(Json(PlotFusionResponse {
+        mode: out.mode,
+        state_layout: out.state_layout.to_vec(),
+        tracks: out.tracks.into_iter().map(track_out).collect(),
+        deleted: out.deleted.into_iter().map(track_out).collect(),
+        history: out.history.map(|h| {
+            h.into_iter()
+                .map(|e| TrackHistoryEntry {
+                    t: e.t,
+                    tracks: e.tracks.into_iter().map(track_out).collect(),
+                })
+                .collect()
+        }),
+        counters: counters_out(out.counters),
+        timing: Timing {
+            compute_us: out.compute_us,
+        },
+        warnings: out.warnings,
+    }))
+}

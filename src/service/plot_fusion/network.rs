@@ -1,0 +1,801 @@
+//! The radar network of a plot-fusion request: validation of the radars,
+//! the origin and the tracker's options into a [`Network`] and a
+//! [`TrackerConfig`], and of the plots into the core's [`Plot`]s.
+//!
+//! Geometry. The fusion frame is the ENU frame at `origin`. A radar given
+//! in WGS84 has its site converted exactly, and its own ENU axes differ
+//! from the fusion frame's by a rotation (the meridians converge and the
+//! horizon tilts, about 0.9° per 100 km). Each plot is therefore
+//! re-expressed in the fusion axes at its radar's site: its line of sight
+//! `u` (from azimuth and elevation; a 2D plot is taken as horizontal in
+//! the radar's frame) is rotated, `u_f = M u` with `M` the rotation from
+//! the radar's ENU to the fusion ENU, and the azimuth (and elevation) of
+//! `u_f` replace the measured ones; the range and the radial velocity are
+//! invariant. The angle noise is kept (the rotation is a few degrees at
+//! most, so the error of keeping σ_θ, σ_φ is of second order). A radar
+//! given as a local `position_m` is the patent's flat model: its axes are
+//! the fusion frame's and its plots are used as measured.
+//!
+//! Slant range. A 2D radar measures the slant range ρ to a target at an
+//! unknown height; the tracker's plane needs the horizontal range. With
+//! the targets assumed at `tracker.default_height_m` (fusion frame, default
+//! 0) above a radar at height h_s, Δh = default_height − h_s and the
+//! horizontal range is √(ρ² − Δh²) (ρ > |Δh|; closer plots are kept as
+//! measured). Earth curvature between site and target is neglected here
+//! (the site's own height and axes are exact).
+
+use std::collections::HashMap;
+
+use nalgebra::Matrix3;
+
+use super::{
+    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, SpecInput,
+    TrackView,
+};
+use crate::algo::{
+    AlgoError,
+    geo::{Ellipsoid, LocalFrame},
+    jpda::Method,
+    polar::{enu_to_polar_3d, polar_to_enu_3d},
+    tracking::{Deletion, Mode, Plot, RadarSpec, TrackerConfig, VelocityGate},
+    wire::{Reader, Writer},
+};
+use crate::service::{FieldViolation, ServiceError, Violations};
+
+/// Most violations reported for the plots of one request.
+const MAX_PLOT_VIOLATIONS: usize = 100;
+
+/// What the service keeps of a validated network besides the core's
+/// configuration: the fusion frame, the radars' ids and their rotations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Network {
+    /// The fusion frame; `None` when every site is local and no origin was
+    /// given (tracks then carry no latitude and longitude).
+    pub frame: Option<LocalFrame>,
+    pub radar_ids: Vec<String>,
+    /// Rotation from the radar's ENU axes to the fusion frame's; `None` for
+    /// a local site (axes parallel).
+    pub rotations: Vec<Option<Matrix3<f64>>>,
+    index: HashMap<String, usize>,
+}
+
+/// The association method names.
+pub const ASSOCIATIONS: &[&str] = &[
+    "exact",
+    "amsjpda",
+    "global_nearest_neighbour",
+    "nearest_neighbour",
+];
+
+fn wire_name(what: &str) -> &'static str {
+    match what {
+        "axes" => "tracker.dimensions",
+        "mode" => "tracker.mode",
+        "fusion_period" => "tracker.fusion_period_s",
+        "fusion_epoch" => "tracker.fusion_epoch_s",
+        "time_tolerance" => "tracker.time_tolerance_s",
+        "max_exact_tracks" => "tracker.max_exact_cluster_tracks",
+        "plot_gate_probability" => "tracker.plot_gate_probability",
+        "track_gate_probability" => "tracker.track_gate_probability",
+        "confirm_m_of_n" => "tracker.initiation.m",
+        "v_min" => "tracker.initiation.v_min_mps",
+        "v_max" => "tracker.initiation.v_max_mps",
+        "initiation_gate_probability" => "tracker.initiation.gate_probability",
+        "min_dt" => "tracker.initiation.min_dt_s",
+        "max_dt" => "tracker.initiation.max_dt_s",
+        "max_consecutive_misses" => "tracker.deletion.max_consecutive_misses",
+        "deletion_m_of_n" => "tracker.deletion.m",
+        "max_position_sigma" => "tracker.deletion.max_position_sigma_m",
+        "sigma_a" => "tracker.sigma_a_mps2",
+        "default_height" => "tracker.default_height_m",
+        "default_height_sigma" => "tracker.default_height_sigma_m",
+        "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
+        _ => "tracker",
+    }
+}
+
+/// A configuration error of the core, named by its wire field.
+pub fn config_error(e: &AlgoError) -> ServiceError {
+    match e {
+        AlgoError::InvalidParameter { what, reason } => Violations::single(wire_name(what), reason),
+        other => Violations::single("tracker", other.to_string()),
+    }
+}
+
+fn number(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
+    let x = v.required(field, x)?;
+    if !(x.is_finite() && x >= lo && x <= hi) {
+        v.add(
+            field,
+            format!("must be a finite number in [{lo}, {hi}], got {x}"),
+        );
+        return None;
+    }
+    Some(x)
+}
+
+fn positive(v: &mut Violations, field: &str, x: Option<f64>) -> Option<f64> {
+    let x = v.required(field, x)?;
+    if !(x.is_finite() && x > 0.0) {
+        v.add(field, format!("must be finite and > 0, got {x}"));
+        return None;
+    }
+    Some(x)
+}
+
+fn geodetic(v: &mut Violations, f: &str, g: &GeoInput) -> Option<LocalFrame> {
+    let lat = number(v, &format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
+    let lon = number(v, &format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
+    let h = number(
+        v,
+        &format!("{f}.height_m"),
+        Some(g.height_m.unwrap_or(0.0)),
+        -11_000.0,
+        100_000.0,
+    );
+    let (lat, lon, h) = (lat?, lon?, h?);
+    if lat.abs() > 89.9 {
+        v.add(
+            format!("{f}.lat_deg"),
+            "a site within 0.1° of a pole has no usable north reference",
+        );
+        return None;
+    }
+    v.check(
+        f,
+        LocalFrame::new(Ellipsoid::WGS84, lat.to_radians(), lon.to_radians(), h),
+    )
+}
+
+enum Site {
+    Geodetic(LocalFrame),
+    Local([f64; 3]),
+}
+
+/// Validates a network and the tracker's options; the warnings say what
+/// was decided for the caller (the mode, a missing origin).
+pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
+    let mut v = Violations::new();
+    let mut warnings = Vec::new();
+    if spec.radars.is_empty() {
+        v.add("radars", "at least one radar is needed");
+    }
+    if spec.radars.len() > MAX_RADARS {
+        v.add(
+            "radars",
+            format!("{} radars; at most {MAX_RADARS}", spec.radars.len()),
+        );
+        return Err(v.finish().expect_err("a violation was added"));
+    }
+    let mut ids = Vec::new();
+    let mut index = HashMap::new();
+    let mut sites = Vec::new();
+    let mut specs = Vec::new();
+    for (i, r) in spec.radars.iter().enumerate() {
+        let f = format!("radars[{i}]");
+        let id = r.id.clone().unwrap_or_default();
+        if id.is_empty() {
+            v.add(format!("{f}.id"), "is required");
+        } else if index.insert(id.clone(), i).is_some() {
+            v.add(format!("{f}.id"), format!("duplicate radar id '{id}'"));
+        }
+        ids.push(id);
+        let three_d = match r.kind.as_deref() {
+            Some("2d") => Some(false),
+            Some("3d") => Some(true),
+            None => {
+                v.add(format!("{f}.kind"), "is required: 2d or 3d");
+                None
+            }
+            Some(k) => {
+                v.add(format!("{f}.kind"), format!("unknown kind '{k}': 2d or 3d"));
+                None
+            }
+        };
+        let site = match &r.site {
+            None => {
+                v.add(format!("{f}.site"), "is required");
+                None
+            }
+            Some(s) => match (&s.geodetic, &s.position_m) {
+                (Some(g), None) => geodetic(&mut v, &format!("{f}.site"), g).map(Site::Geodetic),
+                (None, Some(p)) => {
+                    let field = format!("{f}.site.position_m");
+                    if !(p.len() == 2 || p.len() == 3) || p.iter().any(|x| !x.is_finite()) {
+                        v.add(
+                            field,
+                            "must be 2 or 3 finite numbers [east, north(, up)] in m",
+                        );
+                        None
+                    } else {
+                        Some(Site::Local([p[0], p[1], p.get(2).copied().unwrap_or(0.0)]))
+                    }
+                }
+                _ => {
+                    v.add(
+                        format!("{f}.site"),
+                        "give either lat_deg/lon_deg/height_m or position_m",
+                    );
+                    None
+                }
+            },
+        };
+        sites.push(site);
+        let sr = positive(&mut v, &format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = number(
+            &mut v,
+            &format!("{f}.sigma_azimuth_deg"),
+            r.sigma_azimuth_deg,
+            0.0,
+            90.0,
+        );
+        if sa == Some(0.0) {
+            v.add(format!("{f}.sigma_azimuth_deg"), "must be > 0");
+        }
+        let se = match (three_d, r.sigma_elevation_deg) {
+            (Some(true), s) => {
+                let s = number(&mut v, &format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
+                if s == Some(0.0) {
+                    v.add(format!("{f}.sigma_elevation_deg"), "must be > 0");
+                }
+                s
+            }
+            (Some(false), Some(_)) => {
+                v.add(
+                    format!("{f}.sigma_elevation_deg"),
+                    "a 2d radar has no elevation; declare kind 3d",
+                );
+                None
+            }
+            _ => None,
+        };
+        let sv = r
+            .sigma_radial_velocity_mps
+            .and_then(|s| positive(&mut v, &format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+        let period = positive(&mut v, &format!("{f}.scan_period_s"), r.scan_period_s);
+        let pd = r.p_detection.unwrap_or(DEFAULT_P_DETECTION);
+        if !(pd > 0.0 && pd <= 1.0) {
+            v.add(
+                format!("{f}.p_detection"),
+                format!("must lie in (0, 1], got {pd}"),
+            );
+        }
+        let clutter = r.clutter_density.unwrap_or(DEFAULT_CLUTTER_DENSITY);
+        if !(clutter.is_finite() && clutter > 0.0) {
+            v.add(
+                format!("{f}.clutter_density"),
+                format!("must be finite and > 0 (false plots per m·rad), got {clutter}"),
+            );
+        }
+        if let (Some(three_d), Some(sr), Some(sa), Some(period)) = (three_d, sr, sa, period) {
+            specs.push(RadarSpec {
+                site: [0.0; 3],
+                sigma_range: sr,
+                sigma_azimuth: sa.to_radians(),
+                sigma_elevation: if three_d {
+                    se.map(f64::to_radians)
+                } else {
+                    None
+                },
+                sigma_radial_velocity: sv,
+                scan_period: period,
+                detection_probability: pd,
+                clutter_density: clutter,
+            });
+        }
+    }
+    let frame = match &spec.origin {
+        Some(o) => geodetic(&mut v, "origin", o),
+        None => sites.iter().find_map(|s| match s {
+            Some(Site::Geodetic(f)) => Some(*f),
+            _ => None,
+        }),
+    };
+    let any_3d = spec.radars.iter().any(|r| r.kind.as_deref() == Some("3d"));
+    let tracker = &spec.tracker;
+    let axes = match tracker.dimensions {
+        None => Some(if any_3d { 3 } else { 2 }),
+        Some(d @ (2 | 3)) => {
+            if d == 2 && any_3d {
+                v.add(
+                    "tracker.dimensions",
+                    "a 2D tracker takes 2d radars only; use 3 (or omit it)",
+                );
+            }
+            Some(d as usize)
+        }
+        Some(d) => {
+            v.add("tracker.dimensions", format!("must be 2 or 3, got {d}"));
+            None
+        }
+    };
+    let mode = match tracker.mode.as_deref() {
+        None | Some("auto") => Some(Mode::Auto),
+        Some("parallel") => Some(Mode::Parallel),
+        Some("serial") => Some(Mode::Serial),
+        Some(m) => {
+            v.add(
+                "tracker.mode",
+                format!("unknown mode '{m}': auto, parallel or serial"),
+            );
+            None
+        }
+    };
+    let method = match tracker.association.as_deref() {
+        None | Some("exact") => Some(Method::Exact),
+        Some("amsjpda") => Some(Method::Amsjpda),
+        Some("global_nearest_neighbour") => Some(Method::GlobalNearestNeighbour),
+        Some("nearest_neighbour") => Some(Method::NearestNeighbour),
+        Some(m) => {
+            v.add(
+                "tracker.association",
+                format!("unknown method '{m}': one of {}", ASSOCIATIONS.join(", ")),
+            );
+            None
+        }
+    };
+    v.finish()?;
+    let (axes, mode, method) = (
+        axes.expect("validated"),
+        mode.expect("validated"),
+        method.expect("validated"),
+    );
+
+    // Sites in the fusion frame.
+    let mut rotations = Vec::with_capacity(specs.len());
+    for (spec, site) in specs.iter_mut().zip(&sites) {
+        match site.as_ref().expect("validated") {
+            Site::Local(p) => {
+                spec.site = *p;
+                rotations.push(None);
+            }
+            Site::Geodetic(radar) => {
+                let fusion = frame.expect("a geodetic site gives a frame");
+                let (lat, lon, h) = radar.origin_geodetic();
+                spec.site = fusion
+                    .geodetic_to_enu(lat, lon, h)
+                    .map_err(|e| Violations::single("radars", e.to_string()))?;
+                rotations.push(Some(radar.rotation_to(&fusion)));
+            }
+        }
+    }
+    if frame.is_none() {
+        warnings.push(
+            "no origin: every site is a local position_m, so tracks carry no lat_deg/lon_deg; \
+             give origin (WGS84) to have them"
+                .into(),
+        );
+    }
+
+    let mut config = TrackerConfig::new(axes, specs);
+    config.mode = mode;
+    config.association.method = method;
+    if let Some(n) = tracker.max_exact_cluster_tracks {
+        config.association.max_exact_tracks = n as usize;
+    }
+    if let Some(p) = tracker.fusion_period_s {
+        config.fusion_period = p;
+    }
+    if let Some(e) = tracker.fusion_epoch_s {
+        config.fusion_epoch = e;
+    }
+    if let Some(t) = tracker.time_tolerance_s {
+        config.time_tolerance = t;
+    }
+    if let Some(p) = tracker.plot_gate_probability {
+        config.plot_gate_probability = p;
+    }
+    if let Some(p) = tracker.track_gate_probability {
+        config.track_gate_probability = p;
+    }
+    if let Some(s) = tracker.sigma_a_mps2 {
+        config.sigma_a[0] = s;
+        config.sigma_a[1] = s;
+        config.sigma_a[2] = s;
+    }
+    if let Some(s) = tracker.sigma_a_vertical_mps2 {
+        config.sigma_a[2] = s;
+    }
+    if let Some(h) = tracker.default_height_m {
+        config.default_height = h;
+    }
+    if let Some(s) = tracker.default_height_sigma_m {
+        config.default_height_sigma = s;
+    }
+    if let Some(s) = tracker.sigma_tangential_speed_mps {
+        config.sigma_tangential_speed = s;
+    }
+    if let Some(i) = &tracker.initiation {
+        let init = &mut config.initiation;
+        if let Some(m) = i.m {
+            init.confirm_m = m;
+        }
+        if let Some(n) = i.n {
+            init.confirm_n = n;
+        }
+        if let Some(p) = i.gate_probability {
+            init.gate_probability = p;
+        }
+        if let Some(d) = i.min_dt_s {
+            init.min_dt = d;
+        }
+        if let Some(d) = i.max_dt_s {
+            init.max_dt = d;
+        }
+        match (&i.v_min_axis_mps, &i.v_max_axis_mps) {
+            (None, None) => {
+                if let VelocityGate::Speed { v_min, v_max } = &mut init.velocity {
+                    if let Some(x) = i.v_min_mps {
+                        *v_min = x;
+                    }
+                    if let Some(x) = i.v_max_mps {
+                        *v_max = x;
+                    }
+                }
+            }
+            (Some(lo), Some(hi)) => {
+                let axis = |field: &str, x: &[f64]| -> Result<[f64; 3], ServiceError> {
+                    match x {
+                        [e, n] => Ok([*e, *n, f64::NAN]),
+                        [e, n, u] => Ok([*e, *n, *u]),
+                        _ => Err(Violations::single(
+                            field,
+                            "must be 2 or 3 numbers [east, north(, up)] in m/s",
+                        )),
+                    }
+                };
+                let mut lo = axis("tracker.initiation.v_min_axis_mps", lo)?;
+                let mut hi = axis("tracker.initiation.v_max_axis_mps", hi)?;
+                if lo[2].is_nan() {
+                    // Vertical band not given: wide open.
+                    lo[2] = -1.0e6;
+                    hi[2] = 1.0e6;
+                }
+                if i.v_min_mps.is_some() || i.v_max_mps.is_some() {
+                    return Err(Violations::single(
+                        "tracker.initiation",
+                        "give either the speed band (v_min_mps, v_max_mps) or the per-axis \
+                         band (v_min_axis_mps, v_max_axis_mps), not both",
+                    ));
+                }
+                init.velocity = VelocityGate::PerAxis {
+                    v_min: lo,
+                    v_max: hi,
+                };
+            }
+            (Some(_), None) => {
+                return Err(Violations::single(
+                    "tracker.initiation.v_max_axis_mps",
+                    "is required with v_min_axis_mps",
+                ));
+            }
+            (None, Some(_)) => {
+                return Err(Violations::single(
+                    "tracker.initiation.v_min_axis_mps",
+                    "is required with v_max_axis_mps",
+                ));
+            }
+        }
+    }
+    if let Some(d) = &tracker.deletion {
+        let rule = Deletion {
+            max_consecutive_misses: d.max_consecutive_misses,
+            misses_m_of_n: match (d.m, d.n) {
+                (Some(m), Some(n)) => Some((m, n)),
+                (None, None) => None,
+                (Some(_), None) => {
+                    return Err(Violations::single(
+                        "tracker.deletion.n",
+                        "is required with deletion.m",
+                    ));
+                }
+                (None, Some(_)) => {
+                    return Err(Violations::single(
+                        "tracker.deletion.m",
+                        "is required with deletion.n",
+                    ));
+                }
+            },
+            max_position_sigma: d.max_position_sigma_m,
+        };
+        if rule.max_consecutive_misses.is_none()
+            && rule.misses_m_of_n.is_none()
+            && rule.max_position_sigma.is_none()
+        {
+            return Err(Violations::single(
+                "tracker.deletion",
+                "set at least one rule (max_consecutive_misses, m and n, or \
+                 max_position_sigma_m): a track that is never deleted coasts forever",
+            ));
+        }
+        config.deletion = rule;
+    }
+    config.validate().map_err(|e| config_error(&e))?;
+
+    let doppler = config.radars.iter().filter(|r| r.has_doppler()).count();
+    if mode == Mode::Auto && doppler > 0 && doppler < config.radars.len() {
+        let without: Vec<&str> = config
+            .radars
+            .iter()
+            .zip(&ids)
+            .filter(|(r, _)| !r.has_doppler())
+            .map(|(_, id)| id.as_str())
+            .collect();
+        warnings.push(format!(
+            "mode auto chose serial: radar(s) {} give no Doppler (parallel fusion needs \
+             sigma_radial_velocity_mps on every radar)",
+            without.join(", ")
+        ));
+    }
+    if config.is_parallel() {
+        for (r, id) in config.radars.iter().zip(&ids) {
+            if config.fusion_period > r.scan_period {
+                warnings.push(format!(
+                    "tracker.fusion_period_s = {} exceeds radar {id}'s scan period {} s: two \
+                     plots of one target from that radar can fall in one fusion instant and \
+                     are then fused as if from two radars; use a period of at most {} s",
+                    config.fusion_period, r.scan_period, r.scan_period
+                ));
+            }
+        }
+    }
+    Ok((
+        Network {
+            frame,
+            radar_ids: ids,
+            rotations,
+            index,
+        },
+        config,
+        warnings,
+    ))
+}
+
+impl Network {
+    /// A network from its stored parts.
+    pub fn from_parts(
+        frame: Option<LocalFrame>,
+        radar_ids: Vec<String>,
+        rotations: Vec<Option<Matrix3<f64>>>,
+    ) -> Self {
+        let index = radar_ids
+            .iter()
+            .enumerate()
+            .map(|(i, id)| (id.clone(), i))
+            .collect();
+        Self {
+            frame,
+            radar_ids,
+            rotations,
+            index,
+        }
+    }
+
+    /// Validates plots against the network and re-expresses their angles in
+    /// the fusion axes; violations name `{field}[i].…`.
+    pub fn plots(
+        &self,
+        inputs: &[PlotInput],
+        config: &TrackerConfig,
+        field: &str,
+    ) -> Result<Vec<Plot>, ServiceError> {
+        let parallel = config.is_parallel();
+        let mut out = Vec::with_capacity(inputs.len());
+        let mut bad: Vec<FieldViolation> = Vec::new();
+        let mut more = 0usize;
+        for (i, p) in inputs.iter().enumerate() {
+            match self.plot(p, config, parallel) {
+                Ok(plot) => out.push(plot),
+                Err((name, message)) => {
+                    if bad.len() < MAX_PLOT_VIOLATIONS {
+                        bad.push(FieldViolation {
+                            field: format!("{field}[{i}].{name}"),
+                            message,
+                        });
+                    } else {
+                        more += 1;
+                    }
+                }
+            }
+        }
+        if bad.is_empty() {
+            return Ok(out);
+        }
+        if more > 0 {
+            bad.push(FieldViolation {
+                field: field.to_string(),
+                message: format!("{more} more invalid plots not listed"),
+            });
+        }
+        Err(ServiceError::InvalidInput(bad))
+    }
+
+    fn plot(
+        &self,
+        p: &PlotInput,
+        config: &TrackerConfig,
+        parallel: bool,
+    ) -> Result<Plot, (&'static str, String)> {
+        let id = p
+            .radar_id
+            .as_deref()
+            .ok_or(("radar_id", "is required".to_string()))?;
+        let &radar = self.index.get(id).ok_or_else(|| {
+            (
+                "radar_id",
+                format!(
+                    "no radar '{id}' in the network (radars: {})",
+                    self.radar_ids.join(", ")
+                ),
+            )
+        })?;
+        let spec = &config.radars[radar];
+        let t = p.t.ok_or(("t", "is required".to_string()))?;
+        if !t.is_finite() {
+            return Err(("t", format!("must be finite, got {t}")));
+        }
+        let range = p.range_m.ok_or(("range_m", "is required".to_string()))?;
+        if !(range.is_finite() && range > 0.0) {
+            return Err(("range_m", format!("must be finite and > 0, got {range}")));
+        }
+        let az = p
+            .azimuth_deg
+            .ok_or(("azimuth_deg", "is required".to_string()))?;
+        if !(az.is_finite() && az.abs() <= 720.0) {
+            return Err((
+                "azimuth_deg",
+                format!("must be finite, in [-720, 720], got {az}"),
+            ));
+        }
+        let elevation = match (spec.is_3d(), p.elevation_deg) {
+            (true, None) => {
+                return Err(("elevation_deg", format!("radar '{id}' is 3d: required")));
+            }
+            (true, Some(el)) => {
+                if !(el.is_finite() && el.abs() < 90.0) {
+                    return Err(("elevation_deg", format!("must lie in (-90, 90), got {el}")));
+                }
+                Some(el.to_radians())
+            }
+            (false, Some(_)) => {
+                return Err((
+                    "elevation_deg",
+                    format!("radar '{id}' is 2d and gives no elevation"),
+                ));
+            }
+            (false, None) => None,
+        };
+        let radial_velocity = match (spec.has_doppler(), p.radial_velocity_mps) {
+            (false, Some(_)) => {
+                return Err((
+                    "radial_velocity_mps",
+                    format!(
+                        "radar '{id}' is declared without Doppler (give its \
+                         sigma_radial_velocity_mps)"
+                    ),
+                ));
+            }
+            (true, Some(v)) => {
+                if !(v.is_finite() && v.abs() < 1.0e5) {
+                    return Err(("radial_velocity_mps", format!("must be finite, got {v}")));
+                }
+                Some(v)
+            }
+            (_, None) if parallel => {
+                return Err((
+                    "radial_velocity_mps",
+                    "required in parallel mode (time registration)".to_string(),
+                ));
+            }
+            (_, None) => None,
+        };
+        let (azimuth, elevation) = match &self.rotations[radar] {
+            None => (az.to_radians(), elevation),
+            Some(m) => rotate(m, az.to_radians(), elevation),
+        };
+        // A 2D radar measures the slant range: with the targets assumed at
+        // `default_height` the horizontal range is √(ρ² − Δh²) and, in level
+        // flight, the horizontal radial velocity ṙ ρ/ρ_h.
+        let (range, radial_velocity) = if spec.is_3d() {
+            (range, radial_velocity)
+        } else {
+            let dh = config.default_height - spec.site[2];
+            if dh != 0.0 && range > dh.abs() {
+                let horizontal = (range * range - dh * dh).sqrt();
+                (horizontal, radial_velocity.map(|v| v * range / horizontal))
+            } else {
+                (range, radial_velocity)
+            }
+        };
+        Ok(Plot {
+            radar,
+            t,
+            range,
+            azimuth,
+            elevation,
+            radial_velocity,
+        })
+    }
+
+    /// A core track as a wire track (ids, and lat/lon from the frame).
+    pub fn track_view(&self, t: &crate::algo::tracking::TrackOutput) -> TrackView {
+        super::output::view(self, t)
+    }
+
+    pub fn encode(&self, w: &mut Writer) {
+        w.opt(self.frame.as_ref(), |w, f| {
+            let (lat, lon, h) = f.origin_geodetic();
+            w.f64(lat);
+            w.f64(lon);
+            w.f64(h);
+        });
+        w.usize(self.radar_ids.len());
+        for (id, rot) in self.radar_ids.iter().zip(&self.rotations) {
+            w.str(id);
+            w.opt(rot.as_ref(), |w, m| w.f64s(m.as_slice()));
+        }
+    }
+
+    pub fn decode(r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+        let frame = r.opt(|r| {
+            let (lat, lon, h) = (r.f64()?, r.f64()?, r.f64()?);
+            LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)
+        })?;
+        let n = r.len(9)?;
+        let mut ids = Vec::with_capacity(n);
+        let mut rotations = Vec::with_capacity(n);
+        for _ in 0..n {
+            ids.push(r.str()?);
+            rotations.push(r.opt(|r| {
+                let v = r.f64s()?;
+                if v.len() != 9 {
+                    return Err(crate::algo::wire::corrupt("radar rotation"));
+                }
+                Ok(Matrix3::from_column_slice(&v))
+            })?);
+        }
+        Ok(Self::from_parts(frame, ids, rotations))
+    }
+}
+
+/// Azimuth (and elevation) of a line of sight re-expressed through `m`.
+/// A 2D plot's line of sight is horizontal in its radar's frame; only the
+/// azimuth of its rotated direction is kept.
+fn rotate(m: &Matrix3<f64>, azimuth: f64, elevation: Option<f64>) -> (f64, Option<f64>) {
+    let u = polar_to_enu_3d(1.0, azimuth, elevation.unwrap_or(0.0))
+        .expect("unit range and finite angles");
+    let uf = m * nalgebra::Vector3::new(u[0], u[1], u[2]);
+    let [_, az, el] = enu_to_polar_3d(uf[0], uf[1], uf[2]).expect("a unit vector");
+    (az, elevation.map(|_| el))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_of_the_line_of_sight_keeps_angles_when_frames_coincide() {
+        let (az, el) = rotate(&Matrix3::identity(), 0.3, Some(0.1));
+        assert!((az - 0.3).abs() < 1e-12 && (el.unwrap() - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_radar_east_of_the_origin_sees_north_turned_by_the_meridian_convergence() {
+        // Radar 1° of longitude east of the origin, both at latitude 45°:
+        // the radar's north, seen in the origin's frame, is turned towards
+        // the west by the meridian convergence Δλ·sin φ = 1°·sin 45° = 0.7071°
+        // (spherical approximation; WGS84 agrees to ~1e-3°).
+        let o = LocalFrame::new(Ellipsoid::WGS84, 45f64.to_radians(), 0.0, 0.0).unwrap();
+        let r =
+            LocalFrame::new(Ellipsoid::WGS84, 45f64.to_radians(), 1f64.to_radians(), 0.0).unwrap();
+        let m = r.rotation_to(&o);
+        let (az, _) = rotate(&m, 0.0, None);
+        let want = -(1f64.to_radians() * 45f64.to_radians().sin());
+        assert!(
+            crate::algo::polar::wrap_angle(az - want).abs() < 2e-5,
+            "az {} want {}",
+            az.to_degrees(),
+            want.to_degrees()
+        );
+    }
+}

@@ -1,0 +1,90 @@
+//! Tracks as the wire shows them: the core's track with radar ids instead
+//! of indices, nested covariance rows, and WGS84 latitude/longitude (and
+//! height for a 3D tracker) of its position.
+
+use super::Network;
+use crate::algo::tracking::{TrackOutput, TrackStatus};
+
+/// State layouts of the 2D and 3D trackers.
+pub const LAYOUT_2D: [&str; 4] = ["x", "vx", "y", "vy"];
+pub const LAYOUT_3D: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
+
+/// The layout of a tracker with `axes` spatial axes.
+pub fn layout(axes: usize) -> &'static [&'static str] {
+    if axes == 3 { &LAYOUT_3D } else { &LAYOUT_2D }
+}
+
+/// One track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackView {
+    pub id: u64,
+    /// `tentative`, `confirmed` or `deleted`.
+    pub status: &'static str,
+    pub t: f64,
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    /// Absent when the request has no origin.
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+    /// 3D trackers only (WGS84 ellipsoidal height).
+    pub height_m: Option<f64>,
+    /// Radars whose plots updated the track at its last update.
+    pub radars: Vec<String>,
+    pub hits: u32,
+    pub misses: u32,
+    pub consecutive_misses: u32,
+    /// Frames since the track started.
+    pub age: u32,
+    pub last_update_t: f64,
+}
+
+/// The confirmed tracks after one processing instant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HistoryEntry {
+    pub t: f64,
+    pub tracks: Vec<TrackView>,
+}
+
+pub fn status_name(s: TrackStatus) -> &'static str {
+    match s {
+        TrackStatus::Tentative => "tentative",
+        TrackStatus::Confirmed => "confirmed",
+        TrackStatus::Deleted => "deleted",
+    }
+}
+
+pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
+    let n = t.state.len();
+    let three_d = n == 6;
+    let position = [
+        t.state[0],
+        t.state[2],
+        if three_d { t.state[4] } else { 0.0 },
+    ];
+    let geo = network
+        .frame
+        .as_ref()
+        .and_then(|f| f.enu_to_geodetic(position).ok());
+    TrackView {
+        id: t.id,
+        status: status_name(t.status),
+        t: t.t,
+        state: t.state.iter().copied().collect(),
+        covariance: (0..n)
+            .map(|i| (0..n).map(|j| t.covariance[(i, j)]).collect())
+            .collect(),
+        lat_deg: geo.map(|g| g.0.to_degrees()),
+        lon_deg: geo.map(|g| g.1.to_degrees()),
+        height_m: geo.filter(|_| three_d).map(|g| g.2),
+        radars: t
+            .radars
+            .iter()
+            .map(|&r| network.radar_ids[r].clone())
+            .collect(),
+        hits: t.hits,
+        misses: t.misses,
+        consecutive_misses: t.consecutive_misses,
+        age: t.age,
+        last_update_t: t.last_update,
+    }
+}

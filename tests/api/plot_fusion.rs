@@ -1,0 +1,351 @@
+//! The plot-fusion tracker (seed 001) through the real servers: a realistic
+//! scene with the defaults (WGS84 sites, unsynchronised radars, P_D < 1,
+//! clutter, a target that starts and ends mid-way) in serial and parallel
+//! mode, REST and gRPC giving the same tracks, the history, and bad input
+//! named by field on both transports.
+
+use radar_fusion::proto::{self as pb, plot_fusion_service_client::PlotFusionServiceClient};
+use serde_json::{Value, json};
+use tonic::Code;
+
+#[path = "../common/plot_scene.rs"]
+mod plot_scene;
+
+use crate::helpers::{TestApp, assert_problem, grpc_fields, problem_fields, spawn_app};
+use plot_scene::{origin_frame, request, targets};
+
+const PATH: &str = "/v1/plot-fusion/track";
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap()
+}
+
+/// Aircraft at 8 km: 2D slant ranges are made horizontal with it.
+fn with_height(mut req: Value) -> Value {
+    req["tracker"] = json!({"default_height_m": 8000.0});
+    req
+}
+
+/// Every confirmed track at the end lies within `tol` m of a live target,
+/// and every live target has one; lat/lon are the frame's conversion of
+/// the state.
+fn check_tracks(out: &Value, tol: f64) {
+    let frame = origin_frame();
+    let end = 150.0;
+    let confirmed: Vec<&Value> = out["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .collect();
+    let live: Vec<_> = targets()
+        .into_iter()
+        .filter(|g| g.start <= end && end <= g.end)
+        .collect();
+    assert_eq!(confirmed.len(), live.len(), "{}", out["tracks"]);
+    for target in &live {
+        let near = confirmed.iter().any(|t| {
+            let p = target.at(f(&t["t"]));
+            let s = &t["state"];
+            (f(&s[0]) - p[0]).hypot(f(&s[2]) - p[1]) < tol
+        });
+        assert!(near, "no track near a target: {}", out["tracks"]);
+    }
+    for t in &confirmed {
+        let s = &t["state"];
+        let (lat, lon, _) = frame.enu_to_geodetic([f(&s[0]), f(&s[2]), 0.0]).unwrap();
+        assert!((f(&t["lat_deg"]) - lat.to_degrees()).abs() < 1e-9);
+        assert!((f(&t["lon_deg"]) - lon.to_degrees()).abs() < 1e-9);
+        assert_eq!(t["covariance"].as_array().unwrap().len(), 4);
+    }
+}
+
+#[tokio::test]
+async fn serial_fusion_of_two_unsynchronised_2d_radars_with_the_defaults() {
+    let app = spawn_app().await;
+    let out = app.post_ok(PATH, &with_height(request(false, 7))).await;
+    assert_eq!(out["mode"], "serial");
+    assert_eq!(out["state_layout"], json!(["x", "vx", "y", "vy"]));
+    check_tracks(&out, 400.0);
+    // The target that ended at 100 s was deleted.
+    assert!(!out["deleted"].as_array().unwrap().is_empty());
+    let c = &out["counters"];
+    assert_eq!(c["late"], 0);
+    assert!(c["confirmed"].as_u64().unwrap() >= 3);
+    assert_eq!(c["fused_plots"], 0);
+    assert_eq!(out["warnings"], json!([]));
+    assert!(out.get("history").is_none());
+}
+
+#[tokio::test]
+async fn parallel_fusion_when_every_radar_gives_doppler() {
+    let app = spawn_app().await;
+    let out = app.post_ok(PATH, &with_height(request(true, 11))).await;
+    assert_eq!(out["mode"], "parallel");
+    check_tracks(&out, 400.0);
+    assert!(out["counters"]["fused_plots"].as_u64().unwrap() > 0);
+    // Forcing serial mode on the same plots also tracks every target.
+    let mut req = with_height(request(true, 11));
+    req["tracker"]["mode"] = json!("serial");
+    let out = app.post_ok(PATH, &req).await;
+    assert_eq!(out["mode"], "serial");
+    check_tracks(&out, 400.0);
+}
+
+#[tokio::test]
+async fn plots_in_any_order_give_the_same_tracks_and_history_is_returned_when_asked() {
+    let app = spawn_app().await;
+    let mut req = with_height(request(false, 3));
+    req["history"] = json!(true);
+    let sorted = app.post_ok(PATH, &req).await;
+    let plots = req["plots"].as_array_mut().unwrap();
+    plots.reverse();
+    // Reversal also reverses plots of equal time; restore their order by a
+    // stable sort on time to isolate "any order" from "ties".
+    let mut shuffled: Vec<Value> = plots.clone();
+    shuffled.sort_by(|a, b| f(&a["t"]).total_cmp(&f(&b["t"])));
+    // Interleave: odd positions first, then even ones (times unsorted).
+    let (odd, even): (Vec<_>, Vec<_>) = shuffled
+        .into_iter()
+        .enumerate()
+        .partition(|(i, _)| i % 2 == 1);
+    *plots = odd.into_iter().chain(even).map(|(_, p)| p).collect();
+    let unsorted = app.post_ok(PATH, &req).await;
+    assert_eq!(sorted["tracks"], unsorted["tracks"]);
+    let history = sorted["history"].as_array().unwrap();
+    assert_eq!(
+        history.len() as u64,
+        sorted["counters"]["frames"].as_u64().unwrap()
+    );
+    let mut last = f64::NEG_INFINITY;
+    for entry in history {
+        assert!(f(&entry["t"]) >= last);
+        last = f(&entry["t"]);
+        for t in entry["tracks"].as_array().unwrap() {
+            assert_eq!(t["status"], "confirmed");
+        }
+    }
+    assert!(
+        !history.last().unwrap()["tracks"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+}
+
+async fn client(app: &TestApp) -> PlotFusionServiceClient<tonic::transport::Channel> {
+    PlotFusionServiceClient::new(app.channel().await)
+}
+
+/// The JSON request as its protobuf twin.
+fn proto_request(req: &Value) -> pb::PlotFusionRequest {
+    let o = |v: &Value| v.as_f64();
+    pb::PlotFusionRequest {
+        origin: Some(pb::GeoPoint {
+            lat_deg: o(&req["origin"]["lat_deg"]),
+            lon_deg: o(&req["origin"]["lon_deg"]),
+            height_m: o(&req["origin"]["height_m"]),
+        }),
+        radars: req["radars"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| pb::PlotRadar {
+                id: r["id"].as_str().unwrap().into(),
+                kind: r["kind"].as_str().unwrap().into(),
+                site: Some(pb::PlotRadarSite {
+                    lat_deg: o(&r["site"]["lat_deg"]),
+                    lon_deg: o(&r["site"]["lon_deg"]),
+                    height_m: o(&r["site"]["height_m"]),
+                    position_m: r["site"]["position_m"]
+                        .as_array()
+                        .map(|a| a.iter().map(f).collect())
+                        .unwrap_or_default(),
+                }),
+                sigma_range_m: o(&r["sigma_range_m"]),
+                sigma_azimuth_deg: o(&r["sigma_azimuth_deg"]),
+                sigma_elevation_deg: o(&r["sigma_elevation_deg"]),
+                sigma_radial_velocity_mps: o(&r["sigma_radial_velocity_mps"]),
+                scan_period_s: o(&r["scan_period_s"]),
+                p_detection: o(&r["p_detection"]),
+                clutter_density: o(&r["clutter_density"]),
+            })
+            .collect(),
+        plots: req["plots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| pb::RadarPlot {
+                radar_id: p["radar_id"].as_str().unwrap().into(),
+                t: o(&p["t"]),
+                range_m: o(&p["range_m"]),
+                azimuth_deg: o(&p["azimuth_deg"]),
+                elevation_deg: o(&p["elevation_deg"]),
+                radial_velocity_mps: o(&p["radial_velocity_mps"]),
+            })
+            .collect(),
+        tracker: Some(pb::TrackerOptions {
+            default_height_m: o(&req["tracker"]["default_height_m"]),
+            ..Default::default()
+        }),
+        history: false,
+    }
+}
+
+#[tokio::test]
+async fn grpc_gives_the_tracks_of_rest() {
+    let app = spawn_app().await;
+    let req = with_height(request(true, 5));
+    let rest = app.post_ok(PATH, &req).await;
+    let grpc = client(&app)
+        .await
+        .track(proto_request(&req))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(grpc.mode, "parallel");
+    let tracks = rest["tracks"].as_array().unwrap();
+    assert_eq!(grpc.tracks.len(), tracks.len());
+    for (g, r) in grpc.tracks.iter().zip(tracks) {
+        assert_eq!(g.id, r["id"].as_u64().unwrap());
+        assert_eq!(g.status, r["status"].as_str().unwrap());
+        let state: Vec<f64> = r["state"].as_array().unwrap().iter().map(f).collect();
+        assert_eq!(g.state, state);
+        let cov = g.covariance.as_ref().unwrap();
+        assert_eq!((cov.rows, cov.cols), (4, 4));
+        assert_eq!(g.lat_deg, r["lat_deg"].as_f64());
+        assert_eq!(g.radars.len(), r["radars"].as_array().unwrap().len());
+    }
+    let c = grpc.counters.unwrap();
+    assert_eq!(c.plots, rest["counters"]["plots"].as_u64().unwrap());
+}
+
+#[tokio::test]
+async fn local_sites_without_origin_are_the_patents_flat_model_and_say_so() {
+    // The patent's Fig. 5 geometry: radars at [−200, 0] and [200, 0] m.
+    // One target at [−25, 35] km moving [30, −50] m/s, seen without noise
+    // every 10 s (radar 1) and 8 s (radar 2) for 100 s.
+    let app = spawn_app().await;
+    let sites: [(&str, f64, f64); 2] = [("r1", -200.0, 10.0), ("r2", 200.0, 8.0)];
+    let mut plots = Vec::new();
+    for (id, x, period) in sites {
+        let mut t = 0.0;
+        while t <= 100.0 {
+            let (e, n) = (-25_000.0 + 30.0 * t - x, 35_000.0 - 50.0 * t);
+            plots.push(json!({"radar_id": id, "t": t, "range_m": e.hypot(n),
+                              "azimuth_deg": e.atan2(n).to_degrees()}));
+            t += period;
+        }
+    }
+    let radars: Vec<Value> = sites
+        .iter()
+        .map(|(id, x, period)| {
+            json!({"id": id, "kind": "2d", "site": {"position_m": [x, 0.0]},
+                   "sigma_range_m": 100.0, "sigma_azimuth_deg": 0.1, "scan_period_s": period})
+        })
+        .collect();
+    let out = app
+        .post_ok(PATH, &json!({"radars": radars, "plots": plots}))
+        .await;
+    let tracks = out["tracks"].as_array().unwrap();
+    assert_eq!(tracks.len(), 1, "{tracks:?}");
+    let t = &tracks[0];
+    assert_eq!(t["status"], "confirmed");
+    assert!(t.get("lat_deg").is_none());
+    // Noise-free plots: the track is on the truth to well under 1 m·s.
+    let time = f(&t["t"]);
+    let s = &t["state"];
+    assert!((f(&s[0]) - (-25_000.0 + 30.0 * time)).abs() < 1.0, "{s}");
+    assert!((f(&s[2]) - (35_000.0 - 50.0 * time)).abs() < 1.0, "{s}");
+    assert!((f(&s[1]) - 30.0).abs() < 0.1 && (f(&s[3]) + 50.0).abs() < 0.1);
+    assert_eq!(t["radars"].as_array().unwrap().len(), 1);
+    let warnings = out["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("origin")),
+        "{warnings:?}"
+    );
+}
+
+fn small_request() -> Value {
+    json!({
+        "origin": {"lat_deg": 52.0, "lon_deg": 4.0},
+        "radars": [
+            {"id": "a", "kind": "2d", "site": {"position_m": [0.0, 0.0]},
+             "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 4.0},
+            {"id": "b", "kind": "3d", "site": {"lat_deg": 52.1, "lon_deg": 4.1},
+             "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "sigma_elevation_deg": 0.1,
+             "scan_period_s": 4.0}
+        ],
+        "plots": [
+            {"radar_id": "a", "t": 0.0, "range_m": 1000.0, "azimuth_deg": 10.0},
+            {"radar_id": "nope", "t": 0.0, "range_m": 1000.0, "azimuth_deg": 10.0},
+            {"radar_id": "b", "t": 0.0, "range_m": 1000.0, "azimuth_deg": 10.0},
+            {"radar_id": "a", "t": 0.0, "range_m": 1000.0, "azimuth_deg": 10.0,
+             "radial_velocity_mps": 3.0},
+            {"radar_id": "a", "t": 0.0, "range_m": -5.0, "azimuth_deg": 10.0},
+            {"radar_id": "a", "t": 0.0, "range_m": 1000.0, "azimuth_deg": 10.0,
+             "elevation_deg": 1.0}
+        ]
+    })
+}
+
+#[tokio::test]
+async fn bad_plots_are_named_by_field_on_both_transports() {
+    let app = spawn_app().await;
+    let req = small_request();
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    let want = vec![
+        "plots[1].radar_id",
+        "plots[2].elevation_deg",
+        "plots[3].radial_velocity_mps",
+        "plots[4].range_m",
+        "plots[5].elevation_deg",
+    ];
+    assert_eq!(problem_fields(&body), want);
+    // gRPC: the same, plus a non-finite time (JSON cannot carry one).
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    p.plots[0].t = Some(f64::NAN);
+    let status = client(&app).await.track(p).await.unwrap_err();
+    assert_eq!(status.code(), Code::InvalidArgument);
+    let mut want_grpc = vec!["plots[0].t"];
+    want_grpc.extend(want);
+    assert_eq!(grpc_fields(&status), want_grpc);
+}
+
+#[tokio::test]
+async fn bad_radars_and_options_are_named_by_field() {
+    let app = spawn_app().await;
+    let mut req = small_request();
+    req["plots"] = json!([]);
+    req["radars"][0]["sigma_range_m"] = json!(0.0);
+    req["radars"][1]["kind"] = json!("4d");
+    req["radars"][1]["id"] = json!("a");
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    let fields = problem_fields(&body);
+    for want in ["radars[0].sigma_range_m", "radars[1].id", "radars[1].kind"] {
+        assert!(fields.iter().any(|f| f == want), "{fields:?}");
+    }
+
+    let mut req = small_request();
+    req["plots"] = json!([]);
+    req["tracker"] = json!({"mode": "parallel", "initiation": {"m": 5, "n": 4},
+                            "deletion": {}});
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.deletion"]);
+    req["tracker"]["deletion"] = json!({"max_consecutive_misses": 4});
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.mode"]);
+    req["tracker"]["mode"] = json!("serial");
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.initiation.m"]);
+
+    // A radar site given both ways, or neither.
+    let mut req = small_request();
+    req["plots"] = json!([]);
+    req["radars"][0]["site"] = json!({"lat_deg": 52.0, "lon_deg": 4.0, "position_m": [0, 0]});
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["radars[0].site"]);
+}
