@@ -24,6 +24,7 @@
 pub mod cache;
 pub mod correlation;
 pub mod persist;
+pub mod plot_fusion;
 
 use std::fmt;
 
@@ -110,20 +111,23 @@ pub trait SessionKind: Sized + Send + 'static {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum KindName {
     Correlation,
+    PlotFusion,
 }
 
 impl KindName {
-    pub const ALL: [KindName; 1] = [KindName::Correlation];
+    pub const ALL: [KindName; 2] = [KindName::Correlation, KindName::PlotFusion];
 
     pub fn name(self) -> &'static str {
         match self {
             Self::Correlation => correlation::CorrelationSession::NAME,
+            Self::PlotFusion => plot_fusion::PlotFusionSession::NAME,
         }
     }
 
     pub fn tag(self) -> u8 {
         match self {
             Self::Correlation => correlation::CorrelationSession::TAG,
+            Self::PlotFusion => plot_fusion::PlotFusionSession::TAG,
         }
     }
 
