@@ -513,7 +513,7 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     let open = pb::CreateSessionRequest {
         kind: "plot_fusion".into(),
         plot_fusion: Some(pb::PlotFusionConfig {
-            origin: p.origin.clone(),
+            origin: p.origin,
             radars: p.radars.clone(),
             tracker: p.tracker.clone(),
         }),
