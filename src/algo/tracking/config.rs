@@ -182,9 +182,11 @@ impl TrackerConfig {
     /// epoch 0; time tolerance 0; exact JPDA (clusters up to 12 tracks,
     /// 2·10⁶ hypothesis edges); gates 0.99; confirmation 3-of-4 with a speed
     /// band [0, 600] m/s, pairing 1 s to twice the longest scan period;
-    /// deletion after 3 consecutive misses; σ_a = 1 m/s² per axis; default
+    /// deletion after 3 consecutive missed frames per radar (a frame is one
+    /// radar's scan in serial mode, so 3 × radars frames ≈ 3 scans of each); σ_a = 1 m/s² per axis; default
     /// height 0 ± 1000 m; tangential speed σ 100 m/s.
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
+        let misses = 3 * radars.len().clamp(1, 20) as u32;
         let min_period = radars
             .iter()
             .map(|r| r.scan_period)
@@ -220,7 +222,7 @@ impl TrackerConfig {
                 max_dt: (2.0 * max_period).max(1.0),
             },
             deletion: Deletion {
-                max_consecutive_misses: Some(3),
+                max_consecutive_misses: Some(misses),
                 misses_m_of_n: None,
                 max_position_sigma: None,
             },
