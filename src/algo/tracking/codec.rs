@@ -20,7 +20,7 @@ use crate::algo::tracking::config::{
 use crate::algo::tracking::initiator::Initiator;
 use crate::algo::tracking::registration::CartesianPlot;
 use crate::algo::tracking::track::Track;
-use crate::algo::tracking::{Counters, Tracker};
+use crate::algo::tracking::{Counters, NoiseModel, Tracker};
 use crate::algo::wire::{Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
@@ -180,6 +180,10 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     for v in c.sigma_a {
         w.f64(v);
     }
+    w.u8(match c.noise {
+        NoiseModel::Cwna => 0,
+        NoiseModel::Dwna => 1,
+    });
     w.f64(c.default_height);
     w.f64(c.default_height_sigma);
     w.f64(c.sigma_tangential_speed);
@@ -251,6 +255,11 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         max_position_sigma: r.opt(Reader::f64)?,
     };
     let sigma_a = [r.f64()?, r.f64()?, r.f64()?];
+    let noise = match r.u8()? {
+        0 => NoiseModel::Cwna,
+        1 => NoiseModel::Dwna,
+        _ => return Err(corrupt("bad noise model")),
+    };
     Ok(TrackerConfig {
         axes,
         radars,
@@ -264,6 +273,7 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         initiation,
         deletion,
         sigma_a,
+        noise,
         default_height: r.f64()?,
         default_height_sigma: r.f64()?,
         sigma_tangential_speed: r.f64()?,

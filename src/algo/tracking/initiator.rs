@@ -75,7 +75,7 @@ impl Initiator {
         // 7b: extend the tentative tracks.
         let mut edges = Vec::new();
         for (i, track) in self.tentatives.iter_mut().enumerate() {
-            track.predict(t, &cfg.sigma_a)?;
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
             for (j, plot) in plots.iter().enumerate() {
                 let k = plot.z.len();
                 // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.

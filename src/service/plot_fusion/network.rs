@@ -37,7 +37,7 @@ use crate::algo::{
     geo::{Ellipsoid, LocalFrame},
     jpda::Method,
     polar::{enu_to_polar_3d, polar_to_enu_3d},
-    tracking::{Deletion, Mode, Plot, RadarSpec, TrackerConfig, VelocityGate},
+    tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
     wire::{Reader, Writer},
 };
 use crate::service::{FieldViolation, ServiceError, Violations};
@@ -321,6 +321,17 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             None
         }
     };
+    let noise = match tracker.process_noise.as_deref() {
+        None | Some("cwna") => Some(NoiseModel::Cwna),
+        Some("dwna") => Some(NoiseModel::Dwna),
+        Some(m) => {
+            v.add(
+                "tracker.process_noise",
+                format!("unknown process noise '{m}': cwna or dwna"),
+            );
+            None
+        }
+    };
     let method = match tracker.association.as_deref() {
         None | Some("exact") => Some(Method::Exact),
         Some("amsjpda") => Some(Method::Amsjpda),
@@ -335,10 +346,11 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
     };
     v.finish()?;
-    let (axes, mode, method) = (
+    let (axes, mode, method, noise) = (
         axes.expect("validated"),
         mode.expect("validated"),
         method.expect("validated"),
+        noise.expect("validated"),
     );
 
     // Sites in the fusion frame.
@@ -369,6 +381,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
 
     let mut config = TrackerConfig::new(axes, specs);
     config.mode = mode;
+    config.noise = noise;
     config.association.method = method;
     if let Some(n) = tracker.max_exact_cluster_tracks {
         config.association.max_exact_tracks = n as usize;
