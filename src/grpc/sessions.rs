@@ -24,6 +24,7 @@ use crate::{
             correlation::{self as domain, CorrelationSession, change_name},
             persist::AnyView,
             plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+            refuse_foreign_fields,
         },
     },
     state::AppState,
@@ -49,30 +50,23 @@ enum KindSpec {
 
 fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
     let kind = KindName::parse(Some(&req.kind), "kind")?;
-    let correlation = [
-        ("state_layout", !req.state_layout.is_empty()),
-        ("method", req.method.is_some()),
-        ("motion_model", req.motion_model.is_some()),
-        ("alignment", req.alignment.is_some()),
-        ("measurement_matrix", req.measurement_matrix.is_some()),
-        ("nodes", !req.nodes.is_empty()),
-        ("pruning", req.pruning.is_some()),
-        ("fuse", req.fuse.is_some()),
-        ("retire_after_s", req.retire_after_s.is_some()),
-        ("history_instants", req.history_instants.is_some()),
-    ];
-    let plot_fusion = [("plot_fusion", req.plot_fusion.is_some())];
-    let foreign: &[(&str, bool)] = match kind {
-        KindName::Correlation => &plot_fusion,
-        KindName::PlotFusion => &correlation,
-    };
-    let mut v = Violations::new();
-    for (field, present) in foreign {
-        if *present {
-            v.add(*field, format!("not a field of a {} session", kind.name()));
-        }
-    }
-    v.finish()?;
+    use KindName::{Correlation as C, PlotFusion as P};
+    refuse_foreign_fields(
+        kind,
+        &[
+            ("state_layout", !req.state_layout.is_empty(), C),
+            ("method", req.method.is_some(), C),
+            ("motion_model", req.motion_model.is_some(), C),
+            ("alignment", req.alignment.is_some(), C),
+            ("measurement_matrix", req.measurement_matrix.is_some(), C),
+            ("nodes", !req.nodes.is_empty(), C),
+            ("pruning", req.pruning.is_some(), C),
+            ("fuse", req.fuse.is_some(), C),
+            ("retire_after_s", req.retire_after_s.is_some(), C),
+            ("history_instants", req.history_instants.is_some(), C),
+            ("plot_fusion", req.plot_fusion.is_some(), P),
+        ],
+    )?;
     match kind {
         KindName::Correlation => Ok(KindSpec::Correlation(correlation_spec_in(req)?)),
         KindName::PlotFusion => {

@@ -31,6 +31,7 @@ use crate::{
             correlation::{self as domain, CorrelationSession, change_name},
             persist::AnyView,
             plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+            refuse_foreign_fields,
         },
     },
     state::AppState,
@@ -273,34 +274,25 @@ pub struct SessionList {
 
 /// Refuses the fields of the other kind, naming each.
 fn only_fields_of(kind: KindName, req: &CreateSessionRequest) -> Result<(), ServiceError> {
-    let correlation = [
-        ("state_layout", !req.state_layout.is_empty()),
-        ("method", req.method.is_some()),
-        ("motion_model", req.motion_model.is_some()),
-        ("alignment", req.alignment.is_some()),
-        ("measurement_matrix", req.measurement_matrix.is_some()),
-        ("nodes", !req.nodes.is_empty()),
-        ("pruning", req.pruning.is_some()),
-        ("fuse", req.fuse.is_some()),
-        ("retire_after_s", req.retire_after_s.is_some()),
-        ("history_instants", req.history_instants.is_some()),
-    ];
-    let plot_fusion = [
-        ("origin", req.origin.is_some()),
-        ("radars", req.radars.is_some()),
-        ("tracker", req.tracker.is_some()),
-    ];
-    let foreign: &[(&str, bool)] = match kind {
-        KindName::Correlation => &plot_fusion,
-        KindName::PlotFusion => &correlation,
-    };
-    let mut v = Violations::new();
-    for (field, present) in foreign {
-        if *present {
-            v.add(*field, format!("not a field of a {} session", kind.name()));
-        }
-    }
-    v.finish()
+    use KindName::{Correlation as C, PlotFusion as P};
+    refuse_foreign_fields(
+        kind,
+        &[
+            ("state_layout", !req.state_layout.is_empty(), C),
+            ("method", req.method.is_some(), C),
+            ("motion_model", req.motion_model.is_some(), C),
+            ("alignment", req.alignment.is_some(), C),
+            ("measurement_matrix", req.measurement_matrix.is_some(), C),
+            ("nodes", !req.nodes.is_empty(), C),
+            ("pruning", req.pruning.is_some(), C),
+            ("fuse", req.fuse.is_some(), C),
+            ("retire_after_s", req.retire_after_s.is_some(), C),
+            ("history_instants", req.history_instants.is_some(), C),
+            ("origin", req.origin.is_some(), P),
+            ("radars", req.radars.is_some(), P),
+            ("tracker", req.tracker.is_some(), P),
+        ],
+    )
 }
 
 fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<crate::service::plot_fusion::SpecInput> {

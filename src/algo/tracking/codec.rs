@@ -51,7 +51,12 @@ pub(crate) fn encode(tr: &Tracker) -> Vec<u8> {
     w.u64(tr.next_id);
     w.opt(tr.last_time, Writer::f64);
     w.opt(tr.last_instant, |w, k| w.u64(k as u64));
-    let c = &tr.counters;
+    encode_counters(&mut w, &tr.counters);
+    w.buf
+}
+
+/// The counters, eight u64 in declaration order.
+pub fn encode_counters(w: &mut Writer, c: &Counters) {
     for v in [
         c.plots,
         c.late,
@@ -64,7 +69,20 @@ pub(crate) fn encode(tr: &Tracker) -> Vec<u8> {
     ] {
         w.u64(v);
     }
-    w.buf
+}
+
+/// What [`encode_counters`] wrote.
+pub fn decode_counters(r: &mut Reader<'_>) -> Result<Counters, AlgoError> {
+    Ok(Counters {
+        plots: r.u64()?,
+        late: r.u64()?,
+        frames: r.u64()?,
+        fused_plots: r.u64()?,
+        started: r.u64()?,
+        confirmed: r.u64()?,
+        dropped: r.u64()?,
+        deleted: r.u64()?,
+    })
 }
 
 pub(crate) fn decode(bytes: &[u8]) -> Result<Tracker, AlgoError> {
@@ -98,20 +116,7 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<Tracker, AlgoError> {
     tr.next_id = r.u64()?;
     tr.last_time = r.opt(Reader::f64)?;
     tr.last_instant = r.opt(|r| r.u64().map(|k| k as i64))?;
-    let mut c = [0u64; 8];
-    for v in &mut c {
-        *v = r.u64()?;
-    }
-    tr.counters = Counters {
-        plots: c[0],
-        late: c[1],
-        frames: c[2],
-        fused_plots: c[3],
-        started: c[4],
-        confirmed: c[5],
-        dropped: c[6],
-        deleted: c[7],
-    };
+    tr.counters = decode_counters(&mut r)?;
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }

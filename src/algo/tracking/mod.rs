@@ -34,7 +34,7 @@
 //! from it.
 
 pub mod associator;
-mod codec;
+pub mod codec;
 pub mod config;
 mod deleter;
 pub mod initiator;

@@ -102,32 +102,10 @@ pub fn config_error(e: &AlgoError) -> ServiceError {
     }
 }
 
-fn number(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x >= lo && x <= hi) {
-        v.add(
-            field,
-            format!("must be a finite number in [{lo}, {hi}], got {x}"),
-        );
-        return None;
-    }
-    Some(x)
-}
-
-fn positive(v: &mut Violations, field: &str, x: Option<f64>) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x > 0.0) {
-        v.add(field, format!("must be finite and > 0, got {x}"));
-        return None;
-    }
-    Some(x)
-}
-
 fn geodetic(v: &mut Violations, f: &str, g: &GeoInput) -> Option<LocalFrame> {
-    let lat = number(v, &format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
-    let lon = number(v, &format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
-    let h = number(
-        v,
+    let lat = v.number_in(&format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
+    let lon = v.number_in(&format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
+    let h = v.number_in(
         &format!("{f}.height_m"),
         Some(g.height_m.unwrap_or(0.0)),
         -11_000.0,
@@ -221,9 +199,8 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             },
         };
         sites.push(site);
-        let sr = positive(&mut v, &format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = number(
-            &mut v,
+        let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = v.number_in(
             &format!("{f}.sigma_azimuth_deg"),
             r.sigma_azimuth_deg,
             0.0,
@@ -234,7 +211,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
         let se = match (three_d, r.sigma_elevation_deg) {
             (Some(true), s) => {
-                let s = number(&mut v, &format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
+                let s = v.number_in(&format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
                 if s == Some(0.0) {
                     v.add(format!("{f}.sigma_elevation_deg"), "must be > 0");
                 }
@@ -251,8 +228,8 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         };
         let sv = r
             .sigma_radial_velocity_mps
-            .and_then(|s| positive(&mut v, &format!("{f}.sigma_radial_velocity_mps"), Some(s)));
-        let period = positive(&mut v, &format!("{f}.scan_period_s"), r.scan_period_s);
+            .and_then(|s| v.positive(&format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+        let period = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
         let pd = r.p_detection.unwrap_or(DEFAULT_P_DETECTION);
         if !(pd > 0.0 && pd <= 1.0) {
             v.add(

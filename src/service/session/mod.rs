@@ -52,6 +52,19 @@ pub struct Limits {
     pub max_batch_reports: usize,
 }
 
+impl Limits {
+    /// Refuses a batch of `n` items (`what`: reports, plots) over the limit.
+    pub fn check_batch(&self, n: usize, what: &str) -> Result<(), ServiceError> {
+        if n > self.max_batch_reports {
+            return Err(ServiceError::TooLarge(format!(
+                "the batch holds {n} {what}; the limit is {} per batch",
+                self.max_batch_reports
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// What a kind of session is: its configuration, batch, update and view
 /// types and how its state is created, changed, shown and stored. The
 /// generic [`Envelope`] and [`persist`] do the rest.
@@ -152,6 +165,21 @@ impl KindName {
                 }),
         }
     }
+}
+
+/// Refuses the fields of a create request that belong to another kind than
+/// `kind`: `fields` lists (field, present, the kind it belongs to).
+pub fn refuse_foreign_fields(
+    kind: KindName,
+    fields: &[(&str, bool, KindName)],
+) -> Result<(), ServiceError> {
+    let mut v = Violations::new();
+    for (field, present, owner) in fields {
+        if *present && *owner != kind {
+            v.add(*field, format!("not a field of a {} session", kind.name()));
+        }
+    }
+    v.finish()
 }
 
 /// The name of a stored kind tag, for messages.

@@ -23,7 +23,10 @@ use super::{Limits, SessionKind};
 use crate::{
     algo::{
         AlgoError,
-        tracking::{Counters, Tracker},
+        tracking::{
+            Counters, Tracker,
+            codec::{decode_counters, encode_counters},
+        },
         wire::{Reader, Writer, corrupt},
     },
     service::{
@@ -199,34 +202,6 @@ fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, AlgoError> {
     })
 }
 
-fn encode_counters(w: &mut Writer, c: &Counters) {
-    for v in [
-        c.plots,
-        c.late,
-        c.frames,
-        c.fused_plots,
-        c.started,
-        c.confirmed,
-        c.dropped,
-        c.deleted,
-    ] {
-        w.u64(v);
-    }
-}
-
-fn decode_counters(r: &mut Reader<'_>) -> Result<Counters, AlgoError> {
-    Ok(Counters {
-        plots: r.u64()?,
-        late: r.u64()?,
-        frames: r.u64()?,
-        fused_plots: r.u64()?,
-        started: r.u64()?,
-        confirmed: r.u64()?,
-        dropped: r.u64()?,
-        deleted: r.u64()?,
-    })
-}
-
 fn stored(e: AlgoError) -> ServiceError {
     ServiceError::Internal(format!("stored plot_fusion session: {e}"))
 }
@@ -248,14 +223,7 @@ impl SessionKind for PlotFusionSession {
     }
 
     fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
-        if batch.plots.len() > limits.max_batch_reports {
-            return Err(ServiceError::TooLarge(format!(
-                "the batch holds {} plots; the limit is {} per batch",
-                batch.plots.len(),
-                limits.max_batch_reports
-            )));
-        }
-        Ok(())
+        limits.check_batch(batch.plots.len(), "plots")
     }
 
     fn apply(
