@@ -14,7 +14,7 @@ mod plot_scene;
 use crate::helpers::{
     TestApp, assert_problem, grpc_fields, problem_fields, spawn_app, spawn_app_with,
 };
-use plot_scene::{origin_frame, request, targets};
+use plot_scene::{far_radars, origin_frame, plots, radars_json, request, targets};
 
 const PATH: &str = "/v1/plot-fusion/track";
 
@@ -53,12 +53,24 @@ fn check_tracks(out: &Value, tol: f64) {
         });
         assert!(near, "no track near a target: {}", out["tracks"]);
     }
+    // A 2D track's lat/lon is the point above its (e, n) at the assumed
+    // height: back in the fusion frame at that height, it is (e, n) again.
     for t in &confirmed {
         let s = &t["state"];
-        let (lat, lon, _) = frame.enu_to_geodetic([f(&s[0]), f(&s[2]), 0.0]).unwrap();
-        assert!((f(&t["lat_deg"]) - lat.to_degrees()).abs() < 1e-9);
-        assert!((f(&t["lon_deg"]) - lon.to_degrees()).abs() < 1e-9);
-        assert_eq!(t["covariance"].as_array().unwrap().len(), 4);
+        let height = if s.as_array().unwrap().len() == 6 {
+            t["height_m"].as_f64().unwrap()
+        } else {
+            8000.0
+        };
+        let enu = frame
+            .geodetic_to_enu(
+                f(&t["lat_deg"]).to_radians(),
+                f(&t["lon_deg"]).to_radians(),
+                height,
+            )
+            .unwrap();
+        assert!((enu[0] - f(&s[0])).abs() < 1e-3, "{enu:?} {s}");
+        assert!((enu[1] - f(&s[2])).abs() < 1e-3, "{enu:?} {s}");
     }
 }
 
@@ -77,6 +89,38 @@ async fn serial_fusion_of_two_unsynchronised_2d_radars_with_the_defaults() {
     assert_eq!(c["fused_plots"], 0);
     assert_eq!(out["warnings"], json!([]));
     assert!(out.get("history").is_none());
+}
+
+#[tokio::test]
+async fn radars_200_km_away_2d_and_3d_track_aircraft_at_altitude() {
+    // A 2D radar 190 km north-west and a 3D radar 160 km south-east of the
+    // centre: meridian convergence, horizon tilt (1.7° and 1.4°) and 2D
+    // slant ranges at 8 km all matter at this distance.
+    let app = spawn_app().await;
+    let radars = far_radars();
+    let req = json!({
+        "origin": {"lat_deg": plot_scene::ORIGIN.0, "lon_deg": plot_scene::ORIGIN.1},
+        "radars": radars_json(&radars, 1e-7),
+        "plots": plots(&radars, &targets(), 150.0, 1.0, 13),
+        "tracker": {"default_height_m": 8000.0, "dimensions": 2},
+    });
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.dimensions"]);
+    let mut req = req;
+    req["tracker"] = json!({"default_height_m": 8000.0});
+    let out = app.post_ok(PATH, &req).await;
+    assert_eq!(
+        out["state_layout"],
+        json!(["x", "vx", "y", "vy", "z", "vz"])
+    );
+    check_tracks(&out, 600.0);
+    for t in out["tracks"].as_array().unwrap() {
+        if t["status"] == "confirmed" {
+            // The 3D radar measures the height: 8 km within a few hundred m.
+            let h = f(&t["height_m"]);
+            assert!((h - 8000.0).abs() < 500.0, "height {h}");
+        }
+    }
 }
 
 #[tokio::test]
