@@ -147,7 +147,7 @@ pub struct TrackerOptions {
     /// sigma_a_mps2² m²/s³, consistent whatever the radars' sampling) or
     /// `dwna` (discrete, σ per prediction interval).
     pub process_noise: Option<String>,
-    /// Acceleration noise per horizontal axis (default 1): √q for cwna, σ
+    /// Acceleration noise per horizontal axis (default 3): √q for cwna, σ
     /// (m/s²) for dwna.
     pub sigma_a_mps2: Option<f64>,
     /// Vertical σ (default `sigma_a_mps2`).
@@ -161,7 +161,7 @@ pub struct TrackerOptions {
     pub default_height_sigma_m: Option<f64>,
     /// Parallel mode: σ of the target speed across the line of sight, for
     /// the plots moved to a fusion instant with their angles held (default
-    /// 100 m/s; 0 is the patent's covariance).
+    /// 300 m/s; 0 is the patent's covariance).
     pub sigma_tangential_speed_mps: Option<f64>,
 }
 
