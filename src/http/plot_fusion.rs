@@ -105,7 +105,8 @@ pub struct PlotInitiation {
     pub max_dt_s: Option<f64>,
 }
 
-/// Track deletion: any rule given deletes (default: 3 consecutive misses).
+/// Track deletion: any rule given deletes (default: 3 × radars consecutive
+/// missed frames in serial mode, 3 in parallel mode).
 #[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlotDeletion {
@@ -164,8 +165,8 @@ pub struct TrackerOptions {
     /// 300 m/s; 0 is the patent's covariance).
     pub sigma_tangential_speed_mps: Option<f64>,
     /// Two confirmed tracks updated by the same plot whose states differ by
-    /// less than the χ² quantile at this probability are one target: the
-    /// younger is deleted (counted in `merged`). Default 0.05; 0 disables.
+    /// less than the χ² gate of this probability are one target: the
+    /// younger is deleted (counted in `merged`). Default 0.99; 0 disables.
     pub duplicate_gate_probability: Option<f64>,
 }
 

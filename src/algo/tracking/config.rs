@@ -148,6 +148,17 @@ pub struct Deletion {
     pub max_position_sigma: Option<f64>,
 }
 
+impl Deletion {
+    /// Deletion after `k` consecutive missed frames only.
+    pub fn after_misses(k: u32) -> Self {
+        Self {
+            max_consecutive_misses: Some(k),
+            misses_m_of_n: None,
+            max_position_sigma: None,
+        }
+    }
+}
+
 /// Everything the tracker needs; see [`TrackerConfig::new`] for defaults.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerConfig {
@@ -206,14 +217,14 @@ impl TrackerConfig {
     /// 2·10⁶ hypothesis edges); gates 0.99; confirmation 3-of-4 with a speed
     /// band [0, 600] m/s, pairing 1 s to twice the longest scan period;
     /// CWNA with q = 9 m²/s³ per axis (√q = 3: aircraft turning at 2–4 m/s²
-    /// keep a consistent NEES, `seed001-montecarlo`); deletion after 3
-    /// consecutive missed frames per radar (a frame is one radar's scan in
-    /// serial mode, so 3 × radars frames ≈ 3 scans of each); default height
+    /// keep a consistent NEES, `seed001-montecarlo`); deletion by
+    /// [`TrackerConfig::default_deletion`] (3 × radars missed frames in
+    /// serial mode, 3 in parallel mode); default height
     /// 0 ± 1000 m; tangential speed σ 300 m/s (parallel mode; 100 m/s left
     /// its plots overconfident for 100–300 m/s targets); duplicates deleted
-    /// at the χ² 5 % quantile.
+    /// inside the 99 % χ² gate.
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
-        let misses = 3 * radars.len().clamp(1, 20) as u32;
+        let misses = default_misses(Mode::Auto, &radars);
         let min_period = radars
             .iter()
             .map(|r| r.scan_period)
@@ -248,18 +259,23 @@ impl TrackerConfig {
                 min_dt: 1.0,
                 max_dt: (2.0 * max_period).max(1.0),
             },
-            deletion: Deletion {
-                max_consecutive_misses: Some(misses),
-                misses_m_of_n: None,
-                max_position_sigma: None,
-            },
+            deletion: Deletion::after_misses(misses),
             sigma_a: [3.0; 3],
             noise: NoiseModel::Cwna,
             default_height: 0.0,
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
-            duplicate_probability: 0.05,
+            duplicate_probability: 0.99,
         }
+    }
+
+    /// The default deletion rule for the configured mode:
+    /// [`Deletion::after_misses`] of `3 × radars` missed frames in serial
+    /// mode (a frame is one radar's scan group, so about three scans of
+    /// each radar), 3 in parallel mode (a frame is a fusion instant holding
+    /// every radar's plots).
+    pub fn default_deletion(&self) -> Deletion {
+        Deletion::after_misses(default_misses(self.mode, &self.radars))
     }
 
     /// `true` when plots are processed in parallel mode (after `Auto` is
@@ -353,6 +369,19 @@ impl TrackerConfig {
             ));
         }
         Ok(())
+    }
+}
+
+fn default_misses(mode: Mode, radars: &[RadarSpec]) -> u32 {
+    let parallel = match mode {
+        Mode::Parallel => true,
+        Mode::Serial => false,
+        Mode::Auto => radars.iter().all(RadarSpec::has_doppler),
+    };
+    if parallel {
+        3
+    } else {
+        3 * radars.len().clamp(1, 20) as u32
     }
 }
 

@@ -32,6 +32,61 @@ pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
     (track.p[(0, 0)] + track.p[(2, 2)]).sqrt()
 }
 
+/// Which confirmed tracks duplicate another: two tracks whose best plot of
+/// this frame (`hit`) is the same plot and whose states are statistically
+/// indistinguishable, (x₁ − x₂)′(P₁ + P₂)⁻¹(x₁ − x₂) below the χ²_n
+/// quantile at `probability` (n the state size; P₁ + P₂ ignores the
+/// correlation of two tracks fed the same plots, so the test is
+/// conservative). Of such a pair the track with fewer hits (then the
+/// higher id) is the duplicate. JPDA feeds both tracks of a target from its
+/// plots, so neither would ever miss; without this they live on side by
+/// side. `probability` 0 disables the rule.
+pub fn duplicates(
+    tracks: &[Track],
+    hit: &[Option<usize>],
+    probability: f64,
+) -> Result<Vec<bool>, AlgoError> {
+    let mut out = vec![false; tracks.len()];
+    if probability <= 0.0 || tracks.len() < 2 {
+        return Ok(out);
+    }
+    let n = tracks[0].x.len();
+    let threshold = chi2_threshold(n, 1.0 - probability)?;
+    // Tracks by their best plot; only tracks sharing one are compared.
+    let mut by_plot: Vec<(usize, usize)> = hit
+        .iter()
+        .enumerate()
+        .filter_map(|(i, h)| h.map(|j| (j, i)))
+        .collect();
+    by_plot.sort_unstable();
+    for group in by_plot.chunk_by(|a, b| a.0 == b.0) {
+        if group.len() < 2 {
+            continue;
+        }
+        let mut members: Vec<usize> = group.iter().map(|&(_, i)| i).collect();
+        members.sort_by(|&a, &b| {
+            tracks[b]
+                .hits
+                .cmp(&tracks[a].hits)
+                .then(tracks[a].id.cmp(&tracks[b].id))
+        });
+        for (k, &i) in members.iter().enumerate() {
+            for &keeper in &members[..k] {
+                if out[keeper] {
+                    continue;
+                }
+                let d = &tracks[i].x - &tracks[keeper].x;
+                let s = &tracks[i].p + &tracks[keeper].p;
+                if mahalanobis_sq(&d, &s)? <= threshold {
+                    out[i] = true;
+                    break;
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,59 +174,4 @@ mod tests {
             vec![false, true]
         );
     }
-}
-
-/// Which confirmed tracks duplicate another: two tracks whose best plot of
-/// this frame (`hit`) is the same plot and whose states are statistically
-/// indistinguishable, (x₁ − x₂)′(P₁ + P₂)⁻¹(x₁ − x₂) below the χ²_n
-/// quantile at `probability` (n the state size; P₁ + P₂ ignores the
-/// correlation of two tracks fed the same plots, so the test is
-/// conservative). Of such a pair the track with fewer hits (then the
-/// higher id) is the duplicate. JPDA feeds both tracks of a target from its
-/// plots, so neither would ever miss; without this they live on side by
-/// side. `probability` 0 disables the rule.
-pub fn duplicates(
-    tracks: &[Track],
-    hit: &[Option<usize>],
-    probability: f64,
-) -> Result<Vec<bool>, AlgoError> {
-    let mut out = vec![false; tracks.len()];
-    if probability <= 0.0 || tracks.len() < 2 {
-        return Ok(out);
-    }
-    let n = tracks[0].x.len();
-    let threshold = chi2_threshold(n, 1.0 - probability)?;
-    // Tracks by their best plot; only tracks sharing one are compared.
-    let mut by_plot: Vec<(usize, usize)> = hit
-        .iter()
-        .enumerate()
-        .filter_map(|(i, h)| h.map(|j| (j, i)))
-        .collect();
-    by_plot.sort_unstable();
-    for group in by_plot.chunk_by(|a, b| a.0 == b.0) {
-        if group.len() < 2 {
-            continue;
-        }
-        let mut members: Vec<usize> = group.iter().map(|&(_, i)| i).collect();
-        members.sort_by(|&a, &b| {
-            tracks[b]
-                .hits
-                .cmp(&tracks[a].hits)
-                .then(tracks[a].id.cmp(&tracks[b].id))
-        });
-        for (k, &i) in members.iter().enumerate() {
-            for &keeper in &members[..k] {
-                if out[keeper] {
-                    continue;
-                }
-                let d = &tracks[i].x - &tracks[keeper].x;
-                let s = &tracks[i].p + &tracks[keeper].p;
-                if mahalanobis_sq(&d, &s)? <= threshold {
-                    out[i] = true;
-                    break;
-                }
-            }
-        }
-    }
-    Ok(out)
 }
