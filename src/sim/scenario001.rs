@@ -437,7 +437,8 @@ mod tests {
         // Track 1: 3 frames reported, 1 assigned → false.
         assert_eq!(s.false_tracks, 1);
         assert_eq!(s.confirm_delay, vec![Some(1.0), Some(2.0)]);
-        assert_eq!((s.samples, s.missed, s.unassigned_tracks), (6, 1, 2));
+        // Target 1 is missed at t = 1 and t = 3.
+        assert_eq!((s.samples, s.missed, s.unassigned_tracks), (6, 2, 2));
         // Track 1 at 5 km is 5 km from both targets: not a duplicate.
         assert_eq!(s.duplicates, 0);
         let twin = Frame {

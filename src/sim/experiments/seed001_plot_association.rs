@@ -361,7 +361,7 @@ fn one_run(
                 }
             }
         }
-        for target in 0..targets {
+        for (target, &x) in truth.iter().enumerate() {
             let i = origin[0]
                 .iter()
                 .position(|&o| o == target)
@@ -371,13 +371,13 @@ fn one_run(
                 .position(|&o| o == target)
                 .expect("one plot");
             s.n += 1;
-            s.sq_r1 += sq_dist(&plots[0][i].z, truth[target]);
-            s.sq_r2 += sq_dist(&plots[1][j].z, truth[target]);
-            s.sq_output += sq_dist(&fused[i].z, truth[target]);
+            s.sq_r1 += sq_dist(&plots[0][i].z, x);
+            s.sq_r2 += sq_dist(&plots[1][j].z, x);
+            s.sq_output += sq_dist(&fused[i].z, x);
             match (members[i], partner_of_r2[j]) {
                 (Some(jj), _) if jj == j => {
                     s.correct += 1;
-                    s.sq_fused += sq_dist(&fused[i].z, truth[target]);
+                    s.sq_fused += sq_dist(&fused[i].z, x);
                     s.n_fused += 1;
                 }
                 (None, None) => s.split += 1,

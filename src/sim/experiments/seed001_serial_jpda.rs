@@ -341,8 +341,8 @@ fn one_run(end: f64, rng: &mut SimRng) -> Result<Vec<MethodRun>, SimError> {
     let specs: Vec<_> = radars.iter().map(|r| radar_spec(r, 1e-7)).collect();
     let (plots, _) = scan_plots(&radars, &truth, end, rng)?;
     let mut runs = vec![(config(specs.clone()), plots.clone())];
-    for i in 0..2 {
-        runs.push((config(vec![specs[i].clone()]), only_radar(&plots, i)));
+    for (i, spec) in specs.iter().enumerate() {
+        runs.push((config(vec![spec.clone()]), only_radar(&plots, i)));
     }
     runs.into_iter()
         .map(|(cfg, plots)| {
