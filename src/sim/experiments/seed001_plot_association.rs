@@ -8,12 +8,12 @@
 //! as σ = 60 m and 30 m per Cartesian axis and put it directly into the
 //! Cartesian plots (R = σ²I), as the patent's statement is Cartesian; no
 //! polar radar is simulated. The patent gives no geometry, speed or scan
-//! period; ours: the targets fly at 100 m/s on headings 0°, 60° and 120°
+//! period; ours: the targets fly at 50 m/s on headings 0°, 60° and 120°
 //! (`truth::crossing`) through one point 50 km north of the origin, which
 //! they reach at the middle scan; 51 scans 2 s apart (100 s). Neighbouring
-//! targets are then 100 m·|t − t_cross|/s apart, so the 99 % gate
+//! targets are then 50 m·|t − t_cross|/s apart, so the 99 % gate
 //! (radius ≈ 3.03·√(60² + 30²) = 204 m) holds two or three targets for
-//! about ±2 s about the crossing. P_D = 1, no clutter (the patent has none).
+//! about ±4 s about the crossing. P_D = 1, no clutter (the patent has none).
 //!
 //! Measures, per target and scan: **correctly paired** when its radar-1 and
 //! radar-2 plots end in the same fused plot; **mis-paired** when either is
