@@ -209,6 +209,7 @@ fn pb_batch(id: &str, body: &Value) -> pb::PushBatchRequest {
             .map(|r| r.iter().map(pb_report).collect())
             .unwrap_or_default(),
         flush: body["flush"].as_bool().unwrap_or(false),
+        plots: Vec::new(),
     }
 }
 

@@ -119,6 +119,7 @@ pub(crate) fn spec_in(
                 n: d.n,
                 max_position_sigma_m: d.max_position_sigma_m,
             }),
+            process_noise: t.process_noise,
             sigma_a_mps2: t.sigma_a_mps2,
             sigma_a_vertical_mps2: t.sigma_a_vertical_mps2,
             default_height_m: t.default_height_m,

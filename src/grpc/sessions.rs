@@ -11,6 +11,7 @@ use tonic::{Code, Request, Response, Status, Streaming};
 use super::{
     correlation::{correlate_input, finite, pair_result, system_track, track_ref},
     error::to_status,
+    plot_fusion::{counters_out, plots_in, spec_in as plot_spec_in, track_out},
     rows,
 };
 use crate::{
@@ -22,6 +23,8 @@ use crate::{
             Batch, KindName, Spec, Update, View,
             correlation::{self as domain, CorrelationSession, change_name},
             persist::AnyView,
+            plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+            refuse_foreign_fields,
         },
     },
     state::AppState,
@@ -42,11 +45,42 @@ fn tenant<T>(request: &Request<T>) -> String {
 /// A create request: the kind it names and its configuration.
 enum KindSpec {
     Correlation(Spec<domain::SessionSpec>),
+    PlotFusion(Spec<crate::service::plot_fusion::SpecInput>),
 }
 
 fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
-    match KindName::parse(Some(&req.kind), "kind")? {
+    let kind = KindName::parse(Some(&req.kind), "kind")?;
+    use KindName::{Correlation as C, PlotFusion as P};
+    refuse_foreign_fields(
+        kind,
+        &[
+            ("state_layout", !req.state_layout.is_empty(), C),
+            ("method", req.method.is_some(), C),
+            ("motion_model", req.motion_model.is_some(), C),
+            ("alignment", req.alignment.is_some(), C),
+            ("measurement_matrix", req.measurement_matrix.is_some(), C),
+            ("nodes", !req.nodes.is_empty(), C),
+            ("pruning", req.pruning.is_some(), C),
+            ("fuse", req.fuse.is_some(), C),
+            ("retire_after_s", req.retire_after_s.is_some(), C),
+            ("history_instants", req.history_instants.is_some(), C),
+            ("plot_fusion", req.plot_fusion.is_some(), P),
+        ],
+    )?;
+    match kind {
         KindName::Correlation => Ok(KindSpec::Correlation(correlation_spec_in(req)?)),
+        KindName::PlotFusion => {
+            let Some(c) = req.plot_fusion else {
+                return Err(Violations::single(
+                    "plot_fusion",
+                    "is required for a plot_fusion session",
+                ));
+            };
+            Ok(KindSpec::PlotFusion(Spec {
+                idle_expiry_s: req.idle_expiry_s,
+                body: plot_spec_in(c.origin, c.radars, c.tracker),
+            }))
+        }
     }
 }
 
@@ -123,6 +157,44 @@ fn batch_in(req: pb::PushBatchRequest) -> Result<Batch<domain::BatchInput>, Serv
     })
 }
 
+fn plot_batch_in(req: pb::PushBatchRequest) -> Batch<pf::BatchInput> {
+    Batch {
+        sequence: req.sequence,
+        body: pf::BatchInput {
+            plots: plots_in(req.plots),
+            flush: req.flush,
+        },
+    }
+}
+
+fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
+    let b = u.body;
+    pb::BatchUpdate {
+        session_id: u.session_id,
+        sequence: u.sequence,
+        version: u.version,
+        duplicate: u.duplicate,
+        plot_fusion: Some(pb::PlotFusionBatchUpdate {
+            frames: b.frames,
+            pending_plots: b.pending_plots,
+            late_plots: b.late_plots,
+            tracks: b
+                .tracks
+                .into_iter()
+                .map(|c| pb::ChangedTrack {
+                    change: track_change_name(c.change).into(),
+                    track: Some(track_out(c.track)),
+                })
+                .collect(),
+            deleted: b.deleted.into_iter().map(track_out).collect(),
+            dropped: b.dropped,
+            counters: Some(counters_out(b.counters)),
+        }),
+        warnings: u.warnings,
+        ..Default::default()
+    }
+}
+
 fn update_out(u: Update<domain::BatchUpdate>) -> pb::BatchUpdate {
     let (b, warnings) = (u.body, u.warnings);
     pb::BatchUpdate {
@@ -145,6 +217,7 @@ fn update_out(u: Update<domain::BatchUpdate>) -> pb::BatchUpdate {
         pairs: b.pairs.into_iter().map(pair_result).collect(),
         system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         retired: b.retired.into_iter().map(track_ref).collect(),
+        plot_fusion: None,
         warnings,
     }
 }
@@ -152,6 +225,31 @@ fn update_out(u: Update<domain::BatchUpdate>) -> pb::BatchUpdate {
 fn view_out(v: AnyView) -> pb::SessionState {
     match v {
         AnyView::Correlation(v) => correlation_view_out(v),
+        AnyView::PlotFusion(v) => plot_view_out(v),
+    }
+}
+
+fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
+    let b = v.body;
+    pb::SessionState {
+        id: v.id,
+        kind: v.kind.into(),
+        version: v.version,
+        created_unix_ms: v.created_unix_ms,
+        last_sequence: v.last_sequence,
+        batches: v.batches,
+        idle_expiry_s: v.idle_expiry_s,
+        encoded_bytes: v.encoded_bytes as u64,
+        plot_fusion: Some(pb::PlotFusionSessionState {
+            mode: b.mode.into(),
+            state_layout: b.state_layout.iter().map(|s| s.to_string()).collect(),
+            radars: b.radars,
+            last_frame_t: b.last_frame_t,
+            pending_plots: b.pending_plots,
+            counters: Some(counters_out(b.counters)),
+            tracks: b.tracks.into_iter().map(track_out).collect(),
+        }),
+        ..Default::default()
     }
 }
 
@@ -191,6 +289,7 @@ fn correlation_view_out(v: View<domain::SessionView>) -> pb::SessionState {
         pairs: b.pairs.into_iter().map(pair_result).collect(),
         system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         encoded_bytes: v.encoded_bytes as u64,
+        plot_fusion: None,
     }
 }
 
@@ -204,6 +303,17 @@ fn opened(view: &AnyView) -> pb::BatchUpdate {
             pending_reports: v.body.pending_reports,
             ..Default::default()
         },
+        AnyView::PlotFusion(v) => pb::BatchUpdate {
+            session_id: v.id.clone(),
+            sequence: v.last_sequence,
+            version: v.version,
+            plot_fusion: Some(pb::PlotFusionBatchUpdate {
+                pending_plots: v.body.pending_plots,
+                counters: Some(counters_out(v.body.counters)),
+                ..Default::default()
+            }),
+            ..Default::default()
+        },
     }
 }
 
@@ -212,6 +322,9 @@ async fn create(state: &AppState, tenant: &str, spec: KindSpec) -> Result<AnyVie
     Ok(match spec {
         KindSpec::Correlation(spec) => {
             AnyView::Correlation(sessions.create::<CorrelationSession>(tenant, spec).await?)
+        }
+        KindSpec::PlotFusion(spec) => {
+            AnyView::PlotFusion(sessions.create::<PlotFusionSession>(tenant, spec).await?)
         }
     })
 }
@@ -222,13 +335,32 @@ async fn push(
     id: &str,
     req: pb::PushBatchRequest,
 ) -> Result<pb::BatchUpdate, ServiceError> {
-    let batch = batch_in(req)?;
     let limits = state.settings().session_limits();
-    let update = state
-        .sessions()
-        .push::<CorrelationSession>(tenant, id, batch, limits)
-        .await?;
-    Ok(update_out(update))
+    let sessions = state.sessions();
+    // The batch's items say its kind; an empty batch asks the stored session.
+    let kind = match (req.reports.is_empty(), req.plots.is_empty()) {
+        (false, false) => {
+            return Err(Violations::single(
+                "plots",
+                "a batch carries reports (correlation) or plots (plot_fusion), not both",
+            ));
+        }
+        (false, true) => KindName::Correlation,
+        (true, false) => KindName::PlotFusion,
+        (true, true) => sessions.kind_of(tenant, id).await?,
+    };
+    Ok(match kind {
+        KindName::Correlation => update_out(
+            sessions
+                .push::<CorrelationSession>(tenant, id, batch_in(req)?, limits)
+                .await?,
+        ),
+        KindName::PlotFusion => plot_update_out(
+            sessions
+                .push::<PlotFusionSession>(tenant, id, plot_batch_in(req), limits)
+                .await?,
+        ),
+    })
 }
 
 type UpdateStream = Pin<Box<dyn Stream<Item = Result<pb::BatchUpdate, Status>> + Send>>;

@@ -143,7 +143,12 @@ pub struct TrackerOptions {
     pub track_gate_probability: Option<f64>,
     pub initiation: Option<PlotInitiation>,
     pub deletion: Option<PlotDeletion>,
-    /// White-noise acceleration σ per horizontal axis (default 1 m/s²).
+    /// `cwna` (default: continuous white-noise acceleration, q =
+    /// sigma_a_mps2² m²/s³, consistent whatever the radars' sampling) or
+    /// `dwna` (discrete, σ per prediction interval).
+    pub process_noise: Option<String>,
+    /// Acceleration noise per horizontal axis (default 3): √q for cwna, σ
+    /// (m/s²) for dwna.
     pub sigma_a_mps2: Option<f64>,
     /// Vertical σ (default `sigma_a_mps2`).
     pub sigma_a_vertical_mps2: Option<f64>,
@@ -156,7 +161,7 @@ pub struct TrackerOptions {
     pub default_height_sigma_m: Option<f64>,
     /// Parallel mode: σ of the target speed across the line of sight, for
     /// the plots moved to a fusion instant with their angles held (default
-    /// 100 m/s; 0 is the patent's covariance).
+    /// 300 m/s; 0 is the patent's covariance).
     pub sigma_tangential_speed_mps: Option<f64>,
 }
 
@@ -302,6 +307,7 @@ pub(crate) fn spec_in(
                 n: d.n,
                 max_position_sigma_m: d.max_position_sigma_m,
             }),
+            process_noise: t.process_noise,
             sigma_a_mps2: t.sigma_a_mps2,
             sigma_a_vertical_mps2: t.sigma_a_vertical_mps2,
             default_height_m: t.default_height_m,

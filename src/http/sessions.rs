@@ -16,40 +16,52 @@ use super::{
         Alignment, CorrelationMethod, MotionModel, PairResult, SystemTrack, TrackRef, TrackSample,
         config_in, finite, pair_result, sample_in, system_track, track_ref,
     },
+    plot_fusion::{
+        FusedTrack, GeoPoint, PlotIn, PlotRadar, TrackerCounters, TrackerOptions, counters_out,
+        plots_in, spec_in, track_out,
+    },
     problem::{ApiJson, Problem},
 };
 use crate::{
     auth::Tenant,
     service::{
-        correlation as corr,
+        ServiceError, Violations, correlation as corr,
         session::{
             Batch, KindName, Spec, Update, View,
             correlation::{self as domain, CorrelationSession, change_name},
             persist::AnyView,
+            plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+            refuse_foreign_fields,
         },
     },
     state::AppState,
 };
 
-/// A streaming session. `kind` names what it does (`correlation`, the
+/// A streaming session. `kind` names what it does: `correlation` (the
 /// default: the batch correlation's configuration, the node ids, and the
-/// session's own settings).
+/// session's own settings) or `plot_fusion` (the plot-fusion tracker's
+/// `origin`, `radars` and `tracker`, as in `POST /v1/plot-fusion/track`).
+/// Fields of the other kind are refused.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateSessionRequest {
-    /// `correlation` (default).
+    /// `correlation` (default) or `plot_fusion`.
     #[schema(example = "correlation")]
     pub kind: Option<String>,
+    /// Correlation sessions.
     #[schema(example = json!(["x", "vx", "y", "vy"]))]
+    #[serde(default)]
     pub state_layout: Vec<String>,
-    pub method: CorrelationMethod,
+    /// Correlation sessions: required.
+    pub method: Option<CorrelationMethod>,
     pub motion_model: Option<MotionModel>,
     /// `predict` (default with a motion model) or `nearest`; `tolerance_s` as
     /// in the batch endpoint.
     pub alignment: Option<Alignment>,
     pub measurement_matrix: Option<Vec<Vec<f64>>>,
-    /// The ids of the radar nodes (at least two).
+    /// Correlation sessions: the ids of the radar nodes (at least two).
     #[schema(example = json!(["radar-1", "radar-2"]))]
+    #[serde(default)]
     pub nodes: Vec<String>,
     pub pruning: Option<String>,
     pub fuse: Option<bool>,
@@ -61,6 +73,12 @@ pub struct CreateSessionRequest {
     /// Instants kept for the replay of pairs that enter the gate late
     /// (default 32, at most 1024).
     pub history_instants: Option<u32>,
+    /// Plot-fusion sessions: the fusion centre (see the batch endpoint).
+    pub origin: Option<GeoPoint>,
+    /// Plot-fusion sessions: the radars (required).
+    pub radars: Option<Vec<PlotRadar>>,
+    /// Plot-fusion sessions: the tracker's options.
+    pub tracker: Option<TrackerOptions>,
 }
 
 /// One batch of track reports.
@@ -71,10 +89,15 @@ pub struct PushBatchRequest {
     /// later one the previous + 1; a number already applied is acknowledged
     /// again without being applied (safe retries); one that skips ahead gets 409.
     pub sequence: Option<u64>,
+    /// Correlation sessions: track reports.
     #[serde(default)]
     pub reports: Vec<TrackReport>,
-    /// Close the open alignment instant now (default false: it closes when a
-    /// report later than its start + tolerance arrives).
+    /// Plot-fusion sessions: radar plots, in any order.
+    #[serde(default)]
+    pub plots: Vec<PlotIn>,
+    /// Close the open alignment instant (correlation) or frame (plot
+    /// fusion) now. Default false: it closes when a later report or plot
+    /// arrives.
     #[serde(default)]
     pub flush: bool,
 }
@@ -118,16 +141,67 @@ pub struct BatchUpdate {
     /// again. A retry of the last batch carries that batch's update again
     /// (changes, pairs, system tracks); an older one carries no changes.
     pub duplicate: bool,
-    /// Instants closed and correlated by this batch.
-    pub instants: Vec<f64>,
-    pub pending_reports: u32,
-    pub changes: Vec<PairChange>,
-    /// Pairs whose quality counters moved in this batch.
-    pub pairs: Vec<PairResult>,
-    /// Every current system track, fused at its latest instant.
-    pub system_tracks: Vec<SystemTrack>,
-    pub retired: Vec<TrackRef>,
+    /// Correlation: instants closed and correlated by this batch.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instants: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pending_reports: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub changes: Option<Vec<PairChange>>,
+    /// Correlation: pairs whose quality counters moved in this batch.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pairs: Option<Vec<PairResult>>,
+    /// Correlation: every current system track, fused at its latest instant.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub system_tracks: Option<Vec<SystemTrack>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub retired: Option<Vec<TrackRef>>,
+    /// Plot-fusion sessions: what the batch did to the tracks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plot_fusion: Option<PlotFusionBatchUpdate>,
     pub warnings: Vec<String>,
+}
+
+/// A track a plot-fusion batch touched.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ChangedTrack {
+    /// `initiated`, `confirmed` or `updated`.
+    pub change: &'static str,
+    pub track: FusedTrack,
+}
+
+/// What a plot-fusion batch did.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlotFusionBatchUpdate {
+    /// Frames (scan groups or fusion instants) processed by this batch.
+    pub frames: u32,
+    /// Plots buffered for a frame not yet complete.
+    pub pending_plots: u32,
+    /// Indices of the batch's late plots (older than the last processed
+    /// frame), dropped.
+    pub late_plots: Vec<u32>,
+    /// Every live track, when a frame was processed.
+    pub tracks: Vec<ChangedTrack>,
+    /// Confirmed tracks deleted, as they were when deleted.
+    pub deleted: Vec<FusedTrack>,
+    /// Tentative tracks dropped without being confirmed.
+    pub dropped: Vec<u64>,
+    pub counters: TrackerCounters,
+}
+
+/// The tracker of a plot-fusion session.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlotFusionSessionState {
+    /// `parallel` or `serial`.
+    pub mode: &'static str,
+    pub state_layout: Vec<&'static str>,
+    pub radars: Vec<String>,
+    /// Time of the last processed frame.
+    pub last_frame_t: Option<f64>,
+    pub pending_plots: u32,
+    pub counters: TrackerCounters,
+    /// Confirmed then tentative tracks.
+    pub tracks: Vec<FusedTrack>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -152,20 +226,35 @@ pub struct SessionState {
     pub created_unix_ms: u64,
     pub last_sequence: Option<u64>,
     pub batches: u64,
-    pub instants_processed: u64,
-    pub last_instant_t: Option<f64>,
-    pub pending_reports: u32,
-    pub reports_accepted: u64,
-    pub reports_late: u64,
     pub idle_expiry_s: f64,
-    pub retire_after_s: f64,
-    pub history_instants: u32,
-    pub method: String,
-    pub nodes: Vec<SessionNode>,
-    pub pairs: Vec<PairResult>,
-    pub system_tracks: Vec<SystemTrack>,
     /// Size of the stored session.
     pub encoded_bytes: usize,
+    /// Correlation sessions: their state (the fields below, present only
+    /// for this kind).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instants_processed: Option<u64>,
+    pub last_instant_t: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pending_reports: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reports_accepted: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reports_late: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub retire_after_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub history_instants: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub method: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nodes: Option<Vec<SessionNode>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pairs: Option<Vec<PairResult>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub system_tracks: Option<Vec<SystemTrack>>,
+    /// Plot-fusion sessions: the tracker.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plot_fusion: Option<PlotFusionSessionState>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -183,7 +272,45 @@ pub struct SessionList {
     pub sessions: Vec<SessionSummary>,
 }
 
-fn correlation_spec_in(req: CreateSessionRequest) -> Spec<domain::SessionSpec> {
+/// Refuses the fields of the other kind, naming each.
+fn only_fields_of(kind: KindName, req: &CreateSessionRequest) -> Result<(), ServiceError> {
+    use KindName::{Correlation as C, PlotFusion as P};
+    refuse_foreign_fields(
+        kind,
+        &[
+            ("state_layout", !req.state_layout.is_empty(), C),
+            ("method", req.method.is_some(), C),
+            ("motion_model", req.motion_model.is_some(), C),
+            ("alignment", req.alignment.is_some(), C),
+            ("measurement_matrix", req.measurement_matrix.is_some(), C),
+            ("nodes", !req.nodes.is_empty(), C),
+            ("pruning", req.pruning.is_some(), C),
+            ("fuse", req.fuse.is_some(), C),
+            ("retire_after_s", req.retire_after_s.is_some(), C),
+            ("history_instants", req.history_instants.is_some(), C),
+            ("origin", req.origin.is_some(), P),
+            ("radars", req.radars.is_some(), P),
+            ("tracker", req.tracker.is_some(), P),
+        ],
+    )
+}
+
+fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<crate::service::plot_fusion::SpecInput> {
+    Spec {
+        idle_expiry_s: req.idle_expiry_s,
+        body: spec_in(req.origin, req.radars.unwrap_or_default(), req.tracker),
+    }
+}
+
+fn correlation_spec_in(
+    req: CreateSessionRequest,
+) -> Result<Spec<domain::SessionSpec>, ServiceError> {
+    let Some(method) = req.method else {
+        return Err(Violations::single(
+            "method",
+            "is required for a correlation session",
+        ));
+    };
     let nodes = req
         .nodes
         .into_iter()
@@ -192,12 +319,12 @@ fn correlation_spec_in(req: CreateSessionRequest) -> Spec<domain::SessionSpec> {
             tracks: Vec::new(),
         })
         .collect();
-    Spec {
+    Ok(Spec {
         idle_expiry_s: req.idle_expiry_s,
         body: domain::SessionSpec {
             config: config_in(
                 req.state_layout,
-                req.method,
+                method,
                 req.motion_model,
                 req.alignment,
                 req.measurement_matrix,
@@ -207,6 +334,16 @@ fn correlation_spec_in(req: CreateSessionRequest) -> Spec<domain::SessionSpec> {
             ),
             retire_after_s: req.retire_after_s,
             history_instants: req.history_instants,
+        },
+    })
+}
+
+fn plot_batch_in(req: PushBatchRequest) -> Batch<pf::BatchInput> {
+    Batch {
+        sequence: req.sequence,
+        body: pf::BatchInput {
+            flush: req.flush,
+            plots: plots_in(req.plots),
         },
     }
 }
@@ -241,20 +378,55 @@ fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
         sequence: u.sequence,
         version: u.version,
         duplicate: u.duplicate,
-        instants: b.instants,
-        pending_reports: b.pending_reports,
-        changes: b
-            .changes
-            .into_iter()
-            .map(|c| PairChange {
-                a: track_ref(c.a),
-                b: track_ref(c.b),
-                change: change_name(c.change),
-            })
-            .collect(),
-        pairs: b.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
-        retired: b.retired.into_iter().map(track_ref).collect(),
+        instants: Some(b.instants),
+        pending_reports: Some(b.pending_reports),
+        changes: Some(
+            b.changes
+                .into_iter()
+                .map(|c| PairChange {
+                    a: track_ref(c.a),
+                    b: track_ref(c.b),
+                    change: change_name(c.change),
+                })
+                .collect(),
+        ),
+        pairs: Some(b.pairs.into_iter().map(pair_result).collect()),
+        system_tracks: Some(b.system_tracks.into_iter().map(system_track).collect()),
+        retired: Some(b.retired.into_iter().map(track_ref).collect()),
+        plot_fusion: None,
+        warnings: u.warnings,
+    }
+}
+
+fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
+    let b = u.body;
+    BatchUpdate {
+        session_id: u.session_id,
+        sequence: u.sequence,
+        version: u.version,
+        duplicate: u.duplicate,
+        instants: None,
+        pending_reports: None,
+        changes: None,
+        pairs: None,
+        system_tracks: None,
+        retired: None,
+        plot_fusion: Some(PlotFusionBatchUpdate {
+            frames: b.frames,
+            pending_plots: b.pending_plots,
+            late_plots: b.late_plots,
+            tracks: b
+                .tracks
+                .into_iter()
+                .map(|c| ChangedTrack {
+                    change: track_change_name(c.change),
+                    track: track_out(c.track),
+                })
+                .collect(),
+            deleted: b.deleted.into_iter().map(track_out).collect(),
+            dropped: b.dropped,
+            counters: counters_out(b.counters),
+        }),
         warnings: u.warnings,
     }
 }
@@ -262,6 +434,41 @@ fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
 fn view_out(v: AnyView) -> SessionState {
     match v {
         AnyView::Correlation(v) => correlation_view_out(v),
+        AnyView::PlotFusion(v) => plot_view_out(v),
+    }
+}
+
+fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
+    let b = v.body;
+    SessionState {
+        id: v.id,
+        kind: v.kind,
+        version: v.version,
+        created_unix_ms: v.created_unix_ms,
+        last_sequence: v.last_sequence,
+        batches: v.batches,
+        idle_expiry_s: v.idle_expiry_s,
+        encoded_bytes: v.encoded_bytes,
+        instants_processed: None,
+        last_instant_t: None,
+        pending_reports: None,
+        reports_accepted: None,
+        reports_late: None,
+        retire_after_s: None,
+        history_instants: None,
+        method: None,
+        nodes: None,
+        pairs: None,
+        system_tracks: None,
+        plot_fusion: Some(PlotFusionSessionState {
+            mode: b.mode,
+            state_layout: b.state_layout.to_vec(),
+            radars: b.radars,
+            last_frame_t: b.last_frame_t,
+            pending_plots: b.pending_plots,
+            counters: counters_out(b.counters),
+            tracks: b.tracks.into_iter().map(track_out).collect(),
+        }),
     }
 }
 
@@ -274,33 +481,35 @@ fn correlation_view_out(v: View<domain::SessionView>) -> SessionState {
         created_unix_ms: v.created_unix_ms,
         last_sequence: v.last_sequence,
         batches: v.batches,
-        instants_processed: b.instants_processed,
-        last_instant_t: b.last_instant.and_then(finite),
-        pending_reports: b.pending_reports,
-        reports_accepted: b.reports_accepted,
-        reports_late: b.reports_late,
         idle_expiry_s: v.idle_expiry_s,
-        retire_after_s: b.retire_after_s,
-        history_instants: b.history_instants,
-        method: b.method,
-        nodes: b
-            .nodes
-            .into_iter()
-            .map(|n| SessionNode {
-                id: n.id,
-                tracks: n
-                    .tracks
-                    .into_iter()
-                    .map(|t| SessionTrack {
-                        id: t.id,
-                        last_t: t.last_t,
-                    })
-                    .collect(),
-            })
-            .collect(),
-        pairs: b.pairs.into_iter().map(pair_result).collect(),
-        system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         encoded_bytes: v.encoded_bytes,
+        instants_processed: Some(b.instants_processed),
+        last_instant_t: b.last_instant.and_then(finite),
+        pending_reports: Some(b.pending_reports),
+        reports_accepted: Some(b.reports_accepted),
+        reports_late: Some(b.reports_late),
+        retire_after_s: Some(b.retire_after_s),
+        history_instants: Some(b.history_instants),
+        method: Some(b.method),
+        nodes: Some(
+            b.nodes
+                .into_iter()
+                .map(|n| SessionNode {
+                    id: n.id,
+                    tracks: n
+                        .tracks
+                        .into_iter()
+                        .map(|t| SessionTrack {
+                            id: t.id,
+                            last_t: t.last_t,
+                        })
+                        .collect(),
+                })
+                .collect(),
+        ),
+        pairs: Some(b.pairs.into_iter().map(pair_result).collect()),
+        system_tracks: Some(b.system_tracks.into_iter().map(system_track).collect()),
+        plot_fusion: None,
     }
 }
 
@@ -318,11 +527,19 @@ pub async fn create(
     Extension(tenant): Extension<Tenant>,
     ApiJson(req): ApiJson<CreateSessionRequest>,
 ) -> Result<impl IntoResponse, Problem> {
-    let view = match KindName::parse(req.kind.as_deref(), "kind")? {
+    let kind = KindName::parse(req.kind.as_deref(), "kind")?;
+    only_fields_of(kind, &req)?;
+    let view = match kind {
         KindName::Correlation => AnyView::Correlation(
             state
                 .sessions()
-                .create::<CorrelationSession>(&tenant.0, correlation_spec_in(req))
+                .create::<CorrelationSession>(&tenant.0, correlation_spec_in(req)?)
+                .await?,
+        ),
+        KindName::PlotFusion => AnyView::PlotFusion(
+            state
+                .sessions()
+                .create::<PlotFusionSession>(&tenant.0, plot_fusion_spec_in(req))
                 .await?,
         ),
     };
@@ -394,7 +611,8 @@ pub async fn delete(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// Pushes a batch of track reports; answers what changed.
+/// Pushes a batch (track reports to a correlation session, plots to a
+/// plot-fusion session); answers what changed.
 #[utoipa::path(post, path = "/v1/sessions/{id}/batches", tag = "sessions",
     params(("id" = String, Path, description = "Session id")),
     request_body = PushBatchRequest,
@@ -414,9 +632,31 @@ pub async fn push(
     ApiJson(req): ApiJson<PushBatchRequest>,
 ) -> Result<Json<BatchUpdate>, Problem> {
     let limits = state.settings().session_limits();
-    let update = state
-        .sessions()
-        .push::<CorrelationSession>(&tenant.0, &id, batch_in(req), limits)
-        .await?;
-    Ok(Json(update_out(update)))
+    let sessions = state.sessions();
+    // The batch's items say its kind; an empty batch (a flush, a sequence
+    // number) asks the stored session.
+    let kind = match (req.reports.is_empty(), req.plots.is_empty()) {
+        (false, false) => {
+            return Err(Violations::single(
+                "plots",
+                "a batch carries reports (correlation) or plots (plot_fusion), not both",
+            )
+            .into());
+        }
+        (false, true) => KindName::Correlation,
+        (true, false) => KindName::PlotFusion,
+        (true, true) => sessions.kind_of(&tenant.0, &id).await?,
+    };
+    Ok(Json(match kind {
+        KindName::Correlation => update_out(
+            sessions
+                .push::<CorrelationSession>(&tenant.0, &id, batch_in(req), limits)
+                .await?,
+        ),
+        KindName::PlotFusion => plot_update_out(
+            sessions
+                .push::<PlotFusionSession>(&tenant.0, &id, plot_batch_in(req), limits)
+                .await?,
+        ),
+    }))
 }

@@ -295,34 +295,10 @@ fn computation_error(e: AlgoError) -> ServiceError {
     }])
 }
 
-fn finite_in(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x >= lo && x <= hi) {
-        v.add(field, format!("must lie in [{lo}, {hi}], got {x}"));
-        return None;
-    }
-    Some(x)
-}
-
-fn positive(v: &mut Violations, field: &str, x: Option<f64>) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x > 0.0) {
-        v.add(field, format!("must be finite and > 0, got {x}"));
-        return None;
-    }
-    Some(x)
-}
-
 fn site(v: &mut Violations, f: &str, s: &SiteInput) -> Option<LocalFrame> {
-    let lat = finite_in(v, &format!("{f}.lat_deg"), s.lat_deg, -90.0, 90.0);
-    let lon = finite_in(v, &format!("{f}.lon_deg"), s.lon_deg, -180.0, 180.0);
-    let h = finite_in(
-        v,
-        &format!("{f}.height_m"),
-        s.height_m,
-        -11_000.0,
-        100_000.0,
-    );
+    let lat = v.number_in(&format!("{f}.lat_deg"), s.lat_deg, -90.0, 90.0);
+    let lon = v.number_in(&format!("{f}.lon_deg"), s.lon_deg, -180.0, 180.0);
+    let h = v.number_in(&format!("{f}.height_m"), s.height_m, -11_000.0, 100_000.0);
     let (lat, lon, h) = (lat?, lon?, h?);
     if lat.abs() == 90.0 {
         v.add(
@@ -534,14 +510,10 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             }
             Some(s) => site(&mut v, &format!("{f}.site"), s),
         };
-        let sr = positive(&mut v, &format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = positive(
-            &mut v,
-            &format!("{f}.sigma_azimuth_deg"),
-            r.sigma_azimuth_deg,
-        );
+        let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = v.positive(&format!("{f}.sigma_azimuth_deg"), r.sigma_azimuth_deg);
         let se = match (three_d, r.sigma_elevation_deg) {
-            (Some(true), s) => positive(&mut v, &format!("{f}.sigma_elevation_deg"), s),
+            (Some(true), s) => v.positive(&format!("{f}.sigma_elevation_deg"), s),
             (Some(false), Some(_)) => {
                 v.add(
                     format!("{f}.sigma_elevation_deg"),
@@ -551,7 +523,7 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             }
             _ => Some(0.0),
         };
-        let scan = positive(&mut v, &format!("{f}.scan_period_s"), r.scan_period_s);
+        let scan = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
         let mut track_ids = HashSet::new();
         for (ti, t) in r.tracks.iter().enumerate() {
             let ft = format!("{f}.tracks[{ti}]");
@@ -596,17 +568,11 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
                         last_t = time;
                     }
                 }
-                let range = finite_in(&mut v, &format!("{fp}.range_m"), p.range_m, 0.0, 1e7);
+                let range = v.number_in(&format!("{fp}.range_m"), p.range_m, 0.0, 1e7);
                 if range == Some(0.0) {
                     v.add(format!("{fp}.range_m"), "must be > 0");
                 }
-                let az = finite_in(
-                    &mut v,
-                    &format!("{fp}.azimuth_deg"),
-                    p.azimuth_deg,
-                    -360.0,
-                    360.0,
-                );
+                let az = v.number_in(&format!("{fp}.azimuth_deg"), p.azimuth_deg, -360.0, 360.0);
                 let el = match (three_d, p.elevation_deg) {
                     (Some(false), Some(_)) => {
                         v.add(
@@ -615,9 +581,9 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
                         );
                         None
                     }
-                    (Some(true), e) => {
-                        finite_in(&mut v, &format!("{fp}.elevation_deg"), e, -90.0, 90.0).map(Some)
-                    }
+                    (Some(true), e) => v
+                        .number_in(&format!("{fp}.elevation_deg"), e, -90.0, 90.0)
+                        .map(Some),
                     _ => Some(None),
                 };
                 if let (Some(time), Some(range), Some(az), Some(el)) = (time, range, az, el) {

@@ -85,6 +85,26 @@ impl Violations {
         value
     }
 
+    /// A required number in [lo, hi], or a recorded violation.
+    pub fn number_in(&mut self, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
+        let x = self.required(field, x)?;
+        if !(x.is_finite() && x >= lo && x <= hi) {
+            self.add(field, format!("must lie in [{lo}, {hi}], got {x}"));
+            return None;
+        }
+        Some(x)
+    }
+
+    /// A required finite number > 0, or a recorded violation.
+    pub fn positive(&mut self, field: &str, x: Option<f64>) -> Option<f64> {
+        let x = self.required(field, x)?;
+        if !(x.is_finite() && x > 0.0) {
+            self.add(field, format!("must be finite and > 0, got {x}"));
+            return None;
+        }
+        Some(x)
+    }
+
     /// Records `result`'s error, if any, against `field`, and passes the value on.
     pub fn check<T, E: std::fmt::Display>(
         &mut self,

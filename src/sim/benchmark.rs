@@ -15,6 +15,7 @@ use super::montecarlo::run_rng;
 use crate::service::correlation::{
     CorrelateInput, MethodInput, NodeInput, RuleInput, SampleInput, TrackInput,
 };
+use crate::service::plot_fusion;
 
 /// Position and velocity error σ of the benchmark's local tracks.
 pub const SIGMA_POSITION_M: f64 = 200.0;
@@ -87,6 +88,111 @@ pub fn correlation_request(n: usize, pruning: &str) -> CorrelateInput {
         pruning: Some(pruning.into()),
         ..Default::default()
     }
+}
+
+/// The plot-fusion benchmark scene (`examples/plot_fusion_load.rs`): `n`
+/// targets in straight flight uniform in a square of side 6 km·√n (one per
+/// 36 km²: 1,000 targets over 190 km × 190 km) at 100–300 m/s, seen by
+/// `radars` 2D radars spread on a 60 km circle about the centre, scan
+/// periods 4, 4.5, 5, 5.5 s with phases 0, 1.1, 2.3, 3.7 s, σ_ρ = 50 m,
+/// σ_θ = 0.1°, P_D = 0.9, `false_per_scan` clutter plots per scan
+/// (uniform in range 1–200 km and azimuth); with `doppler` every radar
+/// also gives the radial velocity (σ 1 m/s). Plots are in time order.
+pub fn plot_fusion_scene(
+    n: usize,
+    radars: usize,
+    duration_s: f64,
+    false_per_scan: usize,
+    doppler: bool,
+) -> (plot_fusion::SpecInput, Vec<plot_fusion::PlotInput>) {
+    use std::f64::consts::TAU;
+    let mut rng = run_rng(43, n as u64);
+    let normal = |rng: &mut super::SimRng| -> f64 { rng.sample(StandardNormal) };
+    let side = 6000.0 * (n as f64).sqrt();
+    let targets: Vec<[f64; 4]> = (0..n)
+        .map(|_| {
+            let speed = rng.random_range(100.0..300.0);
+            let heading: f64 = rng.random_range(0.0..TAU);
+            [
+                rng.random_range(-side / 2.0..side / 2.0),
+                speed * heading.sin(),
+                rng.random_range(-side / 2.0..side / 2.0),
+                speed * heading.cos(),
+            ]
+        })
+        .collect();
+    let sites: Vec<[f64; 2]> = (0..radars)
+        .map(|i| {
+            let a = TAU * i as f64 / radars as f64;
+            [60_000.0 * a.sin(), 60_000.0 * a.cos()]
+        })
+        .collect();
+    let periods = [4.0, 4.5, 5.0, 5.5];
+    let phases = [0.0, 1.1, 2.3, 3.7];
+    let (sr, sa, sv) = (50.0, 0.1f64.to_radians(), 1.0);
+    let mut plots: Vec<plot_fusion::PlotInput> = Vec::new();
+    for (r, site) in sites.iter().enumerate() {
+        let mut t = phases[r % 4];
+        while t <= duration_s {
+            for x in &targets {
+                if rng.random::<f64>() >= 0.9 {
+                    continue;
+                }
+                let (e, nn) = (x[0] + x[1] * t - site[0], x[2] + x[3] * t - site[1]);
+                let range = e.hypot(nn);
+                let rv = (e * x[1] + nn * x[3]) / range;
+                plots.push(plot_fusion::PlotInput {
+                    radar_id: Some(format!("r{r}")),
+                    t: Some(t),
+                    range_m: Some(range + sr * normal(&mut rng)),
+                    azimuth_deg: Some((e.atan2(nn) + sa * normal(&mut rng)).to_degrees()),
+                    elevation_deg: None,
+                    radial_velocity_mps: doppler.then(|| rv + sv * normal(&mut rng)),
+                });
+            }
+            for _ in 0..false_per_scan {
+                plots.push(plot_fusion::PlotInput {
+                    radar_id: Some(format!("r{r}")),
+                    t: Some(t),
+                    range_m: Some(rng.random_range(1_000.0..200_000.0)),
+                    azimuth_deg: Some(rng.random_range(0.0..360.0)),
+                    elevation_deg: None,
+                    radial_velocity_mps: doppler.then(|| rng.random_range(-300.0..300.0)),
+                });
+            }
+            t += periods[r % 4];
+        }
+    }
+    plots.sort_by(|a, b| a.t.unwrap_or(0.0).total_cmp(&b.t.unwrap_or(0.0)));
+    let spec = plot_fusion::SpecInput {
+        origin: Some(plot_fusion::GeoInput {
+            lat_deg: Some(52.0),
+            lon_deg: Some(4.0),
+            height_m: Some(0.0),
+        }),
+        radars: sites
+            .iter()
+            .enumerate()
+            .map(|(r, site)| plot_fusion::RadarInput {
+                id: Some(format!("r{r}")),
+                kind: Some("2d".into()),
+                site: Some(plot_fusion::SiteInput {
+                    geodetic: None,
+                    position_m: Some(site.to_vec()),
+                }),
+                sigma_range_m: Some(sr),
+                sigma_azimuth_deg: Some(0.1),
+                sigma_radial_velocity_mps: doppler.then_some(sv),
+                scan_period_s: Some(periods[r % 4]),
+                p_detection: Some(0.9),
+                // false_per_scan over 199 km × 2π rad.
+                clutter_density: Some((false_per_scan.max(1) as f64) / (199_000.0 * TAU)),
+                ..Default::default()
+            })
+            .collect(),
+        tracker: Default::default(),
+    };
+    (spec, plots)
 }
 
 #[cfg(test)]

@@ -11,8 +11,10 @@ use tonic::Code;
 #[path = "../common/plot_scene.rs"]
 mod plot_scene;
 
-use crate::helpers::{TestApp, assert_problem, grpc_fields, problem_fields, spawn_app};
-use plot_scene::{origin_frame, request, targets};
+use crate::helpers::{
+    TestApp, assert_problem, grpc_fields, problem_fields, spawn_app, spawn_app_with,
+};
+use plot_scene::{far_radars, origin_frame, plots, radars_json, request, targets};
 
 const PATH: &str = "/v1/plot-fusion/track";
 
@@ -51,12 +53,24 @@ fn check_tracks(out: &Value, tol: f64) {
         });
         assert!(near, "no track near a target: {}", out["tracks"]);
     }
+    // A 2D track's lat/lon is the point above its (e, n) at the assumed
+    // height: back in the fusion frame at that height, it is (e, n) again.
     for t in &confirmed {
         let s = &t["state"];
-        let (lat, lon, _) = frame.enu_to_geodetic([f(&s[0]), f(&s[2]), 0.0]).unwrap();
-        assert!((f(&t["lat_deg"]) - lat.to_degrees()).abs() < 1e-9);
-        assert!((f(&t["lon_deg"]) - lon.to_degrees()).abs() < 1e-9);
-        assert_eq!(t["covariance"].as_array().unwrap().len(), 4);
+        let height = if s.as_array().unwrap().len() == 6 {
+            t["height_m"].as_f64().unwrap()
+        } else {
+            8000.0
+        };
+        let enu = frame
+            .geodetic_to_enu(
+                f(&t["lat_deg"]).to_radians(),
+                f(&t["lon_deg"]).to_radians(),
+                height,
+            )
+            .unwrap();
+        assert!((enu[0] - f(&s[0])).abs() < 1e-3, "{enu:?} {s}");
+        assert!((enu[1] - f(&s[2])).abs() < 1e-3, "{enu:?} {s}");
     }
 }
 
@@ -75,6 +89,38 @@ async fn serial_fusion_of_two_unsynchronised_2d_radars_with_the_defaults() {
     assert_eq!(c["fused_plots"], 0);
     assert_eq!(out["warnings"], json!([]));
     assert!(out.get("history").is_none());
+}
+
+#[tokio::test]
+async fn radars_200_km_away_2d_and_3d_track_aircraft_at_altitude() {
+    // A 2D radar 190 km north-west and a 3D radar 160 km south-east of the
+    // centre: meridian convergence, horizon tilt (1.7° and 1.4°) and 2D
+    // slant ranges at 8 km all matter at this distance.
+    let app = spawn_app().await;
+    let radars = far_radars();
+    let req = json!({
+        "origin": {"lat_deg": plot_scene::ORIGIN.0, "lon_deg": plot_scene::ORIGIN.1},
+        "radars": radars_json(&radars, 1e-7),
+        "plots": plots(&radars, &targets(), 150.0, 1.0, 13),
+        "tracker": {"default_height_m": 8000.0, "dimensions": 2},
+    });
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.dimensions"]);
+    let mut req = req;
+    req["tracker"] = json!({"default_height_m": 8000.0});
+    let out = app.post_ok(PATH, &req).await;
+    assert_eq!(
+        out["state_layout"],
+        json!(["x", "vx", "y", "vy", "z", "vz"])
+    );
+    check_tracks(&out, 600.0);
+    for t in out["tracks"].as_array().unwrap() {
+        if t["status"] == "confirmed" {
+            // The 3D radar measures the height: 8 km within a few hundred m.
+            let h = f(&t["height_m"]);
+            assert!((h - 8000.0).abs() < 500.0, "height {h}");
+        }
+    }
 }
 
 #[tokio::test]
@@ -348,4 +394,222 @@ async fn bad_radars_and_options_are_named_by_field() {
     req["radars"][0]["site"] = json!({"lat_deg": 52.0, "lon_deg": 4.0, "position_m": [0, 0]});
     let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
     assert_eq!(problem_fields(&body), vec!["radars[0].site"]);
+}
+
+// ------------------------------------------------------------ sessions
+
+/// The create request of a plot_fusion session for a batch request.
+fn session_create(req: &Value) -> Value {
+    json!({
+        "kind": "plot_fusion",
+        "origin": req["origin"],
+        "radars": req["radars"],
+        "tracker": req["tracker"],
+    })
+}
+
+async fn create_session(app: &TestApp, body: &Value) -> Value {
+    let response = app.post_json("/v1/sessions", body).await;
+    assert_eq!(response.status(), 201);
+    response.json().await.unwrap()
+}
+
+/// The plots in time order, cut into batches of `size`.
+fn batches(req: &Value, size: usize) -> Vec<Vec<Value>> {
+    req["plots"]
+        .as_array()
+        .unwrap()
+        .chunks(size)
+        .map(<[Value]>::to_vec)
+        .collect()
+}
+
+#[tokio::test]
+async fn a_session_fed_in_batches_ends_with_the_batch_endpoints_tracks() {
+    let app = spawn_app().await;
+    let req = with_height(request(false, 7));
+    let whole = app.post_ok(PATH, &req).await;
+    let created = create_session(&app, &session_create(&req)).await;
+    assert_eq!(created["kind"], "plot_fusion");
+    assert_eq!(created["plot_fusion"]["mode"], "serial");
+    assert!(created.get("method").is_none());
+    let id = created["id"].as_str().unwrap().to_string();
+    let path = format!("/v1/sessions/{id}/batches");
+    let chunks = batches(&req, 13);
+    let n = chunks.len();
+    let mut initiated = 0;
+    for (i, plots) in chunks.into_iter().enumerate() {
+        let body = json!({"sequence": i + 1, "plots": plots, "flush": i + 1 == n});
+        let u = app.post_ok(&path, &body).await;
+        assert_eq!(u["duplicate"], false);
+        assert_eq!(u["warnings"], json!([]));
+        assert!(u.get("instants").is_none());
+        let pf = &u["plot_fusion"];
+        for t in pf["tracks"].as_array().unwrap() {
+            if t["change"] == "initiated" {
+                initiated += 1;
+            }
+        }
+        if i + 1 == n {
+            assert_eq!(pf["pending_plots"], 0);
+        }
+    }
+    assert!(initiated >= 3);
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(state["plot_fusion"]["tracks"], whole["tracks"]);
+    assert_eq!(state["plot_fusion"]["counters"], whole["counters"]);
+    assert_eq!(state["batches"].as_u64().unwrap(), n as u64);
+
+    // A retry of the last batch is a duplicate with the same update.
+    let list = app.get_ok("/v1/sessions").await;
+    assert_eq!(list["sessions"][0]["kind"], "plot_fusion");
+}
+
+#[tokio::test]
+async fn a_failed_batch_changes_nothing_and_late_plots_are_counted() {
+    let app = spawn_app_with(|s| s.max_batch_reports = 50).await;
+    let req = with_height(request(false, 7));
+    let created = create_session(&app, &session_create(&req)).await;
+    let id = created["id"].as_str().unwrap().to_string();
+    let path = format!("/v1/sessions/{id}/batches");
+    let chunks = batches(&req, 40);
+    let first = app
+        .post_ok(
+            &path,
+            &json!({"sequence": 1, "plots": chunks[0], "flush": true}),
+        )
+        .await;
+    let version = first["version"].as_u64().unwrap();
+
+    // Bad plots: 422 naming the field; the session is unchanged.
+    let mut bad = chunks[1].clone();
+    bad[3]["radar_id"] = json!("nowhere");
+    bad[5]["range_m"] = json!(-1.0);
+    let body = assert_problem(
+        app.post_json(&path, &json!({"sequence": 2, "plots": bad}))
+            .await,
+        422,
+    )
+    .await;
+    assert_eq!(
+        problem_fields(&body),
+        vec!["plots[3].radar_id", "plots[5].range_m"]
+    );
+    // Too many plots: 413.
+    let many: Vec<Value> = chunks[1].iter().chain(&chunks[2]).cloned().collect();
+    assert_problem(
+        app.post_json(&path, &json!({"sequence": 2, "plots": many}))
+            .await,
+        413,
+    )
+    .await;
+    // Reports to a plot_fusion session: 422 naming `reports`.
+    let body = assert_problem(
+        app.post_json(
+            &path,
+            &json!({"sequence": 2, "reports": [{"node": "a", "track": "1", "t": 0.0,
+                     "state": [0.0, 0.0, 0.0, 0.0], "covariance": [[1.0, 0.0, 0.0, 0.0],
+                     [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]}]}),
+        )
+        .await,
+        422,
+    )
+    .await;
+    assert_eq!(problem_fields(&body), vec!["reports"]);
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(state["version"].as_u64().unwrap(), version);
+
+    // A plot older than the flushed frame is late: dropped, counted, named.
+    let mut plots = chunks[1].clone();
+    let mut late = chunks[0][0].clone();
+    late["t"] = json!(0.0);
+    plots.push(late);
+    let u = app
+        .post_ok(&path, &json!({"sequence": 2, "plots": plots}))
+        .await;
+    let last = (plots.len() - 1) as u64;
+    assert_eq!(u["plot_fusion"]["late_plots"], json!([last]));
+    assert_eq!(u["plot_fusion"]["counters"]["late"], 1);
+    assert!(u["warnings"][0].as_str().unwrap().contains("late"));
+
+    // Fields of the other kind are refused at creation, each named.
+    let mut create = session_create(&req);
+    create["nodes"] = json!(["a", "b"]);
+    create["method"] = json!({"kind": "weighted"});
+    let body = assert_problem(app.post_json("/v1/sessions", &create).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["method", "nodes"]);
+}
+
+#[tokio::test]
+async fn a_grpc_stream_tracks_like_the_batch_call() {
+    use radar_fusion::proto::session_service_client::SessionServiceClient;
+
+    let app = spawn_app().await;
+    let req = with_height(request(true, 5));
+    let whole = client(&app)
+        .await
+        .track(proto_request(&req))
+        .await
+        .unwrap()
+        .into_inner();
+    let p = proto_request(&req);
+    let mut sessions = SessionServiceClient::new(app.channel().await);
+    let open = pb::CreateSessionRequest {
+        kind: "plot_fusion".into(),
+        plot_fusion: Some(pb::PlotFusionConfig {
+            origin: p.origin,
+            radars: p.radars.clone(),
+            tracker: p.tracker.clone(),
+        }),
+        ..Default::default()
+    };
+    let (tx, mut updates) =
+        crate::sessions::data::open_stream(&mut sessions, pb::stream_request::Kind::Open(open))
+            .await;
+    let opened = updates.message().await.unwrap().unwrap();
+    let id = opened.session_id.clone();
+    assert!(opened.plot_fusion.is_some());
+    let chunks: Vec<&[pb::RadarPlot]> = p.plots.chunks(25).collect();
+    let n = chunks.len();
+    for (i, chunk) in chunks.into_iter().enumerate() {
+        tx.send(pb::StreamRequest {
+            kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+                sequence: Some(i as u64 + 1),
+                plots: chunk.to_vec(),
+                flush: i + 1 == n,
+                ..Default::default()
+            })),
+        })
+        .await
+        .unwrap();
+        let u = updates.message().await.unwrap().unwrap();
+        assert!(u.error.is_none(), "{:?}", u.error);
+        assert_eq!(u.sequence, Some(i as u64 + 1));
+    }
+    // A bad batch is answered in the stream, which goes on.
+    let mut bad = p.plots[0].clone();
+    bad.radar_id = "zz".into();
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+            sequence: Some(n as u64 + 1),
+            plots: vec![bad],
+            ..Default::default()
+        })),
+    })
+    .await
+    .unwrap();
+    let u = updates.message().await.unwrap().unwrap();
+    let error = u.error.expect("refused");
+    assert_eq!(error.code_name, "INVALID_ARGUMENT");
+    assert_eq!(error.violations[0].field, "plots[0].radar_id");
+    drop(tx);
+    let state = sessions
+        .get_session(pb::GetSessionRequest { session_id: id })
+        .await
+        .unwrap()
+        .into_inner();
+    let pf = state.plot_fusion.expect("a plot_fusion state");
+    assert_eq!(pf.mode, "parallel");
+    assert_eq!(pf.tracks, whole.tracks);
+    assert_eq!(pf.counters, whole.counters);
 }

@@ -7,7 +7,7 @@ use serde_json::{Value, json};
 use crate::helpers::{spawn_app, spawn_app_with};
 
 #[path = "../common/sessions.rs"]
-mod data;
+pub(crate) mod data;
 
 use data::{open_stream, pb_open, pb_report, scenario, session_config};
 

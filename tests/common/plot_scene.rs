@@ -109,6 +109,42 @@ pub fn origin_frame() -> LocalFrame {
     .unwrap()
 }
 
+/// A truth position `[e, n, H]`: the point above the fusion plane's (e, n)
+/// at ellipsoidal height H (found by iterating u ← u + (H − height(u)) with
+/// the pyproj-checked conversions of `algo::geo`), in the radar's ENU frame.
+pub fn in_radar_frame(fusion: &LocalFrame, radar: &LocalFrame, p: [f64; 3]) -> [f64; 3] {
+    let mut u = p[2];
+    for _ in 0..6 {
+        let (_, _, h) = fusion.enu_to_geodetic([p[0], p[1], u]).unwrap();
+        u += p[2] - h;
+    }
+    fusion.position_to(radar, [p[0], p[1], u]).unwrap()
+}
+
+/// Two 2D radars about 200 km from the centre, on opposite sides.
+pub fn far_radars() -> Vec<SceneRadar> {
+    vec![
+        SceneRadar {
+            id: "north-west",
+            lat: 53.3,
+            lon: 2.0,
+            three_d: false,
+            doppler: false,
+            period: 6.0,
+            phase: 0.7,
+        },
+        SceneRadar {
+            id: "south-east",
+            lat: 50.9,
+            lon: 6.2,
+            three_d: true,
+            doppler: false,
+            period: 4.0,
+            phase: 2.9,
+        },
+    ]
+}
+
 /// The radars as the request's JSON.
 pub fn radars_json(radars: &[SceneRadar], clutter: f64) -> Value {
     Value::Array(
@@ -158,20 +194,23 @@ pub fn plots(
             0.0,
         )
         .unwrap();
-        let rot = fusion.rotation_to(&frame);
         let mut t = r.phase;
         while t <= duration {
             for target in targets.iter().filter(|g| g.start <= t && t <= g.end) {
                 if rng.random::<f64>() >= P_D {
                     continue;
                 }
-                let p = fusion.position_to(&frame, target.at(t)).unwrap();
-                let v = rot * nalgebra::Vector3::from(target.v);
+                let p = in_radar_frame(&fusion, &frame, target.at(t));
                 let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
                 let horizontal = p[0].hypot(p[1]);
                 let az = p[0].atan2(p[1]).to_degrees();
                 let el = p[2].atan2(horizontal).to_degrees();
-                let rv = (p[0] * v[0] + p[1] * v[1] + p[2] * v[2]) / range;
+                // ṙ by a central difference over ±10 ms.
+                let slant = |t: f64| {
+                    let q = in_radar_frame(&fusion, &frame, target.at(t));
+                    (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt()
+                };
+                let rv = (slant(t + 0.01) - slant(t - 0.01)) / 0.02;
                 let n = |rng: &mut ChaCha8Rng| rng.sample::<f64, _>(StandardNormal);
                 let mut plot = json!({
                     "radar_id": r.id,

@@ -20,7 +20,7 @@ use crate::algo::tracking::config::{
 use crate::algo::tracking::initiator::Initiator;
 use crate::algo::tracking::registration::CartesianPlot;
 use crate::algo::tracking::track::Track;
-use crate::algo::tracking::{Counters, Tracker};
+use crate::algo::tracking::{Counters, NoiseModel, Tracker};
 use crate::algo::wire::{Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
@@ -51,7 +51,12 @@ pub(crate) fn encode(tr: &Tracker) -> Vec<u8> {
     w.u64(tr.next_id);
     w.opt(tr.last_time, Writer::f64);
     w.opt(tr.last_instant, |w, k| w.u64(k as u64));
-    let c = &tr.counters;
+    encode_counters(&mut w, &tr.counters);
+    w.buf
+}
+
+/// The counters, eight u64 in declaration order.
+pub fn encode_counters(w: &mut Writer, c: &Counters) {
     for v in [
         c.plots,
         c.late,
@@ -64,7 +69,20 @@ pub(crate) fn encode(tr: &Tracker) -> Vec<u8> {
     ] {
         w.u64(v);
     }
-    w.buf
+}
+
+/// What [`encode_counters`] wrote.
+pub fn decode_counters(r: &mut Reader<'_>) -> Result<Counters, AlgoError> {
+    Ok(Counters {
+        plots: r.u64()?,
+        late: r.u64()?,
+        frames: r.u64()?,
+        fused_plots: r.u64()?,
+        started: r.u64()?,
+        confirmed: r.u64()?,
+        dropped: r.u64()?,
+        deleted: r.u64()?,
+    })
 }
 
 pub(crate) fn decode(bytes: &[u8]) -> Result<Tracker, AlgoError> {
@@ -98,20 +116,7 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<Tracker, AlgoError> {
     tr.next_id = r.u64()?;
     tr.last_time = r.opt(Reader::f64)?;
     tr.last_instant = r.opt(|r| r.u64().map(|k| k as i64))?;
-    let mut c = [0u64; 8];
-    for v in &mut c {
-        *v = r.u64()?;
-    }
-    tr.counters = Counters {
-        plots: c[0],
-        late: c[1],
-        frames: c[2],
-        fused_plots: c[3],
-        started: c[4],
-        confirmed: c[5],
-        dropped: c[6],
-        deleted: c[7],
-    };
+    tr.counters = decode_counters(&mut r)?;
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
@@ -180,6 +185,10 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     for v in c.sigma_a {
         w.f64(v);
     }
+    w.u8(match c.noise {
+        NoiseModel::Cwna => 0,
+        NoiseModel::Dwna => 1,
+    });
     w.f64(c.default_height);
     w.f64(c.default_height_sigma);
     w.f64(c.sigma_tangential_speed);
@@ -251,6 +260,11 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         max_position_sigma: r.opt(Reader::f64)?,
     };
     let sigma_a = [r.f64()?, r.f64()?, r.f64()?];
+    let noise = match r.u8()? {
+        0 => NoiseModel::Cwna,
+        1 => NoiseModel::Dwna,
+        _ => return Err(corrupt("bad noise model")),
+    };
     Ok(TrackerConfig {
         axes,
         radars,
@@ -264,6 +278,7 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         initiation,
         deletion,
         sigma_a,
+        noise,
         default_height: r.f64()?,
         default_height_sigma: r.f64()?,
         sigma_tangential_speed: r.f64()?,

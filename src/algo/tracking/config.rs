@@ -24,6 +24,21 @@ pub enum Mode {
     Serial,
 }
 
+/// The process noise of the constant-velocity model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseModel {
+    /// Continuous white-noise acceleration, spectral density q_i = σ_i²
+    /// (m²/s³) per axis: Q = q [[Δt³/3, Δt²/2], [Δt²/2, Δt]]. Consistent
+    /// whatever the sampling (Q over 4 s = Q over 4 × 1 s), which serial
+    /// fusion of unsynchronised radars needs: the default.
+    Cwna,
+    /// Discrete white-noise acceleration, piecewise-constant acceleration of
+    /// σ_i per interval: Q = σ² [[Δt⁴/4, Δt³/2], [Δt³/2, Δt²]]. Its total
+    /// noise depends on how often the track is predicted (more radars, less
+    /// noise), so it suits a fixed-period tracker only.
+    Dwna,
+}
+
 /// One radar of the network. Its index in [`TrackerConfig::radars`] is the
 /// radar's id in [`Plot::radar`].
 #[derive(Debug, Clone, PartialEq)]
@@ -161,8 +176,11 @@ pub struct TrackerConfig {
     pub initiation: Initiation,
     /// Track deletion.
     pub deletion: Deletion,
-    /// DWNA acceleration standard deviation per axis `[e, n, u]` (m/s²), ≥ 0.
+    /// Acceleration noise per axis `[e, n, u]`, ≥ 0: σ (m/s²) for DWNA, √q
+    /// (q in m²/s³) for CWNA.
     pub sigma_a: [f64; 3],
+    /// The process-noise model.
+    pub noise: NoiseModel,
     /// 3D tracker: height (m, fusion frame `u`) given to 2D plots when a
     /// track is started from them (seed 003's mapping).
     pub default_height: f64,
@@ -182,9 +200,14 @@ impl TrackerConfig {
     /// epoch 0; time tolerance 0; exact JPDA (clusters up to 12 tracks,
     /// 2·10⁶ hypothesis edges); gates 0.99; confirmation 3-of-4 with a speed
     /// band [0, 600] m/s, pairing 1 s to twice the longest scan period;
-    /// deletion after 3 consecutive misses; σ_a = 1 m/s² per axis; default
-    /// height 0 ± 1000 m; tangential speed σ 100 m/s.
+    /// CWNA with q = 9 m²/s³ per axis (√q = 3: aircraft turning at 2–4 m/s²
+    /// keep a consistent NEES, `seed001-montecarlo`); deletion after 3
+    /// consecutive missed frames per radar (a frame is one radar's scan in
+    /// serial mode, so 3 × radars frames ≈ 3 scans of each); default height
+    /// 0 ± 1000 m; tangential speed σ 300 m/s (parallel mode; 100 m/s left
+    /// its plots overconfident for 100–300 m/s targets).
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
+        let misses = 3 * radars.len().clamp(1, 20) as u32;
         let min_period = radars
             .iter()
             .map(|r| r.scan_period)
@@ -220,14 +243,15 @@ impl TrackerConfig {
                 max_dt: (2.0 * max_period).max(1.0),
             },
             deletion: Deletion {
-                max_consecutive_misses: Some(3),
+                max_consecutive_misses: Some(misses),
                 misses_m_of_n: None,
                 max_position_sigma: None,
             },
-            sigma_a: [1.0; 3],
+            sigma_a: [3.0; 3],
+            noise: NoiseModel::Cwna,
             default_height: 0.0,
             default_height_sigma: 1000.0,
-            sigma_tangential_speed: 100.0,
+            sigma_tangential_speed: 300.0,
         }
     }
 

@@ -75,9 +75,14 @@ impl Initiator {
         // 7b: extend the tentative tracks.
         let mut edges = Vec::new();
         for (i, track) in self.tentatives.iter_mut().enumerate() {
-            track.predict(t, &cfg.sigma_a)?;
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
             for (j, plot) in plots.iter().enumerate() {
                 let k = plot.z.len();
+                // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
+                let nu0 = plot.z[0] - track.x[0];
+                if nu0 * nu0 > gates[k - 2] * (track.p[(0, 0)] + plot.r[(0, 0)]) {
+                    continue;
+                }
                 let h = position_selector(k, cfg.axes);
                 let s = &h * &track.p * h.transpose() + &plot.r;
                 let d2 = mahalanobis_sq(&(&plot.z - &h * &track.x), &s)?;
@@ -119,6 +124,9 @@ impl Initiator {
                     continue;
                 }
                 let k = root.z.len().min(plot.z.len());
+                if velocity_bound(root, plot, dt, &init.velocity) > gates[k - 2] {
+                    continue;
+                }
                 if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
                     let (x, p) = two_point(root, plot, dt, cfg);
                     self.tentatives
@@ -152,6 +160,40 @@ impl Initiator {
         }
         self.tentatives = remaining;
         Ok(out)
+    }
+}
+
+/// A lower bound of [`velocity_statistic`] without allocation, for
+/// pruning: D = d'S⁻¹d ≥ |d|²/λ_max(S) ≥ |d|²/tr(S), and per axis
+/// D ≥ d_i²/S_ii.
+pub fn velocity_bound(a: &CartesianPlot, b: &CartesianPlot, dt: f64, gate: &VelocityGate) -> f64 {
+    let k = a.z.len().min(b.z.len());
+    match *gate {
+        VelocityGate::Speed { v_min, v_max } => {
+            let mut s2 = 0.0;
+            let mut trace = 0.0;
+            for i in 0..k {
+                let d = b.z[i] - a.z[i];
+                s2 += d * d;
+                trace += a.r[(i, i)] + b.r[(i, i)];
+            }
+            let s = s2.sqrt();
+            let excess = if s > v_max * dt {
+                s - v_max * dt
+            } else if s < v_min * dt {
+                v_min * dt - s
+            } else {
+                0.0
+            };
+            excess * excess / trace
+        }
+        VelocityGate::PerAxis { v_min, v_max } => (0..k)
+            .map(|i| {
+                let delta = b.z[i] - a.z[i];
+                let d = (delta - v_max[i] * dt).max(0.0) - (v_min[i] * dt - delta).max(0.0);
+                d * d / (a.r[(i, i)] + b.r[(i, i)])
+            })
+            .fold(0.0, f64::max),
     }
 }
 
@@ -395,6 +437,34 @@ mod tests {
             .unwrap();
         assert_eq!(out.started, 0);
         assert_eq!(ini.roots.len(), 2); // the new plot is a root; the old one waits
+    }
+
+    #[test]
+    fn the_pruning_bound_never_exceeds_the_statistic() {
+        // Random-ish pairs, correlated covariances: bound ≤ D always.
+        let gates = [
+            VelocityGate::Speed {
+                v_min: 50.0,
+                v_max: 300.0,
+            },
+            VelocityGate::PerAxis {
+                v_min: [100.0, -100.0, -50.0],
+                v_max: [800.0, 100.0, 50.0],
+            },
+        ];
+        for k in 0..200 {
+            let f = k as f64;
+            let mut a = plot(0.0, 900.0 * (f * 0.7).sin(), 700.0 * (f * 1.3).cos());
+            let b = plot(2.0, 1200.0 * (f * 0.3).cos(), 500.0 * (f * 0.9).sin());
+            a.r = DMatrix::from_row_slice(2, 2, &[100.0, 0.0, 0.0, 400.0]);
+            a.r[(0, 1)] = 150.0 * (f * 0.2).sin();
+            a.r[(1, 0)] = a.r[(0, 1)];
+            for g in &gates {
+                let bound = velocity_bound(&a, &b, 2.0, g);
+                let d = velocity_statistic(&a, &b, 2.0, g).unwrap();
+                assert!(bound <= d * (1.0 + 1e-12) + 1e-12, "k {k}: {bound} > {d}");
+            }
+        }
     }
 
     #[test]

@@ -34,7 +34,7 @@
 //! from it.
 
 pub mod associator;
-mod codec;
+pub mod codec;
 pub mod config;
 mod deleter;
 pub mod initiator;
@@ -46,7 +46,9 @@ mod track;
 mod tests;
 
 pub use codec::FORMAT_VERSION;
-pub use config::{Deletion, Initiation, Mode, Plot, RadarSpec, TrackerConfig, VelocityGate};
+pub use config::{
+    Deletion, Initiation, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate,
+};
 pub use registration::{CartesianPlot, Doppler};
 pub use track::{TrackOutput, TrackStatus};
 
@@ -379,7 +381,7 @@ impl Tracker {
     ) -> Result<(), AlgoError> {
         let cfg = &self.config;
         for track in &mut self.tracks {
-            track.predict(t, &cfg.sigma_a)?;
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
         }
         let mut estimates: Vec<TrackEstimate> = self
             .tracks

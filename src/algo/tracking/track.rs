@@ -8,7 +8,8 @@ use nalgebra::{DMatrix, DVector};
 use crate::algo::error::AlgoError;
 use crate::algo::gating::chi2_threshold;
 use crate::algo::kalman;
-use crate::algo::motion::{cv_transition, dwna_process_noise};
+use crate::algo::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
+use crate::algo::tracking::config::NoiseModel;
 
 /// Where a track stands in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -113,8 +114,13 @@ impl Track {
     }
 
     /// Predicts the track to time `t` (Δt = t − self.t, any sign).
-    pub fn predict(&mut self, t: f64, sigma_a: &[f64; 3]) -> Result<(), AlgoError> {
-        let (x, p) = predict(&self.x, &self.p, t - self.t, sigma_a)?;
+    pub fn predict(
+        &mut self,
+        t: f64,
+        sigma_a: &[f64; 3],
+        noise: NoiseModel,
+    ) -> Result<(), AlgoError> {
+        let (x, p) = predict(&self.x, &self.p, t - self.t, sigma_a, noise)?;
         self.x = x;
         self.p = p;
         self.t = t;
@@ -138,20 +144,25 @@ impl Track {
     }
 }
 
-/// Constant-velocity prediction over `dt` with DWNA process noise of
-/// standard deviation `sigma_a[i]` on axis i: F = blockdiag([[1, Δt], [0, 1]]),
-/// Q = blockdiag(σ_i² [[Δt⁴/4, Δt³/2], [Δt³/2, Δt²]]).
+/// Constant-velocity prediction over `dt`, F = blockdiag([[1, Δt], [0, 1]]),
+/// with per-axis process noise: DWNA of standard deviation σ_i,
+/// Q = σ_i² [[Δt⁴/4, Δt³/2], [Δt³/2, Δt²]], or CWNA of spectral density
+/// q_i = σ_i², Q = q_i [[Δt³/3, Δt²/2], [Δt²/2, Δt]].
 pub fn predict(
     x: &DVector<f64>,
     p: &DMatrix<f64>,
     dt: f64,
     sigma_a: &[f64; 3],
+    noise: NoiseModel,
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let axes = x.len() / 2;
     let f = cv_transition(axes, dt)?;
     let mut q = DMatrix::zeros(2 * axes, 2 * axes);
     for (i, &s) in sigma_a.iter().enumerate().take(axes) {
-        let block = dwna_process_noise(1, dt, s)?;
+        let block = match noise {
+            NoiseModel::Dwna => dwna_process_noise(1, dt, s)?,
+            NoiseModel::Cwna => cwna_process_noise(1, dt, s * s)?,
+        };
         q.view_mut((2 * i, 2 * i), (2, 2)).copy_from(&block);
     }
     kalman::predict(x, p, &f, &q)
@@ -200,7 +211,14 @@ mod tests {
         // 2 axes, Δt = 2, σ = (1, 0): x = [0, 10, 5, −1] → [20, 10, 3, −1];
         // P = I: F F' per axis = [[1 + 4, 2], [2, 1]], Q_x = [[4, 4], [4, 4]].
         let x = dvector![0.0, 10.0, 5.0, -1.0];
-        let (x1, p1) = predict(&x, &DMatrix::identity(4, 4), 2.0, &[1.0, 0.0, 0.0]).unwrap();
+        let (x1, p1) = predict(
+            &x,
+            &DMatrix::identity(4, 4),
+            2.0,
+            &[1.0, 0.0, 0.0],
+            NoiseModel::Dwna,
+        )
+        .unwrap();
         assert_eq!(x1, dvector![20.0, 10.0, 3.0, -1.0]);
         assert_eq!(p1[(0, 0)], 9.0);
         assert_eq!(p1[(0, 1)], 6.0);
@@ -208,6 +226,19 @@ mod tests {
         assert_eq!(p1[(2, 2)], 5.0);
         assert_eq!(p1[(2, 3)], 2.0);
         assert_eq!(p1[(0, 2)], 0.0);
+        // CWNA, q = 1: Q_x = [[8/3, 2], [2, 2]] → P_xx = 5 + 8/3, P_xv = 4,
+        // P_vv = 3.
+        let (_, p2) = predict(
+            &x,
+            &DMatrix::identity(4, 4),
+            2.0,
+            &[1.0, 0.0, 0.0],
+            NoiseModel::Cwna,
+        )
+        .unwrap();
+        assert!((p2[(0, 0)] - (5.0 + 8.0 / 3.0)).abs() < 1e-12);
+        assert!((p2[(0, 1)] - 4.0).abs() < 1e-12 && (p2[(1, 1)] - 3.0).abs() < 1e-12);
+        assert_eq!(p2[(2, 2)], 5.0);
         let h = position_selector(2, 3);
         assert_eq!(h.ncols(), 6);
         assert_eq!((h[(0, 0)], h[(1, 2)], h[(1, 3)]), (1.0, 1.0, 0.0));

@@ -107,6 +107,8 @@ pub struct TrackerInput {
     pub track_gate_probability: Option<f64>,
     pub initiation: Option<InitiationInput>,
     pub deletion: Option<DeletionInput>,
+    /// `cwna` (default) or `dwna`.
+    pub process_noise: Option<String>,
     pub sigma_a_mps2: Option<f64>,
     pub sigma_a_vertical_mps2: Option<f64>,
     pub default_height_m: Option<f64>,

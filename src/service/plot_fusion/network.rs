@@ -17,12 +17,16 @@
 //! the fusion frame's and its plots are used as measured.
 //!
 //! Slant range. A 2D radar measures the slant range ρ to a target at an
-//! unknown height; the tracker's plane needs the horizontal range. With
-//! the targets assumed at `tracker.default_height_m` (fusion frame, default
-//! 0) above a radar at height h_s, Δh = default_height − h_s and the
-//! horizontal range is √(ρ² − Δh²) (ρ > |Δh|; closer plots are kept as
-//! measured). Earth curvature between site and target is neglected here
-//! (the site's own height and axes are exact).
+//! unknown height; the tracker's plane needs the horizontal position. The
+//! targets are assumed at `tracker.default_height_m` H (default 0): for a
+//! geodetic site H is the ellipsoidal height and the elevation of the line
+//! of sight follows from the triangle centre–site–target on a sphere of
+//! radius R = 6371 km, sin ε = ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ)
+//! (h the site's height); for a local site (flat model) sin ε = (H − u)/ρ,
+//! so H = u gives the patent's horizontal range ρ exactly. The line of
+//! sight is re-expressed in the fusion axes like a 3D plot's and its
+//! horizontal part kept (range ρ cos ε_f, azimuth). ε is clamped to ±89°
+//! (a target nearly overhead, or a slant range too short for H).
 
 use std::collections::HashMap;
 
@@ -37,7 +41,7 @@ use crate::algo::{
     geo::{Ellipsoid, LocalFrame},
     jpda::Method,
     polar::{enu_to_polar_3d, polar_to_enu_3d},
-    tracking::{Deletion, Mode, Plot, RadarSpec, TrackerConfig, VelocityGate},
+    tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
     wire::{Reader, Writer},
 };
 use crate::service::{FieldViolation, ServiceError, Violations};
@@ -53,11 +57,28 @@ pub struct Network {
     /// given (tracks then carry no latitude and longitude).
     pub frame: Option<LocalFrame>,
     pub radar_ids: Vec<String>,
-    /// Rotation from the radar's ENU axes to the fusion frame's; `None` for
-    /// a local site (axes parallel).
-    pub rotations: Vec<Option<Matrix3<f64>>>,
+    /// Per radar: the rotation from its ENU axes to the fusion frame's
+    /// (`None` for a local site: axes parallel) and its height (WGS84
+    /// ellipsoidal for a geodetic site, the `up` offset for a local one).
+    pub sites: Vec<RadarSite>,
+    /// The height assumed for targets seen by 2D radars
+    /// (`tracker.default_height_m`): ellipsoidal for geodetic sites and for
+    /// the latitude/longitude of 2D tracks, fusion-frame `up` for local sites.
+    pub target_height: f64,
     index: HashMap<String, usize>,
 }
+
+/// A radar's site as the plot conversion needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadarSite {
+    pub rotation: Option<Matrix3<f64>>,
+    pub height: f64,
+}
+
+/// Earth radius of the spherical slant-range geometry of 2D plots (m).
+const EARTH_RADIUS_M: f64 = 6_371_000.0;
+/// Largest elevation given to a 2D plot (a target nearly overhead).
+const MAX_2D_ELEVATION_RAD: f64 = 89.0 * std::f64::consts::PI / 180.0;
 
 /// The association method names.
 pub const ASSOCIATIONS: &[&str] = &[
@@ -102,32 +123,10 @@ pub fn config_error(e: &AlgoError) -> ServiceError {
     }
 }
 
-fn number(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x >= lo && x <= hi) {
-        v.add(
-            field,
-            format!("must be a finite number in [{lo}, {hi}], got {x}"),
-        );
-        return None;
-    }
-    Some(x)
-}
-
-fn positive(v: &mut Violations, field: &str, x: Option<f64>) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && x > 0.0) {
-        v.add(field, format!("must be finite and > 0, got {x}"));
-        return None;
-    }
-    Some(x)
-}
-
 fn geodetic(v: &mut Violations, f: &str, g: &GeoInput) -> Option<LocalFrame> {
-    let lat = number(v, &format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
-    let lon = number(v, &format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
-    let h = number(
-        v,
+    let lat = v.number_in(&format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
+    let lon = v.number_in(&format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
+    let h = v.number_in(
         &format!("{f}.height_m"),
         Some(g.height_m.unwrap_or(0.0)),
         -11_000.0,
@@ -221,9 +220,8 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             },
         };
         sites.push(site);
-        let sr = positive(&mut v, &format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = number(
-            &mut v,
+        let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = v.number_in(
             &format!("{f}.sigma_azimuth_deg"),
             r.sigma_azimuth_deg,
             0.0,
@@ -234,7 +232,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
         let se = match (three_d, r.sigma_elevation_deg) {
             (Some(true), s) => {
-                let s = number(&mut v, &format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
+                let s = v.number_in(&format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
                 if s == Some(0.0) {
                     v.add(format!("{f}.sigma_elevation_deg"), "must be > 0");
                 }
@@ -251,8 +249,8 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         };
         let sv = r
             .sigma_radial_velocity_mps
-            .and_then(|s| positive(&mut v, &format!("{f}.sigma_radial_velocity_mps"), Some(s)));
-        let period = positive(&mut v, &format!("{f}.scan_period_s"), r.scan_period_s);
+            .and_then(|s| v.positive(&format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+        let period = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
         let pd = r.p_detection.unwrap_or(DEFAULT_P_DETECTION);
         if !(pd > 0.0 && pd <= 1.0) {
             v.add(
@@ -321,6 +319,17 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             None
         }
     };
+    let noise = match tracker.process_noise.as_deref() {
+        None | Some("cwna") => Some(NoiseModel::Cwna),
+        Some("dwna") => Some(NoiseModel::Dwna),
+        Some(m) => {
+            v.add(
+                "tracker.process_noise",
+                format!("unknown process noise '{m}': cwna or dwna"),
+            );
+            None
+        }
+    };
     let method = match tracker.association.as_deref() {
         None | Some("exact") => Some(Method::Exact),
         Some("amsjpda") => Some(Method::Amsjpda),
@@ -335,19 +344,23 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
     };
     v.finish()?;
-    let (axes, mode, method) = (
+    let (axes, mode, method, noise) = (
         axes.expect("validated"),
         mode.expect("validated"),
         method.expect("validated"),
+        noise.expect("validated"),
     );
 
     // Sites in the fusion frame.
-    let mut rotations = Vec::with_capacity(specs.len());
+    let mut radar_sites = Vec::with_capacity(specs.len());
     for (spec, site) in specs.iter_mut().zip(&sites) {
         match site.as_ref().expect("validated") {
             Site::Local(p) => {
                 spec.site = *p;
-                rotations.push(None);
+                radar_sites.push(RadarSite {
+                    rotation: None,
+                    height: p[2],
+                });
             }
             Site::Geodetic(radar) => {
                 let fusion = frame.expect("a geodetic site gives a frame");
@@ -355,7 +368,10 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
                 spec.site = fusion
                     .geodetic_to_enu(lat, lon, h)
                     .map_err(|e| Violations::single("radars", e.to_string()))?;
-                rotations.push(Some(radar.rotation_to(&fusion)));
+                radar_sites.push(RadarSite {
+                    rotation: Some(radar.rotation_to(&fusion)),
+                    height: h,
+                });
             }
         }
     }
@@ -369,6 +385,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
 
     let mut config = TrackerConfig::new(axes, specs);
     config.mode = mode;
+    config.noise = noise;
     config.association.method = method;
     if let Some(n) = tracker.max_exact_cluster_tracks {
         config.association.max_exact_tracks = n as usize;
@@ -540,12 +557,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
     }
     Ok((
-        Network {
-            frame,
-            radar_ids: ids,
-            rotations,
-            index,
-        },
+        Network::from_parts(frame, ids, radar_sites, config.default_height),
         config,
         warnings,
     ))
@@ -556,7 +568,8 @@ impl Network {
     pub fn from_parts(
         frame: Option<LocalFrame>,
         radar_ids: Vec<String>,
-        rotations: Vec<Option<Matrix3<f64>>>,
+        sites: Vec<RadarSite>,
+        target_height: f64,
     ) -> Self {
         let index = radar_ids
             .iter()
@@ -566,7 +579,8 @@ impl Network {
         Self {
             frame,
             radar_ids,
-            rotations,
+            sites,
+            target_height,
             index,
         }
     }
@@ -689,23 +703,47 @@ impl Network {
             }
             (_, None) => None,
         };
-        let (azimuth, elevation) = match &self.rotations[radar] {
-            None => (az.to_radians(), elevation),
-            Some(m) => rotate(m, az.to_radians(), elevation),
-        };
-        // A 2D radar measures the slant range: with the targets assumed at
-        // `default_height` the horizontal range is √(ρ² − Δh²) and, in level
-        // flight, the horizontal radial velocity ṙ ρ/ρ_h.
-        let (range, radial_velocity) = if spec.is_3d() {
-            (range, radial_velocity)
+        let site = &self.sites[radar];
+        let (range, azimuth, elevation, radial_velocity) = if spec.is_3d() {
+            let (azimuth, elevation) = match &site.rotation {
+                None => (az.to_radians(), elevation),
+                Some(m) => rotate(m, az.to_radians(), elevation),
+            };
+            (range, azimuth, elevation, radial_velocity)
         } else {
-            let dh = config.default_height - spec.site[2];
-            if dh != 0.0 && range > dh.abs() {
-                let horizontal = (range * range - dh * dh).sqrt();
-                (horizontal, radial_velocity.map(|v| v * range / horizontal))
-            } else {
-                (range, radial_velocity)
-            }
+            // A 2D radar measures the slant range ρ to a target of unknown
+            // height: with the target at `target_height` its elevation is
+            // sin ε = Δh/ρ (flat, local sites) or, on a sphere of radius R
+            // through the site, ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ).
+            // The line of sight at that elevation is re-expressed in the
+            // fusion axes and its horizontal part kept: the horizontal range
+            // ρ cos ε_f and azimuth in the fusion frame. In level flight the
+            // horizontal radial velocity is ṙ / cos ε.
+            let (h, big_h) = (site.height, self.target_height);
+            let sin_el = match site.rotation {
+                None => (big_h - h) / range,
+                Some(_) => {
+                    let (rh, rt) = (EARTH_RADIUS_M + h, EARTH_RADIUS_M + big_h);
+                    (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
+                }
+            };
+            let el = sin_el
+                .clamp(-1.0, 1.0)
+                .asin()
+                .clamp(-MAX_2D_ELEVATION_RAD, MAX_2D_ELEVATION_RAD);
+            let (azimuth, el_f) = match &site.rotation {
+                None => (az.to_radians(), el),
+                Some(m) => {
+                    let (a, e) = rotate(m, az.to_radians(), Some(el));
+                    (a, e.expect("an elevation in, one out"))
+                }
+            };
+            (
+                range * el_f.cos(),
+                azimuth,
+                None,
+                radial_velocity.map(|v| v / el.cos()),
+            )
         };
         Ok(Plot {
             radar,
@@ -729,10 +767,12 @@ impl Network {
             w.f64(lon);
             w.f64(h);
         });
+        w.f64(self.target_height);
         w.usize(self.radar_ids.len());
-        for (id, rot) in self.radar_ids.iter().zip(&self.rotations) {
+        for (id, site) in self.radar_ids.iter().zip(&self.sites) {
             w.str(id);
-            w.opt(rot.as_ref(), |w, m| w.f64s(m.as_slice()));
+            w.opt(site.rotation.as_ref(), |w, m| w.f64s(m.as_slice()));
+            w.f64(site.height);
         }
     }
 
@@ -741,20 +781,25 @@ impl Network {
             let (lat, lon, h) = (r.f64()?, r.f64()?, r.f64()?);
             LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)
         })?;
-        let n = r.len(9)?;
+        let target_height = r.f64()?;
+        let n = r.len(17)?;
         let mut ids = Vec::with_capacity(n);
-        let mut rotations = Vec::with_capacity(n);
+        let mut sites = Vec::with_capacity(n);
         for _ in 0..n {
             ids.push(r.str()?);
-            rotations.push(r.opt(|r| {
+            let rotation = r.opt(|r| {
                 let v = r.f64s()?;
                 if v.len() != 9 {
                     return Err(crate::algo::wire::corrupt("radar rotation"));
                 }
                 Ok(Matrix3::from_column_slice(&v))
-            })?);
+            })?;
+            sites.push(RadarSite {
+                rotation,
+                height: r.f64()?,
+            });
         }
-        Ok(Self::from_parts(frame, ids, rotations))
+        Ok(Self::from_parts(frame, ids, sites, target_height))
     }
 }
 

@@ -3,6 +3,7 @@
 //! height for a 3D tracker) of its position.
 
 use super::Network;
+use crate::algo::geo::LocalFrame;
 use crate::algo::tracking::{TrackOutput, TrackStatus};
 
 /// State layouts of the 2D and 3D trackers.
@@ -23,7 +24,8 @@ pub struct TrackView {
     pub t: f64,
     pub state: Vec<f64>,
     pub covariance: Vec<Vec<f64>>,
-    /// Absent when the request has no origin.
+    /// Absent when the request has no origin. A 2D track's is the point
+    /// above its (e, n) at `tracker.default_height_m`.
     pub lat_deg: Option<f64>,
     pub lon_deg: Option<f64>,
     /// 3D trackers only (WGS84 ellipsoidal height).
@@ -53,6 +55,21 @@ pub fn status_name(s: TrackStatus) -> &'static str {
     }
 }
 
+/// The geodetic position of the point above the fusion plane's (e, n) at
+/// ellipsoidal height `h` (a 2D track's targets are assumed there): up is
+/// found by fixed-point iteration u ← u + (h − height(u)), which converges
+/// in a few steps because the fusion up and the local vertical differ by
+/// the small angle d/R.
+fn at_height(f: &LocalFrame, e: f64, n: f64, h: f64) -> Option<(f64, f64, f64)> {
+    let mut u = h;
+    let mut geo = f.enu_to_geodetic([e, n, u]).ok()?;
+    for _ in 0..4 {
+        u += h - geo.2;
+        geo = f.enu_to_geodetic([e, n, u]).ok()?;
+    }
+    Some(geo)
+}
+
 pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
     let n = t.state.len();
     let three_d = n == 6;
@@ -61,10 +78,13 @@ pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
         t.state[2],
         if three_d { t.state[4] } else { 0.0 },
     ];
-    let geo = network
-        .frame
-        .as_ref()
-        .and_then(|f| f.enu_to_geodetic(position).ok());
+    let geo = network.frame.as_ref().and_then(|f| {
+        if three_d {
+            f.enu_to_geodetic(position).ok()
+        } else {
+            at_height(f, position[0], position[1], network.target_height)
+        }
+    });
     TrackView {
         id: t.id,
         status: status_name(t.status),

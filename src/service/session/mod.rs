@@ -24,6 +24,7 @@
 pub mod cache;
 pub mod correlation;
 pub mod persist;
+pub mod plot_fusion;
 
 use std::fmt;
 
@@ -49,6 +50,19 @@ pub struct Limits {
     pub max_tracks: usize,
     /// Most items (reports, plots) in one batch.
     pub max_batch_reports: usize,
+}
+
+impl Limits {
+    /// Refuses a batch of `n` items (`what`: reports, plots) over the limit.
+    pub fn check_batch(&self, n: usize, what: &str) -> Result<(), ServiceError> {
+        if n > self.max_batch_reports {
+            return Err(ServiceError::TooLarge(format!(
+                "the batch holds {n} {what}; the limit is {} per batch",
+                self.max_batch_reports
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// What a kind of session is: its configuration, batch, update and view
@@ -110,20 +124,23 @@ pub trait SessionKind: Sized + Send + 'static {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum KindName {
     Correlation,
+    PlotFusion,
 }
 
 impl KindName {
-    pub const ALL: [KindName; 1] = [KindName::Correlation];
+    pub const ALL: [KindName; 2] = [KindName::Correlation, KindName::PlotFusion];
 
     pub fn name(self) -> &'static str {
         match self {
             Self::Correlation => correlation::CorrelationSession::NAME,
+            Self::PlotFusion => plot_fusion::PlotFusionSession::NAME,
         }
     }
 
     pub fn tag(self) -> u8 {
         match self {
             Self::Correlation => correlation::CorrelationSession::TAG,
+            Self::PlotFusion => plot_fusion::PlotFusionSession::TAG,
         }
     }
 
@@ -148,6 +165,21 @@ impl KindName {
                 }),
         }
     }
+}
+
+/// Refuses the fields of a create request that belong to another kind than
+/// `kind`: `fields` lists (field, present, the kind it belongs to).
+pub fn refuse_foreign_fields(
+    kind: KindName,
+    fields: &[(&str, bool, KindName)],
+) -> Result<(), ServiceError> {
+    let mut v = Violations::new();
+    for (field, present, owner) in fields {
+        if *present && *owner != kind {
+            v.add(*field, format!("not a field of a {} session", kind.name()));
+        }
+    }
+    v.finish()
 }
 
 /// The name of a stored kind tag, for messages.

@@ -15,7 +15,8 @@ use std::{
 
 use super::{
     Admission, Batch, DecodeError, Envelope, KindName, Limits, SessionKind, Spec, Update, View,
-    cache::SessionCache, correlation::CorrelationSession, stored_kind, tag_name,
+    cache::SessionCache, correlation::CorrelationSession, plot_fusion::PlotFusionSession,
+    stored_kind, tag_name,
 };
 use crate::{
     service::{ServiceError, offload},
@@ -35,6 +36,7 @@ pub struct Sessions {
 #[derive(Debug, Clone, PartialEq)]
 pub enum AnyView {
     Correlation(View<<CorrelationSession as SessionKind>::View>),
+    PlotFusion(View<<PlotFusionSession as SessionKind>::View>),
 }
 
 impl From<StoreError> for ServiceError {
@@ -148,6 +150,9 @@ impl Sessions {
                         stored.version,
                     )?))
                 }
+                Some(KindName::PlotFusion) => Ok(AnyView::PlotFusion(
+                    view_of::<PlotFusionSession>(&id, &stored.data, stored.version)?,
+                )),
                 None => Err(ServiceError::Internal(format!(
                     "stored session: {} is not served by this release",
                     tag_name(tag)
@@ -166,6 +171,19 @@ impl Sessions {
         let stored = self.read(tenant, id).await?;
         let id = id.to_string();
         offload(move || view_of::<K>(&id, &stored.data, stored.version)).await
+    }
+
+    /// The kind of session `id` (from the store's bytes; for a batch whose
+    /// items do not say it).
+    pub async fn kind_of(&self, tenant: &str, id: &str) -> Result<KindName, ServiceError> {
+        let stored = self.read(tenant, id).await?;
+        let tag = stored_kind(&stored.data)?;
+        KindName::from_tag(tag).ok_or_else(|| {
+            ServiceError::Internal(format!(
+                "stored session: {} is not served by this release",
+                tag_name(tag)
+            ))
+        })
     }
 
     /// The stored session `id`, or 404.

@@ -174,14 +174,7 @@ impl SessionKind for CorrelationSession {
     }
 
     fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
-        if batch.reports.len() > limits.max_batch_reports {
-            return Err(ServiceError::TooLarge(format!(
-                "the batch holds {} reports; the limit is {} per batch",
-                batch.reports.len(),
-                limits.max_batch_reports
-            )));
-        }
-        Ok(())
+        limits.check_batch(batch.reports.len(), "reports")
     }
 
     fn apply(

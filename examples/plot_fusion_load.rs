@@ -1,0 +1,263 @@
+//! Throughput of the plot-fusion tracker (seed 001), compute and end to end,
+//! in one run on the scene of `sim::benchmark::plot_fusion_scene`:
+//!
+//! ```text
+//! cargo run --release --example plot_fusion_load -- \
+//!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
+//!     [--batch-s 1] [--doppler] [--skip-compute]
+//! ```
+//!
+//! - compute: `service::plot_fusion::track` on every plot at once, in
+//!   process (validation, registration, tracking; no transport);
+//! - end to end: a `plot_fusion` session over the gRPC `Stream` of an
+//!   in-process server (memory store), one batch per `--batch-s` seconds of
+//!   data, each batch sent when the previous one was answered; plots/s
+//!   over the whole stream and the per-batch latency p50/p99.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, ensure};
+use radar_fusion::{
+    app::Application,
+    config::Settings,
+    proto::{self as pb, session_service_client::SessionServiceClient},
+    service::plot_fusion as svc,
+    sim::benchmark::plot_fusion_scene,
+};
+use tokio::sync::oneshot;
+use tonic::transport::Channel;
+
+struct Args {
+    targets: usize,
+    radars: usize,
+    duration: f64,
+    clutter: usize,
+    batch_s: f64,
+    doppler: bool,
+    skip_compute: bool,
+}
+
+fn parse_args() -> anyhow::Result<Args> {
+    let mut args = Args {
+        targets: 1000,
+        radars: 4,
+        duration: 60.0,
+        clutter: 20,
+        batch_s: 1.0,
+        doppler: false,
+        skip_compute: false,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        match flag.as_str() {
+            "--doppler" => args.doppler = true,
+            "--skip-compute" => args.skip_compute = true,
+            _ => {
+                let value = it.next().context("a flag needs a value")?;
+                match flag.as_str() {
+                    "--targets" => args.targets = value.parse()?,
+                    "--radars" => args.radars = value.parse()?,
+                    "--duration" => args.duration = value.parse()?,
+                    "--clutter" => args.clutter = value.parse()?,
+                    "--batch-s" => args.batch_s = value.parse()?,
+                    other => anyhow::bail!("unknown flag {other}"),
+                }
+            }
+        }
+    }
+    Ok(args)
+}
+
+fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
+    pb::PlotFusionConfig {
+        origin: spec.origin.as_ref().map(|o| pb::GeoPoint {
+            lat_deg: o.lat_deg,
+            lon_deg: o.lon_deg,
+            height_m: o.height_m,
+        }),
+        radars: spec
+            .radars
+            .iter()
+            .map(|r| pb::PlotRadar {
+                id: r.id.clone().unwrap_or_default(),
+                kind: r.kind.clone().unwrap_or_default(),
+                site: r.site.as_ref().map(|s| pb::PlotRadarSite {
+                    position_m: s.position_m.clone().unwrap_or_default(),
+                    ..Default::default()
+                }),
+                sigma_range_m: r.sigma_range_m,
+                sigma_azimuth_deg: r.sigma_azimuth_deg,
+                sigma_elevation_deg: r.sigma_elevation_deg,
+                sigma_radial_velocity_mps: r.sigma_radial_velocity_mps,
+                scan_period_s: r.scan_period_s,
+                p_detection: r.p_detection,
+                clutter_density: r.clutter_density,
+            })
+            .collect(),
+        tracker: None,
+    }
+}
+
+fn pb_plot(p: &svc::PlotInput) -> pb::RadarPlot {
+    pb::RadarPlot {
+        radar_id: p.radar_id.clone().unwrap_or_default(),
+        t: p.t,
+        range_m: p.range_m,
+        azimuth_deg: p.azimuth_deg,
+        elevation_deg: p.elevation_deg,
+        radial_velocity_mps: p.radial_velocity_mps,
+    }
+}
+
+/// Batches of `batch_s` seconds of data, the last one flushing.
+fn batches(plots: &[svc::PlotInput], batch_s: f64) -> Vec<pb::PushBatchRequest> {
+    let mut out: Vec<pb::PushBatchRequest> = Vec::new();
+    let mut current = Vec::new();
+    let mut edge = batch_s;
+    for p in plots {
+        let t = p.t.unwrap_or(0.0);
+        while t >= edge {
+            if !current.is_empty() {
+                out.push(pb::PushBatchRequest {
+                    sequence: Some(out.len() as u64 + 1),
+                    plots: std::mem::take(&mut current),
+                    ..Default::default()
+                });
+            }
+            edge += batch_s;
+        }
+        current.push(pb_plot(p));
+    }
+    out.push(pb::PushBatchRequest {
+        sequence: Some(out.len() as u64 + 1),
+        plots: current,
+        flush: true,
+        ..Default::default()
+    });
+    out
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let args = parse_args()?;
+    let (spec, plots) = plot_fusion_scene(
+        args.targets,
+        args.radars,
+        args.duration,
+        args.clutter,
+        args.doppler,
+    );
+    let n = plots.len();
+    println!(
+        "scene: {} targets, {} radars, {} s, {} clutter plots per scan, doppler {}: {n} plots",
+        args.targets, args.radars, args.duration, args.clutter, args.doppler
+    );
+
+    if !args.skip_compute {
+        let input = svc::TrackInput {
+            spec: spec.clone(),
+            plots: plots.clone(),
+            history: false,
+        };
+        let wall = Instant::now();
+        let out = svc::track(input).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let wall = wall.elapsed().as_secs_f64();
+        let confirmed = out
+            .tracks
+            .iter()
+            .filter(|t| t.status == "confirmed")
+            .count();
+        println!(
+            "compute (service::plot_fusion::track, mode {}): {:.0} plots/s (tracking {:.3} s, \
+             with validation {:.3} s); {confirmed} confirmed tracks, counters {:?}",
+            out.mode,
+            n as f64 / (out.compute_us * 1e-6),
+            out.compute_us * 1e-6,
+            wall,
+            out.counters
+        );
+    }
+
+    let mut settings = Settings::for_tests();
+    settings.max_batch_reports = n.max(1);
+    settings.max_tracks_per_session = 1_000_000;
+    settings.max_body_bytes = 1 << 30;
+    settings.session_memory_bytes = 16 << 30;
+    settings.request_timeout_s = 600.0;
+    let app = Application::build(settings).await?;
+    let (grpc_addr, state) = (app.grpc_addr(), app.state());
+    let (stop, stopped) = oneshot::channel::<()>();
+    let server = tokio::spawn(app.run_until(async move {
+        let _ = stopped.await;
+    }));
+    for _ in 0..400 {
+        if state.is_ready() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let channel = Channel::from_shared(format!("http://{grpc_addr}"))?
+        .connect()
+        .await?;
+    let mut client = SessionServiceClient::new(channel)
+        .max_decoding_message_size(usize::MAX)
+        .max_encoding_message_size(usize::MAX);
+    let batches = batches(&plots, args.batch_s);
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tx.send(pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Open(pb::CreateSessionRequest {
+            kind: "plot_fusion".into(),
+            plot_fusion: Some(pb_config(&spec)),
+            ..Default::default()
+        })),
+    })
+    .await?;
+    let mut updates = client
+        .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
+        .await?
+        .into_inner();
+    let opened = updates.message().await?.context("the stream opens")?;
+    let mut latencies = Vec::with_capacity(batches.len());
+    let started = Instant::now();
+    let mut last = None;
+    for batch in batches.iter() {
+        let t = Instant::now();
+        tx.send(pb::StreamRequest {
+            kind: Some(pb::stream_request::Kind::Batch(batch.clone())),
+        })
+        .await?;
+        let update = updates.message().await?.context("an update per batch")?;
+        ensure!(update.error.is_none(), "batch failed: {:?}", update.error);
+        latencies.push(t.elapsed());
+        last = update.plot_fusion;
+    }
+    let total = started.elapsed().as_secs_f64();
+    drop(tx);
+    latencies.sort();
+    let pct = |p: f64| {
+        let i = ((latencies.len() as f64 * p).ceil() as usize).clamp(1, latencies.len()) - 1;
+        latencies[i].as_secs_f64() * 1e3
+    };
+    let state_now = client
+        .get_session(pb::GetSessionRequest {
+            session_id: opened.session_id,
+        })
+        .await?
+        .into_inner();
+    println!(
+        "end to end (gRPC stream, {} batches of {} s): {:.0} plots/s, {:.1} batches/s; \
+         per-batch latency p50 {:.2} ms, p99 {:.2} ms; final counters {:?}; stored session {} \
+         bytes",
+        batches.len(),
+        args.batch_s,
+        n as f64 / total,
+        batches.len() as f64 / total,
+        pct(0.5),
+        pct(0.99),
+        last.and_then(|l| l.counters),
+        state_now.encoded_bytes
+    );
+    let _ = stop.send(());
+    server.await??;
+    Ok(())
+}

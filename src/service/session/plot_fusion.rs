@@ -1,0 +1,566 @@
+//! The plot-fusion kind of session (seed 001 as a stream): the tracker of
+//! `algo::tracking` kept between batches of radar plots.
+//!
+//! A batch is plots as they arrive, in any order within the batch. The
+//! tracker buffers them and processes a frame (a radar's scan group in
+//! serial mode, a fusion instant in parallel mode) once a plot of a later
+//! frame has arrived, or when the batch asks for a `flush` (the end of the
+//! data, or a quiet radar network). So plots pushed in time order over N
+//! batches, the last with `flush`, give exactly the tracks of the batch
+//! endpoint over the same plots (tested).
+//!
+//! A plot older than the last processed frame is *late*: it is dropped
+//! (no retrodiction), counted, and named in the update and a warning.
+//!
+//! Each update lists the tracks the batch touched: every live track when a
+//! frame was processed (each frame predicts every track), with what
+//! happened to it (`initiated`, `confirmed`, `updated`), the tracks
+//! deleted, and the ids of tentative tracks dropped.
+
+use std::collections::HashSet;
+
+use super::{Limits, SessionKind};
+use crate::{
+    algo::{
+        AlgoError,
+        tracking::{
+            Counters, Tracker,
+            codec::{decode_counters, encode_counters},
+        },
+        wire::{Reader, Writer, corrupt},
+    },
+    service::{
+        ServiceError,
+        plot_fusion::{
+            Network, PlotInput, SpecInput, TrackView, computation_error, mode_name, network, output,
+        },
+    },
+};
+
+/// Format of the kind's payload.
+pub const FORMAT_VERSION: u8 = 1;
+
+/// A batch of plots.
+#[derive(Debug, Clone, Default)]
+pub struct BatchInput {
+    pub plots: Vec<PlotInput>,
+    /// Close the open frame now: process every buffered plot. Plots that
+    /// arrive later for that frame are late.
+    pub flush: bool,
+}
+
+/// What happened to a track in a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrackChange {
+    /// Started (tentative) in this batch.
+    Initiated,
+    /// Confirmed in this batch (possibly started in it too).
+    Confirmed,
+    /// Predicted and, if a plot was associated, updated.
+    Updated,
+}
+
+pub const TRACK_CHANGES: [TrackChange; 3] = [
+    TrackChange::Initiated,
+    TrackChange::Confirmed,
+    TrackChange::Updated,
+];
+
+pub fn track_change_name(c: TrackChange) -> &'static str {
+    match c {
+        TrackChange::Initiated => "initiated",
+        TrackChange::Confirmed => "confirmed",
+        TrackChange::Updated => "updated",
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChangedTrack {
+    pub change: TrackChange,
+    pub track: TrackView,
+}
+
+/// What one batch changed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchUpdate {
+    /// Frames processed by this batch.
+    pub frames: u32,
+    /// Plots buffered for a frame not yet complete.
+    pub pending_plots: u32,
+    /// Indices (into the batch's plots) of the late plots, dropped.
+    pub late_plots: Vec<u32>,
+    pub tracks: Vec<ChangedTrack>,
+    /// Confirmed tracks deleted, as they were when deleted.
+    pub deleted: Vec<TrackView>,
+    /// Tentative tracks dropped without being confirmed.
+    pub dropped: Vec<u64>,
+    pub counters: Counters,
+}
+
+/// The session as a client reads it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionView {
+    pub mode: &'static str,
+    pub state_layout: &'static [&'static str],
+    pub radars: Vec<String>,
+    /// Time of the last processed frame.
+    pub last_frame_t: Option<f64>,
+    pub pending_plots: u32,
+    pub counters: Counters,
+    /// Confirmed then tentative tracks.
+    pub tracks: Vec<TrackView>,
+}
+
+/// The state: the network (ids, frame, rotations) and the tracker.
+pub struct PlotFusionSession {
+    network: Network,
+    tracker: Tracker,
+}
+
+impl PlotFusionSession {
+    fn live_ids(&self) -> HashSet<u64> {
+        self.tracker.tracks().iter().map(|t| t.id).collect()
+    }
+}
+
+fn status_code(s: &str) -> u8 {
+    match s {
+        "tentative" => 0,
+        "confirmed" => 1,
+        _ => 2,
+    }
+}
+
+fn status_of(code: u8) -> Result<&'static str, AlgoError> {
+    match code {
+        0 => Ok("tentative"),
+        1 => Ok("confirmed"),
+        2 => Ok("deleted"),
+        _ => Err(corrupt("track status")),
+    }
+}
+
+fn encode_track(w: &mut Writer, t: &TrackView) {
+    w.u64(t.id);
+    w.u8(status_code(t.status));
+    w.f64(t.t);
+    w.f64s(&t.state);
+    for row in &t.covariance {
+        w.f64_run(row);
+    }
+    w.opt(t.lat_deg, Writer::f64);
+    w.opt(t.lon_deg, Writer::f64);
+    w.opt(t.height_m, Writer::f64);
+    w.usize(t.radars.len());
+    for r in &t.radars {
+        w.str(r);
+    }
+    w.u32(t.hits);
+    w.u32(t.misses);
+    w.u32(t.consecutive_misses);
+    w.u32(t.age);
+    w.f64(t.last_update_t);
+}
+
+fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, AlgoError> {
+    let id = r.u64()?;
+    let status = status_of(r.u8()?)?;
+    let t = r.f64()?;
+    let state = r.f64s()?;
+    let n = state.len();
+    if !(n == 4 || n == 6) {
+        return Err(corrupt("track state size"));
+    }
+    let mut covariance = Vec::with_capacity(n);
+    for _ in 0..n {
+        let mut row = Vec::with_capacity(n);
+        for _ in 0..n {
+            row.push(r.f64()?);
+        }
+        covariance.push(row);
+    }
+    let lat_deg = r.opt(Reader::f64)?;
+    let lon_deg = r.opt(Reader::f64)?;
+    let height_m = r.opt(Reader::f64)?;
+    let k = r.len(8)?;
+    let radars = (0..k).map(|_| r.str()).collect::<Result<_, _>>()?;
+    Ok(TrackView {
+        id,
+        status,
+        t,
+        state,
+        covariance,
+        lat_deg,
+        lon_deg,
+        height_m,
+        radars,
+        hits: r.u32()?,
+        misses: r.u32()?,
+        consecutive_misses: r.u32()?,
+        age: r.u32()?,
+        last_update_t: r.f64()?,
+    })
+}
+
+fn stored(e: AlgoError) -> ServiceError {
+    ServiceError::Internal(format!("stored plot_fusion session: {e}"))
+}
+
+impl SessionKind for PlotFusionSession {
+    const TAG: u8 = 2;
+    const NAME: &'static str = "plot_fusion";
+    const BATCH_FIELD: &'static str = "plots";
+
+    type Spec = SpecInput;
+    type Batch = BatchInput;
+    type Update = BatchUpdate;
+    type View = SessionView;
+
+    fn create(spec: SpecInput) -> Result<Self, ServiceError> {
+        let (network, config, _warnings) = network::validate(&spec)?;
+        let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+        Ok(Self { network, tracker })
+    }
+
+    fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
+        limits.check_batch(batch.plots.len(), "plots")
+    }
+
+    fn apply(
+        &mut self,
+        batch: &BatchInput,
+        limits: &Limits,
+        warnings: &mut Vec<String>,
+    ) -> Result<BatchUpdate, ServiceError> {
+        let plots = self
+            .network
+            .plots(&batch.plots, self.tracker.config(), "plots")?;
+        let before = self.live_ids();
+        let mut report = self
+            .tracker
+            .process_with(&plots, batch.flush, &mut |_| {})
+            .map_err(computation_error)?;
+        let live = self.tracker.tracks();
+        if live.len() > limits.max_tracks {
+            return Err(ServiceError::QuotaExceeded(format!(
+                "the session would hold {} tracks (confirmed and tentative); the limit is {} \
+                 per session: lower the clutter density's effect (tracker.initiation) or use \
+                 more sessions",
+                live.len(),
+                limits.max_tracks
+            )));
+        }
+        if !report.late.is_empty() {
+            warnings.push(format!(
+                "{} late plot(s) dropped (older than the last processed frame at t = {}; \
+                 first at plots[{}]): send plots in time order, or flush less often",
+                report.late.len(),
+                self.tracker.last_time().unwrap_or(f64::NAN),
+                report.late[0]
+            ));
+        }
+        let confirmed: HashSet<u64> = report.confirmed.iter().copied().collect();
+        let deleted_ids: HashSet<u64> = report.deleted.iter().map(|t| t.id).collect();
+        let live_ids: HashSet<u64> = live.iter().map(|t| t.id).collect();
+        let mut dropped: Vec<u64> = before
+            .iter()
+            .filter(|id| !live_ids.contains(id) && !deleted_ids.contains(id))
+            .copied()
+            .collect();
+        dropped.sort_unstable();
+        let tracks = if report.frames == 0 {
+            Vec::new()
+        } else {
+            live.iter()
+                .map(|t| ChangedTrack {
+                    change: if confirmed.contains(&t.id) {
+                        TrackChange::Confirmed
+                    } else if !before.contains(&t.id) {
+                        TrackChange::Initiated
+                    } else {
+                        TrackChange::Updated
+                    },
+                    track: self.network.track_view(t),
+                })
+                .collect()
+        };
+        Ok(BatchUpdate {
+            frames: report.frames as u32,
+            pending_plots: report.pending as u32,
+            late_plots: std::mem::take(&mut report.late)
+                .into_iter()
+                .map(|i| i as u32)
+                .collect(),
+            tracks,
+            deleted: report
+                .deleted
+                .iter()
+                .map(|t| self.network.track_view(t))
+                .collect(),
+            dropped,
+            counters: self.tracker.counters(),
+        })
+    }
+
+    fn acknowledgement(&self) -> BatchUpdate {
+        BatchUpdate {
+            frames: 0,
+            pending_plots: self.tracker.pending() as u32,
+            late_plots: Vec::new(),
+            tracks: Vec::new(),
+            deleted: Vec::new(),
+            dropped: Vec::new(),
+            counters: self.tracker.counters(),
+        }
+    }
+
+    fn view(&self) -> Result<SessionView, ServiceError> {
+        Ok(SessionView {
+            mode: mode_name(self.tracker.mode()),
+            state_layout: output::layout(self.tracker.config().axes),
+            radars: self.network.radar_ids.clone(),
+            last_frame_t: self.tracker.last_time(),
+            pending_plots: self.tracker.pending() as u32,
+            counters: self.tracker.counters(),
+            tracks: self
+                .tracker
+                .tracks()
+                .iter()
+                .map(|t| self.network.track_view(t))
+                .collect(),
+        })
+    }
+
+    fn encode(&self, w: &mut Writer) {
+        w.u8(FORMAT_VERSION);
+        self.network.encode(w);
+        w.bytes(&self.tracker.encode());
+    }
+
+    fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
+        let format = r.u8().map_err(stored)?;
+        if format != FORMAT_VERSION {
+            return Err(ServiceError::Internal(format!(
+                "stored plot_fusion session has format {format}; this release reads \
+                 {FORMAT_VERSION}"
+            )));
+        }
+        let network = Network::decode(r).map_err(stored)?;
+        let tracker = Tracker::decode(&r.bytes().map_err(stored)?).map_err(stored)?;
+        if tracker.config().radars.len() != network.radar_ids.len() {
+            return Err(stored(corrupt("radar count")));
+        }
+        Ok(Self { network, tracker })
+    }
+
+    fn encode_update(u: &BatchUpdate, w: &mut Writer) {
+        w.u32(u.frames);
+        w.u32(u.pending_plots);
+        w.usize(u.late_plots.len());
+        for &i in &u.late_plots {
+            w.u32(i);
+        }
+        w.usize(u.tracks.len());
+        for c in &u.tracks {
+            w.u8(TRACK_CHANGES
+                .iter()
+                .position(|k| *k == c.change)
+                .unwrap_or(0) as u8);
+            encode_track(w, &c.track);
+        }
+        w.usize(u.deleted.len());
+        for t in &u.deleted {
+            encode_track(w, t);
+        }
+        w.usize(u.dropped.len());
+        for &id in &u.dropped {
+            w.u64(id);
+        }
+        encode_counters(w, &u.counters);
+    }
+
+    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+        let frames = r.u32()?;
+        let pending_plots = r.u32()?;
+        let n = r.len(4)?;
+        let late_plots = (0..n).map(|_| r.u32()).collect::<Result<_, _>>()?;
+        let n = r.len(8)?;
+        let mut tracks = Vec::with_capacity(n);
+        for _ in 0..n {
+            let change = *TRACK_CHANGES
+                .get(r.u8()? as usize)
+                .ok_or_else(|| corrupt("track change"))?;
+            tracks.push(ChangedTrack {
+                change,
+                track: decode_track(r)?,
+            });
+        }
+        let n = r.len(8)?;
+        let deleted = (0..n).map(|_| decode_track(r)).collect::<Result<_, _>>()?;
+        let n = r.len(8)?;
+        let dropped = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
+        Ok(BatchUpdate {
+            frames,
+            pending_plots,
+            late_plots,
+            tracks,
+            deleted,
+            dropped,
+            counters: decode_counters(r)?,
+        })
+    }
+}
+
+// The batch endpoint's types, for the equality test below.
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::service::plot_fusion::{self as pf, RadarInput, SiteInput, TrackInput};
+
+    fn spec() -> SpecInput {
+        SpecInput {
+            origin: None,
+            radars: [("a", -200.0, 10.0), ("b", 200.0, 8.0)]
+                .into_iter()
+                .map(|(id, x, period)| RadarInput {
+                    id: Some(id.into()),
+                    kind: Some("2d".into()),
+                    site: Some(SiteInput {
+                        geodetic: None,
+                        position_m: Some(vec![x, 0.0]),
+                    }),
+                    sigma_range_m: Some(100.0),
+                    sigma_azimuth_deg: Some(0.1),
+                    scan_period_s: Some(period),
+                    ..Default::default()
+                })
+                .collect(),
+            tracker: Default::default(),
+        }
+    }
+
+    /// Two crossing targets seen every 10 s and 8 s, with a deterministic
+    /// wobble standing in for noise.
+    fn plots() -> Vec<PlotInput> {
+        let mut out = Vec::new();
+        for (id, x, period) in [("a", -200.0, 10.0), ("b", 200.0, 8.0)] {
+            let mut t: f64 = 0.0;
+            let mut k = 0.0;
+            while t <= 120.0 {
+                for (e0, n0, ve, vn) in [
+                    (-25_000.0, 35_000.0, 30.0, -50.0),
+                    (-26_000.0, 31_000.0, 50.0, 20.0),
+                ] {
+                    let (e, n): (f64, f64) = (e0 + ve * t - x, n0 + vn * t);
+                    k += 1.0;
+                    out.push(PlotInput {
+                        radar_id: Some(id.into()),
+                        t: Some(t),
+                        range_m: Some(e.hypot(n) + 60.0 * (k * 1.7f64).sin()),
+                        azimuth_deg: Some(e.atan2(n).to_degrees() + 0.05 * (k * 2.3f64).cos()),
+                        ..Default::default()
+                    });
+                }
+                t += period;
+            }
+        }
+        out.sort_by(|a, b| a.t.unwrap().total_cmp(&b.t.unwrap()));
+        out
+    }
+
+    #[test]
+    fn batches_in_time_order_give_the_batch_endpoints_tracks_across_encode_and_decode() {
+        let all = plots();
+        let whole = pf::track(TrackInput {
+            spec: spec(),
+            plots: all.clone(),
+            history: false,
+        })
+        .unwrap();
+        let limits = Limits {
+            max_tracks: 100,
+            max_batch_reports: 1000,
+        };
+        let mut session = PlotFusionSession::create(spec()).unwrap();
+        let chunks: Vec<&[PlotInput]> = all.chunks(7).collect();
+        let n = chunks.len();
+        for (i, chunk) in chunks.into_iter().enumerate() {
+            let mut w = Writer::default();
+            session.encode(&mut w);
+            session = PlotFusionSession::decode(&mut Reader::new(&w.buf)).unwrap();
+            let mut warnings = Vec::new();
+            let update = session
+                .apply(
+                    &BatchInput {
+                        plots: chunk.to_vec(),
+                        flush: i + 1 == n,
+                    },
+                    &limits,
+                    &mut warnings,
+                )
+                .unwrap();
+            assert!(warnings.is_empty(), "{warnings:?}");
+            let mut w = Writer::default();
+            PlotFusionSession::encode_update(&update, &mut w);
+            let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
+            assert_eq!(back, update);
+        }
+        let view = session.view().unwrap();
+        assert_eq!(view.tracks, whole.tracks);
+        assert_eq!(view.counters, whole.counters);
+        assert_eq!(view.pending_plots, 0);
+        assert_eq!(whole.tracks.len(), 2);
+    }
+
+    #[test]
+    fn a_late_plot_is_dropped_and_named_and_a_failed_batch_is_an_error() {
+        let limits = Limits {
+            max_tracks: 100,
+            max_batch_reports: 1000,
+        };
+        let all = plots();
+        let mut session = PlotFusionSession::create(spec()).unwrap();
+        let mut warnings = Vec::new();
+        session
+            .apply(
+                &BatchInput {
+                    plots: all[..20].to_vec(),
+                    flush: true,
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap();
+        let mut late = all[0].clone();
+        late.t = Some(0.0);
+        let update = session
+            .apply(
+                &BatchInput {
+                    plots: vec![all[20].clone(), late],
+                    flush: false,
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap();
+        assert_eq!(update.late_plots, vec![1]);
+        assert_eq!(update.counters.late, 1);
+        assert!(warnings[0].contains("late"), "{warnings:?}");
+        let mut bad = all[21].clone();
+        bad.radar_id = Some("zz".into());
+        let err = session
+            .apply(
+                &BatchInput {
+                    plots: vec![bad],
+                    flush: false,
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap_err();
+        match err {
+            ServiceError::InvalidInput(v) => assert_eq!(v[0].field, "plots[0].radar_id"),
+            other => panic!("{other:?}"),
+        }
+    }
+}
