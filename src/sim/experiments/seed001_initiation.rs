@@ -13,7 +13,8 @@
 //! 0–90° from 1 to 100 km. The whole tracker runs (`Tracker`, serial mode):
 //! 3-of-4 confirmation (the tracker's default; a target seen at every scan
 //! confirms at its third scan), the patent's per-axis gate with χ² at 0.99,
-//! roots waiting up to two scans (10 s), σ_a = 1 m/s². Rows:
+//! roots waiting up to two scans (10 s), the default process noise (CWNA,
+//! √q = 3). Rows:
 //! 1. the patent's case: P_D = 1, no clutter, 4 scans;
 //! 2. P_D = 0.9 and clutter of 0.005 false plots per km² per scan
 //!    (≈ 39 per scan over the 7854 km² sector), 4 scans;

@@ -20,9 +20,11 @@
 //! - duration D = 300 s (`--scans` × 5 s).
 //!
 //! Trackers, all with `TrackerConfig::new`'s defaults unless stated: exact
-//! JPDA, σ_a = 1 m/s², 3-of-4 initiation with a [0, 600] m/s speed gate,
-//! deletion after 3 consecutive misses, 99 % gates, σ_t = 100 m/s for the
-//! unseen cross-range motion of parallel mode. The radar specs are the true
+//! JPDA, CWNA process noise √q = 3 per axis, 3-of-4 initiation with a
+//! [0, 600] m/s speed gate, deletion after 3 missed frames per radar (3 ×
+//! radars consecutive frames), 99 % gates, σ_t = 300 m/s for the unseen
+//! cross-range motion of parallel mode. The diagnostic variants include the
+//! former defaults (DWNA σ_a = 1 m/s², σ_t = 100 m/s, 3 misses). The radar specs are the true
 //! ones (λ per m·rad from the clutter rate, see
 //! [`crate::sim::scenario001::radar_spec`]).
 //! - **parallel**: every radar, `Mode::Parallel`, fusion period = the
@@ -43,7 +45,7 @@ use rand::RngExt;
 
 use super::{EvalOptions, mean_se};
 use crate::algo::jpda::Method;
-use crate::algo::tracking::{Mode, Plot, RadarSpec, TrackerConfig};
+use crate::algo::tracking::{Mode, NoiseModel, Plot, RadarSpec, TrackerConfig};
 use crate::sim::metrics::{nees_bounds, rmse};
 use crate::sim::montecarlo::run_batch;
 use crate::sim::report::{LinePlot, Report, Series, markdown_table};
@@ -69,83 +71,101 @@ const METHODS: [&str; 3] = ["parallel", "serial", "best single radar"];
 /// The radar count whose scenes also run the diagnostic variants.
 const DIAGNOSTIC_RADARS: usize = 3;
 
-/// A tracker with one or two options changed from the defaults, run on the
-/// same scenes as the [`DIAGNOSTIC_RADARS`] row to find what drives a figure.
+/// A tracker with one or more options changed from the defaults, run on
+/// the same scenes as the [`DIAGNOSTIC_RADARS`] row to find what drives a
+/// figure.
 struct Variant {
     name: &'static str,
     mode: Mode,
-    sigma_a: f64,
-    sigma_t: f64,
-    method: Method,
-    /// Consecutive misses that delete a track.
-    max_misses: u32,
     /// Each radar alone (`mode` ignored), the best RMSE of them kept.
     single: bool,
+    /// `Some`: process noise model and σ_a (or √q) per axis.
+    noise: Option<(NoiseModel, f64)>,
+    /// `Some`: σ_t of parallel mode (m/s).
+    sigma_t: Option<f64>,
+    /// `Some`: consecutive misses that delete a track.
+    max_misses: Option<u32>,
+    method: Method,
 }
 
-const VARIANTS: [Variant; 7] = [
+/// The defaults before commit 114755c (and the deletion change of 4fc2c52):
+/// DWNA σ_a = 1 m/s², σ_t = 100 m/s, 3 consecutive misses delete.
+const FORMER_NOISE: Option<(NoiseModel, f64)> = Some((NoiseModel::Dwna, 1.0));
+const FORMER_SIGMA_T: Option<f64> = Some(100.0);
+const FORMER_MISSES: Option<u32> = Some(3);
+
+const VARIANTS: [Variant; 8] = [
     Variant {
-        name: "serial σ_a = 3 m/s²",
-        mode: Mode::Serial,
-        sigma_a: 3.0,
-        sigma_t: 100.0,
-        method: Method::Exact,
-        max_misses: 3,
+        name: "parallel former defaults",
+        mode: Mode::Parallel,
         single: false,
+        noise: FORMER_NOISE,
+        sigma_t: FORMER_SIGMA_T,
+        max_misses: FORMER_MISSES,
+        method: Method::Exact,
     },
     Variant {
-        name: "best single radar σ_a = 3 m/s²",
+        name: "serial former defaults",
         mode: Mode::Serial,
-        sigma_a: 3.0,
-        sigma_t: 100.0,
+        single: false,
+        noise: FORMER_NOISE,
+        sigma_t: FORMER_SIGMA_T,
+        max_misses: FORMER_MISSES,
         method: Method::Exact,
-        max_misses: 3,
+    },
+    Variant {
+        name: "best single radar former defaults",
+        mode: Mode::Serial,
         single: true,
-    },
-    Variant {
-        name: "parallel σ_a = 3 m/s²",
-        mode: Mode::Parallel,
-        sigma_a: 3.0,
-        sigma_t: 100.0,
+        noise: FORMER_NOISE,
+        sigma_t: FORMER_SIGMA_T,
+        max_misses: FORMER_MISSES,
         method: Method::Exact,
-        max_misses: 3,
-        single: false,
     },
     Variant {
-        name: "parallel σ_t = 300 m/s",
+        name: "parallel σ_t = 100 m/s",
         mode: Mode::Parallel,
-        sigma_a: 1.0,
-        sigma_t: 300.0,
-        method: Method::Exact,
-        max_misses: 3,
         single: false,
+        noise: None,
+        sigma_t: FORMER_SIGMA_T,
+        max_misses: None,
+        method: Method::Exact,
     },
     Variant {
-        name: "parallel σ_a = 3 m/s² σ_t = 300 m/s",
+        name: "parallel 3 misses delete",
         mode: Mode::Parallel,
-        sigma_a: 3.0,
-        sigma_t: 300.0,
-        method: Method::Exact,
-        max_misses: 3,
         single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: FORMER_MISSES,
+        method: Method::Exact,
     },
     Variant {
-        name: "serial σ_a = 3 m/s² GNN",
+        name: "serial 3 misses delete",
         mode: Mode::Serial,
-        sigma_a: 3.0,
-        sigma_t: 100.0,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: FORMER_MISSES,
+        method: Method::Exact,
+    },
+    Variant {
+        name: "serial GNN",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
         method: Method::GlobalNearestNeighbour,
-        max_misses: 3,
-        single: false,
     },
     Variant {
-        name: "serial σ_a = 3 m/s² 3·radars misses delete",
-        mode: Mode::Serial,
-        sigma_a: 3.0,
-        sigma_t: 100.0,
-        method: Method::Exact,
-        max_misses: 3 * DIAGNOSTIC_RADARS as u32,
+        name: "parallel GNN",
+        mode: Mode::Parallel,
         single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        method: Method::GlobalNearestNeighbour,
     },
 ];
 
@@ -404,7 +424,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         "{targets} targets (half of them turning at 2–4 m/s²) over {duration} s, 2D Doppler radars \
          20 km from the centre with periods 4–6 s and random phases, P_D = 0.9, \
          {FALSE_PLOTS_PER_SCAN} false plots per scan per radar; the trackers' defaults (exact JPDA, \
-         σ_a = 1 m/s², 3-of-4, 3 misses delete, σ_t = 100 m/s). Scored at every frame of each \
+         CWNA √q = 3, 3-of-4, 3 missed frames per radar delete, σ_t = 300 m/s). Scored at every frame of each \
          method against the targets born by then: GOSPA assignment with c = 1 km (p = 1, α = 2; \
          GOSPA is a sum over the ≈ {targets} targets, not a per-target figure). {} runs per radar \
          count from seed {}; wall time {wall:.1} s.\n",
@@ -443,7 +463,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
     let _ = writeln!(
         md,
         "\nDiagnostics on the {DIAGNOSTIC_RADARS}-radar scenes (same runs): straight and turning \
-         targets apart, and trackers with one or two options changed.\n"
+         targets apart, and trackers with options changed (\"former defaults\": DWNA σ_a = 1 m/s², \
+         σ_t = 100 m/s, 3 consecutive misses delete).\n"
     );
     md.push_str(&markdown_table(
         &[
@@ -617,10 +638,17 @@ fn one_run(
             .map(|v| {
                 let variant = |specs: Vec<RadarSpec>| {
                     let mut c = config(specs, v.mode);
-                    c.sigma_a = [v.sigma_a; 3];
-                    c.sigma_tangential_speed = v.sigma_t;
+                    if let Some((noise, sigma)) = v.noise {
+                        c.noise = noise;
+                        c.sigma_a = [sigma; 3];
+                    }
+                    if let Some(sigma_t) = v.sigma_t {
+                        c.sigma_tangential_speed = sigma_t;
+                    }
+                    if v.max_misses.is_some() {
+                        c.deletion.max_consecutive_misses = v.max_misses;
+                    }
                     c.association.method = v.method;
-                    c.deletion.max_consecutive_misses = Some(v.max_misses);
                     c
                 };
                 if !v.single {
