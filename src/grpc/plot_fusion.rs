@@ -125,6 +125,7 @@ pub(crate) fn spec_in(
             default_height_m: t.default_height_m,
             default_height_sigma_m: t.default_height_sigma_m,
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
+            duplicate_gate_probability: t.duplicate_gate_probability,
         },
     }
 }
@@ -172,5 +173,6 @@ pub(crate) fn counters_out(c: Counters) -> pb::TrackerCounters {
         confirmed: c.confirmed,
         dropped: c.dropped,
         deleted: c.deleted,
+        merged: c.merged,
     }
 }

@@ -163,6 +163,10 @@ pub struct TrackerOptions {
     /// the plots moved to a fusion instant with their angles held (default
     /// 300 m/s; 0 is the patent's covariance).
     pub sigma_tangential_speed_mps: Option<f64>,
+    /// Two confirmed tracks updated by the same plot whose states differ by
+    /// less than the χ² quantile at this probability are one target: the
+    /// younger is deleted (counted in `merged`). Default 0.05; 0 disables.
+    pub duplicate_gate_probability: Option<f64>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -230,6 +234,8 @@ pub struct TrackerCounters {
     pub confirmed: u64,
     pub dropped: u64,
     pub deleted: u64,
+    /// Confirmed tracks deleted as duplicates of an older track.
+    pub merged: u64,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -313,6 +319,7 @@ pub(crate) fn spec_in(
             default_height_m: t.default_height_m,
             default_height_sigma_m: t.default_height_sigma_m,
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
+            duplicate_gate_probability: t.duplicate_gate_probability,
         },
     }
 }
@@ -368,6 +375,7 @@ pub(crate) fn counters_out(c: Counters) -> TrackerCounters {
         confirmed: c.confirmed,
         dropped: c.dropped,
         deleted: c.deleted,
+        merged: c.merged,
     }
 }
 

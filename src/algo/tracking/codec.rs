@@ -55,7 +55,7 @@ pub(crate) fn encode(tr: &Tracker) -> Vec<u8> {
     w.buf
 }
 
-/// The counters, eight u64 in declaration order.
+/// The counters, nine u64 in declaration order.
 pub fn encode_counters(w: &mut Writer, c: &Counters) {
     for v in [
         c.plots,
@@ -66,6 +66,7 @@ pub fn encode_counters(w: &mut Writer, c: &Counters) {
         c.confirmed,
         c.dropped,
         c.deleted,
+        c.merged,
     ] {
         w.u64(v);
     }
@@ -82,6 +83,7 @@ pub fn decode_counters(r: &mut Reader<'_>) -> Result<Counters, AlgoError> {
         confirmed: r.u64()?,
         dropped: r.u64()?,
         deleted: r.u64()?,
+        merged: r.u64()?,
     })
 }
 
@@ -192,6 +194,7 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     w.f64(c.default_height);
     w.f64(c.default_height_sigma);
     w.f64(c.sigma_tangential_speed);
+    w.f64(c.duplicate_probability);
 }
 
 fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
@@ -282,6 +285,7 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, AlgoError> {
         default_height: r.f64()?,
         default_height_sigma: r.f64()?,
         sigma_tangential_speed: r.f64()?,
+        duplicate_probability: r.f64()?,
     })
 }
 

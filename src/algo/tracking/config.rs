@@ -193,6 +193,11 @@ pub struct TrackerConfig {
     /// extrapolated plot's covariance gets (σ_t·|t − τ|)² across the line of
     /// sight to stay consistent (0: the patent's covariance, optimistic).
     pub sigma_tangential_speed: f64,
+    /// Duplicate deletion: two confirmed tracks whose best plot of a frame
+    /// is the same and whose states differ by less than the χ²_n quantile
+    /// at this probability are one target; the younger is deleted. In
+    /// [0, 1); 0 disables the rule.
+    pub duplicate_probability: f64,
 }
 
 impl TrackerConfig {
@@ -205,7 +210,8 @@ impl TrackerConfig {
     /// consecutive missed frames per radar (a frame is one radar's scan in
     /// serial mode, so 3 × radars frames ≈ 3 scans of each); default height
     /// 0 ± 1000 m; tangential speed σ 300 m/s (parallel mode; 100 m/s left
-    /// its plots overconfident for 100–300 m/s targets).
+    /// its plots overconfident for 100–300 m/s targets); duplicates deleted
+    /// at the χ² 5 % quantile.
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
         let misses = 3 * radars.len().clamp(1, 20) as u32;
         let min_period = radars
@@ -252,6 +258,7 @@ impl TrackerConfig {
             default_height: 0.0,
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
+            duplicate_probability: 0.05,
         }
     }
 
@@ -301,6 +308,13 @@ impl TrackerConfig {
         finite("default_height", self.default_height)?;
         positive("default_height_sigma", self.default_height_sigma)?;
         non_negative("sigma_tangential_speed", self.sigma_tangential_speed)?;
+        let p = self.duplicate_probability;
+        if !(0.0..1.0).contains(&p) {
+            return Err(invalid(
+                "duplicate_probability",
+                format!("must lie in [0, 1), got {p}"),
+            ));
+        }
         Ok(())
     }
 

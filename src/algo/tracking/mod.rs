@@ -76,6 +76,9 @@ pub struct Counters {
     pub confirmed: u64,
     pub dropped: u64,
     pub deleted: u64,
+    /// Confirmed tracks deleted as duplicates of another (see
+    /// [`TrackerConfig::duplicate_probability`]).
+    pub merged: u64,
 }
 
 /// What one call of [`Tracker::process`] or [`Tracker::flush`] did.
@@ -412,16 +415,20 @@ impl Tracker {
                 &cfg.association,
             )?,
         };
-        for ((track, est), hit) in self.tracks.iter_mut().zip(estimates).zip(hit) {
+        for ((track, est), hit) in self.tracks.iter_mut().zip(estimates).zip(&hit) {
             track.x = est.x;
             track.p = est.p;
             track.record(hit.map(|j| plots[j].radars.clone()));
         }
 
+        let duplicate = deleter::duplicates(&self.tracks, &hit, cfg.duplicate_probability)?;
         let rule = cfg.deletion;
         let mut kept = Vec::with_capacity(self.tracks.len());
-        for track in self.tracks.drain(..) {
-            if deleter::should_delete(&track, &rule) {
+        for (track, duplicate) in self.tracks.drain(..).zip(duplicate) {
+            if duplicate {
+                report.deleted.push(track.output(TrackStatus::Deleted));
+                self.counters.merged += 1;
+            } else if deleter::should_delete(&track, &rule) {
                 report.deleted.push(track.output(TrackStatus::Deleted));
                 self.counters.deleted += 1;
             } else {

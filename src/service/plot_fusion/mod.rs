@@ -114,6 +114,7 @@ pub struct TrackerInput {
     pub default_height_m: Option<f64>,
     pub default_height_sigma_m: Option<f64>,
     pub sigma_tangential_speed_mps: Option<f64>,
+    pub duplicate_gate_probability: Option<f64>,
 }
 
 /// Everything that configures a tracker: the network and the options.

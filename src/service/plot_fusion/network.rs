@@ -111,6 +111,7 @@ fn wire_name(what: &str) -> &'static str {
         "default_height" => "tracker.default_height_m",
         "default_height_sigma" => "tracker.default_height_sigma_m",
         "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
+        "duplicate_probability" => "tracker.duplicate_gate_probability",
         _ => "tracker",
     }
 }
@@ -421,6 +422,9 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     }
     if let Some(s) = tracker.sigma_tangential_speed_mps {
         config.sigma_tangential_speed = s;
+    }
+    if let Some(p) = tracker.duplicate_gate_probability {
+        config.duplicate_probability = p;
     }
     if let Some(i) = &tracker.initiation {
         let init = &mut config.initiation;
