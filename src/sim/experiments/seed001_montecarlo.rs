@@ -23,8 +23,9 @@
 //! JPDA, CWNA process noise √q = 3 per axis, 3-of-4 initiation with a
 //! [0, 600] m/s speed gate, deletion after 3 missed frames per radar (3 ×
 //! radars consecutive frames), 99 % gates, σ_t = 300 m/s for the unseen
-//! cross-range motion of parallel mode. The diagnostic variants include the
-//! former defaults (DWNA σ_a = 1 m/s², σ_t = 100 m/s, 3 misses). The radar specs are the true
+//! cross-range motion of parallel mode, duplicate deletion at the χ² 5 %
+//! quantile. The diagnostic variants include the former defaults (DWNA
+//! σ_a = 1 m/s², σ_t = 100 m/s, 3 misses, no duplicate deletion). The radar specs are the true
 //! ones (λ per m·rad from the clutter rate, see
 //! [`crate::sim::scenario001::radar_spec`]).
 //! - **parallel**: every radar, `Mode::Parallel`, fusion period = the
@@ -85,16 +86,20 @@ struct Variant {
     sigma_t: Option<f64>,
     /// `Some`: consecutive misses that delete a track.
     max_misses: Option<u32>,
+    /// `Some`: `duplicate_probability` (0 disables duplicate deletion).
+    duplicate: Option<f64>,
     method: Method,
 }
 
-/// The defaults before commit 114755c (and the deletion change of 4fc2c52):
-/// DWNA σ_a = 1 m/s², σ_t = 100 m/s, 3 consecutive misses delete.
+/// The defaults before commits 4fc2c52, 114755c and 5f66756: DWNA
+/// σ_a = 1 m/s², σ_t = 100 m/s, 3 consecutive misses delete, no duplicate
+/// deletion.
 const FORMER_NOISE: Option<(NoiseModel, f64)> = Some((NoiseModel::Dwna, 1.0));
 const FORMER_SIGMA_T: Option<f64> = Some(100.0);
 const FORMER_MISSES: Option<u32> = Some(3);
+const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
-const VARIANTS: [Variant; 8] = [
+const VARIANTS: [Variant; 10] = [
     Variant {
         name: "parallel former defaults",
         mode: Mode::Parallel,
@@ -102,6 +107,7 @@ const VARIANTS: [Variant; 8] = [
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
+        duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
     },
     Variant {
@@ -111,6 +117,7 @@ const VARIANTS: [Variant; 8] = [
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
+        duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
     },
     Variant {
@@ -120,6 +127,7 @@ const VARIANTS: [Variant; 8] = [
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
+        duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
     },
     Variant {
@@ -129,6 +137,7 @@ const VARIANTS: [Variant; 8] = [
         noise: None,
         sigma_t: FORMER_SIGMA_T,
         max_misses: None,
+        duplicate: None,
         method: Method::Exact,
     },
     Variant {
@@ -138,6 +147,7 @@ const VARIANTS: [Variant; 8] = [
         noise: None,
         sigma_t: None,
         max_misses: FORMER_MISSES,
+        duplicate: None,
         method: Method::Exact,
     },
     Variant {
@@ -147,6 +157,27 @@ const VARIANTS: [Variant; 8] = [
         noise: None,
         sigma_t: None,
         max_misses: FORMER_MISSES,
+        duplicate: None,
+        method: Method::Exact,
+    },
+    Variant {
+        name: "serial duplicates at χ² 0.99",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: Some(0.99),
+        method: Method::Exact,
+    },
+    Variant {
+        name: "parallel duplicates at χ² 0.99",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: Some(0.99),
         method: Method::Exact,
     },
     Variant {
@@ -156,6 +187,7 @@ const VARIANTS: [Variant; 8] = [
         noise: None,
         sigma_t: None,
         max_misses: None,
+        duplicate: None,
         method: Method::GlobalNearestNeighbour,
     },
     Variant {
@@ -165,6 +197,7 @@ const VARIANTS: [Variant; 8] = [
         noise: None,
         sigma_t: None,
         max_misses: None,
+        duplicate: None,
         method: Method::GlobalNearestNeighbour,
     },
 ];
@@ -424,7 +457,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         "{targets} targets (half of them turning at 2–4 m/s²) over {duration} s, 2D Doppler radars \
          20 km from the centre with periods 4–6 s and random phases, P_D = 0.9, \
          {FALSE_PLOTS_PER_SCAN} false plots per scan per radar; the trackers' defaults (exact JPDA, \
-         CWNA √q = 3, 3-of-4, 3 missed frames per radar delete, σ_t = 300 m/s). Scored at every frame of each \
+         CWNA √q = 3, 3-of-4, 3 missed frames per radar delete, σ_t = 300 m/s, duplicates deleted at \
+         χ² 0.05). Scored at every frame of each \
          method against the targets born by then: GOSPA assignment with c = 1 km (p = 1, α = 2; \
          GOSPA is a sum over the ≈ {targets} targets, not a per-target figure). {} runs per radar \
          count from seed {}; wall time {wall:.1} s.\n",
@@ -464,7 +498,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         md,
         "\nDiagnostics on the {DIAGNOSTIC_RADARS}-radar scenes (same runs): straight and turning \
          targets apart, and trackers with options changed (\"former defaults\": DWNA σ_a = 1 m/s², \
-         σ_t = 100 m/s, 3 consecutive misses delete).\n"
+         σ_t = 100 m/s, 3 consecutive misses delete, no duplicate deletion).\n"
     );
     md.push_str(&markdown_table(
         &[
@@ -647,6 +681,9 @@ fn one_run(
                     }
                     if v.max_misses.is_some() {
                         c.deletion.max_consecutive_misses = v.max_misses;
+                    }
+                    if let Some(p) = v.duplicate {
+                        c.duplicate_probability = p;
                     }
                     c.association.method = v.method;
                     c
