@@ -13,6 +13,9 @@
 //! - [`scenario000`]: the two-node scene of seed 000 §5.1 and the truth
 //!   bookkeeping that maps local track ids to targets, with the
 //!   [`scenario000::Correlator`] plug for track-to-track correlation methods.
+//! - [`scenario001`]: the seed 001 tracker experiments' plots, frame-by-frame
+//!   tracker runs and their scoring (RMSE, NEES, GOSPA, ID switches, false
+//!   tracks, time to confirm).
 //! - [`metrics`]: E_c/E_e/E_s, association rate, RMSE, NEES, OSPA, GOSPA.
 //! - [`montecarlo`]: N runs from one seed, bit-for-bit reproducible for any
 //!   thread count, with a progress bar on stderr.
@@ -29,6 +32,7 @@ pub mod metrics;
 pub mod montecarlo;
 pub mod report;
 pub mod scenario000;
+pub mod scenario001;
 pub mod sensor;
 pub mod tracker;
 pub mod truth;

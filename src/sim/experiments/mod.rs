@@ -10,6 +10,10 @@ pub mod correlation;
 pub mod seed000_correlation;
 pub mod seed000_local_tracking;
 pub mod seed000_miss_probability;
+pub mod seed001_initiation;
+pub mod seed001_montecarlo;
+pub mod seed001_plot_association;
+pub mod seed001_serial_jpda;
 pub mod seed002_jpda;
 pub mod seed003_dimension;
 pub mod seed004_ais_bias;
@@ -86,6 +90,26 @@ pub const REGISTRY: &[Experiment] = &[
         name: "seed000-miss-probability",
         summary: "seed 000 eq. 23 checked by Monte Carlo: chi-square exceedances and L/R miss rates of same-target pairs",
         run: seed000_miss_probability::run,
+    },
+    Experiment {
+        name: "seed001-plot-association",
+        summary: "seed 001 Fig. 3: GNN plot-to-plot association and ML fusion of two radars' plots, three crossing targets",
+        run: seed001_plot_association::run,
+    },
+    Experiment {
+        name: "seed001-serial-jpda",
+        summary: "seed 001 Fig. 5: serial plot fusion with JPDA vs each radar alone, position RMSE over time",
+        run: seed001_serial_jpda::run,
+    },
+    Experiment {
+        name: "seed001-initiation",
+        summary: "seed 001 Fig. 6: logic track initiation with the per-axis velocity gate, clean and with clutter at P_D = 0.9",
+        run: seed001_initiation::run,
+    },
+    Experiment {
+        name: "seed001-montecarlo",
+        summary: "seed 001 beyond the patent: 2-4 unsynchronised Doppler radars, turning targets, clutter; parallel vs serial vs best single radar",
+        run: seed001_montecarlo::run,
     },
     Experiment {
         name: "seed004-ais-bias",
