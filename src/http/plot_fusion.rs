@@ -105,7 +105,7 @@ pub struct PlotInitiation {
     pub max_dt_s: Option<f64>,
 }
 
-/// Track deletion: any rule given deletes (default: 3 × radars consecutive
+/// Track deletion: any rule given deletes (default: 2 × radars (at least 3) consecutive
 /// missed frames in serial mode, 3 in parallel mode).
 #[derive(Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]

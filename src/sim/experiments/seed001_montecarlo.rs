@@ -21,11 +21,12 @@
 //!
 //! Trackers, all with `TrackerConfig::new`'s defaults unless stated: exact
 //! JPDA, CWNA process noise √q = 3 per axis, 3-of-4 initiation with a
-//! [0, 600] m/s speed gate, deletion after 3 missed frames per radar (3 ×
-//! radars consecutive frames), 99 % gates, σ_t = 300 m/s for the unseen
-//! cross-range motion of parallel mode, duplicate deletion at the χ² 5 %
-//! quantile. The diagnostic variants include the former defaults (DWNA
-//! σ_a = 1 m/s², σ_t = 100 m/s, 3 misses, no duplicate deletion). The radar specs are the true
+//! [0, 600] m/s speed gate, deletion by `TrackerConfig::default_deletion`
+//! (2 × radars, at least 3, consecutive missed frames in serial mode, 3 in parallel
+//! mode), 99 % gates, σ_t = 300 m/s for the unseen cross-range motion of
+//! parallel mode, duplicate deletion inside the χ² 0.99 gate. The
+//! diagnostic variants include the former defaults (DWNA σ_a = 1 m/s²,
+//! σ_t = 100 m/s, 3 misses, no duplicate deletion). The radar specs are the true
 //! ones (λ per m·rad from the clutter rate, see
 //! [`crate::sim::scenario001::radar_spec`]).
 //! - **parallel**: every radar, `Mode::Parallel`, fusion period = the
@@ -99,7 +100,7 @@ const FORMER_SIGMA_T: Option<f64> = Some(100.0);
 const FORMER_MISSES: Option<u32> = Some(3);
 const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
-const VARIANTS: [Variant; 10] = [
+const VARIANTS: [Variant; 11] = [
     Variant {
         name: "parallel former defaults",
         mode: Mode::Parallel,
@@ -141,12 +142,22 @@ const VARIANTS: [Variant; 10] = [
         method: Method::Exact,
     },
     Variant {
-        name: "parallel 3 misses delete",
+        name: "parallel 3 × radars misses delete",
         mode: Mode::Parallel,
         single: false,
         noise: None,
         sigma_t: None,
-        max_misses: FORMER_MISSES,
+        max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
+        duplicate: None,
+        method: Method::Exact,
+    },
+    Variant {
+        name: "serial 3 × radars misses delete",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
         duplicate: None,
         method: Method::Exact,
     },
@@ -161,23 +172,23 @@ const VARIANTS: [Variant; 10] = [
         method: Method::Exact,
     },
     Variant {
-        name: "serial duplicates at χ² 0.99",
+        name: "serial without duplicate deletion",
         mode: Mode::Serial,
         single: false,
         noise: None,
         sigma_t: None,
         max_misses: None,
-        duplicate: Some(0.99),
+        duplicate: Some(0.0),
         method: Method::Exact,
     },
     Variant {
-        name: "parallel duplicates at χ² 0.99",
+        name: "parallel without duplicate deletion",
         mode: Mode::Parallel,
         single: false,
         noise: None,
         sigma_t: None,
         max_misses: None,
-        duplicate: Some(0.99),
+        duplicate: Some(0.0),
         method: Method::Exact,
     },
     Variant {
@@ -457,8 +468,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         "{targets} targets (half of them turning at 2–4 m/s²) over {duration} s, 2D Doppler radars \
          20 km from the centre with periods 4–6 s and random phases, P_D = 0.9, \
          {FALSE_PLOTS_PER_SCAN} false plots per scan per radar; the trackers' defaults (exact JPDA, \
-         CWNA √q = 3, 3-of-4, 3 missed frames per radar delete, σ_t = 300 m/s, duplicates deleted at \
-         χ² 0.05). Scored at every frame of each \
+         CWNA √q = 3, 3-of-4, 2 × radars missed frames delete in serial mode and 3 in parallel mode, \
+         σ_t = 300 m/s, duplicates deleted inside the χ² 0.99 gate). Scored at every frame of each \
          method against the targets born by then: GOSPA assignment with c = 1 km (p = 1, α = 2; \
          GOSPA is a sum over the ≈ {targets} targets, not a per-target figure). {} runs per radar \
          count from seed {}; wall time {wall:.1} s.\n",
@@ -632,6 +643,9 @@ fn one_run(
     let config = |specs: Vec<RadarSpec>, mode: Mode| {
         let mut c = TrackerConfig::new(2, specs);
         c.mode = mode;
+        // The service's default for the mode (2 × radars missed frames in
+        // serial mode, 3 in parallel mode).
+        c.deletion = c.default_deletion();
         c
     };
     let track = |cfg: TrackerConfig, plots: &[Plot]| -> Result<MethodRun, SimError> {
