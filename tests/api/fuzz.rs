@@ -90,6 +90,7 @@ fn arbitrary_rest_bodies_never_get_a_server_error() {
             Just("/v1/jpda/update"),
             Just("/v1/ais-radar/associate"),
             Just("/v1/dimension/fuse"),
+            Just("/v1/plot-fusion/track"),
         ],
     );
     runner
@@ -110,6 +111,56 @@ fn arbitrary_rest_bodies_never_get_a_server_error() {
                 .block_on(app.post_raw("/v1/correlation/rules/evaluate", &body))
                 .status();
             prop_assert!(status.is_client_error(), "{status} for {body:?}");
+            Ok(())
+        })
+        .unwrap();
+}
+
+/// Plot-fusion requests of the right shape with arbitrary numbers: two
+/// radars (one WGS84, one local), a tracker with some options, and plots.
+fn arb_plot_fusion_request() -> impl Strategy<Value = Value> {
+    (
+        prop::collection::vec(arb_number(), 12),
+        prop::collection::vec(prop::collection::vec(arb_number(), 5), 0..12),
+        any::<bool>(),
+    )
+        .prop_map(|(n, plots, three_d)| {
+            json!({
+                "origin": {"lat_deg": n[0], "lon_deg": n[1]},
+                "radars": [
+                    {"id": "a", "kind": if three_d { "3d" } else { "2d" },
+                     "site": {"lat_deg": n[2], "lon_deg": n[3], "height_m": n[4]},
+                     "sigma_range_m": n[5], "sigma_azimuth_deg": n[6],
+                     "sigma_elevation_deg": if three_d { n[6].clone() } else { Value::Null },
+                     "sigma_radial_velocity_mps": n[7], "scan_period_s": n[8]},
+                    {"id": "b", "kind": "2d", "site": {"position_m": [n[9], n[10]]},
+                     "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 4.0}
+                ],
+                "tracker": {"default_height_m": n[11], "fusion_period_s": n[8]},
+                "plots": plots.into_iter().enumerate().map(|(i, p)| json!({
+                    "radar_id": if i % 2 == 0 { "a" } else { "b" },
+                    "t": p[0], "range_m": p[1], "azimuth_deg": p[2],
+                    "elevation_deg": if three_d && i % 2 == 0 { p[3].clone() } else { Value::Null },
+                    "radial_velocity_mps": if i % 2 == 0 { p[4].clone() } else { Value::Null },
+                })).collect::<Vec<_>>(),
+            })
+        })
+}
+
+#[test]
+fn arbitrary_plot_fusion_requests_never_get_a_server_error() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let app = rt.block_on(spawn_app());
+    let mut runner = runner(300);
+    runner
+        .run(&arb_plot_fusion_request(), |body| {
+            let status = rt
+                .block_on(app.post_json("/v1/plot-fusion/track", &body))
+                .status();
+            prop_assert!(
+                status.is_success() || status.is_client_error(),
+                "{status} for {body}"
+            );
             Ok(())
         })
         .unwrap();

@@ -613,3 +613,58 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     assert_eq!(pf.tracks, whole.tracks);
     assert_eq!(pf.counters, whole.counters);
 }
+
+#[tokio::test]
+async fn extreme_but_valid_values_get_an_answer_or_a_named_error_never_a_500() {
+    // Valid radars (one WGS84 3D Doppler, one local 2D Doppler); plots at
+    // the edges of what validation lets through.
+    let app = spawn_app().await;
+    let radars = json!([
+        {"id": "a", "kind": "3d", "site": {"lat_deg": 89.9, "lon_deg": 180.0, "height_m": 100000.0},
+         "sigma_range_m": 1e-300, "sigma_azimuth_deg": 90.0, "sigma_elevation_deg": 1e-9,
+         "sigma_radial_velocity_mps": 1e300, "scan_period_s": 1e-300},
+        {"id": "b", "kind": "2d", "site": {"position_m": [1e300, -1e300, 1e300]},
+         "sigma_range_m": 1e300, "sigma_azimuth_deg": 1e-300,
+         "sigma_radial_velocity_mps": 1e-300, "scan_period_s": 1e300}
+    ]);
+    let extremes = [
+        (0.0, 1e300, 720.0, 89.999, 9.9e4),
+        (1e300, 1e-300, -720.0, -89.999, -9.9e4),
+        (-1e300, 1.0, 0.0, 0.0, 0.0),
+        (1e-300, 5e299, 359.9, 45.0, 1.0),
+        (f64::MAX, 1e-10, 1e-300, 1e-300, 1e-300),
+    ];
+    for tracker in [
+        json!({}),
+        json!({"mode": "serial", "default_height_m": 1e300}),
+        json!({"mode": "parallel", "fusion_period_s": 1e-300, "fusion_epoch_s": -1e300}),
+    ] {
+        let mut plots = Vec::new();
+        for (t, range, az, el, rv) in &extremes {
+            for radar in ["a", "b"] {
+                let mut p = json!({"radar_id": radar, "t": t, "range_m": range,
+                                   "azimuth_deg": az, "radial_velocity_mps": rv});
+                if radar == "a" {
+                    p["elevation_deg"] = json!(el);
+                }
+                plots.push(p);
+            }
+        }
+        let body = json!({"origin": {"lat_deg": -89.9, "lon_deg": -180.0},
+                          "radars": radars, "plots": plots, "tracker": tracker});
+        let status = app.post_json(PATH, &body).await.status();
+        assert!(
+            status.is_success() || status.is_client_error(),
+            "{status} for tracker {tracker}"
+        );
+    }
+    // Ranges beyond 10,000 km and times beyond ±1e12 s are named.
+    let body = json!({"radars": radars, "tracker": {"mode": "serial"}, "plots": [
+        {"radar_id": "b", "t": 0.0, "range_m": 1e300, "azimuth_deg": 0.0},
+        {"radar_id": "b", "t": 1e300, "range_m": 1e3, "azimuth_deg": 0.0}]});
+    let problem = assert_problem(app.post_json(PATH, &body).await, 422).await;
+    assert_eq!(
+        problem_fields(&problem),
+        vec!["plots[0].range_m", "plots[1].t"]
+    );
+}

@@ -46,6 +46,10 @@ use crate::algo::{
 };
 use crate::service::{FieldViolation, ServiceError, Violations};
 
+/// Longest plot range accepted (m): far beyond any radar's horizon.
+const MAX_RANGE_M: f64 = 1.0e7;
+/// Largest |t| accepted (s): about 31,700 years, so Unix times fit.
+const MAX_ABS_T_S: f64 = 1.0e12;
 /// Most violations reported for the plots of one request.
 const MAX_PLOT_VIOLATIONS: usize = 100;
 
@@ -650,12 +654,18 @@ impl Network {
         })?;
         let spec = &config.radars[radar];
         let t = p.t.ok_or(("t", "is required".to_string()))?;
-        if !t.is_finite() {
-            return Err(("t", format!("must be finite, got {t}")));
+        if !(t.is_finite() && t.abs() <= MAX_ABS_T_S) {
+            return Err((
+                "t",
+                format!("must be finite and within ±{MAX_ABS_T_S:e} s, got {t}"),
+            ));
         }
         let range = p.range_m.ok_or(("range_m", "is required".to_string()))?;
-        if !(range.is_finite() && range > 0.0) {
-            return Err(("range_m", format!("must be finite and > 0, got {range}")));
+        if !(range.is_finite() && range > 0.0 && range <= MAX_RANGE_M) {
+            return Err((
+                "range_m",
+                format!("must be > 0 and at most {MAX_RANGE_M:e} m, got {range}"),
+            ));
         }
         let az = p
             .azimuth_deg
