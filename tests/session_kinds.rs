@@ -51,7 +51,7 @@ impl SessionKind for Counter {
     type Update = i64;
     type View = (i64, i64);
 
-    fn create(limit: i64) -> Result<Self, ServiceError> {
+    fn create(limit: i64, _warnings: &mut Vec<String>) -> Result<Self, ServiceError> {
         if limit <= 0 {
             return Err(Violations::single("limit", "must be positive"));
         }

@@ -240,6 +240,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
         batches: v.batches,
         idle_expiry_s: v.idle_expiry_s,
         encoded_bytes: v.encoded_bytes as u64,
+        warnings: v.warnings,
         plot_fusion: Some(pb::PlotFusionSessionState {
             mode: b.mode.into(),
             state_layout: b.state_layout.iter().map(|s| s.to_string()).collect(),
@@ -290,6 +291,7 @@ fn correlation_view_out(v: View<domain::SessionView>) -> pb::SessionState {
         system_tracks: b.system_tracks.into_iter().map(system_track).collect(),
         encoded_bytes: v.encoded_bytes as u64,
         plot_fusion: None,
+        warnings: v.warnings,
     }
 }
 
@@ -301,6 +303,7 @@ fn opened(view: &AnyView) -> pb::BatchUpdate {
             sequence: v.last_sequence,
             version: v.version,
             pending_reports: v.body.pending_reports,
+            warnings: v.warnings.clone(),
             ..Default::default()
         },
         AnyView::PlotFusion(v) => pb::BatchUpdate {
@@ -312,6 +315,7 @@ fn opened(view: &AnyView) -> pb::BatchUpdate {
                 counters: Some(counters_out(v.body.counters)),
                 ..Default::default()
             }),
+            warnings: v.warnings.clone(),
             ..Default::default()
         },
     }

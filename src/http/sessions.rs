@@ -255,6 +255,9 @@ pub struct SessionState {
     /// Plot-fusion sessions: the tracker.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plot_fusion: Option<PlotFusionSessionState>,
+    /// In the answer to a create request: what was decided for the caller
+    /// (a mode chosen, a missing origin). Empty otherwise.
+    pub warnings: Vec<String>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -449,6 +452,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
         batches: v.batches,
         idle_expiry_s: v.idle_expiry_s,
         encoded_bytes: v.encoded_bytes,
+        warnings: v.warnings,
         instants_processed: None,
         last_instant_t: None,
         pending_reports: None,
@@ -483,6 +487,7 @@ fn correlation_view_out(v: View<domain::SessionView>) -> SessionState {
         batches: v.batches,
         idle_expiry_s: v.idle_expiry_s,
         encoded_bytes: v.encoded_bytes,
+        warnings: v.warnings,
         instants_processed: Some(b.instants_processed),
         last_instant_t: b.last_instant.and_then(finite),
         pending_reports: Some(b.pending_reports),

@@ -668,3 +668,40 @@ async fn extreme_but_valid_values_get_an_answer_or_a_named_error_never_a_500() {
         vec!["plots[0].range_m", "plots[1].t"]
     );
 }
+
+#[tokio::test]
+async fn a_session_says_at_creation_what_was_decided_for_it() {
+    // Local sites and no origin; one radar with Doppler, one without.
+    let app = spawn_app().await;
+    let created = create_session(
+        &app,
+        &json!({"kind": "plot_fusion", "radars": [
+            {"id": "a", "kind": "2d", "site": {"position_m": [0.0, 0.0]},
+             "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 4.0,
+             "sigma_radial_velocity_mps": 1.0},
+            {"id": "b", "kind": "2d", "site": {"position_m": [1000.0, 0.0]},
+             "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 5.0}]}),
+    )
+    .await;
+    assert_eq!(created["plot_fusion"]["mode"], "serial");
+    let warnings: Vec<&str> = created["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(
+        warnings.iter().any(|w| w.contains("origin")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("chose serial") && w.contains('b')),
+        "{warnings:?}"
+    );
+    // A later read carries none.
+    let id = created["id"].as_str().unwrap();
+    let read = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(read["warnings"], json!([]));
+}

@@ -87,8 +87,9 @@ pub trait SessionKind: Sized + Send + 'static {
     type View: fmt::Debug + PartialEq + Send + 'static;
 
     /// A new, empty state; validates the configuration (violations name the
-    /// fields of the create request).
-    fn create(spec: Self::Spec) -> Result<Self, ServiceError>;
+    /// fields of the create request) and pushes what the caller should know
+    /// of what was decided for it (a mode chosen, a missing origin).
+    fn create(spec: Self::Spec, warnings: &mut Vec<String>) -> Result<Self, ServiceError>;
     /// Refuses a batch larger than the limits before any work is done.
     fn check_size(batch: &Self::Batch, limits: &Limits) -> Result<(), ServiceError>;
     /// Applies one batch, pushing its warnings. On error the state may be
@@ -242,6 +243,9 @@ pub struct View<V> {
     /// Size of the stored session.
     pub encoded_bytes: usize,
     pub body: V,
+    /// What the creation decided that the caller should know (only in the
+    /// answer to a create request).
+    pub warnings: Vec<String>,
 }
 
 /// The update of the last sequenced batch, replayed to a retry of it.
@@ -277,7 +281,11 @@ fn corrupt(e: AlgoError) -> ServiceError {
 impl<K: SessionKind> Envelope<K> {
     /// A new session; validates the envelope's settings and the kind's
     /// configuration together, so that a client learns of every bad field.
-    pub fn create(spec: Spec<K::Spec>, created_unix_ms: u64) -> Result<Self, ServiceError> {
+    pub fn create(
+        spec: Spec<K::Spec>,
+        created_unix_ms: u64,
+        warnings: &mut Vec<String>,
+    ) -> Result<Self, ServiceError> {
         let idle = spec.idle_expiry_s.unwrap_or(DEFAULT_IDLE_EXPIRY_S);
         let mut v = Violations::new();
         if !(idle.is_finite() && idle > 0.0 && idle <= MAX_IDLE_EXPIRY_S) {
@@ -286,7 +294,7 @@ impl<K: SessionKind> Envelope<K> {
                 format!("must be a number of seconds in (0, {MAX_IDLE_EXPIRY_S}]"),
             );
         }
-        let state = match (K::create(spec.body), v.finish()) {
+        let state = match (K::create(spec.body, warnings), v.finish()) {
             (Ok(state), Ok(())) => state,
             (Err(ServiceError::InvalidInput(mut kind)), Err(ServiceError::InvalidInput(env))) => {
                 kind.splice(0..0, env);
@@ -421,6 +429,7 @@ impl<K: SessionKind> Envelope<K> {
             idle_expiry_s: self.idle_expiry_s,
             encoded_bytes,
             body: self.state.view()?,
+            warnings: Vec::new(),
         })
     }
 

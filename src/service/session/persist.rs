@@ -123,7 +123,8 @@ impl Sessions {
         tenant: &str,
         spec: Spec<K::Spec>,
     ) -> Result<View<K::View>, ServiceError> {
-        let session = Envelope::<K>::create(spec, unix_ms())?;
+        let mut warnings = Vec::new();
+        let session = Envelope::<K>::create(spec, unix_ms(), &mut warnings)?;
         let data = session.encode();
         let id = new_id();
         let bytes = data.len();
@@ -131,7 +132,10 @@ impl Sessions {
             .store
             .create(tenant, &id, K::NAME, data, ttl(&session))
             .await?;
-        let view = session.view(&id, version, bytes);
+        let view = session.view(&id, version, bytes).map(|mut v| {
+            v.warnings = warnings;
+            v
+        });
         self.cache.put(tenant, &id, version, bytes, session);
         view
     }

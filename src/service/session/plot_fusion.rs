@@ -216,8 +216,9 @@ impl SessionKind for PlotFusionSession {
     type Update = BatchUpdate;
     type View = SessionView;
 
-    fn create(spec: SpecInput) -> Result<Self, ServiceError> {
-        let (network, config, _warnings) = network::validate(&spec)?;
+    fn create(spec: SpecInput, warnings: &mut Vec<String>) -> Result<Self, ServiceError> {
+        let (network, config, decided) = network::validate(&spec)?;
+        warnings.extend(decided);
         let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
         Ok(Self { network, tracker })
     }
@@ -481,7 +482,7 @@ mod tests {
             max_tracks: 100,
             max_batch_reports: 1000,
         };
-        let mut session = PlotFusionSession::create(spec()).unwrap();
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
         let chunks: Vec<&[PlotInput]> = all.chunks(7).collect();
         let n = chunks.len();
         for (i, chunk) in chunks.into_iter().enumerate() {
@@ -519,7 +520,7 @@ mod tests {
             max_batch_reports: 1000,
         };
         let all = plots();
-        let mut session = PlotFusionSession::create(spec()).unwrap();
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
         let mut warnings = Vec::new();
         session
             .apply(

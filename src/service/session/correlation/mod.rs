@@ -169,7 +169,7 @@ impl SessionKind for CorrelationSession {
     type Update = BatchUpdate;
     type View = SessionView;
 
-    fn create(spec: SessionSpec) -> Result<Self, ServiceError> {
+    fn create(spec: SessionSpec, _warnings: &mut Vec<String>) -> Result<Self, ServiceError> {
         CorrelationSession::new(spec)
     }
 

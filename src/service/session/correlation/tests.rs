@@ -198,6 +198,7 @@ fn session_of(input: &CorrelateInput, history: u32) -> Session {
             },
         },
         0,
+        &mut Vec::new(),
     )
     .unwrap()
 }
