@@ -130,6 +130,36 @@ pub fn within_gate(
     })
 }
 
+/// Points sorted by one coordinate, for exact gate pruning: since
+/// ν′S⁻¹ν ≥ ν₀²/S₀₀ for any covariance S, only points whose first
+/// coordinate lies within √(γ S₀₀) of the prediction can pass a χ² gate γ;
+/// [`SortedByFirst::within`] finds them by binary search.
+#[derive(Debug, Clone, Default)]
+pub struct SortedByFirst(Vec<(f64, usize)>);
+
+impl SortedByFirst {
+    /// The points' first coordinates, indexed in iteration order.
+    pub fn new(first: impl Iterator<Item = f64>) -> Self {
+        let mut v: Vec<(f64, usize)> = first.enumerate().map(|(j, x)| (x, j)).collect();
+        v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        Self(v)
+    }
+
+    /// Replaces `out` with the indices, ascending, of the points within
+    /// `reach` of `centre` (every point when `reach` is not finite).
+    pub fn within(&self, centre: f64, reach: f64, out: &mut Vec<usize>) {
+        out.clear();
+        if reach.is_finite() {
+            let lo = self.0.partition_point(|&(v, _)| v < centre - reach);
+            let hi = self.0.partition_point(|&(v, _)| v <= centre + reach);
+            out.extend(self.0[lo..hi].iter().map(|&(_, j)| j));
+            out.sort_unstable();
+        } else {
+            out.extend(0..self.0.len());
+        }
+    }
+}
+
 fn chi_squared(dof: usize) -> Result<ChiSquared, AlgoError> {
     if dof == 0 {
         return Err(AlgoError::InvalidParameter {

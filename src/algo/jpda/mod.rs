@@ -19,7 +19,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
-use crate::algo::gating::{chi2_gate_probability, chi2_threshold};
+use crate::algo::gating::{SortedByFirst, chi2_gate_probability, chi2_threshold};
 use crate::algo::gaussian::{check_covariance, cholesky, symmetrize};
 use crate::algo::kalman::PositionLayout;
 use crate::algo::polar::{polar_measurement_model, wrap_angle};
@@ -253,28 +253,14 @@ fn prepare(tracks: &[TrackEstimate], scan: &Scan) -> Result<Prepared, AlgoError>
     // ν' S⁻¹ ν ≥ ν_0² / S_00, so only measurements whose first component
     // lies within √(γ S_00) of the prediction can pass; they are found by
     // binary search in the measurements sorted by that component.
-    let mut by_first: Vec<(f64, usize)> = scan
-        .measurements
-        .iter()
-        .enumerate()
-        .map(|(j, z)| (z[0], j))
-        .collect();
-    by_first.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let by_first = SortedByFirst::new(scan.measurements.iter().map(|z| z[0]));
     let mut nu = DVector::zeros(dim);
     let mut candidates: Vec<usize> = Vec::new();
     let hits: Vec<Vec<Hit>> = lin
         .iter()
         .map(|l| {
-            candidates.clear();
             let reach = (scan.gate.threshold * l.s00).sqrt() * (1.0 + 1e-9);
-            if reach.is_finite() {
-                let lo = by_first.partition_point(|&(v, _)| v < l.z_pred[0] - reach);
-                let hi = by_first.partition_point(|&(v, _)| v <= l.z_pred[0] + reach);
-                candidates.extend(by_first[lo..hi].iter().map(|&(_, j)| j));
-                candidates.sort_unstable();
-            } else {
-                candidates.extend(0..scan.measurements.len());
-            }
+            by_first.within(l.z_pred[0], reach, &mut candidates);
             let mut row = Vec::new();
             for &j in &candidates {
                 innovation(&mut nu, &scan.measurements[j], &l.z_pred, polar);

@@ -27,6 +27,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
+use crate::algo::gating::SortedByFirst;
 use crate::algo::gaussian::{check_covariance, cholesky, symmetrize};
 use crate::algo::jpda::{
     self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
@@ -116,9 +117,7 @@ pub fn associate_cartesian(
     // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 with S_00 = P_00 + R_00, so only
     // plots whose first component (east) lies within √(γ S_00) of the
     // track's can pass; found by binary search in the plots sorted by it.
-    let mut by_first: Vec<(f64, usize)> =
-        plots.iter().enumerate().map(|(j, p)| (p.z[0], j)).collect();
-    by_first.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let by_first = SortedByFirst::new(plots.iter().map(|p| p.z[0]));
     let max_r00 = plots.iter().map(|p| p.r[(0, 0)]).fold(0.0, f64::max);
     let gate_max = gates[0].max(gates[1]);
     let mut candidates: Vec<usize> = Vec::new();
@@ -127,15 +126,7 @@ pub fn associate_cartesian(
         let axes = track.x.len() / 2;
         let mut row = Vec::new();
         let reach = (gate_max * (track.p[(0, 0)] + max_r00)).sqrt() * (1.0 + 1e-9);
-        candidates.clear();
-        if reach.is_finite() {
-            let lo = by_first.partition_point(|&(v, _)| v < track.x[0] - reach);
-            let hi = by_first.partition_point(|&(v, _)| v <= track.x[0] + reach);
-            candidates.extend(by_first[lo..hi].iter().map(|&(_, j)| j));
-            candidates.sort_unstable();
-        } else {
-            candidates.extend(0..plots.len());
-        }
+        by_first.within(track.x[0], reach, &mut candidates);
         for &j in &candidates {
             let plot = &plots[j];
             let k = plot.z.len();

@@ -269,6 +269,14 @@ impl TrackerConfig {
         }
     }
 
+    /// Sets the mode and the default deletion rule that goes with it
+    /// ([`TrackerConfig::default_deletion`]); set `deletion` afterwards to
+    /// override it.
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.mode = mode;
+        self.deletion = self.default_deletion();
+    }
+
     /// The default deletion rule for the configured mode:
     /// [`Deletion::after_misses`] of `2 × radars` (at least 3) missed frames
     /// in serial mode (a frame is one radar's scan group, so about two scans

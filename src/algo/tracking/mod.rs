@@ -229,6 +229,15 @@ impl Tracker {
         self.process_with(&[], true, &mut |_| {})
     }
 
+    /// The ids of every live track, confirmed and tentative (no copies of
+    /// their states).
+    pub fn track_ids(&self) -> impl Iterator<Item = u64> + '_ {
+        self.tracks
+            .iter()
+            .chain(&self.initiator.tentatives)
+            .map(|t| t.id)
+    }
+
     /// The confirmed tracks by ascending id.
     pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
         let mut confirmed: Vec<TrackOutput> = self

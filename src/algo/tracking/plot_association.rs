@@ -24,6 +24,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::algo::assignment;
 use crate::algo::error::AlgoError;
+use crate::algo::gating::SortedByFirst;
 use crate::algo::gaussian::{cholesky, mahalanobis_sq, symmetrize};
 use crate::algo::tracking::registration::CartesianPlot;
 use crate::algo::tracking::track::chi2_gates;
@@ -49,20 +50,14 @@ pub fn associate_and_fuse(
         // Exact pruning: d'S⁻¹d ≥ d_0²/S_00, so only plots whose first
         // component lies within √(γ S_00) of the cluster's can pass; they
         // are found by binary search in the batch sorted by it.
-        let mut by_first: Vec<(f64, usize)> =
-            batch.iter().enumerate().map(|(j, p)| (p.z[0], j)).collect();
-        by_first.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let by_first = SortedByFirst::new(batch.iter().map(|p| p.z[0]));
         let max_r00 = batch.iter().map(|p| p.r[(0, 0)]).fold(0.0, f64::max);
         let gate_max = gates[0].max(gates[1]);
         let mut candidates = Vec::new();
         let mut edges = Vec::new();
         for (c, cluster) in clusters.iter().enumerate() {
             let reach = (gate_max * (cluster.r[(0, 0)] + max_r00)).sqrt() * (1.0 + 1e-9);
-            let lo = by_first.partition_point(|&(v, _)| v < cluster.z[0] - reach);
-            let hi = by_first.partition_point(|&(v, _)| v <= cluster.z[0] + reach);
-            candidates.clear();
-            candidates.extend(by_first[lo..hi].iter().map(|&(_, j)| j));
-            candidates.sort_unstable();
+            by_first.within(cluster.z[0], reach, &mut candidates);
             for &j in &candidates {
                 let p = batch[j];
                 let d2 = distance_sq(cluster, p)?;

@@ -87,11 +87,10 @@ pub fn register(
 pub fn extrapolate(
     radar: &RadarSpec,
     radar_index: usize,
-    plot_in: &Plot,
+    plot: &Plot,
     t: f64,
     sigma_tangential_speed: f64,
 ) -> Result<CartesianPlot, AlgoError> {
-    let plot = plot_in;
     let (Some(v), Some(sigma_v)) = (plot.radial_velocity, radar.sigma_radial_velocity) else {
         return Err(AlgoError::InvalidParameter {
             what: "radial_velocity",
@@ -105,20 +104,20 @@ pub fn extrapolate(
         polar.range = range;
     }
     polar.sigma_range = polar.sigma_range.hypot(dt * sigma_v);
-    let mut plot = to_cartesian(radar, radar_index, t, &polar)?;
+    let mut out = to_cartesian(radar, radar_index, t, &polar)?;
     // The unseen motion across the line of sight: (σ_t Δt)² (I − u u').
     let cross = (dt * sigma_tangential_speed).powi(2);
     if cross > 0.0 {
-        let u = line_of_sight(plot_in)?;
-        let n = plot.z.len();
+        let u = line_of_sight(plot)?;
+        let n = out.z.len();
         for i in 0..n {
             for j in 0..n {
                 let identity = if i == j { 1.0 } else { 0.0 };
-                plot.r[(i, j)] += cross * (identity - u[i] * u[j]);
+                out.r[(i, j)] += cross * (identity - u[i] * u[j]);
             }
         }
     }
-    Ok(plot)
+    Ok(out)
 }
 
 /// The radial velocity re-expressed about the fusion centre (step 1), or

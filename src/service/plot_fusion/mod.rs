@@ -36,13 +36,8 @@ pub const DEFAULT_CLUTTER_DENSITY: f64 = 1e-7;
 /// this is cut, with a warning).
 pub const MAX_HISTORY_TRACK_STATES: usize = 2_000_000;
 
-/// A WGS84 position.
-#[derive(Debug, Clone, Default)]
-pub struct GeoInput {
-    pub lat_deg: Option<f64>,
-    pub lon_deg: Option<f64>,
-    pub height_m: Option<f64>,
-}
+/// A WGS84 position: the dimension service's site input, shared.
+pub use super::dimension::SiteInput as GeoInput;
 
 /// A radar site: WGS84 (`geodetic`) or a local offset `[e, n, u]` from the
 /// request's origin; exactly one.

@@ -389,8 +389,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     }
 
     let mut config = TrackerConfig::new(axes, specs);
-    config.mode = mode;
-    config.deletion = config.default_deletion();
+    config.set_mode(mode);
     config.noise = noise;
     config.association.method = method;
     if let Some(n) = tracker.max_exact_cluster_tracks {

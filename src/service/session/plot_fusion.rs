@@ -117,12 +117,6 @@ pub struct PlotFusionSession {
     tracker: Tracker,
 }
 
-impl PlotFusionSession {
-    fn live_ids(&self) -> HashSet<u64> {
-        self.tracker.tracks().iter().map(|t| t.id).collect()
-    }
-}
-
 fn status_code(s: &str) -> u8 {
     match s {
         "tentative" => 0,
@@ -236,7 +230,7 @@ impl SessionKind for PlotFusionSession {
         let plots = self
             .network
             .plots(&batch.plots, self.tracker.config(), "plots")?;
-        let before = self.live_ids();
+        let before: HashSet<u64> = self.tracker.track_ids().collect();
         let mut report = self
             .tracker
             .process_with(&plots, batch.flush, &mut |_| {})

@@ -642,10 +642,9 @@ fn one_run(
     let specs: Vec<RadarSpec> = radars.iter().map(|r| radar_spec(r, 1e-9)).collect();
     let config = |specs: Vec<RadarSpec>, mode: Mode| {
         let mut c = TrackerConfig::new(2, specs);
-        c.mode = mode;
         // The service's default for the mode (2 × radars missed frames in
         // serial mode, 3 in parallel mode).
-        c.deletion = c.default_deletion();
+        c.set_mode(mode);
         c
     };
     let track = |cfg: TrackerConfig, plots: &[Plot]| -> Result<MethodRun, SimError> {
