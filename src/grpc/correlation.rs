@@ -154,6 +154,9 @@ pub(super) fn correlate_input(
             mode: a.mode,
             tolerance_s: a.tolerance_s,
             max_gap_s: a.max_gap_s,
+            period_s: a.period_s,
+            epoch_s: a.epoch_s,
+            max_staleness_s: a.max_staleness_s,
         }),
         measurement_matrix,
         nodes,
@@ -201,6 +204,7 @@ pub(super) fn system_track(g: corr::GroupOutput) -> pb::SystemTrack {
         state: g.state,
         covariance: Some(matrix(&g.covariance)),
         fusion: fusion_name(g.fusion).into(),
+        trial: g.trial,
     }
 }
 
@@ -223,6 +227,32 @@ fn correlate_response(out: corr::CorrelateOutput) -> pb::CorrelateTracksResponse
         }),
         gains: out.gains.into(),
         instants: out.instants,
+        alignment: Some(pb::AlignmentReport {
+            mode: out.alignment.mode.into(),
+            period_s: out.alignment.period_s,
+            period_estimated: out.alignment.period_estimated,
+            epoch_s: out.alignment.epoch_s,
+            tolerance_s: out.alignment.tolerance_s,
+            max_gap_s: out.alignment.max_gap_s,
+            nodes: out
+                .alignment
+                .nodes
+                .into_iter()
+                .map(|n| pb::NodeAlignment {
+                    node: n.node,
+                    tracks: n.tracks as u64,
+                    scan_period_s: n.scan_period_s,
+                    max_staleness_s: n.max_staleness_s,
+                })
+                .collect(),
+            instants: out.alignment.instants as u64,
+            node_pairs_without_common_instant: out.alignment.node_pairs_without_common_instant
+                as u64,
+            tracks_without_partner_instant: out.alignment.tracks_without_partner_instant as u64,
+            tracks: out.alignment.tracks as u64,
+            brought: out.alignment.brought as u64,
+            unused_samples: out.alignment.unused_samples as u64,
+        }),
         pairs: out.pairs.into_iter().map(pair_result).collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out

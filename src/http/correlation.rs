@@ -92,14 +92,70 @@ pub struct MotionModel {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Alignment {
-    /// `predict` (default when a motion model is given), `interpolate` or `nearest`.
+    /// `grid` (default): a fusion-time grid, each track brought to each
+    /// instant from its latest sample at or before it (predicted with the
+    /// motion model; without one, along its velocity without process noise,
+    /// or held when the state has no velocities). `predict` / `nearest`:
+    /// clusters of report times no wider than `tolerance_s`, the latest
+    /// sample of each track predicted / as reported. `interpolate`: linear
+    /// interpolation at the cluster instants (batch only).
+    #[schema(example = "grid")]
     pub mode: Option<String>,
-    /// Widest spread of report times merged into one instant (default 0.5 s).
+    /// `predict`, `nearest`, `interpolate`: widest spread of report times
+    /// merged into one instant (default 0.5 s). Sessions, every mode: how
+    /// long after an instant reports for it may still arrive before it
+    /// closes.
     #[schema(example = 0.5)]
     pub tolerance_s: Option<f64>,
     /// `interpolate`: the widest gap between two samples interpolated across
     /// (default 10 s); a track is never extrapolated.
     pub max_gap_s: Option<f64>,
+    /// `grid`: the fusion period in seconds (default: the longest scan
+    /// period of the nodes, each estimated as the median interval between
+    /// consecutive samples of its tracks).
+    pub period_s: Option<f64>,
+    /// `grid`: instants are `epoch_s + k·period_s` (default 0).
+    pub epoch_s: Option<f64>,
+    /// `grid`: the oldest a sample may be at an instant (default 1.5 scan
+    /// periods of its node, so a missed scan makes a track absent).
+    pub max_staleness_s: Option<f64>,
+}
+
+/// What alignment did: test `node_pairs_without_common_instant` and
+/// `tracks_without_partner_instant` to know whether the nodes could meet.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AlignmentReport {
+    /// `grid`, `predict`, `nearest` or `interpolate`.
+    pub mode: &'static str,
+    /// `grid`: the fusion period used (absent: no track had two samples, so
+    /// one instant at the latest sample time).
+    pub period_s: Option<f64>,
+    /// `grid`: the period was estimated from the data.
+    pub period_estimated: bool,
+    pub epoch_s: Option<f64>,
+    pub tolerance_s: Option<f64>,
+    pub max_gap_s: Option<f64>,
+    pub nodes: Vec<NodeAlignment>,
+    pub instants: usize,
+    /// Node pairs (both with tracks) that share no instant where both hold a track.
+    pub node_pairs_without_common_instant: usize,
+    /// Tracks present at no instant where another node holds a track.
+    pub tracks_without_partner_instant: usize,
+    pub tracks: usize,
+    /// Estimates brought across a gap to an instant (predicted, held or interpolated).
+    pub brought: usize,
+    /// Samples not used: a later sample of the same track came first.
+    pub unused_samples: usize,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct NodeAlignment {
+    pub node: String,
+    pub tracks: usize,
+    /// Median interval between consecutive samples of the node's tracks.
+    pub scan_period_s: Option<f64>,
+    /// `grid`: the oldest a sample may be at an instant.
+    pub max_staleness_s: Option<f64>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -142,6 +198,7 @@ pub struct CorrelateTracksResponse {
     pub gains: &'static str,
     /// The common instants after alignment.
     pub instants: Vec<f64>,
+    pub alignment: AlignmentReport,
     /// Every pair with at least one sample inside the first threshold in its
     /// current cycle or window, or correlated, or a trial system track.
     pub pairs: Vec<PairResult>,
@@ -218,6 +275,9 @@ pub struct SystemTrack {
     pub covariance: Vec<Vec<f64>>,
     /// `bar_shalom_campo`, `covariance_intersection`, `single` or `none`.
     pub fusion: &'static str,
+    /// A trial system track (seed 000 eq. 21): its pairs are still
+    /// undecided; it is output as the paper does, flagged.
+    pub trial: bool,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -329,6 +389,9 @@ pub(super) fn config_in(
             mode: a.mode,
             tolerance_s: a.tolerance_s,
             max_gap_s: a.max_gap_s,
+            period_s: a.period_s,
+            epoch_s: a.epoch_s,
+            max_staleness_s: a.max_staleness_s,
         }),
         measurement_matrix,
         nodes,
@@ -368,6 +431,7 @@ pub(super) fn system_track(g: svc::GroupOutput) -> SystemTrack {
         state: g.state,
         covariance: g.covariance,
         fusion: fusion_name(g.fusion),
+        trial: g.trial,
     }
 }
 
@@ -380,6 +444,33 @@ pub(super) fn track_ref(t: svc::TrackName) -> TrackRef {
 
 pub(super) fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
+}
+
+fn alignment_report(a: svc::AlignmentReport) -> AlignmentReport {
+    AlignmentReport {
+        mode: a.mode,
+        period_s: a.period_s,
+        period_estimated: a.period_estimated,
+        epoch_s: a.epoch_s,
+        tolerance_s: a.tolerance_s,
+        max_gap_s: a.max_gap_s,
+        nodes: a
+            .nodes
+            .into_iter()
+            .map(|n| NodeAlignment {
+                node: n.node,
+                tracks: n.tracks,
+                scan_period_s: n.scan_period_s,
+                max_staleness_s: n.max_staleness_s,
+            })
+            .collect(),
+        instants: a.instants,
+        node_pairs_without_common_instant: a.node_pairs_without_common_instant,
+        tracks_without_partner_instant: a.tracks_without_partner_instant,
+        tracks: a.tracks,
+        brought: a.brought,
+        unused_samples: a.unused_samples,
+    }
 }
 
 fn response(out: svc::CorrelateOutput) -> CorrelateTracksResponse {
@@ -402,6 +493,7 @@ fn response(out: svc::CorrelateOutput) -> CorrelateTracksResponse {
         },
         gains: out.gains,
         instants: out.instants,
+        alignment: alignment_report(out.alignment),
         pairs: out.pairs.into_iter().map(pair_result).collect(),
         omitted_pairs: out.omitted_pairs,
         unpaired: out

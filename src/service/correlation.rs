@@ -19,7 +19,9 @@ use nalgebra::{DMatrix, DVector};
 
 use super::{ServiceError, Violations, covariance_message, micros_since};
 use crate::algo::{
+    AlgoError,
     correlation::{
+        align::{self, Estimate},
         engine::{
             self, Config, Decision, Method, PairCorrelator, PairReport, Pruning, Reason,
             Resolution, RuleSpec, Statistic,
@@ -89,11 +91,22 @@ pub struct MotionModelInput {
 
 #[derive(Debug, Clone, Default)]
 pub struct AlignmentInput {
-    /// `predict` (default with a motion model), `interpolate` or `nearest`.
+    /// `grid` (default), `predict`, `interpolate` or `nearest`.
     pub mode: Option<String>,
     /// `interpolate`: the widest gap between two samples interpolated across.
     pub max_gap_s: Option<f64>,
+    /// `predict`, `nearest`, `interpolate`: widest spread of report times
+    /// merged into one instant. Sessions (every mode): how long after an
+    /// instant reports for it may still arrive.
     pub tolerance_s: Option<f64>,
+    /// `grid`: the fusion period (default: the longest scan period of the
+    /// nodes, estimated from the data).
+    pub period_s: Option<f64>,
+    /// `grid`: instants are `epoch_s + k·period_s` (default 0).
+    pub epoch_s: Option<f64>,
+    /// `grid`: the oldest a sample may be at an instant (default 1.5 scan
+    /// periods of its node, estimated from the data).
+    pub max_staleness_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -137,6 +150,7 @@ pub struct CorrelateOutput {
     /// `reported`, `recomputed` or `not_used` (weighted statistic).
     pub gains: &'static str,
     pub instants: Vec<f64>,
+    pub alignment: AlignmentReport,
     pub pairs: Vec<PairOutput>,
     /// Pairs never within the gate in their current window (not listed).
     pub omitted_pairs: u64,
@@ -199,6 +213,8 @@ pub struct GroupOutput {
     pub state: Vec<f64>,
     pub covariance: Vec<Vec<f64>>,
     pub fusion: FusionKind,
+    /// A trial system track (eq. 21): its pairs are undecided.
+    pub trial: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -224,6 +240,13 @@ pub(super) type CrossCovariances = HashMap<((usize, usize), (usize, usize)), (us
 /// How a track's samples are carried to the common instants.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum AlignMode {
+    /// A fusion-time grid (`algo::correlation::align`): each track brought
+    /// from its latest sample at or before each instant.
+    Grid {
+        period: Option<f64>,
+        epoch: f64,
+        max_staleness: Option<f64>,
+    },
     /// The latest sample of the cluster, predicted forward with the model.
     Predict,
     /// The latest sample of the cluster, as reported.
@@ -242,6 +265,10 @@ pub(super) struct Plan {
     pub(super) method_name: String,
     pub(super) config: Config,
     pub(super) model: Option<ConstantVelocity>,
+    /// The model that brings samples to instants: the motion model, or
+    /// without one a constant-velocity model without process noise when the
+    /// layout has velocities (positions are then held as reported).
+    pub(super) align_model: Option<ConstantVelocity>,
     pub(super) alignment: AlignMode,
     pub(super) tolerance: f64,
     pub(super) h: Option<DMatrix<f64>>,
@@ -346,7 +373,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
 
     // Alignment.
     let t_align = Instant::now();
-    let (scene, gains_reported, mut warnings) = align(&input, &plan)?;
+    let (scene, gains_reported, mut warnings, alignment) = align(&input, &plan)?;
     let align_us = micros_since(t_align);
 
     // Correlation of every node pair.
@@ -372,8 +399,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
     };
     let model_ref: Option<&dyn MotionModel> = plan.model.as_ref().map(|m| m as &dyn MotionModel);
     let mut pairs = Vec::new();
-    let mut links = Vec::new();
-    let mut cross: CrossCovariances = HashMap::new();
+    let mut links = Links::default();
     let mut omitted = 0u64;
     let mut delta = f64::NAN;
     let mut singular = 0usize;
@@ -389,7 +415,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
             let reports = correlator.reports();
             let mut listed = 0u64;
             for r in reports {
-                collect_link(&r, na, nb, &mut links, &mut cross);
+                links.collect(&r, na, nb);
                 if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
                     listed += 1;
                     pairs.push(pair_output(&r, name(na, r.a), name(nb, r.b)));
@@ -405,40 +431,13 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
              consistent with one another); the weighted statistic was used for them"
         ));
     }
-    let grouping = grouping::group(&links);
     let correlate_us = micros_since(t_corr);
 
     // System tracks.
     let t_fuse = Instant::now();
-    let mut groups = Vec::new();
-    for (id, members) in grouping.groups.iter().enumerate() {
-        let fused = if plan.fuse {
-            fuse_group(&scene, members, &cross, dim)
-        } else {
-            None
-        };
-        let (t, state, covariance, kind) = match fused {
-            Some((k, f, kind)) => (
-                scene.time(k),
-                plan.layout.vector_to_request(f.x.as_slice()),
-                plan.layout.matrix_to_request(&f.p),
-                kind,
-            ),
-            None => (f64::NAN, Vec::new(), Vec::new(), FusionKind::None),
-        };
-        groups.push(GroupOutput {
-            id: id as u32,
-            members: members.iter().map(|&(n, t)| name(n, t)).collect(),
-            t,
-            state,
-            covariance,
-            fusion: kind,
-        });
-    }
+    let (grouping, grouped, groups) = system_tracks(&scene, &plan, &links, name);
     let fuse_us = micros_since(t_fuse);
 
-    let grouped: std::collections::HashSet<(usize, usize)> =
-        grouping.groups.iter().flatten().copied().collect();
     let unpaired = (0..n_nodes)
         .map(|n| {
             let ids = (0..scene.nodes()[n].len())
@@ -499,6 +498,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
             Statistic::Modified => "recomputed",
         },
         instants: scene.times().to_vec(),
+        alignment,
         pairs,
         omitted_pairs: omitted,
         unpaired,
@@ -514,26 +514,97 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
     })
 }
 
-/// Records a correlated pair of nodes `na`, `nb` as a grouping link, with
-/// its cross-covariance for the fusion.
-pub(super) fn collect_link(
-    r: &PairReport,
-    na: usize,
-    nb: usize,
-    links: &mut Vec<Link>,
-    cross: &mut CrossCovariances,
-) {
-    if r.decision == Decision::Correlated {
-        links.push(Link {
+/// The correlated and trial pairs of every node pair, as grouping links,
+/// with the cross-covariances of the correlated ones for the fusion.
+#[derive(Debug, Default)]
+pub(super) struct Links {
+    pub(super) correlated: Vec<Link>,
+    /// Trial system tracks (eq. 21): undecided pairs provisionally paired.
+    pub(super) trial: Vec<Link>,
+    pub(super) cross: CrossCovariances,
+}
+
+impl Links {
+    /// Records pair report `r` of nodes `na`, `nb`.
+    pub(super) fn collect(&mut self, r: &PairReport, na: usize, nb: usize) {
+        let link = Link {
             a: (na, r.a),
             b: (nb, r.b),
             m: r.m,
             mean_statistic: r.mean_statistic,
-        });
-        if let Some(c) = &r.cross_covariance {
-            cross.insert(((na, r.a), (nb, r.b)), (r.last_common, c.clone()));
+        };
+        if r.decision == Decision::Correlated {
+            self.correlated.push(link);
+            if let Some(c) = &r.cross_covariance {
+                self.cross
+                    .insert(((na, r.a), (nb, r.b)), (r.last_common, c.clone()));
+            }
+        } else if r.trial {
+            self.trial.push(link);
         }
     }
+}
+
+/// The system tracks: the groups of correlated tracks, then the trial
+/// groups (trial pairs among tracks in no correlated group, flagged
+/// `trial`), each fused at its latest well-covered instant. Returns the
+/// correlated grouping too (its conflicts), and every track in a group.
+pub(super) fn system_tracks(
+    scene: &Scene,
+    plan: &Plan,
+    links: &Links,
+    name: impl Fn(usize, usize) -> TrackName,
+) -> (
+    grouping::Grouping,
+    std::collections::HashSet<(usize, usize)>,
+    Vec<GroupOutput>,
+) {
+    let dim = plan.layout.dim;
+    let grouping = grouping::group(&links.correlated);
+    let mut grouped: std::collections::HashSet<(usize, usize)> =
+        grouping.groups.iter().flatten().copied().collect();
+    let free: Vec<Link> = links
+        .trial
+        .iter()
+        .filter(|l| !grouped.contains(&l.a) && !grouped.contains(&l.b))
+        .cloned()
+        .collect();
+    let trial = grouping::group(&free);
+    grouped.extend(trial.groups.iter().flatten().copied());
+    let all = grouping
+        .groups
+        .iter()
+        .map(|g| (g, false))
+        .chain(trial.groups.iter().map(|g| (g, true)));
+    let groups = all
+        .enumerate()
+        .map(|(id, (members, is_trial))| {
+            let fused = if plan.fuse {
+                fuse_group(scene, members, &links.cross, dim)
+            } else {
+                None
+            };
+            let (t, state, covariance, fusion) = match fused {
+                Some((k, f, kind)) => (
+                    scene.time(k),
+                    plan.layout.vector_to_request(f.x.as_slice()),
+                    plan.layout.matrix_to_request(&f.p),
+                    kind,
+                ),
+                None => (f64::NAN, Vec::new(), Vec::new(), FusionKind::None),
+            };
+            GroupOutput {
+                id: id as u32,
+                members: members.iter().map(|&(n, t)| name(n, t)).collect(),
+                t,
+                state,
+                covariance,
+                fusion,
+                trial: is_trial,
+            }
+        })
+        .collect();
+    (grouping, grouped, groups)
 }
 
 pub(super) fn pair_output(r: &PairReport, a: TrackName, b: TrackName) -> PairOutput {
@@ -629,6 +700,7 @@ struct ConfigParts {
     alpha: f64,
     pruning: Pruning,
     model: Option<ConstantVelocity>,
+    align_model: Option<ConstantVelocity>,
     mode: AlignMode,
     tolerance: f64,
     h: Option<DMatrix<f64>>,
@@ -786,9 +858,40 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         v.add("alignment.tolerance_s", "must be a finite number ≥ 0");
     }
     let max_gap = alignment.max_gap_s.unwrap_or(DEFAULT_MAX_GAP_S);
+    let grid_only = [
+        ("alignment.period_s", alignment.period_s.is_some()),
+        ("alignment.epoch_s", alignment.epoch_s.is_some()),
+        (
+            "alignment.max_staleness_s",
+            alignment.max_staleness_s.is_some(),
+        ),
+    ];
     let mode = match alignment.mode.as_deref() {
-        None if input.motion_model.is_some() => AlignMode::Predict,
-        None | Some("nearest") => AlignMode::Nearest,
+        None | Some("grid") => {
+            let period = alignment
+                .period_s
+                .and_then(|p| v.positive("alignment.period_s", Some(p)));
+            let epoch = v.number_in(
+                "alignment.epoch_s",
+                alignment.epoch_s.or(Some(0.0)),
+                -1e12,
+                1e12,
+            );
+            let max_staleness = alignment.max_staleness_s.and_then(|s| {
+                if s.is_finite() && s >= 0.0 {
+                    Some(s)
+                } else {
+                    v.add("alignment.max_staleness_s", "must be a finite number ≥ 0");
+                    None
+                }
+            });
+            AlignMode::Grid {
+                period,
+                epoch: epoch.unwrap_or(0.0),
+                max_staleness,
+            }
+        }
+        Some("nearest") => AlignMode::Nearest,
         Some("predict") => {
             if input.motion_model.is_none() {
                 v.add("alignment.mode", "predict needs a motion_model");
@@ -804,10 +907,29 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         Some(other) => {
             v.add(
                 "alignment.mode",
-                format!("unknown mode '{other}': predict, interpolate or nearest"),
+                format!("unknown mode '{other}': grid, predict, interpolate or nearest"),
             );
             AlignMode::Nearest
         }
+    };
+    if !matches!(mode, AlignMode::Grid { .. }) {
+        for (field, given) in grid_only {
+            if given {
+                v.add(
+                    field,
+                    "applies to the grid alignment only (alignment.mode: grid)",
+                );
+            }
+        }
+    }
+    // Without a motion model, samples with velocities are extrapolated
+    // along them (F without Q); positions alone are held.
+    let align_model = match (&model, &layout) {
+        (Some(m), _) => Some(m.clone()),
+        (None, Some(l)) if l.has_velocity => {
+            ConstantVelocity::new(l.axes, ProcessNoise::Cwna { q: 0.0 }).ok()
+        }
+        _ => None,
     };
     let pruning = match input.pruning.as_deref() {
         None | Some("grid") => Pruning::Grid,
@@ -857,6 +979,7 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         alpha,
         pruning,
         model,
+        align_model,
         mode,
         tolerance,
         h,
@@ -872,6 +995,7 @@ fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
         alpha,
         pruning,
         model,
+        align_model,
         mode,
         tolerance,
         h,
@@ -886,6 +1010,7 @@ fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
             pruning,
         },
         model,
+        align_model,
         alignment: mode,
         tolerance,
         h,
@@ -937,9 +1062,6 @@ fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
                     );
                 }
             }
-        }
-        if node.tracks.is_empty() {
-            v.add(format!("{field}.tracks"), "must hold at least one track");
         }
         let mut track_ids = HashMap::new();
         for (ti, track) in node.tracks.iter().enumerate() {
@@ -1095,98 +1217,244 @@ fn motion_model(
     v.param("motion_model.", ConstantVelocity::new(layout.axes, noise))
 }
 
-/// Builds the aligned scene; returns it, whether gains were reported, and warnings.
-fn align(input: &CorrelateInput, plan: &Plan) -> Result<(Scene, bool, Vec<String>), ServiceError> {
+/// Most track-instants (tracks × instants) an aligned scene may hold.
+pub const MAX_SCENE_CELLS: usize = 8_000_000;
+
+/// What alignment did, for a client to test.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AlignmentReport {
+    /// `grid`, `predict`, `nearest` or `interpolate`.
+    pub mode: &'static str,
+    /// `grid`: the fusion period used (`None`: no node had two samples of a
+    /// track, so one instant at the latest time).
+    pub period_s: Option<f64>,
+    /// `grid`: whether the period was estimated from the data.
+    pub period_estimated: bool,
+    pub epoch_s: Option<f64>,
+    /// `predict`, `nearest`, `interpolate`.
+    pub tolerance_s: Option<f64>,
+    pub max_gap_s: Option<f64>,
+    pub nodes: Vec<NodeAlignment>,
+    pub instants: usize,
+    /// Node pairs that share no instant where both hold a track.
+    pub node_pairs_without_common_instant: usize,
+    /// Tracks present at no instant where another node holds a track.
+    pub tracks_without_partner_instant: usize,
+    pub tracks: usize,
+    /// Estimates brought across a gap to an instant (predicted, or held).
+    pub brought: usize,
+    /// Samples not used (superseded by a later sample of the same track
+    /// before the next instant).
+    pub unused_samples: usize,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeAlignment {
+    pub node: String,
+    pub tracks: usize,
+    /// Median interval between consecutive samples of the node's tracks.
+    pub scan_period_s: Option<f64>,
+    /// `grid`: the oldest a sample may be at an instant.
+    pub max_staleness_s: Option<f64>,
+}
+
+fn mode_name(m: AlignMode) -> &'static str {
+    match m {
+        AlignMode::Grid { .. } => "grid",
+        AlignMode::Predict => "predict",
+        AlignMode::Nearest => "nearest",
+        AlignMode::Interpolate { .. } => "interpolate",
+    }
+}
+
+/// A track's samples in canonical order, with their update factors.
+fn estimates(track: &TrackInput, plan: &Plan) -> Vec<Estimate> {
+    let layout = &plan.layout;
+    track
+        .samples
+        .iter()
+        .map(|s| Estimate {
+            t: s.t.expect("validated"),
+            x: layout.vector_to_canonical(&s.state),
+            p: layout.matrix_to_canonical(&s.covariance),
+            factor: match (&s.gain, &plan.h) {
+                (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
+                _ => None,
+            },
+        })
+        .collect()
+}
+
+/// The grid's period and each node's staleness bound: given, or estimated
+/// from node scan periods (`None` period: nothing to estimate from).
+pub(super) fn grid_parameters(
+    period: Option<f64>,
+    max_staleness: Option<f64>,
+    node_periods: &[Option<f64>],
+) -> (Option<f64>, Vec<f64>) {
+    let grid = period.or_else(|| node_periods.iter().flatten().copied().reduce(f64::max));
+    let staleness = node_periods
+        .iter()
+        .map(|p| {
+            max_staleness.unwrap_or_else(|| match p.or(grid) {
+                Some(p) => align::STALENESS_PERIODS * p,
+                None => f64::INFINITY,
+            })
+        })
+        .collect();
+    (grid, staleness)
+}
+
+/// Builds the aligned scene; returns it, whether gains were reported,
+/// warnings and the alignment report.
+fn align(
+    input: &CorrelateInput,
+    plan: &Plan,
+) -> Result<(Scene, bool, Vec<String>, AlignmentReport), ServiceError> {
     let layout = &plan.layout;
     let dim = layout.dim;
-    let mut times: Vec<f64> = input
+    let model: Option<&dyn MotionModel> = match plan.alignment {
+        AlignMode::Predict | AlignMode::Grid { .. } => {
+            plan.align_model.as_ref().map(|m| m as &dyn MotionModel)
+        }
+        _ => None,
+    };
+    let est: Vec<Vec<Vec<Estimate>>> = input
         .nodes
         .iter()
-        .flat_map(|n| n.tracks.iter())
-        .flat_map(|t| t.samples.iter())
-        .filter_map(|s| s.t)
+        .map(|n| n.tracks.iter().map(|t| estimates(t, plan)).collect())
         .collect();
+    let gains_reported = est.iter().flatten().flatten().any(|e| e.factor.is_some());
+    let mut times: Vec<f64> = est.iter().flatten().flatten().map(|e| e.t).collect();
     times.sort_by(f64::total_cmp);
-    // Clusters no wider than the tolerance; the instant is the latest time.
-    let mut clusters: Vec<(f64, f64)> = Vec::new();
-    for t in times {
-        match clusters.last_mut() {
-            Some((start, end)) if t - *start <= plan.tolerance => *end = t,
-            _ => clusters.push((t, t)),
+    let node_periods: Vec<Option<f64>> = est
+        .iter()
+        .map(|tracks| {
+            let mut iv: Vec<f64> = tracks
+                .iter()
+                .flat_map(|s| s.windows(2).map(|w| w[1].t - w[0].t))
+                .collect();
+            align::median_interval(&mut iv)
+        })
+        .collect();
+    let mut report = AlignmentReport {
+        mode: mode_name(plan.alignment),
+        period_s: None,
+        period_estimated: false,
+        epoch_s: None,
+        tolerance_s: None,
+        max_gap_s: None,
+        nodes: Vec::new(),
+        instants: 0,
+        node_pairs_without_common_instant: 0,
+        tracks_without_partner_instant: 0,
+        tracks: est.iter().map(Vec::len).sum(),
+        brought: 0,
+        unused_samples: 0,
+    };
+    let mut warnings = Vec::new();
+    let mut staleness = vec![None; est.len()];
+    let clustered;
+    let instants: Vec<f64> = match plan.alignment {
+        AlignMode::Grid {
+            period,
+            epoch,
+            max_staleness,
+        } => {
+            let (grid, bounds) = grid_parameters(period, max_staleness, &node_periods);
+            report.period_s = grid;
+            report.period_estimated = period.is_none() && grid.is_some();
+            report.epoch_s = Some(epoch);
+            staleness = bounds.iter().copied().map(Some).collect();
+            clustered = Vec::new();
+            match grid {
+                Some(g) => {
+                    let widest = bounds.iter().copied().fold(0.0, f64::max);
+                    let limit = MAX_SCENE_CELLS / report.tracks.max(1);
+                    align::grid_instants(&times, g, epoch, widest, limit).ok_or_else(|| {
+                        ServiceError::TooLarge(format!(
+                            "the grid alignment with a period of {g} s gives more than {limit} \
+                             instants for {} tracks (the limit is {MAX_SCENE_CELLS} \
+                             track-instants), or the period is below the resolution of the \
+                             times: give a longer alignment.period_s or split the request in time",
+                            report.tracks
+                        ))
+                    })?
+                }
+                None => {
+                    if times.len() > 1 {
+                        warnings.push(
+                            "no track has two samples, so no scan period can be estimated: \
+                             every track was brought to one instant at the latest sample time; \
+                             give alignment.period_s for a grid"
+                                .to_string(),
+                        );
+                    }
+                    times.last().map(|&t| vec![t]).unwrap_or_default()
+                }
+            }
         }
+        _ => {
+            report.tolerance_s = Some(plan.tolerance);
+            if let AlignMode::Interpolate { max_gap } = plan.alignment {
+                report.max_gap_s = Some(max_gap);
+            }
+            clustered = align::clusters(&times, plan.tolerance);
+            clustered.iter().map(|c| c.1).collect()
+        }
+    };
+    report.instants = instants.len();
+    let cells = instants.len().saturating_mul(report.tracks);
+    if cells > MAX_SCENE_CELLS {
+        return Err(ServiceError::TooLarge(format!(
+            "alignment gives {} instants for {} tracks ({cells} track-instants; the limit is \
+             {MAX_SCENE_CELLS}): give a longer alignment.period_s or split the request in time",
+            instants.len(),
+            report.tracks
+        )));
     }
-    let instants: Vec<f64> = clusters.iter().map(|c| c.1).collect();
     let mut scene = Scene::new(dim, layout.positions(), instants.clone())
         .map_err(|e| ServiceError::Internal(e.to_string()))?;
-    let mut gains_reported = false;
-    let mut predicted = 0usize;
-    let mut interpolated = 0usize;
-    let mut dropped = 0usize;
-    let eye = DMatrix::<f64>::identity(dim, dim);
-    for (ni, node) in input.nodes.iter().enumerate() {
-        let mut tracks = Vec::with_capacity(node.tracks.len());
-        for (ti, track) in node.tracks.iter().enumerate() {
+    for (ni, node) in est.iter().enumerate() {
+        let mut tracks = Vec::with_capacity(node.len());
+        for (ti, samples) in node.iter().enumerate() {
             let mut out = Track::new(instants.len(), dim);
-            if let AlignMode::Interpolate { max_gap } = plan.alignment {
-                interpolated +=
-                    interpolate_track(&mut out, &track.samples, &instants, layout, max_gap);
-                tracks.push(out);
-                continue;
-            }
-            let mut ci = 0;
-            let samples = &track.samples;
-            let mut si = 0;
-            while si < samples.len() {
-                let t = samples[si].t.expect("validated");
-                while clusters[ci].1 < t {
-                    ci += 1;
+            let at = |si: usize, e: AlgoError| {
+                Violations::from_param(&format!("nodes[{ni}].tracks[{ti}].samples[{si}]."), e)
+            };
+            match plan.alignment {
+                AlignMode::Grid { .. } => {
+                    let bound = staleness[ni].unwrap_or(f64::INFINITY);
+                    let stats = align::fill_grid(&mut out, samples, &instants, 0, model, bound)
+                        .map_err(|(si, e)| at(si, e))?;
+                    report.brought += stats.brought;
+                    report.unused_samples += stats.unused;
                 }
-                // The latest sample of this track inside cluster ci.
-                let mut last = si;
-                while last + 1 < samples.len()
-                    && samples[last + 1].t.expect("validated") <= clusters[ci].1
-                {
-                    last += 1;
+                AlignMode::Interpolate { max_gap } => {
+                    report.brought += interpolate_track(&mut out, samples, &instants, max_gap);
                 }
-                dropped += last - si;
-                let s = &samples[last];
-                let ts = s.t.expect("validated");
-                let mut x = layout.vector_to_canonical(&s.state);
-                let mut p = layout.matrix_to_canonical(&s.covariance);
-                let dt = instants[ci] - ts;
-                if dt > 0.0 && plan.alignment == AlignMode::Predict {
-                    let model = plan.model.as_ref().expect("predict needs a model");
-                    let (xp, pp) = model
-                        .predict(
-                            &DVector::from_column_slice(&x),
-                            &DMatrix::from_row_slice(dim, dim, &p),
-                            dt,
-                        )
-                        .map_err(|e| {
-                            Violations::from_param(
-                                &format!("nodes[{ni}].tracks[{ti}].samples[{last}]."),
-                                e,
-                            )
-                        })?;
-                    x = xp.as_slice().to_vec();
-                    p = small::row_major(&pp);
-                    predicted += 1;
-                }
-                out.set(ci, &x, &p);
-                if let (Some(g), Some(h)) = (&s.gain, &plan.h) {
-                    let m = h.nrows();
-                    let k_flat: Vec<f64> = g.iter().flatten().copied().collect();
-                    // K rows follow the request's layout: permute them.
-                    let k_req = DMatrix::from_row_slice(dim, m, &k_flat);
-                    let mut k = DMatrix::zeros(dim, m);
-                    for (i, &ri) in layout.from_request.iter().enumerate() {
-                        k.set_row(i, &k_req.row(ri));
+                AlignMode::Predict | AlignMode::Nearest => {
+                    let mut ci = 0;
+                    let mut si = 0;
+                    while si < samples.len() {
+                        while clustered[ci].1 < samples[si].t {
+                            ci += 1;
+                        }
+                        // The latest sample of this track inside cluster ci.
+                        let mut last = si;
+                        while last + 1 < samples.len() && samples[last + 1].t <= clustered[ci].1 {
+                            last += 1;
+                        }
+                        report.unused_samples += last - si;
+                        let placed =
+                            align::place(&mut out, ci, instants[ci], &samples[last], model, true)
+                                .map_err(|e| at(last, e))?;
+                        if placed == align::Placed::Brought && model.is_some() {
+                            report.brought += 1;
+                        }
+                        si = last + 1;
                     }
-                    let factor = &eye - &k * h;
-                    out.set_gain_factor(ci, &small::row_major(&factor));
-                    gains_reported = true;
                 }
-                si = last + 1;
             }
             tracks.push(out);
         }
@@ -1194,27 +1462,148 @@ fn align(input: &CorrelateInput, plan: &Plan) -> Result<(Scene, bool, Vec<String
             .add_node(tracks)
             .map_err(|e| ServiceError::Internal(e.to_string()))?;
     }
-    let mut warnings = Vec::new();
-    if predicted > 0 {
+    report.nodes = input
+        .nodes
+        .iter()
+        .zip(&node_periods)
+        .zip(&staleness)
+        .map(|((n, &p), &s)| NodeAlignment {
+            node: n.id.clone().unwrap_or_default(),
+            tracks: n.tracks.len(),
+            scan_period_s: p,
+            max_staleness_s: s.filter(|s| s.is_finite()),
+        })
+        .collect();
+    let node_ids: Vec<String> = report.nodes.iter().map(|n| n.node.clone()).collect();
+    let empty: Vec<&str> = report
+        .nodes
+        .iter()
+        .filter(|n| n.tracks == 0)
+        .map(|n| n.node.as_str())
+        .collect();
+    if !empty.is_empty() {
         warnings.push(format!(
-            "{predicted} sample(s) were predicted forward (at most {} s) to a common instant",
-            plan.tolerance
+            "{} node(s) hold no tracks ({}): they take part in no pair",
+            empty.len(),
+            empty.join(", ")
         ));
     }
-    if interpolated > 0 {
-        warnings.push(format!(
-            "{interpolated} estimate(s) were interpolated linearly between two samples of their \
-             track to a common instant"
-        ));
+    coverage(&scene, &node_ids, &mut report, &mut warnings);
+    match plan.alignment {
+        AlignMode::Predict if report.brought > 0 => warnings.push(format!(
+            "{} sample(s) were predicted forward (at most {} s) to a common instant",
+            report.brought, plan.tolerance
+        )),
+        AlignMode::Interpolate { .. } if report.brought > 0 => warnings.push(format!(
+            "{} estimate(s) were interpolated linearly between two samples of their track to a \
+             common instant",
+            report.brought
+        )),
+        AlignMode::Grid { .. } if plan.model.is_none() && report.brought > 0 => {
+            warnings.push(if layout.has_velocity {
+                format!(
+                    "no motion_model: {} estimate(s) were extrapolated to their instant along \
+                     their velocity without process noise; give motion_model for Q",
+                    report.brought
+                )
+            } else {
+                format!(
+                    "no velocities in state_layout: {} position(s) were held unchanged up to \
+                     their staleness bound to reach an instant; moving targets may fail the test",
+                    report.brought
+                )
+            })
+        }
+        _ => {}
     }
-    if dropped > 0 {
+    if report.unused_samples > 0 && !matches!(plan.alignment, AlignMode::Grid { .. }) {
         warnings.push(format!(
-            "{dropped} sample(s) were superseded by a later sample of the same track within one \
+            "{} sample(s) were superseded by a later sample of the same track within one \
              alignment instant (tolerance {} s) and ignored",
-            plan.tolerance
+            report.unused_samples, plan.tolerance
         ));
     }
-    Ok((scene, gains_reported, warnings))
+    Ok((scene, gains_reported, warnings, report))
+}
+
+/// Which nodes meet at which instants: counts the node pairs that never do
+/// and the tracks that never meet another node, and warns when alignment
+/// left the nodes apart.
+pub(super) fn coverage(
+    scene: &Scene,
+    node_ids: &[String],
+    report: &mut AlignmentReport,
+    warnings: &mut Vec<String>,
+) {
+    let n = scene.nodes().len();
+    if n < 2 {
+        return;
+    }
+    let ks = scene.first()..scene.end();
+    let node_at: Vec<Vec<bool>> = scene
+        .nodes()
+        .iter()
+        .map(|tracks| {
+            ks.clone()
+                .map(|k| tracks.iter().any(|t| t.is_present(k)))
+                .collect()
+        })
+        .collect();
+    let busy: Vec<usize> = (0..ks.len())
+        .map(|i| node_at.iter().filter(|v| v[i]).count())
+        .collect();
+    let mut apart = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            let has_tracks = |x: usize| !scene.nodes()[x].is_empty();
+            if has_tracks(a)
+                && has_tracks(b)
+                && !(0..ks.len()).any(|i| node_at[a][i] && node_at[b][i])
+            {
+                apart.push((a, b));
+            }
+        }
+    }
+    report.node_pairs_without_common_instant = apart.len();
+    let alone = scene
+        .nodes()
+        .iter()
+        .flatten()
+        .filter(|t| {
+            !ks.clone()
+                .enumerate()
+                .any(|(i, k)| t.is_present(k) && busy[i] >= 2)
+        })
+        .count();
+    report.tracks_without_partner_instant = alone;
+    let fix = match report.mode {
+        "grid" => "raise alignment.max_staleness_s (or alignment.period_s)",
+        "interpolate" => "raise alignment.max_gap_s, or use the default grid alignment",
+        _ => {
+            "use the default grid alignment (alignment.mode: grid), or raise alignment.tolerance_s to the scan offset"
+        }
+    };
+    if !apart.is_empty() {
+        let names: Vec<String> = apart
+            .iter()
+            .take(5)
+            .map(|&(a, b)| format!("{}–{}", node_ids[a], node_ids[b]))
+            .collect();
+        warnings.push(format!(
+            "{} node pair(s) share no instant where both hold a track ({}{}) under the {} \
+             alignment, so they cannot correlate: {fix}",
+            apart.len(),
+            names.join(", "),
+            if apart.len() > 5 { ", …" } else { "" },
+            report.mode
+        ));
+    } else if alone * 2 > report.tracks {
+        warnings.push(format!(
+            "{alone} of {} tracks are present at no instant where another node holds a track, \
+             so they cannot correlate under the {} alignment: {fix}",
+            report.tracks, report.mode
+        ));
+    }
 }
 
 /// Fills `out` at every instant that lies between two samples of the track
@@ -1225,49 +1614,30 @@ fn align(input: &CorrelateInput, plan: &Plan) -> Result<(Scene, bool, Vec<String
 /// estimates (those not on a sample).
 fn interpolate_track(
     out: &mut Track,
-    samples: &[SampleInput],
+    samples: &[Estimate],
     instants: &[f64],
-    layout: &Layout,
     max_gap: f64,
 ) -> usize {
-    let times: Vec<f64> = samples.iter().map(|s| s.t.expect("validated")).collect();
     let mut count = 0;
     for (k, &t) in instants.iter().enumerate() {
         // The first sample at or after t.
-        let b = times.partition_point(|&ts| ts < t);
-        if b < times.len() && times[b] == t {
-            let s = &samples[b];
-            out.set(
-                k,
-                &layout.vector_to_canonical(&s.state),
-                &layout.matrix_to_canonical(&s.covariance),
-            );
+        let b = samples.partition_point(|s| s.t < t);
+        if b < samples.len() && samples[b].t == t {
+            out.set(k, &samples[b].x, &samples[b].p);
             continue;
         }
-        if b == 0 || b == times.len() || times[b] - times[b - 1] > max_gap {
+        if b == 0 || b == samples.len() || samples[b].t - samples[b - 1].t > max_gap {
             continue;
         }
         let (sa, sb) = (&samples[b - 1], &samples[b]);
-        let w = (t - times[b - 1]) / (times[b] - times[b - 1]);
-        let (xa, xb) = (
-            layout.vector_to_canonical(&sa.state),
-            layout.vector_to_canonical(&sb.state),
-        );
-        let (pa, pb) = (
-            layout.matrix_to_canonical(&sa.covariance),
-            layout.matrix_to_canonical(&sb.covariance),
-        );
-        let x: Vec<f64> = xa
-            .iter()
-            .zip(&xb)
-            .map(|(a, b)| (1.0 - w) * a + w * b)
-            .collect();
-        let p: Vec<f64> = pa
-            .iter()
-            .zip(&pb)
-            .map(|(a, b)| (1.0 - w) * a + w * b)
-            .collect();
-        out.set(k, &x, &p);
+        let w = (t - sa.t) / (sb.t - sa.t);
+        let mix = |a: &[f64], b: &[f64]| -> Vec<f64> {
+            a.iter()
+                .zip(b)
+                .map(|(a, b)| (1.0 - w) * a + w * b)
+                .collect()
+        };
+        out.set(k, &mix(&sa.x, &sb.x), &mix(&sa.p, &sb.p));
         count += 1;
     }
     count

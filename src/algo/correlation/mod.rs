@@ -2,6 +2,7 @@
 //! (statistics, double-threshold logic, baselines), grouping across M nodes
 //! and the fusion of correlated tracks into system tracks.
 
+pub mod align;
 pub mod engine;
 pub mod fusion;
 pub mod grouping;

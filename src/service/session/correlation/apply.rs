@@ -8,16 +8,19 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 
 use super::{
     BatchInput, BatchUpdate, ChangeKind, CorrelationSession, PairChange, ReportInput,
-    state::{Pending, Slot, gain_factor, internal},
+    state::{INTERVALS_KEPT, Pending, Slot, internal},
 };
 use crate::{
     algo::{
-        correlation::engine::{PairCorrelator, Side, Statistic},
+        correlation::{
+            align::{self, Estimate},
+            engine::{PairCorrelator, Side, Statistic},
+        },
         motion::MotionModel,
     },
     service::{
         ServiceError, Violations,
-        correlation::{self, CrossCovariances},
+        correlation::{self, AlignMode, Links},
         session::Limits,
     },
 };
@@ -32,7 +35,6 @@ impl CorrelationSession {
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<BatchUpdate, ServiceError> {
-        let tol = self.plan.tolerance;
         let mut v = Violations::new();
         // Validate every report before touching the state.
         let mut accepted: Vec<(usize, String, f64, &ReportInput)> = Vec::new();
@@ -105,108 +107,19 @@ impl CorrelationSession {
             )));
         }
 
-        let horizon = self.closed_start.map(|s| s + tol);
-        let mut late = 0u64;
-        for (node, track, t, r) in accepted {
-            if horizon.is_some_and(|h| t <= h) {
-                late += 1;
-                continue;
-            }
-            let slot = self.slot_for(node, &track);
-            let layout = &self.plan.layout;
-            let x = layout.vector_to_canonical(&r.sample.state);
-            let p = layout.matrix_to_canonical(&r.sample.covariance);
-            let factor = match (&r.sample.gain, &self.plan.h) {
-                (Some(g), Some(h)) => Some(gain_factor(g, h, layout)),
-                _ => None,
-            };
-            self.pending.push(Pending {
-                node,
-                slot,
-                t,
-                x,
-                p,
-                factor,
-            });
-            self.reports_accepted += 1;
-        }
-        if late > 0 {
-            self.reports_late += late;
-            warnings.push(format!(
-                "{late} report(s) fell in an instant already closed (at or before {} s) and \
-                 were dropped",
-                horizon.unwrap_or(f64::NAN)
-            ));
-        }
-
-        // Close the clusters that can no longer grow.
-        self.pending.sort_by(|a, b| a.t.total_cmp(&b.t));
-        let mut clusters: Vec<(usize, usize, f64)> = Vec::new(); // [from, to), start
-        for (i, r) in self.pending.iter().enumerate() {
-            match clusters.last_mut() {
-                Some((_, to, start)) if r.t - *start <= tol => *to = i + 1,
-                _ => clusters.push((i, i + 1, r.t)),
-            }
-        }
-        if !batch.flush {
-            clusters.pop();
-        }
-        let closed = clusters.last().map_or(0, |c| c.1);
-        let reports: Vec<Pending> = self.pending.drain(..closed).collect();
         let before: Vec<Vec<(usize, usize, bool, bool)>> = self
             .correlators
             .iter()
             .map(|c| c.links().collect())
             .collect();
         let first_new = self.scene.end();
-        let mut instants = Vec::new();
         let mut retire_at: Vec<(usize, usize, usize)> = Vec::new(); // (k, node, slot)
-        let mut superseded = 0usize;
-        let mut predicted = 0usize;
-        for &(from, to, start) in &clusters {
-            let group = &reports[from..to];
-            let t_k = group.last().expect("clusters are not empty").t;
-            let k = self.scene.push_instant(t_k).map_err(internal)?;
-            instants.push(t_k);
-            self.closed_start = Some(start);
-            // The latest report of each track (stable sort: ties keep arrival order).
-            let mut latest: HashMap<(usize, usize), &Pending> = HashMap::new();
-            for r in group {
-                if latest.insert((r.node, r.slot), r).is_some() {
-                    superseded += 1;
-                }
-            }
-            let mut keys: Vec<_> = latest.keys().copied().collect();
-            keys.sort_unstable();
-            for key in keys {
-                let r = latest[&key];
-                predicted += usize::from(self.fill(k, r)?);
-                self.slots[r.node][r.slot].last_t = Some(t_k);
-            }
-            for (node, slots) in self.slots.iter_mut().enumerate() {
-                for (slot, s) in slots.iter_mut().enumerate() {
-                    if !s.id.is_empty()
-                        && !s.retiring
-                        && s.last_t.is_some_and(|lt| t_k - lt > self.retire_after_s)
-                    {
-                        s.retiring = true;
-                        retire_at.push((k, node, slot));
-                    }
-                }
-            }
-        }
+        let instants = if matches!(self.plan.alignment, AlignMode::Grid { .. }) {
+            self.close_grid(accepted, batch.flush, limits, &mut retire_at, warnings)?
+        } else {
+            self.close_clusters(accepted, batch.flush, &mut retire_at, warnings)?
+        };
         self.instants_processed += instants.len() as u64;
-        if superseded > 0 {
-            warnings.push(format!(
-                "{superseded} report(s) were superseded by a later report of the same track \
-                 within one alignment instant (tolerance {tol} s) and ignored"
-            ));
-        }
-        if predicted > 0 {
-            warnings.push(format!(
-                "{predicted} report(s) were predicted forward (at most {tol} s) to a common instant"
-            ));
-        }
 
         // Correlate every node pair over the new instants, releasing the
         // pairs of retired tracks at the instant they retire.
@@ -214,8 +127,7 @@ impl CorrelationSession {
             self.plan.model.as_ref().map(|m| m as &dyn MotionModel);
         let end = self.scene.end();
         let mut reports_out = Vec::new();
-        let mut links = Vec::new();
-        let mut cross: CrossCovariances = HashMap::new();
+        let mut links = Links::default();
         let mut singular = 0usize;
         for (ci, (na, nb)) in self.node_pairs().into_iter().enumerate() {
             let mut state = std::mem::take(&mut self.correlators[ci]);
@@ -249,7 +161,7 @@ impl CorrelationSession {
                     .map_err(internal)?;
             singular += c.singular_tests;
             for r in c.reports() {
-                correlation::collect_link(&r, na, nb, &mut links, &mut cross);
+                links.collect(&r, na, nb);
                 if r.last_common >= first_new && r.last_common < end {
                     reports_out.push((na, nb, r));
                 }
@@ -301,7 +213,7 @@ impl CorrelationSession {
                 correlation::pair_output(r, self.name(*na, r.a), self.name(*nb, r.b))
             })
             .collect();
-        let system_tracks = self.system_tracks(&links, &cross);
+        let system_tracks = self.system_tracks(&links);
 
         // Free the retired slots and trim the history.
         let mut retired = Vec::new();
@@ -309,11 +221,7 @@ impl CorrelationSession {
             retired.push(self.name(node, slot));
             let id = std::mem::take(&mut self.slots[node][slot].id);
             self.by_id[node].remove(&id);
-            self.slots[node][slot] = Slot {
-                id: String::new(),
-                last_t: None,
-                retiring: false,
-            };
+            self.slots[node][slot] = Slot::default();
             self.scene.clear_track(node, slot);
         }
         if self.scene.times().len() > 2 * self.history {
@@ -327,5 +235,309 @@ impl CorrelationSession {
             system_tracks,
             retired,
         })
+    }
+}
+
+/// A validated report: node, track id, time, and the report.
+type Accepted<'a> = (usize, String, f64, &'a ReportInput);
+
+impl CorrelationSession {
+    /// A report as an estimate in canonical order.
+    fn estimate(&self, t: f64, r: &ReportInput) -> Estimate {
+        let layout = &self.plan.layout;
+        Estimate {
+            t,
+            x: layout.vector_to_canonical(&r.sample.state),
+            p: layout.matrix_to_canonical(&r.sample.covariance),
+            factor: match (&r.sample.gain, &self.plan.h) {
+                (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
+                _ => None,
+            },
+        }
+    }
+
+    /// Marks the live tracks silent for longer than the retirement time at
+    /// instant `k` (time `t_k`) for release.
+    fn mark_silent(&mut self, k: usize, t_k: f64, retire_at: &mut Vec<(usize, usize, usize)>) {
+        for (node, slots) in self.slots.iter_mut().enumerate() {
+            for (slot, s) in slots.iter_mut().enumerate() {
+                if !s.id.is_empty()
+                    && !s.retiring
+                    && s.last_t.is_some_and(|lt| t_k - lt > self.retire_after_s)
+                {
+                    s.retiring = true;
+                    retire_at.push((k, node, slot));
+                }
+            }
+        }
+    }
+
+    /// The cluster alignment (`predict`, `nearest`): reports wait in the open
+    /// cluster; returns the instants closed.
+    fn close_clusters(
+        &mut self,
+        accepted: Vec<Accepted<'_>>,
+        flush: bool,
+        retire_at: &mut Vec<(usize, usize, usize)>,
+        warnings: &mut Vec<String>,
+    ) -> Result<Vec<f64>, ServiceError> {
+        let tol = self.plan.tolerance;
+        let horizon = self.closed_start.map(|s| s + tol);
+        let mut late = 0u64;
+        for (node, track, t, r) in accepted {
+            if horizon.is_some_and(|h| t <= h) {
+                late += 1;
+                continue;
+            }
+            let slot = self.slot_for(node, &track);
+            let est = self.estimate(t, r);
+            self.pending.push(Pending { node, slot, est });
+            self.reports_accepted += 1;
+        }
+        if late > 0 {
+            self.reports_late += late;
+            warnings.push(format!(
+                "{late} report(s) fell in an instant already closed (at or before {} s) and \
+                 were dropped",
+                horizon.unwrap_or(f64::NAN)
+            ));
+        }
+
+        // Close the clusters that can no longer grow.
+        self.pending.sort_by(|a, b| a.est.t.total_cmp(&b.est.t));
+        let times: Vec<f64> = self.pending.iter().map(|r| r.est.t).collect();
+        let mut clusters: Vec<(usize, usize, f64)> = Vec::new(); // [from, to), start
+        for (i, &t) in times.iter().enumerate() {
+            match clusters.last_mut() {
+                Some((_, to, start)) if t - *start <= tol => *to = i + 1,
+                _ => clusters.push((i, i + 1, t)),
+            }
+        }
+        if !flush {
+            clusters.pop();
+        }
+        let closed = clusters.last().map_or(0, |c| c.1);
+        let reports: Vec<Pending> = self.pending.drain(..closed).collect();
+        let mut instants = Vec::new();
+        let mut superseded = 0usize;
+        let mut predicted = 0usize;
+        for &(from, to, start) in &clusters {
+            let group = &reports[from..to];
+            let t_k = group.last().expect("clusters are not empty").est.t;
+            let k = self.scene.push_instant(t_k).map_err(internal)?;
+            instants.push(t_k);
+            self.closed_start = Some(start);
+            // The latest report of each track (stable sort: ties keep arrival order).
+            let mut latest: HashMap<(usize, usize), &Pending> = HashMap::new();
+            for r in group {
+                if latest.insert((r.node, r.slot), r).is_some() {
+                    superseded += 1;
+                }
+            }
+            let mut keys: Vec<_> = latest.keys().copied().collect();
+            keys.sort_unstable();
+            for key in keys {
+                let r = latest[&key];
+                predicted += usize::from(self.fill(k, r.node, r.slot, &r.est, true)?);
+                self.slots[r.node][r.slot].last_t = Some(t_k);
+            }
+            self.mark_silent(k, t_k, retire_at);
+        }
+        if superseded > 0 {
+            warnings.push(format!(
+                "{superseded} report(s) were superseded by a later report of the same track \
+                 within one alignment instant (tolerance {tol} s) and ignored"
+            ));
+        }
+        if predicted > 0 {
+            warnings.push(format!(
+                "{predicted} report(s) were predicted forward (at most {tol} s) to a common instant"
+            ));
+        }
+        Ok(instants)
+    }
+
+    /// The grid alignment: instants on the fusion-time grid close once a
+    /// report later than the instant plus the tolerance has arrived (or on
+    /// a flush); each live track is brought to each from its latest report
+    /// at or before it, within its node's staleness bound. A report for an
+    /// instant already closed still serves the later ones. Returns the
+    /// instants closed.
+    fn close_grid(
+        &mut self,
+        mut accepted: Vec<Accepted<'_>>,
+        flush: bool,
+        limits: &Limits,
+        retire_at: &mut Vec<(usize, usize, usize)>,
+        warnings: &mut Vec<String>,
+    ) -> Result<Vec<f64>, ServiceError> {
+        let AlignMode::Grid {
+            epoch,
+            max_staleness,
+            ..
+        } = self.plan.alignment
+        else {
+            unreachable!("the grid alignment");
+        };
+        let tol = self.plan.tolerance;
+        let last_closed = self.scene.times().last().copied();
+        accepted.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let mut late = 0u64;
+        for (node, track, t, r) in accepted {
+            let slot = self.slot_for(node, &track);
+            let est = self.estimate(t, r);
+            let s = &mut self.slots[node][slot];
+            if let Some(seen) = s.seen_t
+                && t > seen
+            {
+                let iv = &mut self.intervals[node];
+                if iv.len() == INTERVALS_KEPT {
+                    iv.remove(0);
+                }
+                iv.push(t - seen);
+            }
+            s.seen_t = Some(s.seen_t.map_or(t, |seen| seen.max(t)));
+            self.reports_accepted += 1;
+            if last_closed.is_some_and(|c| t <= c) {
+                late += 1;
+                if s.latest.as_ref().is_none_or(|l| t > l.t) {
+                    s.latest = Some(est);
+                    s.used = false;
+                }
+            } else {
+                self.pending.push(Pending { node, slot, est });
+            }
+        }
+        if late > 0 {
+            self.reports_late += late;
+            warnings.push(format!(
+                "{late} report(s) arrived after their instant closed (at or before {} s): \
+                 they serve the later instants only",
+                last_closed.unwrap_or(f64::NAN)
+            ));
+        }
+        self.pending.sort_by(|a, b| a.est.t.total_cmp(&b.est.t));
+        let Some(t_max) = self.pending.last().map(|r| r.est.t) else {
+            return Ok(Vec::new());
+        };
+
+        // The period: fixed once known.
+        let node_periods: Vec<Option<f64>> = self
+            .intervals
+            .iter()
+            .map(|iv| align::median_interval(&mut iv.clone()))
+            .collect();
+        if self.grid_period.is_none() {
+            let (estimated, _) = correlation::grid_parameters(None, None, &node_periods);
+            if let Some(p) = estimated {
+                self.grid_period = Some(p);
+                warnings.push(format!(
+                    "grid alignment: the fusion period was estimated at {p} s (the longest scan \
+                     period of the nodes that have reported twice); give alignment.period_s to \
+                     fix it"
+                ));
+            }
+        }
+        let (_, bounds) =
+            correlation::grid_parameters(self.grid_period, max_staleness, &node_periods);
+        let widest = bounds.iter().copied().fold(0.0, f64::max);
+        let Some(period) = self.grid_period else {
+            if !flush {
+                warnings.push(
+                    "grid alignment: waiting for a second report of some track to estimate the \
+                     scan period; give alignment.period_s to start at once"
+                        .to_string(),
+                );
+                return Ok(Vec::new());
+            }
+            // One instant at the latest report, as the batch endpoint does.
+            return self
+                .close_grid_instant(t_max, &bounds, retire_at)
+                .map(|_| vec![t_max]);
+        };
+        let end = align::grid_at_or_after(t_max, period, epoch);
+        let mut g = match last_closed {
+            Some(c) => align::grid_after(c, period, epoch).unwrap_or(f64::INFINITY),
+            None => align::grid_at_or_after(self.pending[0].est.t, period, epoch),
+        };
+        let mut instants = Vec::new();
+        while if flush { g <= end } else { g + tol < t_max } {
+            self.take_reports_upto(g);
+            let newest = self
+                .slots
+                .iter()
+                .flatten()
+                .filter(|s| !s.id.is_empty())
+                .filter_map(|s| s.latest.as_ref().map(|l| l.t))
+                .fold(f64::NEG_INFINITY, f64::max);
+            if g - newest > widest {
+                // Nothing can be present: jump to the next report.
+                match self.pending.first() {
+                    Some(r) => g = align::grid_at_or_after(r.est.t, period, epoch),
+                    None => break,
+                }
+                continue;
+            }
+            self.close_grid_instant(g, &bounds, retire_at)?;
+            instants.push(g);
+            if instants.len() > limits.max_batch_reports.max(1024) {
+                return Err(ServiceError::TooLarge(format!(
+                    "the batch would close more than {} grid instants of {period} s: give a \
+                     longer alignment.period_s",
+                    instants.len() - 1
+                )));
+            }
+            let Some(next) = align::grid_after(g, period, epoch) else {
+                return Err(Violations::single(
+                    "alignment.period_s",
+                    format!("{period} s is below the resolution of the report times"),
+                ));
+            };
+            g = next;
+        }
+        Ok(instants)
+    }
+
+    /// The pending reports up to `t` become their tracks' latest (a report
+    /// older than the latest already held is superseded).
+    fn take_reports_upto(&mut self, t: f64) {
+        let upto = self.pending.partition_point(|r| r.est.t <= t);
+        for r in self.pending.drain(..upto) {
+            let s = &mut self.slots[r.node][r.slot];
+            if s.latest.as_ref().is_none_or(|l| r.est.t > l.t) {
+                s.latest = Some(r.est);
+                s.used = false;
+            }
+        }
+    }
+
+    /// Closes grid instant `t_k`: every live track whose latest report is
+    /// within its node's staleness bound is brought to it.
+    fn close_grid_instant(
+        &mut self,
+        t_k: f64,
+        bounds: &[f64],
+        retire_at: &mut Vec<(usize, usize, usize)>,
+    ) -> Result<(), ServiceError> {
+        self.take_reports_upto(t_k);
+        let k = self.scene.push_instant(t_k).map_err(internal)?;
+        for node in 0..self.slots.len() {
+            for slot in 0..self.slots[node].len() {
+                let s = &self.slots[node][slot];
+                let Some(est) = s.latest.as_ref().filter(|l| t_k - l.t <= bounds[node]) else {
+                    continue;
+                };
+                if s.id.is_empty() {
+                    continue;
+                }
+                let (est, first_use) = (est.clone(), !s.used);
+                self.fill(k, node, slot, &est, first_use)?;
+                let s = &mut self.slots[node][slot];
+                s.used = true;
+                s.last_t = Some(t_k);
+            }
+        }
+        self.mark_silent(k, t_k, retire_at);
+        Ok(())
     }
 }

@@ -13,6 +13,7 @@ use crate::{
     algo::{
         AlgoError,
         correlation::{
+            align::Estimate,
             engine::{self, CorrelatorState, Decision},
             scene::Scene,
         },
@@ -30,6 +31,7 @@ use crate::{
 
 /// Appends the session's payload (format 3).
 pub(super) fn encode(s: &CorrelationSession, w: &mut Writer) {
+    // Format 4: format 3 with the grid alignment's fields and state.
     w.u8(FORMAT_VERSION);
     encode_spec(w, &s.spec);
     w.f64(s.retire_after_s);
@@ -39,6 +41,7 @@ pub(super) fn encode(s: &CorrelationSession, w: &mut Writer) {
     w.u64(s.reports_late);
     w.opt(s.closed_start, Writer::f64);
     encode_tail(s, w);
+    encode_grid(s, w);
 }
 
 /// The scene, the slots, the correlators and the pending reports: the same
@@ -60,22 +63,73 @@ fn encode_tail(s: &CorrelationSession, w: &mut Writer) {
     for p in &s.pending {
         w.usize(p.node);
         w.usize(p.slot);
-        w.f64(p.t);
-        w.f64s(&p.x);
-        w.f64s(&p.p);
-        w.opt(p.factor.as_deref(), Writer::f64s);
+        encode_estimate(w, &p.est);
     }
+}
+
+fn encode_estimate(w: &mut Writer, e: &Estimate) {
+    w.f64(e.t);
+    w.f64s(&e.x);
+    w.f64s(&e.p);
+    w.opt(e.factor.as_deref(), Writer::f64s);
+}
+
+fn decode_estimate(r: &mut Reader<'_>, dim: usize) -> Result<Estimate, AlgoError> {
+    let t = r.f64()?;
+    let x = r.f64s()?;
+    let p = r.f64s()?;
+    let factor = r.opt(Reader::f64s)?;
+    if x.len() != dim
+        || p.len() != dim * dim
+        || factor.as_ref().is_some_and(|f| f.len() != dim * dim)
+    {
+        return Err(wire::corrupt("estimate shape"));
+    }
+    Ok(Estimate { t, x, p, factor })
+}
+
+/// The grid alignment's state (format 4 on): the fixed period, each node's
+/// recent intervals, and each slot's latest report.
+fn encode_grid(s: &CorrelationSession, w: &mut Writer) {
+    w.opt(s.grid_period, Writer::f64);
+    for iv in &s.intervals {
+        w.f64s(iv);
+    }
+    for slots in &s.slots {
+        for slot in slots {
+            w.opt(slot.latest.as_ref(), encode_estimate);
+            w.bool(slot.used);
+            w.opt(slot.seen_t, Writer::f64);
+        }
+    }
+}
+
+fn decode_grid(r: &mut Reader<'_>, s: &mut CorrelationSession) -> Result<(), AlgoError> {
+    let dim = s.plan.layout.dim;
+    s.grid_period = r.opt(Reader::f64)?;
+    for iv in s.intervals.iter_mut() {
+        *iv = r.f64s()?;
+    }
+    for slots in s.slots.iter_mut() {
+        for slot in slots.iter_mut() {
+            slot.latest = r.opt(|r| decode_estimate(r, dim))?;
+            slot.used = r.bool()?;
+            slot.seen_t = r.opt(Reader::f64)?;
+        }
+    }
+    Ok(())
 }
 
 /// Reads a payload written by [`encode`].
 pub(super) fn decode(r: &mut Reader<'_>) -> Result<CorrelationSession, ServiceError> {
     let format = r.u8().map_err(corrupt)?;
-    if format != FORMAT_VERSION {
+    if !(3..=FORMAT_VERSION).contains(&format) {
         return Err(ServiceError::Internal(format!(
-            "stored correlation payload has format {format}; this release reads {FORMAT_VERSION}"
+            "stored correlation payload has format {format}; this release reads 3 to \
+             {FORMAT_VERSION}"
         )));
     }
-    let spec = decode_spec(r, false).map_err(corrupt)?;
+    let spec = decode_spec(r, Spec::of_format(format)).map_err(corrupt)?;
     let retire_after_s = r.f64().map_err(corrupt)?;
     let history = r.usize().map_err(corrupt)?;
     let counters = [
@@ -84,8 +138,12 @@ pub(super) fn decode(r: &mut Reader<'_>) -> Result<CorrelationSession, ServiceEr
         r.u64().map_err(corrupt)?,
     ];
     let closed_start = r.opt(Reader::f64).map_err(corrupt)?;
-    // Payload format 3 holds scene format 2.
-    decode_tail(r, 2, spec, retire_after_s, history, counters, closed_start)
+    // Payload formats 3 and 4 hold scene format 2.
+    let mut s = decode_tail(r, 2, spec, retire_after_s, history, counters, closed_start)?;
+    if format >= 4 {
+        decode_grid(r, &mut s).map_err(corrupt)?;
+    }
+    Ok(s)
 }
 
 /// Reads a whole session of format 1 or 2 (before the envelope).
@@ -97,7 +155,7 @@ pub(super) fn decode_legacy(buf: &[u8]) -> Result<Envelope<CorrelationSession>, 
             "stored session has format {version}, not 1 or 2"
         )));
     }
-    let spec = decode_spec(&mut r, true).map_err(corrupt)?;
+    let spec = decode_spec(&mut r, Spec::Legacy).map_err(corrupt)?;
     let idle_expiry_s = r.f64().map_err(corrupt)?;
     let retire_after_s = r.f64().map_err(corrupt)?;
     let history = r.usize().map_err(corrupt)?;
@@ -175,7 +233,7 @@ fn decode_tail(
             list.push(Slot {
                 id,
                 last_t,
-                retiring: false,
+                ..Slot::default()
             });
         }
         slots.push(list);
@@ -191,23 +249,13 @@ fn decode_tail(
     for _ in 0..np {
         let node = r.usize().map_err(corrupt)?;
         let slot = r.usize().map_err(corrupt)?;
-        let t = r.f64().map_err(corrupt)?;
-        let x = r.f64s().map_err(corrupt)?;
-        let p = r.f64s().map_err(corrupt)?;
-        let factor = r.opt(Reader::f64s).map_err(corrupt)?;
-        if node >= n || slot >= slots[node].len() || x.len() != dim || p.len() != dim * dim {
+        let est = decode_estimate(r, dim).map_err(corrupt)?;
+        if node >= n || slot >= slots[node].len() {
             return Err(ServiceError::Internal(
                 "stored session: pending report".into(),
             ));
         }
-        pending.push(Pending {
-            node,
-            slot,
-            t,
-            x,
-            p,
-            factor,
-        });
+        pending.push(Pending { node, slot, est });
     }
     Ok(CorrelationSession {
         spec,
@@ -224,12 +272,17 @@ fn decode_tail(
         instants_processed,
         reports_accepted,
         reports_late,
+        grid_period: None,
+        intervals: vec![Vec::new(); n],
     })
 }
 
 fn opt_str(w: &mut Writer, v: &Option<String>) {
     w.opt(v.as_deref(), Writer::str);
 }
+
+/// Set in a system track's fusion code when it is a trial system track.
+const TRIAL_BIT: u8 = 0x80;
 
 /// Stable codes of the enums kept in an encoded update (append only).
 const DECISIONS: [Decision; 3] = [
@@ -316,7 +369,9 @@ pub(super) fn encode_update(w: &mut Writer, u: &BatchUpdate) {
         w.f64s(&g.state);
         w.usize(g.covariance.len());
         g.covariance.iter().for_each(|row| w.f64s(row));
-        w.u8(code_of(&FUSION_KINDS, &g.fusion));
+        // The trial flag rides in the fusion code's high bit, so that the
+        // updates kept by earlier releases read unchanged.
+        w.u8(code_of(&FUSION_KINDS, &g.fusion) | if g.trial { TRIAL_BIT } else { 0 });
     }
     w.usize(u.retired.len());
     u.retired.iter().for_each(|n| encode_name(w, n));
@@ -349,13 +404,24 @@ pub(super) fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError
         })
     })?;
     let system_tracks = decode_list(r, |r| {
+        let id = r.u32()?;
+        let members = decode_list(r, decode_name)?;
+        let t = r.f64()?;
+        let state = r.f64s()?;
+        let covariance = decode_list(r, Reader::f64s)?;
+        let code = r.u8()?;
         Ok(GroupOutput {
-            id: r.u32()?,
-            members: decode_list(r, decode_name)?,
-            t: r.f64()?,
-            state: r.f64s()?,
-            covariance: decode_list(r, Reader::f64s)?,
-            fusion: of_code(&FUSION_KINDS, r, "fusion")?,
+            id,
+            members,
+            t,
+            state,
+            covariance,
+            fusion: of_code(
+                &FUSION_KINDS,
+                &mut Reader::new(&[code & !TRIAL_BIT]),
+                "fusion",
+            )?,
+            trial: code & TRIAL_BIT != 0,
         })
     })?;
     Ok(BatchUpdate {
@@ -415,6 +481,9 @@ fn encode_spec(w: &mut Writer, spec: &SessionSpec) {
         opt_str(w, &a.mode);
         w.opt(a.max_gap_s, Writer::f64);
         w.opt(a.tolerance_s, Writer::f64);
+        w.opt(a.period_s, Writer::f64);
+        w.opt(a.epoch_s, Writer::f64);
+        w.opt(a.max_staleness_s, Writer::f64);
     });
     w.opt(c.measurement_matrix.as_ref(), |w, h| {
         w.usize(h.len());
@@ -428,10 +497,29 @@ fn encode_spec(w: &mut Writer, spec: &SessionSpec) {
     w.opt(spec.history_instants, Writer::u32);
 }
 
+/// The configuration formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Spec {
+    /// Formats 1 and 2: with the requested idle expiry.
+    Legacy,
+    /// Format 3: without it.
+    Three,
+    /// Format 4: the grid alignment's fields.
+    Four,
+}
+
+impl Spec {
+    fn of_format(format: u8) -> Self {
+        if format >= 4 { Spec::Four } else { Spec::Three }
+    }
+}
+
 /// Reads a configuration; formats 1 and 2 also held the requested idle
-/// expiry (`legacy`), read and dropped here (the envelope holds the
-/// effective one).
-fn decode_spec(r: &mut Reader<'_>, legacy: bool) -> Result<SessionSpec, AlgoError> {
+/// expiry, read and dropped here (the envelope holds the effective one).
+/// Before format 4 an omitted alignment mode meant `predict` with a motion
+/// model and `nearest` without: such sessions keep it.
+fn decode_spec(r: &mut Reader<'_>, format: Spec) -> Result<SessionSpec, AlgoError> {
+    let legacy = format == Spec::Legacy;
     let n = r.len(8)?;
     let state_layout = (0..n).map(|_| r.str()).collect::<Result<_, _>>()?;
     let s = |r: &mut Reader<'_>| r.opt(Reader::str);
@@ -465,13 +553,33 @@ fn decode_spec(r: &mut Reader<'_>, legacy: bool) -> Result<SessionSpec, AlgoErro
             factor: r.opt(Reader::f64)?,
         })
     })?;
-    let alignment = r.opt(|r| {
-        Ok(AlignmentInput {
+    let mut alignment = r.opt(|r| {
+        let mut a = AlignmentInput {
             mode: s(r)?,
             max_gap_s: r.opt(Reader::f64)?,
             tolerance_s: r.opt(Reader::f64)?,
-        })
+            ..AlignmentInput::default()
+        };
+        if format == Spec::Four {
+            a.period_s = r.opt(Reader::f64)?;
+            a.epoch_s = r.opt(Reader::f64)?;
+            a.max_staleness_s = r.opt(Reader::f64)?;
+        }
+        Ok(a)
     })?;
+    if format != Spec::Four {
+        let a = alignment.get_or_insert_with(AlignmentInput::default);
+        if a.mode.is_none() {
+            a.mode = Some(
+                if motion_model.is_some() {
+                    "predict"
+                } else {
+                    "nearest"
+                }
+                .into(),
+            );
+        }
+    }
     let measurement_matrix = r.opt(|r| {
         let n = r.len(8)?;
         (0..n).map(|_| r.f64s()).collect()

@@ -48,8 +48,10 @@ use crate::{
 /// later release that changes it bumps it and keeps a decoder for the older
 /// ones. Formats 1 and 2 are the sessions of the releases before the
 /// envelope (whole sessions, read by [`codec::decode_legacy`]); format 3 is
-/// format 2 without what the envelope now holds.
-pub const FORMAT_VERSION: u8 = 3;
+/// format 2 without what the envelope now holds; format 4 adds the grid
+/// alignment (its options, the fixed period, node intervals and each
+/// track's latest report).
+pub const FORMAT_VERSION: u8 = 4;
 /// Default time (data time) after which a silent track is retired.
 pub const DEFAULT_RETIRE_AFTER_S: f64 = 60.0;
 /// Default number of instants kept for the replay of late-gated pairs.

@@ -4,8 +4,6 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, DVector};
-
 use super::{
     DEFAULT_HISTORY_INSTANTS, DEFAULT_RETIRE_AFTER_S, MAX_HISTORY_INSTANTS, NodeView, SessionSpec,
     SessionView, TrackView,
@@ -14,38 +12,44 @@ use crate::{
     algo::{
         AlgoError,
         correlation::{
+            align::{self, Estimate},
             engine::{self, CorrelatorState, Decision, PairCorrelator, Statistic},
-            grouping::{self, Link},
             scene::Scene,
         },
         motion::MotionModel,
-        small,
     },
     service::{
         ServiceError, Violations,
-        correlation::{self, AlignMode, CrossCovariances, GroupOutput, Plan, TrackName},
+        correlation::{self, AlignMode, GroupOutput, Links, Plan, TrackName},
     },
 };
 
 /// A track slot of a node: a live track, or free for reuse.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub(super) struct Slot {
     /// Empty when free.
     pub(super) id: String,
     pub(super) last_t: Option<f64>,
     /// Retired in the current batch: freed at its end.
     pub(super) retiring: bool,
+    /// Grid alignment: the track's latest report at or before the last
+    /// closed instant, and whether it was already placed at an instant.
+    pub(super) latest: Option<Estimate>,
+    pub(super) used: bool,
+    /// Grid alignment: the time of the newest report accepted (pending
+    /// included), for the scan-period estimate.
+    pub(super) seen_t: Option<f64>,
 }
+
+/// Most recent sample intervals kept per node for its scan-period estimate.
+pub(super) const INTERVALS_KEPT: usize = 64;
 
 #[derive(Debug, Clone)]
 pub(super) struct Pending {
     pub(super) node: usize,
     pub(super) slot: usize,
-    pub(super) t: f64,
     /// Canonical order.
-    pub(super) x: Vec<f64>,
-    pub(super) p: Vec<f64>,
-    pub(super) factor: Option<Vec<f64>>,
+    pub(super) est: Estimate,
 }
 
 /// The state of a session.
@@ -66,6 +70,10 @@ pub struct CorrelationSession {
     pub(super) instants_processed: u64,
     pub(super) reports_accepted: u64,
     pub(super) reports_late: u64,
+    /// Grid alignment: the fusion period once fixed (given, or estimated
+    /// when the first instant closes) and each node's recent intervals.
+    pub(super) grid_period: Option<f64>,
+    pub(super) intervals: Vec<Vec<f64>>,
 }
 
 pub(super) fn internal(e: AlgoError) -> ServiceError {
@@ -88,10 +96,11 @@ impl CorrelationSession {
                 format!("must be between 1 and {MAX_HISTORY_INSTANTS}"),
             );
         }
-        if plan.alignment != AlignMode::Predict && plan.alignment != AlignMode::Nearest {
+        if let AlignMode::Interpolate { .. } = plan.alignment {
             v.add(
                 "alignment.mode",
-                "a session aligns causally: predict or nearest (interpolate needs later samples)",
+                "a session aligns causally: grid, predict or nearest (interpolate needs later \
+                 samples)",
             );
         }
         let mut seen = HashMap::new();
@@ -140,6 +149,11 @@ impl CorrelationSession {
             instants_processed: 0,
             reports_accepted: 0,
             reports_late: 0,
+            grid_period: match plan.alignment {
+                AlignMode::Grid { period, .. } => period,
+                _ => None,
+            },
+            intervals: vec![Vec::new(); n],
             plan,
             spec,
         })
@@ -184,11 +198,7 @@ impl CorrelationSession {
             Some(s) => s,
             None => {
                 let s = self.scene.push_track(node);
-                self.slots[node].push(Slot {
-                    id: String::new(),
-                    last_t: None,
-                    retiring: false,
-                });
+                self.slots[node].push(Slot::default());
                 s
             }
         };
@@ -197,94 +207,57 @@ impl CorrelationSession {
         slot
     }
 
-    /// Puts report `r` at instant `k` (predicted to it in predict mode) and
-    /// its filter factor for the modified statistic; true when predicted.
-    pub(super) fn fill(&mut self, k: usize, r: &Pending) -> Result<bool, ServiceError> {
+    /// Puts estimate `est` of track `slot` of `node` at instant `k`
+    /// (brought to it in the predict and grid modes) with its filter factor
+    /// for the modified statistic (I when `first_use` is false: the estimate
+    /// was placed before and no update happened since); true when brought
+    /// across a gap.
+    pub(super) fn fill(
+        &mut self,
+        k: usize,
+        node: usize,
+        slot: usize,
+        est: &Estimate,
+        first_use: bool,
+    ) -> Result<bool, ServiceError> {
         let dim = self.plan.layout.dim;
         let t_k = self.scene.time(k);
-        let (mut x, mut p) = (r.x.clone(), r.p.clone());
-        let mut predicted = false;
-        let dt = t_k - r.t;
-        if dt > 0.0 && self.plan.alignment == AlignMode::Predict {
-            let model = self.plan.model.as_ref().expect("predict needs a model");
-            let (xp, pp) = model
-                .predict(
-                    &DVector::from_column_slice(&x),
-                    &DMatrix::from_row_slice(dim, dim, &p),
-                    dt,
-                )
-                .map_err(|e| Violations::from_param("reports.", e))?;
-            x = xp.as_slice().to_vec();
-            p = small::row_major(&pp);
-            predicted = true;
-        }
-        let prev = self.scene.track(r.node, r.slot).previous(k);
-        let factor = match (&r.factor, prev, self.plan.config.statistic) {
-            (Some(f), ..) => Some(f.clone()),
-            (None, Some(kp), Statistic::Modified) => {
-                let model = self.plan.model.as_ref().expect("modified needs a model");
-                let tr = self.scene.track(r.node, r.slot);
-                engine::filter_factor(
-                    model,
-                    tr.x(kp, dim),
-                    tr.p(kp, dim),
-                    &p,
-                    t_k - self.scene.time(kp),
-                )
-                .map_err(|e| Violations::from_param("reports.", e))?
-                .map(|f| f[..dim * dim].to_vec())
-            }
+        let model: Option<&dyn MotionModel> = match self.plan.alignment {
+            AlignMode::Predict | AlignMode::Grid { .. } => self
+                .plan
+                .align_model
+                .as_ref()
+                .map(|m| m as &dyn MotionModel),
             _ => None,
         };
-        let track = self.scene.track_mut(r.node, r.slot);
-        track.set(k, &x, &p);
-        if let Some(f) = factor {
-            track.set_gain_factor(k, &f);
+        let prev = self.scene.track(node, slot).previous(k);
+        let track = self.scene.track_mut(node, slot);
+        let placed = align::place(track, k, t_k, est, model, first_use)
+            .map_err(|e| Violations::from_param("reports.", e))?;
+        if let (None, Some(kp), Statistic::Modified) =
+            (&est.factor, prev, self.plan.config.statistic)
+        {
+            let model = self.plan.model.as_ref().expect("modified needs a model");
+            let tr = self.scene.track(node, slot);
+            let factor = engine::filter_factor(
+                model,
+                tr.x(kp, dim),
+                tr.p(kp, dim),
+                tr.p(k, dim),
+                t_k - self.scene.time(kp),
+            )
+            .map_err(|e| Violations::from_param("reports.", e))?;
+            if let Some(f) = factor {
+                self.scene
+                    .track_mut(node, slot)
+                    .set_gain_factor(k, &f[..dim * dim]);
+            }
         }
-        Ok(predicted)
+        Ok(placed == align::Placed::Brought && model.is_some())
     }
 
-    pub(super) fn system_tracks(
-        &self,
-        links: &[Link],
-        cross: &CrossCovariances,
-    ) -> Vec<GroupOutput> {
-        let grouping = grouping::group(links);
-        let dim = self.plan.layout.dim;
-        grouping
-            .groups
-            .iter()
-            .enumerate()
-            .map(|(id, members)| {
-                let fused = if self.plan.fuse {
-                    correlation::fuse_group(&self.scene, members, cross, dim)
-                } else {
-                    None
-                };
-                let (t, state, covariance, fusion) = match fused {
-                    Some((k, f, kind)) => (
-                        self.scene.time(k),
-                        self.plan.layout.vector_to_request(f.x.as_slice()),
-                        self.plan.layout.matrix_to_request(&f.p),
-                        kind,
-                    ),
-                    None => (
-                        f64::NAN,
-                        Vec::new(),
-                        Vec::new(),
-                        correlation::FusionKind::None,
-                    ),
-                };
-                GroupOutput {
-                    id: id as u32,
-                    members: members.iter().map(|&(n, t)| self.name(n, t)).collect(),
-                    t,
-                    state,
-                    covariance,
-                    fusion,
-                }
-            })
-            .collect()
+    pub(super) fn system_tracks(&self, links: &Links) -> Vec<GroupOutput> {
+        correlation::system_tracks(&self.scene, &self.plan, links, |n, t| self.name(n, t)).2
     }
 
     /// The whole session as a client reads it.
@@ -292,8 +265,7 @@ impl CorrelationSession {
         let model_ref: Option<&dyn MotionModel> =
             self.plan.model.as_ref().map(|m| m as &dyn MotionModel);
         let mut pairs = Vec::new();
-        let mut links = Vec::new();
-        let mut cross: CrossCovariances = HashMap::new();
+        let mut links = Links::default();
         for (ci, (na, nb)) in self.node_pairs().into_iter().enumerate() {
             let c = PairCorrelator::resume(
                 &self.scene,
@@ -305,7 +277,7 @@ impl CorrelationSession {
             )
             .map_err(internal)?;
             for r in c.reports() {
-                correlation::collect_link(&r, na, nb, &mut links, &mut cross);
+                links.collect(&r, na, nb);
                 if r.m >= 1 || r.decision == Decision::Correlated || r.trial {
                     pairs.push(correlation::pair_output(
                         &r,
@@ -315,7 +287,7 @@ impl CorrelationSession {
                 }
             }
         }
-        let system_tracks = self.system_tracks(&links, &cross);
+        let system_tracks = self.system_tracks(&links);
         Ok(SessionView {
             instants_processed: self.instants_processed,
             last_instant: self.scene.times().last().copied(),
@@ -358,22 +330,4 @@ pub(super) fn node_ids(spec: &SessionSpec) -> Vec<String> {
 
 pub(super) fn plan_of(spec: &SessionSpec) -> Result<Plan, ServiceError> {
     correlation::validate_plan(&spec.config)
-}
-
-/// I − K H in canonical order from a gain K in the request's row order.
-pub(super) fn gain_factor(
-    g: &[Vec<f64>],
-    h: &DMatrix<f64>,
-    layout: &correlation::Layout,
-) -> Vec<f64> {
-    let dim = layout.dim;
-    let m = h.nrows();
-    let k_flat: Vec<f64> = g.iter().flatten().copied().collect();
-    let k_req = DMatrix::from_row_slice(dim, m, &k_flat);
-    let mut k = DMatrix::zeros(dim, m);
-    for (i, &ri) in layout.from_request.iter().enumerate() {
-        k.set_row(i, &k_req.row(ri));
-    }
-    let factor = DMatrix::<f64>::identity(dim, dim) - &k * h;
-    small::row_major(&factor)
 }

@@ -94,10 +94,25 @@ impl Noise {
 /// Two radars, eight targets (two pairs of them crossing, so that some
 /// pairs enter the gate late), radar b reporting 0.2 s after radar a,
 /// with one track of b starting late and one of a ending early.
+///
+/// The cluster alignment (`predict`, tolerance 0.5 s) the stored fixtures
+/// were written with; [`grid_scenario`] is the default grid alignment.
 fn scenario() -> CorrelateInput {
+    scenario_with("predict", 0.2)
+}
+
+/// The scenario with the default grid alignment, radar b reporting
+/// `offset` s after radar a.
+fn grid_scenario(offset: f64) -> CorrelateInput {
+    let mut input = scenario_with("grid", offset);
+    input.alignment.as_mut().unwrap().mode = None;
+    input
+}
+
+fn scenario_with(mode: &str, offset_b: f64) -> CorrelateInput {
     let mut noise = Noise(0x9e37_79b9_7f4a_7c15);
     let mut nodes = Vec::new();
-    for (ni, (node, offset)) in [("a", 0.0), ("b", 0.2)].into_iter().enumerate() {
+    for (ni, (node, offset)) in [("a", 0.0), ("b", offset_b)].into_iter().enumerate() {
         let mut tracks = Vec::new();
         for target in 0..8 {
             let (x0, y0, vx, vy) = match target {
@@ -157,6 +172,7 @@ fn scenario() -> CorrelateInput {
             ..Default::default()
         }),
         alignment: Some(AlignmentInput {
+            mode: Some(mode.into()),
             tolerance_s: Some(0.5),
             ..Default::default()
         }),
@@ -252,6 +268,102 @@ fn batches_give_the_decisions_of_the_batch_endpoint() {
         assert_eq!(view.pairs, batch.pairs, "batches of {size}");
         assert_eq!(view.system_tracks, batch.groups, "batches of {size}");
     }
+}
+
+/// Radar b reports half a scan (1 s of 2 s) after radar a: the cluster
+/// alignment finds no common instant, the default grid finds them all, and
+/// a session in batches of any size gives the batch endpoint's decisions.
+#[test]
+fn unsynchronised_radars_correlate_on_the_grid_in_batches_as_in_one_call() {
+    let correlated = |pairs: &[PairOutput]| {
+        pairs
+            .iter()
+            .filter(|p| p.decision == Decision::Correlated)
+            .count()
+    };
+    let clustered = correlate(scenario_with("predict", 1.0)).unwrap();
+    assert_eq!(correlated(&clustered.pairs), 0);
+    assert_eq!(clustered.alignment.node_pairs_without_common_instant, 1);
+    assert!(
+        clustered
+            .warnings
+            .iter()
+            .any(|w| w.contains("share no instant") && w.contains("grid")),
+        "{:?}",
+        clustered.warnings
+    );
+    let input = grid_scenario(1.0);
+    let batch = correlate(input.clone()).unwrap();
+    // Both nodes report every 2 s: the grid is 0, 2, 4, … 60 (the first grid
+    // point at or after b's last report at 59), staleness 3 s.
+    assert_eq!(batch.alignment.period_s, Some(2.0));
+    assert!(batch.alignment.period_estimated);
+    assert_eq!(batch.instants.len(), 31);
+    assert_eq!(batch.instants[1], 2.0);
+    assert_eq!(batch.alignment.node_pairs_without_common_instant, 0);
+    // Every target seen by both radars is correlated, and nothing else.
+    let pairs: Vec<(String, String)> = batch
+        .pairs
+        .iter()
+        .filter(|p| p.decision == Decision::Correlated)
+        .map(|p| (p.a.track.clone(), p.b.track.clone()))
+        .collect();
+    let want: Vec<(String, String)> = (0..8).map(|t| (format!("a{t}"), format!("b{t}"))).collect();
+    assert_eq!(pairs, want);
+    for size in [1, 7, 16, 1000] {
+        let view = run_session(&input, size, 64);
+        assert_eq!(view.instants_processed as usize, batch.instants.len());
+        assert_eq!(view.pairs, batch.pairs, "batches of {size}");
+        assert_eq!(view.system_tracks, batch.groups, "batches of {size}");
+    }
+}
+
+/// On the grid a report that arrives after its instant closed is not lost:
+/// it becomes its track's latest and serves the next instants.
+#[test]
+fn on_the_grid_a_late_report_serves_the_later_instants() {
+    let input = grid_scenario(1.0);
+    let mut s = session_of(&input, 64);
+    let reports = reports_of(&input);
+    let (early, rest): (Vec<_>, Vec<_>) = reports
+        .iter()
+        .cloned()
+        .partition(|r| r.sample.t.unwrap() < 20.0);
+    // Radar b's reports at 17 s arrive late, after instant 18 closed; its
+    // reports at 19 s are lost.
+    let (late, early): (Vec<_>, Vec<_>) = early
+        .into_iter()
+        .filter(|r| !(r.node.as_deref() == Some("b") && r.sample.t == Some(19.0)))
+        .partition(|r| r.node.as_deref() == Some("b") && r.sample.t == Some(17.0));
+    assert_eq!(late.len(), 7);
+    let batch = |reports: Vec<ReportInput>, flush| TestBatch {
+        reports,
+        flush,
+        sequence: None,
+    };
+    let first = s.push("s", batch(early, true), &LIMITS).unwrap();
+    // The last report is a's at 18 s: the flush closes the grid up to 18.
+    assert_eq!(first.body.instants.last(), Some(&18.0));
+    let u = s.push("s", batch(late, false), &LIMITS).unwrap();
+    assert!(
+        u.warnings
+            .iter()
+            .any(|w| w.contains("serve the later instants")),
+        "{u:?}"
+    );
+    assert_eq!(s.state.reports_late, 7);
+    // At 20 s the late reports are b's latest, 3 s old: within the 3 s
+    // staleness bound, so b's tracks are present there (without them, the
+    // reports at 15 s would be 5 s old and b absent).
+    let u = s.push("s", batch(rest, true), &LIMITS).unwrap();
+    assert_eq!(u.body.instants.first(), Some(&20.0));
+    let scene = &s.state.scene;
+    let k20 = scene.first() + scene.times().iter().position(|&t| t == 20.0).unwrap();
+    let present = scene.nodes()[1]
+        .iter()
+        .filter(|t| t.is_present(k20))
+        .count();
+    assert_eq!(present, 7, "b's seven tracks alive at 17 s");
 }
 
 #[test]
