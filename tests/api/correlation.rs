@@ -284,15 +284,66 @@ async fn asynchronous_nodes_are_aligned_by_prediction() {
             .contains("predicted forward")
     );
 
-    // Without merging (tolerance 0), the two nodes never share an instant.
+    // Without merging (nearest, tolerance 0), the two nodes never share an
+    // instant: nothing correlates, and the answer says why and what to do.
     let mut body = request(
         json!({"kind": "weighted"}),
         vec![node("r1", 0.0, 1), node("r2", 1.0, 7)],
     );
-    body["alignment"] = json!({"tolerance_s": 0.0});
-    let body: Value = app.post_ok(PATH, &body).await;
-    assert_eq!(body["instants"].as_array().unwrap().len(), 16);
-    assert!(correlated(&body).is_empty());
+    body["alignment"] = json!({"mode": "nearest", "tolerance_s": 0.0});
+    let out: Value = app.post_ok(PATH, &body).await;
+    assert_eq!(out["instants"].as_array().unwrap().len(), 16);
+    assert!(correlated(&out).is_empty());
+    assert_eq!(out["alignment"]["node_pairs_without_common_instant"], 1);
+    assert_eq!(out["alignment"]["tracks_without_partner_instant"], 6);
+    let warning = out["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .find(|w| w.contains("share no instant"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(warning.contains("r1–r2") && warning.contains("alignment.mode: grid"));
+
+    // The default grid: both nodes report every 4 s (the `track` helper's
+    // period), so the grid is 4 s: instants 0, 4, …, 32 (the first grid
+    // point at or after r1's first report at 0, to the first at or after
+    // r2's last report at 29), each track brought from its latest report at
+    // most 1.5 × 4 = 6 s old: they meet at every instant but the first.
+    body.as_object_mut().unwrap().remove("alignment");
+    let out: Value = app.post_ok(PATH, &body).await;
+    assert_eq!(out["alignment"]["mode"], "grid");
+    assert_eq!(out["alignment"]["period_s"], 4.0);
+    assert_eq!(out["alignment"]["period_estimated"], true);
+    assert_eq!(out["instants"].as_array().unwrap().len(), 9);
+    assert_eq!(out["alignment"]["nodes"][0]["max_staleness_s"], 6.0);
+    assert_eq!(out["alignment"]["node_pairs_without_common_instant"], 0);
+    assert_eq!(correlated(&out).len(), 3, "{out}");
+}
+
+#[tokio::test]
+async fn a_node_without_tracks_is_accepted_with_a_warning() {
+    let app = spawn_app().await;
+    let mut body = request(
+        json!({"kind": "weighted"}),
+        vec![
+            node("r1", 0.0, 1),
+            node("r2", 0.0, 7),
+            json!({"id": "r3", "tracks": []}),
+        ],
+    );
+    body["alignment"] = json!({"mode": "nearest"});
+    let out: Value = app.post_ok(PATH, &body).await;
+    assert_eq!(correlated(&out).len(), 3, "{out}");
+    assert_eq!(out["alignment"]["nodes"][2]["tracks"], 0);
+    assert!(
+        out["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("hold no tracks (r3)")),
+        "{out}"
+    );
 }
 
 #[tokio::test]
@@ -379,10 +430,6 @@ async fn bad_input_names_the_field() {
             "nodes[0].tracks[1].samples[0].covariance",
         ),
         (Box::new(|b| b["nodes"] = json!([])), "nodes"),
-        (
-            Box::new(|b| b["nodes"][1]["tracks"] = json!([])),
-            "nodes[1].tracks",
-        ),
         (
             Box::new(|b| b["nodes"][1]["tracks"][2]["id"] = json!("r2-0")),
             "nodes[1].tracks[2].id",

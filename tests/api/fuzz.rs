@@ -328,8 +328,9 @@ fn arb_correlation_request() -> impl Strategy<Value = Value> {
         ],
         prop_oneof![Just(0.0f64), Just(0.5), Just(5.0)],
         number,
+        prop_oneof![Just("grid"), Just("predict"), Just("nearest")],
     )
-        .prop_map(|(nodes, kind, tolerance, sigma)| {
+        .prop_map(|(nodes, kind, tolerance, sigma, mode)| {
             let nodes: Vec<Value> = nodes
                 .into_iter()
                 .enumerate()
@@ -339,7 +340,7 @@ fn arb_correlation_request() -> impl Strategy<Value = Value> {
                 "state_layout": ["x", "vx", "y", "vy"],
                 "method": {"kind": kind, "rule": if kind.contains("double") { json!({"l": 2, "r": 3}) } else { Value::Null }},
                 "motion_model": {"process_noise": "dwna", "sigma_a_mps2": sigma.abs()},
-                "alignment": {"tolerance_s": tolerance},
+                "alignment": {"mode": mode, "tolerance_s": tolerance},
                 "nodes": nodes,
             })
         })
