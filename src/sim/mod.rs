@@ -26,6 +26,7 @@
 //! files; it calls `algo` for every piece of numerics the service also uses.
 
 pub mod ais;
+pub mod async_network;
 pub mod benchmark;
 pub mod experiments;
 pub mod metrics;

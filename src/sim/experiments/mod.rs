@@ -7,6 +7,7 @@
 //! [`REGISTRY`].
 
 pub mod correlation;
+pub mod seed000_async_network;
 pub mod seed000_correlation;
 pub mod seed000_local_tracking;
 pub mod seed000_miss_probability;
@@ -80,6 +81,11 @@ pub const REGISTRY: &[Experiment] = &[
         name: "seed000-correlation",
         summary: "seed 000 §5: E_c/E_e/E_s of the weighted, modified and double-threshold methods and the baselines, 60 and 120 targets",
         run: seed000_correlation::run,
+    },
+    Experiment {
+        name: "seed000-async-network",
+        summary: "correlation of unsynchronised radar networks (4/4 s offset 2, 4/5 s, 10/12 s offset 3, three radars) with the endpoint's defaults: correct, wrong, missed",
+        run: seed000_async_network::run,
     },
     Experiment {
         name: "seed000-local-tracking",
