@@ -925,7 +925,7 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
     // Without a motion model, samples with velocities are extrapolated
     // along them (F without Q); positions alone are held.
     let align_model = match (&model, &layout) {
-        (Some(m), _) => Some(m.clone()),
+        (Some(m), _) => Some(*m),
         (None, Some(l)) if l.has_velocity => {
             ConstantVelocity::new(l.axes, ProcessNoise::Cwna { q: 0.0 }).ok()
         }
@@ -1221,7 +1221,7 @@ fn motion_model(
 pub const MAX_SCENE_CELLS: usize = 8_000_000;
 
 /// What alignment did, for a client to test.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct AlignmentReport {
     /// `grid`, `predict`, `nearest` or `interpolate`.
     pub mode: &'static str,
@@ -1258,7 +1258,7 @@ pub struct NodeAlignment {
     pub max_staleness_s: Option<f64>,
 }
 
-fn mode_name(m: AlignMode) -> &'static str {
+pub(super) fn mode_name(m: AlignMode) -> &'static str {
     match m {
         AlignMode::Grid { .. } => "grid",
         AlignMode::Predict => "predict",
@@ -1431,7 +1431,7 @@ fn align(
                     report.unused_samples += stats.unused;
                 }
                 AlignMode::Interpolate { max_gap } => {
-                    report.brought += interpolate_track(&mut out, samples, &instants, max_gap);
+                    report.brought += align::interpolate(&mut out, samples, &instants, max_gap);
                 }
                 AlignMode::Predict | AlignMode::Nearest => {
                     let mut ci = 0;
@@ -1555,7 +1555,7 @@ pub(super) fn coverage(
     let mut apart = Vec::new();
     for a in 0..n {
         for b in a + 1..n {
-            let has_tracks = |x: usize| !scene.nodes()[x].is_empty();
+            let has_tracks = |x: usize| node_at[x].iter().any(|&p| p);
             if has_tracks(a)
                 && has_tracks(b)
                 && !(0..ks.len()).any(|i| node_at[a][i] && node_at[b][i])
@@ -1565,10 +1565,14 @@ pub(super) fn coverage(
         }
     }
     report.node_pairs_without_common_instant = apart.len();
-    let alone = scene
+    let present: Vec<&Track> = scene
         .nodes()
         .iter()
         .flatten()
+        .filter(|t| ks.clone().any(|k| t.is_present(k)))
+        .collect();
+    let alone = present
+        .iter()
         .filter(|t| {
             !ks.clone()
                 .enumerate()
@@ -1597,50 +1601,14 @@ pub(super) fn coverage(
             if apart.len() > 5 { ", …" } else { "" },
             report.mode
         ));
-    } else if alone * 2 > report.tracks {
+    } else if alone * 2 > present.len() {
         warnings.push(format!(
             "{alone} of {} tracks are present at no instant where another node holds a track, \
              so they cannot correlate under the {} alignment: {fix}",
-            report.tracks, report.mode
+            present.len(),
+            report.mode
         ));
     }
-}
-
-/// Fills `out` at every instant that lies between two samples of the track
-/// no more than `max_gap` apart (or on a sample): the state and covariance are
-/// interpolated linearly, x = (1 − w) x_a + w x_b, P = (1 − w) P_a + w P_b
-/// (a convex combination of positive definite matrices stays positive
-/// definite). Never extrapolates. Returns the number of interpolated
-/// estimates (those not on a sample).
-fn interpolate_track(
-    out: &mut Track,
-    samples: &[Estimate],
-    instants: &[f64],
-    max_gap: f64,
-) -> usize {
-    let mut count = 0;
-    for (k, &t) in instants.iter().enumerate() {
-        // The first sample at or after t.
-        let b = samples.partition_point(|s| s.t < t);
-        if b < samples.len() && samples[b].t == t {
-            out.set(k, &samples[b].x, &samples[b].p);
-            continue;
-        }
-        if b == 0 || b == samples.len() || samples[b].t - samples[b - 1].t > max_gap {
-            continue;
-        }
-        let (sa, sb) = (&samples[b - 1], &samples[b]);
-        let w = (t - sa.t) / (sb.t - sa.t);
-        let mix = |a: &[f64], b: &[f64]| -> Vec<f64> {
-            a.iter()
-                .zip(b)
-                .map(|(a, b)| (1.0 - w) * a + w * b)
-                .collect()
-        };
-        out.set(k, &mix(&sa.x, &sb.x), &mix(&sa.p, &sb.p));
-        count += 1;
-    }
-    count
 }
 
 /// Wire name of a statistic: the one vocabulary of REST and gRPC.

@@ -115,13 +115,17 @@ pub fn grid_instants(
     Some(out)
 }
 
-/// Brings `(x, p)` forward by `dt` ≥ 0 with the model; as reported without one.
+/// A state and its row-major covariance.
+pub type StateCov = (Vec<f64>, Vec<f64>);
+
+/// Brings `(x, p)` forward by `dt` > 0 with the model; `None` without one
+/// (or without a gap): the estimate is used as reported.
 pub fn bring(
     model: Option<&dyn MotionModel>,
     x: &[f64],
     p: &[f64],
     dt: f64,
-) -> Result<Option<(Vec<f64>, Vec<f64>)>, AlgoError> {
+) -> Result<Option<StateCov>, AlgoError> {
     let Some(model) = model.filter(|_| dt > 0.0) else {
         return Ok(None);
     };
@@ -252,6 +256,38 @@ pub fn fill_grid(
     }
     stats.unused += samples.len() - last_used.map_or(0, |u| u + 1);
     Ok(stats)
+}
+
+/// Fills `out` at every instant that lies between two samples of the track
+/// no more than `max_gap` apart (or on a sample): the state and covariance are
+/// interpolated linearly, x = (1 − w) x_a + w x_b, P = (1 − w) P_a + w P_b
+/// (a convex combination of positive definite matrices stays positive
+/// definite). Never extrapolates. Returns the number of interpolated
+/// estimates (those not on a sample).
+pub fn interpolate(out: &mut Track, samples: &[Estimate], instants: &[f64], max_gap: f64) -> usize {
+    let mut count = 0;
+    for (k, &t) in instants.iter().enumerate() {
+        // The first sample at or after t.
+        let b = samples.partition_point(|s| s.t < t);
+        if b < samples.len() && samples[b].t == t {
+            out.set(k, &samples[b].x, &samples[b].p);
+            continue;
+        }
+        if b == 0 || b == samples.len() || samples[b].t - samples[b - 1].t > max_gap {
+            continue;
+        }
+        let (sa, sb) = (&samples[b - 1], &samples[b]);
+        let w = (t - sa.t) / (sb.t - sa.t);
+        let mix = |a: &[f64], b: &[f64]| -> Vec<f64> {
+            a.iter()
+                .zip(b)
+                .map(|(a, b)| (1.0 - w) * a + w * b)
+                .collect()
+        };
+        out.set(k, &mix(&sa.x, &sb.x), &mix(&sa.p, &sb.p));
+        count += 1;
+    }
+    count
 }
 
 #[cfg(test)]

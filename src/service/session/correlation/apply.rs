@@ -175,6 +175,15 @@ impl CorrelationSession {
             ));
         }
 
+        // Nodes that the alignment keeps apart, over the instants held.
+        if !instants.is_empty() && self.scene.times().len() >= COVERAGE_MIN_INSTANTS {
+            let mut report = correlation::AlignmentReport {
+                mode: correlation::mode_name(self.plan.alignment),
+                ..Default::default()
+            };
+            correlation::coverage(&self.scene, &self.node_ids, &mut report, warnings);
+        }
+
         // What changed.
         let mut changes = Vec::new();
         let pairs = self.node_pairs();
@@ -237,6 +246,9 @@ impl CorrelationSession {
         })
     }
 }
+
+/// Instants held before a session warns about nodes that never meet.
+const COVERAGE_MIN_INSTANTS: usize = 4;
 
 /// A validated report: node, track id, time, and the report.
 type Accepted<'a> = (usize, String, f64, &'a ReportInput);
@@ -521,10 +533,10 @@ impl CorrelationSession {
     ) -> Result<(), ServiceError> {
         self.take_reports_upto(t_k);
         let k = self.scene.push_instant(t_k).map_err(internal)?;
-        for node in 0..self.slots.len() {
+        for (node, &bound) in bounds.iter().enumerate() {
             for slot in 0..self.slots[node].len() {
                 let s = &self.slots[node][slot];
-                let Some(est) = s.latest.as_ref().filter(|l| t_k - l.t <= bounds[node]) else {
+                let Some(est) = s.latest.as_ref().filter(|l| t_k - l.t <= bound) else {
                     continue;
                 };
                 if s.id.is_empty() {

@@ -318,6 +318,32 @@ fn unsynchronised_radars_correlate_on_the_grid_in_batches_as_in_one_call() {
     }
 }
 
+/// A session whose cluster alignment keeps the nodes apart says so.
+#[test]
+fn a_session_says_when_its_nodes_never_meet() {
+    let input = scenario_with("predict", 1.0);
+    let mut s = session_of(&input, 64);
+    let u = s
+        .push(
+            "s",
+            TestBatch {
+                reports: reports_of(&input),
+                flush: true,
+                sequence: None,
+            },
+            &LIMITS,
+        )
+        .unwrap();
+    assert!(u.body.changes.is_empty());
+    assert!(
+        u.warnings
+            .iter()
+            .any(|w| w.contains("share no instant") && w.contains("(a–b)") && w.contains("grid")),
+        "{:?}",
+        u.warnings
+    );
+}
+
 /// On the grid a report that arrives after its instant closed is not lost:
 /// it becomes its track's latest and serves the next instants.
 #[test]
