@@ -322,6 +322,62 @@ async fn asynchronous_nodes_are_aligned_by_prediction() {
 }
 
 #[tokio::test]
+async fn grpc_aligns_unsynchronised_nodes_on_the_grid_and_reports_it() {
+    let app = spawn_app().await;
+    // r2 reports 2 s after r1 (half the 4 s scan), nothing set but the
+    // motion model: the same answer as REST's default grid.
+    let out = app
+        .correlation()
+        .await
+        .correlate_tracks(pb::CorrelateTracksRequest {
+            state_layout: ["x", "vx", "y", "vy"].map(String::from).to_vec(),
+            method: Some(pb::CorrelationMethod {
+                kind: Some("independent_double_threshold".into()),
+                rule: Some(pb::LrRule {
+                    l: Some(3),
+                    r: Some(4),
+                }),
+                ..Default::default()
+            }),
+            motion_model: Some(pb::MotionModel {
+                process_noise: Some("dwna".into()),
+                sigma_a_mps2: Some(1.0),
+                ..Default::default()
+            }),
+            nodes: vec![
+                to_proto_node(&node("r1", 0.0, 1)),
+                to_proto_node(&node("r2", 2.0, 7)),
+                pb::Node {
+                    id: "r3".into(),
+                    tracks: vec![],
+                },
+            ],
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let a = out.alignment.expect("an alignment report");
+    assert_eq!(a.mode, "grid");
+    assert_eq!(a.period_s, Some(4.0));
+    assert!(a.period_estimated);
+    assert_eq!(a.node_pairs_without_common_instant, 0);
+    assert_eq!(a.nodes[2].tracks, 0);
+    let correlated = out
+        .pairs
+        .iter()
+        .filter(|p| p.decision == "correlated")
+        .count();
+    assert_eq!(correlated, 3, "{:?}", out.pairs);
+    assert!(out.system_tracks.iter().all(|g| !g.trial));
+    assert!(
+        out.warnings
+            .iter()
+            .any(|w| w.contains("hold no tracks (r3)"))
+    );
+}
+
+#[tokio::test]
 async fn a_node_without_tracks_is_accepted_with_a_warning() {
     let app = spawn_app().await;
     let mut body = request(

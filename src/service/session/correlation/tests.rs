@@ -318,6 +318,46 @@ fn unsynchronised_radars_correlate_on_the_grid_in_batches_as_in_one_call() {
     }
 }
 
+/// Before any pair reaches its rule, the provisionally paired tracks (trial
+/// system tracks, eq. 21) are output as system tracks flagged `trial`, and
+/// are not listed as unpaired.
+#[test]
+fn trial_system_tracks_are_output_flagged() {
+    let mut input = scenario();
+    // Three scans of the 3/4 rule: m ≤ 3 … and 2 scans: m ≤ 2 < L = 3.
+    for n in &mut input.nodes {
+        for t in &mut n.tracks {
+            t.samples.retain(|s| s.t.unwrap() < 4.0);
+        }
+        n.tracks.retain(|t| !t.samples.is_empty());
+    }
+    let out = correlate(input).unwrap();
+    assert!(
+        out.pairs.iter().all(|p| p.decision != Decision::Correlated),
+        "{:?}",
+        out.pairs
+    );
+    let trials: Vec<(String, String)> = out
+        .groups
+        .iter()
+        .map(|g| {
+            assert!(g.trial, "{g:?}");
+            (g.members[0].track.clone(), g.members[1].track.clone())
+        })
+        .collect();
+    let flagged = out.pairs.iter().filter(|p| p.trial).count();
+    assert_eq!(trials.len(), flagged);
+    assert!(trials.len() >= 5, "{trials:?}");
+    for (a, b) in &trials {
+        assert_eq!(a[1..], b[1..], "same target: {a} {b}");
+        assert!(
+            out.unpaired
+                .iter()
+                .all(|(_, ids)| !ids.contains(a) && !ids.contains(b))
+        );
+    }
+}
+
 /// A session whose cluster alignment keeps the nodes apart says so.
 #[test]
 fn a_session_says_when_its_nodes_never_meet() {
