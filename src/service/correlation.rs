@@ -1353,6 +1353,16 @@ fn align(
         unused_samples: 0,
     };
     let mut warnings = Vec::new();
+    if matches!(plan.alignment, AlignMode::Grid { .. })
+        && input.alignment.as_ref().is_some_and(|a| a.tolerance_s.is_some())
+    {
+        warnings.push(
+            "alignment.tolerance_s has no effect on the grid alignment of a batch (it is a \
+             session's lateness allowance); give alignment.mode predict or nearest for clusters \
+             of report times"
+                .to_string(),
+        );
+    }
     let mut staleness = vec![None; est.len()];
     let clustered;
     let instants: Vec<f64> = match plan.alignment {

@@ -318,12 +318,12 @@ impl CorrelationSession {
         // Close the clusters that can no longer grow.
         self.pending.sort_by(|a, b| a.est.t.total_cmp(&b.est.t));
         let times: Vec<f64> = self.pending.iter().map(|r| r.est.t).collect();
-        let mut clusters: Vec<(usize, usize, f64)> = Vec::new(); // [from, to), start
-        for (i, &t) in times.iter().enumerate() {
-            match clusters.last_mut() {
-                Some((_, to, start)) if t - *start <= tol => *to = i + 1,
-                _ => clusters.push((i, i + 1, t)),
-            }
+        // [from, to) of each cluster of the sorted reports, and its start.
+        let mut clusters: Vec<(usize, usize, f64)> = Vec::new();
+        for (start, end) in align::clusters(&times, tol) {
+            let from = clusters.last().map_or(0, |c| c.1);
+            let to = from + times[from..].partition_point(|&t| t <= end);
+            clusters.push((from, to, start));
         }
         if !flush {
             clusters.pop();
