@@ -1354,7 +1354,10 @@ fn align(
     };
     let mut warnings = Vec::new();
     if matches!(plan.alignment, AlignMode::Grid { .. })
-        && input.alignment.as_ref().is_some_and(|a| a.tolerance_s.is_some())
+        && input
+            .alignment
+            .as_ref()
+            .is_some_and(|a| a.tolerance_s.is_some())
     {
         warnings.push(
             "alignment.tolerance_s has no effect on the grid alignment of a batch (it is a \

@@ -282,8 +282,58 @@ pub fn score(run: &NetworkRun, out: &CorrelateOutput) -> Score {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::service::correlation::correlate;
+    use crate::service::{
+        correlation::{PairOutput, correlate},
+        session::{
+            Limits, SessionKind,
+            correlation::{BatchInput, CorrelationSession, ReportInput, SessionSpec, SessionView},
+        },
+    };
     use rand::SeedableRng;
+
+    /// Runs `request` through a correlation session with the same
+    /// configuration, its reports in time order in batches of `size`, then
+    /// a flush.
+    fn session_view(request: &CorrelateInput, size: usize, history: Option<u32>) -> SessionView {
+        let mut config = request.clone();
+        let mut reports: Vec<ReportInput> = Vec::new();
+        for n in &mut config.nodes {
+            for t in n.tracks.drain(..) {
+                for s in t.samples {
+                    reports.push(ReportInput {
+                        node: n.id.clone(),
+                        track: t.id.clone(),
+                        sample: s,
+                    });
+                }
+            }
+        }
+        reports.sort_by(|a, b| a.sample.t.unwrap().total_cmp(&b.sample.t.unwrap()));
+        let mut s = CorrelationSession::new(SessionSpec {
+            config,
+            retire_after_s: None,
+            history_instants: history,
+        })
+        .unwrap();
+        let limits = Limits {
+            max_tracks: 10_000,
+            max_batch_reports: 10_000,
+        };
+        let mut w = Vec::new();
+        for chunk in reports.chunks(size) {
+            let batch = BatchInput {
+                reports: chunk.to_vec(),
+                flush: false,
+            };
+            s.apply(&batch, &limits, &mut w).unwrap();
+        }
+        let flush = BatchInput {
+            reports: Vec::new(),
+            flush: true,
+        };
+        s.apply(&flush, &limits, &mut w).unwrap();
+        s.view().unwrap()
+    }
 
     /// With the defaults (grid alignment, period and staleness estimated)
     /// every network correlates ≥ 97 % of the same-target pairs with no
@@ -300,6 +350,43 @@ mod tests {
             assert_eq!(s.wrong, 0, "{}: {s:?}", net.name);
             assert!(s.rate() >= 0.97, "{}: {s:?} {:?}", net.name, out.warnings);
             assert_eq!(out.alignment.node_pairs_without_common_instant, 0);
+            if i == 0 || i == 3 {
+                // A streaming session with the same defaults, fed in time
+                // order in batches of 30 reports, meets the same bar (its
+                // period is estimated from the first reports, so it may be
+                // finer than the batch's) …
+                let session = |request: &CorrelateInput| {
+                    let view = session_view(request, 30, None);
+                    score(
+                        &run,
+                        &CorrelateOutput {
+                            pairs: view.pairs,
+                            ..out.clone()
+                        },
+                    )
+                };
+                let streamed = session(&run.request);
+                assert_eq!(streamed.wrong, 0, "{}: {streamed:?}", net.name);
+                assert!(streamed.rate() >= 0.97, "{}: {streamed:?}", net.name);
+                // … and with the period and staleness fixed, and a history
+                // that holds every instant, decides exactly as the batch call.
+                let mut fixed = run.request.clone();
+                fixed.alignment = Some(AlignmentInput {
+                    period_s: out.alignment.period_s,
+                    max_staleness_s: Some(1.5 * out.alignment.period_s.unwrap()),
+                    ..Default::default()
+                });
+                let batch = correlate(fixed.clone()).unwrap();
+                // (Listed in the order of the session's track slots.)
+                let sorted = |mut v: Vec<PairOutput>| {
+                    v.sort_by(|x, y| (&x.a, &x.b).cmp(&(&y.a, &y.b)));
+                    v
+                };
+                assert_eq!(
+                    sorted(session_view(&fixed, 30, Some(1024)).pairs),
+                    sorted(batch.pairs)
+                );
+            }
             if i == 0 {
                 let mut old = run.request.clone();
                 old.alignment = Some(old_default());
