@@ -66,6 +66,11 @@ impl fmt::Debug for ApiKeys {
 impl ApiKeys {
     /// Keys from `--api-keys` and `--api-keys-file` (either, both or neither).
     /// Errors name the flag (and the entry or line) and never the key.
+    ///
+    /// Open mode (no authentication) only when neither option is given: a
+    /// key option that yields no key (an empty or comment-only file, an
+    /// empty mounted secret, `FUSION_API_KEYS=''` or `','`) is an error,
+    /// never a silently open service.
     pub fn from_settings(settings: &Settings) -> Result<Self, String> {
         let mut entries = Vec::new();
         if let Some(list) = &settings.api_keys {
@@ -75,6 +80,26 @@ impl ApiKeys {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| format!("--api-keys-file: cannot read {}: {e}", path.display()))?;
             entries.extend(parse_file(&text)?);
+        }
+        let given: Vec<&str> = [
+            settings
+                .api_keys
+                .as_ref()
+                .map(|_| "--api-keys (FUSION_API_KEYS)"),
+            settings
+                .api_keys_file
+                .as_ref()
+                .map(|_| "--api-keys-file (FUSION_API_KEYS_FILE)"),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if entries.is_empty() && !given.is_empty() {
+            return Err(format!(
+                "{} given but no API key found in it: refusing to start without \
+                 authentication; remove the option to run open, or give `key=tenant` entries",
+                given.join(" and ")
+            ));
         }
         Self::from_entries(entries)
     }
@@ -388,6 +413,19 @@ mod tests {
         settings.api_keys_file = Some(dir.join("missing"));
         let e = ApiKeys::from_settings(&settings).unwrap_err();
         assert!(e.starts_with("--api-keys-file: cannot read"), "{e}");
+        // Keys configured but none found: refused, never open.
+        std::fs::write(&path, "# no keys yet\n\n").unwrap();
+        for (list, file) in [
+            (None, Some(path.clone())),
+            (Some(""), None),
+            (Some(","), None),
+            (Some(" , "), Some(path.clone())),
+        ] {
+            settings.api_keys = list.map(Into::into);
+            settings.api_keys_file = file;
+            let e = ApiKeys::from_settings(&settings).unwrap_err();
+            assert!(e.contains("no API key found"), "{e}");
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -202,7 +202,14 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
         }
         Err(error) => {
             metrics::counter!("auth_failures_total", "transport" => "http").increment(1);
-            problem::unauthenticated(error)
+            // The body is not read: say that the connection closes, so a
+            // keep-alive client opens a new one instead of meeting a reset.
+            let mut response = problem::unauthenticated(error);
+            response.headers_mut().insert(
+                header::CONNECTION,
+                header::HeaderValue::from_static("close"),
+            );
+            response
         }
     }
 }
@@ -242,14 +249,33 @@ async fn record_metrics(req: Request, next: Next) -> Response {
         .extensions()
         .get::<MatchedPath>()
         .map_or_else(|| "unmatched".to_string(), |p| p.as_str().to_string());
-    let method = req.method().to_string();
+    let method = method_label(req.method());
     let response = next.run(req).await;
     let status = response.status().as_u16().to_string();
-    metrics::counter!("http_requests_total", "method" => method.clone(), "route" => route.clone(), "status" => status)
+    metrics::counter!("http_requests_total", "method" => method, "route" => route.clone(), "status" => status)
         .increment(1);
     metrics::histogram!("http_request_duration_seconds", "method" => method, "route" => route)
         .record(start.elapsed().as_secs_f64());
     response
+}
+
+/// The metrics label of a method: the standard ones by name, any other
+/// token (a client may send anything) folded into `other`, so that the
+/// label set stays bounded.
+fn method_label(m: &axum::http::Method) -> &'static str {
+    use axum::http::Method;
+    match *m {
+        Method::GET => "GET",
+        Method::POST => "POST",
+        Method::PUT => "PUT",
+        Method::DELETE => "DELETE",
+        Method::PATCH => "PATCH",
+        Method::HEAD => "HEAD",
+        Method::OPTIONS => "OPTIONS",
+        Method::TRACE => "TRACE",
+        Method::CONNECT => "CONNECT",
+        _ => "other",
+    }
 }
 
 async fn not_found() -> Problem {

@@ -49,6 +49,14 @@ async fn assert_unauthenticated(response: reqwest::Response) -> String {
         .unwrap()
         .to_string();
     assert!(challenge.starts_with("Bearer"), "{challenge}");
+    // The body was not read: the connection is closed, and said so.
+    assert_eq!(
+        response
+            .headers()
+            .get("connection")
+            .map(|v| v.to_str().unwrap()),
+        Some("close")
+    );
     let body = assert_problem(response, 401).await;
     assert_eq!(body["type"], "urn:radar-fusion:problem:unauthenticated");
     challenge

@@ -67,6 +67,41 @@ async fn metrics_count_routes_and_grpc_methods() {
 }
 
 #[tokio::test]
+async fn invented_methods_and_routes_fold_into_one_label_each() {
+    let app = spawn_app().await;
+    for i in 0..50 {
+        let method = reqwest::Method::from_bytes(format!("INVENTED{i}").as_bytes()).unwrap();
+        app.client
+            .request(method, app.url(&format!("/no/such/route/{i}")))
+            .send()
+            .await
+            .unwrap();
+    }
+    let text = app
+        .client
+        .get(app.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        !text.contains("INVENTED"),
+        "an invented method became a label"
+    );
+    assert!(
+        !text.contains("/no/such/route"),
+        "an unknown route became a label"
+    );
+    let series = text
+        .lines()
+        .filter(|l| l.starts_with("http_requests_total{") && l.contains(r#"method="other""#))
+        .count();
+    assert_eq!(series, 1, "{text}");
+}
+
+#[tokio::test]
 async fn openapi_is_served_and_the_checked_in_copy_is_current() {
     let app = spawn_app().await;
     let served: serde_json::Value = app
