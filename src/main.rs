@@ -12,10 +12,7 @@ use radar_fusion::{
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command.unwrap_or(Command::Serve) {
-        Command::Openapi => {
-            print!("{}", http::openapi_json());
-            Ok(())
-        }
+        Command::Openapi => print_ignoring_closed_pipe(&http::openapi_json()),
         Command::Healthcheck { addr } => healthcheck(addr).await,
         Command::Eval(args) => eval(args),
         Command::Serve => {
@@ -31,8 +28,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     use sim::experiments::{EvalOptions, listing, run_and_write};
     use sim::montecarlo::Progress;
     let Some(name) = args.experiment.filter(|_| !args.list) else {
-        print!("{}", listing());
-        return Ok(());
+        return print_ignoring_closed_pipe(&listing());
     };
     let mut opts = EvalOptions::new(args.runs, args.seed);
     opts.runner.threads = args.threads;
@@ -57,8 +53,27 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// GET /healthz over a plain HTTP/1.0 connection; fails unless the status is 200.
+/// Writes `text` to standard output; a reader that stops early (`| head`)
+/// ends the output quietly instead of a broken-pipe panic.
+fn print_ignoring_closed_pipe(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
+}
+
+/// GET /healthz over a plain HTTP/1.0 connection; fails unless the status
+/// is 200. Every error names the address probed.
 async fn healthcheck(addr: std::net::SocketAddr) -> anyhow::Result<()> {
+    use anyhow::Context;
+    healthcheck_once(addr)
+        .await
+        .with_context(|| format!("healthcheck of http://{addr}/healthz"))
+}
+
+async fn healthcheck_once(addr: std::net::SocketAddr) -> anyhow::Result<()> {
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
     let probe = async {
         let mut stream = tokio::net::TcpStream::connect(addr).await?;
@@ -69,7 +84,9 @@ async fn healthcheck(addr: std::net::SocketAddr) -> anyhow::Result<()> {
         let n = stream.read(&mut head).await?;
         anyhow::Ok(String::from_utf8_lossy(&head[..n]).into_owned())
     };
-    let head = tokio::time::timeout(std::time::Duration::from_secs(3), probe).await??;
+    let head = tokio::time::timeout(std::time::Duration::from_secs(3), probe)
+        .await
+        .map_err(|_| anyhow::anyhow!("no answer within 3 s"))??;
     anyhow::ensure!(
         head.starts_with("HTTP/1.0 200") || head.starts_with("HTTP/1.1 200"),
         "unhealthy: {}",

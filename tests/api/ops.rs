@@ -262,3 +262,33 @@ async fn ready_with_the_memory_store() {
         json!({"status": "ready"})
     );
 }
+
+#[test]
+fn the_cli_survives_a_closed_pipe_and_names_the_address_it_probes() {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    let bin = env!("CARGO_BIN_EXE_radar-fusion");
+    // `radar-fusion openapi | head -c 10`: the reader leaves early.
+    let mut child = Command::new(bin)
+        .arg("openapi")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = [0u8; 10];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    // stdout is dropped (closed) here.
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(out.status.success(), "{stderr}");
+    // A probe of a port where nothing listens fails and says where it looked.
+    let out = Command::new(bin)
+        .args(["healthcheck", "--addr", "127.0.0.1:1"])
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("http://127.0.0.1:1/healthz"), "{stderr}");
+}
