@@ -29,7 +29,7 @@ use radar_fusion::{
 #[path = "common/redis.rs"]
 mod redis_harness;
 
-use redis_harness::{REDIS_URL, redis_is_up, unique};
+use redis_harness::{redis_is_up, redis_url, unique};
 
 /// The toy kind: a running total of integer increments, each at most
 /// `limit`. Its apply adds the increments one by one and fails at the first
@@ -154,7 +154,7 @@ async fn redis_pair() -> Option<(Sessions, Sessions)> {
     let prefix = unique("radar-fusion-kinds:");
     let mut out = Vec::new();
     for _ in 0..2 {
-        let store = SessionStore::connect(&settings(REDIS_URL, &prefix))
+        let store = SessionStore::connect(&settings(&redis_url(), &prefix))
             .await
             .unwrap();
         store.ping().await.expect("Redis answers PING");

@@ -36,7 +36,7 @@ mod redis_harness;
 mod data;
 
 use data::{open_stream, pb_report, scenario};
-use redis_harness::{REDIS_URL, RedisServer, redis_is_up, redis_server_available, unique};
+use redis_harness::{RedisServer, redis_is_up, redis_server_available, redis_url, unique};
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
 
@@ -229,7 +229,7 @@ async fn batches_alternating_between_instances_give_the_single_instance_result()
         return;
     }
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
     let (batch, reports) = scenario();
     let id = a.create(&session_config(&batch)).await;
     let bodies = batch_bodies(&reports);
@@ -259,7 +259,7 @@ async fn concurrent_pushers_on_two_instances_apply_every_batch_exactly_once() {
         return;
     }
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
     let (batch, reports) = scenario();
     let id = a.create(&session_config(&batch)).await;
     let bodies = Arc::new(batch_bodies(&reports));
@@ -353,7 +353,7 @@ async fn a_batch_retried_on_the_other_instance_is_acknowledged_not_applied() {
         return;
     }
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
     let (batch, reports) = scenario();
     let id = a.create(&session_config(&batch)).await;
     let bodies = batch_bodies(&reports);
@@ -421,7 +421,7 @@ async fn an_idle_session_expires_on_both_instances_and_pushes_keep_it_alive() {
         return;
     }
     const IDLE: f64 = 1.5;
-    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
     let (batch, reports) = scenario();
     let mut config = session_config(&batch);
     config["idle_expiry_s"] = json!(IDLE);
@@ -626,7 +626,7 @@ async fn tenants_cannot_reach_each_others_sessions_over_grpc() {
     if !redis_is_up() {
         return;
     }
-    let (a, b) = two_instances(REDIS_URL, |s| {
+    let (a, b) = two_instances(&redis_url(), |s| {
         s.api_keys = Some("key-of-acme-1=acme,key-of-globex=globex".into());
     })
     .await;
@@ -737,7 +737,7 @@ async fn a_grpc_stream_dropped_on_one_instance_continues_over_rest_on_the_other(
         return;
     }
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(REDIS_URL, |_| {}).await;
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
     let (_, reports) = scenario();
     let bodies = batch_bodies(&reports);
     let half = bodies.len() / 2;

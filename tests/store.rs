@@ -16,7 +16,7 @@ use radar_fusion::store::{CasOutcome, SessionStore, StoreError, StoreSettings, S
 mod redis_harness;
 
 use redis_harness::{
-    REDIS_URL, RedisServer, free_port, redis_is_up, redis_server_available, unique,
+    RedisServer, free_port, redis_is_up, redis_server_available, redis_url, unique,
 };
 const LONG: Duration = Duration::from_secs(60);
 /// A TTL short enough to wait out; tests then sleep at least twice as long.
@@ -48,7 +48,7 @@ async fn redis(configure: impl FnOnce(&mut StoreSettings)) -> Option<Arc<Session
     if !redis_is_up() {
         return None;
     }
-    let mut s = settings(REDIS_URL);
+    let mut s = settings(&redis_url());
     configure(&mut s);
     let store = SessionStore::connect(&s).await.expect("redis store");
     assert_eq!(store.backend(), "redis");

@@ -9,7 +9,59 @@ use crate::helpers::{spawn_app, spawn_app_with};
 #[path = "../common/sessions.rs"]
 pub(crate) mod data;
 
-use data::{open_stream, pb_open, pb_report, scenario, session_config};
+use data::{open_stream, pb_open, pb_report, scenario, scenario_offset, session_config};
+
+/// Radars half a scan apart (b 1 s after a, scans every 2 s), everything
+/// left to its default: the session's grid (estimated from the first two
+/// scans) meets them, and N batches and a flush decide as one batch call.
+#[tokio::test]
+async fn a_default_session_correlates_unsynchronised_radars_like_the_batch_call() {
+    let app = spawn_app().await;
+    let (batch, reports) = scenario_offset(1.0, None);
+    let expected = app.post_ok("/v1/correlation/tracks", &batch).await;
+    assert_eq!(expected["alignment"]["period_s"], 2.0);
+    let decided = |pairs: &Value| {
+        pairs
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["decision"] == "correlated")
+            .count()
+    };
+    assert_eq!(decided(&expected["pairs"]), 6, "{expected}");
+    let created = app.post_json("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(created.status(), 201);
+    let id = created.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let mut warnings = Vec::new();
+    for (i, chunk) in reports.chunks(30).enumerate() {
+        let u = app
+            .post_ok(
+                &format!("/v1/sessions/{id}/batches"),
+                &json!({"sequence": i + 1, "reports": chunk}),
+            )
+            .await;
+        warnings.extend(u["warnings"].as_array().unwrap().iter().cloned());
+    }
+    let n = reports.chunks(30).count();
+    app.post_ok(
+        &format!("/v1/sessions/{id}/batches"),
+        &json!({"sequence": n + 1, "flush": true}),
+    )
+    .await;
+    assert!(
+        warnings.iter().any(|w| w
+            .as_str()
+            .unwrap()
+            .contains("fusion period was estimated at 2 s")),
+        "{warnings:?}"
+    );
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(state["pairs"], expected["pairs"]);
+    assert_eq!(state["system_tracks"], expected["system_tracks"]);
+}
 
 #[tokio::test]
 async fn batches_over_rest_give_the_batch_endpoints_decisions() {

@@ -1,6 +1,8 @@
-//! Redis for the integration tests: the shared Redis on 127.0.0.1:6379 (a
-//! loud failure when it is down, unless `FUSION_SKIP_REDIS_TESTS=1`), unique
-//! key prefixes, and private `redis-server` processes for outage tests.
+//! Redis for the integration tests: the shared Redis on 127.0.0.1:6379, or
+//! a private `redis-server` started on a free port when none answers there,
+//! or a loud skip when redis-server is not installed (or
+//! `FUSION_SKIP_REDIS_TESTS=1`); unique key prefixes, and private
+//! `redis-server` processes for outage tests.
 //! Included by `tests/store.rs` and `tests/sessions_redis.rs`.
 #![allow(dead_code)] // each test crate uses its own part
 
@@ -8,51 +10,127 @@ use std::{
     net::{SocketAddr, TcpListener, TcpStream},
     path::{Path, PathBuf},
     process::{Child, Command, Stdio},
-    sync::atomic::{AtomicU64, Ordering},
+    sync::{
+        OnceLock,
+        atomic::{AtomicU64, Ordering},
+    },
     time::{Duration, Instant, SystemTime, UNIX_EPOCH},
 };
 
 pub const REDIS_ADDR: &str = "127.0.0.1:6379";
-pub const REDIS_URL: &str = "redis://127.0.0.1:6379/0";
 
 pub fn skip_redis() -> bool {
     std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1")
 }
 
-/// Whether Redis runs on 127.0.0.1:6379; `false` (with a loud warning) only
-/// when it does not and `FUSION_SKIP_REDIS_TESTS=1`; panics otherwise.
-pub fn redis_is_up() -> bool {
-    let addr: SocketAddr = REDIS_ADDR.parse().expect("literal address");
-    if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_ok() {
-        return true;
-    }
-    let message = "Redis is not running on 127.0.0.1:6379: start it with \
-         `redis-server --port 6379 --save '' --daemonize yes` — .ci/run does this";
-    if skip_redis() {
-        eprintln!(
-            "\n!!!!!!!! WARNING: SKIPPING REDIS TEST (FUSION_SKIP_REDIS_TESTS=1): {message}\n"
-        );
-        return false;
-    }
-    panic!("\n\n{message}\n(set FUSION_SKIP_REDIS_TESTS=1 to skip the Redis tests)\n");
+/// The Redis this test binary uses: the shared one on 127.0.0.1:6379 when
+/// it answers, else a private `redis-server` on a free port started once
+/// (and stopped when the test binary exits), else none.
+static REDIS: OnceLock<Option<String>> = OnceLock::new();
+
+/// A line on the real standard error: the test harness captures `eprintln!`
+/// of passing tests, and a skip must be seen.
+/// The test's name is its thread's.
+fn loud(line: &str) {
+    use std::io::Write;
+    let test = std::thread::current().name().unwrap_or("?").to_string();
+    let _ = writeln!(std::io::stderr(), "\n!!!!!!!! {test}: {line}\n");
 }
 
-/// Whether `redis-server` is on PATH; `false` (with a loud warning) only when
-/// it is not and `FUSION_SKIP_REDIS_TESTS=1`; panics otherwise.
-pub fn redis_server_available() -> bool {
-    if Command::new("redis-server")
-        .arg("--version")
-        .output()
-        .is_ok()
-    {
-        return true;
-    }
-    let message = "redis-server is not on PATH: install it (apt-get install redis-server)";
+fn loud_skip(what: &str) {
+    loud(&format!(
+        "SKIPPED: {what}: no Redis answers on {REDIS_ADDR} and redis-server is not on PATH. \
+         Install it (apt-get install redis-server) or start Redis on {REDIS_ADDR} to run the \
+         Redis tests; .ci/run does."
+    ));
+}
+
+/// Whether a Redis is available for the shared-store tests (see
+/// [`redis_url`]); `false`, with one loud line naming what is skipped,
+/// only when none can be had or `FUSION_SKIP_REDIS_TESTS=1`.
+pub fn redis_is_up() -> bool {
     if skip_redis() {
-        eprintln!("\n!!!!!!!! WARNING: SKIPPING REDIS OUTAGE TEST: {message}\n");
+        loud("SKIPPED: a Redis test (FUSION_SKIP_REDIS_TESTS=1)");
         return false;
     }
-    panic!("{message}");
+    let up = REDIS
+        .get_or_init(|| {
+            // FUSION_TEST_REDIS_ADDR moves the shared Redis (a dead address
+            // there tries the fallbacks).
+            let shared =
+                std::env::var("FUSION_TEST_REDIS_ADDR").unwrap_or_else(|_| REDIS_ADDR.to_string());
+            let addr: SocketAddr = shared.parse().expect("FUSION_TEST_REDIS_ADDR is host:port");
+            if TcpStream::connect_timeout(&addr, Duration::from_secs(1)).is_ok() {
+                return Some(format!("redis://{shared}/0"));
+            }
+            if !redis_server_on_path() {
+                return None;
+            }
+            let port = free_port();
+            // The server lives as long as this test binary: a watcher
+            // shell stops it when this process is gone.
+            let me = std::process::id();
+            let script = format!(
+                "redis-server --port {port} --bind 127.0.0.1 --save '' --appendonly no \
+                 >/dev/null 2>&1 & r=$!; while kill -0 {me} 2>/dev/null; do sleep 1; done; \
+                 kill $r"
+            );
+            // Never waited for: the watcher outlives the tests by design.
+            #[allow(clippy::zombie_processes)]
+            Command::new("sh")
+                .args(["-c", &script])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("sh runs");
+            let addr: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+            let start = Instant::now();
+            while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
+                if start.elapsed() > Duration::from_secs(10) {
+                    return None;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            eprintln!("redis: none on {shared}; started a private redis-server on port {port}");
+            Some(format!("redis://127.0.0.1:{port}/0"))
+        })
+        .is_some();
+    if !up {
+        loud_skip("a test of the Redis session store");
+    }
+    up
+}
+
+/// The URL of the Redis of [`redis_is_up`] (call that first).
+pub fn redis_url() -> String {
+    REDIS
+        .get()
+        .cloned()
+        .flatten()
+        .expect("redis_is_up() said true")
+}
+
+fn redis_server_on_path() -> bool {
+    Command::new("redis-server")
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok()
+}
+
+/// Whether `redis-server` is on PATH (the outage tests start their own);
+/// `false`, with one loud line, when it is not or `FUSION_SKIP_REDIS_TESTS=1`.
+pub fn redis_server_available() -> bool {
+    if skip_redis() {
+        loud("SKIPPED: a Redis outage test (FUSION_SKIP_REDIS_TESTS=1)");
+        return false;
+    }
+    if redis_server_on_path() {
+        return true;
+    }
+    loud_skip("a Redis outage test (it starts and kills its own redis-server)");
+    false
 }
 
 /// A name unique to this call (process id, clock, counter) under `tag`.

@@ -8,9 +8,15 @@ use serde_json::{Value, json};
 /// Two radars, six straight targets, radar b reporting 0.3 s after radar a;
 /// targets 0 and 1 cross mid-way.
 pub fn scenario() -> (Value, Vec<Value>) {
+    scenario_offset(0.3, Some("predict"))
+}
+
+/// The scenario with radar b reporting `offset` s after radar a (scans every
+/// 2 s) and the given alignment mode (`None`: the default grid).
+pub fn scenario_offset(offset_b: f64, mode: Option<&str>) -> (Value, Vec<Value>) {
     let mut reports = Vec::new();
     let mut nodes = Vec::new();
-    for (node, offset, bias) in [("a", 0.0, 0.0), ("b", 0.3, 15.0)] {
+    for (node, offset, bias) in [("a", 0.0, 0.0), ("b", offset_b, 15.0)] {
         let mut tracks = Vec::new();
         for target in 0..6 {
             let (x0, y0, vx, vy) = match target {
@@ -45,13 +51,15 @@ pub fn scenario() -> (Value, Vec<Value>) {
             .unwrap()
             .total_cmp(&b["t"].as_f64().unwrap())
     });
-    let batch = json!({
+    let mut batch = json!({
         "state_layout": ["x", "vx", "y", "vy"],
         "method": {"kind": "independent_double_threshold", "rule": {"l": 3, "r": 4}},
         "motion_model": {"process_noise": "dwna", "sigma_a_mps2": 1.0},
-        "alignment": {"tolerance_s": 0.5},
         "nodes": nodes,
     });
+    if let Some(mode) = mode {
+        batch["alignment"] = json!({"mode": mode, "tolerance_s": 0.5});
+    }
     (batch, reports)
 }
 
@@ -108,6 +116,7 @@ pub fn pb_open() -> pb::CreateSessionRequest {
             ..Default::default()
         }),
         alignment: Some(pb::Alignment {
+            mode: Some("predict".into()),
             tolerance_s: Some(0.5),
             ..Default::default()
         }),
