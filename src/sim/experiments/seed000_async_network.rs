@@ -17,7 +17,7 @@ use super::EvalOptions;
 use crate::service::correlation::correlate;
 use crate::sim::async_network::{Score, cases, generate, old_default, score};
 use crate::sim::montecarlo::run_batch;
-use crate::sim::report::{Report, markdown_table};
+use crate::sim::report::{LinePlot, Report, Series, markdown_table};
 use crate::sim::{SimError, SimRng};
 
 pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
@@ -34,7 +34,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         opts.runner.runs, opts.runner.seed
     );
     let mut rows = Vec::new();
-    for net in cases() {
+    let mut rates: [Vec<(f64, f64)>; 2] = [Vec::new(), Vec::new()];
+    for (ni, net) in cases().into_iter().enumerate() {
         let results: Vec<Result<(Score, Score), SimError>> =
             run_batch(&opts.runner, net.name, |_, rng: &mut SimRng| {
                 let run = generate(&net, rng)?;
@@ -59,6 +60,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             grid.add(g);
             clusters.add(c);
         }
+        rates[0].push(((ni + 1) as f64, grid.rate()));
+        rates[1].push(((ni + 1) as f64, clusters.rate()));
         for (name, s) in [
             ("grid (default)", grid),
             ("clusters 0.5 s (before)", clusters),
@@ -84,9 +87,33 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         ],
         &rows,
     ));
+    md.push_str("\nNetworks on the plot's x axis in the table's order (1 to 4).\n");
+    let [grid, clusters] = rates;
+    let series = vec![
+        Series {
+            name: "grid (default)".into(),
+            points: grid,
+            dashed: false,
+        },
+        Series {
+            name: "clusters 0.5 s (before)".into(),
+            points: clusters,
+            dashed: true,
+        },
+    ];
     Ok(Report {
         markdown: md,
         csv,
-        plots: Vec::new(),
+        plots: vec![(
+            "correct".into(),
+            LinePlot {
+                title: "Same-target pairs correlated, by network".into(),
+                x_label: "network".into(),
+                y_label: "correct-correlation rate".into(),
+                series,
+                y_range: Some((0.0, 1.0)),
+            }
+            .to_svg(),
+        )],
     })
 }
