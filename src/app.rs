@@ -134,15 +134,19 @@ impl Application {
         };
         let (http_listener, grpc_listener) =
             (http_listener.tap_io(nodelay), grpc_listener.tap_io(nodelay));
+        let access_log = state.settings().access_log;
         let http_server = tokio::spawn(
             axum::serve(http_listener, rest)
                 .with_graceful_shutdown(stopped(stop_rx.clone()))
                 .into_future(),
         );
         let grpc_server = tokio::spawn(
-            axum::serve(grpc_listener, telemetry::with_request_tracing(grpc))
-                .with_graceful_shutdown(stopped(stop_rx))
-                .into_future(),
+            axum::serve(
+                grpc_listener,
+                telemetry::with_request_tracing(grpc, access_log),
+            )
+            .with_graceful_shutdown(stopped(stop_rx))
+            .into_future(),
         );
 
         shutdown.await;

@@ -78,6 +78,17 @@ pub enum LogFormat {
     Json,
 }
 
+/// The level of the one-line-per-request access log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AccessLog {
+    /// No access log.
+    Off,
+    /// At DEBUG: silent under the default `--log info`.
+    Debug,
+    /// At INFO.
+    Info,
+}
+
 /// Every runtime setting of the service.
 #[derive(Debug, Clone, Args)]
 pub struct Settings {
@@ -109,6 +120,18 @@ pub struct Settings {
         global = true
     )]
     pub log_format: LogFormat,
+    /// Level of the access log (one line per request with status and
+    /// latency). Internal errors (500) are logged at ERROR whatever this
+    /// says; shed (503) and timed-out (504) requests are counted in
+    /// `/metrics` and logged at DEBUG.
+    #[arg(
+        long,
+        env = "FUSION_ACCESS_LOG",
+        value_enum,
+        default_value = "debug",
+        global = true
+    )]
+    pub access_log: AccessLog,
     /// Longest time a request may take before it is answered 504 / DEADLINE_EXCEEDED.
     #[arg(
         long,
@@ -341,6 +364,13 @@ mod tests {
         ]);
         assert_eq!(s.validate(), Ok(()));
         assert_eq!(s.store_settings().timeout, Duration::from_millis(250));
+    }
+
+    #[test]
+    fn the_access_log_is_quiet_by_default() {
+        assert_eq!(with(&[]).access_log, AccessLog::Debug);
+        assert_eq!(with(&["--access-log", "info"]).access_log, AccessLog::Info);
+        assert_eq!(with(&["--access-log", "off"]).access_log, AccessLog::Off);
     }
 
     #[test]

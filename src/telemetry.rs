@@ -1,18 +1,19 @@
 //! Logs and metrics: the `tracing` subscriber (text or JSON lines) and the
 //! process-wide Prometheus recorder behind `/metrics`.
 
-use std::sync::OnceLock;
+use std::{io::IsTerminal, sync::OnceLock, time::Duration};
 
-use axum::{Router, extract::Request, http::HeaderName};
+use axum::{Router, extract::Request, http::HeaderName, response::Response};
 use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
 use tower_http::{
+    classify::ServerErrorsFailureClass,
     request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer},
-    trace::{DefaultOnFailure, DefaultOnRequest, DefaultOnResponse, TraceLayer},
+    trace::{DefaultOnRequest, TraceLayer},
 };
-use tracing::Level;
+use tracing::{Level, Span};
 use tracing_subscriber::{EnvFilter, fmt, prelude::*};
 
-use crate::config::LogFormat;
+use crate::config::{AccessLog, LogFormat};
 
 /// Latency buckets in seconds, from 50 µs to 30 s.
 const LATENCY_BUCKETS: &[f64] = &[
@@ -25,8 +26,12 @@ const LATENCY_BUCKETS: &[f64] = &[
 pub fn init_logging(filter: &str, format: LogFormat) {
     let filter = EnvFilter::try_new(filter).unwrap_or_else(|_| EnvFilter::new("info"));
     let registry = tracing_subscriber::registry().with(filter);
+    // Colour codes only for a terminal: never in files or log collectors.
+    let ansi = std::io::stdout().is_terminal();
     let _ = match format {
-        LogFormat::Text => registry.with(fmt::layer().with_target(false)).try_init(),
+        LogFormat::Text => registry
+            .with(fmt::layer().with_target(false).with_ansi(ansi))
+            .try_init(),
         LogFormat::Json => registry
             .with(
                 fmt::layer()
@@ -59,8 +64,11 @@ pub fn metrics_handle() -> PrometheusHandle {
 /// Wraps a router so that every request has an `x-request-id` (generated when
 /// the client sends none, echoed in the response) and runs in a span that
 /// carries it, so every log line of the request names it. Each response is
-/// logged at INFO with its status and latency; 5xx at ERROR.
-pub fn with_request_tracing(router: Router) -> Router {
+/// logged at the `access` level with its status and latency (or not at
+/// all); a 5xx other than 503 and 504 at ERROR; shed (503) and timed-out
+/// (504) requests at DEBUG only (they are counted in the metrics: a flood
+/// of them must not flood the log).
+pub fn with_request_tracing(router: Router, access: AccessLog) -> Router {
     let x_request_id = HeaderName::from_static("x-request-id");
     router
         .layer(PropagateRequestIdLayer::new(x_request_id.clone()))
@@ -80,12 +88,28 @@ pub fn with_request_tracing(router: Router) -> Router {
                     )
                 })
                 .on_request(DefaultOnRequest::new().level(Level::DEBUG))
-                .on_response(
-                    DefaultOnResponse::new()
-                        .level(Level::INFO)
-                        .latency_unit(tower_http::LatencyUnit::Micros),
-                )
-                .on_failure(DefaultOnFailure::new().level(Level::ERROR)),
+                .on_response(move |res: &Response, latency: Duration, _: &Span| {
+                    let status = res.status().as_u16();
+                    let micros = latency.as_micros();
+                    match access {
+                        AccessLog::Off => {}
+                        AccessLog::Debug => tracing::debug!(status, latency_us = micros, "response"),
+                        AccessLog::Info => tracing::info!(status, latency_us = micros, "response"),
+                    }
+                })
+                .on_failure(
+                    |class: ServerErrorsFailureClass, latency: Duration, _: &Span| {
+                        let micros = latency.as_micros();
+                        match class {
+                            ServerErrorsFailureClass::StatusCode(s)
+                                if s.as_u16() == 503 || s.as_u16() == 504 =>
+                            {
+                                tracing::debug!(status = s.as_u16(), latency_us = micros, "shed or timed out")
+                            }
+                            other => tracing::error!(failure = %other, latency_us = micros, "server error"),
+                        }
+                    },
+                ),
         )
         .layer(SetRequestIdLayer::new(x_request_id, MakeRequestUuid))
 }

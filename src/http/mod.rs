@@ -182,7 +182,7 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .layer(CompressionLayer::new())
         .layer(middleware::from_fn(problem::problem_for_bare_errors))
         .layer(middleware::from_fn_with_state(grpc, dispatch_grpc));
-    crate::telemetry::with_request_tracing(router)
+    crate::telemetry::with_request_tracing(router, settings.access_log)
 }
 
 /// Answers 401 to an API request without a valid `Authorization: Bearer <key>`
