@@ -12,7 +12,7 @@ use crate::{
     auth::ApiKeys,
     config::Settings,
     grpc, http,
-    state::{AppState, Readiness},
+    state::{AppState, Readiness, StoreHealth},
     store::SessionStore,
     telemetry,
 };
@@ -107,11 +107,14 @@ impl Application {
         let store_ok = match state.store().ping().await {
             Ok(()) => true,
             Err(e) => {
-                tracing::warn!(error = %e, "session store unavailable at start: not ready");
+                tracing::warn!(
+                    error = %e,
+                    "session store unavailable at start: sessions degraded, everything else serving"
+                );
                 false
             }
         };
-        set_health(&health, serving_status(store_ok)).await;
+        set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
         tracing::info!(
@@ -154,7 +157,7 @@ impl Application {
         state.set_ready(false);
         monitor.abort();
         let _ = monitor.await;
-        set_health(&health, ServingStatus::NotServing).await;
+        set_health(&health, false, false).await;
         let _ = stop_tx.send(true);
 
         let grace = state.settings().shutdown_grace();
@@ -177,27 +180,41 @@ impl Application {
     }
 }
 
-async fn set_health(health: &HealthReporter, status: ServingStatus) {
-    health.set_service_status("", status).await;
+/// The gRPC health statuses: the server ("") and the stateless services
+/// follow readiness; `SessionService` also needs the session store.
+async fn set_health(health: &HealthReporter, ready: bool, store_ok: bool) {
+    health.set_service_status("", serving_status(ready)).await;
     for name in grpc::SERVICE_NAMES {
-        health.set_service_status(*name, status).await;
+        let serving = ready && (store_ok || *name != grpc::SESSION_SERVICE);
+        health
+            .set_service_status(*name, serving_status(serving))
+            .await;
     }
 }
 
-/// Keeps the gRPC health status in step with readiness (started, not draining,
-/// session store answering), checked every [`HEALTH_CHECK_EVERY`]; runs until aborted.
-async fn follow_readiness(state: AppState, health: HealthReporter, mut reported: bool) {
+/// Keeps the gRPC health statuses in step with readiness (started, not
+/// draining) and the session store's health, checked every
+/// [`HEALTH_CHECK_EVERY`]; runs until aborted.
+async fn follow_readiness(state: AppState, health: HealthReporter, mut store_reported: bool) {
+    let mut ready_reported = true;
     loop {
         tokio::time::sleep(HEALTH_CHECK_EVERY).await;
-        let readiness = state.check_ready().await;
-        let ready = readiness == Readiness::Ready;
-        if ready != reported {
-            set_health(&health, serving_status(ready)).await;
-            match readiness {
-                Readiness::Ready => tracing::info!("ready again"),
-                Readiness::NotReady(reason) => tracing::warn!(reason, "not ready"),
+        let (ready, store_ok) = match state.check_ready().await {
+            Readiness::Ready { store } => (true, store == StoreHealth::Ok),
+            Readiness::NotReady(_) => (false, store_reported),
+        };
+        if ready != ready_reported || store_ok != store_reported {
+            set_health(&health, ready, store_ok).await;
+            if store_ok != store_reported {
+                if store_ok {
+                    tracing::info!("session store reachable again: sessions serving");
+                } else {
+                    tracing::warn!(
+                        "session store unavailable: sessions degraded, everything else serving"
+                    );
+                }
             }
-            reported = ready;
+            (ready_reported, store_reported) = (ready, store_ok);
         }
     }
 }

@@ -89,27 +89,45 @@ impl AppState {
         &self.inner.sessions
     }
 
-    /// Whether the service should receive traffic now: started, not draining,
-    /// and its session store answers a ping (within the store timeout).
+    /// Whether the service should receive traffic now: started and not
+    /// draining. The session store's health is reported beside it and does
+    /// not take the replica out of rotation: every stateless endpoint still
+    /// works during a store outage, and every replica shares the store.
     pub async fn check_ready(&self) -> Readiness {
         if !self.is_ready() {
             return Readiness::NotReady("starting or shutting down");
         }
+        Readiness::Ready {
+            store: self.check_store().await,
+        }
+    }
+
+    /// Whether the session store answers a ping (within the store timeout).
+    pub async fn check_store(&self) -> StoreHealth {
         match self.store().ping().await {
-            Ok(()) => Readiness::Ready,
+            Ok(()) => StoreHealth::Ok,
             Err(e) => {
-                // Probes ask often: the change of readiness is logged by `app`.
+                // Probes ask often: the change is logged by `app`.
                 tracing::debug!(error = %e, backend = self.store().backend(), "session store ping failed");
-                Readiness::NotReady("session store unavailable")
+                StoreHealth::Degraded
             }
         }
     }
 }
 
+/// The session store's health.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreHealth {
+    Ok,
+    /// Unreachable: session calls fail with 503, everything else works.
+    Degraded,
+}
+
 /// The answer of [`AppState::check_ready`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Readiness {
-    Ready,
+    /// In rotation, with the store's health.
+    Ready { store: StoreHealth },
     /// Not ready, with a reason safe to show to a probe.
     NotReady(&'static str),
 }

@@ -465,17 +465,17 @@ async fn an_idle_session_expires_on_both_instances_and_pushes_keep_it_alive() {
 
 // ---------------------------------------------------------------- Redis outage
 
-/// Polls `/readyz` until it answers `status`; panics after `limit`.
+/// Polls `/healthz/store` until it answers `status`; panics after `limit`.
 async fn wait_readyz(app: &App, status: u16, limit: Duration) {
     let start = Instant::now();
     loop {
-        let got = app.get("/readyz").await.status().as_u16();
+        let got = app.get("/healthz/store").await.status().as_u16();
         if got == status {
             return;
         }
         assert!(
             start.elapsed() < limit,
-            "/readyz still {got}, not {status}, after {limit:?}"
+            "/healthz/store still {got}, not {status}, after {limit:?}"
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
@@ -566,14 +566,16 @@ async fn a_redis_outage_fails_fast_and_the_session_continues_after_recovery() {
         start.elapsed()
     );
     assert_eq!(err.code(), tonic::Code::Unavailable, "{err:?}");
-    // Not ready while Redis is away.
+    // While Redis is away the replicas stay in rotation (the stateless
+    // endpoints work) and report the store degraded.
     for app in [&a, &b] {
         let start = Instant::now();
         let r = app.get("/readyz").await;
         assert!(start.elapsed() < FAST);
-        assert_eq!(r.status(), 503);
+        assert_eq!(r.status(), 200);
         let body: Value = r.json().await.unwrap();
-        assert_eq!(body["status"], "not_ready");
+        assert_eq!(body["store"], "degraded");
+        assert_eq!(app.get("/healthz/store").await.status(), 503);
     }
 
     // Redis comes back with its append-only file: both instances recover by
@@ -818,8 +820,13 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
         assert_eq!(r.status(), 503);
         assert_eq!(r.headers()["retry-after"], "1");
         let start = Instant::now();
-        assert_eq!(app.get("/readyz").await.status(), 503);
-        assert!(start.elapsed() < FAST, "readyz took {:?}", start.elapsed());
+        assert_eq!(app.get("/healthz/store").await.status(), 503);
+        assert!(
+            start.elapsed() < FAST,
+            "store health took {:?}",
+            start.elapsed()
+        );
+        assert_eq!(app.get("/readyz").await.status(), 200);
     }
     redis.signal("CONT");
 

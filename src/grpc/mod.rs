@@ -131,6 +131,9 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
 }
 
 /// Names of the services whose health is reported (besides the overall "").
+/// The service that needs the session store.
+pub const SESSION_SERVICE: &str = "radar.fusion.v1.SessionService";
+
 pub const SERVICE_NAMES: &[&str] = &[
     "radar.fusion.v1.CorrelationService",
     "radar.fusion.v1.AisRadarService",

@@ -48,7 +48,7 @@ pub struct Timing {
             problem details naming the offending field. The same operations are served \
             over gRPC (package radar.fusion.v1)."
     ),
-    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, plot_fusion::track, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::readyz, ops::metrics),
+    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, plot_fusion::track, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::store_health, ops::readyz, ops::metrics),
     components(schemas(Problem, problem::ProblemField)),
     modifiers(&BearerAuth),
     tags(
@@ -173,6 +173,7 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .merge(api)
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))
+        .route("/healthz/store", get(ops::store_health))
         .route("/metrics", get(ops::metrics))
         .merge(SwaggerUi::new("/docs").url("/openapi.json", ApiDoc::openapi()))
         .fallback(not_found)

@@ -217,7 +217,7 @@ async fn graceful_shutdown_stops_serving_and_reports_not_ready() {
 }
 
 #[tokio::test]
-async fn not_ready_while_the_session_store_is_unreachable() {
+async fn a_store_outage_degrades_sessions_only() {
     use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
 
     // A port nobody listens on: connecting still works (Redis is lazy).
@@ -232,23 +232,53 @@ async fn not_ready_while_the_session_store_is_unreachable() {
     })
     .await;
     assert_eq!(app.state.store().backend(), "redis");
+    // In rotation: the stateless endpoints work without the store.
     let r = app.client.get(app.url("/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(
+        r.json::<serde_json::Value>().await.unwrap(),
+        json!({"status": "ready", "reason": "session store unavailable", "store": "degraded"})
+    );
+    let r = app
+        .post_json(
+            "/v1/correlation/rules/evaluate",
+            &json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]}),
+        )
+        .await;
+    assert_eq!(r.status(), 200);
+    // The store's own check says it is down.
+    let r = app
+        .client
+        .get(app.url("/healthz/store"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status(), 503);
     assert_eq!(
         r.json::<serde_json::Value>().await.unwrap(),
-        json!({"status": "not_ready", "reason": "session store unavailable"})
+        json!({"status": "degraded", "reason": "session store unavailable"})
     );
     // Liveness does not depend on the store.
     let r = app.client.get(app.url("/healthz")).send().await.unwrap();
     assert_eq!(r.status(), 200);
-    let status = HealthClient::new(app.channel().await)
-        .check(HealthCheckRequest { service: "".into() })
-        .await
-        .expect("health check answers")
-        .into_inner()
-        .status;
-    // 2 = NOT_SERVING in grpc.health.v1.
-    assert_eq!(status, 2);
+    // gRPC health: the server and the stateless services serve (1), the
+    // session service does not (2).
+    let mut health = HealthClient::new(app.channel().await);
+    for (service, want) in [
+        ("", 1),
+        ("radar.fusion.v1.CorrelationService", 1),
+        ("radar.fusion.v1.SessionService", 2),
+    ] {
+        let status = health
+            .check(HealthCheckRequest {
+                service: service.into(),
+            })
+            .await
+            .expect("health check answers")
+            .into_inner()
+            .status;
+        assert_eq!(status, want, "{service}");
+    }
 }
 
 #[tokio::test]
@@ -259,8 +289,15 @@ async fn ready_with_the_memory_store() {
     assert_eq!(r.status(), 200);
     assert_eq!(
         r.json::<serde_json::Value>().await.unwrap(),
-        json!({"status": "ready"})
+        json!({"status": "ready", "store": "ok"})
     );
+    let r = app
+        .client
+        .get(app.url("/healthz/store"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
 }
 
 #[test]
