@@ -140,6 +140,16 @@ pub struct Settings {
         global = true
     )]
     pub request_timeout_s: f64,
+    /// Longest time a REST request's body may take to arrive once its
+    /// headers have (408 after it); the request takes an in-flight slot
+    /// only when its body is complete, so slow clients cannot hold slots.
+    #[arg(
+        long,
+        env = "FUSION_BODY_READ_TIMEOUT_S",
+        default_value_t = 10.0,
+        global = true
+    )]
+    pub body_read_timeout_s: f64,
     /// Largest request body (REST) or message (gRPC) in bytes; larger ones get 413 / RESOURCE_EXHAUSTED.
     #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024, global = true)]
     pub max_body_bytes: usize,
@@ -280,6 +290,10 @@ impl Settings {
         Duration::from_secs_f64(self.request_timeout_s)
     }
 
+    pub fn body_read_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.body_read_timeout_s)
+    }
+
     pub fn shutdown_grace(&self) -> Duration {
         Duration::from_secs_f64(self.shutdown_grace_s)
     }
@@ -305,6 +319,7 @@ impl Settings {
             }
         };
         positive("request-timeout-s", self.request_timeout_s)?;
+        positive("body-read-timeout-s", self.body_read_timeout_s)?;
         positive("shutdown-grace-s", self.shutdown_grace_s)?;
         if self.max_body_bytes < 1024 {
             return Err("--max-body-bytes must be at least 1024".into());

@@ -215,8 +215,33 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
     }
 }
 
-/// Sheds an API request with 503 when `max_in_flight` are being served.
+/// Reads an API request's whole body first, within the body limit and the
+/// body-read timeout (`FUSION_BODY_READ_TIMEOUT_S`), and only then takes an
+/// in-flight slot: a client that sends its headers and then trickles or
+/// withholds its body holds no slot, and is answered 408 when the timeout
+/// passes. Sheds the request with 503 when `max_in_flight` are being served.
 async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let settings = state.settings();
+    let (parts, body) = req.into_parts();
+    let read = axum::body::to_bytes(body, settings.max_body_bytes);
+    let bytes = match tokio::time::timeout(settings.body_read_timeout(), read).await {
+        Ok(Ok(bytes)) => bytes,
+        Ok(Err(_)) => {
+            // Over the limit (a chunked body found out while reading), or
+            // the connection failed mid-body.
+            return Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response();
+        }
+        Err(_) => {
+            metrics::counter!("requests_slow_body_total").increment(1);
+            let mut response = Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response();
+            response.headers_mut().insert(
+                header::CONNECTION,
+                header::HeaderValue::from_static("close"),
+            );
+            return response;
+        }
+    };
+    let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     match state.try_admit() {
         Some(_permit) => next.run(req).await,
         None => {

@@ -185,6 +185,53 @@ async fn oversized_bodies_are_413_on_rest_and_resource_exhausted_on_grpc() {
     assert_eq!(status.code(), Code::ResourceExhausted, "{status:?}");
 }
 
+/// Clients that send their headers and then withhold their bodies hold no
+/// in-flight slot: with one slot, ten such clients leave a normal request
+/// served, and each is answered 408 when the body-read timeout passes.
+#[tokio::test]
+async fn slow_clients_hold_no_slot_and_time_out() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let app = spawn_app_with(|s| {
+        s.max_in_flight = 1;
+        s.body_read_timeout_s = 0.5;
+    })
+    .await;
+    let mut slow = Vec::new();
+    for _ in 0..10 {
+        let mut stream = tokio::net::TcpStream::connect(app.http_addr).await.unwrap();
+        stream
+            .write_all(
+                format!(
+                    "POST {EVALUATE} HTTP/1.1\r\nHost: test\r\nContent-Type: application/json\r\n\
+                     Content-Length: 1000\r\n\r\n{{\"alpha\""
+                )
+                .as_bytes(),
+            )
+            .await
+            .unwrap();
+        slow.push(stream);
+    }
+    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    let body = json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]});
+    let r = app.post_json(EVALUATE, &body).await;
+    assert_eq!(r.status(), 200, "a slow client holds the only slot");
+    for mut stream in slow {
+        let mut response = Vec::new();
+        let _ = tokio::time::timeout(
+            std::time::Duration::from_secs(5),
+            stream.read_to_end(&mut response),
+        )
+        .await
+        .expect("the slow client is answered and closed");
+        let text = String::from_utf8_lossy(&response);
+        assert!(text.starts_with("HTTP/1.1 408"), "{text}");
+        assert!(
+            text.to_ascii_lowercase().contains("connection: close"),
+            "{text}"
+        );
+    }
+}
+
 /// Sends a POST with `Transfer-Encoding: chunked` (no Content-Length) over a
 /// raw socket and returns the response head and body as text.
 async fn raw_chunked_post(addr: std::net::SocketAddr, path: &str, body: &str) -> String {
