@@ -110,9 +110,71 @@ impl utoipa::Modify for BearerAuth {
                     .build(),
             )
             .build();
+        // The answers every API operation can give besides its own, each
+        // with an example of its problem body.
+        let problem = |status: u16, description: &str| {
+            let code = StatusCode::from_u16(status).expect("a status");
+            let body = Problem::for_status(code);
+            let example = serde_json::to_value(&body).expect("a problem serialises");
+            ResponseBuilder::new()
+                .description(description)
+                .content(
+                    problem::PROBLEM_JSON,
+                    ContentBuilder::new()
+                        .schema(Some(Ref::from_schema_name("Problem")))
+                        .example(Some(example))
+                        .build(),
+                )
+                .build()
+        };
+        let common = [
+            (
+                "503",
+                problem(
+                    503,
+                    "Shed (too many requests in flight; `Retry-After`), or a session store that \
+                     does not answer (`Retry-After`; for a session write the outcome is unknown: \
+                     retry with the same sequence number)",
+                ),
+            ),
+            (
+                "504",
+                problem(504, "The request ran past FUSION_REQUEST_TIMEOUT_S"),
+            ),
+        ];
+        let with_body = [
+            (
+                "400",
+                problem(400, "The body is not JSON, or not the expected JSON object"),
+            ),
+            (
+                "408",
+                problem(
+                    408,
+                    "The body did not arrive within FUSION_BODY_READ_TIMEOUT_S (the connection \
+                     is closed)",
+                ),
+            ),
+            (
+                "413",
+                problem(
+                    413,
+                    "The body exceeds FUSION_MAX_BODY_BYTES, or a count limit",
+                ),
+            ),
+            (
+                "415",
+                problem(415, "The Content-Type is not application/json"),
+            ),
+        ];
         for (path, item) in &mut openapi.paths.paths {
             if !path.starts_with("/v1/") {
                 continue;
+            }
+            if let Some(post) = &mut item.post {
+                for (status, response) in &with_body {
+                    add_response(&mut post.responses, status, response);
+                }
             }
             let operations = [
                 &mut item.get,
@@ -128,8 +190,41 @@ impl utoipa::Modify for BearerAuth {
                     .responses
                     .responses
                     .insert("401".to_string(), unauthorized.clone().into());
+                for (status, response) in &common {
+                    add_response(&mut operation.responses, status, response);
+                }
             }
         }
+    }
+}
+
+/// Adds `response` under `status`; an operation's own response for that
+/// status keeps its description and gains the problem example if it has
+/// none (the schema's own example is a 422's).
+fn add_response(
+    responses: &mut utoipa::openapi::Responses,
+    status: &str,
+    response: &utoipa::openapi::Response,
+) {
+    use utoipa::openapi::RefOr;
+    match responses.responses.get_mut(status) {
+        None => {
+            responses
+                .responses
+                .insert(status.to_string(), response.clone().into());
+        }
+        Some(RefOr::T(own)) => {
+            let example = match response.content.get(problem::PROBLEM_JSON) {
+                Some(RefOr::T(c)) => c.example.clone(),
+                _ => None,
+            };
+            if let Some(RefOr::T(content)) = own.content.get_mut(problem::PROBLEM_JSON)
+                && content.example.is_none()
+            {
+                content.example = example;
+            }
+        }
+        Some(RefOr::Ref(_)) => {}
     }
 }
 

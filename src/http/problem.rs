@@ -93,6 +93,12 @@ impl Problem {
                 "Service overloaded",
                 "too many requests in flight; retry shortly",
             ),
+            StatusCode::REQUEST_TIMEOUT => (
+                "body-timeout",
+                "Request body too slow",
+                "the request body did not arrive within the configured limit \
+                 (FUSION_BODY_READ_TIMEOUT_S)",
+            ),
             _ => (
                 "http-error",
                 status.canonical_reason().unwrap_or("Error"),

@@ -117,6 +117,26 @@ async fn openapi_is_served_and_the_checked_in_copy_is_current() {
     assert_eq!(served, generated);
     assert!(served["openapi"].as_str().unwrap().starts_with("3."));
     assert!(served["paths"]["/v1/correlation/rules/evaluate"]["post"].is_object());
+    // Every API operation lists the answers the layers in front of it give.
+    for (path, item) in served["paths"].as_object().unwrap() {
+        if !path.starts_with("/v1/") {
+            continue;
+        }
+        for (method, op) in item.as_object().unwrap() {
+            let mut want = vec!["401", "503", "504"];
+            if method == "post" {
+                want.extend(["400", "408", "413", "415"]);
+            }
+            for status in want {
+                let r = &op["responses"][status];
+                assert!(r.is_object(), "{method} {path} lacks {status}");
+                if status != "401" {
+                    let example = &r["content"]["application/problem+json"]["example"];
+                    assert_eq!(example["status"], status.parse::<u16>().unwrap());
+                }
+            }
+        }
+    }
 
     let checked_in =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json"))
