@@ -854,6 +854,65 @@ async fn a_hung_redis_fails_fast_and_the_session_continues_after_it_resumes() {
     a.delete(&id).await;
 }
 
+/// The same without sequence numbers: a batch answered 503 while Redis hung
+/// may have been written when it resumed; retried unchanged, it is known by
+/// its fingerprint and not applied twice. Every batch of the run is pushed
+/// once more too: nothing is applied twice, and the final state is the
+/// single-instance run's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unsequenced_batch_retried_after_a_503_is_not_applied_twice() {
+    let Some(redis) = private_redis() else {
+        return;
+    };
+    let reference = single_instance_outcome().await;
+    let (a, b) = two_instances(&redis.url(), |s| s.store_timeout_s = 0.5).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    // The bodies without their sequence numbers.
+    let bodies: Vec<Value> = batch_bodies(&reports)
+        .into_iter()
+        .map(|mut body| {
+            body.as_object_mut().unwrap().remove("sequence");
+            body
+        })
+        .collect();
+    let k = 5;
+    for body in &bodies[..k] {
+        b.push(&id, body).await;
+    }
+    redis.signal("STOP");
+    let r = b
+        .post_json(&format!("/v1/sessions/{id}/batches"), &bodies[k])
+        .await;
+    assert_eq!(r.status(), 503);
+    redis.signal("CONT");
+    wait_readyz(&b, 200, Duration::from_secs(10)).await;
+    // The client retries batch k unchanged, then every batch again.
+    let retry = a.push(&id, &bodies[k]).await;
+    let state = a.state(&id).await;
+    let applied = state["batches"].as_u64().unwrap();
+    assert_eq!(applied, k as u64 + 1, "{retry}");
+    for (i, body) in bodies.iter().enumerate().skip(k + 1) {
+        let to = if i % 2 == 0 { &a } else { &b };
+        to.push(&id, body).await;
+    }
+    for body in &bodies[..bodies.len() - 1] {
+        let again = a.push(&id, body).await;
+        assert_eq!(again["duplicate"], true, "{again}");
+    }
+    let end = a.state(&id).await;
+    assert_eq!(end["batches"], bodies.len() as u64);
+    for field in [
+        "pairs",
+        "system_tracks",
+        "instants_processed",
+        "reports_accepted",
+    ] {
+        assert_eq!(end[field], reference[field], "{field}");
+    }
+    a.delete(&id).await;
+}
+
 /// A stream batch that outlives the request timeout (its Redis hung, the
 /// store timeout longer than the request's) answers DEADLINE_EXCEEDED inside
 /// the stream, which stays open; once Redis resumes, the same batch retried

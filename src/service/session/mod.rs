@@ -37,7 +37,10 @@ use crate::algo::{
 /// First byte of every session written by this release: the envelope's
 /// format. Correlation sessions of earlier releases start with their own
 /// format, 1 or 2, and are read as correlation sessions.
-pub const ENVELOPE_FORMAT: u8 = 3;
+pub const ENVELOPE_FORMAT: u8 = 4;
+/// Unsequenced batches remembered by their fingerprint, so that a retry of
+/// one whose outcome the client could not know is not applied twice.
+pub const RECENT_BATCHES: usize = 64;
 /// Default idle expiry of a session.
 pub const DEFAULT_IDLE_EXPIRY_S: f64 = 3600.0;
 /// Longest idle expiry a session may ask for (30 days).
@@ -103,6 +106,17 @@ pub trait SessionKind: Sized + Send + 'static {
     /// The update of a batch that changed nothing (the acknowledgement of an
     /// old duplicate): empty, but with the state's current counters.
     fn acknowledgement(&self) -> Self::Update;
+    /// A fingerprint of a batch's content (64-bit FNV-1a of its items, bit
+    /// for bit), by which an unsequenced batch applied recently is known
+    /// again when a client retries it. For kinds whose identical items are
+    /// the same data (a track report, a plot: sent twice, they are one
+    /// measurement), so that content identifies a batch. `None` (the
+    /// default) for a batch that changes nothing when applied twice (a
+    /// flush alone), or a kind whose identical batches are distinct events.
+    fn fingerprint(batch: &Self::Batch) -> Option<u64> {
+        let _ = batch;
+        None
+    }
     fn view(&self) -> Result<Self::View, ServiceError>;
     /// Appends the kind's state; it writes its own format byte first.
     fn encode(&self, w: &mut Writer);
@@ -192,7 +206,7 @@ pub fn tag_name(tag: u8) -> String {
 pub fn stored_kind(buf: &[u8]) -> Result<u8, ServiceError> {
     match buf {
         [1 | 2, ..] => Ok(correlation::CorrelationSession::TAG),
-        [ENVELOPE_FORMAT, tag, ..] => Ok(*tag),
+        [3 | ENVELOPE_FORMAT, tag, ..] => Ok(*tag),
         [f, ..] => Err(ServiceError::Internal(format!(
             "stored session has format {f}; this release reads 1 to {ENVELOPE_FORMAT}"
         ))),
@@ -264,6 +278,53 @@ pub struct Envelope<K: SessionKind> {
     pub last_sequence: Option<u64>,
     pub batches: u64,
     pub last_update: Option<Kept<K::Update>>,
+    /// Fingerprints of the last [`RECENT_BATCHES`] unsequenced batches
+    /// applied, oldest first.
+    pub recent: Vec<u64>,
+}
+
+/// 64-bit FNV-1a, the batches' fingerprint.
+#[derive(Debug, Clone, Copy)]
+pub struct Fnv(pub u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    pub fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= u64::from(x);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    pub fn f64(&mut self, x: f64) {
+        self.bytes(&x.to_bits().to_le_bytes());
+    }
+
+    pub fn opt_f64(&mut self, x: Option<f64>) {
+        match x {
+            None => self.bytes(&[0]),
+            Some(x) => {
+                self.bytes(&[1]);
+                self.f64(x);
+            }
+        }
+    }
+
+    pub fn str(&mut self, s: Option<&str>) {
+        match s {
+            None => self.bytes(&[0]),
+            Some(s) => {
+                self.bytes(&[1]);
+                self.bytes(&(s.len() as u64).to_le_bytes());
+                self.bytes(s.as_bytes());
+            }
+        }
+    }
 }
 
 /// What the envelope says of a batch before it is applied.
@@ -309,6 +370,7 @@ impl<K: SessionKind> Envelope<K> {
             last_sequence: None,
             batches: 0,
             last_update: None,
+            recent: Vec::new(),
         })
     }
 
@@ -317,13 +379,35 @@ impl<K: SessionKind> Envelope<K> {
     /// (a conflict naming the expected number). Sequences start at 1, so that
     /// the first batch of two concurrent writers cannot be mistaken for a
     /// duplicate; 0 is invalid. `version` is the session's current version.
+    ///
+    /// An unsequenced batch whose `fingerprint` is one of the last
+    /// [`RECENT_BATCHES`] unsequenced batches applied is taken for a retry
+    /// (of a batch whose answer was lost, or answered 503 or timed out
+    /// after the store had written it): acknowledged, not applied twice.
     pub fn admit(
         &self,
         id: &str,
         sequence: Option<u64>,
+        fingerprint: Option<u64>,
         version: u64,
     ) -> Result<Admission<K::Update>, ServiceError> {
         let Some(s) = sequence else {
+            if let Some(f) = fingerprint
+                && self.recent.contains(&f)
+            {
+                return Ok(Admission::Duplicate(Update {
+                    session_id: id.to_string(),
+                    sequence: None,
+                    version,
+                    duplicate: true,
+                    body: self.state.acknowledgement(),
+                    warnings: vec![format!(
+                        "an identical unsequenced batch is among the last {RECENT_BATCHES} \
+                         applied: taken for a retry, acknowledged and not applied twice (give \
+                         batches sequence numbers to send identical content on purpose)"
+                    )],
+                }));
+            }
             return Ok(Admission::Apply);
         };
         if s == 0 {
@@ -396,6 +480,11 @@ impl<K: SessionKind> Envelope<K> {
         let body = self.state.apply(&batch.body, limits, &mut warnings)?;
         if batch.sequence.is_some() {
             self.last_sequence = batch.sequence;
+        } else if let Some(f) = K::fingerprint(&batch.body) {
+            if self.recent.len() == RECENT_BATCHES {
+                self.recent.remove(0);
+            }
+            self.recent.push(f);
         }
         self.batches += 1;
         self.last_update = batch.sequence.map(|sequence| Kept {
@@ -449,6 +538,8 @@ impl<K: SessionKind> Envelope<K> {
             kept.warnings.iter().for_each(|s| w.str(s));
             K::encode_update(&kept.body, w);
         });
+        w.usize(self.recent.len());
+        self.recent.iter().for_each(|&f| w.u64(f));
         self.state.encode(&mut w);
         // The store keeps this buffer as it is: no spare capacity.
         w.buf.shrink_to_fit();
@@ -482,6 +573,16 @@ impl<K: SessionKind> Envelope<K> {
                 })
             })
             .map_err(corrupt)?;
+        // Format 3 kept no fingerprints.
+        let recent = if buf[0] >= 4 {
+            let n = r.len(8).map_err(corrupt)?;
+            (0..n)
+                .map(|_| r.u64())
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(corrupt)?
+        } else {
+            Vec::new()
+        };
         let state = K::decode(&mut r)?;
         if !r.is_empty() {
             return Err(ServiceError::Internal("stored session: trailing bytes".into()).into());
@@ -493,6 +594,7 @@ impl<K: SessionKind> Envelope<K> {
             last_sequence,
             batches,
             last_update,
+            recent,
         })
     }
 }

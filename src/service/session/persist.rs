@@ -250,7 +250,8 @@ impl Sessions {
                         Envelope::<K>::decode(&data).map_err(|e| e.for_request::<K>(&id2))?
                     }
                 };
-                match session.admit(&id2, batch2.sequence, version)? {
+                let fingerprint = K::fingerprint(&batch2.body);
+                match session.admit(&id2, batch2.sequence, fingerprint, version)? {
                     Admission::Duplicate(ack) => Ok(Err(ack)),
                     Admission::Apply => {
                         let update = session.apply(&id2, &batch2, &limits)?;
@@ -288,8 +289,9 @@ impl Sessions {
                     // later): never report it as "nothing changed".
                     StoreError::Unavailable { reason } => ServiceError::Unavailable(format!(
                         "the session store did not confirm the write ({reason}): the batch \
-                         may or may not have been applied; retry it with the same sequence \
-                         number (a batch applied already is acknowledged as a duplicate)"
+                         may or may not have been applied; retry it unchanged, with the same \
+                         sequence number if it had one (a batch applied already is \
+                         acknowledged as a duplicate)"
                     )),
                     other => other.into(),
                 })?;

@@ -19,7 +19,7 @@
 
 use std::collections::HashSet;
 
-use super::{Limits, SessionKind};
+use super::{Fnv, Limits, SessionKind};
 use crate::{
     algo::{
         AlgoError,
@@ -307,6 +307,27 @@ impl SessionKind for PlotFusionSession {
             dropped: Vec::new(),
             counters: self.tracker.counters(),
         }
+    }
+
+    fn fingerprint(batch: &BatchInput) -> Option<u64> {
+        if batch.plots.is_empty() {
+            return None;
+        }
+        let mut h = Fnv::default();
+        h.bytes(&[u8::from(batch.flush)]);
+        for p in &batch.plots {
+            h.str(p.radar_id.as_deref());
+            for x in [
+                p.t,
+                p.range_m,
+                p.azimuth_deg,
+                p.elevation_deg,
+                p.radial_velocity_mps,
+            ] {
+                h.opt_f64(x);
+            }
+        }
+        Some(h.0)
     }
 
     fn view(&self) -> Result<SessionView, ServiceError> {

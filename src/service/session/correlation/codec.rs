@@ -189,6 +189,7 @@ pub(super) fn decode_legacy(buf: &[u8]) -> Result<Envelope<CorrelationSession>, 
         ));
     }
     Ok(Envelope {
+        recent: Vec::new(),
         state,
         created_unix_ms,
         idle_expiry_s,

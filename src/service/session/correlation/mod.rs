@@ -32,7 +32,7 @@ mod tests;
 
 pub use state::CorrelationSession;
 
-use super::{Envelope, Limits, SessionKind};
+use super::{Envelope, Fnv, Limits, SessionKind};
 use crate::{
     algo::{
         AlgoError,
@@ -197,6 +197,25 @@ impl SessionKind for CorrelationSession {
             system_tracks: Vec::new(),
             retired: Vec::new(),
         }
+    }
+
+    fn fingerprint(batch: &BatchInput) -> Option<u64> {
+        if batch.reports.is_empty() {
+            return None;
+        }
+        let mut h = Fnv::default();
+        h.bytes(&[u8::from(batch.flush)]);
+        for r in &batch.reports {
+            h.str(r.node.as_deref());
+            h.str(r.track.as_deref());
+            let s = &r.sample;
+            h.opt_f64(s.t);
+            s.state.iter().for_each(|&x| h.f64(x));
+            s.covariance.iter().flatten().for_each(|&x| h.f64(x));
+            h.bytes(&[u8::from(s.gain.is_some())]);
+            s.gain.iter().flatten().flatten().for_each(|&x| h.f64(x));
+        }
+        Some(h.0)
     }
 
     fn view(&self) -> Result<SessionView, ServiceError> {

@@ -55,7 +55,7 @@ impl Push for Session {
 
     fn check_sequence(&self, sequence: Option<u64>) -> Result<bool, ServiceError> {
         Ok(matches!(
-            self.admit("s", sequence, 0)?,
+            self.admit("s", sequence, None, 0)?,
             Admission::Duplicate(_)
         ))
     }
@@ -747,7 +747,7 @@ fn a_format_2_session_reads_and_continues_like_a_current_one() {
     assert!(read.last_update.is_some(), "format 2 kept the last update");
     // The retry of the last batch replays the same update from both.
     let last = half.div_ceil(16) as u64;
-    let replay = |s: &Session| match s.admit("s", Some(last), 7).unwrap() {
+    let replay = |s: &Session| match s.admit("s", Some(last), None, 7).unwrap() {
         Admission::Duplicate(u) => u,
         Admission::Apply => panic!("batch {last} is a duplicate"),
     };
