@@ -12,7 +12,7 @@
 //! run, the median engine compute of 120 × 120 × 12 for every method and of
 //! 10,000 × 10,000 × 11 for the weighted and independent double-threshold
 //! methods, each next to the service's `timing.correlate_us` on the same
-//! samples for reference.
+//! samples for reference; a method name after the size keeps that method only.
 //!
 //! Service: two nodes, n targets each, 8 samples per track, the independent
 //! double-threshold method (6/8), with the spatial grid and by brute force
@@ -120,20 +120,24 @@ fn engine_line(s: &RealisticScene, label: &str, method: &str, runs: usize, servi
     );
 }
 
-fn engine_table(only: Option<usize>) {
+fn engine_table(only: Option<usize>, method_only: Option<&str>) {
+    let wanted = |m: &str| method_only.is_none_or(|o| o == m);
     println!(
         "| scene | method | engine median ms | engine min ms | service correlate_us median ms | candidate pairs | correlated | right | service correlated |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     if only.is_none_or(|n| n == 120) {
         let s = realistic_scene(120, 12, false);
-        for method in METHODS {
+        for method in METHODS.into_iter().filter(|m| wanted(m)) {
             engine_line(&s, "120x120x12", method, 101, 11);
         }
     }
     if only.is_none_or(|n| n == 10_000) {
         let s = realistic_scene(10_000, 11, false);
-        for method in ["weighted", "independent_double_threshold"] {
+        for method in ["weighted", "independent_double_threshold"]
+            .into_iter()
+            .filter(|m| wanted(m))
+        {
             engine_line(&s, "10000x10000x11", method, 3, 1);
         }
     }
@@ -142,7 +146,10 @@ fn engine_table(only: Option<usize>) {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--engine") {
-        engine_table(args.get(i + 1).and_then(|s| s.parse().ok()));
+        engine_table(
+            args.get(i + 1).and_then(|s| s.parse().ok()),
+            args.get(i + 2).map(String::as_str),
+        );
         return;
     }
     if let Some(i) = args.iter().position(|a| a == "--once") {
