@@ -77,6 +77,61 @@ fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
     q.is_finite().then_some(q)
 }
 
+/// X = S⁻¹ B for a symmetric positive definite S and a square B (both n×n,
+/// row-major) by a Cholesky factorisation; `None` when S is not positive
+/// definite.
+pub fn solve_spd(s: &[f64], b: &[f64], n: usize) -> Option<Sq> {
+    debug_assert!(n <= MAX_DIM && s.len() >= n * n && b.len() >= n * n);
+    match n {
+        1 => solve_spd_n::<1>(s, b),
+        2 => solve_spd_n::<2>(s, b),
+        3 => solve_spd_n::<3>(s, b),
+        4 => solve_spd_n::<4>(s, b),
+        5 => solve_spd_n::<5>(s, b),
+        6 => solve_spd_n::<6>(s, b),
+        7 => solve_spd_n::<7>(s, b),
+        8 => solve_spd_n::<8>(s, b),
+        9 => solve_spd_n::<9>(s, b),
+        _ => None,
+    }
+}
+
+#[allow(clippy::needless_range_loop)]
+fn solve_spd_n<const N: usize>(s: &[f64], b: &[f64]) -> Option<Sq> {
+    let l = cholesky_n::<N>(s)?;
+    let mut x = ZERO;
+    for c in 0..N {
+        // L y = b_c, then L' x_c = y.
+        let mut y = [0.0f64; N];
+        for i in 0..N {
+            let mut sum = b[i * N + c];
+            for k in 0..i {
+                sum -= l[i][k] * y[k];
+            }
+            y[i] = sum / l[i][i];
+        }
+        for i in (0..N).rev() {
+            let mut sum = y[i];
+            for k in i + 1..N {
+                sum -= l[k][i] * x[k * N + c];
+            }
+            x[i * N + c] = sum / l[i][i];
+        }
+    }
+    Some(x)
+}
+
+/// The transpose of an n×n row-major matrix.
+pub fn transpose(a: &[f64], n: usize) -> Sq {
+    let mut t = ZERO;
+    for i in 0..n {
+        for j in 0..n {
+            t[j * n + i] = a[i * n + j];
+        }
+    }
+    t
+}
+
 /// trace(S⁻¹) of a symmetric positive definite S (n×n, row-major):
 /// with S = L L', trace(S⁻¹) = ‖L⁻¹‖²_F. `None` when S is not positive definite.
 pub fn trace_inverse(s: &[f64], n: usize) -> Option<f64> {
@@ -240,6 +295,22 @@ mod tests {
         let t = trace_inverse(&[4.0, 2.0, 2.0, 3.0], 2).unwrap();
         assert!((t - 7.0 / 8.0).abs() < 1e-15);
         assert!(trace_inverse(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+    }
+
+    #[test]
+    fn solve_and_transpose_by_hand() {
+        // S = [[4, 2], [2, 3]], S⁻¹ = [[3, −2], [−2, 4]] / 8. B = [[1, 0], [2, 8]]:
+        // S⁻¹B = [[3 − 4, −16], [−2 + 8, 32]] / 8 = [[−1/8, −2], [3/4, 4]].
+        let x = solve_spd(&[4.0, 2.0, 2.0, 3.0], &[1.0, 0.0, 2.0, 8.0], 2).unwrap();
+        let want = [-0.125, -2.0, 0.75, 4.0];
+        for (g, w) in x[..4].iter().zip(want) {
+            assert!((g - w).abs() < 1e-15, "{x:?}");
+        }
+        assert!(solve_spd(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0, 0.0, 1.0], 2).is_none());
+        assert_eq!(
+            &transpose(&[1.0, 2.0, 3.0, 4.0], 2)[..4],
+            &[1.0, 3.0, 2.0, 4.0]
+        );
     }
 
     #[test]

@@ -42,7 +42,7 @@ impl PairCorrelator<'_> {
             // unpaired costs 1, as much as the worst gated pair.
             assignment::solve(&edges, 1.0 + 1e-12)
                 .into_iter()
-                .map(|(a, b)| self.index[&(a as u32, b as u32)])
+                .map(|(a, b)| self.pair_of(a as u32, b as u32).expect("a candidate"))
                 .collect()
         } else {
             gated.sort_by_key(|&(pi, c)| {

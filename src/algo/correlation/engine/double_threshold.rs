@@ -152,7 +152,7 @@ impl PairCorrelator<'_> {
                     .collect();
                 let chosen = assignment::solve(&edges, f64::from(rf) + 2.0);
                 for (a, b) in chosen {
-                    let pi = self.index[&(a as u32, b as u32)];
+                    let pi = self.pair_of(a as u32, b as u32).expect("a candidate");
                     let reason = if competitors(self, pi).is_empty() {
                         if !is_schedule && self.pairs[pi as usize].l < rf {
                             Reason::EarlyDecision

@@ -17,16 +17,13 @@
 //! spatial gate, and its earlier common instants are replayed exactly, so the
 //! result equals the brute-force computation over all pairs.
 
-use std::{
-    collections::{HashMap, VecDeque},
-    hash::{BuildHasherDefault, Hasher},
-};
+use std::collections::VecDeque;
 
 use super::{
     rules::LrRule,
     scene::{Scene, Track},
 };
-use crate::algo::{AlgoError, gating::chi2_threshold, motion::MotionModel, small::Sq};
+use crate::algo::{AlgoError, gating::chi2_threshold, motion::MotionModel};
 
 /// The test statistic compared with the first threshold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -185,14 +182,15 @@ pub struct PairCorrelator<'a> {
     window_gate: Vec<f64>,
     hist_len: usize,
     pairs: Vec<Pair>,
-    index: HashMap<(u32, u32), u32, FastHash>,
     adj_a: Vec<Vec<u32>>,
     adj_b: Vec<Vec<u32>>,
     partner_a: Vec<Option<u32>>,
     partner_b: Vec<Option<u32>>,
     /// I − K H per track and instant for the modified statistic.
-    factors_a: Vec<Vec<Option<Sq>>>,
-    factors_b: Vec<Vec<Option<Sq>>>,
+    factors_a: Factors,
+    factors_b: Factors,
+    /// F and Q per step length (modified statistic).
+    steps: Steps,
     next: usize,
     /// Tests whose modified S was not positive definite: the weighted
     /// statistic was used for them instead.
@@ -230,7 +228,8 @@ struct Pair {
     decided_at: Option<usize>,
     decided_time: Option<f64>,
     hist: VecDeque<Sample>,
-    cross: Option<Sq>,
+    /// P_ab, dim × dim row-major (modified statistic).
+    cross: Option<Box<[f64]>>,
     last_common: Option<usize>,
 }
 
@@ -270,7 +269,7 @@ pub use double_threshold::{default_schedule, final_rule};
 pub use state::CorrelatorState;
 use state::bad;
 pub use statistic::filter_factor;
-use statistic::filter_factors;
+use statistic::{Factors, Steps, filter_factors};
 
 impl<'a> PairCorrelator<'a> {
     /// A correlator of nodes `na` and `nb`. The modified statistic needs the
@@ -340,19 +339,19 @@ impl<'a> PairCorrelator<'a> {
             window_gate,
             hist_len: window.max(rule_len),
             pairs: Vec::new(),
-            index: HashMap::default(),
             adj_a: vec![Vec::new(); ta],
             adj_b: vec![Vec::new(); tb],
             partner_a: vec![None; ta],
             partner_b: vec![None; tb],
-            factors_a: Vec::new(),
-            factors_b: Vec::new(),
+            factors_a: Factors::default(),
+            factors_b: Factors::default(),
+            steps: Steps::default(),
             next: 0,
             singular_tests: 0,
         };
         if cfg.statistic == Statistic::Modified {
-            me.factors_a = filter_factors(scene, na, me.model)?;
-            me.factors_b = filter_factors(scene, nb, me.model)?;
+            me.factors_a = filter_factors(scene, na, me.model, &mut me.steps)?;
+            me.factors_b = filter_factors(scene, nb, me.model, &mut me.steps)?;
         }
         Ok(me)
     }
@@ -383,7 +382,6 @@ impl<'a> PairCorrelator<'a> {
         me.next = state.next;
         me.singular_tests = state.singular_tests;
         for (pi, p) in state.pairs.iter().enumerate() {
-            me.index.insert((p.a, p.b), pi as u32);
             me.adj_a[p.a as usize].push(pi as u32);
             me.adj_b[p.b as usize].push(pi as u32);
         }
@@ -513,7 +511,7 @@ impl<'a> PairCorrelator<'a> {
             decided_at: p.decided_at,
             decided_time: p.decided_time,
             last_common: p.last_common.unwrap_or(0),
-            cross_covariance: p.cross.map(|c| c[..self.dim * self.dim].to_vec()),
+            cross_covariance: p.cross.as_deref().map(<[f64]>::to_vec),
         }
     }
 
@@ -523,6 +521,14 @@ impl<'a> PairCorrelator<'a> {
 
     fn track_b(&self, t: u32) -> &Track {
         self.scene.track(self.nb, t as usize)
+    }
+
+    /// The pair of tracks (a, b), if it is a candidate.
+    fn pair_of(&self, a: u32, b: u32) -> Option<u32> {
+        self.adj_a[a as usize]
+            .iter()
+            .copied()
+            .find(|&pi| self.pairs[pi as usize].b == b)
     }
 
     fn both_present(&self, pi: u32, k: usize) -> bool {
@@ -561,37 +567,6 @@ impl<'a> PairCorrelator<'a> {
         if self.partner_b[b] == Some(pi) {
             self.partner_b[b] = None;
         }
-    }
-}
-
-/// A multiplicative hasher for the engine's small integer keys (pair and
-/// grid-cell indices, never attacker-chosen strings), much cheaper than SipHash.
-type FastHash = BuildHasherDefault<MulHasher>;
-
-#[derive(Default)]
-struct MulHasher(u64);
-
-impl Hasher for MulHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    fn write_u32(&mut self, i: u32) {
-        self.write_u64(u64::from(i));
-    }
-
-    fn write_i64(&mut self, i: i64) {
-        self.write_u64(i as u64);
-    }
-
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
     }
 }
 

@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 
 use super::{Pair, REASONS, Sample, Side, Status};
 use crate::algo::{
-    AlgoError, small,
+    AlgoError,
     wire::{Reader, Writer},
 };
 
@@ -116,7 +116,7 @@ impl CorrelatorState {
                 w.f64(h.posdiff);
                 w.bool(h.hit);
             }
-            w.opt(p.cross.as_ref(), |w, c| {
+            w.opt(p.cross.as_deref(), |w, c| {
                 for &v in &c[..dim * dim] {
                     w.f64(v);
                 }
@@ -163,13 +163,7 @@ impl CorrelatorState {
                     hit: r.bool()?,
                 });
             }
-            let cross = r.opt(|r| {
-                let mut c = small::ZERO;
-                for v in &mut c[..dim * dim] {
-                    *v = r.f64()?;
-                }
-                Ok(c)
-            })?;
+            let cross = r.opt(|r| (0..dim * dim).map(|_| r.f64()).collect())?;
             let last_common = r.opt(Reader::usize)?;
             if a as usize >= partner_a.len() || b as usize >= partner_b.len() {
                 return Err(bad("pair names an unknown track"));

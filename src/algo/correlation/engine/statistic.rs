@@ -1,6 +1,8 @@
 //! The test statistics: weighted α = d'(P_a + P_b)⁻¹d (eq. 10) and modified
 //! β with the cross-covariance recursion of eq. 13, the per-pair counters they
-//! feed, and the filter factors I − K H the recursion needs.
+//! feed, and the filter factors I − K H the recursion needs. Everything here
+//! runs on stack matrices ([`small`]); F and Q are computed once per step
+//! length ([`Steps`]) when the model's process noise ignores the state.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -8,9 +10,93 @@ use super::{PairCorrelator, Reason, Sample, Statistic, Status};
 use crate::algo::{
     AlgoError,
     correlation::scene::Scene,
+    error::check_vector,
     motion::MotionModel,
     small::{self, MAX_DIM, Sq},
 };
+
+/// Most step lengths whose F and Q are kept.
+const STEPS_KEPT: usize = 64;
+
+/// F(dt) and, when the model's process noise ignores the state, Q(dt), by
+/// the bits of dt (`None` when the model refused dt).
+#[derive(Default)]
+pub(super) struct Steps {
+    entries: Vec<(u64, Option<(Sq, Option<Sq>)>)>,
+}
+
+impl Steps {
+    /// Index of the entry of `dt`, computed on first use.
+    fn index(&mut self, model: &dyn MotionModel, dt: f64, dim: usize) -> usize {
+        let key = dt.to_bits();
+        if let Some(i) = self.entries.iter().position(|e| e.0 == key) {
+            return i;
+        }
+        let value = model.transition(dt).ok().and_then(|f| {
+            if model.process_noise_ignores_state() {
+                let q = model.process_noise(dt, &DVector::zeros(dim)).ok()?;
+                Some((sq_of(&f), Some(sq_of(&q))))
+            } else {
+                Some((sq_of(&f), None))
+            }
+        });
+        if self.entries.len() == STEPS_KEPT {
+            // Irregular instants: forget the oldest step length.
+            self.entries.remove(0);
+        }
+        self.entries.push((key, value));
+        self.entries.len() - 1
+    }
+
+    /// F(dt) and Q(dt) at `state` (computed when it depends on the state);
+    /// `None` when the model refuses dt or the state.
+    fn get(
+        &mut self,
+        model: &dyn MotionModel,
+        dt: f64,
+        dim: usize,
+        state: impl FnOnce() -> DVector<f64>,
+    ) -> Option<(&Sq, Sq)> {
+        let i = self.index(model, dt, dim);
+        let (f, q) = self.entries[i].1.as_ref()?;
+        let q = match q {
+            Some(q) => *q,
+            None => sq_of(&model.process_noise(dt, &state()).ok()?),
+        };
+        Some((f, q))
+    }
+}
+
+/// A square matrix in a stack buffer, row-major, without a temporary.
+fn sq_of(m: &DMatrix<f64>) -> Sq {
+    let n = m.nrows();
+    debug_assert!(n <= MAX_DIM && m.ncols() == n);
+    let mut s = small::ZERO;
+    for i in 0..n {
+        for j in 0..n {
+            s[i * n + j] = m[(i, j)];
+        }
+    }
+    s
+}
+
+/// I − K H of every track of a node at every held instant, flat.
+#[derive(Default)]
+pub(super) struct Factors {
+    instants: usize,
+    dim2: usize,
+    present: Vec<bool>,
+    data: Vec<f64>,
+}
+
+impl Factors {
+    /// The factor of track `t` at held instant `k` (relative to the
+    /// scene's first), if any.
+    pub(super) fn get(&self, t: u32, k: usize) -> Option<&[f64]> {
+        let i = t as usize * self.instants + k;
+        self.present[i].then(|| &self.data[i * self.dim2..(i + 1) * self.dim2])
+    }
+}
 
 impl PairCorrelator<'_> {
     /// d = x_a − x_b and S = P_a + P_b at instant `k` (eq. 10), on the stack.
@@ -33,16 +119,14 @@ impl PairCorrelator<'_> {
     /// counters (or, once decided, its monitoring window).
     pub(super) fn advance(&mut self, pi: u32, k: usize) {
         let dim = self.dim;
-        let (a, b) = {
-            let p = &self.pairs[pi as usize];
-            (p.a, p.b)
-        };
         if self.cfg.statistic == Statistic::Modified {
             self.update_cross(pi, k);
         }
-        let (d, s) = self.difference(a, b, k);
+        let p = &self.pairs[pi as usize];
+        let (d, s) = self.difference(p.a, p.b, k);
         let mut stat = None;
-        if let Some(cross) = &self.pairs[pi as usize].cross {
+        let mut singular = false;
+        if let Some(cross) = &p.cross {
             let mut s_mod = s;
             for i in 0..dim {
                 for j in 0..dim {
@@ -50,12 +134,13 @@ impl PairCorrelator<'_> {
                 }
             }
             stat = small::quad_form_inv(&s_mod, &d, dim);
-            if stat.is_none() {
-                // P_a + P_b − P_ab − P_ab' is a covariance only when the
-                // reported covariances, gains and model are consistent;
-                // otherwise fall back to the weighted statistic.
-                self.singular_tests += 1;
-            }
+            // P_a + P_b − P_ab − P_ab' is a covariance only when the
+            // reported covariances, gains and model are consistent;
+            // otherwise fall back to the weighted statistic.
+            singular = stat.is_none();
+        }
+        if singular {
+            self.singular_tests += 1;
         }
         let stat = stat
             .or_else(|| small::quad_form_inv(&s, &d, dim))
@@ -115,86 +200,108 @@ impl PairCorrelator<'_> {
     /// errors needs it.)
     pub(super) fn update_cross(&mut self, pi: u32, k: usize) {
         let dim = self.dim;
-        let (a, b, prev, cross) = {
-            let p = &self.pairs[pi as usize];
-            (p.a, p.b, p.last_common, p.cross)
-        };
-        let new = match (prev, cross) {
+        let p = &mut self.pairs[pi as usize];
+        let (a, b, prev) = (p.a, p.b, p.last_common);
+        let mut cross = p.cross.take();
+        let new = match (prev, &cross) {
             // A last common instant before the held window restarts the
             // recursion from P_ab = 0 (streaming sessions only).
-            (Some(kp), Some(c)) if kp >= self.scene.first() => {
-                let dt = self.scene.time(k) - self.scene.time(kp);
-                let (ta, tb) = (self.track_a(a), self.track_b(b));
-                let mean: DVector<f64> = DVector::from_iterator(
-                    dim,
-                    (0..dim).map(|i| 0.5 * (ta.x(kp, dim)[i] + tb.x(kp, dim)[i])),
-                );
-                let model = self.model.expect("checked in new");
-                let (Ok(f), Ok(q)) = (model.transition(dt), model.process_noise(dt, &mean)) else {
-                    self.pairs[pi as usize].cross = Some(small::ZERO);
-                    return;
-                };
-                let f = small::to_sq(&f);
-                let q = small::to_sq(&q);
-                let fc = small::mul(&f, &c, dim);
-                let mut mid = small::mul_t(&fc, &f, dim);
-                for i in 0..dim * dim {
-                    mid[i] += q[i];
-                }
-                let first = self.scene.first();
-                let fa = self.factors_a[a as usize][k - first];
-                let fb = self.factors_b[b as usize][k - first];
-                let left = match fa {
-                    Some(fa) => small::mul(&fa, &mid, dim),
-                    None => mid,
-                };
-                match fb {
-                    Some(fb) => small::mul_t(&left, &fb, dim),
-                    None => left,
-                }
-            }
+            (Some(kp), Some(c)) if kp >= self.scene.first() => self.propagated(a, b, kp, k, c),
             _ => small::ZERO,
         };
-        self.pairs[pi as usize].cross = Some(new);
+        match &mut cross {
+            Some(c) => c.copy_from_slice(&new[..dim * dim]),
+            None => cross = Some(new[..dim * dim].into()),
+        }
+        self.pairs[pi as usize].cross = cross;
+    }
+
+    /// A_a(k) [Φ P_ab(kp) Φ' + Q] A_b(k)' for the pair (a, b) whose last
+    /// common instant was `kp`; zero when the model refuses the step.
+    fn propagated(&mut self, a: u32, b: u32, kp: usize, k: usize, c: &[f64]) -> Sq {
+        let dim = self.dim;
+        let model = self.model.expect("checked in new");
+        let dt = self.scene.time(k) - self.scene.time(kp);
+        let (ta, tb) = (
+            self.scene.track(self.na, a as usize),
+            self.scene.track(self.nb, b as usize),
+        );
+        let mean = || {
+            DVector::from_iterator(
+                dim,
+                (0..dim).map(|i| 0.5 * (ta.x(kp, dim)[i] + tb.x(kp, dim)[i])),
+            )
+        };
+        let Some((f, q)) = self.steps.get(model, dt, dim, mean) else {
+            return small::ZERO;
+        };
+        let fc = small::mul(f, c, dim);
+        let mut mid = small::mul_t(&fc, f, dim);
+        for i in 0..dim * dim {
+            mid[i] += q[i];
+        }
+        let first = self.scene.first();
+        let left = match self.factors_a.get(a, k - first) {
+            Some(fa) => small::mul(fa, &mid, dim),
+            None => mid,
+        };
+        match self.factors_b.get(b, k - first) {
+            Some(fb) => small::mul_t(&left, fb, dim),
+            None => left,
+        }
     }
 }
 
 /// I − K H for every track of a node at every instant: reported, or
 /// recomputed as P(k|k) P(k|k−1)⁻¹ with P(k|k−1) = Φ P(k⁻|k⁻) Φ' + Q from the
 /// track's previous instant k⁻ (for the optimal gain, P(k|k) = (I − K H) P(k|k−1)).
-/// `None` at a track's first instant, where no prediction exists.
+/// None at a track's first instant, where no prediction exists.
 pub(super) fn filter_factors(
     scene: &Scene,
     node: usize,
     model: Option<&dyn MotionModel>,
-) -> Result<Vec<Vec<Option<Sq>>>, AlgoError> {
+    steps: &mut Steps,
+) -> Result<Factors, AlgoError> {
     let dim = scene.dim();
     let model = model.expect("checked by the caller");
     let (first, end) = (scene.first(), scene.end());
-    let mut out = Vec::with_capacity(scene.nodes()[node].len());
-    for track in &scene.nodes()[node] {
-        let mut per = vec![None; end - first];
+    let tracks = &scene.nodes()[node];
+    let instants = end - first;
+    let mut out = Factors {
+        instants,
+        dim2: dim * dim,
+        present: vec![false; tracks.len() * instants],
+        data: vec![0.0; tracks.len() * instants * dim * dim],
+    };
+    for (t, track) in tracks.iter().enumerate() {
         let mut prev: Option<usize> = None;
-        for (k, slot) in (first..end).zip(per.iter_mut()) {
+        for k in first..end {
             if !track.is_present(k) {
                 continue;
             }
-            if let Some(g) = track.gain_factor(k, dim) {
+            let factor = if let Some(g) = track.gain_factor(k, dim) {
                 let mut s = small::ZERO;
                 s[..dim * dim].copy_from_slice(g);
-                *slot = Some(s);
+                Some(s)
             } else if let Some(kp) = prev {
-                *slot = filter_factor(
-                    model,
-                    track.x(kp, dim),
-                    track.p(kp, dim),
-                    track.p(k, dim),
-                    scene.time(k) - scene.time(kp),
-                )?;
+                let x_prev = track.x(kp, dim);
+                let dt = scene.time(k) - scene.time(kp);
+                let state = || DVector::from_column_slice(x_prev);
+                match steps.get(model, dt, dim, state) {
+                    Some((f, q)) => factor_from(f, &q, track.p(kp, dim), track.p(k, dim), dim)?,
+                    // The model refuses the step: the error it gives.
+                    None => filter_factor(model, x_prev, track.p(kp, dim), track.p(k, dim), dt)?,
+                }
+            } else {
+                None
+            };
+            if let Some(a) = factor {
+                let i = t * instants + (k - first);
+                out.present[i] = true;
+                out.data[i * dim * dim..(i + 1) * dim * dim].copy_from_slice(&a[..dim * dim]);
             }
             prev = Some(k);
         }
-        out.push(per);
     }
     Ok(out)
 }
@@ -213,12 +320,35 @@ pub fn filter_factor(
 ) -> Result<Option<Sq>, AlgoError> {
     let dim = x_prev.len();
     let x = DVector::from_column_slice(x_prev);
-    let p_prev = DMatrix::from_row_slice(dim, dim, p_prev);
-    let (_, p_pred) = model.predict(&x, &p_prev, dt)?;
-    let p_now = DMatrix::from_row_slice(dim, dim, p_now);
+    check_vector("state", &x, model.state_dim())?;
+    let f = sq_of(&model.transition(dt)?);
+    let q = sq_of(&model.process_noise(dt, &x)?);
+    factor_from(&f, &q, p_prev, p_now, dim)
+}
+
+/// A = P(k|k) P(k|k−1)⁻¹ with P(k|k−1) = F P_prev F' + Q, symmetrised and
+/// checked as the Kalman prediction does, on the stack.
+fn factor_from(
+    f: &Sq,
+    q: &Sq,
+    p_prev: &[f64],
+    p_now: &[f64],
+    dim: usize,
+) -> Result<Option<Sq>, AlgoError> {
+    small::check_covariance("covariance", p_prev, dim)?;
+    let fp = small::mul(f, p_prev, dim);
+    let mut pred = small::mul_t(&fp, f, dim);
+    for i in 0..dim * dim {
+        pred[i] += q[i];
+    }
+    for j in 0..dim {
+        for i in j + 1..dim {
+            let m = 0.5 * (pred[i * dim + j] + pred[j * dim + i]);
+            pred[i * dim + j] = m;
+            pred[j * dim + i] = m;
+        }
+    }
+    small::check_covariance("predicted covariance", &pred[..dim * dim], dim)?;
     // A = P(k|k) P⁻¹ = (P⁻¹ P(k|k))' since both are symmetric.
-    Ok(p_pred.cholesky().map(|chol| {
-        let at = chol.solve(&p_now);
-        small::to_sq(&at.transpose())
-    }))
+    Ok(small::solve_spd(&pred, p_now, dim).map(|at| small::transpose(&at, dim)))
 }
