@@ -39,7 +39,7 @@ pub fn quad_form_inv(s: &[f64], d: &[f64], n: usize) -> Option<f64> {
 /// The lower Cholesky factor of a row-major N×N matrix, or `None` when it is
 /// not positive definite.
 #[allow(clippy::needless_range_loop)] // textbook index form of Cholesky
-fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
+pub fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
     let mut l = [[0.0f64; N]; N];
     for i in 0..N {
         for j in 0..=i {
@@ -60,8 +60,9 @@ fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
     Some(l)
 }
 
+/// d' S⁻¹ d for an N×N S (row-major), the kernel of [`quad_form_inv`].
 #[allow(clippy::needless_range_loop)]
-fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
+pub fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
     let l = cholesky_n::<N>(s)?;
     // Forward substitution L y = d; then d' S⁻¹ d = ‖y‖².
     let mut y = [0.0f64; N];
@@ -77,29 +78,11 @@ fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
     q.is_finite().then_some(q)
 }
 
-/// X = S⁻¹ B for a symmetric positive definite S and a square B (both n×n,
-/// row-major) by a Cholesky factorisation; `None` when S is not positive
-/// definite.
-pub fn solve_spd(s: &[f64], b: &[f64], n: usize) -> Option<Sq> {
-    debug_assert!(n <= MAX_DIM && s.len() >= n * n && b.len() >= n * n);
-    match n {
-        1 => solve_spd_n::<1>(s, b),
-        2 => solve_spd_n::<2>(s, b),
-        3 => solve_spd_n::<3>(s, b),
-        4 => solve_spd_n::<4>(s, b),
-        5 => solve_spd_n::<5>(s, b),
-        6 => solve_spd_n::<6>(s, b),
-        7 => solve_spd_n::<7>(s, b),
-        8 => solve_spd_n::<8>(s, b),
-        9 => solve_spd_n::<9>(s, b),
-        _ => None,
-    }
-}
-
+/// X = S⁻¹ B from the Cholesky factor L of S (S = L L') and a row-major
+/// N×N B: forward then back substitution, column by column.
 #[allow(clippy::needless_range_loop)]
-fn solve_spd_n<const N: usize>(s: &[f64], b: &[f64]) -> Option<Sq> {
-    let l = cholesky_n::<N>(s)?;
-    let mut x = ZERO;
+pub fn cholesky_solve_n<const N: usize>(l: &[[f64; N]; N], b: &[f64]) -> [[f64; N]; N] {
+    let mut x = [[0.0f64; N]; N];
     for c in 0..N {
         // L y = b_c, then L' x_c = y.
         let mut y = [0.0f64; N];
@@ -113,23 +96,46 @@ fn solve_spd_n<const N: usize>(s: &[f64], b: &[f64]) -> Option<Sq> {
         for i in (0..N).rev() {
             let mut sum = y[i];
             for k in i + 1..N {
-                sum -= l[k][i] * x[k * N + c];
+                sum -= l[k][i] * x[k][c];
             }
-            x[i * N + c] = sum / l[i][i];
+            x[i][c] = sum / l[i][i];
         }
     }
-    Some(x)
+    x
 }
 
-/// The transpose of an n×n row-major matrix.
-pub fn transpose(a: &[f64], n: usize) -> Sq {
-    let mut t = ZERO;
-    for i in 0..n {
-        for j in 0..n {
-            t[j * n + i] = a[i * n + j];
+/// a · b for N×N row-major matrices, exactly as [`mul`] sums.
+#[allow(clippy::needless_range_loop)]
+pub fn mul_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
+    let mut c = [[0.0f64; N]; N];
+    for i in 0..N {
+        for k in 0..N {
+            let aik = a[i * N + k];
+            if aik == 0.0 {
+                continue;
+            }
+            for j in 0..N {
+                c[i][j] += aik * b[k * N + j];
+            }
         }
     }
-    t
+    c
+}
+
+/// a · bᵀ for N×N row-major matrices, exactly as [`mul_t`] sums.
+#[allow(clippy::needless_range_loop)]
+pub fn mul_t_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
+    let mut c = [[0.0f64; N]; N];
+    for i in 0..N {
+        for j in 0..N {
+            let mut sum = 0.0;
+            for k in 0..N {
+                sum += a[i * N + k] * b[j * N + k];
+            }
+            c[i][j] = sum;
+        }
+    }
+    c
 }
 
 /// trace(S⁻¹) of a symmetric positive definite S (n×n, row-major):
@@ -298,19 +304,20 @@ mod tests {
     }
 
     #[test]
-    fn solve_and_transpose_by_hand() {
+    fn cholesky_solve_by_hand() {
         // S = [[4, 2], [2, 3]], S⁻¹ = [[3, −2], [−2, 4]] / 8. B = [[1, 0], [2, 8]]:
         // S⁻¹B = [[3 − 4, −16], [−2 + 8, 32]] / 8 = [[−1/8, −2], [3/4, 4]].
-        let x = solve_spd(&[4.0, 2.0, 2.0, 3.0], &[1.0, 0.0, 2.0, 8.0], 2).unwrap();
+        let l = cholesky_n::<2>(&[4.0, 2.0, 2.0, 3.0]).unwrap();
+        let x = cholesky_solve_n(&l, &[1.0, 0.0, 2.0, 8.0]);
         let want = [-0.125, -2.0, 0.75, 4.0];
-        for (g, w) in x[..4].iter().zip(want) {
+        for (g, w) in x.as_flattened().iter().zip(want) {
             assert!((g - w).abs() < 1e-15, "{x:?}");
         }
-        assert!(solve_spd(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0, 0.0, 1.0], 2).is_none());
-        assert_eq!(
-            &transpose(&[1.0, 2.0, 3.0, 4.0], 2)[..4],
-            &[1.0, 3.0, 2.0, 4.0]
-        );
+        assert!(cholesky_n::<2>(&[1.0, 2.0, 2.0, 1.0]).is_none());
+        // The fixed-size products sum as the general ones.
+        let (a, b) = ([1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 8.0]);
+        assert_eq!(mul_n::<2>(&a, &b).as_flattened(), &mul(&a, &b, 2)[..4]);
+        assert_eq!(mul_t_n::<2>(&a, &b).as_flattened(), &mul_t(&a, &b, 2)[..4]);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! runs on stack matrices ([`small`]); F and Q are computed once per step
 //! length ([`Steps`]) when the model's process noise ignores the state.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 use super::{PairCorrelator, Reason, Sample, Statistic, Status};
 use crate::algo::{
@@ -15,69 +15,77 @@ use crate::algo::{
     small::{self, MAX_DIM, Sq},
 };
 
+/// Calls `$f::<N>(args)` with N the runtime dimension `$n` (1 to
+/// [`MAX_DIM`]), so that the kernels work on exact-size stack matrices.
+macro_rules! by_dim {
+    ($n:expr, $f:ident ( $($arg:expr),* )) => {
+        match $n {
+            1 => $f::<1>($($arg),*),
+            2 => $f::<2>($($arg),*),
+            3 => $f::<3>($($arg),*),
+            4 => $f::<4>($($arg),*),
+            5 => $f::<5>($($arg),*),
+            6 => $f::<6>($($arg),*),
+            7 => $f::<7>($($arg),*),
+            8 => $f::<8>($($arg),*),
+            9 => $f::<9>($($arg),*),
+            _ => unreachable!("the scene checks the dimension"),
+        }
+    };
+}
+
 /// Most step lengths whose F and Q are kept.
 const STEPS_KEPT: usize = 64;
 
-/// F(dt) and, when the model's process noise ignores the state, Q(dt), by
-/// the bits of dt (`None` when the model refused dt).
+/// F(dt) and, when the model's process noise ignores the state, Q(dt)
+/// (row-major), by the bits of dt (`None` when the model refused dt).
 #[derive(Default)]
 pub(super) struct Steps {
-    entries: Vec<(u64, Option<(Sq, Option<Sq>)>)>,
+    entries: Vec<(u64, Option<Step>)>,
+}
+
+struct Step {
+    f: Vec<f64>,
+    q: Option<Vec<f64>>,
 }
 
 impl Steps {
-    /// Index of the entry of `dt`, computed on first use.
-    fn index(&mut self, model: &dyn MotionModel, dt: f64, dim: usize) -> usize {
-        let key = dt.to_bits();
-        if let Some(i) = self.entries.iter().position(|e| e.0 == key) {
-            return i;
-        }
-        let value = model.transition(dt).ok().and_then(|f| {
-            if model.process_noise_ignores_state() {
-                let q = model.process_noise(dt, &DVector::zeros(dim)).ok()?;
-                Some((sq_of(&f), Some(sq_of(&q))))
-            } else {
-                Some((sq_of(&f), None))
-            }
-        });
-        if self.entries.len() == STEPS_KEPT {
-            // Irregular instants: forget the oldest step length.
-            self.entries.remove(0);
-        }
-        self.entries.push((key, value));
-        self.entries.len() - 1
-    }
-
-    /// F(dt) and Q(dt) at `state` (computed when it depends on the state);
-    /// `None` when the model refuses dt or the state.
+    /// F(dt) and Q(dt) (Q only when it ignores the state), computed on
+    /// first use; `None` when the model refuses dt.
     fn get(
         &mut self,
         model: &dyn MotionModel,
         dt: f64,
         dim: usize,
-        state: impl FnOnce() -> DVector<f64>,
-    ) -> Option<(&Sq, Sq)> {
-        let i = self.index(model, dt, dim);
-        let (f, q) = self.entries[i].1.as_ref()?;
-        let q = match q {
-            Some(q) => *q,
-            None => sq_of(&model.process_noise(dt, &state()).ok()?),
+    ) -> Option<(&[f64], Option<&[f64]>)> {
+        let key = dt.to_bits();
+        let i = match self.entries.iter().position(|e| e.0 == key) {
+            Some(i) => i,
+            None => {
+                let step = model.transition(dt).ok().and_then(|f| {
+                    let q = if model.process_noise_ignores_state() {
+                        Some(small::row_major(
+                            &model.process_noise(dt, &DVector::zeros(dim)).ok()?,
+                        ))
+                    } else {
+                        None
+                    };
+                    Some(Step {
+                        f: small::row_major(&f),
+                        q,
+                    })
+                });
+                if self.entries.len() == STEPS_KEPT {
+                    // Irregular instants: forget the oldest step length.
+                    self.entries.remove(0);
+                }
+                self.entries.push((key, step));
+                self.entries.len() - 1
+            }
         };
-        Some((f, q))
+        let step = self.entries[i].1.as_ref()?;
+        Some((&step.f, step.q.as_deref()))
     }
-}
-
-/// A square matrix in a stack buffer, row-major, without a temporary.
-fn sq_of(m: &DMatrix<f64>) -> Sq {
-    let n = m.nrows();
-    debug_assert!(n <= MAX_DIM && m.ncols() == n);
-    let mut s = small::ZERO;
-    for i in 0..n {
-        for j in 0..n {
-            s[i * n + j] = m[(i, j)];
-        }
-    }
-    s
 }
 
 /// I − K H of every track of a node at every held instant, flat.
@@ -123,33 +131,25 @@ impl PairCorrelator<'_> {
             self.update_cross(pi, k);
         }
         let p = &self.pairs[pi as usize];
-        let (d, s) = self.difference(p.a, p.b, k);
-        let mut stat = None;
-        let mut singular = false;
-        if let Some(cross) = &p.cross {
-            let mut s_mod = s;
-            for i in 0..dim {
-                for j in 0..dim {
-                    s_mod[i * dim + j] -= cross[i * dim + j] + cross[j * dim + i];
-                }
-            }
-            stat = small::quad_form_inv(&s_mod, &d, dim);
+        let scene = self.scene;
+        let (ta, tb) = (
+            scene.track(self.na, p.a as usize),
+            scene.track(self.nb, p.b as usize),
+        );
+        let (xa, xb) = (ta.x(k, dim), tb.x(k, dim));
+        let (pa, pb) = (ta.p(k, dim), tb.p(k, dim));
+        let cross = p.cross.as_deref();
+        let (stat, singular) = by_dim!(dim, statistic_n(xa, xb, pa, pb, cross));
+        if singular {
             // P_a + P_b − P_ab − P_ab' is a covariance only when the
             // reported covariances, gains and model are consistent;
-            // otherwise fall back to the weighted statistic.
-            singular = stat.is_none();
-        }
-        if singular {
+            // otherwise the weighted statistic was used.
             self.singular_tests += 1;
         }
-        let stat = stat
-            .or_else(|| small::quad_form_inv(&s, &d, dim))
-            .unwrap_or(f64::INFINITY);
-        let posdiff = self
-            .scene
+        let posdiff = scene
             .position_indices()
             .iter()
-            .map(|&i| d[i] * d[i])
+            .map(|&i| (xa[i] - xb[i]) * (xa[i] - xb[i]))
             .sum::<f64>()
             .sqrt();
         let pass = stat <= self.delta;
@@ -203,22 +203,24 @@ impl PairCorrelator<'_> {
         let p = &mut self.pairs[pi as usize];
         let (a, b, prev) = (p.a, p.b, p.last_common);
         let mut cross = p.cross.take();
-        let new = match (prev, &cross) {
+        match (prev, &mut cross) {
             // A last common instant before the held window restarts the
             // recursion from P_ab = 0 (streaming sessions only).
-            (Some(kp), Some(c)) if kp >= self.scene.first() => self.propagated(a, b, kp, k, c),
-            _ => small::ZERO,
-        };
-        match &mut cross {
-            Some(c) => c.copy_from_slice(&new[..dim * dim]),
-            None => cross = Some(new[..dim * dim].into()),
+            (Some(kp), Some(c)) if kp >= self.scene.first() => {
+                if !self.propagate(a, b, kp, k, c) {
+                    c.fill(0.0);
+                }
+            }
+            (_, Some(c)) => c.fill(0.0),
+            (_, None) => cross = Some(vec![0.0; dim * dim].into()),
         }
         self.pairs[pi as usize].cross = cross;
     }
 
-    /// A_a(k) [Φ P_ab(kp) Φ' + Q] A_b(k)' for the pair (a, b) whose last
-    /// common instant was `kp`; zero when the model refuses the step.
-    fn propagated(&mut self, a: u32, b: u32, kp: usize, k: usize, c: &[f64]) -> Sq {
+    /// P_ab ← A_a(k) [Φ P_ab Φ' + Q] A_b(k)' in place, for the pair (a, b)
+    /// whose last common instant was `kp`; false when the model refuses the
+    /// step.
+    fn propagate(&mut self, a: u32, b: u32, kp: usize, k: usize, c: &mut [f64]) -> bool {
         let dim = self.dim;
         let model = self.model.expect("checked in new");
         let dt = self.scene.time(k) - self.scene.time(kp);
@@ -226,30 +228,95 @@ impl PairCorrelator<'_> {
             self.scene.track(self.na, a as usize),
             self.scene.track(self.nb, b as usize),
         );
-        let mean = || {
-            DVector::from_iterator(
-                dim,
-                (0..dim).map(|i| 0.5 * (ta.x(kp, dim)[i] + tb.x(kp, dim)[i])),
-            )
+        let Some((f, q)) = self.steps.get(model, dt, dim) else {
+            return false;
         };
-        let Some((f, q)) = self.steps.get(model, dt, dim, mean) else {
-            return small::ZERO;
+        let q_here;
+        let q = match q {
+            Some(q) => q,
+            None => {
+                let mean = DVector::from_iterator(
+                    dim,
+                    (0..dim).map(|i| 0.5 * (ta.x(kp, dim)[i] + tb.x(kp, dim)[i])),
+                );
+                match model.process_noise(dt, &mean) {
+                    Ok(q) => {
+                        q_here = small::row_major(&q);
+                        &q_here
+                    }
+                    Err(_) => return false,
+                }
+            }
         };
-        let fc = small::mul(f, c, dim);
-        let mut mid = small::mul_t(&fc, f, dim);
-        for i in 0..dim * dim {
-            mid[i] += q[i];
-        }
         let first = self.scene.first();
-        let left = match self.factors_a.get(a, k - first) {
-            Some(fa) => small::mul(fa, &mid, dim),
-            None => mid,
-        };
-        match self.factors_b.get(b, k - first) {
-            Some(fb) => small::mul_t(&left, fb, dim),
-            None => left,
+        let fa = self.factors_a.get(a, k - first);
+        let fb = self.factors_b.get(b, k - first);
+        by_dim!(dim, cross_step_n(f, q, fa, fb, c));
+        true
+    }
+}
+
+/// The test statistic of one pair at one instant and whether the modified
+/// S = P_a + P_b − P_ab − P_ab' was not positive definite (then the weighted
+/// statistic is used); ∞ when neither S is positive definite.
+fn statistic_n<const N: usize>(
+    xa: &[f64],
+    xb: &[f64],
+    pa: &[f64],
+    pb: &[f64],
+    cross: Option<&[f64]>,
+) -> (f64, bool) {
+    let mut d = [0.0; N];
+    for i in 0..N {
+        d[i] = xa[i] - xb[i];
+    }
+    let mut s = [[0.0; N]; N];
+    for i in 0..N {
+        for j in 0..N {
+            s[i][j] = pa[i * N + j] + pb[i * N + j];
         }
     }
+    let mut singular = false;
+    if let Some(c) = cross {
+        let mut s_mod = s;
+        for i in 0..N {
+            for j in 0..N {
+                s_mod[i][j] -= c[i * N + j] + c[j * N + i];
+            }
+        }
+        if let Some(q) = small::quad_form_inv_n::<N>(s_mod.as_flattened(), &d) {
+            return (q, false);
+        }
+        singular = true;
+    }
+    let stat = small::quad_form_inv_n::<N>(s.as_flattened(), &d).unwrap_or(f64::INFINITY);
+    (stat, singular)
+}
+
+/// c ← A_a [F c F' + Q] A_b' (each factor only when known).
+fn cross_step_n<const N: usize>(
+    f: &[f64],
+    q: &[f64],
+    fa: Option<&[f64]>,
+    fb: Option<&[f64]>,
+    c: &mut [f64],
+) {
+    let fc = small::mul_n::<N>(f, c);
+    let mut mid = small::mul_t_n::<N>(fc.as_flattened(), f);
+    for i in 0..N {
+        for j in 0..N {
+            mid[i][j] += q[i * N + j];
+        }
+    }
+    let left = match fa {
+        Some(fa) => small::mul_n::<N>(fa, mid.as_flattened()),
+        None => mid,
+    };
+    let out = match fb {
+        Some(fb) => small::mul_t_n::<N>(left.as_flattened(), fb),
+        None => left,
+    };
+    c.copy_from_slice(out.as_flattened());
 }
 
 /// I − K H for every track of a node at every instant: reported, or
@@ -279,26 +346,28 @@ pub(super) fn filter_factors(
             if !track.is_present(k) {
                 continue;
             }
-            let factor = if let Some(g) = track.gain_factor(k, dim) {
-                let mut s = small::ZERO;
-                s[..dim * dim].copy_from_slice(g);
-                Some(s)
+            let i = t * instants + (k - first);
+            let slot = &mut out.data[i * dim * dim..(i + 1) * dim * dim];
+            if let Some(g) = track.gain_factor(k, dim) {
+                slot.copy_from_slice(g);
+                out.present[i] = true;
             } else if let Some(kp) = prev {
                 let x_prev = track.x(kp, dim);
                 let dt = scene.time(k) - scene.time(kp);
-                let state = || DVector::from_column_slice(x_prev);
-                match steps.get(model, dt, dim, state) {
-                    Some((f, q)) => factor_from(f, &q, track.p(kp, dim), track.p(k, dim), dim)?,
-                    // The model refuses the step: the error it gives.
-                    None => filter_factor(model, x_prev, track.p(kp, dim), track.p(k, dim), dt)?,
+                let (p_prev, p_now) = (track.p(kp, dim), track.p(k, dim));
+                match steps.get(model, dt, dim) {
+                    Some((f, Some(q))) => {
+                        by_dim!(dim, factor_n(f, q, p_prev, p_now, slot))?;
+                    }
+                    // Q depends on the state, or the model refuses the
+                    // step (the error it gives).
+                    _ => {
+                        let a = filter_factor(model, x_prev, p_prev, p_now, dt)?
+                            .expect("an error otherwise");
+                        slot.copy_from_slice(&a[..dim * dim]);
+                    }
                 }
-            } else {
-                None
-            };
-            if let Some(a) = factor {
-                let i = t * instants + (k - first);
                 out.present[i] = true;
-                out.data[i * dim * dim..(i + 1) * dim * dim].copy_from_slice(&a[..dim * dim]);
             }
             prev = Some(k);
         }
@@ -309,8 +378,8 @@ pub(super) fn filter_factors(
 /// The filter factor A = I − K H of a track at one sample, recovered from
 /// its covariances when the gain was not reported: P(k|k) = A P(k|k−1), so
 /// A = P(k|k) P(k|k−1)⁻¹ with P(k|k−1) the previous covariance `p_prev`
-/// (at state `x_prev`) predicted over `dt`. `None` when the prediction is
-/// not positive definite.
+/// (at state `x_prev`) predicted over `dt`. An error when `p_prev` or the
+/// prediction is not a covariance (the result is then always `Some`).
 pub fn filter_factor(
     model: &dyn MotionModel,
     x_prev: &[f64],
@@ -321,34 +390,49 @@ pub fn filter_factor(
     let dim = x_prev.len();
     let x = DVector::from_column_slice(x_prev);
     check_vector("state", &x, model.state_dim())?;
-    let f = sq_of(&model.transition(dt)?);
-    let q = sq_of(&model.process_noise(dt, &x)?);
-    factor_from(&f, &q, p_prev, p_now, dim)
+    small::check_covariance("covariance", p_prev, dim)?;
+    let f = small::row_major(&model.transition(dt)?);
+    let q = small::row_major(&model.process_noise(dt, &x)?);
+    let mut a = small::ZERO;
+    by_dim!(dim, factor_n(&f, &q, p_prev, p_now, &mut a[..dim * dim]))?;
+    Ok(Some(a))
 }
 
-/// A = P(k|k) P(k|k−1)⁻¹ with P(k|k−1) = F P_prev F' + Q, symmetrised and
-/// checked as the Kalman prediction does, on the stack.
-fn factor_from(
-    f: &Sq,
-    q: &Sq,
+/// `out` ← P_now P⁻¹ with P = F P_prev F' + Q symmetrised (the Kalman
+/// prediction), which must be a covariance.
+fn factor_n<const N: usize>(
+    f: &[f64],
+    q: &[f64],
     p_prev: &[f64],
     p_now: &[f64],
-    dim: usize,
-) -> Result<Option<Sq>, AlgoError> {
-    small::check_covariance("covariance", p_prev, dim)?;
-    let fp = small::mul(f, p_prev, dim);
-    let mut pred = small::mul_t(&fp, f, dim);
-    for i in 0..dim * dim {
-        pred[i] += q[i];
-    }
-    for j in 0..dim {
-        for i in j + 1..dim {
-            let m = 0.5 * (pred[i * dim + j] + pred[j * dim + i]);
-            pred[i * dim + j] = m;
-            pred[j * dim + i] = m;
+    out: &mut [f64],
+) -> Result<(), AlgoError> {
+    let fp = small::mul_n::<N>(f, p_prev);
+    let mut pred = small::mul_t_n::<N>(fp.as_flattened(), f);
+    for i in 0..N {
+        for j in 0..N {
+            pred[i][j] += q[i * N + j];
         }
     }
-    small::check_covariance("predicted covariance", &pred[..dim * dim], dim)?;
+    for j in 0..N {
+        for i in j + 1..N {
+            let m = 0.5 * (pred[i][j] + pred[j][i]);
+            pred[i][j] = m;
+            pred[j][i] = m;
+        }
+    }
+    let what = "predicted covariance";
+    if pred.as_flattened().iter().any(|v| !v.is_finite()) {
+        return Err(AlgoError::NonFinite { what });
+    }
+    let l = small::cholesky_n::<N>(pred.as_flattened())
+        .ok_or(AlgoError::NotPositiveDefinite { what })?;
     // A = P(k|k) P⁻¹ = (P⁻¹ P(k|k))' since both are symmetric.
-    Ok(small::solve_spd(&pred, p_now, dim).map(|at| small::transpose(&at, dim)))
+    let at = small::cholesky_solve_n(&l, p_now);
+    for i in 0..N {
+        for j in 0..N {
+            out[i * N + j] = at[j][i];
+        }
+    }
+    Ok(())
 }
