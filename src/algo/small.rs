@@ -39,6 +39,7 @@ pub fn quad_form_inv(s: &[f64], d: &[f64], n: usize) -> Option<f64> {
 /// The lower Cholesky factor of a row-major N×N matrix, or `None` when it is
 /// not positive definite.
 #[allow(clippy::needless_range_loop)] // textbook index form of Cholesky
+#[inline]
 pub fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
     let mut l = [[0.0f64; N]; N];
     for i in 0..N {
@@ -62,6 +63,7 @@ pub fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
 
 /// d' S⁻¹ d for an N×N S (row-major), the kernel of [`quad_form_inv`].
 #[allow(clippy::needless_range_loop)]
+#[inline]
 pub fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
     let l = cholesky_n::<N>(s)?;
     // Forward substitution L y = d; then d' S⁻¹ d = ‖y‖².
@@ -81,6 +83,7 @@ pub fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
 /// X = S⁻¹ B from the Cholesky factor L of S (S = L L') and a row-major
 /// N×N B: forward then back substitution, column by column.
 #[allow(clippy::needless_range_loop)]
+#[inline]
 pub fn cholesky_solve_n<const N: usize>(l: &[[f64; N]; N], b: &[f64]) -> [[f64; N]; N] {
     let mut x = [[0.0f64; N]; N];
     for c in 0..N {
@@ -106,6 +109,7 @@ pub fn cholesky_solve_n<const N: usize>(l: &[[f64; N]; N], b: &[f64]) -> [[f64; 
 
 /// a · b for N×N row-major matrices, exactly as [`mul`] sums.
 #[allow(clippy::needless_range_loop)]
+#[inline]
 pub fn mul_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
     let mut c = [[0.0f64; N]; N];
     for i in 0..N {
@@ -124,6 +128,7 @@ pub fn mul_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
 
 /// a · bᵀ for N×N row-major matrices, exactly as [`mul_t`] sums.
 #[allow(clippy::needless_range_loop)]
+#[inline]
 pub fn mul_t_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
     let mut c = [[0.0f64; N]; N];
     for i in 0..N {
