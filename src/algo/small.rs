@@ -126,18 +126,25 @@ pub fn mul_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
     c
 }
 
-/// a · bᵀ for N×N row-major matrices, exactly as [`mul_t`] sums.
+/// a · bᵀ for N×N row-major matrices, exactly as [`mul_t`] sums (each
+/// entry accumulates its k terms in the same order from 0, so the bits are
+/// the same), with the loops ordered so that the inner one vectorises.
 #[allow(clippy::needless_range_loop)]
 #[inline]
 pub fn mul_t_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
+    let mut bt = [[0.0f64; N]; N];
+    for j in 0..N {
+        for k in 0..N {
+            bt[k][j] = b[j * N + k];
+        }
+    }
     let mut c = [[0.0f64; N]; N];
     for i in 0..N {
-        for j in 0..N {
-            let mut sum = 0.0;
-            for k in 0..N {
-                sum += a[i * N + k] * b[j * N + k];
+        for k in 0..N {
+            let aik = a[i * N + k];
+            for j in 0..N {
+                c[i][j] += aik * bt[k][j];
             }
-            c[i][j] = sum;
         }
     }
     c
