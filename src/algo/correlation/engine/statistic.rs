@@ -259,6 +259,7 @@ impl PairCorrelator<'_> {
 /// The test statistic of one pair at one instant and whether the modified
 /// S = P_a + P_b − P_ab − P_ab' was not positive definite (then the weighted
 /// statistic is used); ∞ when neither S is positive definite.
+#[allow(clippy::needless_range_loop)] // index form of the matrix algebra
 fn statistic_n<const N: usize>(
     xa: &[f64],
     xb: &[f64],
@@ -294,6 +295,7 @@ fn statistic_n<const N: usize>(
 }
 
 /// c ← A_a [F c F' + Q] A_b' (each factor only when known).
+#[allow(clippy::needless_range_loop)] // index form of the matrix algebra
 fn cross_step_n<const N: usize>(
     f: &[f64],
     q: &[f64],
@@ -400,6 +402,7 @@ pub fn filter_factor(
 
 /// `out` ← P_now P⁻¹ with P = F P_prev F' + Q symmetrised (the Kalman
 /// prediction), which must be a covariance.
+#[allow(clippy::needless_range_loop)] // index form of the matrix algebra
 fn factor_n<const N: usize>(
     f: &[f64],
     q: &[f64],
