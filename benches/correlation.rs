@@ -1,24 +1,54 @@
-//! Benchmarks of batch track-to-track correlation (issue: "at any scale"):
-//! two nodes, n targets each, 8 samples per track, the independent
+//! Benchmarks of batch track-to-track correlation.
+//!
+//! Engine (issue 14): every method on the realistic scene of
+//! `radar_fusion::sim::benchmark::realistic_scene` (two radars' Kalman
+//! tracks of the same targets, already aligned), timing the pair correlator
+//! and the grouping on the prebuilt scene, so that alignment changes do not
+//! move the figures. `cargo bench --bench correlation` runs 120 × 120 tracks
+//! × 12 instants for each method in criterion, then the service benchmarks
+//! below.
+//!
+//! `cargo bench --bench correlation -- --engine [120|10000]` prints, in one
+//! run, the median engine compute of 120 × 120 × 12 for every method and of
+//! 10,000 × 10,000 × 11 for the weighted and independent double-threshold
+//! methods, each next to the service's `timing.correlate_us` on the same
+//! samples for reference; a method name after the size keeps that method only.
+//!
+//! Service: two nodes, n targets each, 8 samples per track, the independent
 //! double-threshold method (6/8), with the spatial grid and by brute force
-//! over all pairs, through the service-layer function the endpoints call.
-//!
-//! Scene: `radar_fusion::sim::benchmark::correlation_request`.
-//!
-//! `cargo bench --bench correlation` runs 120 and 1000 in criterion;
-//! `cargo bench --bench correlation -- --once 10000` times one 10k × 10k
-//! request each way (brute force there is 10⁸ pairs × 8 instants).
+//! over all pairs, through the service-layer function the endpoints call
+//! (scene: `radar_fusion::sim::benchmark::correlation_request`). Criterion
+//! runs 120 and 1000; `cargo bench --bench correlation -- --once 10000`
+//! times one 10k × 10k request each way (brute force there is 10⁸ pairs × 8
+//! instants).
 
 use std::{hint::black_box, time::Instant};
 
 use criterion::{BatchSize, Criterion, criterion_group};
 use radar_fusion::{
-    service::correlation::{CorrelateInput, correlate},
-    sim::benchmark::correlation_request,
+    algo::correlation::engine::{Decision, Pruning},
+    service::correlation::{CorrelateInput, MethodInput, correlate},
+    sim::benchmark::{
+        METHODS, RealisticScene, correlate_scene, correlation_request, engine_config,
+        realistic_scene,
+    },
 };
 
 fn scene(n: usize, pruning: &str) -> CorrelateInput {
     correlation_request(n, pruning)
+}
+
+fn bench_engine(c: &mut Criterion) {
+    let s = realistic_scene(120, 12, false);
+    let mut group = c.benchmark_group("correlation_engine");
+    group.sample_size(30);
+    for method in METHODS {
+        let cfg = engine_config(method, Pruning::Grid);
+        group.bench_function(format!("120x120x12 {method}"), |b| {
+            b.iter(|| correlate_scene(black_box(&s), &cfg))
+        });
+    }
+    group.finish();
 }
 
 fn bench(c: &mut Criterion) {
@@ -41,10 +71,87 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+criterion_group!(benches, bench_engine, bench);
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// One line of the engine table: median engine compute over `runs` runs and
+/// the service's correlate time (median over `service_runs`).
+fn engine_line(s: &RealisticScene, label: &str, method: &str, runs: usize, service_runs: usize) {
+    let cfg = engine_config(method, Pruning::Grid);
+    let mut times = Vec::with_capacity(runs);
+    let mut outcome = None;
+    for _ in 0..runs {
+        let start = Instant::now();
+        let o = correlate_scene(black_box(s), &cfg);
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+        outcome = Some(o);
+    }
+    let o = outcome.expect("at least one run");
+    let mut service = Vec::with_capacity(service_runs);
+    let mut service_correlated = 0;
+    for _ in 0..service_runs {
+        let mut input = s.request.clone();
+        input.method = Some(MethodInput {
+            kind: Some(method.into()),
+            ..Default::default()
+        });
+        input.fuse = Some(false);
+        let out = correlate(input).expect("valid request");
+        service.push(out.timing.correlate_us / 1e3);
+        service_correlated = out
+            .pairs
+            .iter()
+            .filter(|p| p.decision == Decision::Correlated)
+            .count();
+    }
+    println!(
+        "| {label} | {method} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} |",
+        median(times.clone()),
+        times.iter().copied().fold(f64::INFINITY, f64::min),
+        median(service),
+        o.pairs,
+        o.correlated,
+        o.right,
+        service_correlated,
+    );
+}
+
+fn engine_table(only: Option<usize>, method_only: Option<&str>) {
+    let wanted = |m: &str| method_only.is_none_or(|o| o == m);
+    println!(
+        "| scene | method | engine median ms | engine min ms | service correlate_us median ms | candidate pairs | correlated | right | service correlated |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    if only.is_none_or(|n| n == 120) {
+        let s = realistic_scene(120, 12, false);
+        for method in METHODS.into_iter().filter(|m| wanted(m)) {
+            engine_line(&s, "120x120x12", method, 101, 11);
+        }
+    }
+    if only.is_none_or(|n| n == 10_000) {
+        let s = realistic_scene(10_000, 11, false);
+        for method in ["weighted", "independent_double_threshold"]
+            .into_iter()
+            .filter(|m| wanted(m))
+        {
+            engine_line(&s, "10000x10000x11", method, 3, 1);
+        }
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--engine") {
+        engine_table(
+            args.get(i + 1).and_then(|s| s.parse().ok()),
+            args.get(i + 2).map(String::as_str),
+        );
+        return;
+    }
     if let Some(i) = args.iter().position(|a| a == "--once") {
         let n: usize = args
             .get(i + 1)
@@ -61,9 +168,7 @@ fn main() {
             let correlated = out
                 .pairs
                 .iter()
-                .filter(|p| {
-                    p.decision == radar_fusion::algo::correlation::engine::Decision::Correlated
-                })
+                .filter(|p| p.decision == Decision::Correlated)
                 .count();
             println!(
                 "{n}x{n}x8 {pruning}: {:.4} s wall, compute {:.4} s (align {:.4} s, correlate {:.4} s, fuse {:.4} s), {} correlated, {} listed pairs",

@@ -26,6 +26,12 @@ pub trait MotionModel {
     /// is needed by state-dependent noise such as seed 000 eq. 26).
     fn process_noise(&self, dt: f64, state: &DVector<f64>) -> Result<DMatrix<f64>, AlgoError>;
 
+    /// Whether [`MotionModel::process_noise`] ignores the state, so that a
+    /// caller may compute Q once per step length (the default says no).
+    fn process_noise_ignores_state(&self) -> bool {
+        false
+    }
+
     /// Kalman prediction over `dt`: x⁺ = F x, P⁺ = F P F' + Q.
     fn predict(
         &self,
@@ -100,6 +106,10 @@ impl MotionModel for ConstantVelocity {
 
     fn transition(&self, dt: f64) -> Result<DMatrix<f64>, AlgoError> {
         cv_transition(self.axes, dt)
+    }
+
+    fn process_noise_ignores_state(&self) -> bool {
+        !matches!(self.noise, ProcessNoise::VelocityProportional { .. })
     }
 
     fn process_noise(&self, dt: f64, state: &DVector<f64>) -> Result<DMatrix<f64>, AlgoError> {
@@ -316,6 +326,24 @@ mod tests {
         assert_eq!(q[(2, 2)], 0.0);
         assert!(m.process_noise(T, &dvector![0.0, 1.0]).is_err());
         assert!(ConstantVelocity::new(2, ProcessNoise::Dwna { sigma_a: -1.0 }).is_err());
+        assert!(!m.process_noise_ignores_state());
+    }
+
+    #[test]
+    fn white_noise_models_ignore_the_state() {
+        // DWNA and CWNA Q depend on dt only: the same Q at two states.
+        for noise in [
+            ProcessNoise::Dwna { sigma_a: 2.0 },
+            ProcessNoise::Cwna { q: 3.0 },
+        ] {
+            let m = ConstantVelocity::new(2, noise).unwrap();
+            assert!(m.process_noise_ignores_state());
+            let q1 = m.process_noise(T, &dvector![0.0, 100.0, 0.0, 0.0]).unwrap();
+            let q2 = m
+                .process_noise(T, &dvector![5.0, -7.0, 1.0, 300.0])
+                .unwrap();
+            assert_eq!(q1, q2);
+        }
     }
 
     #[test]

@@ -39,7 +39,8 @@ pub fn quad_form_inv(s: &[f64], d: &[f64], n: usize) -> Option<f64> {
 /// The lower Cholesky factor of a row-major N×N matrix, or `None` when it is
 /// not positive definite.
 #[allow(clippy::needless_range_loop)] // textbook index form of Cholesky
-fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
+#[inline]
+pub fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
     let mut l = [[0.0f64; N]; N];
     for i in 0..N {
         for j in 0..=i {
@@ -60,8 +61,10 @@ fn cholesky_n<const N: usize>(s: &[f64]) -> Option<[[f64; N]; N]> {
     Some(l)
 }
 
+/// d' S⁻¹ d for an N×N S (row-major), the kernel of [`quad_form_inv`].
 #[allow(clippy::needless_range_loop)]
-fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
+#[inline]
+pub fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
     let l = cholesky_n::<N>(s)?;
     // Forward substitution L y = d; then d' S⁻¹ d = ‖y‖².
     let mut y = [0.0f64; N];
@@ -75,6 +78,76 @@ fn quad_form_inv_n<const N: usize>(s: &[f64], d: &[f64]) -> Option<f64> {
         q += y[i] * y[i];
     }
     q.is_finite().then_some(q)
+}
+
+/// X = S⁻¹ B from the Cholesky factor L of S (S = L L') and a row-major
+/// N×N B: forward then back substitution, column by column.
+#[allow(clippy::needless_range_loop)]
+#[inline]
+pub fn cholesky_solve_n<const N: usize>(l: &[[f64; N]; N], b: &[f64]) -> [[f64; N]; N] {
+    let mut x = [[0.0f64; N]; N];
+    for c in 0..N {
+        // L y = b_c, then L' x_c = y.
+        let mut y = [0.0f64; N];
+        for i in 0..N {
+            let mut sum = b[i * N + c];
+            for k in 0..i {
+                sum -= l[i][k] * y[k];
+            }
+            y[i] = sum / l[i][i];
+        }
+        for i in (0..N).rev() {
+            let mut sum = y[i];
+            for k in i + 1..N {
+                sum -= l[k][i] * x[k][c];
+            }
+            x[i][c] = sum / l[i][i];
+        }
+    }
+    x
+}
+
+/// a · b for N×N row-major matrices, exactly as [`mul`] sums.
+#[allow(clippy::needless_range_loop)]
+#[inline]
+pub fn mul_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
+    let mut c = [[0.0f64; N]; N];
+    for i in 0..N {
+        for k in 0..N {
+            let aik = a[i * N + k];
+            if aik == 0.0 {
+                continue;
+            }
+            for j in 0..N {
+                c[i][j] += aik * b[k * N + j];
+            }
+        }
+    }
+    c
+}
+
+/// a · bᵀ for N×N row-major matrices, exactly as [`mul_t`] sums (each
+/// entry accumulates its k terms in the same order from 0, so the bits are
+/// the same), with the loops ordered so that the inner one vectorises.
+#[allow(clippy::needless_range_loop)]
+#[inline]
+pub fn mul_t_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
+    let mut bt = [[0.0f64; N]; N];
+    for j in 0..N {
+        for k in 0..N {
+            bt[k][j] = b[j * N + k];
+        }
+    }
+    let mut c = [[0.0f64; N]; N];
+    for i in 0..N {
+        for k in 0..N {
+            let aik = a[i * N + k];
+            for j in 0..N {
+                c[i][j] += aik * bt[k][j];
+            }
+        }
+    }
+    c
 }
 
 /// trace(S⁻¹) of a symmetric positive definite S (n×n, row-major):
@@ -240,6 +313,23 @@ mod tests {
         let t = trace_inverse(&[4.0, 2.0, 2.0, 3.0], 2).unwrap();
         assert!((t - 7.0 / 8.0).abs() < 1e-15);
         assert!(trace_inverse(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+    }
+
+    #[test]
+    fn cholesky_solve_by_hand() {
+        // S = [[4, 2], [2, 3]], S⁻¹ = [[3, −2], [−2, 4]] / 8. B = [[1, 0], [2, 8]]:
+        // S⁻¹B = [[3 − 4, −16], [−2 + 8, 32]] / 8 = [[−1/8, −2], [3/4, 4]].
+        let l = cholesky_n::<2>(&[4.0, 2.0, 2.0, 3.0]).unwrap();
+        let x = cholesky_solve_n(&l, &[1.0, 0.0, 2.0, 8.0]);
+        let want = [-0.125, -2.0, 0.75, 4.0];
+        for (g, w) in x.as_flattened().iter().zip(want) {
+            assert!((g - w).abs() < 1e-15, "{x:?}");
+        }
+        assert!(cholesky_n::<2>(&[1.0, 2.0, 2.0, 1.0]).is_none());
+        // The fixed-size products sum as the general ones.
+        let (a, b) = ([1.0, 2.0, 3.0, 4.0], [5.0, 6.0, 7.0, 8.0]);
+        assert_eq!(mul_n::<2>(&a, &b).as_flattened(), &mul(&a, &b, 2)[..4]);
+        assert_eq!(mul_t_n::<2>(&a, &b).as_flattened(), &mul_t(&a, &b, 2)[..4]);
     }
 
     #[test]
