@@ -302,7 +302,11 @@ impl AisSceneConfig {
         }
         let gauss = |rng: &mut SimRng, sd: f64| sd * rng.sample::<f64, _>(StandardNormal);
         let uniform = |rng: &mut SimRng, (lo, hi): (f64, f64)| {
-            if lo < hi { rng.random_range(lo..hi) } else { lo }
+            if lo < hi {
+                rng.random_range(lo..hi)
+            } else {
+                lo
+            }
         };
         // (start position, velocity, carries AIS, moored)
         let mut ships: Vec<([f64; 2], [f64; 2], bool, bool)> = Vec::new();
@@ -368,13 +372,13 @@ impl AisSceneConfig {
                 let mut t = rng.random::<f64>() * uniform(rng, interval);
                 while t <= self.duration {
                     let p = at(t);
-                    reports.push(AisPoint {
+                    reports.push(AisPoint::exact(
                         t,
-                        position: [
+                        [
                             p[0] + offset[0] + gauss(rng, self.ais_sigma),
                             p[1] + offset[1] + gauss(rng, self.ais_sigma),
                         ],
-                    });
+                    ));
                     t += uniform(rng, interval);
                 }
                 scene.ais.push(reports);
