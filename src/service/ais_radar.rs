@@ -758,3 +758,41 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         warnings,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(t: f64, x: f64) -> AisPoint {
+        AisPoint {
+            t,
+            position: [x, 0.0],
+            time_sigma: 0.3,
+        }
+    }
+
+    /// Issue 17: of reports sharing a whole-second time the position report
+    /// (rank 0) wins over the coarse type 27 (rank 1) in either order, and
+    /// equal ones are averaged: never the first by accident.
+    #[test]
+    fn repeated_times_keep_the_better_report_in_any_order() {
+        let a = vec![
+            (point(10.5, 185.0), 1),
+            (point(10.5, 3.0), 0),
+            (point(11.5, 7.0), 0),
+        ];
+        let mut b = a.clone();
+        b.reverse();
+        for pts in [a, b] {
+            let kept = best_per_time(pts);
+            assert_eq!(kept.len(), 2);
+            assert_eq!(kept[0].position, [3.0, 0.0]);
+            assert_eq!(kept[1].position, [7.0, 0.0]);
+        }
+        let kept = best_per_time(vec![(point(4.5, 2.0), 0), (point(4.5, 6.0), 0)]);
+        assert_eq!(kept, vec![point(4.5, 4.0)]);
+        assert_eq!(report_rank(27), 1);
+        assert_eq!(report_rank(1), 0);
+        assert_eq!(report_rank(18), 0);
+    }
+}

@@ -455,6 +455,26 @@ impl BitReader<'_> {
 mod tests {
     use super::*;
 
+    /// Issue 17: tag-block times carry their resolution: whole seconds
+    /// (the usual `c:`), written decimals, or milliseconds.
+    #[test]
+    fn tag_block_time_resolution() {
+        let block = |v: &str| {
+            let body = format!("c:{v}");
+            format!("{body}*{:02X}", checksum(&body))
+        };
+        assert_eq!(
+            parse_tag_block(&block("1700000003")).unwrap(),
+            Some((1_700_000_003.0, 1.0))
+        );
+        let (t, r) = parse_tag_block(&block("1700000003.25")).unwrap().unwrap();
+        assert_eq!(t, 1_700_000_003.25);
+        assert!((r - 0.01).abs() < 1e-15);
+        let (t, r) = parse_tag_block(&block("1700000003250")).unwrap().unwrap();
+        assert!((t - 1_700_000_003.25).abs() < 1e-6);
+        assert!((r - 0.001).abs() < 1e-15);
+    }
+
     fn lines(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()
     }
