@@ -27,6 +27,9 @@ use radar_fusion::algo::bias::associate::{self, Config};
 use radar_fusion::sim::ais::AisSceneConfig;
 use radar_fusion::sim::montecarlo::run_rng;
 
+/// A scene kind from its range and azimuth bias.
+type MakeScene = fn(f64, f64) -> AisSceneConfig;
+
 /// Nanoseconds this thread has run on a CPU (Linux), if readable.
 fn thread_cpu_ns() -> Option<f64> {
     let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
@@ -121,19 +124,11 @@ fn main() {
         .collect();
     let repeats = args.first().copied().unwrap_or(5).max(1);
     let seeds = args.get(1).copied().unwrap_or(3).max(1);
-    let kinds: Vec<(&str, Box<dyn Fn(f64) -> AisSceneConfig>)> = vec![
-        (
-            "harbour72",
-            Box::new(|b| AisSceneConfig::harbour(72, b, 0.5f64.to_radians())),
-        ),
-        (
-            "open_sea30",
-            Box::new(|b| AisSceneConfig::open_sea(30, b, 0.5f64.to_radians())),
-        ),
-        (
-            "open_sea10",
-            Box::new(|b| AisSceneConfig::open_sea(10, b, 0.5f64.to_radians())),
-        ),
+    let az = 0.5f64.to_radians();
+    let kinds: [(&str, MakeScene); 3] = [
+        ("harbour72", |b, a| AisSceneConfig::harbour(72, b, a)),
+        ("open_sea30", |b, a| AisSceneConfig::open_sea(30, b, a)),
+        ("open_sea10", |b, a| AisSceneConfig::open_sea(10, b, a)),
     ];
     let cfg = Config::default();
     for (name, make) in &kinds {
@@ -141,7 +136,7 @@ fn main() {
         for seed in 0..seeds {
             for bias in [500.0, 3000.0] {
                 let mut rng = run_rng(17, seed as u64 * 1000 + bias as u64);
-                let scene = make(bias).generate(&mut rng).expect("valid scene");
+                let scene = make(bias, az).generate(&mut rng).expect("valid scene");
                 let mut times = Vec::new();
                 let mut cpu = Vec::new();
                 let mut out = None;

@@ -344,9 +344,9 @@ impl Sector {
                 widest = (c, d);
             }
             s.min_range = s.min_range.min((p[0] * p[0] + p[1] * p[1]).sqrt());
-            for d in 0..2 {
-                s.lo[d] = s.lo[d].min(p[d]);
-                s.hi[d] = s.hi[d].max(p[d]);
+            for (d, &x) in p.iter().enumerate() {
+                s.lo[d] = s.lo[d].min(x);
+                s.hi[d] = s.hi[d].max(x);
             }
         }
         s.half = widest.0.atan2(widest.1);
@@ -430,6 +430,10 @@ fn dist(p: [f64; 2], q: [f64; 2]) -> f64 {
     ((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1])).sqrt()
 }
 
+/// A pair's (range, azimuth) residual at one common instant and the index
+/// of its AIS report.
+type Residual = ([f64; 2], usize);
+
 /// The fixed geometry of a problem: tracks, ships and their time alignment.
 struct Problem<'a> {
     radar: &'a [Vec<RadarSample>],
@@ -454,7 +458,7 @@ struct Problem<'a> {
     /// Brackets and raw residuals (with the AIS report index) of each
     /// pair, built on first use.
     brackets: Vec<OnceCell<Vec<Bracket>>>,
-    residuals: Vec<OnceCell<Vec<([f64; 2], usize)>>>,
+    residuals: Vec<OnceCell<Vec<Residual>>>,
 }
 
 /// Central-difference velocity of each report (one-sided at the ends).
@@ -763,7 +767,7 @@ impl<'a> Problem<'a> {
     /// Range and azimuth residuals (measured − AIS) of pair (i, j) at its
     /// common instants, with the raw track interpolated in the plane, and
     /// each report's index.
-    fn residuals(&self, i: usize, j: usize) -> &[([f64; 2], usize)] {
+    fn residuals(&self, i: usize, j: usize) -> &[Residual] {
         let ij = i * self.cols + j;
         self.residuals[ij].get_or_init(|| {
             self.brackets(ij)
@@ -811,7 +815,7 @@ impl<'a> Problem<'a> {
     /// AIS time quantisation) over the N samples. A single pair uses the
     /// sample covariance / n.
     fn estimate(&self, pairs: &[(usize, usize)]) -> Option<BiasEstimate> {
-        let per_pair: Vec<(usize, &[([f64; 2], usize)])> = pairs
+        let per_pair: Vec<(usize, &[Residual])> = pairs
             .iter()
             .map(|&(i, j)| (j, self.residuals(i, j)))
             .filter(|r| !r.1.is_empty())
