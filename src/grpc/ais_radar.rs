@@ -73,6 +73,11 @@ fn associate_input(req: pb::AssociateRequest) -> svc::AssociateInput {
             cfar_guard: o.cfar_guard,
             cfar_k: o.cfar_k,
             cfar_h: o.cfar_h,
+            widen_search: o.widen_search,
+            radar_sigma_range_m: o.radar_sigma_range_m,
+            radar_sigma_azimuth_deg: o.radar_sigma_azimuth_deg,
+            ais_sigma_m: o.ais_sigma_m,
+            ais_time_sigma_s: o.ais_time_sigma_s,
         }),
     }
 }
@@ -102,6 +107,7 @@ fn associate_response(out: svc::AssociateOutput) -> pb::AssociateResponse {
             }),
             pairs_used: n(b.pairs_used),
             samples_used: n(b.samples_used),
+            effective_pairs: b.effective_pairs,
         }),
         iterations: n(out.iterations),
         converged: out.converged,
@@ -118,6 +124,23 @@ fn associate_response(out: svc::AssociateOutput) -> pb::AssociateResponse {
             .collect(),
         unassociated_radar_tracks: out.unassociated_radar_tracks,
         unassociated_mmsis: out.unassociated_mmsis,
+        unassociable_mmsis: out.unassociable_mmsis,
+        quality: Some(pb::AssociationQuality {
+            reliable: out.quality.reliable,
+            at_bound: out.quality.at_bound,
+            search_widened: out.quality.search_widened,
+            ambiguous: out.quality.ambiguous,
+            inconsistent: out.quality.inconsistent,
+            residual_ratio: out.quality.residual_ratio,
+            alternative: out.quality.alternative.map(|a| pb::AlternativeBias {
+                range_m: a.range_m,
+                azimuth_deg: a.azimuth_deg,
+                pairs: n(a.pairs),
+                mean_distance_m: a.mean_distance_m,
+            }),
+            hypotheses_ranked: n(out.quality.hypotheses_ranked),
+            hypotheses_scored: n(out.quality.hypotheses_scored),
+        }),
         compensated_tracks: out
             .compensated_tracks
             .into_iter()

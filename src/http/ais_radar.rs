@@ -76,6 +76,16 @@ pub struct AssociateOptions {
     pub cfar_guard: Option<u32>,
     pub cfar_k: Option<f64>,
     pub cfar_h: Option<f64>,
+    /// Let the bias search look up to 4 times past the bounds when a bias there gates more pairs (default true); `quality.search_widened` says when it did.
+    pub widen_search: Option<bool>,
+    /// The radar's stated range error σ (default 50 m): with the azimuth and AIS errors, the yardstick of `quality.residual_ratio`.
+    pub radar_sigma_range_m: Option<f64>,
+    /// The radar's stated azimuth error σ (default 0.2°).
+    pub radar_sigma_azimuth_deg: Option<f64>,
+    /// AIS position error σ per axis (default 10 m).
+    pub ais_sigma_m: Option<f64>,
+    /// Time uncertainty σ of the decoded `ais_reports` (default 0 s). NMEA tag-block times of whole seconds are taken at the middle of their second with σ = 1/√12 s on their own.
+    pub ais_time_sigma_s: Option<f64>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -111,6 +121,38 @@ pub struct BiasEstimate {
     pub covariance: Vec<Vec<f64>>,
     pub pairs_used: usize,
     pub samples_used: usize,
+    /// (Σ n_k)² / Σ n_k² over the pairs' sample counts n_k: the pairs' weight in the covariance's small-sample scaling.
+    pub effective_pairs: f64,
+}
+
+/// A distinct bias that associates as many pairs nearly as well (within 1.5 times the mean distance).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AlternativeBias {
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    pub pairs: usize,
+    pub mean_distance_m: f64,
+}
+
+/// What a client tests before trusting the result; every raised flag also has a warning.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AssociationQuality {
+    /// A bias from at least 3 pairs, converged, and none of the flags below.
+    pub reliable: bool,
+    /// The bias lies on or beyond `max_range_bias_m` or `max_azimuth_bias_deg`.
+    pub at_bound: bool,
+    /// The search went past the bounds, where a bias gates more pairs.
+    pub search_widened: bool,
+    /// A distinct bias associates as many pairs nearly as well (`alternative`).
+    pub ambiguous: bool,
+    /// The residuals after compensation exceed 3 times the stated errors.
+    pub inconsistent: bool,
+    /// RMS of the residuals after compensation in units of the stated errors (≈ 1 when they hold).
+    pub residual_ratio: Option<f64>,
+    pub alternative: Option<AlternativeBias>,
+    /// Pair-implied biases ranked by the search, and scored by a gated assignment.
+    pub hypotheses_ranked: usize,
+    pub hypotheses_scored: usize,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -179,6 +221,9 @@ pub struct AssociateResponse {
     pub associations: Vec<AisAssociation>,
     pub unassociated_radar_tracks: Vec<String>,
     pub unassociated_mmsis: Vec<u32>,
+    /// MMSIs sharing fewer than 2 instants with every radar track (a single report, or outside every track's time span): never associable.
+    pub unassociable_mmsis: Vec<u32>,
+    pub quality: AssociationQuality,
     pub compensated_tracks: Vec<CompensatedTrack>,
     pub mean_error_before_m: Option<f64>,
     pub mean_error_after_m: Option<f64>,
@@ -250,6 +295,11 @@ pub async fn associate(
             cfar_guard: o.cfar_guard,
             cfar_k: o.cfar_k,
             cfar_h: o.cfar_h,
+            widen_search: o.widen_search,
+            radar_sigma_range_m: o.radar_sigma_range_m,
+            radar_sigma_azimuth_deg: o.radar_sigma_azimuth_deg,
+            ais_sigma_m: o.ais_sigma_m,
+            ais_time_sigma_s: o.ais_time_sigma_s,
         }),
     };
     let out = service::offload(move || svc::associate(input)).await?;
@@ -272,6 +322,7 @@ pub async fn associate(
             covariance: b.covariance.iter().map(|r| r.to_vec()).collect(),
             pairs_used: b.pairs_used,
             samples_used: b.samples_used,
+            effective_pairs: b.effective_pairs,
         }),
         iterations: out.iterations,
         converged: out.converged,
@@ -288,6 +339,23 @@ pub async fn associate(
             .collect(),
         unassociated_radar_tracks: out.unassociated_radar_tracks,
         unassociated_mmsis: out.unassociated_mmsis,
+        unassociable_mmsis: out.unassociable_mmsis,
+        quality: AssociationQuality {
+            reliable: out.quality.reliable,
+            at_bound: out.quality.at_bound,
+            search_widened: out.quality.search_widened,
+            ambiguous: out.quality.ambiguous,
+            inconsistent: out.quality.inconsistent,
+            residual_ratio: out.quality.residual_ratio,
+            alternative: out.quality.alternative.map(|a| AlternativeBias {
+                range_m: a.range_m,
+                azimuth_deg: a.azimuth_deg,
+                pairs: a.pairs,
+                mean_distance_m: a.mean_distance_m,
+            }),
+            hypotheses_ranked: out.quality.hypotheses_ranked,
+            hypotheses_scored: out.quality.hypotheses_scored,
+        },
         compensated_tracks: out
             .compensated_tracks
             .into_iter()

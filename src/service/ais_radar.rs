@@ -82,6 +82,12 @@ pub struct OptionsInput {
     pub cfar_guard: Option<u32>,
     pub cfar_k: Option<f64>,
     pub cfar_h: Option<f64>,
+    pub widen_search: Option<bool>,
+    pub radar_sigma_range_m: Option<f64>,
+    pub radar_sigma_azimuth_deg: Option<f64>,
+    pub ais_sigma_m: Option<f64>,
+    /// Time uncertainty (s, standard deviation) of the decoded `ais_reports`.
+    pub ais_time_sigma_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -108,6 +114,33 @@ pub struct BiasOut {
     pub covariance: [[f64; 2]; 2],
     pub pairs_used: usize,
     pub samples_used: usize,
+    /// (Σ n_k)² / Σ n_k² over the pairs' sample counts.
+    pub effective_pairs: f64,
+}
+
+/// A distinct bias that associates as many pairs nearly as well.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AlternativeOut {
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    pub pairs: usize,
+    pub mean_distance_m: f64,
+}
+
+/// What a client tests before trusting the result.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct QualityOut {
+    /// No flag below is raised and a bias was estimated from at least
+    /// `MIN_PAIRS_FOR_A_SEPARABLE_BIAS` pairs.
+    pub reliable: bool,
+    pub at_bound: bool,
+    pub search_widened: bool,
+    pub ambiguous: bool,
+    pub inconsistent: bool,
+    pub residual_ratio: Option<f64>,
+    pub alternative: Option<AlternativeOut>,
+    pub hypotheses_ranked: usize,
+    pub hypotheses_scored: usize,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -152,12 +185,62 @@ pub struct AssociateOutput {
     pub associations: Vec<AssociationOut>,
     pub unassociated_radar_tracks: Vec<String>,
     pub unassociated_mmsis: Vec<u32>,
+    /// MMSIs sharing fewer than 2 instants with every radar track (a single
+    /// report, or outside every track's time span): never associable.
+    pub unassociable_mmsis: Vec<u32>,
+    pub quality: QualityOut,
     pub compensated_tracks: Vec<CompensatedTrack>,
     pub mean_error_before_m: Option<f64>,
     pub mean_error_after_m: Option<f64>,
     pub nmea: NmeaSummary,
     pub compute_us: f64,
     pub warnings: Vec<String>,
+}
+
+/// One AIS report before projection: `rank` 0 for positions of types
+/// 1/2/3/18/19 and decoded reports, 1 for type 27's coarse 1/10′ positions.
+#[derive(Debug, Clone, Copy)]
+struct Report {
+    mmsi: u32,
+    t: f64,
+    lat: f64,
+    lon: f64,
+    rank: u8,
+    time_sigma: f64,
+}
+
+/// Type 27 (long-range broadcast) carries 1/10′ positions (about 185 m);
+/// every other position report 1/10000′.
+fn report_rank(message_type: u8) -> u8 {
+    u8::from(message_type == 27)
+}
+
+/// One report per time: of reports with the same time the best rank is
+/// kept; equally ranked ones are averaged (position and time σ), so the
+/// result never depends on their order.
+fn best_per_time(mut pts: Vec<(AisPoint, u8)>) -> Vec<AisPoint> {
+    pts.sort_by(|a, b| a.0.t.total_cmp(&b.0.t).then(a.1.cmp(&b.1)));
+    let mut out: Vec<AisPoint> = Vec::with_capacity(pts.len());
+    let mut k = 0;
+    while k < pts.len() {
+        let (t, rank) = (pts[k].0.t, pts[k].1);
+        let group: Vec<&AisPoint> = pts[k..]
+            .iter()
+            .take_while(|p| p.0.t == t && p.1 == rank)
+            .map(|p| &p.0)
+            .collect();
+        let n = group.len() as f64;
+        out.push(AisPoint {
+            t,
+            position: [
+                group.iter().map(|p| p.position[0]).sum::<f64>() / n,
+                group.iter().map(|p| p.position[1]).sum::<f64>() / n,
+            ],
+            time_sigma: group.iter().map(|p| p.time_sigma).fold(0.0, f64::max),
+        });
+        k += pts[k..].iter().take_while(|p| p.0.t == t).count();
+    }
+    out
 }
 
 /// The wire word of a path.
@@ -192,8 +275,8 @@ fn optional_positive(v: &mut Violations, field: &str, x: Option<f64>, default: f
     }
 }
 
-fn config(v: &mut Violations, o: Option<OptionsInput>) -> Config {
-    let o = o.unwrap_or_default();
+fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Config {
+    let o = o.clone().unwrap_or_default();
     let d = Config::default();
     let seeding = match o.seeding.as_deref() {
         None | Some("auto") => Seeding::Auto,
@@ -216,6 +299,12 @@ fn config(v: &mut Violations, o: Option<OptionsInput>) -> Config {
         max_azimuth_bias: o
             .max_azimuth_bias_deg
             .map_or(d.max_azimuth_bias, f64::to_radians),
+        widen: o.widen_search.unwrap_or(d.widen),
+        sigma_range: o.radar_sigma_range_m.unwrap_or(d.sigma_range),
+        sigma_azimuth: o
+            .radar_sigma_azimuth_deg
+            .map_or(d.sigma_azimuth, f64::to_radians),
+        sigma_ais: o.ais_sigma_m.unwrap_or(d.sigma_ais),
         cfar: CfarConfig {
             window: o.cfar_window.map_or(d.cfar.window, |x| x as usize),
             guard: o.cfar_guard.map_or(d.cfar.guard, |x| x as usize),
@@ -262,7 +351,18 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             Ellipsoid::WGS84
         }
     };
-    let cfg = config(&mut v, input.options);
+    let cfg = config(&mut v, &input.options);
+    let ais_time_sigma = match input.options.as_ref().and_then(|o| o.ais_time_sigma_s) {
+        None => 0.0,
+        Some(x) if x.is_finite() && (0.0..=3600.0).contains(&x) => x,
+        Some(_) => {
+            v.add(
+                "options.ais_time_sigma_s",
+                "must be a finite number between 0 and 3600",
+            );
+            0.0
+        }
+    };
     let points = input
         .radar_tracks
         .iter()
@@ -348,15 +448,22 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     }
     // AIS reports (decoded and from NMEA), grouped by MMSI.
     let decoded = nmea::decode(&input.nmea);
-    let mut reports: Vec<(u32, f64, f64, f64)> = Vec::new();
+    let mut reports: Vec<Report> = Vec::new();
     for (k, r) in input.ais_reports.iter().enumerate() {
         let f = format!("ais_reports[{k}]");
         let mmsi = v.required(&format!("{f}.mmsi"), r.mmsi);
         let t = finite_in(&mut v, &format!("{f}.t"), r.t, -1e12, 1e12);
         let lat = finite_in(&mut v, &format!("{f}.lat_deg"), r.lat_deg, -90.0, 90.0);
         let lon = finite_in(&mut v, &format!("{f}.lon_deg"), r.lon_deg, -180.0, 180.0);
-        if let (Some(m), Some(t), Some(la), Some(lo)) = (mmsi, t, lat, lon) {
-            reports.push((m, t, la, lo));
+        if let (Some(mmsi), Some(t), Some(lat), Some(lon)) = (mmsi, t, lat, lon) {
+            reports.push(Report {
+                mmsi,
+                t,
+                lat,
+                lon,
+                rank: 0,
+                time_sigma: ais_time_sigma,
+            });
         }
     }
     let ais_total = reports.len() + decoded.positions.len();
@@ -382,7 +489,19 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let mut untimed = 0;
     for p in &decoded.positions {
         match p.t {
-            Some(t) => reports.push((p.mmsi, t, p.lat_deg, p.lon_deg)),
+            Some(t) => {
+                // A time stamp of resolution r stands for the interval
+                // [t, t + r): its middle, uniform within ±r/2.
+                let r = p.t_resolution.unwrap_or(0.0);
+                reports.push(Report {
+                    mmsi: p.mmsi,
+                    t: t + r / 2.0,
+                    lat: p.lat_deg,
+                    lon: p.lon_deg,
+                    rank: report_rank(p.message_type),
+                    time_sigma: associate::quantisation_sigma(r),
+                })
+            }
             None => {
                 untimed += 1;
                 nmea_errors.push((
@@ -406,23 +525,33 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     }
     let plane = LocalPlane::new(ellipsoid, lat0.to_radians(), lon0.to_radians())
         .map_err(|e| Violations::from_param("site.", e))?;
-    let mut by_mmsi: BTreeMap<u32, Vec<AisPoint>> = BTreeMap::new();
-    for &(m, t, la, lo) in &reports {
-        by_mmsi.entry(m).or_default().push(AisPoint {
-            t,
-            position: plane.forward(la.to_radians(), lo.to_radians()),
-        });
+    let mut by_mmsi: BTreeMap<u32, Vec<(AisPoint, u8)>> = BTreeMap::new();
+    for r in &reports {
+        let position = plane.forward(r.lat.to_radians(), r.lon.to_radians());
+        by_mmsi.entry(r.mmsi).or_default().push((
+            AisPoint {
+                t: r.t,
+                position,
+                time_sigma: r.time_sigma,
+            },
+            r.rank,
+        ));
     }
     let mut duplicates = 0;
-    for pts in by_mmsi.values_mut() {
-        pts.sort_by(|a, b| a.t.total_cmp(&b.t));
-        let before = pts.len();
-        pts.dedup_by(|a, b| a.t == b.t);
-        duplicates += before - pts.len();
-    }
+    let by_mmsi: BTreeMap<u32, Vec<AisPoint>> = by_mmsi
+        .into_iter()
+        .map(|(m, pts)| {
+            let before = pts.len();
+            let kept = best_per_time(pts);
+            duplicates += before - kept.len();
+            (m, kept)
+        })
+        .collect();
     if duplicates > 0 {
         warnings.push(format!(
-            "{duplicates} AIS report(s) repeated an MMSI's time and were dropped"
+            "{duplicates} AIS report(s) repeated an MMSI's time stamp (whole-second tag-block times do): \
+             of each group the best kind was kept (types 1/2/3/18/19 and decoded reports over the \
+             coarse type 27) and equally good ones averaged"
         ));
     }
     let mmsis: Vec<u32> = by_mmsi.keys().copied().collect();
@@ -449,6 +578,62 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     {
         warnings.push(format!(
             "CA-CFAR credible pairs led to {c} associations, the bias search to {s}; the search result is reported"
+        ));
+    }
+    let deg = 180.0 / std::f64::consts::PI;
+    let unassociable_mmsis: Vec<u32> = out.unassociable_ais.iter().map(|&j| mmsis[j]).collect();
+    if !unassociable_mmsis.is_empty() {
+        let single = out
+            .unassociable_ais
+            .iter()
+            .filter(|&&j| ships[j].len() == 1)
+            .count();
+        warnings.push(format!(
+            "{} AIS ship(s) can never be associated ({single} with a single report): a pair needs \
+             at least 2 instants in common with a radar track; send more reports or a longer \
+             window (unassociable_mmsis)",
+            unassociable_mmsis.len()
+        ));
+    }
+    if let Some((there, within)) = out.widened {
+        warnings.push(format!(
+            "the bias search widened past max_range_bias_m = {} / max_azimuth_bias_deg = {}: a bias \
+             there gates {there} pairs against {within} within the bounds; raise the bounds if the \
+             radar's bias can be this large",
+            cfg.max_range_bias,
+            cfg.max_azimuth_bias * deg
+        ));
+    }
+    if let Some(e) = out.estimate.filter(|_| out.at_bound) {
+        warnings.push(format!(
+            "the bias ({:.1} m, {:.4}°) lies on or beyond a search bound (max_range_bias_m = {}, \
+             max_azimuth_bias_deg = {}); the true bias may lie further out: raise the bounds",
+            e.bias.range,
+            e.bias.azimuth * deg,
+            cfg.max_range_bias,
+            cfg.max_azimuth_bias * deg
+        ));
+    }
+    if let Some(e) = out.estimate.filter(|_| out.inconsistent) {
+        warnings.push(format!(
+            "the residuals after compensation are {:.1} times the stated errors (radar_sigma_range_m \
+             = {}, radar_sigma_azimuth_deg = {}, ais_sigma_m = {}): the association or the bias is \
+             likely wrong, or the stated errors too small",
+            e.residual_ratio,
+            cfg.sigma_range,
+            cfg.sigma_azimuth * deg,
+            cfg.sigma_ais
+        ));
+    }
+    if let Some(a) = &out.ambiguous {
+        warnings.push(format!(
+            "ambiguous: a distinct bias ({:.1} m, {:.4}°) associates {} pairs with a mean distance of \
+             {:.1} m, nearly as well as the reported one; more ships with AIS or a smaller gate_m \
+             would separate them",
+            a.bias.range,
+            a.bias.azimuth * deg,
+            a.pairs,
+            a.mean_distance
         ));
     }
     if let Some(e) = &out.estimate
@@ -488,7 +673,29 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         .collect();
     let associated_r: Vec<usize> = out.associations.iter().map(|a| a.radar).collect();
     let associated_a: Vec<usize> = out.associations.iter().map(|a| a.ais).collect();
-    let deg = 180.0 / std::f64::consts::PI;
+    let quality = QualityOut {
+        reliable: out
+            .estimate
+            .is_some_and(|e| e.pairs >= MIN_PAIRS_FOR_A_SEPARABLE_BIAS)
+            && !out.at_bound
+            && out.widened.is_none()
+            && out.ambiguous.is_none()
+            && !out.inconsistent
+            && out.converged,
+        at_bound: out.at_bound,
+        search_widened: out.widened.is_some(),
+        ambiguous: out.ambiguous.is_some(),
+        inconsistent: out.inconsistent,
+        residual_ratio: out.estimate.map(|e| e.residual_ratio),
+        alternative: out.ambiguous.map(|a| AlternativeOut {
+            range_m: a.bias.range,
+            azimuth_deg: a.bias.azimuth * deg,
+            pairs: a.pairs,
+            mean_distance_m: a.mean_distance,
+        }),
+        hypotheses_ranked: out.hypotheses,
+        hypotheses_scored: out.evaluated,
+    };
     Ok(AssociateOutput {
         path: path_name(out.path),
         s1_m: out.thresholds.map(|t| t.s1),
@@ -511,6 +718,7 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             ],
             pairs_used: e.pairs,
             samples_used: e.samples,
+            effective_pairs: e.effective_pairs,
         }),
         iterations: out.iterations,
         converged: out.converged,
@@ -533,6 +741,8 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             .filter(|j| !associated_a.contains(j))
             .map(|j| mmsis[j])
             .collect(),
+        unassociable_mmsis,
+        quality,
         compensated_tracks,
         mean_error_before_m: out.mean_error_before,
         mean_error_after_m: out.mean_error_after,
@@ -547,4 +757,42 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         compute_us: micros_since(start),
         warnings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(t: f64, x: f64) -> AisPoint {
+        AisPoint {
+            t,
+            position: [x, 0.0],
+            time_sigma: 0.3,
+        }
+    }
+
+    /// Issue 17: of reports sharing a whole-second time the position report
+    /// (rank 0) wins over the coarse type 27 (rank 1) in either order, and
+    /// equal ones are averaged: never the first by accident.
+    #[test]
+    fn repeated_times_keep_the_better_report_in_any_order() {
+        let a = vec![
+            (point(10.5, 185.0), 1),
+            (point(10.5, 3.0), 0),
+            (point(11.5, 7.0), 0),
+        ];
+        let mut b = a.clone();
+        b.reverse();
+        for pts in [a, b] {
+            let kept = best_per_time(pts);
+            assert_eq!(kept.len(), 2);
+            assert_eq!(kept[0].position, [3.0, 0.0]);
+            assert_eq!(kept[1].position, [7.0, 0.0]);
+        }
+        let kept = best_per_time(vec![(point(4.5, 2.0), 0), (point(4.5, 6.0), 0)]);
+        assert_eq!(kept, vec![point(4.5, 4.0)]);
+        assert_eq!(report_rank(27), 1);
+        assert_eq!(report_rank(1), 0);
+        assert_eq!(report_rank(18), 0);
+    }
 }

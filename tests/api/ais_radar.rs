@@ -105,6 +105,39 @@ async fn rest_recovers_the_bias_and_leaves_ships_without_ais_alone() {
     assert!(["cfar", "bias_search"].contains(&body["path"].as_str().unwrap()));
     assert!(body["timing"]["compute_us"].as_f64().unwrap() >= 0.0);
     assert!(body["warnings"].is_array());
+    let q = &body["quality"];
+    assert_eq!(q["reliable"], json!(true), "{q}");
+    for flag in ["at_bound", "search_widened", "ambiguous", "inconsistent"] {
+        assert_eq!(q[flag], json!(false), "{flag}: {q}");
+    }
+    assert_eq!(body["unassociable_mmsis"], json!([]));
+}
+
+/// Issue 17: a ship with a single AIS report can never be associated (a
+/// pair needs two common instants); the answer lists it and says why.
+#[tokio::test]
+async fn a_single_ais_report_is_listed_as_unassociable_with_a_warning() {
+    let app = spawn_app().await;
+    let (tracks, mut reports) = scene(4, &[true; 4]);
+    let one = reports.as_array().unwrap()[20].clone();
+    let mut single = one.clone();
+    single["mmsi"] = json!(999_000_001u32);
+    reports.as_array_mut().unwrap().push(single);
+    let body = app
+        .post_ok(
+            "/v1/ais-radar/associate",
+            &json!({"site": {"lat_deg": LAT0, "lon_deg": LON0}, "radar_tracks": tracks, "ais_reports": reports}),
+        )
+        .await;
+    assert_eq!(body["unassociable_mmsis"], json!([999_000_001u32]));
+    assert_eq!(body["associations"].as_array().unwrap().len(), 4);
+    let warnings = body["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("1 with a single report")),
+        "{warnings:?}"
+    );
 }
 
 #[tokio::test]
@@ -223,14 +256,18 @@ async fn grpc_associates_from_nmea_with_tag_blocks() {
         let t0 = times()[0];
         let mut samples = Vec::new();
         for &t in &times() {
-            let p = [s.east + s.ve * (t - t0), s.north + s.vn * (t - t0)];
+            let at = |t: f64| [s.east + s.ve * (t - t0), s.north + s.vn * (t - t0)];
+            let p = at(t);
             samples.push(grpc_sample(
                 t,
                 p[0].hypot(p[1]) + BIAS_RANGE_M,
                 (p[0].atan2(p[1]).to_degrees() + BIAS_AZ_DEG).rem_euclid(360.0),
             ));
-            // AIS as type 1 sentences (1/10000 minute ≈ 0.19 m resolution) with a tag block.
-            let (lat, lon) = plane.inverse(p);
+            // AIS as type 1 sentences (1/10000 minute ≈ 0.19 m resolution)
+            // sent half a second after the radar sample; the tag block
+            // truncates the receive time to the whole second t, which the
+            // service takes at the middle of its second, t + 0.5.
+            let (lat, lon) = plane.inverse(at(t + 0.5));
             let report = radar_fusion::sim::ais::AisReport {
                 t,
                 mmsi: 235_000_000 + k as u32,
@@ -277,6 +314,11 @@ async fn grpc_associates_from_nmea_with_tag_blocks() {
     assert!((b.azimuth_deg - BIAS_AZ_DEG).abs() < 0.01);
     assert_eq!(out.nmea.unwrap().positions, 75);
     assert!(out.timing.is_some());
+    let q = out.quality.unwrap();
+    assert!(
+        q.reliable && !q.at_bound && !q.ambiguous && !q.inconsistent,
+        "{q:?}"
+    );
 }
 
 #[tokio::test]

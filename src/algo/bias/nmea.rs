@@ -20,6 +20,9 @@ pub struct AisPosition {
     pub mmsi: u32,
     /// Receive time from the tag block (s), if any fragment carried one.
     pub t: Option<f64>,
+    /// Resolution of that time (s): 1 for whole seconds (the usual `c:`),
+    /// 0.001 for milliseconds, 10^−d for d written decimals.
+    pub t_resolution: Option<f64>,
     pub lat_deg: f64,
     pub lon_deg: f64,
     /// Speed over ground in knots, when available.
@@ -53,7 +56,8 @@ pub struct Decoded {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Message {
     pub bits: Vec<u8>,
-    pub t: Option<f64>,
+    /// Receive time and its resolution (s).
+    pub t: Option<(f64, f64)>,
     pub line: usize,
 }
 
@@ -153,7 +157,7 @@ struct Pending {
     count: u32,
     next: u32,
     bits: Vec<u8>,
-    t: Option<f64>,
+    t: Option<(f64, f64)>,
     lines: Vec<usize>,
 }
 
@@ -175,7 +179,7 @@ struct Sentence {
     seq_id: String,
     channel: String,
     bits: Vec<u8>,
-    t: Option<f64>,
+    t: Option<(f64, f64)>,
 }
 
 /// Parses one line: optional tag block, then an AIVDM/AIVDO sentence.
@@ -225,8 +229,10 @@ fn parse_line(line: &str) -> Result<Sentence, String> {
     })
 }
 
-/// The `c:` (receive time, Unix seconds) of a tag block `…*hh`.
-fn parse_tag_block(block: &str) -> Result<Option<f64>, String> {
+/// The `c:` (receive time, Unix seconds) of a tag block `…*hh` and its
+/// resolution: 1 s for an integer (0.001 s when it is in milliseconds),
+/// 10^−d s for d decimals.
+fn parse_tag_block(block: &str) -> Result<Option<(f64, f64)>, String> {
     let (body, sum) = block.rsplit_once('*').ok_or("tag block has no checksum")?;
     check_sum(body, sum).map_err(|e| format!("tag block: {e}"))?;
     let mut t = None;
@@ -238,11 +244,28 @@ fn parse_tag_block(block: &str) -> Result<Option<f64>, String> {
             if !v.is_finite() {
                 return Err("tag block time is not finite".into());
             }
+            let decimals = v_text_decimals(v_text(item));
+            let resolution = 10f64.powi(-(decimals as i32));
             // Some receivers write milliseconds: more than 10¹¹ s is after year 5000.
-            t = Some(if v > 1e11 { v / 1000.0 } else { v });
+            t = Some(if v > 1e11 {
+                (v / 1000.0, resolution / 1000.0)
+            } else {
+                (v, resolution)
+            });
         }
     }
     Ok(t)
+}
+
+/// The text of a `c:` item.
+fn v_text(item: &str) -> &str {
+    item.strip_prefix("c:").unwrap_or(item)
+}
+
+/// Decimals written after the point of a number (0 for an integer).
+fn v_text_decimals(v: &str) -> usize {
+    let mantissa = v.split(['e', 'E']).next().unwrap_or(v);
+    mantissa.split_once('.').map_or(0, |(_, d)| d.len())
 }
 
 fn check_sum(body: &str, sum: &str) -> Result<(), String> {
@@ -315,7 +338,8 @@ fn interpret(out: &mut Decoded, m: &Message) {
         line: m.line,
         message_type: kind,
         mmsi,
-        t: m.t,
+        t: m.t.map(|t| t.0),
+        t_resolution: m.t.map(|t| t.1),
         lat_deg,
         lon_deg,
         sog_knots: (sog != sog_na).then(|| sog as f64 / ss),
@@ -430,6 +454,26 @@ impl BitReader<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 17: tag-block times carry their resolution: whole seconds
+    /// (the usual `c:`), written decimals, or milliseconds.
+    #[test]
+    fn tag_block_time_resolution() {
+        let block = |v: &str| {
+            let body = format!("c:{v}");
+            format!("{body}*{:02X}", checksum(&body))
+        };
+        assert_eq!(
+            parse_tag_block(&block("1700000003")).unwrap(),
+            Some((1_700_000_003.0, 1.0))
+        );
+        let (t, r) = parse_tag_block(&block("1700000003.25")).unwrap().unwrap();
+        assert_eq!(t, 1_700_000_003.25);
+        assert!((r - 0.01).abs() < 1e-15);
+        let (t, r) = parse_tag_block(&block("1700000003250")).unwrap().unwrap();
+        assert!((t - 1_700_000_003.25).abs() < 1e-6);
+        assert!((r - 0.001).abs() < 1e-15);
+    }
 
     fn lines(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()

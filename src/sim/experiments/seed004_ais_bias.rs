@@ -342,9 +342,11 @@ fn one_scene(
             ais.push(
                 reports
                     .iter()
-                    .map(|r| AisPoint {
-                        t: r.t,
-                        position: plane.forward(r.lat_deg.to_radians(), r.lon_deg.to_radians()),
+                    .map(|r| {
+                        AisPoint::exact(
+                            r.t,
+                            plane.forward(r.lat_deg.to_radians(), r.lon_deg.to_radians()),
+                        )
                     })
                     .collect::<Vec<_>>(),
             );
