@@ -349,3 +349,183 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         )],
     })
 }
+
+/// A scene for the dimension-fusion benchmark (`examples/dimension_scene.rs`):
+/// the shape of issue 15's recorded traffic — two 3D and two 2D radars tens
+/// of km apart, 10 s scans with different phases, aircraft at 1–12 km with
+/// some turning, about 2,000 plots in about 90 local tracks, a local track
+/// ending when its aircraft leaves the radar's cover.
+#[derive(Debug, Clone)]
+pub struct BenchScene {
+    pub centre: LocalFrame,
+    pub radars: Vec<Radar>,
+    pub tracks: Vec<LocalTrack>,
+    /// The aircraft of each local track (index into `truth`).
+    pub owner: Vec<usize>,
+    pub truth: Vec<Trajectory>,
+}
+
+impl BenchScene {
+    /// The truth of aircraft `a` at `t` in the centre's ENU frame.
+    pub fn truth_enu(&self, a: usize, t: f64) -> Option<[f64; 3]> {
+        truth_enu(&self.centre, &self.truth[a], t)
+    }
+}
+
+/// Builds the benchmark scene of `aircraft` aircraft over `duration` s.
+pub fn bench_scene(
+    aircraft: usize,
+    duration: f64,
+    rng: &mut SimRng,
+) -> Result<BenchScene, SimError> {
+    let c = centre()?;
+    let err = |e: crate::algo::AlgoError| SimError::InvalidConfig(e.to_string());
+    // (east, north, height, 3D?, cover): sites 30–50 km apart.
+    let layout = [
+        (-20_000.0, -15_000.0, 50.0, true, 120_000.0),
+        (25_000.0, -20_000.0, 0.0, false, 150_000.0),
+        (20_000.0, 25_000.0, 120.0, true, 120_000.0),
+        (-25_000.0, 20_000.0, 30.0, false, 150_000.0),
+    ];
+    let mut sites = Vec::new();
+    let mut radars = Vec::new();
+    for (i, &(e, n, h, three_d, cover)) in layout.iter().enumerate() {
+        let (lat, lon, _) = c.enu_to_geodetic([e, n, 0.0]).map_err(err)?;
+        let frame = LocalFrame::new(Ellipsoid::WGS84, lat, lon, h).map_err(err)?;
+        sites.push(Site {
+            frame,
+            three_d,
+            max_range: cover,
+            period: 10.0,
+            phase: 2.5 * i as f64,
+        });
+        radars.push(Radar {
+            frame,
+            three_d,
+            sigma_range: if three_d { 100.0 } else { 250.0 },
+            sigma_azimuth: if three_d { 0.3f64 } else { 0.4 }.to_radians(),
+            sigma_elevation: if three_d { 0.25f64.to_radians() } else { 0.0 },
+            scan_period: 10.0,
+        });
+    }
+    let u = |rng: &mut SimRng, lo: f64, hi: f64| -> f64 { lo + (hi - lo) * rng.random::<f64>() };
+    let mut truth = Vec::new();
+    for _ in 0..aircraft {
+        let r = 170_000.0 * u(rng, 0.0, 1.0).sqrt();
+        let bearing = u(rng, 0.0, std::f64::consts::TAU);
+        let heading = u(rng, 0.0, std::f64::consts::TAU);
+        let speed = u(rng, 120.0, 260.0);
+        let height = u(rng, 1000.0, 12_000.0);
+        let initial = [
+            r * bearing.sin(),
+            speed * heading.sin(),
+            r * bearing.cos(),
+            speed * heading.cos(),
+            height,
+            0.0,
+        ];
+        let mut legs = Vec::new();
+        if rng.random::<f64>() < 0.3 {
+            // A turn of 1–3 g lasting 30–90 s, after 20–150 s.
+            legs.push(Leg {
+                duration: u(rng, 20.0, 150.0),
+                manoeuvre: Manoeuvre::ConstantVelocity,
+            });
+            let g = u(rng, 1.0, 3.0) * if rng.random::<bool>() { 1.0 } else { -1.0 };
+            legs.push(Leg {
+                duration: u(rng, 30.0, 90.0),
+                manoeuvre: Manoeuvre::Turn { g_load: g },
+            });
+        }
+        let plan = TargetPlan {
+            birth: 0.0,
+            initial,
+            legs,
+            noise_factor: 0.0,
+        };
+        truth.push(simulate(&plan, 0.5, duration, rng)?);
+    }
+    let mut tracks = Vec::new();
+    let mut owner = Vec::new();
+    for (a, traj) in truth.iter().enumerate() {
+        for (i, s) in sites.iter().enumerate() {
+            let (sr, sa, se) = (
+                radars[i].sigma_range,
+                radars[i].sigma_azimuth,
+                radars[i].sigma_elevation,
+            );
+            let mut plots: Vec<Plot> = Vec::new();
+            let mut t = s.phase;
+            while t <= duration {
+                let seen = truth_enu(&c, traj, t)
+                    .map(|p| -> Result<_, SimError> {
+                        let l = c.position_to(&s.frame, p).map_err(err)?;
+                        enu_to_polar_3d(l[0], l[1], l[2]).map_err(err)
+                    })
+                    .transpose()?
+                    .filter(|&[r, _, el]| r <= s.max_range && el > 0.0);
+                match seen {
+                    Some([r, az, el]) => {
+                        let n = |rng: &mut SimRng| -> f64 { rng.sample(StandardNormal) };
+                        plots.push(Plot {
+                            t,
+                            range: r + sr * n(rng),
+                            azimuth: az + sa * n(rng),
+                            elevation: s.three_d.then(|| el + se * n(rng)),
+                        });
+                    }
+                    None if plots.len() >= 3 => {
+                        tracks.push(LocalTrack {
+                            radar: i,
+                            plots: std::mem::take(&mut plots),
+                        });
+                        owner.push(a);
+                    }
+                    None => plots.clear(),
+                }
+                t += s.period;
+            }
+            if plots.len() >= 3 {
+                tracks.push(LocalTrack { radar: i, plots });
+                owner.push(a);
+            }
+        }
+    }
+    Ok(BenchScene {
+        centre: c,
+        radars,
+        tracks,
+        owner,
+        truth,
+    })
+}
+
+/// The 3D position NEES of every sample of the system tracks whose members
+/// all belong to one aircraft (pure tracks), with a flag: was a 3D radar
+/// among the members at that sample's time (altitude measured).
+pub fn position_nees(scene: &BenchScene, out: &dimension::Outcome) -> Vec<(f64, bool)> {
+    let mut v = Vec::new();
+    for st in &out.system_tracks {
+        let a = scene.owner[st.members[0]];
+        if st.members.iter().any(|&m| scene.owner[m] != a) {
+            continue;
+        }
+        for s in &st.samples {
+            let Some(p) = scene.truth_enu(a, s.t) else {
+                continue;
+            };
+            let e = nalgebra::Vector3::new(s.x[0] - p[0], s.x[2] - p[1], s.x[4] - p[2]);
+            let c = nalgebra::Matrix3::from_fn(|i, j| s.p[(2 * i, 2 * j)]);
+            let Some(inv) = c.try_inverse() else { continue };
+            let measured = st.members.iter().any(|&m| {
+                let tr = &scene.tracks[m];
+                scene.radars[tr.radar].three_d
+                    && tr.plots.len() >= 2
+                    && tr.plots[1].t <= s.t + 1e-9
+                    && s.t <= tr.plots.last().map_or(f64::NEG_INFINITY, |p| p.t) + 15.0
+            });
+            v.push(((e.transpose() * inv * e)[0], measured));
+        }
+    }
+    v
+}
