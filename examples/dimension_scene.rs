@@ -12,8 +12,8 @@
 //! tracks. For each seed and filter (α-β, Kalman) it runs the three methods
 //! with the service's defaults and prints:
 //! - compute: the median over `--repeat` runs of the wall time of
-//!   `algo::dimension::fuse` for all three methods (filters, association,
-//!   fusion);
+//!   `algo::dimension::fuse_methods` for all three methods (filters,
+//!   association, fusion);
 //! - NEES: the mean 3D position NEES of the samples of pure system tracks
 //!   (3 for a consistent estimator), over all samples and over the samples
 //!   with a 3D member, and the share above χ²₃(0.99) = 11.34;
@@ -136,10 +136,13 @@ fn main() -> anyhow::Result<()> {
             let mut outs = Vec::new();
             for _ in 0..repeat {
                 let start = Instant::now();
-                outs = METHODS
-                    .iter()
-                    .map(|&m| dimension::fuse(&scene.centre, &scene.radars, &scene.tracks, m, &cfg))
-                    .collect::<Result<Vec<_>, _>>()?;
+                outs = dimension::fuse_methods(
+                    &scene.centre,
+                    &scene.radars,
+                    &scene.tracks,
+                    &METHODS,
+                    &cfg,
+                )?;
                 times.push(start.elapsed().as_secs_f64() * 1e3);
             }
             times.sort_by(f64::total_cmp);
