@@ -7,7 +7,7 @@
 //! 2D radar, local ENU `[e, n, u]` of a 3D radar) with the interleaved state
 //! `[z₁, ż₁, …, z_m, ż_m]`.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use crate::algo::{AlgoError, polar::wrap_angle};
 
@@ -97,26 +97,39 @@ pub fn white_acceleration(t: f64) -> [f64; 3] {
 /// The α-β filter's process-noise model (Kalata): the tracking index
 /// λ = σ_w T² / σ_v of the gains says σ_w = λ σ_v / T² per component, so the
 /// acceleration covariance is A = λ² R / T⁴.
-pub fn alpha_beta_acceleration(r: &DMatrix<f64>, lambda: f64, t: f64) -> DMatrix<f64> {
+pub fn alpha_beta_acceleration<const M: usize>(
+    r: &SMatrix<f64, M, M>,
+    lambda: f64,
+    t: f64,
+) -> SMatrix<f64, M, M> {
     r * (lambda * lambda / t.powi(4))
 }
 
 /// One step of the exact covariance of a filter with constant-velocity
 /// transition and position measurements, for any gain (Joseph form):
 /// P⁺ = (I − KH)(F P F' + Q)(I − KH)' + K R K'. `pp` is F P F' + Q.
-pub fn joseph(pp: &DMatrix<f64>, k: &DMatrix<f64>, r: &DMatrix<f64>) -> DMatrix<f64> {
-    let n = pp.nrows();
-    let m = r.nrows();
-    let h = DMatrix::from_fn(m, n, |i, j| if j == 2 * i { 1.0 } else { 0.0 });
-    let a = DMatrix::identity(n, n) - k * &h;
-    let mut p = &a * pp * a.transpose() + k * r * k.transpose();
-    crate::algo::gaussian::symmetrize(&mut p);
-    p
+pub fn joseph<const N: usize, const M: usize>(
+    pp: &SMatrix<f64, N, N>,
+    k: &SMatrix<f64, N, M>,
+    r: &SMatrix<f64, M, M>,
+) -> SMatrix<f64, N, N> {
+    let a = SMatrix::<f64, N, N>::identity() - k * position_rows::<M, N>();
+    let p = a * pp * a.transpose() + k * r * k.transpose();
+    (p + p.transpose()) * 0.5
 }
 
-/// The α-β gain matrix `I_m ⊗ [α, β/T]'` (n × m).
-pub fn alpha_beta_gain(m: usize, alpha: f64, beta: f64, t: f64) -> DMatrix<f64> {
-    DMatrix::from_fn(2 * m, m, |j, i| {
+/// H: the positions of the interleaved state.
+fn position_rows<const M: usize, const N: usize>() -> SMatrix<f64, M, N> {
+    SMatrix::from_fn(|i, j| if j == 2 * i { 1.0 } else { 0.0 })
+}
+
+/// The α-β gain matrix `I_m ⊗ [α, β/T]'` (N × M).
+pub fn alpha_beta_gain<const N: usize, const M: usize>(
+    alpha: f64,
+    beta: f64,
+    t: f64,
+) -> SMatrix<f64, N, M> {
+    SMatrix::from_fn(|j, i| {
         if j / 2 != i {
             0.0
         } else if j % 2 == 0 {
@@ -124,6 +137,27 @@ pub fn alpha_beta_gain(m: usize, alpha: f64, beta: f64, t: f64) -> DMatrix<f64> 
         } else {
             beta / t
         }
+    })
+}
+
+/// The constant-velocity transition of `N / 2` interleaved components.
+fn transition_fixed<const N: usize>(t: f64) -> SMatrix<f64, N, N> {
+    let mut f = SMatrix::identity();
+    for i in 0..N / 2 {
+        f[(2 * i, 2 * i + 1)] = t;
+    }
+    f
+}
+
+/// The interleaved covariance `A ⊗ [[c₁₁, c₁₂], [c₁₂, c₂₂]]`.
+fn kron<const M: usize, const N: usize>(a: &SMatrix<f64, M, M>, c: [f64; 3]) -> SMatrix<f64, N, N> {
+    SMatrix::from_fn(|i, j| {
+        let k = match (i % 2, j % 2) {
+            (0, 0) => c[0],
+            (1, 1) => c[2],
+            _ => c[1],
+        };
+        a[(i / 2, j / 2)] * k
     })
 }
 
@@ -156,64 +190,98 @@ pub fn filter(
     wrap: &[bool],
     scale: &[f64],
 ) -> Result<Vec<Estimate>, AlgoError> {
-    let m = wrap.len();
-    let n = 2 * m;
-    let mut out = Vec::with_capacity(times.len().saturating_sub(1));
     if times.len() < 2 {
-        return Ok(out);
+        return Ok(Vec::new());
     }
-    let gate = crate::algo::gating::chi2_threshold(m, 0.01)?;
-    let diff = |a: &DVector<f64>, b: &DVector<f64>| -> DVector<f64> {
-        DVector::from_fn(m, |i, _| {
+    let gate = crate::algo::gating::chi2_threshold(wrap.len(), 0.01)?;
+    match wrap.len() {
+        1 => filter_fixed::<1, 2>(filter, times, z, r, wrap, scale, gate),
+        2 => filter_fixed::<2, 4>(filter, times, z, r, wrap, scale, gate),
+        3 => filter_fixed::<3, 6>(filter, times, z, r, wrap, scale, gate),
+        m => Err(AlgoError::InvalidParameter {
+            what: "measurement dimension",
+            reason: format!("must be 1, 2 or 3, got {m}"),
+        }),
+    }
+}
+
+/// [`filter`] for `M` measured components and `N = 2M` states, on
+/// fixed-size matrices (no heap allocation per plot).
+#[allow(clippy::too_many_arguments)]
+fn filter_fixed<const M: usize, const N: usize>(
+    filter: Filter,
+    times: &[f64],
+    z: &[DVector<f64>],
+    r: &[DMatrix<f64>],
+    wrap: &[bool],
+    scale: &[f64],
+    gate: f64,
+) -> Result<Vec<Estimate>, AlgoError> {
+    type V<const D: usize> = SVector<f64, D>;
+    type Mx<const R: usize, const C: usize> = SMatrix<f64, R, C>;
+    let diff = |a: &V<M>, b: &V<M>| -> V<M> {
+        V::<M>::from_fn(|i, _| {
             let d = a[i] - b[i];
             if wrap[i] { wrap_angle(d) } else { d }
         })
     };
+    let zf = |k: usize| V::<M>::from_fn(|i, _| z[k][i]);
+    let rf = |k: usize| Mx::<M, M>::from_fn(|i, j| r[k][(i, j)]);
+    let kron_f = kron::<M, N>;
+    let h = position_rows::<M, N>();
     let kalman_acc = |sigma_a: f64| {
-        DMatrix::from_diagonal(&DVector::from_fn(m, |i, _| (sigma_a * scale[i]).powi(2)))
+        Mx::<M, M>::from_diagonal(&V::<M>::from_fn(|i, _| (sigma_a * scale[i]).powi(2)))
     };
-    // Two-point initialisation.
+    let dyn_m = |a: &Mx<M, M>| DMatrix::from_fn(M, M, |i, j| a[(i, j)]);
+    let mut out = Vec::with_capacity(times.len() - 1);
     let t0 = times[1] - times[0];
-    let d0 = diff(&z[1], &z[0]);
-    let mut x = DVector::from_fn(n, |k, _| {
+    let d0 = diff(&zf(1), &zf(0));
+    let z1 = zf(1);
+    let mut x = V::<N>::from_fn(|k, _| {
         if k % 2 == 0 {
-            z[1][k / 2]
+            z1[k / 2]
         } else {
             d0[k / 2] / t0
         }
     });
-    let mut p = kron(&r[1], [1.0, 1.0 / t0, 2.0 / (t0 * t0)]);
+    let mut p = kron_f(&rf(1), [1.0, 1.0 / t0, 2.0 / (t0 * t0)]);
     let mut alpha = kalata_gains(INITIAL_TRACKING_INDEX)?.0;
-    let mut acc = match filter {
-        Filter::AlphaBeta { .. } => alpha_beta_acceleration(&r[1], INITIAL_TRACKING_INDEX, t0),
+    let acc0 = match filter {
+        Filter::AlphaBeta { .. } => alpha_beta_acceleration(&rf(1), INITIAL_TRACKING_INDEX, t0),
         Filter::Kalman { sigma_a } => kalman_acc(sigma_a),
     };
-    out.push(Estimate {
-        t: times[1],
-        x: x.clone(),
-        p: p.clone(),
-        alpha: 1.0,
-        acceleration: acc.clone(),
-        manoeuvre: false,
-        lag_ahead: DMatrix::zeros(m, m),
-    });
-    let h = DMatrix::from_fn(m, n, |i, j| if j == 2 * i { 1.0 } else { 0.0 });
+    let push = |out: &mut Vec<Estimate>,
+                t: f64,
+                x: &V<N>,
+                p: &Mx<N, N>,
+                alpha: f64,
+                acc: &Mx<M, M>,
+                manoeuvre: bool| {
+        out.push(Estimate {
+            t,
+            x: DVector::from_column_slice(x.as_slice()),
+            p: DMatrix::from_column_slice(N, N, p.as_slice()),
+            alpha,
+            acceleration: dyn_m(acc),
+            manoeuvre,
+            lag_ahead: DMatrix::zeros(M, M),
+        });
+    };
+    push(&mut out, times[1], &x, &p, 1.0, &acc0, false);
     let mut window: Vec<f64> = Vec::new();
     for k in 2..times.len() {
         let t = times[k] - times[k - 1];
-        let f = transition(m, t);
-        let xp = &f * &x;
-        let zp = DVector::from_fn(m, |i, _| xp[2 * i]);
-        let res = diff(&z[k], &zp);
+        let f = transition_fixed::<N>(t);
+        let rk = rf(k);
+        let xp = f * x;
+        let zp = V::<M>::from_fn(|i, _| xp[2 * i]);
+        let res = diff(&zf(k), &zp);
         let (gain, a_used, alpha_k) = match filter {
             Filter::AlphaBeta { window: w } => {
-                let chol = r[k]
-                    .clone()
-                    .cholesky()
-                    .ok_or(AlgoError::NotPositiveDefinite {
-                        what: "plot covariance",
-                    })?;
-                let nis = res.dot(&chol.solve(&res)) / m as f64;
+                let chol = rk.cholesky().ok_or(AlgoError::NotPositiveDefinite {
+                    what: "plot covariance",
+                })?;
+                let nis = res.dot(&chol.solve(&res)) / M as f64;
                 window.push(nis);
                 if window.len() > w {
                     window.remove(0);
@@ -225,55 +293,42 @@ pub fn filter(
                 }
                 let (beta, lambda) = gains_from_alpha(alpha);
                 (
-                    Some(alpha_beta_gain(m, alpha, beta, t)),
-                    alpha_beta_acceleration(&r[k], lambda, t),
+                    Some(alpha_beta_gain::<N, M>(alpha, beta, t)),
+                    alpha_beta_acceleration(&rk, lambda, t),
                     alpha,
                 )
             }
             Filter::Kalman { sigma_a } => (None, kalman_acc(sigma_a), f64::NAN),
         };
-        // Prediction with the process noise of the gains used, then the
-        // manoeuvre rule on the residual.
-        let mut pp = &f * &p * f.transpose() + kron(&a_used, white_acceleration(t));
-        let s = &h * &pp * h.transpose() + &r[k];
-        let nis = s
-            .clone()
-            .cholesky()
-            .map(|c| res.dot(&c.solve(&res)))
-            .ok_or(AlgoError::NotPositiveDefinite {
+        let mut pp = f * p * f.transpose() + kron_f(&a_used, white_acceleration(t));
+        let s = h * pp * h.transpose() + rk;
+        let nis = s.cholesky().map(|c| res.dot(&c.solve(&res))).ok_or(
+            AlgoError::NotPositiveDefinite {
                 what: "residual covariance",
-            })?;
+            },
+        )?;
         let manoeuvre = nis > gate;
         if manoeuvre {
-            let lag = &res * res.transpose() * (1.0 - 1.0 / nis);
-            pp += kron(&lag, [1.0, 2.0 / t, 4.0 / (t * t)]);
+            let lag = res * res.transpose() * (1.0 - 1.0 / nis);
+            pp += kron_f(&lag, [1.0, 2.0 / t, 4.0 / (t * t)]);
             if let Some(prev) = out.last_mut() {
-                prev.lag_ahead = lag / (t * t);
+                prev.lag_ahead = dyn_m(&(lag / (t * t)));
             }
         }
-        crate::algo::gaussian::symmetrize(&mut pp);
+        pp = (pp + pp.transpose()) * 0.5;
         let gain = match gain {
             Some(g) => g,
             None => {
-                let s = &h * &pp * h.transpose() + &r[k];
+                let s = h * pp * h.transpose() + rk;
                 let inv = s.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
                     what: "residual covariance",
                 })?;
-                &pp * h.transpose() * inv
+                pp * h.transpose() * inv
             }
         };
-        x = &xp + &gain * &res;
-        p = joseph(&pp, &gain, &r[k]);
-        acc = a_used;
-        out.push(Estimate {
-            t: times[k],
-            x: x.clone(),
-            p: p.clone(),
-            alpha: alpha_k,
-            acceleration: acc.clone(),
-            manoeuvre,
-            lag_ahead: DMatrix::zeros(m, m),
-        });
+        x = xp + gain * res;
+        p = joseph(&pp, &gain, &rk);
+        push(&mut out, times[k], &x, &p, alpha_k, &a_used, manoeuvre);
     }
     Ok(out)
 }
@@ -285,19 +340,6 @@ pub fn transition(m: usize, t: f64) -> DMatrix<f64> {
         f[(2 * i, 2 * i + 1)] = t;
     }
     f
-}
-
-/// The interleaved covariance `R ⊗ [[c₁₁, c₁₂], [c₁₂, c₂₂]]`.
-fn kron(r: &DMatrix<f64>, c: [f64; 3]) -> DMatrix<f64> {
-    let m = r.nrows();
-    DMatrix::from_fn(2 * m, 2 * m, |a, b| {
-        let k = match (a % 2, b % 2) {
-            (0, 0) => c[0],
-            (1, 1) => c[2],
-            _ => c[1],
-        };
-        r[(a / 2, b / 2)] * k
-    })
 }
 
 #[cfg(test)]
@@ -335,21 +377,21 @@ mod tests {
         // P: the limit is Kalata's closed form σ_v² [[α, β/T], [β/T,
         // β(2α − β)/(2(1 − α)T²)]] (the gain is the Kalman gain of that model).
         let (sigma_v, t) = (870.0f64, 10.0);
-        let r = DMatrix::from_element(1, 1, sigma_v * sigma_v);
+        let r = SMatrix::<f64, 1, 1>::new(sigma_v * sigma_v);
         for lambda in [0.1, 0.5, 1.0, 4.0] {
             let (alpha, beta) = kalata_gains(lambda).unwrap();
-            let k = alpha_beta_gain(1, alpha, beta, t);
-            let q = kron(
+            let k = alpha_beta_gain::<2, 1>(alpha, beta, t);
+            let q: SMatrix<f64, 2, 2> = kron(
                 &alpha_beta_acceleration(&r, lambda, t),
                 white_acceleration(t),
             );
             // σ_w = λ σ_v / T²: Q₂₂ = σ_w² T².
             let sw = lambda * sigma_v / (t * t);
             assert!((q[(1, 1)] - sw * sw * t * t).abs() < 1e-9 * q[(1, 1)]);
-            let f = transition(1, t);
-            let mut p = DMatrix::identity(2, 2) * 1e8;
+            let f = transition_fixed::<2>(t);
+            let mut p = SMatrix::<f64, 2, 2>::identity() * 1e8;
             for _ in 0..500 {
-                p = joseph(&(&f * &p * f.transpose() + &q), &k, &r);
+                p = joseph(&(f * p * f.transpose() + q), &k, &r);
             }
             let c = steady_covariance(alpha, beta, t);
             let v = sigma_v * sigma_v;
@@ -373,12 +415,12 @@ mod tests {
         // noise reduction ratio), below Kalata's α σ_v² for the same gains.
         // α = 0.5, β = 0.2: (0.5 + 0.4 − 0.3)/(0.5·2.8) = 0.6/1.4 = 0.4285714.
         let (alpha, beta, t) = (0.5, 0.2, 5.0);
-        let r = DMatrix::from_element(1, 1, 1.0);
-        let k = alpha_beta_gain(1, alpha, beta, t);
-        let f = transition(1, t);
-        let mut p = DMatrix::identity(2, 2) * 100.0;
+        let r = SMatrix::<f64, 1, 1>::new(1.0);
+        let k = alpha_beta_gain::<2, 1>(alpha, beta, t);
+        let f = transition_fixed::<2>(t);
+        let mut p = SMatrix::<f64, 2, 2>::identity() * 100.0;
         for _ in 0..2000 {
-            p = joseph(&(&f * &p * f.transpose()), &k, &r);
+            p = joseph(&(f * p * f.transpose()), &k, &r);
         }
         assert!((p[(0, 0)] - 0.6 / 1.4).abs() < 1e-9, "{}", p[(0, 0)]);
     }

@@ -607,9 +607,16 @@ fn jacobian(
 /// (the information-weighted mean): x = x₁ + P₁ (P₁ + P₂)⁻¹ (x₂ − x₁),
 /// P = P₁ − P₁ (P₁ + P₂)⁻¹ P₁, one member after the other.
 fn fuse_independent(members: &[State6]) -> Result<(Vector6<f64>, Matrix6<f64>), AlgoError> {
-    let mut x = members[0].x;
-    let mut p = members[0].p;
-    for m in &members[1..] {
+    fuse_into(members[0].x, members[0].p, &members[1..])
+}
+
+/// [`fuse_independent`] of a fused estimate `(x, p)` followed by `members`.
+fn fuse_into(
+    mut x: Vector6<f64>,
+    mut p: Matrix6<f64>,
+    members: &[State6],
+) -> Result<(Vector6<f64>, Matrix6<f64>), AlgoError> {
+    for m in members {
         let chol = (p + m.p).cholesky().ok_or(AlgoError::NotPositiveDefinite {
             what: "P1 + P2 - P12 - P21",
         })?;
@@ -642,36 +649,40 @@ fn system_track(
     times.sort_by(f64::total_cmp);
     times.dedup();
     let gap = |i: usize| 1.5 * radars[filtered[i].radar].scan_period;
-    // The 3D members at every instant.
-    let threes: Vec<Vec<State6>> = times
+    let (three_d, two_d): (Vec<usize>, Vec<usize>) = members
         .iter()
-        .map(|&t| {
-            members
+        .partition(|&&i| radars[filtered[i].radar].three_d);
+    let three_at = |t: f64, into: &mut Vec<State6>| {
+        into.clear();
+        into.extend(
+            three_d
                 .iter()
-                .filter(|&&i| radars[filtered[i].radar].three_d)
-                .filter_map(|&i| at_time(&centred[i], t, gap(i)))
-                .collect()
-        })
-        .collect();
-    // The height the 3D members give at each instant they cover (t, h, σ_h).
+                .filter_map(|&i| at_time(&centred[i], t, gap(i))),
+        );
+    };
+    // The fusion of the 3D members at every instant they cover, and the
+    // height they give there (t, h, σ_h).
+    let mut all: Vec<State6> = Vec::with_capacity(members.len());
+    let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
     let mut heights: Vec<(f64, f64, f64)> = Vec::new();
-    if method != Method::Mapping && has_3d {
-        for (&t, three) in times.iter().zip(&threes) {
-            if three.is_empty() {
-                continue;
-            }
-            let (x3, p3) = fuse_independent(three)?;
+    for &t in &times {
+        three_at(t, &mut all);
+        if all.is_empty() {
+            fused3.push(None);
+            continue;
+        }
+        let (x3, p3) = fuse_independent(&all)?;
+        if method != Method::Mapping {
             let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
             let (_, _, h) = ecef_to_geodetic(&centre.ellipsoid(), ecef)?;
             heights.push((t, h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)));
         }
+        fused3.push(Some((x3, p3)));
     }
     let mut samples = Vec::with_capacity(times.len());
-    let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut next_height = 0;
-    for (&t, three) in times.iter().zip(&threes) {
+    for (&t, f3) in times.iter().zip(&fused3) {
         all.clear();
-        all.extend_from_slice(three);
         while next_height + 1 < heights.len() && heights[next_height + 1].0 <= t {
             next_height += 1;
         }
@@ -682,7 +693,7 @@ fn system_track(
             .filter_map(|k| heights.get(k))
             .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
         let (placement, altitude) = if method == Method::Mapping {
-            let alt = if three.is_empty() {
+            let alt = if f3.is_none() {
                 AltitudeSource::Assumed
             } else {
                 AltitudeSource::Measured
@@ -698,15 +709,15 @@ fn system_track(
                 None => (None, AltitudeSource::Assumed),
             }
         };
-        for &i in members
-            .iter()
-            .filter(|&&i| !radars[filtered[i].radar].three_d)
-        {
+        for &i in &two_d {
             let f = &filtered[i];
             let k = f.est.partition_point(|e| e.t <= t);
             let Some(k) = k.checked_sub(1) else {
                 continue;
             };
+            if t - f.est[k].t > gap(i) {
+                continue;
+            }
             let s = match placement {
                 Some((h, sh)) => extrapolate(
                     &to_centre(centre, &radars[f.radar], &f.est[k], h, sh)?,
@@ -717,12 +728,21 @@ fn system_track(
             };
             all.extend(s);
         }
-        if all.is_empty() {
-            continue;
-        }
-        let (mut x, mut p) = fuse_independent(&all)?;
-        if method == Method::Splitting && !three.is_empty() {
+        // The 3D members' fusion first, then the 2D members one by one (the
+        // order of `fuse_independent` over 3D then 2D members).
+        let (mut x, mut p) = match (f3, all.is_empty()) {
+            (None, true) => continue,
+            (None, false) => fuse_independent(&all)?,
+            (Some((x3, p3)), _) => fuse_into(*x3, *p3, &all)?,
+        };
+
+        if method == Method::Splitting && f3.is_some() {
             // Direction from every track, geocentric distance from 3D tracks.
+            let mut three = Vec::with_capacity(three_d.len());
+            three_at(t, &mut three);
+            let twos = std::mem::take(&mut all);
+            all.extend_from_slice(&three);
+            all.extend(twos);
             let mut info_d = Matrix2::<f64>::zeros();
             let mut vec_d = nalgebra::Vector2::<f64>::zeros();
             for s in &all {
@@ -742,7 +762,7 @@ fn system_track(
             })?;
             let d = cd * vec_d;
             let (mut info_r, mut sum_r) = (0.0, 0.0);
-            for s in three {
+            for s in &three {
                 let ecef = Vector3::from(centre.enu_to_ecef([s.x[0], s.x[2], s.x[4]])?);
                 let u = ecef / ecef.norm();
                 let u_enu = centre.rotation() * u;
