@@ -88,7 +88,9 @@ pub fn place_2d(
     let gauss = ell.a() * (1.0 - e2).sqrt() / (w * w);
     let mut el = sphere_elevation(range, gauss + hs, gauss + height)?;
     let (sa, ca) = azimuth.sin_cos();
-    let solve = |el: f64| -> Result<(Vector3<f64>, f64, Vector3<f64>, Vector3<f64>), AlgoError> {
+    // (ECEF point, its height, the normal in the radar's axes, ∂P/∂E).
+    type Point = (Vector3<f64>, f64, Vector3<f64>, Vector3<f64>);
+    let solve = |el: f64| -> Result<Point, AlgoError> {
         let (se, ce) = el.sin_cos();
         let local = Vector3::new(range * ce * sa, range * ce * ca, range * se);
         let d_el = Vector3::new(-range * se * sa, -range * se * ca, range * ce);

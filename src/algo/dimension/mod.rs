@@ -225,10 +225,40 @@ pub fn fuse_methods(
     Ok(outs)
 }
 
-/// The test coordinates of every centred sample of one track.
+/// The test coordinates of a centred sample and the pieces of their
+/// covariance after an extrapolation by dt: z(dt) = z + dt·J v and
+/// J P_pos(dt) J' = c0 + dt c1 + dt² c2 + dt⁴ c4 (the position block P_pp + dt (P_pv + P_vp) + dt² (P_vv + V) + dt⁴ A/4 of
+/// an extrapolation, through J).
 struct TestPoint {
     z: Vector3<f64>,
-    jac: Matrix3<f64>,
+    jv: Vector3<f64>,
+    c0: Matrix3<f64>,
+    c1: Matrix3<f64>,
+    c2: Matrix3<f64>,
+    c4: Matrix3<f64>,
+}
+
+impl TestPoint {
+    fn new(s: &State6, z: Vector3<f64>, jac: Matrix3<f64>) -> Self {
+        let block = |r: usize, c: usize| Matrix3::from_fn(|i, j| s.p[(2 * i + r, 2 * j + c)]);
+        let t = |m: Matrix3<f64>| jac * m * jac.transpose();
+        Self {
+            z,
+            jv: jac * Vector3::new(s.x[1], s.x[3], s.x[5]),
+            c0: t(block(0, 0)),
+            c1: t(block(0, 1) + block(1, 0)),
+            c2: t(block(1, 1) + s.velocity_jump),
+            c4: t(s.acceleration / 4.0),
+        }
+    }
+
+    fn at(&self, dt: f64) -> (Vector3<f64>, Matrix3<f64>) {
+        let dt2 = dt * dt;
+        (
+            self.z + self.jv * dt,
+            self.c0 + self.c1 * dt + self.c2 * dt2 + self.c4 * (dt2 * dt2),
+        )
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -247,7 +277,7 @@ fn fuse_one(
             tr.iter()
                 .map(|s| {
                     geometry::test_space(centre, method, [s.x[0], s.x[2], s.x[4]])
-                        .map(|(_, z, jac)| TestPoint { z, jac })
+                        .map(|(_, z, jac)| TestPoint::new(s, z, jac))
                 })
                 .collect()
         })
@@ -314,7 +344,17 @@ fn fuse_one(
     let system_tracks = groups
         .into_iter()
         .filter(|g| g.iter().any(|&i| !centred[i].is_empty()))
-        .map(|g| system_track(centre, radars, filtered, centred, g, method))
+        .map(|g| {
+            system_track(
+                centre,
+                radars,
+                filtered,
+                centred,
+                g,
+                method,
+                cfg.altitude_sigma,
+            )
+        })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Outcome {
         pairs,
@@ -472,7 +512,7 @@ fn transition6(dt: f64) -> Matrix6<f64> {
 fn at_time(track: &[State6], t: f64, max_gap: f64) -> Option<State6> {
     let k = track.partition_point(|s| s.t <= t);
     let s = track.get(k.checked_sub(1)?)?;
-    Some(extrapolate(s, t, max_gap)?)
+    extrapolate(s, t, max_gap)
 }
 
 fn extrapolate(s: &State6, t: f64, max_gap: f64) -> Option<State6> {
@@ -498,19 +538,6 @@ fn extrapolate(s: &State6, t: f64, max_gap: f64) -> Option<State6> {
         p,
         acceleration: s.acceleration,
         velocity_jump: s.velocity_jump,
-    })
-}
-
-/// The position block of an extrapolation by `dt` (the rates do not enter
-/// the tests): P_pp + dt (P_pv + P_vp) + dt² P_vv + A dt⁴/4 + V dt².
-fn position_cov(s: &State6, dt: f64) -> Matrix3<f64> {
-    let q = dt.powi(4) / 4.0;
-    Matrix3::from_fn(|i, j| {
-        s.p[(2 * i, 2 * j)]
-            + dt * (s.p[(2 * i, 2 * j + 1)] + s.p[(2 * i + 1, 2 * j)])
-            + dt * dt * s.p[(2 * i + 1, 2 * j + 1)]
-            + s.acceleration[(i, j)] * q
-            + s.velocity_jump[(i, j)] * dt * dt
     })
 }
 
@@ -554,16 +581,13 @@ fn correlate_pair(
         let Some(k) = k.checked_sub(1) else {
             continue;
         };
-        let (o, opk) = (&ot[k], &op[k]);
-        let dt = s.t - o.t;
+        let dt = s.t - ot[k].t;
         if dt > gap {
             continue;
         }
-        let moved = Vector3::new(o.x[1], o.x[3], o.x[5]) * dt;
-        let d = sp.z - (opk.z + opk.jac * moved);
-        let pa = position_cov(s, 0.0);
-        let pb = position_cov(o, dt);
-        let mut cov = sp.jac * pa * sp.jac.transpose() + opk.jac * pb * opk.jac.transpose();
+        let (zb, cb) = op[k].at(dt);
+        let d = sp.z - zb;
+        let mut cov = sp.c0 + cb;
         if dim == 2 {
             cov[(2, 2)] = 1.0;
         }
@@ -640,6 +664,7 @@ fn system_track(
     centred: &[Vec<State6>],
     members: Vec<usize>,
     method: Method,
+    altitude_sigma: f64,
 ) -> Result<SystemTrack, AlgoError> {
     let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
     let mut times: Vec<f64> = members
@@ -701,7 +726,12 @@ fn system_track(
             (None, alt)
         } else {
             match nearest {
-                Some(&(t3, h, sh)) if t3 == t => (Some((h, sh)), AltitudeSource::Measured),
+                // The 3D members are fused in this sample too: the 2D
+                // members sit at their height but keep σ_h = altitude_sigma
+                // along the cone, or that height would count twice.
+                Some(&(t3, h, _)) if t3 == t => {
+                    (Some((h, altitude_sigma)), AltitudeSource::Measured)
+                }
                 Some(&(t3, h, sh)) => {
                     let grown = (sh * sh + (CLIMB_SIGMA_MPS * (t - t3)).powi(2)).sqrt();
                     (Some((h, grown)), AltitudeSource::Lifted)
