@@ -333,15 +333,6 @@ fn filter_fixed<const M: usize, const N: usize>(
     Ok(out)
 }
 
-/// Constant-velocity transition for the interleaved state of `m` components.
-pub fn transition(m: usize, t: f64) -> DMatrix<f64> {
-    let mut f = DMatrix::identity(2 * m, 2 * m);
-    for i in 0..m {
-        f[(2 * i, 2 * i + 1)] = t;
-    }
-    f
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
