@@ -130,6 +130,7 @@ fn response(out: svc::FuseOutput) -> pb::DimensionFuseResponse {
                                 lat_deg: x.lat_deg,
                                 lon_deg: x.lon_deg,
                                 height_m: x.height_m,
+                                altitude: x.altitude.to_string(),
                             })
                             .collect(),
                     })

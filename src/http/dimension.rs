@@ -157,9 +157,15 @@ pub struct DimensionSample {
     pub covariance: Vec<Vec<f64>>,
     pub lat_deg: f64,
     pub lon_deg: f64,
-    /// Absent when the altitude is unknown.
+    /// Absent when the altitude is assumed (only 2D members, preset height)
+    /// and the method is not mapping.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub height_m: Option<f64>,
+    /// Where this sample's height comes from: `measured` (a 3D member
+    /// contributed), `lifted` (2D members placed at the height the system
+    /// track's 3D members gave at the nearest instant, its σ grown by 10 m/s
+    /// per second of distance) or `assumed` (the preset altitude).
+    pub altitude: &'static str,
 }
 
 fn site(s: DimensionSite) -> svc::SiteInput {
@@ -280,6 +286,7 @@ pub async fn fuse(
                                 lat_deg: x.lat_deg,
                                 lon_deg: x.lon_deg,
                                 height_m: x.height_m,
+                                altitude: x.altitude,
                             })
                             .collect(),
                     })

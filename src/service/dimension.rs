@@ -8,7 +8,9 @@ use std::{collections::HashSet, time::Instant};
 use super::{FieldViolation, ServiceError, Violations, micros_since};
 use crate::algo::{
     AlgoError,
-    dimension::{self, Config, Filter, KnnParams, LocalTrack, Method, Period, Plot, Radar},
+    dimension::{
+        self, AltitudeSource, Config, Filter, KnnParams, LocalTrack, Method, Period, Plot, Radar,
+    },
     gating::chi2_threshold,
     geo::{Ellipsoid, LocalFrame},
 };
@@ -148,8 +150,19 @@ pub struct SystemSample {
     pub covariance: Vec<Vec<f64>>,
     pub lat_deg: f64,
     pub lon_deg: f64,
-    /// `None` when the altitude is unknown.
+    /// `None` when the altitude is assumed and the method is not mapping.
     pub height_m: Option<f64>,
+    /// `measured`, `lifted` or `assumed` ([`altitude_name`]).
+    pub altitude: &'static str,
+}
+
+/// The wire name of where a sample's height comes from.
+pub fn altitude_name(a: AltitudeSource) -> &'static str {
+    match a {
+        AltitudeSource::Measured => "measured",
+        AltitudeSource::Lifted => "lifted",
+        AltitudeSource::Assumed => "assumed",
+    }
 }
 
 /// The wire name of a period.
@@ -185,16 +198,18 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     let plan = validate(&input)?;
     let start = Instant::now();
     let mut results = Vec::new();
-    for &method in &plan.methods {
+    // The local filters run once for all methods: their time is in the
+    // first method's compute_us.
+    let outs = dimension::fuse_methods(
+        &plan.centre,
+        &plan.radars,
+        &plan.tracks,
+        &plan.methods,
+        &plan.config,
+    )
+    .map_err(computation_error)?;
+    for (&method, out) in plan.methods.iter().zip(outs) {
         let t0 = Instant::now();
-        let out = dimension::fuse(
-            &plan.centre,
-            &plan.radars,
-            &plan.tracks,
-            method,
-            &plan.config,
-        )
-        .map_err(computation_error)?;
         let r = |i: usize| plan.refs[i].clone();
         let pairs = out
             .pairs
@@ -233,7 +248,9 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
                         .collect(),
                     lat_deg: lat.to_degrees(),
                     lon_deg: lon.to_degrees(),
-                    height_m: st.altitude_known.then_some(h),
+                    height_m: (method == Method::Mapping || s.altitude != AltitudeSource::Assumed)
+                        .then_some(h),
+                    altitude: altitude_name(s.altitude),
                 });
             }
             system_tracks.push(SystemTrackOutput {
@@ -258,7 +275,7 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
                 pairs,
                 uncorrelated,
                 system_tracks,
-                compute_us: micros_since(t0),
+                compute_us: out.compute_us + micros_since(t0),
             },
             warnings_here,
         ));

@@ -94,6 +94,8 @@ async fn one_target_is_one_system_track_under_lifting_and_splitting() {
         assert_eq!(st[0]["altitude_known"], true);
         let last = st[0]["samples"].as_array().unwrap().last().unwrap().clone();
         assert!(last["height_m"].is_f64());
+        // Both tracks see the target at the end: a 3D member contributes.
+        assert_eq!(last["altitude"], "measured");
         assert_eq!(last["covariance"].as_array().unwrap().len(), 6);
     }
 }
@@ -175,6 +177,8 @@ async fn rest_and_grpc_agree() {
                 .collect();
             assert_eq!(a.state, bs);
             assert_eq!(a.height_m, b["height_m"].as_f64());
+            assert_eq!(a.altitude, b["altitude"].as_str().unwrap());
+            assert!(["measured", "lifted", "assumed"].contains(&a.altitude.as_str()));
             assert_eq!(a.covariance.as_ref().unwrap().values.len(), 36);
         }
     }

@@ -7,9 +7,9 @@
 //! 2D radar, local ENU `[e, n, u]` of a 3D radar) with the interleaved state
 //! `[z₁, ż₁, …, z_m, ż_m]`.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
-use crate::algo::{AlgoError, kalman, polar::wrap_angle};
+use crate::algo::{AlgoError, polar::wrap_angle};
 
 /// Tracking index used until the residual window is full.
 pub const INITIAL_TRACKING_INDEX: f64 = 0.5;
@@ -65,15 +65,123 @@ pub enum Filter {
 pub struct Estimate {
     pub t: f64,
     pub x: DVector<f64>,
+    /// The covariance of the estimate's error for the gains actually used
+    /// (see [`filter`]).
     pub p: DMatrix<f64>,
     /// α of the α-β filter at this point (1 at initialisation, NaN for Kalman).
     pub alpha: f64,
+    /// The covariance (m × m, measurement units per s²) of the white
+    /// acceleration the filter's model assumes from this point on: Kalman
+    /// σ_a² (scaled), α-β λ² R / T⁴ for the tracking index λ of its gains.
+    /// Extrapolations add it as process noise.
+    pub acceleration: DMatrix<f64>,
+    /// True when the residual of this point was a manoeuvre (see [`filter`]).
+    pub manoeuvre: bool,
+    /// The velocity-change covariance (m × m) that the next point's
+    /// manoeuvre lag Δ reveals for the interval after this point, Δ/T²
+    /// (zero when the next residual was within its gate): a velocity change
+    /// at the start of the interval that would leave that lag by the next
+    /// point. An extrapolation by dt from this point adds it (Δ (dt/T)² in
+    /// position), so a sample between the start of a manoeuvre and its
+    /// detection carries the lag.
+    pub lag_ahead: DMatrix<f64>,
+}
+
+/// The discrete white-noise acceleration factor: the process noise of one
+/// step of `t` seconds is `A ⊗ [[t⁴/4, t³/2], [t³/2, t²]]` for an
+/// acceleration covariance A.
+pub fn white_acceleration(t: f64) -> [f64; 3] {
+    [t.powi(4) / 4.0, t.powi(3) / 2.0, t * t]
+}
+
+/// The α-β filter's process-noise model (Kalata): the tracking index
+/// λ = σ_w T² / σ_v of the gains says σ_w = λ σ_v / T² per component, so the
+/// acceleration covariance is A = λ² R / T⁴.
+pub fn alpha_beta_acceleration<const M: usize>(
+    r: &SMatrix<f64, M, M>,
+    lambda: f64,
+    t: f64,
+) -> SMatrix<f64, M, M> {
+    r * (lambda * lambda / t.powi(4))
+}
+
+/// One step of the exact covariance of a filter with constant-velocity
+/// transition and position measurements, for any gain (Joseph form):
+/// P⁺ = (I − KH)(F P F' + Q)(I − KH)' + K R K'. `pp` is F P F' + Q.
+pub fn joseph<const N: usize, const M: usize>(
+    pp: &SMatrix<f64, N, N>,
+    k: &SMatrix<f64, N, M>,
+    r: &SMatrix<f64, M, M>,
+) -> SMatrix<f64, N, N> {
+    let a = SMatrix::<f64, N, N>::identity() - k * position_rows::<M, N>();
+    let p = a * pp * a.transpose() + k * r * k.transpose();
+    (p + p.transpose()) * 0.5
+}
+
+/// H: the positions of the interleaved state.
+fn position_rows<const M: usize, const N: usize>() -> SMatrix<f64, M, N> {
+    SMatrix::from_fn(|i, j| if j == 2 * i { 1.0 } else { 0.0 })
+}
+
+/// The α-β gain matrix `I_m ⊗ [α, β/T]'` (N × M).
+pub fn alpha_beta_gain<const N: usize, const M: usize>(
+    alpha: f64,
+    beta: f64,
+    t: f64,
+) -> SMatrix<f64, N, M> {
+    SMatrix::from_fn(|j, i| {
+        if j / 2 != i {
+            0.0
+        } else if j % 2 == 0 {
+            alpha
+        } else {
+            beta / t
+        }
+    })
+}
+
+/// The constant-velocity transition of `N / 2` interleaved components.
+fn transition_fixed<const N: usize>(t: f64) -> SMatrix<f64, N, N> {
+    let mut f = SMatrix::identity();
+    for i in 0..N / 2 {
+        f[(2 * i, 2 * i + 1)] = t;
+    }
+    f
+}
+
+/// The interleaved covariance `A ⊗ [[c₁₁, c₁₂], [c₁₂, c₂₂]]`.
+fn kron<const M: usize, const N: usize>(a: &SMatrix<f64, M, M>, c: [f64; 3]) -> SMatrix<f64, N, N> {
+    SMatrix::from_fn(|i, j| {
+        let k = match (i % 2, j % 2) {
+            (0, 0) => c[0],
+            (1, 1) => c[2],
+            _ => c[1],
+        };
+        a[(i / 2, j / 2)] * k
+    })
 }
 
 /// Filters one track. `wrap[i]` marks angular components (residuals wrapped
 /// to (−π, π]); `scale[i]` converts the Kalman σ_a into that component's
 /// units. The first plot only initialises: estimates start at the second
 /// (two-point initialisation, P from R as in seed 000 eq. 30).
+///
+/// Covariance. Both filters propagate P through the same prediction
+/// F P F' + Q and the Joseph update with the gain actually used, so P is the
+/// error covariance of the estimate whatever the gain. Q is white
+/// acceleration: σ_a for Kalman, and for the α-β filter the acceleration its
+/// current gains assume (Kalata's tracking index, [`alpha_beta_acceleration`];
+/// with a fixed gain this recursion converges to Kalata's steady-state
+/// covariance, [`steady_covariance`]).
+///
+/// Manoeuvres. A target that manoeuvres harder than Q says leaves a lag the
+/// recursion cannot know. When a residual ν is beyond the 99 % gate of its
+/// predicted covariance S (NIS n = ν'S⁻¹ν > χ²_m(0.01)), the excess
+/// Δ = (1 − 1/n) ν ν' is taken as lag: the prediction's covariance gains
+/// Δ ⊗ [[1, 2/T], [2/T, 4/T²]] (the position and velocity errors of a
+/// constant acceleration 2ν/T² over the scan), which makes the residual
+/// look like one σ along its own direction. Kalman's gain follows the
+/// inflated covariance; the α-β gains stay those of the window.
 pub fn filter(
     filter: Filter,
     times: &[f64],
@@ -82,52 +190,98 @@ pub fn filter(
     wrap: &[bool],
     scale: &[f64],
 ) -> Result<Vec<Estimate>, AlgoError> {
-    let m = wrap.len();
-    let n = 2 * m;
-    let mut out = Vec::with_capacity(times.len().saturating_sub(1));
     if times.len() < 2 {
-        return Ok(out);
+        return Ok(Vec::new());
     }
-    let diff = |a: &DVector<f64>, b: &DVector<f64>| -> DVector<f64> {
-        DVector::from_fn(m, |i, _| {
+    let gate = crate::algo::gating::chi2_threshold(wrap.len(), 0.01)?;
+    match wrap.len() {
+        1 => filter_fixed::<1, 2>(filter, times, z, r, wrap, scale, gate),
+        2 => filter_fixed::<2, 4>(filter, times, z, r, wrap, scale, gate),
+        3 => filter_fixed::<3, 6>(filter, times, z, r, wrap, scale, gate),
+        m => Err(AlgoError::InvalidParameter {
+            what: "measurement dimension",
+            reason: format!("must be 1, 2 or 3, got {m}"),
+        }),
+    }
+}
+
+/// [`filter`] for `M` measured components and `N = 2M` states, on
+/// fixed-size matrices (no heap allocation per plot).
+#[allow(clippy::too_many_arguments)]
+fn filter_fixed<const M: usize, const N: usize>(
+    filter: Filter,
+    times: &[f64],
+    z: &[DVector<f64>],
+    r: &[DMatrix<f64>],
+    wrap: &[bool],
+    scale: &[f64],
+    gate: f64,
+) -> Result<Vec<Estimate>, AlgoError> {
+    type V<const D: usize> = SVector<f64, D>;
+    type Mx<const R: usize, const C: usize> = SMatrix<f64, R, C>;
+    let diff = |a: &V<M>, b: &V<M>| -> V<M> {
+        V::<M>::from_fn(|i, _| {
             let d = a[i] - b[i];
             if wrap[i] { wrap_angle(d) } else { d }
         })
     };
-    // Two-point initialisation.
+    let zf = |k: usize| V::<M>::from_fn(|i, _| z[k][i]);
+    let rf = |k: usize| Mx::<M, M>::from_fn(|i, j| r[k][(i, j)]);
+    let kron_f = kron::<M, N>;
+    let h = position_rows::<M, N>();
+    let kalman_acc = |sigma_a: f64| {
+        Mx::<M, M>::from_diagonal(&V::<M>::from_fn(|i, _| (sigma_a * scale[i]).powi(2)))
+    };
+    let dyn_m = |a: &Mx<M, M>| DMatrix::from_fn(M, M, |i, j| a[(i, j)]);
+    let mut out = Vec::with_capacity(times.len() - 1);
     let t0 = times[1] - times[0];
-    let d0 = diff(&z[1], &z[0]);
-    let mut x = DVector::from_fn(n, |k, _| {
+    let d0 = diff(&zf(1), &zf(0));
+    let z1 = zf(1);
+    let mut x = V::<N>::from_fn(|k, _| {
         if k % 2 == 0 {
-            z[1][k / 2]
+            z1[k / 2]
         } else {
             d0[k / 2] / t0
         }
     });
-    let mut p = kron(&r[1], [1.0, 1.0 / t0, 2.0 / (t0 * t0)]);
-    out.push(Estimate {
-        t: times[1],
-        x: x.clone(),
-        p: p.clone(),
-        alpha: 1.0,
-    });
-    let mut window: Vec<f64> = Vec::new();
+    let mut p = kron_f(&rf(1), [1.0, 1.0 / t0, 2.0 / (t0 * t0)]);
     let mut alpha = kalata_gains(INITIAL_TRACKING_INDEX)?.0;
+    let acc0 = match filter {
+        Filter::AlphaBeta { .. } => alpha_beta_acceleration(&rf(1), INITIAL_TRACKING_INDEX, t0),
+        Filter::Kalman { sigma_a } => kalman_acc(sigma_a),
+    };
+    let push = |out: &mut Vec<Estimate>,
+                t: f64,
+                x: &V<N>,
+                p: &Mx<N, N>,
+                alpha: f64,
+                acc: &Mx<M, M>,
+                manoeuvre: bool| {
+        out.push(Estimate {
+            t,
+            x: DVector::from_column_slice(x.as_slice()),
+            p: DMatrix::from_column_slice(N, N, p.as_slice()),
+            alpha,
+            acceleration: dyn_m(acc),
+            manoeuvre,
+            lag_ahead: DMatrix::zeros(M, M),
+        });
+    };
+    push(&mut out, times[1], &x, &p, 1.0, &acc0, false);
+    let mut window: Vec<f64> = Vec::new();
     for k in 2..times.len() {
         let t = times[k] - times[k - 1];
-        let f = transition(m, t);
-        match filter {
+        let f = transition_fixed::<N>(t);
+        let rk = rf(k);
+        let xp = f * x;
+        let zp = V::<M>::from_fn(|i, _| xp[2 * i]);
+        let res = diff(&zf(k), &zp);
+        let (gain, a_used, alpha_k) = match filter {
             Filter::AlphaBeta { window: w } => {
-                let xp = &f * &x;
-                let zp = DVector::from_fn(m, |i, _| xp[2 * i]);
-                let res = diff(&z[k], &zp);
-                let chol = r[k]
-                    .clone()
-                    .cholesky()
-                    .ok_or(AlgoError::NotPositiveDefinite {
-                        what: "plot covariance",
-                    })?;
-                let nis = res.dot(&chol.solve(&res)) / m as f64;
+                let chol = rk.cholesky().ok_or(AlgoError::NotPositiveDefinite {
+                    what: "plot covariance",
+                })?;
+                let nis = res.dot(&chol.solve(&res)) / M as f64;
                 window.push(nis);
                 if window.len() > w {
                     window.remove(0);
@@ -137,72 +291,46 @@ pub fn filter(
                     let s = window.iter().sum::<f64>() / w as f64;
                     alpha = (1.0 - 1.0 / s).clamp(ALPHA_MIN, ALPHA_MAX);
                 }
-                let (beta, _) = gains_from_alpha(alpha);
-                x = DVector::from_fn(n, |j, _| {
-                    let i = j / 2;
-                    if j % 2 == 0 {
-                        xp[j] + alpha * res[i]
-                    } else {
-                        xp[j] + beta / t * res[i]
-                    }
-                });
-                p = kron(&r[k], steady_covariance(alpha, beta, t));
-                out.push(Estimate {
-                    t: times[k],
-                    x: x.clone(),
-                    p: p.clone(),
+                let (beta, lambda) = gains_from_alpha(alpha);
+                (
+                    Some(alpha_beta_gain::<N, M>(alpha, beta, t)),
+                    alpha_beta_acceleration(&rk, lambda, t),
                     alpha,
-                });
+                )
             }
-            Filter::Kalman { sigma_a } => {
-                let mut q = DMatrix::zeros(n, n);
-                for i in 0..m {
-                    let s2 = (sigma_a * scale[i]).powi(2);
-                    q[(2 * i, 2 * i)] = s2 * t.powi(4) / 4.0;
-                    q[(2 * i, 2 * i + 1)] = s2 * t.powi(3) / 2.0;
-                    q[(2 * i + 1, 2 * i)] = s2 * t.powi(3) / 2.0;
-                    q[(2 * i + 1, 2 * i + 1)] = s2 * t * t;
-                }
-                let (xp, pp) = kalman::predict(&x, &p, &f, &q)?;
-                let h = DMatrix::from_fn(m, n, |i, j| if j == 2 * i { 1.0 } else { 0.0 });
-                // Wrap the measurement next to the prediction.
-                let zp = DVector::from_fn(m, |i, _| xp[2 * i]);
-                let zk = &zp + diff(&z[k], &zp);
-                let u = kalman::update_linear(&xp, &pp, &zk, &h, &r[k])?;
-                x = u.x;
-                p = u.p;
-                out.push(Estimate {
-                    t: times[k],
-                    x: x.clone(),
-                    p: p.clone(),
-                    alpha: f64::NAN,
-                });
+            Filter::Kalman { sigma_a } => (None, kalman_acc(sigma_a), f64::NAN),
+        };
+        let mut pp = f * p * f.transpose() + kron_f(&a_used, white_acceleration(t));
+        let s = h * pp * h.transpose() + rk;
+        let nis = s.cholesky().map(|c| res.dot(&c.solve(&res))).ok_or(
+            AlgoError::NotPositiveDefinite {
+                what: "residual covariance",
+            },
+        )?;
+        let manoeuvre = nis > gate;
+        if manoeuvre {
+            let lag = res * res.transpose() * (1.0 - 1.0 / nis);
+            pp += kron_f(&lag, [1.0, 2.0 / t, 4.0 / (t * t)]);
+            if let Some(prev) = out.last_mut() {
+                prev.lag_ahead = dyn_m(&(lag / (t * t)));
             }
         }
+        pp = (pp + pp.transpose()) * 0.5;
+        let gain = match gain {
+            Some(g) => g,
+            None => {
+                let s = h * pp * h.transpose() + rk;
+                let inv = s.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
+                    what: "residual covariance",
+                })?;
+                pp * h.transpose() * inv
+            }
+        };
+        x = xp + gain * res;
+        p = joseph(&pp, &gain, &rk);
+        push(&mut out, times[k], &x, &p, alpha_k, &a_used, manoeuvre);
     }
     Ok(out)
-}
-
-/// Constant-velocity transition for the interleaved state of `m` components.
-pub fn transition(m: usize, t: f64) -> DMatrix<f64> {
-    let mut f = DMatrix::identity(2 * m, 2 * m);
-    for i in 0..m {
-        f[(2 * i, 2 * i + 1)] = t;
-    }
-    f
-}
-
-/// The interleaved covariance `R ⊗ [[c₁₁, c₁₂], [c₁₂, c₂₂]]`.
-fn kron(r: &DMatrix<f64>, c: [f64; 3]) -> DMatrix<f64> {
-    let m = r.nrows();
-    DMatrix::from_fn(2 * m, 2 * m, |a, b| {
-        let k = match (a % 2, b % 2) {
-            (0, 0) => c[0],
-            (1, 1) => c[2],
-            _ => c[1],
-        };
-        r[(a / 2, b / 2)] * k
-    })
 }
 
 #[cfg(test)]
@@ -231,6 +359,61 @@ mod tests {
         }
         assert!(kalata_gains(0.0).is_err());
         assert!(kalata_gains(f64::NAN).is_err());
+    }
+
+    #[test]
+    fn joseph_recursion_with_kalata_gains_converges_to_kalata_covariance() {
+        // A fixed α-β gain for tracking index λ, the white acceleration that
+        // λ assumes (σ_w = λ σ_v / T²) and the Joseph recursion from a large
+        // P: the limit is Kalata's closed form σ_v² [[α, β/T], [β/T,
+        // β(2α − β)/(2(1 − α)T²)]] (the gain is the Kalman gain of that model).
+        let (sigma_v, t) = (870.0f64, 10.0);
+        let r = SMatrix::<f64, 1, 1>::new(sigma_v * sigma_v);
+        for lambda in [0.1, 0.5, 1.0, 4.0] {
+            let (alpha, beta) = kalata_gains(lambda).unwrap();
+            let k = alpha_beta_gain::<2, 1>(alpha, beta, t);
+            let q: SMatrix<f64, 2, 2> = kron(
+                &alpha_beta_acceleration(&r, lambda, t),
+                white_acceleration(t),
+            );
+            // σ_w = λ σ_v / T²: Q₂₂ = σ_w² T².
+            let sw = lambda * sigma_v / (t * t);
+            assert!((q[(1, 1)] - sw * sw * t * t).abs() < 1e-9 * q[(1, 1)]);
+            let f = transition_fixed::<2>(t);
+            let mut p = SMatrix::<f64, 2, 2>::identity() * 1e8;
+            for _ in 0..500 {
+                p = joseph(&(f * p * f.transpose() + q), &k, &r);
+            }
+            let c = steady_covariance(alpha, beta, t);
+            let v = sigma_v * sigma_v;
+            for (got, want) in [
+                (p[(0, 0)], c[0] * v),
+                (p[(0, 1)], c[1] * v),
+                (p[(1, 1)], c[2] * v),
+            ] {
+                assert!(
+                    (got - want).abs() < 1e-6 * want.abs(),
+                    "λ={lambda}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn joseph_with_zero_process_noise_matches_the_noise_reduction_ratio() {
+        // Fixed gains, no process noise: the steady position variance is
+        // σ_v² (2α² + 2β − 3αβ) / (α(4 − 2α − β)) (Benedict–Bordner / Kalata
+        // noise reduction ratio), below Kalata's α σ_v² for the same gains.
+        // α = 0.5, β = 0.2: (0.5 + 0.4 − 0.3)/(0.5·2.8) = 0.6/1.4 = 0.4285714.
+        let (alpha, beta, t) = (0.5, 0.2, 5.0);
+        let r = SMatrix::<f64, 1, 1>::new(1.0);
+        let k = alpha_beta_gain::<2, 1>(alpha, beta, t);
+        let f = transition_fixed::<2>(t);
+        let mut p = SMatrix::<f64, 2, 2>::identity() * 100.0;
+        for _ in 0..2000 {
+            p = joseph(&(f * p * f.transpose()), &k, &r);
+        }
+        assert!((p[(0, 0)] - 0.6 / 1.4).abs() < 1e-9, "{}", p[(0, 0)]);
     }
 
     #[test]
@@ -268,6 +451,7 @@ mod tests {
         }
         // Zero residuals: the window's mean NIS is 0, so α sits at its floor.
         assert_eq!(est.last().unwrap().alpha, ALPHA_MIN);
+        assert!(est.iter().all(|e| !e.manoeuvre));
         let kal = filter(
             Filter::Kalman { sigma_a: 1.0 },
             &times,
@@ -278,5 +462,35 @@ mod tests {
         )
         .unwrap();
         assert!((kal.last().unwrap().x[1] - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_residual_beyond_the_gate_inflates_the_covariance_along_it() {
+        // 1D track, R = 1, T = 1, the target jumps 100 ahead at the last plot
+        // (a manoeuvre no model foresaw): the NIS is far beyond χ²₁(0.01) =
+        // 6.63, the prediction gains (1 − 1/n) ν² ≈ ν² and the reported
+        // variance covers the lag that remains. α-β: α = 0.95 (window NIS
+        // 3333), error (1 − α)·100 = 5, P = 0.05²·(ν² + …) + 0.95² ≈ 25.9,
+        // σ 5.09; without the rule P ≈ 0.9 and the error would be 5.3 σ.
+        let times: Vec<f64> = (0..8).map(f64::from).collect();
+        let mut z: Vec<_> = times.iter().map(|&t| DVector::from_vec(vec![t])).collect();
+        z[7][0] += 100.0;
+        let r = vec![DMatrix::identity(1, 1); 8];
+        for f in [
+            Filter::AlphaBeta { window: 3 },
+            Filter::Kalman { sigma_a: 0.1 },
+        ] {
+            let est = filter(f, &times, &z, &r, &[false], &[1.0]).unwrap();
+            let last = est.last().unwrap();
+            assert!(last.manoeuvre, "{f:?}");
+            assert!(est[..est.len() - 1].iter().all(|e| !e.manoeuvre));
+            // The truth is 107: the estimate's error over its σ stays modest.
+            let err = last.x[0] - 107.0;
+            assert!(
+                err.abs() / last.p[(0, 0)].sqrt() < 3.0,
+                "{f:?}: {err} {}",
+                last.p[(0, 0)]
+            );
+        }
     }
 }

@@ -4,7 +4,7 @@
 //! lifting and the direction from the Earth's centre used by dimension
 //! splitting.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use crate::algo::{
     AlgoError,
@@ -65,6 +65,140 @@ pub fn plot_at_height(
         el = (el - (h - height) / slope).clamp(-1.5, 1.5);
     }
     Ok((radar.enu_to_ecef(polar_to_enu_3d(range, azimuth, el)?)?, el))
+}
+
+/// A 2D plot (slant range, azimuth) of `radar` placed at ellipsoidal height
+/// `height`, in the ENU frame of `centre`, with the Jacobian of that position
+/// with respect to (ρ, θ, h). The elevation solves h(P(ρ, θ, E)) = height by
+/// Newton from the sphere's answer with the exact slope dh/dE = n·∂P/∂E (the
+/// gradient of the geodetic height is the unit normal n at the point); the
+/// Jacobian follows by implicit differentiation of the same constraint:
+/// ∂E/∂ρ = −n·P_ρ / n·P_E, ∂E/∂θ = −n·P_θ / n·P_E, ∂E/∂h = 1 / n·P_E.
+pub fn place_2d(
+    radar: &LocalFrame,
+    centre: &LocalFrame,
+    range: f64,
+    azimuth: f64,
+    height: f64,
+) -> Result<([f64; 3], Matrix3<f64>), AlgoError> {
+    let ell = radar.ellipsoid();
+    let (lat, _, hs) = radar.origin_geodetic();
+    let e2 = ell.e2();
+    let w = (1.0 - e2 * lat.sin().powi(2)).sqrt();
+    let gauss = ell.a() * (1.0 - e2).sqrt() / (w * w);
+    let mut el = sphere_elevation(range, gauss + hs, gauss + height)?;
+    let (sa, ca) = azimuth.sin_cos();
+    // (ECEF point, its height, the normal in the radar's axes, ∂P/∂E).
+    type Point = (Vector3<f64>, f64, Vector3<f64>, Vector3<f64>);
+    let solve = |el: f64| -> Result<Point, AlgoError> {
+        let (se, ce) = el.sin_cos();
+        let local = Vector3::new(range * ce * sa, range * ce * ca, range * se);
+        let d_el = Vector3::new(-range * se * sa, -range * se * ca, range * ce);
+        let ecef = Vector3::from(radar.enu_to_ecef(local.into())?);
+        let (plat, plon, h) = ecef_to_geodetic(&ell, ecef.into())?;
+        let (sl, cl) = plat.sin_cos();
+        let (so, co) = plon.sin_cos();
+        // The normal in the radar's ENU axes.
+        let normal = radar.rotation() * Vector3::new(cl * co, cl * so, sl);
+        Ok((ecef, h, normal, d_el))
+    };
+    let mut at = solve(el)?;
+    for _ in 0..8 {
+        let (_, h, normal, d_el) = at;
+        if (h - height).abs() < 1e-3 {
+            break;
+        }
+        let slope = normal.dot(&d_el);
+        if !(slope.is_finite() && slope.abs() > 1e-9) {
+            return Err(AlgoError::DegenerateGeometry {
+                what: "2D plot",
+                reason: "the height does not change with elevation",
+            });
+        }
+        el = (el - (h - height) / slope).clamp(-1.5, 1.5);
+        at = solve(el)?;
+    }
+    let (ecef, _, normal, d_el) = at;
+    let (se, ce) = el.sin_cos();
+    let d_range = Vector3::new(ce * sa, ce * ca, se);
+    let d_az = Vector3::new(range * ce * ca, -range * ce * sa, 0.0);
+    let slope = normal.dot(&d_el);
+    if !(slope.is_finite() && slope.abs() > 1e-9) {
+        return Err(AlgoError::DegenerateGeometry {
+            what: "2D plot",
+            reason: "the height does not change with elevation",
+        });
+    }
+    let local_jac = Matrix3::from_columns(&[
+        d_range - d_el * (normal.dot(&d_range) / slope),
+        d_az - d_el * (normal.dot(&d_az) / slope),
+        d_el / slope,
+    ]);
+    let pos = centre.ecef_to_enu(ecef.into())?;
+    Ok((pos, radar.rotation_to(centre) * local_jac))
+}
+
+/// The test coordinates of a method at a centre-ENU position, with their
+/// exact Jacobian (rows beyond `dim` are zero):
+/// - mapping: the position itself, J = I;
+/// - lifting: the footprint; moving east or north by δ moves the footprint
+///   by δ N/(N + h) or δ M/(M + h) (N, M the prime-vertical and meridian
+///   radii of curvature), moving up does not move it;
+/// - splitting: R₀ (ê·u, n̂·u) with u = p/|p|, ∂u/∂p = (I − u u')/|p|.
+pub fn test_space(
+    centre: &LocalFrame,
+    method: super::Method,
+    pos: [f64; 3],
+) -> Result<(usize, Vector3<f64>, Matrix3<f64>), AlgoError> {
+    use super::Method;
+    let rot = centre.rotation();
+    match method {
+        Method::Mapping => Ok((3, Vector3::from(pos), Matrix3::identity())),
+        Method::Lifting => {
+            let ell = centre.ellipsoid();
+            let ecef = centre.enu_to_ecef(pos)?;
+            let (lat, lon, h) = ecef_to_geodetic(&ell, ecef)?;
+            let fp = centre.ecef_to_enu(geodetic_to_ecef(&ell, lat, lon, 0.0)?)?;
+            let (sl, cl) = lat.sin_cos();
+            let (so, co) = lon.sin_cos();
+            let w2 = 1.0 - ell.e2() * sl * sl;
+            let n = ell.a() / w2.sqrt();
+            let m = ell.a() * (1.0 - ell.e2()) / (w2 * w2.sqrt());
+            let east = Vector3::new(-so, co, 0.0);
+            let north = Vector3::new(-sl * co, -sl * so, cl);
+            let d_ecef =
+                east * east.transpose() * (n / (n + h)) + north * north.transpose() * (m / (m + h));
+            let mut j = rot * d_ecef * rot.transpose();
+            j.row_mut(2).fill(0.0);
+            Ok((2, Vector3::new(fp[0], fp[1], 0.0), j))
+        }
+        Method::Splitting => {
+            let p = Vector3::from(centre.enu_to_ecef(pos)?);
+            let r = p.norm();
+            if !(r.is_finite() && r > 0.0) {
+                return Err(AlgoError::DegenerateGeometry {
+                    what: "position",
+                    reason: "at the Earth's centre",
+                });
+            }
+            let u = p / r;
+            let e = rot.row(0).transpose();
+            let nn = rot.row(1).transpose();
+            let proj = (Matrix3::identity() - u * u.transpose()) * (DIRECTION_RADIUS_M / r);
+            let mut j = Matrix3::zeros();
+            j.set_row(0, &(e.transpose() * proj * rot.transpose()));
+            j.set_row(1, &(nn.transpose() * proj * rot.transpose()));
+            Ok((
+                2,
+                Vector3::new(
+                    DIRECTION_RADIUS_M * e.dot(&u),
+                    DIRECTION_RADIUS_M * nn.dot(&u),
+                    0.0,
+                ),
+                j,
+            ))
+        }
+    }
 }
 
 /// Horizontal footprint: the ENU `[e, n]` in `centre` of the point at height 0

@@ -20,11 +20,10 @@ pub mod alpha_beta;
 pub mod geometry;
 pub mod knn;
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::algo::{
     AlgoError, assignment,
-    correlation::fusion::bar_shalom_campo,
     geo::{LocalFrame, ecef_to_geodetic},
     polar::{PolarMeasurement, plot_to_local},
 };
@@ -87,8 +86,40 @@ pub struct Config {
 #[derive(Debug, Clone, PartialEq)]
 pub struct State6 {
     pub t: f64,
-    pub x: DVector<f64>,
-    pub p: DMatrix<f64>,
+    pub x: Vector6<f64>,
+    pub p: Matrix6<f64>,
+    /// The white-acceleration covariance (centre ENU, 3 × 3) of the local
+    /// filter's model: an extrapolation by dt adds `A ⊗ [[dt⁴/4, dt³/2],
+    /// [dt³/2, dt²]]`.
+    pub acceleration: Matrix3<f64>,
+    /// The velocity-change covariance (centre ENU) that the manoeuvre lag
+    /// of the local track's next point revealed (`Estimate::lag_ahead`): an
+    /// extrapolation by dt adds `V ⊗ [[dt², dt], [dt, 1]]`.
+    pub velocity_jump: Matrix3<f64>,
+}
+
+/// Where the height of a system-track sample comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AltitudeSource {
+    /// A 3D member contributed to this sample.
+    Measured,
+    /// No 3D member at this instant, but the system track has one: the 2D
+    /// members sit at the height the 3D members fused at the nearest instant,
+    /// its σ grown by `CLIMB_SIGMA_MPS` per second of distance (lifting and
+    /// splitting).
+    Lifted,
+    /// Only 2D members and no height to borrow: the preset altitude with its
+    /// σ (`MAPPING_ALTITUDE_SIGMA_M` under mapping, `altitude_sigma` otherwise).
+    Assumed,
+}
+
+/// A system-track sample: the fused state and where its height comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    pub t: f64,
+    pub x: Vector6<f64>,
+    pub p: Matrix6<f64>,
+    pub altitude: AltitudeSource,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -104,7 +135,7 @@ pub struct PairReport {
 pub struct SystemTrack {
     /// Local track indices, sorted.
     pub members: Vec<usize>,
-    pub samples: Vec<State6>,
+    pub samples: Vec<Sample>,
     /// False when no 3D radar sees the track (and the method is not mapping):
     /// the height is the nominal one and must not be trusted.
     pub altitude_known: bool,
@@ -116,6 +147,9 @@ pub struct Outcome {
     pub system_tracks: Vec<SystemTrack>,
     /// Groups that would hold two tracks of one radar (links dropped).
     pub conflicts: usize,
+    /// Wall time of this method (µs); the first method of
+    /// [`fuse_methods`] includes the local filters that all methods share.
+    pub compute_us: f64,
 }
 
 /// Filtered local track in its radar's coordinates.
@@ -133,6 +167,21 @@ pub fn fuse(
     method: Method,
     cfg: &Config,
 ) -> Result<Outcome, AlgoError> {
+    let mut out = fuse_methods(centre, radars, tracks, &[method], cfg)?;
+    Ok(out.remove(0))
+}
+
+/// Runs several methods over the scene; the local filters run once and the
+/// centre-frame estimates are shared by the methods that place 2D tracks
+/// alike (lifting and splitting).
+pub fn fuse_methods(
+    centre: &LocalFrame,
+    radars: &[Radar],
+    tracks: &[LocalTrack],
+    methods: &[Method],
+    cfg: &Config,
+) -> Result<Vec<Outcome>, AlgoError> {
+    let mut started = std::time::Instant::now();
     let filtered = tracks
         .iter()
         .map(|t| {
@@ -142,16 +191,94 @@ pub fn fuse(
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let sigma_h = match method {
-        Method::Mapping => MAPPING_ALTITUDE_SIGMA_M,
-        _ => cfg.altitude_sigma,
+    let centre_all = |sigma_h: f64| -> Result<Vec<Vec<State6>>, AlgoError> {
+        filtered
+            .iter()
+            .map(|f| {
+                f.est
+                    .iter()
+                    .map(|e| to_centre(centre, &radars[f.radar], e, cfg.preset_altitude, sigma_h))
+                    .collect()
+            })
+            .collect()
     };
-    let centred: Vec<Vec<State6>> = filtered
+    let mut mapped = None;
+    let mut lifted = None;
+    let mut outs = Vec::with_capacity(methods.len());
+    for &method in methods {
+        let centred: &Vec<Vec<State6>> = if method == Method::Mapping {
+            if mapped.is_none() {
+                mapped = Some(centre_all(MAPPING_ALTITUDE_SIGMA_M)?);
+            }
+            mapped.as_ref().expect("set above")
+        } else {
+            if lifted.is_none() {
+                lifted = Some(centre_all(cfg.altitude_sigma)?);
+            }
+            lifted.as_ref().expect("set above")
+        };
+        let mut out = fuse_one(centre, radars, tracks, &filtered, centred, method, cfg)?;
+        out.compute_us = started.elapsed().as_secs_f64() * 1e6;
+        started = std::time::Instant::now();
+        outs.push(out);
+    }
+    Ok(outs)
+}
+
+/// The test coordinates of a centred sample and the pieces of their
+/// covariance after an extrapolation by dt: z(dt) = z + dt·J v and
+/// J P_pos(dt) J' = c0 + dt c1 + dt² c2 + dt⁴ c4 (the position block P_pp + dt (P_pv + P_vp) + dt² (P_vv + V) + dt⁴ A/4 of
+/// an extrapolation, through J).
+struct TestPoint {
+    z: Vector3<f64>,
+    jv: Vector3<f64>,
+    c0: Matrix3<f64>,
+    c1: Matrix3<f64>,
+    c2: Matrix3<f64>,
+    c4: Matrix3<f64>,
+}
+
+impl TestPoint {
+    fn new(s: &State6, z: Vector3<f64>, jac: Matrix3<f64>) -> Self {
+        let block = |r: usize, c: usize| Matrix3::from_fn(|i, j| s.p[(2 * i + r, 2 * j + c)]);
+        let t = |m: Matrix3<f64>| jac * m * jac.transpose();
+        Self {
+            z,
+            jv: jac * Vector3::new(s.x[1], s.x[3], s.x[5]),
+            c0: t(block(0, 0)),
+            c1: t(block(0, 1) + block(1, 0)),
+            c2: t(block(1, 1) + s.velocity_jump),
+            c4: t(s.acceleration / 4.0),
+        }
+    }
+
+    fn at(&self, dt: f64) -> (Vector3<f64>, Matrix3<f64>) {
+        let dt2 = dt * dt;
+        (
+            self.z + self.jv * dt,
+            self.c0 + self.c1 * dt + self.c2 * dt2 + self.c4 * (dt2 * dt2),
+        )
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fuse_one(
+    centre: &LocalFrame,
+    radars: &[Radar],
+    tracks: &[LocalTrack],
+    filtered: &[Filtered],
+    centred: &[Vec<State6>],
+    method: Method,
+    cfg: &Config,
+) -> Result<Outcome, AlgoError> {
+    let points: Vec<Vec<TestPoint>> = centred
         .iter()
-        .map(|f| {
-            f.est
-                .iter()
-                .map(|e| to_centre(centre, &radars[f.radar], e, cfg.preset_altitude, sigma_h))
+        .map(|tr| {
+            tr.iter()
+                .map(|s| {
+                    geometry::test_space(centre, method, [s.x[0], s.x[2], s.x[4]])
+                        .map(|(_, z, jac)| TestPoint::new(s, z, jac))
+                })
                 .collect()
         })
         .collect::<Result<_, _>>()?;
@@ -165,7 +292,7 @@ pub fn fuse(
                 continue;
             }
             pairs.push(correlate_pair(
-                centre, radars, tracks, &centred, a, b, method, cfg,
+                radars, tracks, centred, &points, a, b, method, cfg,
             )?);
         }
     }
@@ -217,12 +344,23 @@ pub fn fuse(
     let system_tracks = groups
         .into_iter()
         .filter(|g| g.iter().any(|&i| !centred[i].is_empty()))
-        .map(|g| system_track(centre, radars, &filtered, &centred, g, method, cfg))
+        .map(|g| {
+            system_track(
+                centre,
+                radars,
+                filtered,
+                centred,
+                g,
+                method,
+                cfg.altitude_sigma,
+            )
+        })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Outcome {
         pairs,
         system_tracks,
         conflicts,
+        compute_us: 0.0,
     })
 }
 
@@ -292,6 +430,18 @@ fn filter_track(
     }
 }
 
+/// The 6 × 6 transform of an interleaved state whose positions and rates go
+/// through the same 3 × 3 Jacobian.
+fn interleave(jac: &Matrix3<f64>) -> Matrix6<f64> {
+    Matrix6::from_fn(|r, c| {
+        if r % 2 == c % 2 {
+            jac[(r / 2, c / 2)]
+        } else {
+            0.0
+        }
+    })
+}
+
 /// A local estimate as a centre-ENU state. 2D estimates `[ρ, ρ̇, θ, θ̇]` are
 /// placed at height `h` (σ_h) with level flight (climb σ `CLIMB_SIGMA_MPS`).
 fn to_centre(
@@ -301,101 +451,107 @@ fn to_centre(
     h: f64,
     sigma_h: f64,
 ) -> Result<State6, AlgoError> {
-    let (pos, jac, py) = if radar.three_d {
+    let mut y = Vector6::zeros();
+    let mut py = Matrix6::zeros();
+    let (pos, jac, acceleration, velocity_jump) = if radar.three_d {
         let pos = radar.frame.position_to(centre, [e.x[0], e.x[2], e.x[4]])?;
-        let m = radar.frame.rotation_to(centre);
-        let jac = DMatrix::from_fn(3, 3, |i, j| m[(i, j)]);
-        (pos, jac, e.p.clone())
+        let jac = radar.frame.rotation_to(centre);
+        py.copy_from(&e.p);
+        let a = Matrix3::from_fn(|i, j| e.acceleration[(i, j)]);
+        let v = Matrix3::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        (
+            pos,
+            jac,
+            jac * a * jac.transpose(),
+            jac * v * jac.transpose(),
+        )
     } else {
-        let at = |rho: f64, th: f64, hh: f64| -> Result<[f64; 3], AlgoError> {
-            centre.ecef_to_enu(geometry::plot_at_height(&radar.frame, rho, th, hh)?.0)
-        };
         let (rho, th) = (e.x[0], e.x[2]);
         // A slant range too short to reach the assumed height: the plot is
         // placed at the nearest reachable one, the site's height ± 0.9 ρ.
         let hs = radar.frame.origin_geodetic().2;
         let h = h.clamp(hs - 0.9 * rho, hs + 0.9 * rho);
-        let pos = at(rho, th, h)?;
-        let steps = [1.0, 1e-6, 1.0];
-        let jac = jacobian(
-            |y| at(y[0], y[1], y[2]).map(|p| p.to_vec()),
-            [rho, th, h],
-            steps,
-        )?;
-        let mut py = DMatrix::zeros(6, 6);
+        let (pos, jac) = geometry::place_2d(&radar.frame, centre, rho, th, h)?;
         py.view_mut((0, 0), (4, 4)).copy_from(&e.p);
         py[(4, 4)] = sigma_h * sigma_h;
         py[(5, 5)] = CLIMB_SIGMA_MPS * CLIMB_SIGMA_MPS;
-        (pos, jac, py)
+        // Range and azimuth accelerations through the cone; none in height.
+        let a = Matrix2::from_fn(|i, j| e.acceleration[(i, j)]);
+        let v = Matrix2::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        let j2 = jac.fixed_columns::<2>(0);
+        (pos, jac, j2 * a * j2.transpose(), j2 * v * j2.transpose())
     };
-    // Interleaved block transform: positions and rates through the same J.
-    let a = DMatrix::from_fn(6, 6, |r, c| {
-        if r % 2 == c % 2 {
-            jac[(r / 2, c / 2)]
-        } else {
-            0.0
-        }
-    });
-    let mut y = DVector::zeros(6);
     for i in 0..e.x.len() {
         y[i] = e.x[i];
     }
-    let v = &a * &y;
-    let x = DVector::from_vec(vec![pos[0], v[1], pos[1], v[3], pos[2], v[5]]);
-    let mut p = &a * py * a.transpose();
-    crate::algo::gaussian::symmetrize(&mut p);
-    Ok(State6 { t: e.t, x, p })
+    let a = interleave(&jac);
+    let v = a * y;
+    let x = Vector6::new(pos[0], v[1], pos[1], v[3], pos[2], v[5]);
+    let p = a * py * a.transpose();
+    Ok(State6 {
+        t: e.t,
+        x,
+        p: (p + p.transpose()) * 0.5,
+        acceleration,
+        velocity_jump,
+    })
+}
+
+/// The constant-velocity transition of the interleaved 6-state.
+fn transition6(dt: f64) -> Matrix6<f64> {
+    let mut f = Matrix6::identity();
+    for i in 0..3 {
+        f[(2 * i, 2 * i + 1)] = dt;
+    }
+    f
 }
 
 /// The estimate of a track at `t`: its latest at or before `t`, extrapolated
-/// (constant velocity, no process noise) when at most `max_gap` old.
+/// (constant velocity, with the filter's white acceleration) when at most
+/// `max_gap` old.
 fn at_time(track: &[State6], t: f64, max_gap: f64) -> Option<State6> {
     let k = track.partition_point(|s| s.t <= t);
     let s = track.get(k.checked_sub(1)?)?;
+    extrapolate(s, t, max_gap)
+}
+
+fn extrapolate(s: &State6, t: f64, max_gap: f64) -> Option<State6> {
     let dt = t - s.t;
     if dt > max_gap {
         return None;
     }
-    let f = alpha_beta::transition(3, dt);
+    let f = transition6(dt);
+    let q = alpha_beta::white_acceleration(dt);
+    let mut p = f * s.p * f.transpose();
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, v) = (s.acceleration[(i, j)], s.velocity_jump[(i, j)]);
+            p[(2 * i, 2 * j)] += a * q[0] + v * dt * dt;
+            p[(2 * i, 2 * j + 1)] += a * q[1] + v * dt;
+            p[(2 * i + 1, 2 * j)] += a * q[1] + v * dt;
+            p[(2 * i + 1, 2 * j + 1)] += a * q[2] + v;
+        }
+    }
     Some(State6 {
         t,
-        x: &f * &s.x,
-        p: &f * &s.p * f.transpose(),
+        x: f * s.x,
+        p,
+        acceleration: s.acceleration,
+        velocity_jump: s.velocity_jump,
     })
 }
 
-/// The test coordinates of a method and their Jacobian (rows × 6).
-fn test_space(
-    centre: &LocalFrame,
-    method: Method,
-    s: &State6,
-) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    let pos = [s.x[0], s.x[2], s.x[4]];
-    let g = |p: [f64; 3]| -> Result<Vec<f64>, AlgoError> {
-        let ecef = centre.enu_to_ecef(p)?;
-        Ok(match method {
-            Method::Mapping => p.to_vec(),
-            Method::Lifting => geometry::footprint(centre, ecef)?.to_vec(),
-            Method::Splitting => geometry::direction(centre, ecef)?.to_vec(),
-        })
-    };
-    let z = g(pos)?;
-    let m = z.len();
-    // Only the positions enter: the columns of the rates stay zero.
-    let j3 = jacobian(g, pos, [1.0; 3])?;
-    let mut jac = DMatrix::zeros(m, 6);
-    for k in 0..3 {
-        jac.set_column(2 * k, &j3.column(k));
-    }
-    Ok((DVector::from_vec(z), jac))
-}
-
+/// One pair of tracks through the modified K-NN. The test coordinates of
+/// every sample are computed once per method (`points`); the other track's
+/// at a test instant are its latest sample's moved by the Jacobian times the
+/// displacement (at most 1.5 scans of flight: the second-order term is
+/// metres against σ of hundreds).
 #[allow(clippy::too_many_arguments)]
 fn correlate_pair(
-    centre: &LocalFrame,
     radars: &[Radar],
     tracks: &[LocalTrack],
     centred: &[Vec<State6>],
+    points: &[Vec<TestPoint>],
     a: usize,
     b: usize,
     method: Method,
@@ -408,28 +564,38 @@ fn correlate_pair(
     } else {
         (b, a, 1.5 * ra.scan_period)
     };
+    let dim = if method == Method::Mapping { 3 } else { 2 };
+    let threshold = if dim == 3 { cfg.chi2_3 } else { cfg.chi2_2 };
     let mut state = PairState::new();
     let (mut sum, mut n) = (0.0, 0u32);
-    for s in &centred[driver] {
+    let (ot, op) = (&centred[other], &points[other]);
+    let (first, last) = (ot[0].t, ot[ot.len() - 1].t + gap);
+    for (s, sp) in centred[driver].iter().zip(&points[driver]) {
         if !state.wants_test() {
             break;
         }
-        let Some(o) = at_time(&centred[other], s.t, gap) else {
+        if s.t < first || s.t > last {
+            continue;
+        }
+        let k = ot.partition_point(|o| o.t <= s.t);
+        let Some(k) = k.checked_sub(1) else {
             continue;
         };
-        let (za, ja) = test_space(centre, method, s)?;
-        let (zb, jb) = test_space(centre, method, &o)?;
-        let d = za - zb;
-        let cov = &ja * &s.p * ja.transpose() + &jb * &o.p * jb.transpose();
-        let chol = cov
-            .clone()
-            .cholesky()
-            .ok_or(AlgoError::NotPositiveDefinite {
-                what: "pair difference covariance",
-            })?;
+        let dt = s.t - ot[k].t;
+        if dt > gap {
+            continue;
+        }
+        let (zb, cb) = op[k].at(dt);
+        let d = sp.z - zb;
+        let mut cov = sp.c0 + cb;
+        if dim == 2 {
+            cov[(2, 2)] = 1.0;
+        }
+        let chol = cov.cholesky().ok_or(AlgoError::NotPositiveDefinite {
+            what: "pair difference covariance",
+        })?;
         let stat = d.dot(&chol.solve(&d));
-        let hit = (0..d.len()).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
-        let threshold = if d.len() == 3 { cfg.chi2_3 } else { cfg.chi2_2 };
+        let hit = (0..dim).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
         state.step(cfg.knn, hit, stat <= threshold);
         sum += stat;
         n += 1;
@@ -442,21 +608,19 @@ fn correlate_pair(
     })
 }
 
-/// Central-difference Jacobian of `f` at `x` with steps `h`
-/// (rows: outputs, columns: the three inputs).
+/// Central-difference Jacobian of `f` at `x` with steps `h`.
 fn jacobian(
-    f: impl Fn([f64; 3]) -> Result<Vec<f64>, AlgoError>,
+    f: impl Fn([f64; 3]) -> Result<[f64; 3], AlgoError>,
     x: [f64; 3],
     h: [f64; 3],
-) -> Result<DMatrix<f64>, AlgoError> {
-    let m = f(x)?.len();
-    let mut jac = DMatrix::zeros(m, 3);
+) -> Result<Matrix3<f64>, AlgoError> {
+    let mut jac = Matrix3::zeros();
     for k in 0..3 {
         let (mut hi, mut lo) = (x, x);
         hi[k] += h[k];
         lo[k] -= h[k];
         let (a, b) = (f(hi)?, f(lo)?);
-        for i in 0..m {
+        for i in 0..3 {
             jac[(i, k)] = (a[i] - b[i]) / (2.0 * h[k]);
         }
     }
@@ -464,15 +628,31 @@ fn jacobian(
 }
 
 /// Independent estimates fused by Bar-Shalom–Campo with zero cross-covariance
-/// (the information-weighted mean).
-fn fuse_independent(members: &[State6]) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    let mut x = members[0].x.clone();
-    let mut p = members[0].p.clone();
-    let n = x.len();
-    for m in &members[1..] {
-        let f = bar_shalom_campo(&x, &p, &m.x, &m.p, &DMatrix::zeros(n, n))?;
-        x = f.x;
-        p = f.p;
+/// (the information-weighted mean): x = x₁ + P₁ (P₁ + P₂)⁻¹ (x₂ − x₁),
+/// P = P₁ − P₁ (P₁ + P₂)⁻¹ P₁, one member after the other.
+fn fuse_independent(members: &[State6]) -> Result<(Vector6<f64>, Matrix6<f64>), AlgoError> {
+    fuse_into(members[0].x, members[0].p, &members[1..])
+}
+
+/// [`fuse_independent`] of a fused estimate `(x, p)` followed by `members`.
+fn fuse_into(
+    mut x: Vector6<f64>,
+    mut p: Matrix6<f64>,
+    members: &[State6],
+) -> Result<(Vector6<f64>, Matrix6<f64>), AlgoError> {
+    for m in members {
+        let chol = (p + m.p).cholesky().ok_or(AlgoError::NotPositiveDefinite {
+            what: "P1 + P2 - P12 - P21",
+        })?;
+        let gain = chol.solve(&p).transpose();
+        x += gain * (m.x - x);
+        p -= gain * p;
+        p = (p + p.transpose()) * 0.5;
+    }
+    if x.iter().chain(p.iter()).any(|v| !v.is_finite()) {
+        return Err(AlgoError::NotPositiveDefinite {
+            what: "fused covariance",
+        });
     }
     Ok((x, p))
 }
@@ -484,7 +664,7 @@ fn system_track(
     centred: &[Vec<State6>],
     members: Vec<usize>,
     method: Method,
-    cfg: &Config,
+    altitude_sigma: f64,
 ) -> Result<SystemTrack, AlgoError> {
     let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
     let mut times: Vec<f64> = members
@@ -493,73 +673,129 @@ fn system_track(
         .collect();
     times.sort_by(f64::total_cmp);
     times.dedup();
-    let mut samples = Vec::with_capacity(times.len());
-    for t in times {
-        let gap = |i: usize| 1.5 * radars[filtered[i].radar].scan_period;
-        let three: Vec<State6> = members
-            .iter()
-            .filter(|&&i| radars[filtered[i].radar].three_d)
-            .filter_map(|&i| at_time(&centred[i], t, gap(i)))
-            .collect();
-        let mut all = three.clone();
-        // 2D members: under lifting and splitting, at the 3D tracks' height.
-        let lift = if method != Method::Mapping && !three.is_empty() {
-            let (x3, p3) = fuse_independent(&three)?;
-            let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
-            let (_, _, h) = ecef_to_geodetic(&centre.ellipsoid(), ecef)?;
-            Some((h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)))
-        } else {
-            None
-        };
-        for &i in members
-            .iter()
-            .filter(|&&i| !radars[filtered[i].radar].three_d)
-        {
-            let f = &filtered[i];
-            let k = f.est.partition_point(|e| e.t <= t);
-            let Some(e) = k.checked_sub(1).map(|k| &f.est[k]) else {
-                continue;
-            };
-            if t - e.t > gap(i) {
-                continue;
-            }
-            let (h, sh) = match (method, lift) {
-                (Method::Mapping, _) => (cfg.preset_altitude, MAPPING_ALTITUDE_SIGMA_M),
-                (_, Some(l)) => l,
-                (_, None) => (cfg.preset_altitude, cfg.altitude_sigma),
-            };
-            let s = to_centre(centre, &radars[f.radar], e, h, sh)?;
-            if let Some(s) = at_time(std::slice::from_ref(&s), t, gap(i)) {
-                all.push(s);
-            }
-        }
+    let gap = |i: usize| 1.5 * radars[filtered[i].radar].scan_period;
+    let (three_d, two_d): (Vec<usize>, Vec<usize>) = members
+        .iter()
+        .partition(|&&i| radars[filtered[i].radar].three_d);
+    let three_at = |t: f64, into: &mut Vec<State6>| {
+        into.clear();
+        into.extend(
+            three_d
+                .iter()
+                .filter_map(|&i| at_time(&centred[i], t, gap(i))),
+        );
+    };
+    // The fusion of the 3D members at every instant they cover, and the
+    // height they give there (t, h, σ_h).
+    let mut all: Vec<State6> = Vec::with_capacity(members.len());
+    let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
+    let mut heights: Vec<(f64, f64, f64)> = Vec::new();
+    for &t in &times {
+        three_at(t, &mut all);
         if all.is_empty() {
+            fused3.push(None);
             continue;
         }
-        let (mut x, mut p) = fuse_independent(&all)?;
-        if method == Method::Splitting && !three.is_empty() {
+        let (x3, p3) = fuse_independent(&all)?;
+        if method != Method::Mapping {
+            let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
+            let (_, _, h) = ecef_to_geodetic(&centre.ellipsoid(), ecef)?;
+            heights.push((t, h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)));
+        }
+        fused3.push(Some((x3, p3)));
+    }
+    let mut samples = Vec::with_capacity(times.len());
+    let mut next_height = 0;
+    for (&t, f3) in times.iter().zip(&fused3) {
+        all.clear();
+        while next_height + 1 < heights.len() && heights[next_height + 1].0 <= t {
+            next_height += 1;
+        }
+        // 2D members: under lifting and splitting, at the 3D tracks' height,
+        // now or at the nearest instant they gave one (`None`: as centred).
+        let nearest = [next_height, next_height + 1]
+            .into_iter()
+            .filter_map(|k| heights.get(k))
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
+        let (placement, altitude) = if method == Method::Mapping {
+            let alt = if f3.is_none() {
+                AltitudeSource::Assumed
+            } else {
+                AltitudeSource::Measured
+            };
+            (None, alt)
+        } else {
+            match nearest {
+                // The 3D members are fused in this sample too: the 2D
+                // members sit at their height but keep σ_h = altitude_sigma
+                // along the cone, or that height would count twice.
+                Some(&(t3, h, _)) if t3 == t => {
+                    (Some((h, altitude_sigma)), AltitudeSource::Measured)
+                }
+                Some(&(t3, h, sh)) => {
+                    let grown = (sh * sh + (CLIMB_SIGMA_MPS * (t - t3)).powi(2)).sqrt();
+                    (Some((h, grown)), AltitudeSource::Lifted)
+                }
+                None => (None, AltitudeSource::Assumed),
+            }
+        };
+        for &i in &two_d {
+            let f = &filtered[i];
+            let k = f.est.partition_point(|e| e.t <= t);
+            let Some(k) = k.checked_sub(1) else {
+                continue;
+            };
+            if t - f.est[k].t > gap(i) {
+                continue;
+            }
+            let s = match placement {
+                Some((h, sh)) => extrapolate(
+                    &to_centre(centre, &radars[f.radar], &f.est[k], h, sh)?,
+                    t,
+                    gap(i),
+                ),
+                None => extrapolate(&centred[i][k], t, gap(i)),
+            };
+            all.extend(s);
+        }
+        // The 3D members' fusion first, then the 2D members one by one (the
+        // order of `fuse_independent` over 3D then 2D members).
+        let (mut x, mut p) = match (f3, all.is_empty()) {
+            (None, true) => continue,
+            (None, false) => fuse_independent(&all)?,
+            (Some((x3, p3)), _) => fuse_into(*x3, *p3, &all)?,
+        };
+
+        if method == Method::Splitting && f3.is_some() {
             // Direction from every track, geocentric distance from 3D tracks.
-            let mut info_d = DMatrix::<f64>::zeros(2, 2);
-            let mut vec_d = DVector::<f64>::zeros(2);
+            let mut three = Vec::with_capacity(three_d.len());
+            three_at(t, &mut three);
+            let twos = std::mem::take(&mut all);
+            all.extend_from_slice(&three);
+            all.extend(twos);
+            let mut info_d = Matrix2::<f64>::zeros();
+            let mut vec_d = nalgebra::Vector2::<f64>::zeros();
             for s in &all {
-                let (z, j) = test_space(centre, Method::Splitting, s)?;
-                let c = &j * &s.p * j.transpose();
+                let (_, z, j) =
+                    geometry::test_space(centre, Method::Splitting, [s.x[0], s.x[2], s.x[4]])?;
+                let pos = Matrix3::from_fn(|i, k| s.p[(2 * i, 2 * k)]);
+                let j2 = j.fixed_rows::<2>(0);
+                let c = j2 * pos * j2.transpose();
                 let inv = c.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
                     what: "direction covariance",
                 })?;
-                vec_d += &inv * z;
+                vec_d += inv * z.fixed_rows::<2>(0);
                 info_d += inv;
             }
             let cd = info_d.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
                 what: "direction information",
             })?;
-            let d = &cd * vec_d;
+            let d = cd * vec_d;
             let (mut info_r, mut sum_r) = (0.0, 0.0);
             for s in &three {
-                let ecef = nalgebra::Vector3::from(centre.enu_to_ecef([s.x[0], s.x[2], s.x[4]])?);
+                let ecef = Vector3::from(centre.enu_to_ecef([s.x[0], s.x[2], s.x[4]])?);
                 let u = ecef / ecef.norm();
-                let rot = centre.rotation();
-                let u_enu = rot * u;
+                let u_enu = centre.rotation() * u;
                 let var = (0..3)
                     .map(|i| {
                         (0..3)
@@ -571,19 +807,15 @@ fn system_track(
                 sum_r += ecef.norm() / var;
             }
             let r = sum_r / info_r;
-            let pos = |dd: [f64; 2], rr: f64| -> Result<[f64; 3], AlgoError> {
-                centre.ecef_to_enu(geometry::from_direction(centre, dd, rr)?)
+            let pos = |y: [f64; 3]| -> Result<[f64; 3], AlgoError> {
+                centre.ecef_to_enu(geometry::from_direction(centre, [y[0], y[1]], y[2])?)
             };
-            let p0 = pos([d[0], d[1]], r)?;
-            let jac = jacobian(
-                |y| pos([y[0], y[1]], y[2]).map(|p| p.to_vec()),
-                [d[0], d[1], r],
-                [1.0; 3],
-            )?;
-            let mut cy = DMatrix::zeros(3, 3);
-            cy.view_mut((0, 0), (2, 2)).copy_from(&cd);
+            let p0 = pos([d[0], d[1], r])?;
+            let jac = jacobian(pos, [d[0], d[1], r], [1.0; 3])?;
+            let mut cy = Matrix3::zeros();
+            cy.fixed_view_mut::<2, 2>(0, 0).copy_from(&cd);
             cy[(2, 2)] = 1.0 / info_r;
-            let cp = &jac * cy * jac.transpose();
+            let cp = jac * cy * jac.transpose();
             for i in 0..3 {
                 x[2 * i] = p0[i];
                 for j in 0..3 {
@@ -592,9 +824,9 @@ fn system_track(
                     p[(2 * j + 1, 2 * i)] = 0.0;
                 }
             }
-            crate::algo::gaussian::symmetrize(&mut p);
+            p = (p + p.transpose()) * 0.5;
         }
-        samples.push(State6 { t, x, p });
+        samples.push(Sample { t, x, p, altitude });
     }
     Ok(SystemTrack {
         members,
