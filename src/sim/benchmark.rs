@@ -583,10 +583,17 @@ mod tests {
             assert!(o.right >= 100, "{method}: {o:?}");
             assert!(o.correlated - o.right <= 10, "{method}: {o:?}");
         }
-        // The same samples through the service decide the same pairs.
+        // The same samples through the service decide the same pairs, when
+        // the service aligns them as the prebuilt scene does: as reported
+        // at their instants (the default grid would also bring a track's
+        // previous report to an instant where its report was lost).
         let mut input = s.request.clone();
         input.method = Some(MethodInput {
             kind: Some("dependent_double_threshold".into()),
+            ..Default::default()
+        });
+        input.alignment = Some(crate::service::correlation::AlignmentInput {
+            mode: Some("nearest".into()),
             ..Default::default()
         });
         let out = crate::service::correlation::correlate(input).unwrap();
