@@ -171,6 +171,13 @@ impl utoipa::Modify for BearerAuth {
             if !path.starts_with("/v1/") {
                 continue;
             }
+            if let (Some(post), Some(example)) = (&mut item.post, request_example(path))
+                && let Some(utoipa::openapi::RefOr::T(body)) = &mut post.request_body
+                && let Some(utoipa::openapi::RefOr::T(content)) =
+                    body.content.get_mut("application/json")
+            {
+                content.example = Some(example);
+            }
             if let Some(post) = &mut item.post {
                 for (status, response) in &with_body {
                     add_response(&mut post.responses, status, response);
@@ -196,6 +203,31 @@ impl utoipa::Modify for BearerAuth {
             }
         }
     }
+}
+
+/// A working request for each POST operation ("Try it out" on the docs
+/// page sends it; a test posts each and expects success), the README's
+/// examples in full.
+fn request_example(path: &str) -> Option<serde_json::Value> {
+    let text = match path {
+        "/v1/correlation/rules/evaluate" => {
+            include_str!("../../openapi/examples/rules_evaluate.json")
+        }
+        "/v1/correlation/rules/recommend" => {
+            include_str!("../../openapi/examples/rules_recommend.json")
+        }
+        "/v1/correlation/tracks" => include_str!("../../openapi/examples/correlation_tracks.json"),
+        "/v1/ais-radar/associate" => {
+            include_str!("../../openapi/examples/ais_radar_associate.json")
+        }
+        "/v1/jpda/update" => include_str!("../../openapi/examples/jpda_update.json"),
+        "/v1/dimension/fuse" => include_str!("../../openapi/examples/dimension_fuse.json"),
+        "/v1/plot-fusion/track" => include_str!("../../openapi/examples/plot_fusion_track.json"),
+        "/v1/sessions" => include_str!("../../openapi/examples/sessions_create.json"),
+        "/v1/sessions/{id}/batches" => include_str!("../../openapi/examples/sessions_batch.json"),
+        _ => return None,
+    };
+    Some(serde_json::from_str(text).expect("the checked-in examples are JSON"))
 }
 
 /// Adds `response` under `status`; an operation's own response for that

@@ -66,6 +66,40 @@ async fn metrics_count_routes_and_grpc_methods() {
     );
 }
 
+/// Every POST operation's example request (what "Try it out" sends) works.
+#[tokio::test]
+async fn every_example_request_of_the_document_succeeds() {
+    let app = spawn_app().await;
+    let doc: serde_json::Value = app.get_ok("/openapi.json").await;
+    let example = |path: &str| -> serde_json::Value {
+        doc["paths"][path]["post"]["requestBody"]["content"]["application/json"]["example"].clone()
+    };
+    let mut posted = 0;
+    let mut session_id = None;
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        if item.get("post").is_none() || path.contains('{') {
+            continue;
+        }
+        let body = example(path);
+        assert!(body.is_object(), "{path} has no example request");
+        let r = app.post_json(path, &body).await;
+        let status = r.status();
+        let answer: serde_json::Value = r.json().await.unwrap();
+        assert!(status.is_success(), "{path}: {status} {answer}");
+        if path == "/v1/sessions" {
+            session_id = answer["id"].as_str().map(String::from);
+        }
+        posted += 1;
+    }
+    assert_eq!(posted, 8);
+    let id = session_id.expect("a session was created");
+    let batch = example("/v1/sessions/{id}/batches");
+    let r = app
+        .post_json(&format!("/v1/sessions/{id}/batches"), &batch)
+        .await;
+    assert_eq!(r.status(), 200);
+}
+
 #[tokio::test]
 async fn invented_methods_and_routes_fold_into_one_label_each() {
     let app = spawn_app().await;
