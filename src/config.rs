@@ -11,7 +11,12 @@ use crate::store::StoreSettings;
 /// The radar fusion service: track-to-track correlation, JPDA, dimension fusion
 /// and AIS–radar bias estimation over REST and gRPC.
 #[derive(Debug, Parser)]
-#[command(name = "radar-fusion", version, about)]
+#[command(
+    name = "radar-fusion",
+    version,
+    about,
+    args_conflicts_with_subcommands = true
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -21,8 +26,9 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Serve REST and gRPC (the default when no command is given).
-    Serve,
+    /// Serve REST and gRPC (the default when no command is given; the
+    /// server flags go before or after `serve`, not both).
+    Serve(Box<Settings>),
     /// Print the OpenAPI document the server serves at /openapi.json.
     Openapi,
     /// Probe a running server's /healthz and exit 0 when it answers 200
@@ -93,149 +99,81 @@ pub enum AccessLog {
 #[derive(Debug, Clone, Args)]
 pub struct Settings {
     /// Address of the REST server (it also answers gRPC on the same port).
-    #[arg(
-        long,
-        env = "FUSION_HTTP_ADDR",
-        default_value = "0.0.0.0:8080",
-        global = true
-    )]
+    #[arg(long, env = "FUSION_HTTP_ADDR", default_value = "0.0.0.0:8080")]
     pub http_addr: SocketAddr,
     /// Address of the dedicated gRPC server.
-    #[arg(
-        long,
-        env = "FUSION_GRPC_ADDR",
-        default_value = "0.0.0.0:50051",
-        global = true
-    )]
+    #[arg(long, env = "FUSION_GRPC_ADDR", default_value = "0.0.0.0:50051")]
     pub grpc_addr: SocketAddr,
     /// Log filter in `tracing` syntax (for example `info,radar_fusion=debug`).
-    #[arg(long, env = "FUSION_LOG", default_value = "info", global = true)]
+    #[arg(long, env = "FUSION_LOG", default_value = "info")]
     pub log: String,
     /// Log line format.
-    #[arg(
-        long,
-        env = "FUSION_LOG_FORMAT",
-        value_enum,
-        default_value = "text",
-        global = true
-    )]
+    #[arg(long, env = "FUSION_LOG_FORMAT", value_enum, default_value = "text")]
     pub log_format: LogFormat,
     /// Level of the access log (one line per request with status and
     /// latency). Internal errors (500) are logged at ERROR whatever this
     /// says; shed (503) and timed-out (504) requests are counted in
     /// `/metrics` and logged at DEBUG.
-    #[arg(
-        long,
-        env = "FUSION_ACCESS_LOG",
-        value_enum,
-        default_value = "debug",
-        global = true
-    )]
+    #[arg(long, env = "FUSION_ACCESS_LOG", value_enum, default_value = "debug")]
     pub access_log: AccessLog,
     /// Longest time a request may take before it is answered 504 / DEADLINE_EXCEEDED.
-    #[arg(
-        long,
-        env = "FUSION_REQUEST_TIMEOUT_S",
-        default_value_t = 30.0,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
     pub request_timeout_s: f64,
     /// Longest time a REST request's body may take to arrive once its
     /// headers have (408 after it); the request takes an in-flight slot
     /// only when its body is complete, so slow clients cannot hold slots.
-    #[arg(
-        long,
-        env = "FUSION_BODY_READ_TIMEOUT_S",
-        default_value_t = 10.0,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_BODY_READ_TIMEOUT_S", default_value_t = 10.0)]
     pub body_read_timeout_s: f64,
     /// Largest request body (REST) or message (gRPC) in bytes; larger ones get 413 / RESOURCE_EXHAUSTED.
-    #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024, global = true)]
+    #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
     /// Most API requests in flight at once over both transports; beyond it requests are
     /// shed at once with 503 / UNAVAILABLE instead of queueing.
-    #[arg(
-        long,
-        env = "FUSION_MAX_IN_FLIGHT",
-        default_value_t = 512,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_MAX_IN_FLIGHT", default_value_t = 512)]
     pub max_in_flight: usize,
     /// Longest time a graceful shutdown waits for in-flight requests.
-    #[arg(
-        long,
-        env = "FUSION_SHUTDOWN_GRACE_S",
-        default_value_t = 30.0,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,
     /// Where streaming sessions keep their state: `memory` (this process only)
     /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas).
-    #[arg(
-        long,
-        env = "FUSION_SESSION_STORE",
-        default_value = "memory",
-        global = true
-    )]
+    #[arg(long, env = "FUSION_SESSION_STORE", default_value = "memory")]
     pub session_store: String,
     /// Prefix of every Redis key of the session store.
     #[arg(
         long,
         env = "FUSION_SESSION_KEY_PREFIX",
-        default_value = "radar-fusion",
-        global = true
+        default_value = "radar-fusion"
     )]
     pub session_key_prefix: String,
     /// Most live sessions one tenant may hold at once.
-    #[arg(
-        long,
-        env = "FUSION_MAX_SESSIONS_PER_TENANT",
-        default_value_t = 100,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_MAX_SESSIONS_PER_TENANT", default_value_t = 100)]
     pub max_sessions_per_tenant: usize,
     /// Memory session store: most bytes of session state held in total.
-    #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES", default_value_t = 512 * 1024 * 1024, global = true)]
+    #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES", default_value_t = 512 * 1024 * 1024)]
     pub session_memory_bytes: usize,
     /// Decoded sessions kept in process in front of the store, bounded by
     /// their encoded size in bytes (0: none). A push to a session this
     /// replica wrote last then skips the read and the decode; the
     /// compare-and-set on the version still guards every write.
-    #[arg(long, env = "FUSION_SESSION_CACHE_BYTES", default_value_t = 256 * 1024 * 1024, global = true)]
+    #[arg(long, env = "FUSION_SESSION_CACHE_BYTES", default_value_t = 256 * 1024 * 1024)]
     pub session_cache_bytes: usize,
     /// Longest time one session-store (Redis) command may take before it fails.
-    #[arg(
-        long,
-        env = "FUSION_STORE_TIMEOUT_S",
-        default_value_t = 1.0,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_STORE_TIMEOUT_S", default_value_t = 1.0)]
     pub store_timeout_s: f64,
     /// Most live tracks one streaming session may hold.
-    #[arg(
-        long,
-        env = "FUSION_MAX_TRACKS_PER_SESSION",
-        default_value_t = 10_000,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_MAX_TRACKS_PER_SESSION", default_value_t = 10_000)]
     pub max_tracks_per_session: usize,
     /// Most track reports in one batch pushed to a session.
-    #[arg(
-        long,
-        env = "FUSION_MAX_BATCH_REPORTS",
-        default_value_t = 100_000,
-        global = true
-    )]
+    #[arg(long, env = "FUSION_MAX_BATCH_REPORTS", default_value_t = 100_000)]
     pub max_batch_reports: usize,
     /// API keys as comma-separated `key=tenant` pairs (key at least 8 characters,
     /// tenant `[A-Za-z0-9_-]{1,64}`). With no key configured anywhere the service
     /// is open and every request acts as tenant `default`.
-    #[arg(long, env = "FUSION_API_KEYS", hide_env_values = true, global = true)]
+    #[arg(long, env = "FUSION_API_KEYS", hide_env_values = true)]
     pub api_keys: Option<Secret>,
     /// A file of API keys, one `key=tenant` per line (`#` starts a comment);
     /// combined with `--api-keys`.
-    #[arg(long, env = "FUSION_API_KEYS_FILE", global = true)]
+    #[arg(long, env = "FUSION_API_KEYS_FILE")]
     pub api_keys_file: Option<PathBuf>,
 }
 

@@ -11,13 +11,16 @@ use radar_fusion::{
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command.unwrap_or(Command::Serve) {
+    match cli
+        .command
+        .unwrap_or_else(|| Command::Serve(Box::new(cli.settings)))
+    {
         Command::Openapi => print_ignoring_closed_pipe(&http::openapi_json()),
         Command::Healthcheck { addr } => healthcheck(addr).await,
         Command::Eval(args) => eval(args),
-        Command::Serve => {
-            telemetry::init_logging(&cli.settings.log, cli.settings.log_format);
-            let app = Application::build(cli.settings).await?;
+        Command::Serve(settings) => {
+            telemetry::init_logging(&settings.log, settings.log_format);
+            let app = Application::build(*settings).await?;
             app.run_until(shutdown_signal()).await
         }
     }

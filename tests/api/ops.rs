@@ -373,6 +373,20 @@ fn the_cli_survives_a_closed_pipe_and_names_the_address_it_probes() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(out.status.success(), "{stderr}");
+    // Each command lists its own flags: eval's help has no server flags,
+    // serve's has them; a server flag before a subcommand is refused.
+    let help = |args: &[&str]| {
+        let out = Command::new(bin).args(args).output().unwrap();
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    assert!(!help(&["eval", "--help"]).contains("--http-addr"));
+    assert!(help(&["serve", "--help"]).contains("--http-addr"));
+    let out = Command::new(bin)
+        .args(["--log", "warn", "eval", "--list"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
     // A probe of a port where nothing listens fails and says where it looked.
     let out = Command::new(bin)
         .args(["healthcheck", "--addr", "127.0.0.1:1"])
