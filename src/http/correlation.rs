@@ -60,17 +60,21 @@ pub struct CorrelationMethod {
     /// `weighted` or `modified`, for the baselines and double_threshold_assignment.
     pub statistic: Option<String>,
     /// Samples considered by the baselines (1 to 64; default 1, 5 for k-NN).
+    #[schema(minimum = 1, maximum = 64)]
     pub window: Option<u32>,
     /// k-NN: mutual nearest neighbours in at least k of the window (default 3).
+    #[schema(minimum = 1, maximum = 64)]
     pub k: Option<u32>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LrRule {
-    #[schema(example = 6)]
+    /// Second threshold L, 1 ≤ l ≤ r.
+    #[schema(example = 6, minimum = 1, maximum = 128)]
     pub l: u32,
-    #[schema(example = 8)]
+    /// Window R, 1 ≤ r ≤ 128.
+    #[schema(example = 8, minimum = 1, maximum = 128)]
     pub r: u32,
 }
 

@@ -26,12 +26,15 @@ pub struct DimensionFuseRequest {
     /// Local filter: `alpha_beta` (adaptive, default) or `kalman`.
     pub filter: Option<String>,
     /// Residual window N of the adaptive α-β filter, 3 to 5 (default 4).
+    #[schema(minimum = 3, maximum = 5)]
     pub window: Option<u32>,
     /// Kalman filter: white-noise acceleration σ (default 5 m/s²).
     pub sigma_a_mps2: Option<f64>,
-    /// Association tests N₀ (default 5).
+    /// Association tests N₀, 2 to 1000 (default 5).
+    #[schema(minimum = 2, maximum = 1000)]
     pub n0: Option<u32>,
     /// Hits K required among N₀, ⌈N₀/2⌉ ≤ K ≤ N₀ (default 3).
+    #[schema(minimum = 1, maximum = 1000)]
     pub k: Option<u32>,
     /// Mapping's preset altitude, and the nominal height of 2D tracks (default 5000 m).
     pub preset_altitude_m: Option<f64>,

@@ -25,6 +25,7 @@ pub struct JpdaUpdateRequest {
     #[schema(example = "exact")]
     pub method: Option<String>,
     /// Clusters with more tracks are computed by AMSJPDA (default 24, 1 to 128).
+    #[schema(minimum = 1, maximum = 128)]
     pub max_exact_cluster_tracks: Option<u32>,
     /// Predict every track over `dt_s` first (constant velocity, DWNA noise).
     pub prediction: Option<JpdaPrediction>,

@@ -123,6 +123,7 @@ pub struct PlotDeletion {
 #[serde(deny_unknown_fields)]
 pub struct TrackerOptions {
     /// 2 or 3 (default 3 when any radar is 3d, else 2).
+    #[schema(minimum = 2, maximum = 3)]
     pub dimensions: Option<u32>,
     /// `auto` (default: parallel when every radar gives Doppler), `parallel` or `serial`.
     #[schema(example = "auto")]
@@ -136,7 +137,8 @@ pub struct TrackerOptions {
     /// Plot-to-track association: `exact` JPDA (default), `amsjpda`,
     /// `global_nearest_neighbour` or `nearest_neighbour`.
     pub association: Option<String>,
-    /// Clusters with more tracks are computed by AMSJPDA (default 12).
+    /// Clusters with more tracks are computed by AMSJPDA (default 12, 1 to 128).
+    #[schema(minimum = 1, maximum = 128)]
     pub max_exact_cluster_tracks: Option<u32>,
     /// χ² gate probability of plot-to-plot association (default 0.99).
     pub plot_gate_probability: Option<f64>,

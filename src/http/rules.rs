@@ -66,7 +66,7 @@ pub struct RecommendRuleRequest {
     #[schema(example = 0.75)]
     pub min_l_over_r: Option<f64>,
     /// Largest window considered, 1 to 128; default 32.
-    #[schema(example = 32)]
+    #[schema(example = 32, minimum = 1, maximum = 128)]
     pub max_r: Option<u32>,
 }
 

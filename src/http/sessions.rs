@@ -72,6 +72,7 @@ pub struct CreateSessionRequest {
     pub retire_after_s: Option<f64>,
     /// Instants kept for the replay of pairs that enter the gate late
     /// (default 32, at most 1024).
+    #[schema(minimum = 1, maximum = 1024)]
     pub history_instants: Option<u32>,
     /// Plot-fusion sessions: the fusion centre (see the batch endpoint).
     pub origin: Option<GeoPoint>,

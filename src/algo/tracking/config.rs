@@ -320,8 +320,16 @@ impl TrackerConfig {
         positive("fusion_period", self.fusion_period)?;
         finite("fusion_epoch", self.fusion_epoch)?;
         non_negative("time_tolerance", self.time_tolerance)?;
-        if self.association.max_exact_tracks == 0 {
-            return Err(invalid("max_exact_tracks", "must be >= 1".into()));
+        // The JPDA endpoint's bound: exact enumeration beyond 128 tracks
+        // in one cluster would never finish.
+        if !(1..=128).contains(&self.association.max_exact_tracks) {
+            return Err(invalid(
+                "max_exact_tracks",
+                format!(
+                    "must lie in 1..=128, got {}",
+                    self.association.max_exact_tracks
+                ),
+            ));
         }
         open_probability("plot_gate_probability", self.plot_gate_probability)?;
         open_probability("track_gate_probability", self.track_gate_probability)?;
