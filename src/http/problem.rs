@@ -253,8 +253,28 @@ where
     }
 }
 
-/// Parses a JSON body, naming the field of a type error by its path.
+/// Parses a JSON body, naming the field of a type error by its path. Every
+/// request body of the API is a JSON object: other JSON (an array, which
+/// serde would otherwise read as the fields in declaration order, a number,
+/// a string, null) is a 422 on `body`, and text that is not JSON (a
+/// truncated `[1,2` included) a 400.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Problem> {
+    if let Some(&first) = bytes.iter().find(|b| !b.is_ascii_whitespace())
+        && first != b'{'
+    {
+        if let Err(e) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+            return Err(malformed(&e));
+        }
+        let message = "must be a JSON object ({ … }), not an array, a number, a string or null";
+        return Err(Problem::invalid(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            format!("body: {message}"),
+            vec![ProblemField {
+                field: "body".into(),
+                message: message.into(),
+            }],
+        ));
+    }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let value = serde_path_to_error::deserialize(&mut de).map_err(|err| {
         let path = err.path().to_string();
@@ -383,7 +403,22 @@ mod tests {
             problem(r#"{"alpha": 0.1, "rules": [], "beta": 1}"#).errors[0].field,
             "beta"
         );
-        assert_eq!(problem(r#"[1]"#).errors[0].field, "body");
+    }
+
+    #[test]
+    fn a_body_that_is_not_an_object_is_refused() {
+        // An array would otherwise fill the fields in declaration order
+        // ([0.1, []] is a valid Outer for serde).
+        for body in ["[0.1, []]", "[1]", "42", "\"x\"", "null"] {
+            let p = problem(body);
+            assert_eq!(p.status, 422, "{body}: {p:?}");
+            assert_eq!(p.errors[0].field, "body");
+            assert!(p.errors[0].message.contains("JSON object"), "{body}: {p:?}");
+        }
+        // A truncated array is malformed JSON, not a field `[0]` to blame.
+        let p = problem("  [1,2");
+        assert_eq!(p.status, 400, "{p:?}");
+        assert!(p.kind.ends_with("malformed-json"));
     }
 
     #[test]

@@ -407,8 +407,13 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     let prediction = input.prediction.as_ref().and_then(|p| {
         let dt = v.required("prediction.dt_s", p.dt_s);
         let sigma_a = v.required("prediction.sigma_a_mps2", p.sigma_a_mps2);
-        if dt.is_some_and(|dt| !dt.is_finite()) {
-            v.add("prediction.dt_s", "must be finite");
+        if dt.is_some_and(|dt| !(dt.is_finite() && dt >= 0.0)) {
+            // A negative step would predict backwards (retrodiction needs a
+            // smoother, not F(−dt) with process noise added).
+            v.add(
+                "prediction.dt_s",
+                "must be a finite number of seconds ≥ 0 (a prediction goes forward)",
+            );
         }
         let axes = if layout_names == CV_2D {
             Some(2)

@@ -331,3 +331,21 @@ async fn grpc_matrix_that_does_not_fill_rows_times_cols_is_named() {
         .collect();
     assert_eq!(fields, vec!["tracks[0].covariance"]);
 }
+
+/// Quirks found by an independent check: a JSON array in the fields'
+/// declaration order was accepted as a request, and a negative `dt_s`
+/// predicted backwards.
+#[tokio::test]
+async fn an_array_body_and_a_backward_prediction_are_refused() {
+    let app = spawn_app().await;
+    let req = scene("exact");
+    let array = Value::Array(req.as_object().unwrap().values().cloned().collect());
+    let body = assert_problem(app.post_json(PATH, &array).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["body"]);
+    let truncated = app.post_raw(PATH, "[1,2").await;
+    assert_problem(truncated, 400).await;
+    let mut backwards = scene("exact");
+    backwards["prediction"] = json!({"dt_s": -4.0, "sigma_a_mps2": 1.0});
+    let body = assert_problem(app.post_json(PATH, &backwards).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["prediction.dt_s"]);
+}
