@@ -440,6 +440,12 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
         v.add("radars", format!("at most {MAX_RADARS} radars per request"));
     }
     let n_tracks: usize = input.radars.iter().map(|r| r.tracks.len()).sum();
+    if n_tracks == 0 && !input.radars.is_empty() {
+        warnings.push(format!(
+            "none of the {} radar(s) holds a track: there is nothing to fuse",
+            input.radars.len()
+        ));
+    }
     if n_tracks > MAX_TRACKS {
         v.add(
             "radars",

@@ -158,6 +158,13 @@ pub fn update(input: JpdaInput) -> Result<JpdaOutput, ServiceError> {
         jpda::update(&mut tracks, &plan.scans, &plan.config).map_err(computation_error)?;
     let compute_us = micros_since(start);
     let mut warnings = Vec::new();
+    if plan.sensor_ids.is_empty() {
+        warnings.push(
+            "no sensors: no measurement updated the tracks (they are returned as given, or \
+             predicted when `prediction` is set)"
+                .to_string(),
+        );
+    }
     let sensors = reports
         .into_iter()
         .zip(&plan.sensor_ids)

@@ -282,3 +282,23 @@ async fn too_many_pair_samples_is_a_422_naming_radars() {
     let problem = assert_problem(app.post_json(PATH, &body).await, 422).await;
     assert_eq!(problem_fields(&problem), vec!["radars"]);
 }
+
+/// Radars that hold no tracks (a normal moment of a network) are answered,
+/// and the answer says there was nothing to fuse.
+#[tokio::test]
+async fn radars_without_tracks_are_said() {
+    let app = spawn_app().await;
+    let mut req = scene();
+    for r in req["radars"].as_array_mut().unwrap() {
+        r["tracks"] = json!([]);
+    }
+    let out: Value = app.post_ok(PATH, &req).await;
+    assert!(
+        out["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("holds a track")),
+        "{out}"
+    );
+}

@@ -349,3 +349,21 @@ async fn an_array_body_and_a_backward_prediction_are_refused() {
     let body = assert_problem(app.post_json(PATH, &backwards).await, 422).await;
     assert_eq!(problem_fields(&body), vec!["prediction.dt_s"]);
 }
+
+/// A scan without sensors is answered, and says that nothing updated the
+/// tracks.
+#[tokio::test]
+async fn no_sensors_is_said() {
+    let app = spawn_app().await;
+    let mut req = scene("exact");
+    req["sensors"] = json!([]);
+    let out: Value = app.post_ok(PATH, &req).await;
+    assert!(
+        out["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().starts_with("no sensors")),
+        "{out}"
+    );
+}
