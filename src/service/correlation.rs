@@ -1267,21 +1267,40 @@ pub(super) fn mode_name(m: AlignMode) -> &'static str {
     }
 }
 
-/// A track's samples in canonical order, with their update factors.
-fn estimates(track: &TrackInput, plan: &Plan) -> Vec<Estimate> {
-    let layout = &plan.layout;
-    track
-        .samples
-        .iter()
-        .map(|s| Estimate {
-            t: s.t.expect("validated"),
+impl Plan {
+    /// A reported sample (validated) at time `t` as an estimate in canonical
+    /// order, with its update factor I − K H when it carries a gain.
+    pub(super) fn estimate(&self, t: f64, s: &SampleInput) -> Estimate {
+        let layout = &self.layout;
+        Estimate {
+            t,
             x: layout.vector_to_canonical(&s.state),
             p: layout.matrix_to_canonical(&s.covariance),
-            factor: match (&s.gain, &plan.h) {
+            factor: match (&s.gain, &self.h) {
                 (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
                 _ => None,
             },
-        })
+        }
+    }
+
+    /// The model that brings samples to their instants: the alignment
+    /// model in the `predict` and `grid` modes; none (as reported) else.
+    pub(super) fn bring_model(&self) -> Option<&dyn MotionModel> {
+        match self.alignment {
+            AlignMode::Predict | AlignMode::Grid { .. } => {
+                self.align_model.as_ref().map(|m| m as &dyn MotionModel)
+            }
+            AlignMode::Nearest | AlignMode::Interpolate { .. } => None,
+        }
+    }
+}
+
+/// A track's samples in canonical order, with their update factors.
+fn estimates(track: &TrackInput, plan: &Plan) -> Vec<Estimate> {
+    track
+        .samples
+        .iter()
+        .map(|s| plan.estimate(s.t.expect("validated"), s))
         .collect()
 }
 
@@ -1313,12 +1332,7 @@ fn align(
 ) -> Result<(Scene, bool, Vec<String>, AlignmentReport), ServiceError> {
     let layout = &plan.layout;
     let dim = layout.dim;
-    let model: Option<&dyn MotionModel> = match plan.alignment {
-        AlignMode::Predict | AlignMode::Grid { .. } => {
-            plan.align_model.as_ref().map(|m| m as &dyn MotionModel)
-        }
-        _ => None,
-    };
+    let model = plan.bring_model();
     let est: Vec<Vec<Vec<Estimate>>> = input
         .nodes
         .iter()

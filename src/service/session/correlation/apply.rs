@@ -13,7 +13,7 @@ use super::{
 use crate::{
     algo::{
         correlation::{
-            align::{self, Estimate},
+            align,
             engine::{PairCorrelator, Side, Statistic},
         },
         motion::MotionModel,
@@ -254,20 +254,6 @@ const COVERAGE_MIN_INSTANTS: usize = 4;
 type Accepted<'a> = (usize, String, f64, &'a ReportInput);
 
 impl CorrelationSession {
-    /// A report as an estimate in canonical order.
-    fn estimate(&self, t: f64, r: &ReportInput) -> Estimate {
-        let layout = &self.plan.layout;
-        Estimate {
-            t,
-            x: layout.vector_to_canonical(&r.sample.state),
-            p: layout.matrix_to_canonical(&r.sample.covariance),
-            factor: match (&r.sample.gain, &self.plan.h) {
-                (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
-                _ => None,
-            },
-        }
-    }
-
     /// Marks the live tracks silent for longer than the retirement time at
     /// instant `k` (time `t_k`) for release.
     fn mark_silent(&mut self, k: usize, t_k: f64, retire_at: &mut Vec<(usize, usize, usize)>) {
@@ -302,7 +288,7 @@ impl CorrelationSession {
                 continue;
             }
             let slot = self.slot_for(node, &track);
-            let est = self.estimate(t, r);
+            let est = self.plan.estimate(t, &r.sample);
             self.pending.push(Pending { node, slot, est });
             self.reports_accepted += 1;
         }
@@ -397,7 +383,7 @@ impl CorrelationSession {
         let mut late = 0u64;
         for (node, track, t, r) in accepted {
             let slot = self.slot_for(node, &track);
-            let est = self.estimate(t, r);
+            let est = self.plan.estimate(t, &r.sample);
             let s = &mut self.slots[node][slot];
             if let Some(seen) = s.seen_t
                 && t > seen
@@ -439,19 +425,15 @@ impl CorrelationSession {
             .iter()
             .map(|iv| align::median_interval(&mut iv.clone()))
             .collect();
-        if self.grid_period.is_none() {
-            let (estimated, _) = correlation::grid_parameters(None, None, &node_periods);
-            if let Some(p) = estimated {
-                self.grid_period = Some(p);
-                warnings.push(format!(
-                    "grid alignment: the fusion period was estimated at {p} s (the longest scan \
-                     period of the nodes that have reported twice); give alignment.period_s to \
-                     fix it"
-                ));
-            }
-        }
-        let (_, bounds) =
+        let (grid, bounds) =
             correlation::grid_parameters(self.grid_period, max_staleness, &node_periods);
+        if let (None, Some(p)) = (self.grid_period, grid) {
+            self.grid_period = Some(p);
+            warnings.push(format!(
+                "grid alignment: the fusion period was estimated at {p} s (the longest scan \
+                 period of the nodes that have reported twice); give alignment.period_s to fix it"
+            ));
+        }
         let widest = bounds.iter().copied().fold(0.0, f64::max);
         let Some(period) = self.grid_period else {
             if !flush {
@@ -463,6 +445,7 @@ impl CorrelationSession {
                 return Ok(Vec::new());
             }
             // One instant at the latest report, as the batch endpoint does.
+            self.take_reports_upto(t_max);
             return self
                 .close_grid_instant(t_max, &bounds, retire_at)
                 .map(|_| vec![t_max]);
@@ -523,7 +506,8 @@ impl CorrelationSession {
         }
     }
 
-    /// Closes grid instant `t_k`: every live track whose latest report is
+    /// Closes grid instant `t_k` (the reports up to it already taken):
+    /// every live track whose latest report is
     /// within its node's staleness bound is brought to it.
     fn close_grid_instant(
         &mut self,
@@ -531,20 +515,20 @@ impl CorrelationSession {
         bounds: &[f64],
         retire_at: &mut Vec<(usize, usize, usize)>,
     ) -> Result<(), ServiceError> {
-        self.take_reports_upto(t_k);
         let k = self.scene.push_instant(t_k).map_err(internal)?;
         for (node, &bound) in bounds.iter().enumerate() {
             for slot in 0..self.slots[node].len() {
-                let s = &self.slots[node][slot];
-                let Some(est) = s.latest.as_ref().filter(|l| t_k - l.t <= bound) else {
-                    continue;
-                };
-                if s.id.is_empty() {
+                let s = &mut self.slots[node][slot];
+                if s.id.is_empty() || !s.latest.as_ref().is_some_and(|l| t_k - l.t <= bound) {
                     continue;
                 }
-                let (est, first_use) = (est.clone(), !s.used);
-                self.fill(k, node, slot, &est, first_use)?;
+                // Taken out for the fill (which needs the whole session)
+                // and put back: no copy of the estimate per instant.
+                let (est, first_use) = (s.latest.take().expect("checked"), !s.used);
+                let filled = self.fill(k, node, slot, &est, first_use);
                 let s = &mut self.slots[node][slot];
+                s.latest = Some(est);
+                filled?;
                 s.used = true;
                 s.last_t = Some(t_k);
             }

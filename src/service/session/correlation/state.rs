@@ -222,14 +222,7 @@ impl CorrelationSession {
     ) -> Result<bool, ServiceError> {
         let dim = self.plan.layout.dim;
         let t_k = self.scene.time(k);
-        let model: Option<&dyn MotionModel> = match self.plan.alignment {
-            AlignMode::Predict | AlignMode::Grid { .. } => self
-                .plan
-                .align_model
-                .as_ref()
-                .map(|m| m as &dyn MotionModel),
-            _ => None,
-        };
+        let model = self.plan.bring_model();
         let prev = self.scene.track(node, slot).previous(k);
         let track = self.scene.track_mut(node, slot);
         let placed = align::place(track, k, t_k, est, model, first_use)
