@@ -43,7 +43,7 @@ wait_port "$REDIS"
 
 printf '# loopback keys\nloopback-key-acme=acme\n' >"$WORK/api-keys"
 start_replica() { # name http grpc
-  FUSION_SESSION_STORE="redis://127.0.0.1:$REDIS/0" FUSION_API_KEYS_FILE="$WORK/api-keys" \
+  FUSION_SESSION_STORE="redis://127.0.0.1:$REDIS/0" FUSION_API_KEYS_FILE="$WORK/api-keys" FUSION_MAX_CONNECTIONS_PER_CLIENT=0 \
   FUSION_LOG=warn FUSION_HTTP_ADDR="127.0.0.1:$2" FUSION_GRPC_ADDR="127.0.0.1:$3" \
     "$BIN" serve >"$WORK/$1.log" 2>&1 &
   PIDS+=($!)

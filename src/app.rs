@@ -4,14 +4,13 @@
 use std::{future::Future, net::SocketAddr, time::Duration};
 
 use anyhow::Context;
-use axum::serve::ListenerExt;
 use tokio::{net::TcpListener, sync::watch};
 use tonic_health::{ServingStatus, server::HealthReporter};
 
 use crate::{
     auth::ApiKeys,
     config::Settings,
-    grpc, http,
+    grpc, http, serve,
     state::{AppState, Readiness, StoreHealth},
     store::SessionStore,
     telemetry,
@@ -127,30 +126,22 @@ impl Application {
         let stopped = |mut rx: watch::Receiver<bool>| async move {
             let _ = rx.wait_for(|stop| *stop).await;
         };
-        // Small HTTP/2 frames (headers, trailers, a stream's updates) must not
-        // wait for the peer's delayed ACK: without TCP_NODELAY a gRPC stream
-        // update of a few frames took 40 ms more (Nagle's algorithm).
-        let nodelay = |tcp: &mut tokio::net::TcpStream| {
-            if let Err(e) = tcp.set_nodelay(true) {
-                tracing::warn!(error = %e, "TCP_NODELAY could not be set");
-            }
-        };
-        let (http_listener, grpc_listener) =
-            (http_listener.tap_io(nodelay), grpc_listener.tap_io(nodelay));
+        let limits = state.settings().connection_limits();
         let access_log = state.settings().access_log;
-        let http_server = tokio::spawn(
-            axum::serve(http_listener, rest)
-                .with_graceful_shutdown(stopped(stop_rx.clone()))
-                .into_future(),
-        );
-        let grpc_server = tokio::spawn(
-            axum::serve(
-                grpc_listener,
-                telemetry::with_request_tracing(grpc, access_log),
-            )
-            .with_graceful_shutdown(stopped(stop_rx))
-            .into_future(),
-        );
+        let http_server = tokio::spawn(serve::serve(
+            http_listener,
+            rest,
+            limits,
+            "http",
+            stopped(stop_rx.clone()),
+        ));
+        let grpc_server = tokio::spawn(serve::serve(
+            grpc_listener,
+            telemetry::with_request_tracing(grpc, access_log),
+            limits,
+            "grpc",
+            stopped(stop_rx),
+        ));
 
         shutdown.await;
         tracing::info!("shutdown requested: draining in-flight requests");
@@ -163,8 +154,8 @@ impl Application {
         let grace = state.settings().shutdown_grace();
         let drained = tokio::time::timeout(grace, async {
             let (h, g) = tokio::join!(http_server, grpc_server);
-            h.context("REST server task")??;
-            g.context("gRPC server task")??;
+            h.context("REST server task")?;
+            g.context("gRPC server task")?;
             anyhow::Ok(())
         })
         .await;

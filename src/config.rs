@@ -124,6 +124,29 @@ pub struct Settings {
     /// only when its body is complete, so slow clients cannot hold slots.
     #[arg(long, env = "FUSION_BODY_READ_TIMEOUT_S", default_value_t = 10.0)]
     pub body_read_timeout_s: f64,
+    /// Longest time a new connection may take to begin a request, and an
+    /// HTTP/1 request to send its headers (also the idle limit of a kept-alive
+    /// HTTP/1 connection between requests); the connection is closed after it.
+    #[arg(long, env = "FUSION_HEADER_READ_TIMEOUT_S", default_value_t = 10.0)]
+    pub header_read_timeout_s: f64,
+    /// Most connections open at once per server (REST port, gRPC port);
+    /// beyond it new connections wait in the listen backlog.
+    #[arg(long, env = "FUSION_MAX_CONNECTIONS", default_value_t = 10_000)]
+    pub max_connections: usize,
+    /// Most connections open at once from one client IP address per server
+    /// (0: unbounded); beyond it a new connection is closed at once. Behind a
+    /// load balancer every connection comes from the balancer: raise it or
+    /// set 0 there, and bound clients at the balancer.
+    #[arg(
+        long,
+        env = "FUSION_MAX_CONNECTIONS_PER_CLIENT",
+        default_value_t = 1024
+    )]
+    pub max_connections_per_client: usize,
+    /// Interval of HTTP/2 keep-alive PINGs, and how long an answer may take
+    /// before the connection is closed as dead.
+    #[arg(long, env = "FUSION_H2_KEEPALIVE_S", default_value_t = 20.0)]
+    pub h2_keepalive_s: f64,
     /// Largest request body (REST) or message (gRPC) in bytes; larger ones get 413 / RESOURCE_EXHAUSTED.
     #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
@@ -232,6 +255,16 @@ impl Settings {
         Duration::from_secs_f64(self.body_read_timeout_s)
     }
 
+    /// The connection limits of both servers (`serve::serve`).
+    pub fn connection_limits(&self) -> crate::serve::ConnectionLimits {
+        crate::serve::ConnectionLimits {
+            header_read_timeout: Duration::from_secs_f64(self.header_read_timeout_s),
+            max_connections: self.max_connections,
+            max_per_client: self.max_connections_per_client,
+            h2_keepalive: Duration::from_secs_f64(self.h2_keepalive_s),
+        }
+    }
+
     pub fn shutdown_grace(&self) -> Duration {
         Duration::from_secs_f64(self.shutdown_grace_s)
     }
@@ -259,6 +292,11 @@ impl Settings {
         positive("request-timeout-s", self.request_timeout_s)?;
         positive("body-read-timeout-s", self.body_read_timeout_s)?;
         positive("shutdown-grace-s", self.shutdown_grace_s)?;
+        positive("header-read-timeout-s", self.header_read_timeout_s)?;
+        positive("h2-keepalive-s", self.h2_keepalive_s)?;
+        if self.max_connections == 0 {
+            return Err("--max-connections must be at least 1".into());
+        }
         if self.max_body_bytes < 1024 {
             return Err("--max-body-bytes must be at least 1024".into());
         }

@@ -11,6 +11,7 @@ pub mod config;
 pub mod grpc;
 pub mod http;
 pub mod proto;
+pub mod serve;
 pub mod service;
 pub mod sim;
 pub mod state;

@@ -18,7 +18,7 @@ use axum::{
     middleware::{self, Next},
     response::Response,
 };
-use tonic::{Code, Status, service::Routes};
+use tonic::{Code, Status, codec::CompressionEncoding, service::Routes};
 use tonic_health::server::HealthReporter;
 
 use crate::{
@@ -84,26 +84,26 @@ pub struct GrpcServices {
 /// Unknown services and methods answer UNIMPLEMENTED.
 pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::server::Error> {
     let limit = state.settings().max_body_bytes;
-    let correlation = CorrelationServiceServer::new(CorrelationGrpc)
-        .max_decoding_message_size(limit)
-        .max_encoding_message_size(usize::MAX);
-    let ais_radar = AisRadarServiceServer::new(AisRadarGrpc)
-        .max_decoding_message_size(limit)
-        .max_encoding_message_size(usize::MAX);
-    let jpda = JpdaServiceServer::new(JpdaGrpc)
-        .max_decoding_message_size(limit)
-        .max_encoding_message_size(usize::MAX);
-    let plot_fusion = PlotFusionServiceServer::new(PlotFusionGrpc)
-        .max_decoding_message_size(limit)
-        .max_encoding_message_size(usize::MAX);
-    let dimension = DimensionServiceServer::new(DimensionGrpc)
-        .max_decoding_message_size(limit)
-        .max_encoding_message_size(usize::MAX);
-    let sessions = SessionServiceServer::new(SessionGrpc {
+    // Every fusion service: messages up to the body limit (after
+    // decompression), `grpc-encoding: gzip` accepted, and responses sent
+    // gzip to clients whose `grpc-accept-encoding` names it.
+    macro_rules! configured {
+        ($server:expr) => {
+            $server
+                .max_decoding_message_size(limit)
+                .max_encoding_message_size(usize::MAX)
+                .accept_compressed(CompressionEncoding::Gzip)
+                .send_compressed(CompressionEncoding::Gzip)
+        };
+    }
+    let correlation = configured!(CorrelationServiceServer::new(CorrelationGrpc));
+    let ais_radar = configured!(AisRadarServiceServer::new(AisRadarGrpc));
+    let jpda = configured!(JpdaServiceServer::new(JpdaGrpc));
+    let plot_fusion = configured!(PlotFusionServiceServer::new(PlotFusionGrpc));
+    let dimension = configured!(DimensionServiceServer::new(DimensionGrpc));
+    let sessions = configured!(SessionServiceServer::new(SessionGrpc {
         state: state.clone(),
-    })
-    .max_decoding_message_size(limit)
-    .max_encoding_message_size(usize::MAX);
+    }));
     let (health, health_service) = tonic_health::server::health_reporter();
     let reflection_v1 = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(crate::proto::FILE_DESCRIPTOR_SET)
@@ -150,6 +150,14 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
     if is_health_or_reflection(req.uri().path()) {
         return next.run(req).await;
     }
+    let req = if is_streaming(req.uri().path()) {
+        req
+    } else {
+        match read_unary_body(&state, req).await {
+            Ok(req) => req,
+            Err(status) => return status.into_http(),
+        }
+    };
     let Some(_permit) = state.try_admit() else {
         metrics::counter!("requests_shed_total", "transport" => "grpc").increment(1);
         return Status::unavailable("too many requests in flight; retry shortly").into_http();
@@ -162,6 +170,40 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
             timeout.as_secs_f64()
         ))
         .into_http(),
+    }
+}
+
+/// The streaming methods: their body is the stream, read batch by batch
+/// (each batch takes its own in-flight slot, `sessions::stream_batch`).
+fn is_streaming(path: &str) -> bool {
+    path == "/radar.fusion.v1.SessionService/Stream"
+}
+
+/// Reads a unary call's whole body (its one message) within the body-read
+/// timeout and the message limit before the call takes an in-flight slot,
+/// as the REST side does: a client that sends its headers and then trickles
+/// or withholds its message holds no slot, and is answered DEADLINE_EXCEEDED.
+async fn read_unary_body(state: &AppState, req: Request) -> Result<Request, Status> {
+    let settings = state.settings();
+    // The 5-byte gRPC frame header (compression flag, length) rides on the
+    // message: a body over limit + 5 carries a message over the limit.
+    let limit = settings.max_body_bytes.saturating_add(5);
+    let (parts, body) = req.into_parts();
+    let read = axum::body::to_bytes(body, limit);
+    match tokio::time::timeout(settings.body_read_timeout(), read).await {
+        Ok(Ok(bytes)) => Ok(Request::from_parts(parts, axum::body::Body::from(bytes))),
+        Ok(Err(_)) => Err(Status::resource_exhausted(format!(
+            "the request message is too large: more than {} bytes (FUSION_MAX_BODY_BYTES), \
+             or the connection failed while it arrived",
+            settings.max_body_bytes
+        ))),
+        Err(_) => {
+            metrics::counter!("requests_slow_body_total").increment(1);
+            Err(Status::deadline_exceeded(format!(
+                "the request message did not arrive within {} s (FUSION_BODY_READ_TIMEOUT_S)",
+                settings.body_read_timeout().as_secs_f64()
+            )))
+        }
     }
 }
 
@@ -220,17 +262,29 @@ fn size_limit_is_resource_exhausted(response: Response) -> Response {
     Response::from_parts(parts, axum::body::Body::new(RemapTrailers(body)))
 }
 
+///
+/// A request message that does not decompress as its `grpc-encoding` says
+/// is the client's error, not INTERNAL as tonic answers it: INVALID_ARGUMENT.
 fn remap_size_status(headers: &mut axum::http::HeaderMap) {
-    let out_of_range = headers
-        .get("grpc-status")
-        .is_some_and(|v| v.as_bytes() == b"11");
+    let status = headers.get("grpc-status").map(|v| v.as_bytes().to_vec());
     // grpc-message is percent-encoded on the wire.
-    let contains = |m: &[u8], needle: &[u8]| m.windows(needle.len()).any(|w| w == needle);
-    let too_large = headers.get("grpc-message").is_some_and(|v| {
-        contains(v.as_bytes(), b"too large") || contains(v.as_bytes(), b"too%20large")
-    });
-    if out_of_range && too_large {
-        headers.insert("grpc-status", axum::http::HeaderValue::from_static("8"));
+    let contains = |needle: &str| {
+        headers.get("grpc-message").is_some_and(|v| {
+            let m = v.as_bytes();
+            let encoded = needle.replace(' ', "%20");
+            [needle.as_bytes(), encoded.as_bytes()]
+                .iter()
+                .any(|n| m.windows(n.len()).any(|w| w == *n))
+        })
+    };
+    match status.as_deref() {
+        Some(b"11") if contains("too large") => {
+            headers.insert("grpc-status", axum::http::HeaderValue::from_static("8"));
+        }
+        Some(b"13") if contains("Error decompressing") => {
+            headers.insert("grpc-status", axum::http::HeaderValue::from_static("3"));
+        }
+        _ => {}
     }
 }
 

@@ -49,7 +49,7 @@ pub struct CorrelationMethod {
     #[schema(example = "independent_double_threshold")]
     pub kind: String,
     /// Significance level α of the first threshold (eq. 14), in (0, 1); default 0.05.
-    #[schema(example = 0.05)]
+    #[schema(example = 0.05, exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub alpha: Option<f64>,
     /// Fixed L/R rule of the double-threshold methods; default 6/8.
     pub rule: Option<LrRule>,

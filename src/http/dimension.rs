@@ -42,7 +42,8 @@ pub struct DimensionFuseRequest {
     pub altitude_sigma_m: Option<f64>,
     /// Association-period hit: every component within this many σ (default 3).
     pub gate_sigmas: Option<f64>,
-    /// Significance α of the check period's χ² test (default 0.01).
+    /// Significance α of the check period's χ² test, in (0, 1) (default 0.01).
+    #[schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub significance: Option<f64>,
     pub radars: Vec<DimensionRadar>,
 }

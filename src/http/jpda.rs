@@ -72,9 +72,10 @@ pub struct JpdaSensor {
     /// Present for a 3D radar.
     pub sigma_elevation_deg: Option<f64>,
     /// P_D in (0, 1].
-    #[schema(example = 0.9)]
+    #[schema(example = 0.9, exclusive_minimum = 0.0, maximum = 1.0)]
     pub detection_probability: f64,
     /// P_G in (0, 1], default 0.99; or give `gate_threshold` (χ²) instead.
+    #[schema(exclusive_minimum = 0.0, maximum = 1.0)]
     pub gate_probability: Option<f64>,
     pub gate_threshold: Option<f64>,
     /// Clutter density λ per unit volume of the measurement space (m² for

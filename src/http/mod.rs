@@ -24,7 +24,9 @@ use axum::{
 };
 use serde::Serialize;
 use tower::ServiceExt;
-use tower_http::{compression::CompressionLayer, timeout::TimeoutLayer};
+use tower_http::{
+    compression::CompressionLayer, decompression::RequestDecompressionLayer, timeout::TimeoutLayer,
+};
 use utoipa::{OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
@@ -294,6 +296,9 @@ pub fn router(state: AppState, grpc: Router) -> Router {
             settings.request_timeout(),
         ))
         .layer(middleware::from_fn_with_state(state.clone(), admit))
+        // Outside `admit`, so the body limit applies to the decompressed
+        // body (a gzip bomb is a 413); another encoding is a 415.
+        .layer(RequestDecompressionLayer::new())
         .layer(middleware::from_fn_with_state(state.clone(), authenticate));
 
     let router = Router::new()
@@ -353,11 +358,7 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
     let read = axum::body::to_bytes(body, settings.max_body_bytes);
     let bytes = match tokio::time::timeout(settings.body_read_timeout(), read).await {
         Ok(Ok(bytes)) => bytes,
-        Ok(Err(_)) => {
-            // Over the limit (a chunked body found out while reading), or
-            // the connection failed mid-body.
-            return Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response();
-        }
+        Ok(Err(e)) => return body_error(&e),
         Err(_) => {
             metrics::counter!("requests_slow_body_total").increment(1);
             let mut response = Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response();
@@ -376,6 +377,41 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
             Problem::for_status(StatusCode::SERVICE_UNAVAILABLE).into_response()
         }
     }
+}
+
+/// The answer to a body that could not be read: over the limit (after
+/// decompression) is a 413; a `Content-Encoding: gzip` body that does not
+/// decompress a 400; anything else (the connection failed mid-body) a 400
+/// that nobody may read.
+fn body_error(e: &axum::Error) -> Response {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(err) = source {
+        if err.is::<http_body_util::LengthLimitError>() {
+            return Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response();
+        }
+        if let Some(io) = err.downcast_ref::<std::io::Error>()
+            && matches!(
+                io.kind(),
+                std::io::ErrorKind::InvalidData | std::io::ErrorKind::UnexpectedEof
+            )
+        {
+            return Problem::new(
+                StatusCode::BAD_REQUEST,
+                "malformed-body",
+                "Malformed body",
+                format!("the body does not decompress as its Content-Encoding says: {io}"),
+            )
+            .into_response();
+        }
+        source = err.source();
+    }
+    Problem::new(
+        StatusCode::BAD_REQUEST,
+        "malformed-body",
+        "Malformed body",
+        format!("the body could not be read: {e}"),
+    )
+    .into_response()
 }
 
 /// Hands requests with a gRPC content type to the gRPC router.

@@ -97,7 +97,8 @@ pub struct PlotInitiation {
     /// Per-axis band `[east, north(, up)]` instead of the speed band.
     pub v_min_axis_mps: Option<Vec<f64>>,
     pub v_max_axis_mps: Option<Vec<f64>>,
-    /// χ² gate probability of the initiation tests (default 0.99).
+    /// χ² gate probability of the initiation tests, in (0, 1) (default 0.99).
+    #[schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub gate_probability: Option<f64>,
     /// Shortest time from a root to its second plot (default 1 s).
     pub min_dt_s: Option<f64>,
@@ -140,9 +141,11 @@ pub struct TrackerOptions {
     /// Clusters with more tracks are computed by AMSJPDA (default 12, 1 to 128).
     #[schema(minimum = 1, maximum = 128)]
     pub max_exact_cluster_tracks: Option<u32>,
-    /// χ² gate probability of plot-to-plot association (default 0.99).
+    /// χ² gate probability of plot-to-plot association, in (0, 1) (default 0.99).
+    #[schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub plot_gate_probability: Option<f64>,
-    /// Gate probability P_G of plot-to-track association (default 0.99).
+    /// Gate probability P_G of plot-to-track association, in (0, 1) (default 0.99).
+    #[schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub track_gate_probability: Option<f64>,
     pub initiation: Option<PlotInitiation>,
     pub deletion: Option<PlotDeletion>,
@@ -168,7 +171,8 @@ pub struct TrackerOptions {
     pub sigma_tangential_speed_mps: Option<f64>,
     /// Two confirmed tracks updated by the same plot whose states differ by
     /// less than the χ² gate of this probability are one target: the
-    /// younger is deleted (counted in `merged`). Default 0.99; 0 disables.
+    /// younger is deleted (counted in `merged`). In [0, 1): default 0.99; 0 disables.
+    #[schema(minimum = 0.0, exclusive_maximum = 1.0)]
     pub duplicate_gate_probability: Option<f64>,
 }
 

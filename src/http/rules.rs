@@ -57,13 +57,13 @@ pub struct EvaluateRulesResponse {
 #[serde(deny_unknown_fields)]
 pub struct RecommendRuleRequest {
     /// Significance level α of the first threshold, in (0, 1).
-    #[schema(example = 0.05)]
+    #[schema(example = 0.05, exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub alpha: f64,
     /// Upper bound on the missed-correlation probability, in (0, 1).
-    #[schema(example = 0.01)]
+    #[schema(example = 0.01, exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub max_miss_probability: f64,
     /// Smallest acceptable l / r, in (0, 1]; default 0.75 (the paper's 3/4 and 6/8).
-    #[schema(example = 0.75)]
+    #[schema(example = 0.75, exclusive_minimum = 0.0, maximum = 1.0)]
     pub min_l_over_r: Option<f64>,
     /// Largest window considered, 1 to 128; default 32.
     #[schema(example = 32, minimum = 1, maximum = 128)]

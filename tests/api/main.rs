@@ -3,6 +3,8 @@
 
 mod ais_radar;
 mod auth;
+mod compression;
+mod connections;
 mod correlation;
 mod dimension;
 mod errors;

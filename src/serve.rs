@@ -1,0 +1,310 @@
+//! The accept loop of both servers: hyper's HTTP/1 and HTTP/2 (by the
+//! connection preface) over one router, with the connection limits that
+//! `axum::serve` cannot set.
+//!
+//! What it bounds, and why (issue 16, "slow clients lock everyone out"):
+//! - **Headers.** A connection must begin a request within
+//!   `header_read_timeout` of being accepted (or of its previous response,
+//!   on a kept-alive HTTP/1 connection), and an HTTP/1 request's headers must
+//!   be complete within it (hyper's header-read timer, which needs the timer
+//!   `axum::serve` never sets). Otherwise the connection is closed.
+//! - **Connections.** At most `max_connections` open at once (beyond it the
+//!   loop stops accepting, so new clients wait in the kernel's backlog
+//!   instead of being refused), and at most `max_per_client` from one IP
+//!   address (beyond it a new connection is closed at once, counted).
+//! - **Dead HTTP/2 peers.** A keep-alive PING every `h2_keepalive`; a peer
+//!   that does not answer within it is closed, so idle gRPC streams of
+//!   vanished clients do not hold connections.
+//!
+//! Bodies are bounded elsewhere: the REST router reads a body within its own
+//! timeout before a request takes an in-flight slot (`http::admit`), and so
+//! does the gRPC router for unary calls (`grpc::admit`).
+//!
+//! Graceful shutdown: when `shutdown` completes the loop stops accepting,
+//! every connection is asked to finish its requests in flight and close
+//! (HTTP/2 GOAWAY), and `serve` returns when all have closed.
+
+use std::{
+    collections::HashMap,
+    future::Future,
+    net::IpAddr,
+    sync::{Arc, Mutex},
+    time::Duration,
+};
+
+use axum::{Router, body::Body, extract::Request};
+use hyper::body::Incoming;
+use hyper_util::{
+    rt::{TokioExecutor, TokioIo, TokioTimer},
+    server::conn::auto::Builder,
+    service::TowerToHyperService,
+};
+use tokio::{
+    net::{TcpListener, TcpStream},
+    sync::{Semaphore, watch},
+};
+use tower::ServiceExt as _;
+
+/// The first bytes of every HTTP/2 connection (RFC 9113 §3.4).
+const H2_PREFACE: &[u8; 24] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n";
+
+/// The limits of one server's connections.
+#[derive(Debug, Clone, Copy)]
+pub struct ConnectionLimits {
+    /// Longest wait for a request to begin and (HTTP/1) for its headers.
+    pub header_read_timeout: Duration,
+    /// Most connections open at once.
+    pub max_connections: usize,
+    /// Most connections open at once from one IP address (0: unbounded).
+    pub max_per_client: usize,
+    /// HTTP/2 keep-alive PING interval and answer timeout.
+    pub h2_keepalive: Duration,
+}
+
+/// Serves `router` on `listener` under `limits` until `shutdown` completes,
+/// then drains (see the module documentation). `server` names the server
+/// in metrics and logs (`http`, `grpc`).
+pub async fn serve<F>(
+    listener: TcpListener,
+    router: Router,
+    limits: ConnectionLimits,
+    server: &'static str,
+    shutdown: F,
+) where
+    F: Future<Output = ()> + Send,
+{
+    let slots = Arc::new(Semaphore::new(limits.max_connections.max(1)));
+    let clients = ClientCounts::new(limits.max_per_client);
+    // `stop_tx` is dropped to ask every connection to close gracefully; each
+    // connection task holds a `closed_rx`, so `closed_tx.closed()` completes
+    // when the last one has ended.
+    let (stop_tx, stop_rx) = watch::channel(());
+    let (closed_tx, closed_rx) = watch::channel(());
+    let mut shutdown = std::pin::pin!(shutdown);
+    loop {
+        let slot = tokio::select! {
+            slot = slots.clone().acquire_owned() => slot.expect("the semaphore is never closed"),
+            () = &mut shutdown => break,
+        };
+        let (tcp, peer) = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok(accepted) => accepted,
+                Err(e) => {
+                    accept_error(server, &e).await;
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        let Some(client) = clients.try_enter(peer.ip()) else {
+            metrics::counter!("connections_refused_total", "server" => server, "reason" => "per_client")
+                .increment(1);
+            tracing::debug!(%peer, server, "connection refused: too many from this client (FUSION_MAX_CONNECTIONS_PER_CLIENT)");
+            drop(tcp);
+            continue;
+        };
+        if let Err(e) = tcp.set_nodelay(true) {
+            // Small HTTP/2 frames must not wait for the peer's delayed ACK
+            // (Nagle): without it a gRPC stream update took 40 ms more.
+            tracing::warn!(error = %e, "TCP_NODELAY could not be set");
+        }
+        let service = router
+            .clone()
+            .map_request(|req: Request<Incoming>| req.map(Body::new));
+        let mut stop_rx = stop_rx.clone();
+        let closed_rx = closed_rx.clone();
+        tokio::spawn(async move {
+            let _slot = slot;
+            let _client = client;
+            let _closed = closed_rx;
+            metrics::gauge!("connections_open", "server" => server).increment(1.0);
+            let _open = OpenGauge(server);
+            tokio::select! {
+                begun = request_begins(&tcp, limits.header_read_timeout) => if !begun {
+                    metrics::counter!("connections_timed_out_total", "server" => server, "phase" => "first_request")
+                        .increment(1);
+                    return;
+                },
+                // Stopping: a connection that has sent nothing is just closed.
+                _ = stop_rx.changed() => return,
+            }
+            let mut builder = Builder::new(TokioExecutor::new());
+            builder
+                .http1()
+                .timer(TokioTimer::new())
+                .header_read_timeout(limits.header_read_timeout);
+            builder
+                .http2()
+                .timer(TokioTimer::new())
+                .keep_alive_interval(limits.h2_keepalive)
+                .keep_alive_timeout(limits.h2_keepalive)
+                .enable_connect_protocol();
+            let conn = builder.serve_connection_with_upgrades(
+                TokioIo::new(tcp),
+                TowerToHyperService::new(service),
+            );
+            let mut conn = std::pin::pin!(conn);
+            let mut stopping = false;
+            loop {
+                tokio::select! {
+                    result = conn.as_mut() => {
+                        if let Err(e) = result {
+                            tracing::trace!(error = %e, server, "connection ended with an error");
+                        }
+                        break;
+                    }
+                    _ = stop_rx.changed(), if !stopping => {
+                        stopping = true;
+                        conn.as_mut().graceful_shutdown();
+                    }
+                }
+            }
+        });
+    }
+    drop(listener);
+    drop(stop_tx);
+    drop(closed_rx);
+    closed_tx.closed().await;
+}
+
+/// Waits until the connection has sent enough to tell HTTP/1 from HTTP/2
+/// (hyper then starts at once): a byte that differs from the HTTP/2
+/// preface, or the whole preface. False when the peer closes first or the
+/// timeout passes; the connection is then dropped.
+async fn request_begins(tcp: &TcpStream, timeout: Duration) -> bool {
+    let deadline = tokio::time::Instant::now() + timeout;
+    let mut buf = [0u8; H2_PREFACE.len()];
+    loop {
+        let Ok(Ok(n)) = tokio::time::timeout_at(deadline, tcp.peek(&mut buf)).await else {
+            return false;
+        };
+        if n == 0 {
+            return false;
+        }
+        if n == H2_PREFACE.len() || buf[..n] != H2_PREFACE[..n] {
+            return true;
+        }
+        // A part of the preface: `peek` would return the same bytes at
+        // once (so its timeout never fires), so wait a little before looking
+        // again, until the deadline.
+        if tokio::time::Instant::now() >= deadline {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// Accept errors: per-connection ones (the peer reset before we took it) are
+/// skipped; others (out of file descriptors) are logged and the loop waits
+/// a moment so that it does not spin.
+async fn accept_error(server: &'static str, e: &std::io::Error) {
+    use std::io::ErrorKind::*;
+    if matches!(
+        e.kind(),
+        ConnectionAborted | ConnectionReset | ConnectionRefused | Interrupted
+    ) {
+        return;
+    }
+    metrics::counter!("accept_errors_total", "server" => server).increment(1);
+    tracing::error!(error = %e, server, "accept failed; retrying in 100 ms");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+}
+
+/// Decrements the open-connections gauge when a connection task ends.
+struct OpenGauge(&'static str);
+
+impl Drop for OpenGauge {
+    fn drop(&mut self) {
+        metrics::gauge!("connections_open", "server" => self.0).decrement(1.0);
+    }
+}
+
+/// Open connections per client IP address, bounded.
+#[derive(Clone)]
+struct ClientCounts {
+    max: usize,
+    counts: Arc<Mutex<HashMap<IpAddr, usize>>>,
+}
+
+impl ClientCounts {
+    fn new(max: usize) -> Self {
+        Self {
+            max,
+            counts: Arc::default(),
+        }
+    }
+
+    /// Counts a new connection from `ip`, or None when it already holds
+    /// `max` (never None when `max` is 0).
+    fn try_enter(&self, ip: IpAddr) -> Option<ClientGuard> {
+        let ip = ip.to_canonical();
+        let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
+        let count = counts.entry(ip).or_insert(0);
+        if self.max > 0 && *count >= self.max {
+            return None;
+        }
+        *count += 1;
+        Some(ClientGuard {
+            ip,
+            counts: self.clone(),
+        })
+    }
+}
+
+/// One counted connection; uncounted when dropped.
+struct ClientGuard {
+    ip: IpAddr,
+    counts: ClientCounts,
+}
+
+impl Drop for ClientGuard {
+    fn drop(&mut self) {
+        let mut counts = self.counts.counts.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(count) = counts.get_mut(&self.ip) {
+            *count -= 1;
+            if *count == 0 {
+                counts.remove(&self.ip);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_client_counts_are_bounded_and_released() {
+        let counts = ClientCounts::new(2);
+        let a: IpAddr = "10.0.0.1".parse().unwrap();
+        let b: IpAddr = "10.0.0.2".parse().unwrap();
+        let first = counts.try_enter(a).expect("first of a");
+        let _second = counts.try_enter(a).expect("second of a");
+        assert!(counts.try_enter(a).is_none(), "a third from a is refused");
+        let _other = counts
+            .try_enter(b)
+            .expect("another client is counted apart");
+        drop(first);
+        assert!(counts.try_enter(a).is_some(), "a slot of a is free again");
+    }
+
+    #[test]
+    fn ipv4_mapped_addresses_count_as_their_ipv4_client() {
+        let counts = ClientCounts::new(1);
+        let _v4 = counts.try_enter("10.0.0.1".parse().unwrap()).unwrap();
+        assert!(
+            counts
+                .try_enter("::ffff:10.0.0.1".parse().unwrap())
+                .is_none(),
+            "the same client over an IPv6 socket"
+        );
+    }
+
+    #[test]
+    fn zero_means_unbounded() {
+        let counts = ClientCounts::new(0);
+        let ip: IpAddr = "10.0.0.1".parse().unwrap();
+        let guards: Vec<_> = (0..100).map(|_| counts.try_enter(ip).unwrap()).collect();
+        assert_eq!(guards.len(), 100);
+    }
+}
