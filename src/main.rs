@@ -8,6 +8,13 @@ use radar_fusion::{
     http, sim, telemetry,
 };
 
+/// mimalloc instead of glibc's malloc: a profile of the JPDA 500-target
+/// request put a third of the server's time in glibc's malloc, free and
+/// consolidation (many small vectors per request, freed across threads);
+/// docs/RESULTS.md ("Request path") has the figures before and after.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();

@@ -327,39 +327,37 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     let mut track_ids = Vec::with_capacity(tracks.capacity());
     let mut seen = std::collections::HashSet::new();
     for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
-        let f = format!("tracks[{i}]");
+        // Paths are formatted only for a violation: this loop runs per track.
+        let f = |rest: &str| format!("tracks[{i}].{rest}");
         match &t.id {
-            None => v.add(format!("{f}.id"), "is required"),
-            Some(id) if id.is_empty() => v.add(format!("{f}.id"), "must not be empty"),
+            None => v.add(f("id"), "is required"),
+            Some(id) if id.is_empty() => v.add(f("id"), "must not be empty"),
             Some(id) if !seen.insert(id.clone()) => {
-                v.add(format!("{f}.id"), format!("duplicate track id '{id}'"))
+                v.add(f("id"), format!("duplicate track id '{id}'"))
             }
             Some(_) => {}
         }
         track_ids.push(t.id.clone().unwrap_or_default());
         if t.state.is_empty() || t.state.len() > MAX_DIM {
-            v.add(
-                format!("{f}.state"),
-                format!("must have 1 to {MAX_DIM} components"),
-            );
+            v.add(f("state"), format!("must have 1 to {MAX_DIM} components"));
             continue;
         }
         if t.state.len() != n {
             v.add(
-                format!("{f}.state"),
+                f("state"),
                 format!("has {} components, tracks[0].state has {n}", t.state.len()),
             );
             continue;
         }
         if t.state.iter().any(|x| !x.is_finite()) {
-            v.add(format!("{f}.state"), "contains a non-finite value");
+            v.add(f("state"), "contains a non-finite value");
             continue;
         }
-        let Some(p) = matrix(&mut v, &format!("{f}.covariance"), &t.covariance, n, n) else {
+        let Some(p) = matrix(&mut v, || f("covariance"), &t.covariance, n, n) else {
             continue;
         };
         if let Err(e) = small::check_covariance("covariance", p.as_slice(), n) {
-            v.add(format!("{f}.covariance"), covariance_message(&e));
+            v.add(f("covariance"), covariance_message(&e));
             continue;
         }
         tracks.push(TrackEstimate {
@@ -535,11 +533,11 @@ fn sensor(
             }
             let h = h_rows
                 .filter(|_| (1..=MAX_DIM).contains(&m) && n > 0)
-                .and_then(|rows| matrix(v, &format!("{f}.h"), rows, m, n));
+                .and_then(|rows| matrix(v, || format!("{f}.h"), rows, m, n));
             let r = v
                 .required(&format!("{f}.r"), s.r.as_ref())
                 .filter(|_| (1..=MAX_DIM).contains(&m))
-                .and_then(|rows| matrix(v, &format!("{f}.r"), rows, m, m));
+                .and_then(|rows| matrix(v, || format!("{f}.r"), rows, m, m));
             if let Some(r) = &r
                 && let Err(e) = small::check_covariance("r", r.as_slice(), m)
             {
@@ -664,47 +662,45 @@ fn sensor(
     }
     let mut measurements = Vec::with_capacity(s.measurements.len());
     for (j, z) in s.measurements.iter().enumerate() {
-        let mf = format!("{f}.measurements[{j}]");
+        // Formatted only for a violation: this loop runs per measurement.
+        let mf = |rest: &str| format!("{f}.measurements[{j}].{rest}");
         match (&model, dim) {
             (Some(SensorModel::Linear { .. }), Some(dim)) => {
-                let Some(values) = v.required(&format!("{mf}.z"), z.z.as_ref()) else {
+                let Some(values) = v.required_at(z.z.as_ref(), || mf("z")) else {
                     continue;
                 };
                 if values.len() != dim {
                     v.add(
-                        format!("{mf}.z"),
+                        mf("z"),
                         format!("has {} components, h has {dim} rows", values.len()),
                     );
                 } else if values.iter().any(|x| !x.is_finite()) {
-                    v.add(format!("{mf}.z"), "contains a non-finite value");
+                    v.add(mf("z"), "contains a non-finite value");
                 } else {
                     measurements.push(DVector::from_vec(values.clone()));
                 }
             }
             (Some(SensorModel::Polar { .. }), Some(dim)) => {
-                let range = v.required(&format!("{mf}.range_m"), z.range_m);
-                let az = v.required(&format!("{mf}.azimuth_deg"), z.azimuth_deg);
+                let range = v.required(&mf("range_m"), z.range_m);
+                let az = v.required(&mf("azimuth_deg"), z.azimuth_deg);
                 if let Some(r) = range
                     && !(r >= 0.0 && r.is_finite())
                 {
-                    v.add(
-                        format!("{mf}.range_m"),
-                        format!("must be finite and ≥ 0, got {r}"),
-                    );
+                    v.add(mf("range_m"), format!("must be finite and ≥ 0, got {r}"));
                 }
                 if let Some(a) = az
                     && !a.is_finite()
                 {
-                    v.add(format!("{mf}.azimuth_deg"), "must be finite");
+                    v.add(mf("azimuth_deg"), "must be finite");
                 }
                 let el = match (dim, z.elevation_deg) {
                     (3, None) => {
-                        v.add(format!("{mf}.elevation_deg"), "is required for a 3D radar");
+                        v.add(mf("elevation_deg"), "is required for a 3D radar");
                         None
                     }
                     (3, Some(e)) if !(-90.0..=90.0).contains(&e) => {
                         v.add(
-                            format!("{mf}.elevation_deg"),
+                            mf("elevation_deg"),
                             format!("must lie in [-90, 90], got {e}"),
                         );
                         None
@@ -712,7 +708,7 @@ fn sensor(
                     (3, Some(e)) => Some(e),
                     (_, Some(_)) => {
                         v.add(
-                            format!("{mf}.elevation_deg"),
+                            mf("elevation_deg"),
                             "a 2D radar (no sigma_elevation_deg) gives no elevation",
                         );
                         None
@@ -749,17 +745,17 @@ fn sensor(
 /// Nested rows as an `rows × cols` matrix, or a violation naming `field`.
 fn matrix(
     v: &mut Violations,
-    field: &str,
+    field: impl Fn() -> String,
     rows: &[Vec<f64>],
     nrows: usize,
     ncols: usize,
 ) -> Option<DMatrix<f64>> {
     if rows.len() != nrows || rows.iter().any(|r| r.len() != ncols) {
-        v.add(field, format!("must be a {nrows} × {ncols} matrix"));
+        v.add(field(), format!("must be a {nrows} × {ncols} matrix"));
         return None;
     }
     if rows.iter().flatten().any(|x| !x.is_finite()) {
-        v.add(field, "contains a non-finite value");
+        v.add(field(), "contains a non-finite value");
         return None;
     }
     Some(DMatrix::from_row_iterator(

@@ -85,6 +85,19 @@ impl Violations {
         value
     }
 
+    /// As [`required`](Self::required), with the field path built only when
+    /// the value is missing (for loops over many elements).
+    pub fn required_at<T>(
+        &mut self,
+        value: Option<T>,
+        field: impl FnOnce() -> String,
+    ) -> Option<T> {
+        if value.is_none() {
+            self.add(field(), "is required");
+        }
+        value
+    }
+
     /// A required number in [lo, hi], or a recorded violation.
     pub fn number_in(&mut self, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
         let x = self.required(field, x)?;
