@@ -215,6 +215,8 @@ fn proto_request(req: &Value) -> pb::PlotFusionRequest {
                 scan_period_s: o(&r["scan_period_s"]),
                 p_detection: o(&r["p_detection"]),
                 clutter_density: o(&r["clutter_density"]),
+                sac: None,
+                sic: None,
             })
             .collect(),
         plots: req["plots"]
@@ -235,6 +237,7 @@ fn proto_request(req: &Value) -> pb::PlotFusionRequest {
             ..Default::default()
         }),
         history: false,
+        asterix: None,
     }
 }
 
