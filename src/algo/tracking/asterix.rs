@@ -36,10 +36,11 @@
 //! skipped by LEN. A LEN below 3 or beyond the data ends the decoding
 //! there (the block boundary is lost).
 //!
-//! Specifications: EUROCONTROL-SPEC-0149-4 (CAT048, edition 1.32) and
-//! -0149-2b (CAT034, edition 1.29); the UAPs are those of every edition
-//! since 1.15 (CAT048) and 1.27 (CAT034). Checked against libasterix's
-//! encoder and decoder (`checks/asterix_fixture.py`).
+//! UAPs: CAT048 edition 1.32 and CAT034 edition 1.29 (EUROCONTROL ASTERIX
+//! specifications), as libasterix's generated definitions give them;
+//! checked against libasterix's encoder and decoder
+//! (`checks/asterix_fixture.py`, `tests/api/asterix.rs`). Why not the
+//! `asterix` crate: README, "ASTERIX input".
 
 /// One nautical mile in metres (exact, by definition).
 pub const NM_M: f64 = 1852.0;
@@ -569,17 +570,15 @@ fn read_048(frn: usize, v: &[u8], t: &mut TargetReport) {
         8 => t.aircraft_address = Some(u24_at(v, 0)),
         11 => t.track_number = Some(u16_at(v, 0) & 0x0FFF),
         19 => t.height_m = Some(signed(u16_at(v, 0) as u32, 14) as f64 * 25.0 * FT_M),
-        20 => {
-            // Primary subfield bit 8: CAL present, right after the primary.
-            if v[0] & 0x80 != 0 {
-                let mut p = 1;
-                while v[p - 1] & 1 != 0 {
-                    p += 1;
-                }
-                let cal = u16_at(v, p);
-                t.doppler_doubtful = cal & 0x8000 != 0;
-                t.doppler_mps = Some(signed(cal as u32, 10) as f64);
+        // Primary subfield bit 8: CAL present, right after the primary.
+        20 if v[0] & 0x80 != 0 => {
+            let mut p = 1;
+            while v[p - 1] & 1 != 0 {
+                p += 1;
             }
+            let cal = u16_at(v, p);
+            t.doppler_doubtful = cal & 0x8000 != 0;
+            t.doppler_mps = Some(signed(cal as u32, 10) as f64);
         }
         _ => {}
     }
