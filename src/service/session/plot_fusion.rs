@@ -742,4 +742,47 @@ mod tests {
             other => panic!("{other:?}"),
         }
     }
+
+    #[test]
+    fn format_1_payloads_read_without_sac_sic_and_asterix_updates_round_trip() {
+        let mut with_sources = spec();
+        with_sources.radars[0].sac = Some(25);
+        with_sources.radars[0].sic = Some(1);
+        let session = PlotFusionSession::create(with_sources, &mut Vec::new()).unwrap();
+        let mut w = Writer::default();
+        session.encode(&mut w);
+        let back = PlotFusionSession::decode(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), Some(0));
+        // Format 1, as the release before ASTERIX wrote it: no SAC/SIC.
+        let mut old = Writer::default();
+        old.u8(1);
+        session.network.encode(&mut old);
+        old.bytes(&session.tracker.encode());
+        let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), None);
+        assert_eq!(back.network.radar_ids, session.network.radar_ids);
+        // An update with an ASTERIX summary round-trips; one without is
+        // encoded as before (bit 31 of frames clear).
+        let mut update = session.acknowledgement();
+        update.frames = 3;
+        let mut plain = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut plain);
+        assert_eq!(plain.buf[..4], 3u32.to_le_bytes());
+        update.asterix = Some(AsterixSummary {
+            bytes: 40,
+            records: 3,
+            late: 1,
+            late_offsets: vec![17],
+            first_t: Some(1.5),
+            errors: vec![crate::algo::tracking::asterix::DecodeError {
+                offset: 30,
+                reason: "cut".into(),
+            }],
+            ..Default::default()
+        });
+        let mut w = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut w);
+        let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back, update);
+    }
 }
