@@ -92,6 +92,8 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
                 scan_period_s: r.scan_period_s,
                 p_detection: r.p_detection,
                 clutter_density: r.clutter_density,
+                sac: None,
+                sic: None,
             })
             .collect(),
         tracker: None,
@@ -157,6 +159,7 @@ async fn main() -> anyhow::Result<()> {
         let input = svc::TrackInput {
             spec: spec.clone(),
             plots: plots.clone(),
+            asterix: None,
             history: false,
         };
         let wall = Instant::now();

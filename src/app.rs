@@ -113,6 +113,8 @@ impl Application {
                 false
             }
         };
+        // Bound (and its session created) before readiness is reported.
+        let asterix_udp = crate::asterix_udp::spawn(&state).await?;
         set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
@@ -148,6 +150,9 @@ impl Application {
         state.set_ready(false);
         monitor.abort();
         let _ = monitor.await;
+        if let Some(listener) = asterix_udp {
+            listener.abort();
+        }
         set_health(&health, false, false).await;
         let _ = stop_tx.send(true);
 

@@ -198,6 +198,31 @@ pub struct Settings {
     /// combined with `--api-keys`.
     #[arg(long, env = "FUSION_API_KEYS_FILE")]
     pub api_keys_file: Option<PathBuf>,
+    /// Listen for ASTERIX (CAT048/CAT034) UDP datagrams on this address and
+    /// feed them to a plot_fusion session (off by default). A multicast
+    /// group address (224.0.0.0/4, ff00::/8) is joined.
+    #[arg(long, env = "FUSION_ASTERIX_UDP")]
+    pub asterix_udp: Option<SocketAddr>,
+    /// The session the datagrams feed: the JSON body of a `plot_fusion`
+    /// create request (`POST /v1/sessions`), its radars with `sac`/`sic`.
+    /// Required with `--asterix-udp`; the session is created (again) when
+    /// it does not exist.
+    #[arg(long, env = "FUSION_ASTERIX_SESSION_SPEC")]
+    pub asterix_session_spec: Option<PathBuf>,
+    /// Id of that session (32 hex digits).
+    #[arg(
+        long,
+        env = "FUSION_ASTERIX_SESSION_ID",
+        default_value = "00000000000000000000000000000048"
+    )]
+    pub asterix_session_id: String,
+    /// Tenant of that session.
+    #[arg(long, env = "FUSION_ASTERIX_TENANT", default_value = "default")]
+    pub asterix_tenant: String,
+    /// IPv4 interface address that joins an IPv4 multicast group (0.0.0.0:
+    /// the system's choice).
+    #[arg(long, env = "FUSION_ASTERIX_INTERFACE", default_value = "0.0.0.0")]
+    pub asterix_interface: std::net::Ipv4Addr,
 }
 
 /// A setting that must not appear in logs: `Debug` prints `***`.
@@ -322,6 +347,18 @@ impl Settings {
         }
         if self.max_sessions_per_tenant == 0 {
             return Err("--max-sessions-per-tenant must be at least 1".into());
+        }
+        if self.asterix_udp.is_some() && self.asterix_session_spec.is_none() {
+            return Err(
+                "--asterix-udp needs --asterix-session-spec (the plot_fusion session to feed)"
+                    .into(),
+            );
+        }
+        let id = &self.asterix_session_id;
+        if !(id.len() == 32 && id.bytes().all(|b| b.is_ascii_hexdigit())) {
+            return Err(format!(
+                "--asterix-session-id must be 32 hex digits, not {id:?}"
+            ));
         }
         Ok(())
     }

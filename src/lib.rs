@@ -6,6 +6,7 @@
 
 pub mod algo;
 pub mod app;
+pub mod asterix_udp;
 pub mod auth;
 pub mod config;
 pub mod grpc;

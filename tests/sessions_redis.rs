@@ -210,6 +210,7 @@ fn pb_batch(id: &str, body: &Value) -> pb::PushBatchRequest {
             .unwrap_or_default(),
         flush: body["flush"].as_bool().unwrap_or(false),
         plots: Vec::new(),
+        asterix: None,
     }
 }
 

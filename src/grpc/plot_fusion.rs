@@ -23,6 +23,7 @@ impl PlotFusionService for PlotFusionGrpc {
         let input = svc::TrackInput {
             spec: spec_in(req.origin, req.radars, req.tracker),
             plots: plots_in(req.plots),
+            asterix: req.asterix.map(asterix_in),
             history: req.history,
         };
         let out = service::offload(move || svc::track(input))
@@ -43,6 +44,7 @@ impl PlotFusionService for PlotFusionGrpc {
                 })
                 .collect(),
             counters: Some(counters_out(out.counters)),
+            asterix: out.asterix.map(asterix_out),
             timing: Some(pb::Timing {
                 compute_us: out.compute_us,
             }),
@@ -90,6 +92,8 @@ pub(crate) fn spec_in(
                 scan_period_s: r.scan_period_s,
                 p_detection: r.p_detection,
                 clutter_density: r.clutter_density,
+                sac: r.sac,
+                sic: r.sic,
             })
             .collect(),
         tracker: svc::TrackerInput {
@@ -142,6 +146,46 @@ pub(crate) fn plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
             radial_velocity_mps: p.radial_velocity_mps,
         })
         .collect()
+}
+
+pub(crate) fn asterix_in(a: pb::AsterixData) -> svc::asterix::AsterixInput {
+    svc::asterix::AsterixInput {
+        data: a.data,
+        date: a.date,
+        day_start_t: a.day_start_t,
+        reference_t: None,
+    }
+}
+
+pub(crate) fn asterix_out(s: svc::asterix::AsterixSummary) -> pb::AsterixSummary {
+    let n = |x: usize| x as u64;
+    pb::AsterixSummary {
+        bytes: n(s.bytes),
+        blocks: n(s.blocks),
+        records: n(s.records),
+        target_reports: n(s.target_reports),
+        plots: n(s.plots),
+        north_markers: n(s.north_markers),
+        sector_crossings: n(s.sector_crossings),
+        other_service_messages: n(s.other_service_messages),
+        unmapped: n(s.unmapped),
+        test_targets: n(s.test_targets),
+        incomplete: n(s.incomplete),
+        rejected: n(s.rejected),
+        late: n(s.late),
+        late_offsets: s.late_offsets.into_iter().map(n).collect(),
+        first_t: s.first_t,
+        last_t: s.last_t,
+        errors: s
+            .errors
+            .into_iter()
+            .map(|e| pb::AsterixError {
+                offset: n(e.offset),
+                reason: e.reason,
+            })
+            .collect(),
+        errors_not_listed: n(s.errors_not_listed),
+    }
 }
 
 pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {

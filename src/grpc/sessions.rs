@@ -11,7 +11,9 @@ use tonic::{Code, Request, Response, Status, Streaming};
 use super::{
     correlation::{correlate_input, finite, pair_result, system_track, track_ref},
     error::to_status,
-    plot_fusion::{counters_out, plots_in, spec_in as plot_spec_in, track_out},
+    plot_fusion::{
+        asterix_in, asterix_out, counters_out, plots_in, spec_in as plot_spec_in, track_out,
+    },
     rows,
 };
 use crate::{
@@ -162,6 +164,7 @@ fn plot_batch_in(req: pb::PushBatchRequest) -> Batch<pf::BatchInput> {
         sequence: req.sequence,
         body: pf::BatchInput {
             plots: plots_in(req.plots),
+            asterix: req.asterix.map(asterix_in),
             flush: req.flush,
         },
     }
@@ -189,6 +192,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             deleted: b.deleted.into_iter().map(track_out).collect(),
             dropped: b.dropped,
             counters: Some(counters_out(b.counters)),
+            asterix: b.asterix.map(asterix_out),
         }),
         warnings: u.warnings,
         ..Default::default()
@@ -342,7 +346,10 @@ async fn push(
     let limits = state.settings().session_limits();
     let sessions = state.sessions();
     // The batch's items say its kind; an empty batch asks the stored session.
-    let kind = match (req.reports.is_empty(), req.plots.is_empty()) {
+    let kind = match (
+        req.reports.is_empty(),
+        req.plots.is_empty() && req.asterix.is_none(),
+    ) {
         (false, false) => {
             return Err(Violations::single(
                 "plots",

@@ -63,6 +63,12 @@ pub struct PlotRadar {
     pub p_detection: Option<f64>,
     /// False plots per m·rad (2D) or m·rad² (3D), default 1e-7.
     pub clutter_density: Option<f64>,
+    /// ASTERIX System Area Code (I048/010) of the radar's records; with `sic`.
+    #[schema(maximum = 255, example = 25)]
+    pub sac: Option<u32>,
+    /// ASTERIX System Identification Code; with `sac`.
+    #[schema(maximum = 255, example = 1)]
+    pub sic: Option<u32>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -176,6 +182,124 @@ pub struct TrackerOptions {
     pub duplicate_gate_probability: Option<f64>,
 }
 
+/// Raw ASTERIX (CAT048 target reports, CAT034 north markers and sector
+/// crossings), as a radar sends it. Each radar's records are those of its
+/// `sac`/`sic`. Times of day are seconds since midnight UTC: the first
+/// record is on `date` (or the day starting at `day_start_t`), every later
+/// one at the instant nearest the record before it (so 23:59:59 then
+/// 00:00:01 rolls to the next day).
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AsterixIn {
+    /// The data blocks, base64 (RFC 4648, with or without padding).
+    #[schema(example = "IgAU6BkBAQAAAAUA8BkBAgACgIA=")]
+    pub data: String,
+    /// UTC date of the first record, `YYYY-MM-DD` (times are then Unix seconds).
+    #[schema(example = "2026-12-02")]
+    pub date: Option<String>,
+    /// Instead of `date`: the start of the first record's day in the
+    /// request's own time scale (s).
+    pub day_start_t: Option<f64>,
+}
+
+/// An ASTERIX record that could not be decoded or used.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AsterixError {
+    /// Byte offset in the data.
+    pub offset: usize,
+    pub reason: String,
+}
+
+/// What the ASTERIX input gave.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct AsterixSummary {
+    pub bytes: usize,
+    /// Data blocks read (of any category).
+    pub blocks: usize,
+    /// CAT048 and CAT034 records decoded.
+    pub records: usize,
+    pub target_reports: usize,
+    /// Target reports used as plots.
+    pub plots: usize,
+    pub north_markers: usize,
+    pub sector_crossings: usize,
+    pub other_service_messages: usize,
+    /// Target reports of a SAC/SIC no radar declares (skipped).
+    pub unmapped: usize,
+    /// Test targets (I048/020 TST), skipped.
+    pub test_targets: usize,
+    /// Without I048/010, /140 or /040, or from a 3D radar without /110 (skipped).
+    pub incomplete: usize,
+    /// Refused by the plot checks (listed in `errors`).
+    pub rejected: usize,
+    /// Sessions: plots older than the last processed frame, dropped.
+    pub late: usize,
+    /// Their records' offsets.
+    pub late_offsets: Vec<usize>,
+    /// Time of the first and last plot (after the date and roll-over).
+    pub first_t: Option<f64>,
+    pub last_t: Option<f64>,
+    /// Decoding errors and refused records, by offset (at most 100; a bad
+    /// record loses the rest of its data block; decoding goes on at the next).
+    pub errors: Vec<AsterixError>,
+    /// Errors beyond the 100 listed.
+    pub errors_not_listed: usize,
+}
+
+pub(crate) fn asterix_in(
+    a: Option<AsterixIn>,
+) -> Result<Option<svc::asterix::AsterixInput>, Problem> {
+    use base64::Engine as _;
+    let Some(a) = a else { return Ok(None) };
+    let engine = base64::engine::GeneralPurpose::new(
+        &base64::alphabet::STANDARD,
+        base64::engine::GeneralPurposeConfig::new()
+            .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent),
+    );
+    let data = engine.decode(a.data.trim()).map_err(|e| {
+        Problem::from(service::Violations::single(
+            "asterix.data",
+            format!("is not base64: {e}"),
+        ))
+    })?;
+    Ok(Some(svc::asterix::AsterixInput {
+        data,
+        date: a.date,
+        day_start_t: a.day_start_t,
+        reference_t: None,
+    }))
+}
+
+pub(crate) fn asterix_out(s: svc::asterix::AsterixSummary) -> AsterixSummary {
+    AsterixSummary {
+        bytes: s.bytes,
+        blocks: s.blocks,
+        records: s.records,
+        target_reports: s.target_reports,
+        plots: s.plots,
+        north_markers: s.north_markers,
+        sector_crossings: s.sector_crossings,
+        other_service_messages: s.other_service_messages,
+        unmapped: s.unmapped,
+        test_targets: s.test_targets,
+        incomplete: s.incomplete,
+        rejected: s.rejected,
+        late: s.late,
+        late_offsets: s.late_offsets,
+        first_t: s.first_t,
+        last_t: s.last_t,
+        errors: s
+            .errors
+            .into_iter()
+            .map(|e| AsterixError {
+                offset: e.offset,
+                reason: e.reason,
+            })
+            .collect(),
+        errors_not_listed: s.errors_not_listed,
+    }
+}
+
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlotFusionRequest {
@@ -184,7 +308,10 @@ pub struct PlotFusionRequest {
     pub origin: Option<GeoPoint>,
     pub radars: Vec<PlotRadar>,
     /// In any order; the service sorts them by time.
+    #[serde(default)]
     pub plots: Vec<PlotIn>,
+    /// Raw ASTERIX beside (or instead of) `plots`.
+    pub asterix: Option<AsterixIn>,
     pub tracker: Option<TrackerOptions>,
     /// Also return the confirmed tracks after every processing instant.
     #[serde(default)]
@@ -257,6 +384,9 @@ pub struct PlotFusionResponse {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub history: Option<Vec<TrackHistoryEntry>>,
     pub counters: TrackerCounters,
+    /// Present when the request had `asterix`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub asterix: Option<AsterixSummary>,
     pub timing: Timing,
     pub warnings: Vec<String>,
 }
@@ -291,6 +421,8 @@ pub(crate) fn spec_in(
                 scan_period_s: r.scan_period_s,
                 p_detection: r.p_detection,
                 clutter_density: r.clutter_density,
+                sac: r.sac,
+                sic: r.sic,
             })
             .collect(),
         tracker: svc::TrackerInput {
@@ -408,6 +540,7 @@ pub async fn track(
     let input = svc::TrackInput {
         spec: spec_in(req.origin, req.radars, req.tracker),
         plots: plots_in(req.plots),
+        asterix: asterix_in(req.asterix)?,
         history: req.history,
     };
     let out = service::offload(move || svc::track(input)).await?;
@@ -425,6 +558,7 @@ pub async fn track(
                 .collect()
         }),
         counters: counters_out(out.counters),
+        asterix: out.asterix.map(asterix_out),
         timing: Timing {
             compute_us: out.compute_us,
         },

@@ -17,8 +17,8 @@ use super::{
         config_in, finite, pair_result, sample_in, system_track, track_ref,
     },
     plot_fusion::{
-        FusedTrack, GeoPoint, PlotIn, PlotRadar, TrackerCounters, TrackerOptions, counters_out,
-        plots_in, spec_in, track_out,
+        AsterixIn, AsterixSummary, FusedTrack, GeoPoint, PlotIn, PlotRadar, TrackerCounters,
+        TrackerOptions, asterix_in, asterix_out, counters_out, plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -96,6 +96,10 @@ pub struct PushBatchRequest {
     /// Plot-fusion sessions: radar plots, in any order.
     #[serde(default)]
     pub plots: Vec<PlotIn>,
+    /// Plot-fusion sessions: raw ASTERIX (its plots follow `plots`). Without
+    /// `date`/`day_start_t` the times of day are taken nearest the session's
+    /// last processed frame.
+    pub asterix: Option<AsterixIn>,
     /// Close the open alignment instant (correlation) or frame (plot
     /// fusion) now. Default false: it closes when a later report or plot
     /// arrives.
@@ -188,6 +192,9 @@ pub struct PlotFusionBatchUpdate {
     /// Tentative tracks dropped without being confirmed.
     pub dropped: Vec<u64>,
     pub counters: TrackerCounters,
+    /// What the batch's ASTERIX gave, when it had some.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub asterix: Option<AsterixSummary>,
 }
 
 /// The tracker of a plot-fusion session.
@@ -306,6 +313,27 @@ fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<crate::service::plot_f
     }
 }
 
+/// A `plot_fusion` session's configuration from the JSON body of a create
+/// request (the ASTERIX UDP listener's `--asterix-session-spec` file).
+pub fn plot_fusion_spec_from_json(
+    json: &str,
+) -> Result<Spec<crate::service::plot_fusion::SpecInput>, String> {
+    let req: CreateSessionRequest = serde_json::from_str(json).map_err(|e| e.to_string())?;
+    let kind = KindName::parse(req.kind.as_deref(), "kind").map_err(|e| e.to_string())?;
+    if kind != KindName::PlotFusion {
+        return Err("\"kind\" must be \"plot_fusion\"".into());
+    }
+    only_fields_of(kind, &req).map_err(|e| match e {
+        ServiceError::InvalidInput(v) => v
+            .iter()
+            .map(|f| format!("{}: {}", f.field, f.message))
+            .collect::<Vec<_>>()
+            .join("; "),
+        other => other.to_string(),
+    })?;
+    Ok(plot_fusion_spec_in(req))
+}
+
 fn correlation_spec_in(
     req: CreateSessionRequest,
 ) -> Result<Spec<domain::SessionSpec>, ServiceError> {
@@ -342,14 +370,15 @@ fn correlation_spec_in(
     })
 }
 
-fn plot_batch_in(req: PushBatchRequest) -> Batch<pf::BatchInput> {
-    Batch {
+fn plot_batch_in(req: PushBatchRequest) -> Result<Batch<pf::BatchInput>, Problem> {
+    Ok(Batch {
         sequence: req.sequence,
         body: pf::BatchInput {
             flush: req.flush,
             plots: plots_in(req.plots),
+            asterix: asterix_in(req.asterix)?,
         },
-    }
+    })
 }
 
 fn batch_in(req: PushBatchRequest) -> Batch<domain::BatchInput> {
@@ -430,6 +459,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             deleted: b.deleted.into_iter().map(track_out).collect(),
             dropped: b.dropped,
             counters: counters_out(b.counters),
+            asterix: b.asterix.map(asterix_out),
         }),
         warnings: u.warnings,
     }
@@ -641,7 +671,10 @@ pub async fn push(
     let sessions = state.sessions();
     // The batch's items say its kind; an empty batch (a flush, a sequence
     // number) asks the stored session.
-    let kind = match (req.reports.is_empty(), req.plots.is_empty()) {
+    let kind = match (
+        req.reports.is_empty(),
+        req.plots.is_empty() && req.asterix.is_none(),
+    ) {
         (false, false) => {
             return Err(Violations::single(
                 "plots",
@@ -661,7 +694,7 @@ pub async fn push(
         ),
         KindName::PlotFusion => plot_update_out(
             sessions
-                .push::<PlotFusionSession>(&tenant.0, &id, plot_batch_in(req), limits)
+                .push::<PlotFusionSession>(&tenant.0, &id, plot_batch_in(req)?, limits)
                 .await?,
         ),
     }))

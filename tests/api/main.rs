@@ -2,6 +2,7 @@
 //! `spawn_app` helper that starts REST and gRPC on port 0.
 
 mod ais_radar;
+mod asterix;
 mod auth;
 mod compression;
 mod connections;

@@ -215,6 +215,8 @@ fn proto_request(req: &Value) -> pb::PlotFusionRequest {
                 scan_period_s: o(&r["scan_period_s"]),
                 p_detection: o(&r["p_detection"]),
                 clutter_density: o(&r["clutter_density"]),
+                sac: None,
+                sic: None,
             })
             .collect(),
         plots: req["plots"]
@@ -235,6 +237,7 @@ fn proto_request(req: &Value) -> pb::PlotFusionRequest {
             ..Default::default()
         }),
         history: false,
+        asterix: None,
     }
 }
 
@@ -704,4 +707,22 @@ async fn a_session_says_at_creation_what_was_decided_for_it() {
     let id = created["id"].as_str().unwrap();
     let read = app.get_ok(&format!("/v1/sessions/{id}")).await;
     assert_eq!(read["warnings"], json!([]));
+}
+
+/// A request with no plot at all (neither `plots` nor `asterix`) is answered
+/// with no track and a warning saying why, never silently.
+#[tokio::test]
+async fn a_request_without_plots_says_so() {
+    let app = spawn_app().await;
+    let out = app
+        .post_ok(PATH, &json!({"radars": radars_json(&far_radars(), 1e-7)}))
+        .await;
+    assert_eq!(out["tracks"].as_array().unwrap().len(), 0);
+    let warnings = out["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("no plot to track")),
+        "{warnings:?}"
+    );
 }

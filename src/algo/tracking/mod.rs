@@ -34,6 +34,7 @@
 //! from it.
 
 pub mod associator;
+pub mod asterix;
 pub mod codec;
 pub mod config;
 mod deleter;

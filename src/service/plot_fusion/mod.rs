@@ -10,6 +10,7 @@
 //! wire tracks. [`track`] is the batch endpoint; the session kind
 //! (`service::session::plot_fusion`) uses the same pieces.
 
+pub mod asterix;
 pub mod network;
 pub mod output;
 
@@ -61,6 +62,10 @@ pub struct RadarInput {
     pub scan_period_s: Option<f64>,
     pub p_detection: Option<f64>,
     pub clutter_density: Option<f64>,
+    /// ASTERIX System Area Code and System Identification Code (I048/010):
+    /// the radar's records in ASTERIX input. Both or neither, 0 to 255.
+    pub sac: Option<u32>,
+    pub sic: Option<u32>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -138,6 +143,8 @@ pub struct PlotInput {
 pub struct TrackInput {
     pub spec: SpecInput,
     pub plots: Vec<PlotInput>,
+    /// Raw ASTERIX beside (or instead of) `plots`.
+    pub asterix: Option<asterix::AsterixInput>,
     pub history: bool,
 }
 
@@ -153,6 +160,8 @@ pub struct TrackOutput {
     pub deleted: Vec<TrackView>,
     pub history: Option<Vec<HistoryEntry>>,
     pub counters: Counters,
+    /// What the ASTERIX input gave, when there was one.
+    pub asterix: Option<asterix::AsterixSummary>,
     pub compute_us: f64,
     pub warnings: Vec<String>,
 }
@@ -169,15 +178,42 @@ pub fn mode_name(m: Mode) -> &'static str {
 /// Tracks every plot of the request from scratch and closes the last frame.
 pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     let (network, config, mut warnings) = network::validate(&input.spec)?;
-    if input.plots.len() > MAX_PLOTS {
+    let asterix_bound = input
+        .asterix
+        .as_ref()
+        .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
+    if input.plots.len() + asterix_bound > MAX_PLOTS {
         return Err(ServiceError::TooLarge(format!(
-            "{} plots; at most {MAX_PLOTS} per request (stream larger data through a \
-             plot_fusion session)",
-            input.plots.len()
+            "{} plots (ASTERIX counted as one per {} bytes); at most {MAX_PLOTS} per request \
+             (stream larger data through a plot_fusion session)",
+            input.plots.len() + asterix_bound,
+            asterix::MIN_PLOT_RECORD_BYTES
         )));
     }
+    let clock = match &input.asterix {
+        Some(a) => Some(asterix::clock(a, "asterix", None)?),
+        None => None,
+    };
     let mut plots = network.plots(&input.plots, &config, "plots")?;
     let start = Instant::now();
+    let summary = match (&input.asterix, clock) {
+        (Some(a), Some(clock)) => {
+            let from = asterix::plots(&network, &config, &a.data, clock);
+            plots.extend(from.plots);
+            warnings.extend(from.warnings);
+            Some(from.summary)
+        }
+        _ => None,
+    };
+    if plots.is_empty() {
+        warnings.push(if input.asterix.is_some() {
+            "no plot to track: `plots` is empty and the ASTERIX data gave no usable target \
+             report (see asterix.errors and its counts)"
+                .to_string()
+        } else {
+            "no plot to track: give `plots`, an `asterix` block, or both".to_string()
+        });
+    }
     // Stable: plots of equal time keep the request's order, as a session
     // fed the same plots in order would.
     plots.sort_by(|a, b| a.t.total_cmp(&b.t));
@@ -232,6 +268,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
                 .collect()
         }),
         counters,
+        asterix: summary,
         compute_us,
         warnings,
     })

@@ -69,7 +69,10 @@ pub struct Network {
     /// (`tracker.default_height_m`): ellipsoidal for geodetic sites and for
     /// the latitude/longitude of 2D tracks, fusion-frame `up` for local sites.
     pub target_height: f64,
+    /// Per radar: its ASTERIX (SAC, SIC), if declared.
+    pub sources: Vec<Option<(u8, u8)>>,
     index: HashMap<String, usize>,
+    source_index: HashMap<(u8, u8), usize>,
 }
 
 /// A radar's site as the plot conversion needs it.
@@ -175,8 +178,11 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     let mut index = HashMap::new();
     let mut sites = Vec::new();
     let mut specs = Vec::new();
+    let mut sources = Vec::new();
+    let mut source_of: HashMap<(u8, u8), usize> = HashMap::new();
     for (i, r) in spec.radars.iter().enumerate() {
         let f = format!("radars[{i}]");
+        sources.push(source(&mut v, &f, r.sac, r.sic, i, &mut source_of));
         let id = r.id.clone().unwrap_or_default();
         if id.is_empty() {
             v.add(format!("{f}.id"), "is required");
@@ -565,7 +571,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
     }
     Ok((
-        Network::from_parts(frame, ids, radar_sites, config.default_height),
+        Network::from_parts(frame, ids, radar_sites, config.default_height).with_sources(sources),
         config,
         warnings,
     ))
@@ -586,11 +592,53 @@ impl Network {
             .collect();
         Self {
             frame,
+            sources: vec![None; radar_ids.len()],
             radar_ids,
             sites,
             target_height,
             index,
+            source_index: HashMap::new(),
         }
+    }
+
+    /// The network with the radars' ASTERIX (SAC, SIC), one per radar.
+    pub fn with_sources(mut self, sources: Vec<Option<(u8, u8)>>) -> Self {
+        self.source_index = sources
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| s.map(|s| (s, i)))
+            .collect();
+        self.sources = sources;
+        self
+    }
+
+    /// The radar (index) of an ASTERIX (SAC, SIC).
+    pub fn radar_of_source(&self, source: (u8, u8)) -> Option<usize> {
+        self.source_index.get(&source).copied()
+    }
+
+    /// The elevation (degrees, in the radar's own frame) of a target at
+    /// `height` seen at slant range `range` by radar `radar`: the geometry
+    /// of the 2D plots' assumed height (module header), solved for a
+    /// measured height. For a local site sin ε = (H − u)/ρ; for a geodetic
+    /// site, on the sphere of radius R through it,
+    /// sin ε = ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ). `None` when no
+    /// elevation fits (|sin ε| > 1).
+    pub fn elevation_deg_at_height(&self, radar: usize, range: f64, height: f64) -> Option<f64> {
+        let site = &self.sites[radar];
+        let sin_el = match site.rotation {
+            None => (height - site.height) / range,
+            Some(_) => {
+                let (rh, rt) = (EARTH_RADIUS_M + site.height, EARTH_RADIUS_M + height);
+                (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
+            }
+        };
+        (sin_el.abs() < 1.0).then(|| sin_el.asin().to_degrees())
+    }
+
+    /// Whether any radar declares its SAC/SIC.
+    pub fn has_sources(&self) -> bool {
+        !self.source_index.is_empty()
     }
 
     /// Validates plots against the network and re-expresses their angles in
@@ -632,7 +680,9 @@ impl Network {
         Err(ServiceError::InvalidInput(bad))
     }
 
-    fn plot(
+    /// One plot validated and re-expressed, or the name of its bad field
+    /// and why.
+    pub fn plot(
         &self,
         p: &PlotInput,
         config: &TrackerConfig,
@@ -774,6 +824,23 @@ impl Network {
         super::output::view(self, t)
     }
 
+    /// The SAC/SIC pairs (the plot_fusion session payload's format 2).
+    pub fn encode_sources(&self, w: &mut Writer) {
+        for s in &self.sources {
+            w.opt(s.as_ref(), |w, &(a, b)| {
+                w.u8(a);
+                w.u8(b);
+            });
+        }
+    }
+
+    pub fn decode_sources(self, r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+        let sources = (0..self.radar_ids.len())
+            .map(|_| r.opt(|r| Ok((r.u8()?, r.u8()?))))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(self.with_sources(sources))
+    }
+
     pub fn encode(&self, w: &mut Writer) {
         w.opt(self.frame.as_ref(), |w, f| {
             let (lat, lon, h) = f.origin_geodetic();
@@ -815,6 +882,48 @@ impl Network {
         }
         Ok(Self::from_parts(frame, ids, sites, target_height))
     }
+}
+
+/// A radar's ASTERIX (SAC, SIC): both or neither, each 0 to 255, no two
+/// radars with the same pair.
+fn source(
+    v: &mut Violations,
+    f: &str,
+    sac: Option<u32>,
+    sic: Option<u32>,
+    i: usize,
+    seen: &mut HashMap<(u8, u8), usize>,
+) -> Option<(u8, u8)> {
+    let (sac, sic) = match (sac, sic) {
+        (None, None) => return None,
+        (Some(_), None) => {
+            v.add(format!("{f}.sic"), "is required with sac");
+            return None;
+        }
+        (None, Some(_)) => {
+            v.add(format!("{f}.sac"), "is required with sic");
+            return None;
+        }
+        (Some(a), Some(b)) => (a, b),
+    };
+    let mut ok = true;
+    for (name, x) in [("sac", sac), ("sic", sic)] {
+        if x > 255 {
+            v.add(format!("{f}.{name}"), format!("must be 0 to 255, got {x}"));
+            ok = false;
+        }
+    }
+    if !ok {
+        return None;
+    }
+    let pair = (sac as u8, sic as u8);
+    if let Some(j) = seen.insert(pair, i) {
+        v.add(
+            format!("{f}.sic"),
+            format!("SAC/SIC {sac}/{sic} is also radars[{j}]'s"),
+        );
+    }
+    Some(pair)
 }
 
 /// Azimuth (and elevation) of a line of sight re-expressed through `m`.

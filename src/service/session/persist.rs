@@ -123,15 +123,33 @@ impl Sessions {
         tenant: &str,
         spec: Spec<K::Spec>,
     ) -> Result<View<K::View>, ServiceError> {
+        self.create_with_id::<K>(tenant, &new_id(), spec).await
+    }
+
+    /// A new session under a chosen id (32 hex digits; the ASTERIX UDP
+    /// listener's configured session). An id in use is a `Conflict`.
+    pub async fn create_with_id<K: SessionKind>(
+        &self,
+        tenant: &str,
+        id: &str,
+        spec: Spec<K::Spec>,
+    ) -> Result<View<K::View>, ServiceError> {
+        check_id(id)?;
         let mut warnings = Vec::new();
         let session = Envelope::<K>::create(spec, unix_ms(), &mut warnings)?;
         let data = session.encode();
-        let id = new_id();
+        let id = id.to_string();
         let bytes = data.len();
         let version = self
             .store
             .create(tenant, &id, K::NAME, data, ttl(&session))
-            .await?;
+            .await
+            .map_err(|e| match e {
+                StoreError::AlreadyExists => {
+                    ServiceError::Conflict(format!("session '{id}' exists already"))
+                }
+                other => other.into(),
+            })?;
         let view = session.view(&id, version, bytes).map(|mut v| {
             v.warnings = warnings;
             v

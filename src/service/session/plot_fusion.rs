@@ -12,6 +12,12 @@
 //! A plot older than the last processed frame is *late*: it is dropped
 //! (no retrodiction), counted, and named in the update and a warning.
 //!
+//! A batch may carry raw ASTERIX beside its plots (`asterix`,
+//! `service::plot_fusion::asterix`): its plots follow the JSON plots, its
+//! late plots are named by record offset in `asterix.late_offsets`, and a
+//! batch without a date takes the times of day nearest to the session's
+//! last processed frame.
+//!
 //! Each update lists the tracks the batch touched: every live track when a
 //! frame was processed (each frame predicts every track), with what
 //! happened to it (`initiated`, `confirmed`, `updated`), the tracks
@@ -32,18 +38,29 @@ use crate::{
     service::{
         ServiceError,
         plot_fusion::{
-            Network, PlotInput, SpecInput, TrackView, computation_error, mode_name, network, output,
+            Network, PlotInput, SpecInput, TrackView,
+            asterix::{self, AsterixInput, AsterixSummary},
+            computation_error, mode_name, network, output,
         },
     },
 };
 
-/// Format of the kind's payload.
-pub const FORMAT_VERSION: u8 = 1;
+/// Format of the kind's payload: 2 = format 1 (the network and the
+/// tracker) plus the radars' ASTERIX SAC/SIC; format 1 is read as radars
+/// without SAC/SIC.
+pub const FORMAT_VERSION: u8 = 2;
+
+/// Bit 31 of an encoded update's `frames` flags the ASTERIX summary after
+/// its counters (a batch never processes 2³¹ frames), so kept updates of
+/// earlier releases read unchanged.
+const ASTERIX_FLAG: u32 = 1 << 31;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
 pub struct BatchInput {
     pub plots: Vec<PlotInput>,
+    /// Raw ASTERIX; its plots follow `plots`.
+    pub asterix: Option<AsterixInput>,
     /// Close the open frame now: process every buffered plot. Plots that
     /// arrive later for that frame are late.
     pub flush: bool,
@@ -95,6 +112,8 @@ pub struct BatchUpdate {
     /// Tentative tracks dropped without being confirmed.
     pub dropped: Vec<u64>,
     pub counters: Counters,
+    /// What the batch's ASTERIX gave, when it had some.
+    pub asterix: Option<AsterixSummary>,
 }
 
 /// The session as a client reads it.
@@ -218,7 +237,18 @@ impl SessionKind for PlotFusionSession {
     }
 
     fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
-        limits.check_batch(batch.plots.len(), "plots")
+        let asterix = batch
+            .asterix
+            .as_ref()
+            .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
+        if asterix == 0 {
+            limits.check_batch(batch.plots.len(), "plots")
+        } else {
+            limits.check_batch(
+                batch.plots.len() + asterix,
+                "plots (ASTERIX counted as one per 10 bytes)",
+            )
+        }
     }
 
     fn apply(
@@ -227,14 +257,41 @@ impl SessionKind for PlotFusionSession {
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<BatchUpdate, ServiceError> {
-        let plots = self
+        let mut plots = self
             .network
             .plots(&batch.plots, self.tracker.config(), "plots")?;
+        let json_plots = plots.len();
+        let mut summary = None;
+        let mut offsets = Vec::new();
+        if let Some(a) = &batch.asterix {
+            let reference = self.tracker.last_time().or(a.reference_t);
+            let clock = asterix::clock(a, "asterix", reference)?;
+            let from = asterix::plots(&self.network, self.tracker.config(), &a.data, clock);
+            plots.extend(from.plots);
+            offsets = from.offsets;
+            warnings.extend(from.warnings);
+            summary = Some(from.summary);
+        }
         let before: HashSet<u64> = self.tracker.track_ids().collect();
         let mut report = self
             .tracker
             .process_with(&plots, batch.flush, &mut |_| {})
             .map_err(computation_error)?;
+        let late_json: Vec<usize> = report
+            .late
+            .iter()
+            .copied()
+            .filter(|&i| i < json_plots)
+            .collect();
+        if let Some(s) = summary.as_mut() {
+            s.late_offsets = report
+                .late
+                .iter()
+                .filter(|&&i| i >= json_plots)
+                .map(|&i| offsets[i - json_plots])
+                .collect();
+            s.late = s.late_offsets.len();
+        }
         let live = self.tracker.tracks();
         if live.len() > limits.max_tracks {
             return Err(ServiceError::QuotaExceeded(format!(
@@ -246,14 +303,22 @@ impl SessionKind for PlotFusionSession {
             )));
         }
         if !report.late.is_empty() {
+            let first = match (late_json.first(), &summary) {
+                (Some(i), _) => format!("plots[{i}]"),
+                (None, Some(s)) => format!(
+                    "the ASTERIX record at offset {}",
+                    s.late_offsets.first().copied().unwrap_or(0)
+                ),
+                (None, None) => "plots".into(),
+            };
             warnings.push(format!(
                 "{} late plot(s) dropped (older than the last processed frame at t = {}; \
-                 first at plots[{}]): send plots in time order, or flush less often",
+                 first {first}): send plots in time order, or flush less often",
                 report.late.len(),
                 self.tracker.last_time().unwrap_or(f64::NAN),
-                report.late[0]
             ));
         }
+        report.late = late_json;
         let confirmed: HashSet<u64> = report.confirmed.iter().copied().collect();
         let deleted_ids: HashSet<u64> = report.deleted.iter().map(|t| t.id).collect();
         let live_ids: HashSet<u64> = live.iter().map(|t| t.id).collect();
@@ -294,6 +359,7 @@ impl SessionKind for PlotFusionSession {
                 .collect(),
             dropped,
             counters: self.tracker.counters(),
+            asterix: summary,
         })
     }
 
@@ -306,15 +372,22 @@ impl SessionKind for PlotFusionSession {
             deleted: Vec::new(),
             dropped: Vec::new(),
             counters: self.tracker.counters(),
+            asterix: None,
         }
     }
 
     fn fingerprint(batch: &BatchInput) -> Option<u64> {
-        if batch.plots.is_empty() {
+        let asterix = batch.asterix.as_ref().filter(|a| !a.data.is_empty());
+        if batch.plots.is_empty() && asterix.is_none() {
             return None;
         }
         let mut h = Fnv::default();
         h.bytes(&[u8::from(batch.flush)]);
+        if let Some(a) = asterix {
+            h.bytes(&a.data);
+            h.str(a.date.as_deref());
+            h.opt_f64(a.day_start_t);
+        }
         for p in &batch.plots {
             h.str(p.radar_id.as_deref());
             for x in [
@@ -351,18 +424,24 @@ impl SessionKind for PlotFusionSession {
         w.u8(FORMAT_VERSION);
         self.network.encode(w);
         w.bytes(&self.tracker.encode());
+        self.network.encode_sources(w);
     }
 
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
         let format = r.u8().map_err(stored)?;
-        if format != FORMAT_VERSION {
+        if !(1..=FORMAT_VERSION).contains(&format) {
             return Err(ServiceError::Internal(format!(
-                "stored plot_fusion session has format {format}; this release reads \
+                "stored plot_fusion session has format {format}; this release reads 1 to \
                  {FORMAT_VERSION}"
             )));
         }
         let network = Network::decode(r).map_err(stored)?;
         let tracker = Tracker::decode(&r.bytes().map_err(stored)?).map_err(stored)?;
+        let network = if format >= 2 {
+            network.decode_sources(r).map_err(stored)?
+        } else {
+            network
+        };
         if tracker.config().radars.len() != network.radar_ids.len() {
             return Err(stored(corrupt("radar count")));
         }
@@ -370,7 +449,7 @@ impl SessionKind for PlotFusionSession {
     }
 
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
-        w.u32(u.frames);
+        w.u32(u.frames | if u.asterix.is_some() { ASTERIX_FLAG } else { 0 });
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -393,10 +472,15 @@ impl SessionKind for PlotFusionSession {
             w.u64(id);
         }
         encode_counters(w, &u.counters);
+        if let Some(a) = &u.asterix {
+            encode_summary(w, a);
+        }
     }
 
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
         let frames = r.u32()?;
+        let has_asterix = frames & ASTERIX_FLAG != 0;
+        let frames = frames & !ASTERIX_FLAG;
         let pending_plots = r.u32()?;
         let n = r.len(4)?;
         let late_plots = (0..n).map(|_| r.u32()).collect::<Result<_, _>>()?;
@@ -423,8 +507,82 @@ impl SessionKind for PlotFusionSession {
             deleted,
             dropped,
             counters: decode_counters(r)?,
+            asterix: if has_asterix {
+                Some(decode_summary(r)?)
+            } else {
+                None
+            },
         })
     }
+}
+
+fn encode_summary(w: &mut Writer, a: &AsterixSummary) {
+    for n in [
+        a.bytes,
+        a.blocks,
+        a.records,
+        a.target_reports,
+        a.plots,
+        a.north_markers,
+        a.sector_crossings,
+        a.other_service_messages,
+        a.unmapped,
+        a.test_targets,
+        a.incomplete,
+        a.rejected,
+        a.late,
+        a.errors_not_listed,
+    ] {
+        w.usize(n);
+    }
+    w.usize(a.late_offsets.len());
+    a.late_offsets.iter().for_each(|&o| w.usize(o));
+    w.opt(a.first_t, Writer::f64);
+    w.opt(a.last_t, Writer::f64);
+    w.usize(a.errors.len());
+    for e in &a.errors {
+        w.usize(e.offset);
+        w.str(&e.reason);
+    }
+}
+
+fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, AlgoError> {
+    let mut n = [0usize; 14];
+    for x in &mut n {
+        *x = r.usize()?;
+    }
+    let k = r.len(8)?;
+    let late_offsets = (0..k).map(|_| r.usize()).collect::<Result<_, _>>()?;
+    let first_t = r.opt(Reader::f64)?;
+    let last_t = r.opt(Reader::f64)?;
+    let k = r.len(9)?;
+    let mut errors = Vec::with_capacity(k);
+    for _ in 0..k {
+        errors.push(crate::algo::tracking::asterix::DecodeError {
+            offset: r.usize()?,
+            reason: r.str()?,
+        });
+    }
+    Ok(AsterixSummary {
+        bytes: n[0],
+        blocks: n[1],
+        records: n[2],
+        target_reports: n[3],
+        plots: n[4],
+        north_markers: n[5],
+        sector_crossings: n[6],
+        other_service_messages: n[7],
+        unmapped: n[8],
+        test_targets: n[9],
+        incomplete: n[10],
+        rejected: n[11],
+        late: n[12],
+        errors_not_listed: n[13],
+        late_offsets,
+        first_t,
+        last_t,
+        errors,
+    })
 }
 
 // The batch endpoint's types, for the equality test below.
@@ -490,6 +648,7 @@ mod tests {
         let whole = pf::track(TrackInput {
             spec: spec(),
             plots: all.clone(),
+            asterix: None,
             history: false,
         })
         .unwrap();
@@ -510,6 +669,7 @@ mod tests {
                     &BatchInput {
                         plots: chunk.to_vec(),
                         flush: i + 1 == n,
+                        ..Default::default()
                     },
                     &limits,
                     &mut warnings,
@@ -542,6 +702,7 @@ mod tests {
                 &BatchInput {
                     plots: all[..20].to_vec(),
                     flush: true,
+                    ..Default::default()
                 },
                 &limits,
                 &mut warnings,
@@ -554,6 +715,7 @@ mod tests {
                 &BatchInput {
                     plots: vec![all[20].clone(), late],
                     flush: false,
+                    ..Default::default()
                 },
                 &limits,
                 &mut warnings,
@@ -569,6 +731,7 @@ mod tests {
                 &BatchInput {
                     plots: vec![bad],
                     flush: false,
+                    ..Default::default()
                 },
                 &limits,
                 &mut warnings,
@@ -578,5 +741,48 @@ mod tests {
             ServiceError::InvalidInput(v) => assert_eq!(v[0].field, "plots[0].radar_id"),
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn format_1_payloads_read_without_sac_sic_and_asterix_updates_round_trip() {
+        let mut with_sources = spec();
+        with_sources.radars[0].sac = Some(25);
+        with_sources.radars[0].sic = Some(1);
+        let session = PlotFusionSession::create(with_sources, &mut Vec::new()).unwrap();
+        let mut w = Writer::default();
+        session.encode(&mut w);
+        let back = PlotFusionSession::decode(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), Some(0));
+        // Format 1, as the release before ASTERIX wrote it: no SAC/SIC.
+        let mut old = Writer::default();
+        old.u8(1);
+        session.network.encode(&mut old);
+        old.bytes(&session.tracker.encode());
+        let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), None);
+        assert_eq!(back.network.radar_ids, session.network.radar_ids);
+        // An update with an ASTERIX summary round-trips; one without is
+        // encoded as before (bit 31 of frames clear).
+        let mut update = session.acknowledgement();
+        update.frames = 3;
+        let mut plain = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut plain);
+        assert_eq!(plain.buf[..4], 3u32.to_le_bytes());
+        update.asterix = Some(AsterixSummary {
+            bytes: 40,
+            records: 3,
+            late: 1,
+            late_offsets: vec![17],
+            first_t: Some(1.5),
+            errors: vec![crate::algo::tracking::asterix::DecodeError {
+                offset: 30,
+                reason: "cut".into(),
+            }],
+            ..Default::default()
+        });
+        let mut w = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut w);
+        let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back, update);
     }
 }

@@ -1,0 +1,196 @@
+//! The ASTERIX UDP listener (off by default; `--asterix-udp ADDR`):
+//! datagrams of CAT048/CAT034 data blocks, as radars multicast them, feed
+//! one `plot_fusion` session through the same session push as a client's
+//! batches (`Sessions::push`, so the store's compare-and-set, limits and
+//! exactly-once rules hold).
+//!
+//! The session is `--asterix-session-id` of `--asterix-tenant`, configured
+//! by `--asterix-session-spec` (the JSON of a `plot_fusion` create
+//! request); the listener creates it at start when it does not exist, and
+//! again if it expires. Datagrams waiting together are pushed as one batch
+//! (at most [`MAX_DATAGRAMS_PER_BATCH`]; data blocks are self-delimiting,
+//! so their concatenation is valid ASTERIX). Times of day are taken
+//! nearest to the session's last frame, or to the time of reception for a
+//! session that has processed none. A frame closes when a later plot
+//! arrives (no flush): the tracks lag one scan group.
+//!
+//! Counters in `/metrics`: `fusion_asterix_datagrams_total`,
+//! `fusion_asterix_records_total`, `fusion_asterix_plots_total`,
+//! `fusion_asterix_decode_errors_total`, `fusion_asterix_late_plots_total`,
+//! `fusion_asterix_push_failures_total`.
+
+use std::{
+    net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket as StdUdpSocket},
+    time::{SystemTime, UNIX_EPOCH},
+};
+
+use anyhow::Context;
+use tokio::{net::UdpSocket, task::JoinHandle};
+
+use crate::{
+    service::{
+        ServiceError,
+        plot_fusion::{SpecInput, asterix::AsterixInput},
+        session::{
+            Batch, Spec,
+            plot_fusion::{BatchInput, PlotFusionSession},
+        },
+    },
+    state::AppState,
+};
+
+/// Most datagrams pushed as one batch.
+pub const MAX_DATAGRAMS_PER_BATCH: usize = 64;
+/// Largest datagram read (the UDP maximum).
+const DATAGRAM_BYTES: usize = 65_536;
+
+/// Binds the configured address (joining a multicast group) and spawns the
+/// listener; `None` when `--asterix-udp` is not set.
+pub async fn spawn(state: &AppState) -> anyhow::Result<Option<JoinHandle<()>>> {
+    let settings = state.settings();
+    let Some(addr) = settings.asterix_udp else {
+        return Ok(None);
+    };
+    let path = settings
+        .asterix_session_spec
+        .clone()
+        .context("--asterix-udp needs --asterix-session-spec")?;
+    let json = std::fs::read_to_string(&path)
+        .with_context(|| format!("reading --asterix-session-spec {}", path.display()))?;
+    let spec = crate::http::sessions::plot_fusion_spec_from_json(&json)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("--asterix-session-spec {}", path.display()))?;
+    let socket = bind(addr, settings.asterix_interface)
+        .with_context(|| format!("binding the ASTERIX UDP address {addr}"))?;
+    let listener = Listener {
+        state: state.clone(),
+        tenant: settings.asterix_tenant.clone(),
+        id: settings.asterix_session_id.clone(),
+        spec,
+    };
+    listener.ensure_session().await;
+    tracing::info!(
+        addr = %socket.local_addr()?,
+        session = %listener.id,
+        tenant = %listener.tenant,
+        "listening for ASTERIX datagrams"
+    );
+    Ok(Some(tokio::spawn(listener.run(socket))))
+}
+
+fn bind(addr: SocketAddr, interface: Ipv4Addr) -> anyhow::Result<UdpSocket> {
+    let socket = match addr.ip() {
+        IpAddr::V4(group) if group.is_multicast() => {
+            let s = StdUdpSocket::bind(SocketAddr::new(Ipv4Addr::UNSPECIFIED.into(), addr.port()))?;
+            s.join_multicast_v4(&group, &interface)
+                .with_context(|| format!("joining multicast group {group} on {interface}"))?;
+            s
+        }
+        IpAddr::V6(group) if group.is_multicast() => {
+            let s = StdUdpSocket::bind(SocketAddr::new(Ipv6Addr::UNSPECIFIED.into(), addr.port()))?;
+            s.join_multicast_v6(&group, 0)
+                .with_context(|| format!("joining multicast group {group}"))?;
+            s
+        }
+        _ => StdUdpSocket::bind(addr)?,
+    };
+    socket.set_nonblocking(true)?;
+    Ok(UdpSocket::from_std(socket)?)
+}
+
+struct Listener {
+    state: AppState,
+    tenant: String,
+    id: String,
+    spec: Spec<SpecInput>,
+}
+
+impl Listener {
+    /// Creates the session unless it exists.
+    async fn ensure_session(&self) {
+        let sessions = self.state.sessions();
+        if sessions.kind_of(&self.tenant, &self.id).await.is_ok() {
+            return;
+        }
+        match sessions
+            .create_with_id::<PlotFusionSession>(&self.tenant, &self.id, self.spec.clone())
+            .await
+        {
+            Ok(_) => tracing::info!(session = %self.id, "ASTERIX session created"),
+            Err(ServiceError::Conflict(_)) => {}
+            Err(e) => tracing::warn!(error = %e, "ASTERIX session could not be created"),
+        }
+    }
+
+    async fn run(self, socket: UdpSocket) {
+        let mut buf = vec![0u8; DATAGRAM_BYTES];
+        loop {
+            let n = match socket.recv(&mut buf).await {
+                Ok(n) => n,
+                Err(e) => {
+                    tracing::warn!(error = %e, "ASTERIX UDP receive failed");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                    continue;
+                }
+            };
+            let mut data = buf[..n].to_vec();
+            let mut datagrams = 1u64;
+            while (datagrams as usize) < MAX_DATAGRAMS_PER_BATCH {
+                match socket.try_recv(&mut buf) {
+                    Ok(n) => {
+                        data.extend_from_slice(&buf[..n]);
+                        datagrams += 1;
+                    }
+                    Err(_) => break,
+                }
+            }
+            metrics::counter!("fusion_asterix_datagrams_total").increment(datagrams);
+            self.push(data).await;
+        }
+    }
+
+    async fn push(&self, data: Vec<u8>) {
+        let now = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
+        let batch = || Batch {
+            sequence: None,
+            body: BatchInput {
+                plots: Vec::new(),
+                asterix: Some(AsterixInput {
+                    data: data.clone(),
+                    date: None,
+                    day_start_t: None,
+                    reference_t: Some(now),
+                }),
+                flush: false,
+            },
+        };
+        let limits = self.state.settings().session_limits();
+        let sessions = self.state.sessions();
+        let mut result = sessions
+            .push::<PlotFusionSession>(&self.tenant, &self.id, batch(), limits)
+            .await;
+        if matches!(result, Err(ServiceError::NotFound(_))) {
+            self.ensure_session().await;
+            result = sessions
+                .push::<PlotFusionSession>(&self.tenant, &self.id, batch(), limits)
+                .await;
+        }
+        match result {
+            Ok(update) => {
+                if let Some(a) = update.body.asterix {
+                    metrics::counter!("fusion_asterix_records_total").increment(a.records as u64);
+                    metrics::counter!("fusion_asterix_plots_total").increment(a.plots as u64);
+                    metrics::counter!("fusion_asterix_decode_errors_total")
+                        .increment((a.errors.len() + a.errors_not_listed) as u64);
+                    metrics::counter!("fusion_asterix_late_plots_total").increment(a.late as u64);
+                }
+            }
+            Err(e) => {
+                metrics::counter!("fusion_asterix_push_failures_total").increment(1);
+                tracing::warn!(error = %e, "ASTERIX batch not applied");
+            }
+        }
+    }
+}
