@@ -487,13 +487,38 @@ fn validate_deletion(d: &Deletion) -> Result<(), AlgoError> {
 }
 
 fn open_probability(what: &'static str, p: f64) -> Result<(), AlgoError> {
-    if p > 0.0 && p < 1.0 {
-        Ok(())
-    } else {
+    if !(p > 0.0 && p < 1.0) {
         Err(invalid(what, format!("must lie in (0, 1), got {p}")))
+    } else if 1.0 - p == 1.0 {
+        // The χ² gate is the quantile at 1 − p: below 2⁻⁵³ that is 1 in
+        // floating point, a gate of zero width (and no quantile).
+        Err(invalid(
+            what,
+            format!("must be at least 1.2e-16 (a gate of this probability has no width), got {p}"),
+        ))
+    } else {
+        Ok(())
     }
 }
 
 fn invalid(what: &'static str, reason: String) -> AlgoError {
     AlgoError::InvalidParameter { what, reason }
+}
+
+#[cfg(test)]
+mod probability_tests {
+    use super::open_probability;
+
+    #[test]
+    fn a_gate_probability_whose_complement_rounds_to_one_is_refused() {
+        // 1 − 5e-324 and 1 − 2⁻⁵⁴ round to 1.0 in binary64 (the spacing of
+        // doubles just below 1 is 2⁻⁵³): no χ² quantile exists there.
+        assert!(open_probability("p", 5e-324).is_err());
+        assert!(open_probability("p", 2f64.powi(-54)).is_err());
+        // 1 − 2⁻⁵³ = 0.99999999999999989 is a double: a valid, tiny gate.
+        assert!(open_probability("p", 2f64.powi(-53)).is_ok());
+        assert!(open_probability("p", 0.99).is_ok());
+        assert!(open_probability("p", 0.0).is_err());
+        assert!(open_probability("p", 1.0).is_err());
+    }
 }
