@@ -267,6 +267,20 @@ impl TestPoint {
         }
     }
 
+    /// [`TestPoint::new`] with J = I (mapping), without the products by I
+    /// (each adds only exact zeros).
+    fn identity(s: &State6, z: Vector3<f64>) -> Self {
+        let block = |r: usize, c: usize| Matrix3::from_fn(|i, j| s.p[(2 * i + r, 2 * j + c)]);
+        Self {
+            z,
+            jv: Vector3::new(s.x[1], s.x[3], s.x[5]),
+            c0: block(0, 0),
+            c1: block(0, 1) + block(1, 0),
+            c2: block(1, 1) + s.velocity_jump,
+            c4: s.acceleration / 4.0,
+        }
+    }
+
     fn at(&self, dt: f64) -> (Vector3<f64>, Matrix3<f64>) {
         let dt2 = dt * dt;
         (
@@ -318,17 +332,21 @@ fn fuse_one_sharing(
     cfg: &Config,
     share: &mut Share,
 ) -> Result<Outcome, AlgoError> {
-    let points: Vec<Vec<TestPoint>> = centred
-        .iter()
-        .map(|tr| {
-            tr.iter()
-                .map(|s| {
-                    geometry::test_space(centre, method, [s.x[0], s.x[2], s.x[4]])
-                        .map(|(_, z, jac)| TestPoint::new(s, z, jac))
-                })
-                .collect()
-        })
-        .collect::<Result<_, _>>()?;
+    let mut points: Vec<Vec<TestPoint>> = Vec::with_capacity(centred.len());
+    for tr in centred {
+        let mut row = Vec::with_capacity(tr.len());
+        for s in tr {
+            let pos = [s.x[0], s.x[2], s.x[4]];
+            row.push(if method == Method::Mapping {
+                // J = I: the pieces are the blocks themselves.
+                TestPoint::identity(s, Vector3::from(pos))
+            } else {
+                let (_, z, jac) = geometry::test_space(centre, method, pos)?;
+                TestPoint::new(s, z, jac)
+            });
+        }
+        points.push(row);
+    }
 
     // Pairwise modified K-NN.
     let mut pairs = Vec::new();
@@ -593,6 +611,7 @@ fn centred_state(radar: &Radar, e: &alpha_beta::Estimate, at: &Placed, sigma_h: 
 /// The estimate of a track at `t`: its latest at or before `t`, extrapolated
 /// (constant velocity, with the filter's white acceleration) when at most
 /// `max_gap` old.
+#[cfg(test)]
 fn at_time(track: &[State6], t: f64, max_gap: f64) -> Option<State6> {
     let k = track.partition_point(|s| s.t <= t);
     let s = track.get(k.checked_sub(1)?)?;
@@ -657,6 +676,7 @@ fn correlate_pair(
     let (mut sum, mut n) = (0.0, 0u32);
     let (ot, op) = (&centred[other], &points[other]);
     let (first, last) = (ot[0].t, ot[ot.len() - 1].t + gap);
+    let mut next = 0;
     for (s, sp) in centred[driver].iter().zip(&points[driver]) {
         if !state.wants_test() {
             break;
@@ -664,8 +684,12 @@ fn correlate_pair(
         if s.t < first || s.t > last {
             continue;
         }
-        let k = ot.partition_point(|o| o.t <= s.t);
-        let Some(k) = k.checked_sub(1) else {
+        // The other track's latest sample at or before s.t (a forward scan:
+        // the driver's instants increase).
+        while next < ot.len() && ot[next].t <= s.t {
+            next += 1;
+        }
+        let Some(k) = next.checked_sub(1) else {
             continue;
         };
         let dt = s.t - ot[k].t;
@@ -793,21 +817,31 @@ fn fused_track(
     let (three_d, two_d): (Vec<usize>, Vec<usize>) = members
         .iter()
         .partition(|&&i| radars[filtered[i].radar].three_d);
-    let three_at = |t: f64, into: &mut Vec<State6>| {
+    // `at_time` for non-decreasing t: each member's latest sample at or
+    // before t found by a forward scan from the previous instant's.
+    let three_at = |t: f64, into: &mut Vec<State6>, cursor: &mut [usize]| {
         into.clear();
-        into.extend(
-            three_d
-                .iter()
-                .filter_map(|&i| at_time(&centred[i], t, gap(i))),
-        );
+        for (&i, k) in three_d.iter().zip(cursor.iter_mut()) {
+            let tr = &centred[i];
+            while *k < tr.len() && tr[*k].t <= t {
+                *k += 1;
+            }
+            if let Some(s) = k
+                .checked_sub(1)
+                .and_then(|k| extrapolate(&tr[k], t, gap(i)))
+            {
+                into.push(s);
+            }
+        }
     };
+    let mut cursor3 = vec![0; three_d.len()];
     // The fusion of the 3D members at every instant they cover, and the
     // height they give there (t, h, σ_h).
     let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
     let mut heights: Vec<(f64, f64, f64)> = Vec::new();
     for &t in &times {
-        three_at(t, &mut all);
+        three_at(t, &mut all, &mut cursor3);
         if all.is_empty() {
             fused3.push(None);
             continue;
@@ -824,6 +858,8 @@ fn fused_track(
     let mut split = Vec::new();
     let mut spots = Vec::new();
     let mut three = Vec::with_capacity(three_d.len());
+    cursor3.fill(0);
+    let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
     for (&t, f3) in times.iter().zip(&fused3) {
         all.clear();
@@ -858,9 +894,11 @@ fn fused_track(
                 None => (None, AltitudeSource::Assumed),
             }
         };
-        for &i in &two_d {
+        for (&i, k) in two_d.iter().zip(cursor2.iter_mut()) {
             let f = &filtered[i];
-            let k = f.est.partition_point(|e| e.t <= t);
+            while *k < f.est.len() && f.est[*k].t <= t {
+                *k += 1;
+            }
             let Some(k) = k.checked_sub(1) else {
                 continue;
             };
@@ -887,7 +925,7 @@ fn fused_track(
 
         if keep_spots {
             split.push(if f3.is_some() {
-                three_at(t, &mut three);
+                three_at(t, &mut three, &mut cursor3);
                 let start = spots.len();
                 spots.extend(three.iter().chain(&all).map(Spot::of));
                 Some((start, three.len(), spots.len()))
