@@ -11,6 +11,9 @@
 //! constant-velocity transition) are left out: adding an exact zero does not
 //! change a sum, so only the sign of a zero result could differ.
 
+// The loops index rows and columns as the formulas do.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{Matrix3, Matrix6, Vector6};
 
 /// Column-major storage of a 6 × 6 matrix: `m[c][r]` is row r, column c.
@@ -54,7 +57,8 @@ pub fn fuse_step(
             }
         }
         let diag = l[j][j];
-        if diag == 0.0 || !(diag >= 0.0) {
+        // nalgebra refuses a zero, a negative or a NaN pivot.
+        if diag.is_nan() || diag <= 0.0 {
             return None;
         }
         let denom = diag.sqrt();
