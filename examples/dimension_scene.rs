@@ -20,7 +20,11 @@
 //! - association: multi-radar aircraft whose local tracks all form one pure
 //!   system track;
 //! - a digest of every pair's K-NN state and every group, to check that a
-//!   change of the code leaves the association decisions as they were.
+//!   change of the code leaves the association decisions as they were, and
+//!   a digest of the bits of every number of the outcome (pair statistics,
+//!   fused samples and covariances, altitude sources), to check that it
+//!   leaves the estimates as they were; `--dump FILE` writes those numbers
+//!   (one a line) for a comparison when the bits differ.
 
 use std::time::Instant;
 
@@ -64,9 +68,33 @@ fn digest(outs: &[dimension::Outcome]) -> u64 {
         }
         text.push_str(&format!("c{}#", o.conflicts));
     }
-    text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+    fnv(text.bytes())
+}
+
+fn fnv(bytes: impl Iterator<Item = u8>) -> u64 {
+    bytes.fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
+}
+
+/// Every number of the outcomes in order: per pair its mean statistic, per
+/// system-track sample t, x, p and the altitude source (0, 1, 2).
+fn numbers(outs: &[dimension::Outcome]) -> Vec<f64> {
+    let mut v = Vec::new();
+    for o in outs {
+        v.extend(o.pairs.iter().map(|p| p.mean_statistic));
+        for s in o.system_tracks.iter().flat_map(|s| &s.samples) {
+            v.push(s.t);
+            v.extend(s.x.iter());
+            v.extend(s.p.iter());
+            v.push(match s.altitude {
+                dimension::AltitudeSource::Measured => 0.0,
+                dimension::AltitudeSource::Lifted => 1.0,
+                dimension::AltitudeSource::Assumed => 2.0,
+            });
+        }
+    }
+    v
 }
 
 /// (multi-radar aircraft, those in exactly one pure system track holding all
@@ -96,6 +124,7 @@ fn main() -> anyhow::Result<()> {
     let mut duration = 300.0;
     let mut seeds = vec![1u64, 2, 3];
     let mut repeat = 15usize;
+    let mut dump: Option<String> = None;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let value = it.next().context("a flag needs a value")?;
@@ -104,10 +133,12 @@ fn main() -> anyhow::Result<()> {
             "--duration" => duration = value.parse()?,
             "--repeat" => repeat = value.parse::<usize>()?.max(1),
             "--seeds" => seeds = value.split(',').map(str::parse).collect::<Result<_, _>>()?,
+            "--dump" => dump = Some(value),
             other => bail!("unknown flag {other}"),
         }
     }
     let chi2_99 = chi2_threshold(3, 0.01)?;
+    let mut dumped = String::new();
     for seed in seeds {
         let mut rng = run_rng(seed, 0);
         let scene = bench_scene(aircraft, duration, &mut rng)?;
@@ -146,13 +177,21 @@ fn main() -> anyhow::Result<()> {
                 times.push(start.elapsed().as_secs_f64() * 1e3);
             }
             times.sort_by(f64::total_cmp);
+            let values = numbers(&outs);
             println!(
-                "  {fname:<10} compute (3 methods) median {:.2} ms (min {:.2}, max {:.2}), decisions {:016x}",
+                "  {fname:<10} compute (3 methods) median {:.2} ms (min {:.2}, max {:.2}), decisions {:016x}, estimates {:016x}",
                 times[times.len() / 2],
                 times[0],
                 times[times.len() - 1],
-                digest(&outs)
+                digest(&outs),
+                fnv(values.iter().flat_map(|v| v.to_bits().to_le_bytes()))
             );
+            if dump.is_some() {
+                dumped.push_str(&format!("# seed {seed} {fname} {}\n", values.len()));
+                for v in &values {
+                    dumped.push_str(&format!("{v:e}\n"));
+                }
+            }
             for (m, o) in METHODS.iter().zip(&outs) {
                 let nees = position_nees(&scene, o);
                 let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
@@ -173,6 +212,9 @@ fn main() -> anyhow::Result<()> {
                 );
             }
         }
+    }
+    if let Some(path) = dump {
+        std::fs::write(&path, dumped).with_context(|| format!("writing {path}"))?;
     }
     Ok(())
 }

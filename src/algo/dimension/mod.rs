@@ -18,6 +18,7 @@
 
 pub mod alpha_beta;
 pub mod geometry;
+mod kernels;
 pub mod knn;
 
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix6, Vector3, Vector6};
@@ -148,7 +149,9 @@ pub struct Outcome {
     /// Groups that would hold two tracks of one radar (links dropped).
     pub conflicts: usize,
     /// Wall time of this method (µs); the first method of
-    /// [`fuse_methods`] includes the local filters that all methods share.
+    /// [`fuse_methods`] includes the local filters and the centre-frame
+    /// states that all methods share, and of lifting and splitting the
+    /// second to run reuses the groups the first fused.
     pub compute_us: f64,
 }
 
@@ -171,9 +174,10 @@ pub fn fuse(
     Ok(out.remove(0))
 }
 
-/// Runs several methods over the scene; the local filters run once and the
-/// centre-frame estimates are shared by the methods that place 2D tracks
-/// alike (lifting and splitting).
+/// Runs several methods over the scene; the local filters run once, every
+/// estimate is placed in the centre frame once (mapping's states and the
+/// others' differ only in a 2D estimate's σ_h), and a group that lifting and
+/// splitting both form is fused once (see `Share`).
 pub fn fuse_methods(
     centre: &LocalFrame,
     radars: &[Radar],
@@ -191,33 +195,47 @@ pub fn fuse_methods(
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let centre_all = |sigma_h: f64| -> Result<Vec<Vec<State6>>, AlgoError> {
-        filtered
-            .iter()
-            .map(|f| {
-                f.est
-                    .iter()
-                    .map(|e| to_centre(centre, &radars[f.radar], e, cfg.preset_altitude, sigma_h))
-                    .collect()
-            })
-            .collect()
-    };
-    let mut mapped = None;
-    let mut lifted = None;
+    // Mapping and the other methods place a 2D estimate at the same preset
+    // height and differ only in its σ_h; a 3D estimate does not depend on it.
+    let need_mapped = methods.contains(&Method::Mapping);
+    let need_lifted = methods.iter().any(|&m| m != Method::Mapping);
+    let (mut mapped, mut lifted) = (Vec::new(), Vec::new());
+    for f in &filtered {
+        let radar = &radars[f.radar];
+        let (mut m, mut l) = (Vec::new(), Vec::new());
+        for e in &f.est {
+            let at = place(centre, radar, e, cfg.preset_altitude)?;
+            if need_mapped {
+                m.push(centred_state(radar, e, &at, MAPPING_ALTITUDE_SIGMA_M));
+            }
+            if need_lifted {
+                l.push(if radar.three_d && need_mapped {
+                    m[m.len() - 1].clone()
+                } else {
+                    centred_state(radar, e, &at, cfg.altitude_sigma)
+                });
+            }
+        }
+        mapped.push(m);
+        lifted.push(l);
+    }
+    let mut share = Share::default();
     let mut outs = Vec::with_capacity(methods.len());
-    for &method in methods {
-        let centred: &Vec<Vec<State6>> = if method == Method::Mapping {
-            if mapped.is_none() {
-                mapped = Some(centre_all(MAPPING_ALTITUDE_SIGMA_M)?);
-            }
-            mapped.as_ref().expect("set above")
+    for (n, &method) in methods.iter().enumerate() {
+        let centred = if method == Method::Mapping {
+            &mapped
         } else {
-            if lifted.is_none() {
-                lifted = Some(centre_all(cfg.altitude_sigma)?);
-            }
-            lifted.as_ref().expect("set above")
+            &lifted
         };
-        let mut out = fuse_one(centre, radars, tracks, &filtered, centred, method, cfg)?;
+        let other = match method {
+            Method::Lifting => Some(Method::Splitting),
+            Method::Splitting => Some(Method::Lifting),
+            Method::Mapping => None,
+        };
+        share.pending_other = other.is_some_and(|o| methods[n + 1..].contains(&o));
+        let mut out = fuse_one_sharing(
+            centre, radars, tracks, &filtered, centred, method, cfg, &mut share,
+        )?;
         out.compute_us = started.elapsed().as_secs_f64() * 1e6;
         started = std::time::Instant::now();
         outs.push(out);
@@ -252,6 +270,20 @@ impl TestPoint {
         }
     }
 
+    /// [`TestPoint::new`] with J = I (mapping), without the products by I
+    /// (each adds only exact zeros).
+    fn identity(s: &State6, z: Vector3<f64>) -> Self {
+        let block = |r: usize, c: usize| Matrix3::from_fn(|i, j| s.p[(2 * i + r, 2 * j + c)]);
+        Self {
+            z,
+            jv: Vector3::new(s.x[1], s.x[3], s.x[5]),
+            c0: block(0, 0),
+            c1: block(0, 1) + block(1, 0),
+            c2: block(1, 1) + s.velocity_jump,
+            c4: s.acceleration / 4.0,
+        }
+    }
+
     fn at(&self, dt: f64) -> (Vector3<f64>, Matrix3<f64>) {
         let dt2 = dt * dt;
         (
@@ -261,7 +293,9 @@ impl TestPoint {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// One method on its own (what [`fuse_methods`] does for it, without
+/// another method to share system tracks with).
+#[cfg(test)]
 fn fuse_one(
     centre: &LocalFrame,
     radars: &[Radar],
@@ -271,17 +305,51 @@ fn fuse_one(
     method: Method,
     cfg: &Config,
 ) -> Result<Outcome, AlgoError> {
-    let points: Vec<Vec<TestPoint>> = centred
-        .iter()
-        .map(|tr| {
-            tr.iter()
-                .map(|s| {
-                    geometry::test_space(centre, method, [s.x[0], s.x[2], s.x[4]])
-                        .map(|(_, z, jac)| TestPoint::new(s, z, jac))
-                })
-                .collect()
-        })
-        .collect::<Result<_, _>>()?;
+    let mut share = Share::default();
+    fuse_one_sharing(
+        centre, radars, tracks, filtered, centred, method, cfg, &mut share,
+    )
+}
+
+/// The system tracks that lifting and splitting have in common. Both place
+/// 2D members alike and fuse alike; splitting then redoes the position of a
+/// sample with a 3D member from the direction and the geocentric distance.
+/// So when both methods run and form the same group, the group is fused
+/// once: the first of the two keeps it here (with the positions splitting
+/// needs) and the second takes it.
+#[derive(Default)]
+struct Share {
+    /// The other method of the two runs later in this call.
+    pending_other: bool,
+    tracks: std::collections::HashMap<Vec<usize>, Fused>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fuse_one_sharing(
+    centre: &LocalFrame,
+    radars: &[Radar],
+    tracks: &[LocalTrack],
+    filtered: &[Filtered],
+    centred: &[Vec<State6>],
+    method: Method,
+    cfg: &Config,
+    share: &mut Share,
+) -> Result<Outcome, AlgoError> {
+    let mut points: Vec<Vec<TestPoint>> = Vec::with_capacity(centred.len());
+    for tr in centred {
+        let mut row = Vec::with_capacity(tr.len());
+        for s in tr {
+            let pos = [s.x[0], s.x[2], s.x[4]];
+            row.push(if method == Method::Mapping {
+                // J = I: the pieces are the blocks themselves.
+                TestPoint::identity(s, Vector3::from(pos))
+            } else {
+                let (_, z, jac) = geometry::test_space(centre, method, pos)?;
+                TestPoint::new(s, z, jac)
+            });
+        }
+        points.push(row);
+    }
 
     // Pairwise modified K-NN.
     let mut pairs = Vec::new();
@@ -345,17 +413,39 @@ fn fuse_one(
         .into_iter()
         .filter(|g| g.iter().any(|&i| !centred[i].is_empty()))
         .map(|g| {
-            system_track(
-                centre,
-                radars,
-                filtered,
-                centred,
-                g,
-                method,
-                cfg.altitude_sigma,
-            )
+            let fuse = |g: Vec<usize>, spots: bool| {
+                fused_track(
+                    centre,
+                    radars,
+                    filtered,
+                    centred,
+                    g,
+                    method,
+                    cfg.altitude_sigma,
+                    spots,
+                )
+            };
+            if method == Method::Mapping {
+                return Ok(fuse(g, false)?.track);
+            }
+            let fused = match share.tracks.remove(&g) {
+                Some(f) => f,
+                None => fuse(
+                    g.clone(),
+                    method == Method::Splitting || share.pending_other,
+                )?,
+            };
+            let track = if method == Method::Splitting {
+                split_track(centre, &fused)?
+            } else {
+                fused.track.clone()
+            };
+            if share.pending_other {
+                share.tracks.insert(g, fused);
+            }
+            Ok(track)
         })
-        .collect::<Result<Vec<_>, _>>()?;
+        .collect::<Result<Vec<_>, AlgoError>>()?;
     Ok(Outcome {
         pairs,
         system_tracks,
@@ -430,18 +520,6 @@ fn filter_track(
     }
 }
 
-/// The 6 × 6 transform of an interleaved state whose positions and rates go
-/// through the same 3 × 3 Jacobian.
-fn interleave(jac: &Matrix3<f64>) -> Matrix6<f64> {
-    Matrix6::from_fn(|r, c| {
-        if r % 2 == c % 2 {
-            jac[(r / 2, c / 2)]
-        } else {
-            0.0
-        }
-    })
-}
-
 /// A local estimate as a centre-ENU state. 2D estimates `[ρ, ρ̇, θ, θ̇]` are
 /// placed at height `h` (σ_h) with level flight (climb σ `CLIMB_SIGMA_MPS`).
 fn to_centre(
@@ -451,12 +529,33 @@ fn to_centre(
     h: f64,
     sigma_h: f64,
 ) -> Result<State6, AlgoError> {
-    let mut y = Vector6::zeros();
-    let mut py = Matrix6::zeros();
+    Ok(centred_state(
+        radar,
+        e,
+        &place(centre, radar, e, h)?,
+        sigma_h,
+    ))
+}
+
+/// Where [`to_centre`] puts an estimate, before σ_h enters: the position,
+/// the Jacobian to centre ENU, and the filter's acceleration and
+/// velocity-jump covariances in centre ENU.
+struct Placed {
+    pos: [f64; 3],
+    jac: Matrix3<f64>,
+    acceleration: Matrix3<f64>,
+    velocity_jump: Matrix3<f64>,
+}
+
+fn place(
+    centre: &LocalFrame,
+    radar: &Radar,
+    e: &alpha_beta::Estimate,
+    h: f64,
+) -> Result<Placed, AlgoError> {
     let (pos, jac, acceleration, velocity_jump) = if radar.three_d {
         let pos = radar.frame.position_to(centre, [e.x[0], e.x[2], e.x[4]])?;
         let jac = radar.frame.rotation_to(centre);
-        py.copy_from(&e.p);
         let a = Matrix3::from_fn(|i, j| e.acceleration[(i, j)]);
         let v = Matrix3::from_fn(|i, j| e.lag_ahead[(i, j)]);
         (
@@ -472,43 +571,50 @@ fn to_centre(
         let hs = radar.frame.origin_geodetic().2;
         let h = h.clamp(hs - 0.9 * rho, hs + 0.9 * rho);
         let (pos, jac) = geometry::place_2d(&radar.frame, centre, rho, th, h)?;
-        py.view_mut((0, 0), (4, 4)).copy_from(&e.p);
-        py[(4, 4)] = sigma_h * sigma_h;
-        py[(5, 5)] = CLIMB_SIGMA_MPS * CLIMB_SIGMA_MPS;
         // Range and azimuth accelerations through the cone; none in height.
         let a = Matrix2::from_fn(|i, j| e.acceleration[(i, j)]);
         let v = Matrix2::from_fn(|i, j| e.lag_ahead[(i, j)]);
         let j2 = jac.fixed_columns::<2>(0);
         (pos, jac, j2 * a * j2.transpose(), j2 * v * j2.transpose())
     };
-    for i in 0..e.x.len() {
-        y[i] = e.x[i];
-    }
-    let a = interleave(&jac);
-    let v = a * y;
-    let x = Vector6::new(pos[0], v[1], pos[1], v[3], pos[2], v[5]);
-    let p = a * py * a.transpose();
-    Ok(State6 {
-        t: e.t,
-        x,
-        p: (p + p.transpose()) * 0.5,
+    Ok(Placed {
+        pos,
+        jac,
         acceleration,
         velocity_jump,
     })
 }
 
-/// The constant-velocity transition of the interleaved 6-state.
-fn transition6(dt: f64) -> Matrix6<f64> {
-    let mut f = Matrix6::identity();
-    for i in 0..3 {
-        f[(2 * i, 2 * i + 1)] = dt;
+/// The centre-ENU state of an estimate [`place`]d, with σ_h for a 2D one.
+fn centred_state(radar: &Radar, e: &alpha_beta::Estimate, at: &Placed, sigma_h: f64) -> State6 {
+    let mut y = Vector6::zeros();
+    let mut py = Matrix6::zeros();
+    if radar.three_d {
+        py.copy_from(&e.p);
+    } else {
+        py.view_mut((0, 0), (4, 4)).copy_from(&e.p);
+        py[(4, 4)] = sigma_h * sigma_h;
+        py[(5, 5)] = CLIMB_SIGMA_MPS * CLIMB_SIGMA_MPS;
     }
-    f
+    for i in 0..e.x.len() {
+        y[i] = e.x[i];
+    }
+    let v = kernels::interleaved_apply(&at.jac, &y);
+    let x = Vector6::new(at.pos[0], v[1], at.pos[1], v[3], at.pos[2], v[5]);
+    let p = kernels::interleaved_congruence(&at.jac, &py);
+    State6 {
+        t: e.t,
+        x,
+        p: (p + p.transpose()) * 0.5,
+        acceleration: at.acceleration,
+        velocity_jump: at.velocity_jump,
+    }
 }
 
 /// The estimate of a track at `t`: its latest at or before `t`, extrapolated
 /// (constant velocity, with the filter's white acceleration) when at most
 /// `max_gap` old.
+#[cfg(test)]
 fn at_time(track: &[State6], t: f64, max_gap: f64) -> Option<State6> {
     let k = track.partition_point(|s| s.t <= t);
     let s = track.get(k.checked_sub(1)?)?;
@@ -520,9 +626,8 @@ fn extrapolate(s: &State6, t: f64, max_gap: f64) -> Option<State6> {
     if dt > max_gap {
         return None;
     }
-    let f = transition6(dt);
     let q = alpha_beta::white_acceleration(dt);
-    let mut p = f * s.p * f.transpose();
+    let mut p = kernels::transition_congruence(&s.p, dt);
     for i in 0..3 {
         for j in 0..3 {
             let (a, v) = (s.acceleration[(i, j)], s.velocity_jump[(i, j)]);
@@ -532,9 +637,13 @@ fn extrapolate(s: &State6, t: f64, max_gap: f64) -> Option<State6> {
             p[(2 * i + 1, 2 * j + 1)] += a * q[2] + v;
         }
     }
+    let mut x = s.x;
+    for i in 0..3 {
+        x[2 * i] = s.x[2 * i] + dt * s.x[2 * i + 1];
+    }
     Some(State6 {
         t,
-        x: f * s.x,
+        x,
         p,
         acceleration: s.acceleration,
         velocity_jump: s.velocity_jump,
@@ -570,6 +679,7 @@ fn correlate_pair(
     let (mut sum, mut n) = (0.0, 0u32);
     let (ot, op) = (&centred[other], &points[other]);
     let (first, last) = (ot[0].t, ot[ot.len() - 1].t + gap);
+    let mut next = 0;
     for (s, sp) in centred[driver].iter().zip(&points[driver]) {
         if !state.wants_test() {
             break;
@@ -577,8 +687,12 @@ fn correlate_pair(
         if s.t < first || s.t > last {
             continue;
         }
-        let k = ot.partition_point(|o| o.t <= s.t);
-        let Some(k) = k.checked_sub(1) else {
+        // The other track's latest sample at or before s.t (a forward scan:
+        // the driver's instants increase).
+        while next < ot.len() && ot[next].t <= s.t {
+            next += 1;
+        }
+        let Some(k) = next.checked_sub(1) else {
             continue;
         };
         let dt = s.t - ot[k].t;
@@ -641,13 +755,9 @@ fn fuse_into(
     members: &[State6],
 ) -> Result<(Vector6<f64>, Matrix6<f64>), AlgoError> {
     for m in members {
-        let chol = (p + m.p).cholesky().ok_or(AlgoError::NotPositiveDefinite {
+        (x, p) = kernels::fuse_step(&x, &p, &m.x, &m.p).ok_or(AlgoError::NotPositiveDefinite {
             what: "P1 + P2 - P12 - P21",
         })?;
-        let gain = chol.solve(&p).transpose();
-        x += gain * (m.x - x);
-        p -= gain * p;
-        p = (p + p.transpose()) * 0.5;
     }
     if x.iter().chain(p.iter()).any(|v| !v.is_finite()) {
         return Err(AlgoError::NotPositiveDefinite {
@@ -657,7 +767,39 @@ fn fuse_into(
     Ok((x, p))
 }
 
-fn system_track(
+/// Position and position covariance of a member's state at a system-track
+/// instant: what splitting's direction and distance fusion reads.
+#[derive(Debug, Clone, Copy)]
+struct Spot {
+    pos: [f64; 3],
+    cov: Matrix3<f64>,
+}
+
+impl Spot {
+    fn of(s: &State6) -> Self {
+        Self {
+            pos: [s.x[0], s.x[2], s.x[4]],
+            cov: Matrix3::from_fn(|i, k| s.p[(2 * i, 2 * k)]),
+        }
+    }
+}
+
+/// A system track fused as lifting fuses it (mapping: as mapping does),
+/// and, when asked for, the members' [`Spot`]s of every sample with a 3D
+/// member (3D members first), from which [`split_track`] makes splitting's.
+struct Fused {
+    track: SystemTrack,
+    /// Per sample: `(start, three, end)`, the sample's spots are
+    /// `spots[start..end]`, the first `three` of them 3D members'.
+    split: Vec<Option<(usize, usize, usize)>>,
+    spots: Vec<Spot>,
+}
+
+/// The system track of a group: at every instant of its members, the 3D
+/// members' fusion, then the 2D members (under lifting and splitting at the
+/// 3D members' height) fused into it one by one.
+#[allow(clippy::too_many_arguments)]
+fn fused_track(
     centre: &LocalFrame,
     radars: &[Radar],
     filtered: &[Filtered],
@@ -665,7 +807,8 @@ fn system_track(
     members: Vec<usize>,
     method: Method,
     altitude_sigma: f64,
-) -> Result<SystemTrack, AlgoError> {
+    keep_spots: bool,
+) -> Result<Fused, AlgoError> {
     let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
     let mut times: Vec<f64> = members
         .iter()
@@ -677,21 +820,31 @@ fn system_track(
     let (three_d, two_d): (Vec<usize>, Vec<usize>) = members
         .iter()
         .partition(|&&i| radars[filtered[i].radar].three_d);
-    let three_at = |t: f64, into: &mut Vec<State6>| {
+    // `at_time` for non-decreasing t: each member's latest sample at or
+    // before t found by a forward scan from the previous instant's.
+    let three_at = |t: f64, into: &mut Vec<State6>, cursor: &mut [usize]| {
         into.clear();
-        into.extend(
-            three_d
-                .iter()
-                .filter_map(|&i| at_time(&centred[i], t, gap(i))),
-        );
+        for (&i, k) in three_d.iter().zip(cursor.iter_mut()) {
+            let tr = &centred[i];
+            while *k < tr.len() && tr[*k].t <= t {
+                *k += 1;
+            }
+            if let Some(s) = k
+                .checked_sub(1)
+                .and_then(|k| extrapolate(&tr[k], t, gap(i)))
+            {
+                into.push(s);
+            }
+        }
     };
+    let mut cursor3 = vec![0; three_d.len()];
     // The fusion of the 3D members at every instant they cover, and the
     // height they give there (t, h, σ_h).
     let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
     let mut heights: Vec<(f64, f64, f64)> = Vec::new();
     for &t in &times {
-        three_at(t, &mut all);
+        three_at(t, &mut all, &mut cursor3);
         if all.is_empty() {
             fused3.push(None);
             continue;
@@ -705,6 +858,11 @@ fn system_track(
         fused3.push(Some((x3, p3)));
     }
     let mut samples = Vec::with_capacity(times.len());
+    let mut split = Vec::new();
+    let mut spots = Vec::new();
+    let mut three = Vec::with_capacity(three_d.len());
+    cursor3.fill(0);
+    let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
     for (&t, f3) in times.iter().zip(&fused3) {
         all.clear();
@@ -739,9 +897,11 @@ fn system_track(
                 None => (None, AltitudeSource::Assumed),
             }
         };
-        for &i in &two_d {
+        for (&i, k) in two_d.iter().zip(cursor2.iter_mut()) {
             let f = &filtered[i];
-            let k = f.est.partition_point(|e| e.t <= t);
+            while *k < f.est.len() && f.est[*k].t <= t {
+                *k += 1;
+            }
             let Some(k) = k.checked_sub(1) else {
                 continue;
             };
@@ -760,79 +920,100 @@ fn system_track(
         }
         // The 3D members' fusion first, then the 2D members one by one (the
         // order of `fuse_independent` over 3D then 2D members).
-        let (mut x, mut p) = match (f3, all.is_empty()) {
+        let (x, p) = match (f3, all.is_empty()) {
             (None, true) => continue,
             (None, false) => fuse_independent(&all)?,
             (Some((x3, p3)), _) => fuse_into(*x3, *p3, &all)?,
         };
 
-        if method == Method::Splitting && f3.is_some() {
-            // Direction from every track, geocentric distance from 3D tracks.
-            let mut three = Vec::with_capacity(three_d.len());
-            three_at(t, &mut three);
-            let twos = std::mem::take(&mut all);
-            all.extend_from_slice(&three);
-            all.extend(twos);
-            let mut info_d = Matrix2::<f64>::zeros();
-            let mut vec_d = nalgebra::Vector2::<f64>::zeros();
-            for s in &all {
-                let (_, z, j) =
-                    geometry::test_space(centre, Method::Splitting, [s.x[0], s.x[2], s.x[4]])?;
-                let pos = Matrix3::from_fn(|i, k| s.p[(2 * i, 2 * k)]);
-                let j2 = j.fixed_rows::<2>(0);
-                let c = j2 * pos * j2.transpose();
-                let inv = c.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
-                    what: "direction covariance",
-                })?;
-                vec_d += inv * z.fixed_rows::<2>(0);
-                info_d += inv;
-            }
-            let cd = info_d.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
-                what: "direction information",
-            })?;
-            let d = cd * vec_d;
-            let (mut info_r, mut sum_r) = (0.0, 0.0);
-            for s in &three {
-                let ecef = Vector3::from(centre.enu_to_ecef([s.x[0], s.x[2], s.x[4]])?);
-                let u = ecef / ecef.norm();
-                let u_enu = centre.rotation() * u;
-                let var = (0..3)
-                    .map(|i| {
-                        (0..3)
-                            .map(|j| u_enu[i] * s.p[(2 * i, 2 * j)] * u_enu[j])
-                            .sum::<f64>()
-                    })
-                    .sum::<f64>();
-                info_r += 1.0 / var;
-                sum_r += ecef.norm() / var;
-            }
-            let r = sum_r / info_r;
-            let pos = |y: [f64; 3]| -> Result<[f64; 3], AlgoError> {
-                centre.ecef_to_enu(geometry::from_direction(centre, [y[0], y[1]], y[2])?)
-            };
-            let p0 = pos([d[0], d[1], r])?;
-            let jac = jacobian(pos, [d[0], d[1], r], [1.0; 3])?;
-            let mut cy = Matrix3::zeros();
-            cy.fixed_view_mut::<2, 2>(0, 0).copy_from(&cd);
-            cy[(2, 2)] = 1.0 / info_r;
-            let cp = jac * cy * jac.transpose();
-            for i in 0..3 {
-                x[2 * i] = p0[i];
-                for j in 0..3 {
-                    p[(2 * i, 2 * j)] = cp[(i, j)];
-                    p[(2 * i, 2 * j + 1)] = 0.0;
-                    p[(2 * j + 1, 2 * i)] = 0.0;
-                }
-            }
-            p = (p + p.transpose()) * 0.5;
+        if keep_spots {
+            split.push(if f3.is_some() {
+                three_at(t, &mut three, &mut cursor3);
+                let start = spots.len();
+                spots.extend(three.iter().chain(&all).map(Spot::of));
+                Some((start, three.len(), spots.len()))
+            } else {
+                None
+            });
         }
         samples.push(Sample { t, x, p, altitude });
     }
-    Ok(SystemTrack {
-        members,
-        samples,
-        altitude_known: has_3d || method == Method::Mapping,
+    Ok(Fused {
+        track: SystemTrack {
+            members,
+            samples,
+            altitude_known: has_3d || method == Method::Mapping,
+        },
+        split,
+        spots,
     })
+}
+
+/// Splitting's system track from the one lifting fuses: at every sample with
+/// a 3D member, the direction from the Earth's centre fused from all members
+/// and the geocentric distance from the 3D members replace the position.
+fn split_track(centre: &LocalFrame, fused: &Fused) -> Result<SystemTrack, AlgoError> {
+    let mut track = fused.track.clone();
+    for (sample, split) in track.samples.iter_mut().zip(&fused.split) {
+        let Some(&(start, n3, end)) = split.as_ref() else {
+            continue;
+        };
+        let (all, three) = (&fused.spots[start..end], &fused.spots[start..start + n3]);
+        let (x, p) = (&mut sample.x, &mut sample.p);
+        // Direction from every track, geocentric distance from 3D tracks.
+        let mut info_d = Matrix2::<f64>::zeros();
+        let mut vec_d = nalgebra::Vector2::<f64>::zeros();
+        for s in all {
+            let (_, z, j) = geometry::test_space(centre, Method::Splitting, s.pos)?;
+            let pos = s.cov;
+            let j2 = j.fixed_rows::<2>(0);
+            let c = j2 * pos * j2.transpose();
+            let inv = c.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
+                what: "direction covariance",
+            })?;
+            vec_d += inv * z.fixed_rows::<2>(0);
+            info_d += inv;
+        }
+        let cd = info_d.try_inverse().ok_or(AlgoError::NotPositiveDefinite {
+            what: "direction information",
+        })?;
+        let d = cd * vec_d;
+        let (mut info_r, mut sum_r) = (0.0, 0.0);
+        for s in three {
+            let ecef = Vector3::from(centre.enu_to_ecef(s.pos)?);
+            let u = ecef / ecef.norm();
+            let u_enu = centre.rotation() * u;
+            let var = (0..3)
+                .map(|i| {
+                    (0..3)
+                        .map(|j| u_enu[i] * s.cov[(i, j)] * u_enu[j])
+                        .sum::<f64>()
+                })
+                .sum::<f64>();
+            info_r += 1.0 / var;
+            sum_r += ecef.norm() / var;
+        }
+        let r = sum_r / info_r;
+        let pos = |y: [f64; 3]| -> Result<[f64; 3], AlgoError> {
+            centre.ecef_to_enu(geometry::from_direction(centre, [y[0], y[1]], y[2])?)
+        };
+        let p0 = pos([d[0], d[1], r])?;
+        let jac = jacobian(pos, [d[0], d[1], r], [1.0; 3])?;
+        let mut cy = Matrix3::zeros();
+        cy.fixed_view_mut::<2, 2>(0, 0).copy_from(&cd);
+        cy[(2, 2)] = 1.0 / info_r;
+        let cp = jac * cy * jac.transpose();
+        for i in 0..3 {
+            x[2 * i] = p0[i];
+            for j in 0..3 {
+                p[(2 * i, 2 * j)] = cp[(i, j)];
+                p[(2 * i, 2 * j + 1)] = 0.0;
+                p[(2 * j + 1, 2 * i)] = 0.0;
+            }
+        }
+        *p = (*p + p.transpose()) * 0.5;
+    }
+    Ok(track)
 }
 
 #[cfg(test)]

@@ -1,0 +1,279 @@
+//! The 6 × 6 operations of the system-track loop, written out for the
+//! structure of their operands and with the order of operations of the
+//! nalgebra calls they replace, so that they give the same bits (the tests
+//! compare them with nalgebra).
+//!
+//! nalgebra's fixed-size products sum `Σ_k a[i,k] b[k,j]` from k = 0 up,
+//! its Cholesky factor is the column-by-column axpy form and its triangular
+//! solves are column by column (forward: axpy; backward: a dot product from
+//! zero). Here the 6 right-hand sides of a solve go through one pass, and
+//! terms that are zero by structure (the interleaved transform, the
+//! constant-velocity transition) are left out: adding an exact zero does not
+//! change a sum, so only the sign of a zero result could differ.
+
+// The loops index rows and columns as the formulas do.
+#![allow(clippy::needless_range_loop)]
+
+use nalgebra::{Matrix3, Matrix6, Vector6};
+
+/// Column-major storage of a 6 × 6 matrix: `m[c][r]` is row r, column c.
+type Cols = [[f64; 6]; 6];
+
+fn cols(m: &Matrix6<f64>) -> Cols {
+    m.data.0
+}
+
+fn matrix(c: Cols) -> Matrix6<f64> {
+    Matrix6::from_data(nalgebra::ArrayStorage(c))
+}
+
+/// One step of the Bar-Shalom–Campo fusion with zero cross-covariance, as
+/// `mod::fuse_into` wrote it with nalgebra:
+/// ```text
+/// chol = (p + q).cholesky();  gain = chol.solve(p)';
+/// x += gain (y − x);  p −= gain p;  p = (p + p') / 2
+/// ```
+/// `None` when p + q is not positive definite.
+pub fn fuse_step(
+    x: &Vector6<f64>,
+    p: &Matrix6<f64>,
+    y: &Vector6<f64>,
+    q: &Matrix6<f64>,
+) -> Option<(Vector6<f64>, Matrix6<f64>)> {
+    let pc = cols(p);
+    let qc = cols(q);
+    // The Cholesky factor of p + q, in the lower triangle of `l` (l[c][r]).
+    let mut l: Cols = [[0.0; 6]; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            l[c][r] = pc[c][r] + qc[c][r];
+        }
+    }
+    for j in 0..6 {
+        for k in 0..j {
+            let factor = -l[k][j];
+            for r in j..6 {
+                l[j][r] += factor * l[k][r];
+            }
+        }
+        let diag = l[j][j];
+        // nalgebra refuses a zero, a negative or a NaN pivot.
+        if diag.is_nan() || diag <= 0.0 {
+            return None;
+        }
+        let denom = diag.sqrt();
+        l[j][j] = denom;
+        for r in j + 1..6 {
+            l[j][r] /= denom;
+        }
+    }
+    // Solve (p + q) S = p for the 6 columns of p at once: b[r][c] = S(r, c).
+    let mut b = [[0.0f64; 6]; 6];
+    for (r, row) in b.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = pc[c][r];
+        }
+    }
+    for i in 0..6 {
+        let diag = l[i][i];
+        let coeff: [f64; 6] = std::array::from_fn(|c| b[i][c] / diag);
+        b[i] = coeff;
+        for r in i + 1..6 {
+            let lri = l[i][r];
+            for c in 0..6 {
+                b[r][c] += -coeff[c] * lri;
+            }
+        }
+    }
+    for i in (0..6).rev() {
+        let mut dot = [0.0f64; 6];
+        for r in i + 1..6 {
+            let lri = l[i][r];
+            for c in 0..6 {
+                dot[c] += lri * b[r][c];
+            }
+        }
+        let diag = l[i][i];
+        for c in 0..6 {
+            b[i][c] = (b[i][c] - dot[c]) / diag;
+        }
+    }
+    // gain(i, k) = S(k, i) = b[k][i].
+    let d: [f64; 6] = std::array::from_fn(|k| y[k] - x[k]);
+    let mut xo = *x;
+    for i in 0..6 {
+        let mut s = b[0][i] * d[0];
+        for k in 1..6 {
+            s += b[k][i] * d[k];
+        }
+        xo[i] += s;
+    }
+    // p − gain p, column by column, then the symmetric part.
+    let mut po: Cols = pc;
+    for j in 0..6 {
+        for i in 0..6 {
+            let mut s = b[0][i] * pc[j][0];
+            for k in 1..6 {
+                s += b[k][i] * pc[j][k];
+            }
+            po[j][i] -= s;
+        }
+    }
+    let mut out: Cols = [[0.0; 6]; 6];
+    for j in 0..6 {
+        for i in 0..6 {
+            out[j][i] = (po[j][i] + po[i][j]) * 0.5;
+        }
+    }
+    Some((xo, matrix(out)))
+}
+
+/// `F P F'` for the interleaved constant-velocity transition F (identity
+/// with F(2i, 2i+1) = dt), as nalgebra's `f * p * f.transpose()`.
+pub fn transition_congruence(p: &Matrix6<f64>, dt: f64) -> Matrix6<f64> {
+    let pc = cols(p);
+    // (F P)(r, c): P(r, c) + dt P(r + 1, c) for even r, P(r, c) for odd r.
+    let mut fp: Cols = [[0.0; 6]; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            fp[c][r] = if r % 2 == 0 {
+                pc[c][r] + dt * pc[c][r + 1]
+            } else {
+                pc[c][r]
+            };
+        }
+    }
+    // (F P F')(r, c) = Σ_k FP(r, k) F(c, k): FP(r, c) + FP(r, c + 1) dt for
+    // even c, FP(r, c) for odd c.
+    let mut out: Cols = [[0.0; 6]; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            out[c][r] = if c % 2 == 0 {
+                fp[c][r] + fp[c + 1][r] * dt
+            } else {
+                fp[c][r]
+            };
+        }
+    }
+    matrix(out)
+}
+
+/// `A Y A'` for the interleaved transform A of a 3 × 3 Jacobian
+/// (A(r, c) = J(r/2, c/2) when r and c have the same parity, else 0), as
+/// nalgebra's `a * y * a.transpose()`.
+pub fn interleaved_congruence(jac: &Matrix3<f64>, y: &Matrix6<f64>) -> Matrix6<f64> {
+    let yc = cols(y);
+    // (A Y)(r, c) = Σ_k J(r/2, k) Y(2k + r%2, c).
+    let mut ay: Cols = [[0.0; 6]; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            let (i, o) = (r / 2, r % 2);
+            ay[c][r] =
+                jac[(i, 0)] * yc[c][o] + jac[(i, 1)] * yc[c][o + 2] + jac[(i, 2)] * yc[c][o + 4];
+        }
+    }
+    // (A Y A')(r, c) = Σ_k AY(r, 2k + c%2) J(c/2, k).
+    let mut out: Cols = [[0.0; 6]; 6];
+    for c in 0..6 {
+        let (i, o) = (c / 2, c % 2);
+        for r in 0..6 {
+            out[c][r] =
+                ay[o][r] * jac[(i, 0)] + ay[o + 2][r] * jac[(i, 1)] + ay[o + 4][r] * jac[(i, 2)];
+        }
+    }
+    matrix(out)
+}
+
+/// `A y` for the interleaved transform A of a 3 × 3 Jacobian, as nalgebra's
+/// `a * y`.
+pub fn interleaved_apply(jac: &Matrix3<f64>, y: &Vector6<f64>) -> Vector6<f64> {
+    Vector6::from_fn(|r, _| {
+        let (i, o) = (r / 2, r % 2);
+        jac[(i, 0)] * y[o] + jac[(i, 1)] * y[o + 2] + jac[(i, 2)] * y[o + 4]
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic sequence in (−1, 1) (a 64-bit LCG).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
+        fn spd(&mut self, scale: f64) -> Matrix6<f64> {
+            let g = Matrix6::from_fn(|_, _| self.next() * scale);
+            g * g.transpose() + Matrix6::identity() * scale
+        }
+    }
+
+    fn same_bits(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
+    #[test]
+    fn fuse_step_gives_the_bits_of_the_nalgebra_form() {
+        let mut g = Lcg(3);
+        for case in 0..500 {
+            let scale = [1.0, 1e3, 1e6][case % 3];
+            let (p, q) = (g.spd(scale), g.spd(scale * 3.0));
+            // Not exactly symmetric, as an extrapolated covariance may be.
+            let p = p + Matrix6::from_fn(|r, c| if r < c { 1e-9 * scale } else { 0.0 });
+            let x = Vector6::from_fn(|_, _| g.next() * 1e5);
+            let y = Vector6::from_fn(|_, _| g.next() * 1e5);
+            let chol = (p + q).cholesky().unwrap();
+            let gain = chol.solve(&p).transpose();
+            let xe = x + gain * (y - x);
+            let mut pe = p;
+            pe -= gain * p;
+            let pe = (pe + pe.transpose()) * 0.5;
+            let (xf, pf) = fuse_step(&x, &p, &y, &q).unwrap();
+            assert!(same_bits(xe.as_slice(), xf.as_slice()), "case {case}");
+            assert!(same_bits(pe.as_slice(), pf.as_slice()), "case {case}");
+        }
+        // Not positive definite: refused, as nalgebra's cholesky refuses it.
+        let p = Matrix6::identity();
+        let q = -Matrix6::identity() * 2.0;
+        assert!((p + q).cholesky().is_none());
+        assert!(fuse_step(&Vector6::zeros(), &p, &Vector6::zeros(), &q).is_none());
+    }
+
+    #[test]
+    fn structured_products_give_the_bits_of_the_dense_ones() {
+        let mut g = Lcg(11);
+        for case in 0..500 {
+            let p = g.spd(1e4);
+            let dt = g.next() * 20.0;
+            let mut f = Matrix6::identity();
+            for i in 0..3 {
+                f[(2 * i, 2 * i + 1)] = dt;
+            }
+            let dense = f * p * f.transpose();
+            let ours = transition_congruence(&p, dt);
+            assert!(same_bits(dense.as_slice(), ours.as_slice()), "case {case}");
+
+            let jac = Matrix3::from_fn(|_, _| g.next() * 2.0);
+            let a = Matrix6::from_fn(|r, c| {
+                if r % 2 == c % 2 {
+                    jac[(r / 2, c / 2)]
+                } else {
+                    0.0
+                }
+            });
+            let dense = a * p * a.transpose();
+            let ours = interleaved_congruence(&jac, &p);
+            assert!(same_bits(dense.as_slice(), ours.as_slice()), "case {case}");
+            let y = Vector6::from_fn(|_, _| g.next() * 1e3);
+            assert!(same_bits(
+                (a * y).as_slice(),
+                interleaved_apply(&jac, &y).as_slice()
+            ));
+        }
+    }
+}
