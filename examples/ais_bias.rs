@@ -7,6 +7,7 @@
 //! ```sh
 //! cargo run --release --example ais_bias [-- REPEATS SEEDS]
 //! cargo run --release --example ais_bias -- coverage [RUNS]
+//! cargo run --release --example ais_bias -- dump [SEEDS] > outcomes.txt
 //! ```
 //!
 //! `coverage` runs Monte Carlo scenes (harbour, 72 tracks; open sea, 20
@@ -15,6 +16,11 @@
 //! with the truncated times taken as exact (the service before issue 17),
 //! CR1 with the times at the middle of their second, and the reported
 //! covariance (CR2, small-sample scaling, stated-error floor) with them.
+//!
+//! `dump` prints the whole `Outcome` (Debug, every float to the last bit) of
+//! every kind at range bias 0, 0.5, 3 and 6 km and azimuth 0.5° and −1°,
+//! under each seeding and without widening, so the results of two builds can
+//! be diffed.
 //!
 //! Output: one line per scene, `kind seed bias_range_m: median_ms min_ms
 //! cpu median_ms correct/false/missed est_range_m est_azimuth_deg
@@ -109,7 +115,64 @@ fn coverage(runs: usize) {
     }
 }
 
+fn dump(seeds: u64) {
+    use radar_fusion::algo::bias::associate::Seeding;
+    let kinds: [(&str, MakeScene); 3] = [
+        ("harbour72", |b, a| AisSceneConfig::harbour(72, b, a)),
+        ("open_sea30", |b, a| AisSceneConfig::open_sea(30, b, a)),
+        ("open_sea10", |b, a| AisSceneConfig::open_sea(10, b, a)),
+    ];
+    let configs = [
+        ("auto", Config::default()),
+        (
+            "cfar",
+            Config {
+                seeding: Seeding::Cfar,
+                ..Config::default()
+            },
+        ),
+        (
+            "search",
+            Config {
+                seeding: Seeding::Search,
+                ..Config::default()
+            },
+        ),
+        (
+            "fixed",
+            Config {
+                widen: false,
+                ..Config::default()
+            },
+        ),
+    ];
+    for (name, make) in &kinds {
+        for seed in 0..seeds {
+            for bias in [0.0, 500.0, 3000.0, 6000.0] {
+                for az in [0.5f64, -1.0] {
+                    let mut rng = run_rng(23, seed * 1000 + bias as u64);
+                    let scene = make(bias, az.to_radians())
+                        .generate(&mut rng)
+                        .expect("valid scene");
+                    for (label, cfg) in &configs {
+                        let o = associate::associate(&scene.radar, &scene.ais, cfg);
+                        println!("{name} seed {seed} bias {bias} az {az} {label}: {o:?}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn main() {
+    if std::env::args().nth(1).as_deref() == Some("dump") {
+        let seeds = std::env::args()
+            .nth(2)
+            .and_then(|a| a.parse().ok())
+            .unwrap_or(2);
+        dump(seeds);
+        return;
+    }
     if std::env::args().nth(1).as_deref() == Some("coverage") {
         let runs = std::env::args()
             .nth(2)
