@@ -550,6 +550,50 @@ fn solve_gated(
 /// of its AIS report.
 type Residual = ([f64; 2], usize);
 
+/// The sums over a pair's common instants (brackets `br` of `ship` in the
+/// track at raw positions `pos`, AIS ranges `rho_a`): eq. 6 distance, range
+/// residual and its square, ρ_a sin δ, ρ_a cos δ, the square of the first,
+/// and the AIS range (δ = θ_p − θ_a, with ρ_a sin δ = (p × q)/|p|). Four
+/// instants at a time, each lane with the same operations as one at a time
+/// (so the square roots and divisions pack into vector instructions), the
+/// sums taken in instant order: the same bits as a plain loop.
+fn sums(pos: &[[f64; 2]], ship: &[AisPoint], rho_a: &[f64], br: &[Bracket]) -> [f64; 7] {
+    const L: usize = 4;
+    let mut acc = [0.0f64; 7];
+    for chunk in br.chunks(L) {
+        // Unused lanes hold a harmless point (1, 0) against itself.
+        let (mut px, mut py, mut qx, mut qy, mut ra) =
+            ([1.0; L], [0.0; L], [1.0; L], [0.0; L], [1.0; L]);
+        for (l, b) in chunk.iter().enumerate() {
+            let p = at(pos, b.a as usize, b.w);
+            let k = b.k as usize;
+            (px[l], py[l]) = (p[0], p[1]);
+            (qx[l], qy[l]) = (ship[k].position[0], ship[k].position[1]);
+            ra[l] = rho_a[k];
+        }
+        let (mut d, mut dr, mut x, mut y) = ([0.0; L], [0.0; L], [0.0; L], [0.0; L]);
+        for l in 0..L {
+            let rho_p = (px[l] * px[l] + py[l] * py[l]).sqrt();
+            dr[l] = rho_p - ra[l];
+            let inv = 1.0 / rho_p.max(1e-9);
+            x[l] = (px[l] * qy[l] - py[l] * qx[l]) * inv;
+            y[l] = (px[l] * qx[l] + py[l] * qy[l]) * inv;
+            let (ex, ey) = (px[l] - qx[l], py[l] - qy[l]);
+            d[l] = (ex * ex + ey * ey).sqrt();
+        }
+        for l in 0..chunk.len() {
+            acc[0] += d[l];
+            acc[1] += dr[l];
+            acc[2] += dr[l] * dr[l];
+            acc[3] += x[l];
+            acc[4] += y[l];
+            acc[5] += x[l] * x[l];
+            acc[6] += ra[l];
+        }
+    }
+    acc
+}
+
 /// The fixed geometry of a problem: tracks, ships and their time alignment.
 struct Problem<'a> {
     radar: &'a [Vec<RadarSample>],
@@ -647,6 +691,7 @@ impl<'a> Problem<'a> {
         };
         let mut summary = Vec::with_capacity(rows * cols);
         let mut pruned = Vec::new();
+        let mut scratch = Vec::new();
         for (i, track) in radar.iter().enumerate() {
             for (j, ship) in ais.iter().enumerate() {
                 if sectors_r[i].apart(&sectors_a[j], outer, reach) {
@@ -654,33 +699,22 @@ impl<'a> Problem<'a> {
                     summary.push(Summary::default());
                     continue;
                 }
-                let mut acc = [0.0f64; 8];
-                let mut n = 0usize;
+                scratch.clear();
                 walk(track, ship, cfg.max_gap, |k, a, w| {
-                    let p = at(&raw[i], a, w);
-                    let q = ship[k].position;
-                    let rho_a = ais_range[j][k];
-                    let rho_p = (p[0] * p[0] + p[1] * p[1]).sqrt();
-                    let dr = rho_p - rho_a;
-                    // ρ_a sin δ and ρ_a cos δ, δ = θ_p − θ_a.
-                    let inv = 1.0 / rho_p.max(1e-9);
-                    let x = (p[0] * q[1] - p[1] * q[0]) * inv;
-                    let y = (p[0] * q[0] + p[1] * q[1]) * inv;
-                    acc[0] += dist(p, q);
-                    acc[1] += dr;
-                    acc[2] += dr * dr;
-                    acc[3] += x;
-                    acc[4] += y;
-                    acc[5] += x * x;
-                    acc[6] += rho_a;
-                    n += 1;
+                    scratch.push(Bracket {
+                        k: k as u32,
+                        a: a as u32,
+                        w,
+                    })
                 });
+                let n = scratch.len();
                 if n < min_common {
                     summary.push(Summary::default());
                     continue;
                 }
+                let acc = sums(&raw[i], ship, &ais_range[j], &scratch);
                 let nf = n as f64;
-                let m: Vec<f64> = acc.iter().map(|s| s / nf).collect();
+                let m = acc.map(|s| s / nf);
                 summary.push(Summary {
                     n,
                     distance: m[0],
