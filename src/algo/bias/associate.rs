@@ -623,11 +623,13 @@ struct Problem<'a> {
     /// associated pairs: the search, the refinements and the ambiguity check
     /// meet the same biases and associations again.
     assigned: RefCell<HashMap<(u64, u64), Assigned>>,
-    estimates: RefCell<HashMap<Vec<(usize, usize)>, Option<BiasEstimate>>>,
+    estimates: RefCell<HashMap<Pairs, Option<BiasEstimate>>>,
 }
 
+/// Associated pairs (radar track, AIS ship).
+type Pairs = Vec<(usize, usize)>;
 /// A gated assignment and its total distance.
-type Assigned = (Vec<(usize, usize)>, f64);
+type Assigned = (Pairs, f64);
 
 /// Central-difference velocity of each report (one-sided at the ends).
 fn velocities(ship: &[AisPoint]) -> Vec<[f64; 2]> {
