@@ -578,15 +578,7 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
         .filter(|t| t["status"] == "confirmed")
         .count();
     assert_eq!(confirmed, 3, "{view}");
-    let metrics = app
-        .client
-        .get(app.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let metrics = app.metrics_text().await;
     let value = |name: &str| -> u64 {
         metrics
             .lines()

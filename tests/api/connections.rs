@@ -127,15 +127,7 @@ async fn connections_per_client_are_bounded() {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     assert!(served, "a freed slot serves the client again");
-    let refused = app
-        .client
-        .get(app.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let refused = app.metrics_text().await;
     assert!(
         refused.contains("connections_refused_total{server=\"http\",reason=\"per_client\"}"),
         "{refused}"

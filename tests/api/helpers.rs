@@ -62,6 +62,18 @@ impl TestApp {
         serde_json::from_str(&text).expect("JSON response")
     }
 
+    /// The Prometheus text of `/metrics`.
+    pub async fn metrics_text(&self) -> String {
+        self.client
+            .get(self.url("/metrics"))
+            .send()
+            .await
+            .expect("request sent")
+            .text()
+            .await
+            .expect("metrics text")
+    }
+
     /// A gRPC client of the dedicated gRPC port.
     pub async fn correlation(&self) -> CorrelationServiceClient<Channel> {
         grpc_client(self.grpc_addr).await

@@ -39,15 +39,7 @@ async fn metrics_count_routes_and_grpc_methods() {
             rules: vec![],
         })
         .await;
-    let text = app
-        .client
-        .get(app.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = app.metrics_text().await;
     assert!(
         text.contains(r#"http_requests_total{method="POST",route="/v1/correlation/rules/evaluate",status="200"}"#),
         "{text}"
@@ -111,15 +103,7 @@ async fn invented_methods_and_routes_fold_into_one_label_each() {
             .await
             .unwrap();
     }
-    let text = app
-        .client
-        .get(app.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = app.metrics_text().await;
     assert!(
         !text.contains("INVENTED"),
         "an invented method became a label"
