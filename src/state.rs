@@ -74,6 +74,27 @@ impl AppState {
         self.inner.in_flight.clone().try_acquire_owned().ok()
     }
 
+    /// Reads a request body whole, within `limit` bytes (after any
+    /// decompression layer in front) and the body-read timeout
+    /// (`FUSION_BODY_READ_TIMEOUT_S`): both adapters call it before a
+    /// request takes an in-flight slot, so a slow or withholding client
+    /// holds none. A timeout is counted in `requests_slow_body_total`.
+    pub async fn read_body(
+        &self,
+        body: axum::body::Body,
+        limit: usize,
+    ) -> Result<axum::body::Bytes, BodyReadError> {
+        let read = axum::body::to_bytes(body, limit);
+        match tokio::time::timeout(self.settings().body_read_timeout(), read).await {
+            Ok(Ok(bytes)) => Ok(bytes),
+            Ok(Err(e)) => Err(BodyReadError::classify(&e)),
+            Err(_) => {
+                metrics::counter!("requests_slow_body_total").increment(1);
+                Err(BodyReadError::TimedOut)
+            }
+        }
+    }
+
     pub fn metrics(&self) -> &PrometheusHandle {
         &self.inner.metrics
     }
@@ -130,4 +151,38 @@ pub enum Readiness {
     Ready { store: StoreHealth },
     /// Not ready, with a reason safe to show to a probe.
     NotReady(&'static str),
+}
+
+/// Why a request body could not be read whole ([`AppState::read_body`]).
+#[derive(Debug)]
+pub enum BodyReadError {
+    /// Over the limit (decompressed, when the body was compressed).
+    TooLarge,
+    /// It does not decompress as its `Content-Encoding` says.
+    Undecodable(std::io::Error),
+    /// The connection failed mid-body.
+    Failed(String),
+    /// Not complete within the body-read timeout.
+    TimedOut,
+}
+
+impl BodyReadError {
+    fn classify(e: &axum::Error) -> Self {
+        let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+        while let Some(err) = source {
+            if err.is::<http_body_util::LengthLimitError>() {
+                return Self::TooLarge;
+            }
+            if let Some(io) = err.downcast_ref::<std::io::Error>()
+                && matches!(
+                    io.kind(),
+                    std::io::ErrorKind::InvalidData | std::io::ErrorKind::UnexpectedEof
+                )
+            {
+                return Self::Undecodable(std::io::Error::new(io.kind(), io.to_string()));
+            }
+            source = err.source();
+        }
+        Self::Failed(e.to_string())
+    }
 }

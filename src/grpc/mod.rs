@@ -30,7 +30,7 @@ use crate::{
         plot_fusion_service_server::PlotFusionServiceServer,
         session_service_server::SessionServiceServer,
     },
-    state::AppState,
+    state::{AppState, BodyReadError},
 };
 use ais_radar::AisRadarGrpc;
 use correlation::CorrelationGrpc;
@@ -164,7 +164,7 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
     };
     let timeout = state.settings().request_timeout();
     match tokio::time::timeout(timeout, next.run(req)).await {
-        Ok(response) => size_limit_is_resource_exhausted(response),
+        Ok(response) => remap_client_error_statuses(response),
         Err(_) => Status::deadline_exceeded(format!(
             "the call took longer than the configured limit of {} s (FUSION_REQUEST_TIMEOUT_S)",
             timeout.as_secs_f64()
@@ -184,26 +184,25 @@ fn is_streaming(path: &str) -> bool {
 /// as the REST side does: a client that sends its headers and then trickles
 /// or withholds its message holds no slot, and is answered DEADLINE_EXCEEDED.
 async fn read_unary_body(state: &AppState, req: Request) -> Result<Request, Status> {
-    let settings = state.settings();
+    let limit = state.settings().max_body_bytes;
+    let (parts, body) = req.into_parts();
     // The 5-byte gRPC frame header (compression flag, length) rides on the
     // message: a body over limit + 5 carries a message over the limit.
-    let limit = settings.max_body_bytes.saturating_add(5);
-    let (parts, body) = req.into_parts();
-    let read = axum::body::to_bytes(body, limit);
-    match tokio::time::timeout(settings.body_read_timeout(), read).await {
-        Ok(Ok(bytes)) => Ok(Request::from_parts(parts, axum::body::Body::from(bytes))),
-        Ok(Err(_)) => Err(Status::resource_exhausted(format!(
-            "the request message is too large: more than {} bytes (FUSION_MAX_BODY_BYTES), \
-             or the connection failed while it arrived",
-            settings.max_body_bytes
+    match state.read_body(body, limit.saturating_add(5)).await {
+        Ok(bytes) => Ok(Request::from_parts(parts, axum::body::Body::from(bytes))),
+        Err(BodyReadError::TooLarge) => Err(Status::resource_exhausted(format!(
+            "the request message is larger than {limit} bytes (FUSION_MAX_BODY_BYTES)"
         ))),
-        Err(_) => {
-            metrics::counter!("requests_slow_body_total").increment(1);
-            Err(Status::deadline_exceeded(format!(
-                "the request message did not arrive within {} s (FUSION_BODY_READ_TIMEOUT_S)",
-                settings.body_read_timeout().as_secs_f64()
-            )))
-        }
+        Err(BodyReadError::Undecodable(e)) => Err(Status::invalid_argument(format!(
+            "the request body could not be read: {e}"
+        ))),
+        Err(BodyReadError::Failed(e)) => Err(Status::cancelled(format!(
+            "the request body could not be read: {e}"
+        ))),
+        Err(BodyReadError::TimedOut) => Err(Status::deadline_exceeded(format!(
+            "the request message did not arrive within {} s (FUSION_BODY_READ_TIMEOUT_S)",
+            state.settings().body_read_timeout().as_secs_f64()
+        ))),
     }
 }
 
@@ -256,16 +255,16 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
 /// the gRPC status-code guide (and grpc-go, grpc-java) use RESOURCE_EXHAUSTED
 /// for it, as our REST side uses 413. The status arrives in the headers of a
 /// trailers-only response or in the trailers, so both are rewritten.
-fn size_limit_is_resource_exhausted(response: Response) -> Response {
+fn remap_client_error_statuses(response: Response) -> Response {
     let (mut parts, body) = response.into_parts();
-    remap_size_status(&mut parts.headers);
+    remap_client_error_status(&mut parts.headers);
     Response::from_parts(parts, axum::body::Body::new(RemapTrailers(body)))
 }
 
 ///
 /// A request message that does not decompress as its `grpc-encoding` says
 /// is the client's error, not INTERNAL as tonic answers it: INVALID_ARGUMENT.
-fn remap_size_status(headers: &mut axum::http::HeaderMap) {
+fn remap_client_error_status(headers: &mut axum::http::HeaderMap) {
     let status = headers.get("grpc-status").map(|v| v.as_bytes().to_vec());
     // grpc-message is percent-encoded on the wire.
     let contains = |needle: &str| {
@@ -288,7 +287,7 @@ fn remap_size_status(headers: &mut axum::http::HeaderMap) {
     }
 }
 
-/// A response body whose trailers go through [`remap_size_status`].
+/// A response body whose trailers go through [`remap_client_error_status`].
 struct RemapTrailers(axum::body::Body);
 
 impl http_body::Body for RemapTrailers {
@@ -304,7 +303,7 @@ impl http_body::Body for RemapTrailers {
             frame.map(|frame| {
                 frame.map(|frame| match frame.into_trailers() {
                     Ok(mut trailers) => {
-                        remap_size_status(&mut trailers);
+                        remap_client_error_status(&mut trailers);
                         http_body::Frame::trailers(trailers)
                     }
                     Err(frame) => frame,

@@ -30,7 +30,7 @@ use tower_http::{
 use utoipa::{OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::state::AppState;
+use crate::state::{AppState, BodyReadError};
 use problem::Problem;
 
 /// Where the time of a request went.
@@ -353,21 +353,10 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
 /// withholds its body holds no slot, and is answered 408 when the timeout
 /// passes. Sheds the request with 503 when `max_in_flight` are being served.
 async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let settings = state.settings();
     let (parts, body) = req.into_parts();
-    let read = axum::body::to_bytes(body, settings.max_body_bytes);
-    let bytes = match tokio::time::timeout(settings.body_read_timeout(), read).await {
-        Ok(Ok(bytes)) => bytes,
-        Ok(Err(e)) => return body_error(&e),
-        Err(_) => {
-            metrics::counter!("requests_slow_body_total").increment(1);
-            let mut response = Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response();
-            response.headers_mut().insert(
-                header::CONNECTION,
-                header::HeaderValue::from_static("close"),
-            );
-            return response;
-        }
+    let bytes = match state.read_body(body, state.settings().max_body_bytes).await {
+        Ok(bytes) => bytes,
+        Err(e) => return body_error(e),
     };
     let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     match state.try_admit() {
@@ -380,38 +369,36 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
 }
 
 /// The answer to a body that could not be read: over the limit (after
-/// decompression) is a 413; a `Content-Encoding: gzip` body that does not
-/// decompress a 400; anything else (the connection failed mid-body) a 400
-/// that nobody may read.
-fn body_error(e: &axum::Error) -> Response {
-    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
-    while let Some(err) = source {
-        if err.is::<http_body_util::LengthLimitError>() {
-            return Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response();
+/// decompression) a 413; a body that does not decompress as its
+/// `Content-Encoding` says a 400; the connection failed mid-body a 400 that
+/// nobody may read; too slow a 408 with the connection closed.
+fn body_error(e: BodyReadError) -> Response {
+    let malformed = |detail: String| {
+        Problem::new(
+            StatusCode::BAD_REQUEST,
+            "malformed-body",
+            "Malformed body",
+            detail,
+        )
+        .into_response()
+    };
+    match e {
+        BodyReadError::TooLarge => {
+            Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response()
         }
-        if let Some(io) = err.downcast_ref::<std::io::Error>()
-            && matches!(
-                io.kind(),
-                std::io::ErrorKind::InvalidData | std::io::ErrorKind::UnexpectedEof
-            )
-        {
-            return Problem::new(
-                StatusCode::BAD_REQUEST,
-                "malformed-body",
-                "Malformed body",
-                format!("the body does not decompress as its Content-Encoding says: {io}"),
-            )
-            .into_response();
+        BodyReadError::Undecodable(io) => malformed(format!(
+            "the body does not decompress as its Content-Encoding says: {io}"
+        )),
+        BodyReadError::Failed(e) => malformed(format!("the body could not be read: {e}")),
+        BodyReadError::TimedOut => {
+            let mut response = Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response();
+            response.headers_mut().insert(
+                header::CONNECTION,
+                header::HeaderValue::from_static("close"),
+            );
+            response
         }
-        source = err.source();
     }
-    Problem::new(
-        StatusCode::BAD_REQUEST,
-        "malformed-body",
-        "Malformed body",
-        format!("the body could not be read: {e}"),
-    )
-    .into_response()
 }
 
 /// Hands requests with a gRPC content type to the gRPC router.

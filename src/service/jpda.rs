@@ -681,8 +681,8 @@ fn sensor(
                 }
             }
             (Some(SensorModel::Polar { .. }), Some(dim)) => {
-                let range = v.required(&mf("range_m"), z.range_m);
-                let az = v.required(&mf("azimuth_deg"), z.azimuth_deg);
+                let range = v.required_at(z.range_m, || mf("range_m"));
+                let az = v.required_at(z.azimuth_deg, || mf("azimuth_deg"));
                 if let Some(r) = range
                     && !(r >= 0.0 && r.is_finite())
                 {

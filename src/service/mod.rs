@@ -79,10 +79,7 @@ impl Violations {
 
     /// Returns the value of a required field, or records that it is missing.
     pub fn required<T>(&mut self, field: &str, value: Option<T>) -> Option<T> {
-        if value.is_none() {
-            self.add(field, "is required");
-        }
-        value
+        self.required_at(value, || field.to_string())
     }
 
     /// As [`required`](Self::required), with the field path built only when

@@ -498,12 +498,7 @@ async fn a_rest_session_batch_takes_asterix_and_reports_it() {
     assert_eq!(a["plots"], json_plots().len(), "{out}");
     assert_eq!(a["unmapped"], 1);
     let view = app.get_ok(&format!("/v1/sessions/{id}")).await;
-    let confirmed = view["plot_fusion"]["tracks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|t| t["status"] == "confirmed")
-        .count();
+    let confirmed = confirmed_in(&view);
     assert_eq!(confirmed, 3, "{view}");
     // A session batch without a date, before any frame, is refused by name.
     let created = app
@@ -571,12 +566,7 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
     }
     assert_eq!(plots as usize, json_plots().len());
     let view = app.get_ok(&format!("/v1/sessions/{id}")).await;
-    let confirmed = view["plot_fusion"]["tracks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|t| t["status"] == "confirmed")
-        .count();
+    let confirmed = confirmed_in(&view);
     assert_eq!(confirmed, 3, "{view}");
     let metrics = app.metrics_text().await;
     let value = |name: &str| -> u64 {
@@ -592,4 +582,14 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
     assert_eq!(value("fusion_asterix_records_total") as usize, records);
     assert_eq!(value("fusion_asterix_decode_errors_total"), 0);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Confirmed tracks in a plot_fusion session's view.
+fn confirmed_in(view: &Value) -> usize {
+    view["plot_fusion"]["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .count()
 }
