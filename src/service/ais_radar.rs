@@ -6,7 +6,8 @@
 
 use std::{collections::BTreeMap, time::Instant};
 
-use super::{ServiceError, Violations, micros_since};
+use super::validate::{Bound, LATITUDE, LONGITUDE};
+use super::{Ids, Increasing, Interval, ServiceError, Violations, micros_since};
 use crate::algo::{
     bias::{
         associate::{self, AisPoint, Config, Path, RadarSample, Seeding},
@@ -252,80 +253,115 @@ pub fn path_name(p: Path) -> &'static str {
     }
 }
 
-fn finite_in(v: &mut Violations, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
-    let x = v.required(field, x)?;
-    if !(x.is_finite() && (lo..=hi).contains(&x)) {
-        v.add(
-            field,
-            format!("must be a finite number between {lo} and {hi}"),
-        );
-        return None;
-    }
-    Some(x)
-}
+/// Times of radar samples and AIS reports, in s.
+const TIME: Interval = Interval::closed(-1e12, 1e12);
+/// Positions in the radar's plane, in m.
+const PLANE: Interval = Interval::closed(-1e7, 1e7);
 
-fn optional_positive(v: &mut Violations, field: &str, x: Option<f64>, default: f64) -> f64 {
-    match x {
-        None => default,
-        Some(x) if x.is_finite() && x > 0.0 => x,
-        Some(_) => {
-            v.add(field, "must be a finite number > 0");
-            default
-        }
-    }
-}
-
-fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Config {
+/// The options, each checked at its own wire field; absent ones take the
+/// defaults of the numerical core.
+fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Option<Config> {
     let o = o.clone().unwrap_or_default();
     let d = Config::default();
-    let seeding = match o.seeding.as_deref() {
-        None | Some("auto") => Seeding::Auto,
-        Some("cfar") => Seeding::Cfar,
-        Some("search") => Seeding::Search,
-        Some(other) => {
-            v.add(
-                "options.seeding",
-                format!("must be auto, cfar or search, got {other:?}"),
-            );
-            Seeding::Auto
-        }
+    let seeding = v.one_of(
+        "options.seeding",
+        o.seeding.as_deref(),
+        Some(Seeding::Auto),
+        &[
+            ("auto", Seeding::Auto),
+            ("cfar", Seeding::Cfar),
+            ("search", Seeding::Search),
+        ],
+    );
+    let positive = |v: &mut Violations, name: &str, x: Option<f64>, default: f64| -> Option<f64> {
+        v.number_or(format!("options.{name}"), x, default, Interval::POSITIVE)
     };
-    let cfg = Config {
-        max_gap: optional_positive(v, "options.max_gap_s", o.max_gap_s, d.max_gap),
-        gate: optional_positive(v, "options.gate_m", o.gate_m, d.gate),
-        seeding,
-        max_iterations: o.max_iterations.map_or(d.max_iterations, |x| x as usize),
-        max_range_bias: o.max_range_bias_m.unwrap_or(d.max_range_bias),
-        max_azimuth_bias: o
-            .max_azimuth_bias_deg
-            .map_or(d.max_azimuth_bias, f64::to_radians),
+    let max_gap = positive(v, "max_gap_s", o.max_gap_s, d.max_gap);
+    let gate = positive(v, "gate_m", o.gate_m, d.gate);
+    let max_iterations = v.count_or(
+        "options.max_iterations",
+        o.max_iterations,
+        d.max_iterations as u32,
+        1,
+        1000,
+    );
+    let max_range_bias = v.number_or(
+        "options.max_range_bias_m",
+        o.max_range_bias_m,
+        d.max_range_bias,
+        Interval::NON_NEGATIVE,
+    );
+    let max_azimuth_bias = v.number_or(
+        "options.max_azimuth_bias_deg",
+        o.max_azimuth_bias_deg,
+        d.max_azimuth_bias.to_degrees(),
+        Interval::closed(0.0, 180.0),
+    );
+    let sigma_range = positive(
+        v,
+        "radar_sigma_range_m",
+        o.radar_sigma_range_m,
+        d.sigma_range,
+    );
+    let sigma_azimuth = positive(
+        v,
+        "radar_sigma_azimuth_deg",
+        o.radar_sigma_azimuth_deg,
+        d.sigma_azimuth.to_degrees(),
+    );
+    let sigma_ais = v.number_or(
+        "options.ais_sigma_m",
+        o.ais_sigma_m,
+        d.sigma_ais,
+        Interval::NON_NEGATIVE,
+    );
+    let window = v.count_or(
+        "options.cfar_window",
+        o.cfar_window,
+        d.cfar.window as u32,
+        1,
+        1000,
+    );
+    let guard = v.count_or(
+        "options.cfar_guard",
+        o.cfar_guard,
+        d.cfar.guard as u32,
+        0,
+        100,
+    );
+    let k = positive(v, "cfar_k", o.cfar_k, d.cfar.k);
+    let h = v.number_or(
+        "options.cfar_h",
+        o.cfar_h,
+        d.cfar.h,
+        Interval {
+            lo: Bound::Closed(1.0),
+            hi: Bound::Unbounded,
+        },
+    );
+    // Given values keep their exact radians; a default is the core's own.
+    let radians = |given: Option<f64>, checked: Option<f64>, default: f64| {
+        checked.map(|_| given.map_or(default, f64::to_radians))
+    };
+    Some(Config {
+        max_gap: max_gap?,
+        gate: gate?,
+        seeding: seeding?,
+        max_iterations: max_iterations? as usize,
+        max_range_bias: max_range_bias?,
+        max_azimuth_bias: radians(o.max_azimuth_bias_deg, max_azimuth_bias, d.max_azimuth_bias)?,
         widen: o.widen_search.unwrap_or(d.widen),
-        sigma_range: o.radar_sigma_range_m.unwrap_or(d.sigma_range),
-        sigma_azimuth: o
-            .radar_sigma_azimuth_deg
-            .map_or(d.sigma_azimuth, f64::to_radians),
-        sigma_ais: o.ais_sigma_m.unwrap_or(d.sigma_ais),
+        sigma_range: sigma_range?,
+        sigma_azimuth: radians(o.radar_sigma_azimuth_deg, sigma_azimuth, d.sigma_azimuth)?,
+        sigma_ais: sigma_ais?,
         cfar: CfarConfig {
-            window: o.cfar_window.map_or(d.cfar.window, |x| x as usize),
-            guard: o.cfar_guard.map_or(d.cfar.guard, |x| x as usize),
-            k: o.cfar_k.unwrap_or(d.cfar.k),
-            h: o.cfar_h.unwrap_or(d.cfar.h),
+            window: window? as usize,
+            guard: guard? as usize,
+            k: k?,
+            h: h?,
         },
         ..d
-    };
-    // Parameter names of the numerical core map to the options' wire names.
-    if let Err(e) = associate::validate_config(&cfg) {
-        let field = match e.what() {
-            "window" | "guard" | "k" | "h" => format!("options.cfar_{}", e.what()),
-            other => format!("options.{other}"),
-        };
-        let message = match &e {
-            crate::algo::AlgoError::InvalidParameter { reason, .. } => reason.clone(),
-            other => other.to_string(),
-        };
-        v.add(field, message);
-    }
-    cfg
+    })
 }
 
 /// Validates, decodes, projects and associates.
@@ -334,102 +370,73 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let site = v.required("site", input.site);
     let (lat0, lon0) = match site {
         Some(s) => (
-            finite_in(&mut v, "site.lat_deg", s.lat_deg, -89.9, 89.9),
-            finite_in(&mut v, "site.lon_deg", s.lon_deg, -180.0, 180.0),
+            v.number("site.lat_deg", s.lat_deg, LATITUDE),
+            v.number("site.lon_deg", s.lon_deg, LONGITUDE),
         ),
         None => (None, None),
     };
-    let ellipsoid = match input.ellipsoid.as_deref() {
-        None | Some("wgs84") => Ellipsoid::WGS84,
-        Some("grs80") => Ellipsoid::GRS80,
-        Some("krasovsky_1940") => Ellipsoid::KRASOVSKY_1940,
-        Some(other) => {
-            v.add(
-                "ellipsoid",
-                format!("must be wgs84, grs80 or krasovsky_1940, got {other:?}"),
-            );
-            Ellipsoid::WGS84
-        }
-    };
+    let ellipsoid = v.one_of(
+        "ellipsoid",
+        input.ellipsoid.as_deref(),
+        Some(Ellipsoid::WGS84),
+        &[
+            ("wgs84", Ellipsoid::WGS84),
+            ("grs80", Ellipsoid::GRS80),
+            ("krasovsky_1940", Ellipsoid::KRASOVSKY_1940),
+        ],
+    );
     let cfg = config(&mut v, &input.options);
-    let ais_time_sigma = match input.options.as_ref().and_then(|o| o.ais_time_sigma_s) {
-        None => 0.0,
-        Some(x) if x.is_finite() && (0.0..=3600.0).contains(&x) => x,
-        Some(_) => {
-            v.add(
-                "options.ais_time_sigma_s",
-                "must be a finite number between 0 and 3600",
-            );
-            0.0
-        }
-    };
+    let ais_time_sigma = v
+        .number_or(
+            "options.ais_time_sigma_s",
+            input.options.as_ref().and_then(|o| o.ais_time_sigma_s),
+            0.0,
+            Interval::closed(0.0, 3600.0),
+        )
+        .unwrap_or(0.0);
     let points = input
         .radar_tracks
         .iter()
         .map(|t| t.samples.len())
         .sum::<usize>()
         + input.ais_reports.len();
-    if points > MAX_POINTS {
-        v.add(
-            "radar_tracks",
-            format!("at most {MAX_POINTS} samples and AIS reports per request"),
-        );
-    }
-    if input.nmea.len() > MAX_NMEA_LINES {
-        v.add(
-            "nmea",
-            format!("at most {MAX_NMEA_LINES} lines per request"),
-        );
-    }
+    v.at_most(
+        "radar_tracks",
+        points,
+        MAX_POINTS,
+        "samples and AIS reports",
+    );
+    v.at_most("nmea", input.nmea.len(), MAX_NMEA_LINES, "lines");
     // Radar tracks.
+    let mut track_ids = Ids::new();
     let mut ids = Vec::with_capacity(input.radar_tracks.len());
     let mut tracks = Vec::with_capacity(input.radar_tracks.len());
     for (i, t) in input.radar_tracks.iter().enumerate() {
         let f = format!("radar_tracks[{i}]");
-        match &t.id {
-            Some(id) if !id.is_empty() => {
-                if ids.contains(id) {
-                    v.add(format!("{f}.id"), format!("duplicate track id {id:?}"));
-                }
-                ids.push(id.clone());
-            }
-            _ => {
-                v.add(format!("{f}.id"), "is required");
-                ids.push(String::new());
-            }
-        }
+        let id = track_ids.check(&mut v, t.id.as_deref(), i, |j| {
+            format!("radar_tracks[{j}].id")
+        });
+        ids.push(id.unwrap_or_default().to_string());
         if t.samples.len() < 2 {
-            v.add(format!("{f}.samples"), "a track needs at least 2 samples");
+            v.add(format!("{f}.samples"), "must hold at least 2 samples");
         }
         let mut samples = Vec::with_capacity(t.samples.len());
-        let mut last_t = f64::NEG_INFINITY;
+        let mut times = Increasing::new();
         for (k, s) in t.samples.iter().enumerate() {
             let sf = format!("{f}.samples[{k}]");
-            let time = finite_in(&mut v, &format!("{sf}.t"), s.t, -1e12, 1e12);
-            if let Some(time) = time {
-                if time <= last_t {
-                    v.add(format!("{sf}.t"), "times must be strictly increasing");
-                }
-                last_t = time;
-            }
+            let time = times.next(&mut v, format!("{sf}.t"), s.t, TIME);
             let polar = s.range_m.is_some() || s.azimuth_deg.is_some();
             let cart = s.east_m.is_some() || s.north_m.is_some();
             let pos = match (polar, cart) {
                 (true, false) => {
-                    let r = finite_in(&mut v, &format!("{sf}.range_m"), s.range_m, 0.0, 1e7);
-                    let a = finite_in(
-                        &mut v,
-                        &format!("{sf}.azimuth_deg"),
-                        s.azimuth_deg,
-                        -360.0,
-                        360.0,
-                    );
+                    let r = v.number_in(format!("{sf}.range_m"), s.range_m, 0.0, 1e7);
+                    let a = v.number_in(format!("{sf}.azimuth_deg"), s.azimuth_deg, -360.0, 360.0);
                     r.zip(a)
                         .map(|(r, a)| (r, a.to_radians().rem_euclid(std::f64::consts::TAU)))
                 }
                 (false, true) => {
-                    let e = finite_in(&mut v, &format!("{sf}.east_m"), s.east_m, -1e7, 1e7);
-                    let n = finite_in(&mut v, &format!("{sf}.north_m"), s.north_m, -1e7, 1e7);
+                    let e = v.number(format!("{sf}.east_m"), s.east_m, PLANE);
+                    let n = v.number(format!("{sf}.north_m"), s.north_m, PLANE);
                     e.zip(n).map(|(e, n)| associate::plane_to_polar([e, n]))
                 }
                 _ => {
@@ -451,10 +458,10 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let mut reports: Vec<Report> = Vec::new();
     for (k, r) in input.ais_reports.iter().enumerate() {
         let f = format!("ais_reports[{k}]");
-        let mmsi = v.required(&format!("{f}.mmsi"), r.mmsi);
-        let t = finite_in(&mut v, &format!("{f}.t"), r.t, -1e12, 1e12);
-        let lat = finite_in(&mut v, &format!("{f}.lat_deg"), r.lat_deg, -90.0, 90.0);
-        let lon = finite_in(&mut v, &format!("{f}.lon_deg"), r.lon_deg, -180.0, 180.0);
+        let mmsi = v.required(format!("{f}.mmsi"), r.mmsi);
+        let t = v.number(format!("{f}.t"), r.t, TIME);
+        let lat = v.number_in(format!("{f}.lat_deg"), r.lat_deg, -90.0, 90.0);
+        let lon = v.number(format!("{f}.lon_deg"), r.lon_deg, LONGITUDE);
         if let (Some(mmsi), Some(t), Some(lat), Some(lon)) = (mmsi, t, lat, lon) {
             reports.push(Report {
                 mmsi,
@@ -476,8 +483,11 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             ),
         );
     }
-    v.finish()?;
-    let (lat0, lon0) = (lat0.expect("validated"), lon0.expect("validated"));
+    let parsed = (|| Some((lat0?, lon0?, ellipsoid?, cfg?)))();
+    let (lat0, lon0, ellipsoid, cfg) = v.finish_with(parsed)?;
+    // The core checks its own ranges too; every one of them is parsed
+    // above, so this only catches a core whose ranges changed.
+    associate::validate_config(&cfg).map_err(|e| ServiceError::Internal(e.to_string()))?;
 
     let start = Instant::now();
     let mut warnings = Vec::new();

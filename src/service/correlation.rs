@@ -17,7 +17,7 @@ use std::{collections::HashMap, time::Instant};
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{ServiceError, Violations, covariance_message, micros_since};
+use super::{Ids, Increasing, Interval, ServiceError, Violations, at, micros_since};
 use crate::algo::{
     AlgoError,
     correlation::{
@@ -32,7 +32,6 @@ use crate::algo::{
         scene::{Scene, Track},
     },
     motion::{ConstantVelocity, MotionModel, ProcessNoise},
-    small,
 };
 
 /// Most nodes in one request.
@@ -368,31 +367,27 @@ impl Layout {
 /// Correlates the request's nodes.
 pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError> {
     let start = Instant::now();
-    let plan = validate(&input)?;
+    let Parsed { plan, nodes } = validate(&input)?;
     let dim = plan.layout.dim;
 
     // Alignment.
     let t_align = Instant::now();
-    let (scene, gains_reported, mut warnings, alignment) = align(&input, &plan)?;
+    let tolerance_given = input
+        .alignment
+        .as_ref()
+        .is_some_and(|a| a.tolerance_s.is_some());
+    drop(input);
+    let (node_ids, (track_ids, est)): (Vec<String>, (Vec<Vec<String>>, Vec<Vec<Vec<Estimate>>>)) =
+        nodes
+            .into_iter()
+            .map(|n| (n.id, (n.track_ids, n.tracks)))
+            .unzip();
+    let (scene, gains_reported, mut warnings, alignment) =
+        align(est, &node_ids, tolerance_given, &plan)?;
     let align_us = micros_since(t_align);
 
     // Correlation of every node pair.
     let t_corr = Instant::now();
-    let node_ids: Vec<String> = input
-        .nodes
-        .iter()
-        .map(|n| n.id.clone().unwrap_or_default())
-        .collect();
-    let track_ids: Vec<Vec<String>> = input
-        .nodes
-        .iter()
-        .map(|n| {
-            n.tracks
-                .iter()
-                .map(|t| t.id.clone().unwrap_or_default())
-                .collect()
-        })
-        .collect();
     let name = |node: usize, track: usize| TrackName {
         node: node_ids[node].clone(),
         track: track_ids[node][track].clone(),
@@ -691,10 +686,10 @@ pub(super) fn fuse_group(
     }
 }
 
-/// The validated configuration of a request, before its nodes.
+/// The parsed configuration of a request, before its nodes.
 struct ConfigParts {
     layout: Option<Layout>,
-    kind: String,
+    kind: &'static str,
     config_method: Option<Method>,
     statistic: Statistic,
     alpha: f64,
@@ -706,6 +701,15 @@ struct ConfigParts {
     h: Option<DMatrix<f64>>,
 }
 
+/// The wire names of the alignment modes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum ModeName {
+    Grid,
+    Predict,
+    Interpolate,
+    Nearest,
+}
+
 fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
     let layout = match Layout::parse(&input.state_layout) {
         Ok(l) => Some(l),
@@ -715,24 +719,23 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         }
     };
     let method = input.method.clone().unwrap_or_default();
-    let kind = method.kind.clone().unwrap_or_default();
-    if method.kind.is_none() {
-        v.add(
-            "method.kind",
-            format!("is required: one of {}", METHODS.join(", ")),
-        );
-    } else if !METHODS.contains(&kind.as_str()) {
-        v.add(
-            "method.kind",
-            format!("unknown method '{kind}': one of {}", METHODS.join(", ")),
-        );
-    }
-    let alpha = method.alpha.unwrap_or(DEFAULT_ALPHA);
-    v.param(
-        "method.",
-        crate::algo::correlation::rules::check_alpha(alpha),
-    );
-    let statistic = match (kind.as_str(), method.statistic.as_deref()) {
+    let choices: Vec<(&str, &'static str)> = METHODS.iter().map(|&m| (m, m)).collect();
+    let kind = v
+        .one_of("method.kind", method.kind.as_deref(), None, &choices)
+        .unwrap_or("");
+    let alpha = v
+        .number_or(
+            "method.alpha",
+            method.alpha,
+            DEFAULT_ALPHA,
+            Interval::OPEN_UNIT,
+        )
+        .unwrap_or(DEFAULT_ALPHA);
+    let statistics = [
+        ("weighted", Statistic::Weighted),
+        ("modified", Statistic::Modified),
+    ];
+    let statistic = match (kind, method.statistic.as_deref()) {
         ("modified" | "dependent_double_threshold", None | Some("modified")) => Statistic::Modified,
         ("weighted" | "independent_double_threshold", None | Some("weighted")) => {
             Statistic::Weighted
@@ -747,23 +750,14 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
             );
             Statistic::Weighted
         }
-        (_, None | Some("weighted")) => Statistic::Weighted,
-        (_, Some("modified")) => Statistic::Modified,
-        (_, Some(other)) => {
-            v.add(
+        (_, given) => v
+            .one_of(
                 "method.statistic",
-                format!("unknown statistic '{other}': weighted or modified"),
-            );
-            Statistic::Weighted
-        }
-    };
-    let rule_of = |v: &mut Violations, field: &str, r: &RuleInput| -> Option<LrRule> {
-        let l = v.required(&format!("{field}.l"), r.l);
-        let rr = v.required(&format!("{field}.r"), r.r);
-        match (l, rr) {
-            (Some(l), Some(rr)) => v.param(&format!("{field}."), LrRule::new(l, rr)),
-            _ => None,
-        }
+                given,
+                Some(Statistic::Weighted),
+                &statistics,
+            )
+            .unwrap_or(Statistic::Weighted),
     };
     let rules = if method.rule.is_some()
         && (method.schedule.is_some() || method.dynamic_schedule == Some(true))
@@ -774,12 +768,12 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         );
         None
     } else if let Some(r) = &method.rule {
-        rule_of(v, "method.rule", r).map(RuleSpec::Fixed)
+        super::rules::parse_rule(v, "method.rule", r.l, r.r).map(RuleSpec::Fixed)
     } else if let Some(s) = &method.schedule {
         let parsed: Vec<Option<LrRule>> = s
             .iter()
             .enumerate()
-            .map(|(i, r)| rule_of(v, &format!("method.schedule[{i}]"), r))
+            .map(|(i, r)| super::rules::parse_rule(v, &format!("method.schedule[{i}]"), r.l, r.r))
             .collect();
         if s.is_empty() {
             v.add("method.schedule", "must hold at least one rule");
@@ -791,16 +785,19 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
     } else if method.dynamic_schedule == Some(true) {
         Some(RuleSpec::Schedule(engine::default_schedule()))
     } else {
-        Some(RuleSpec::Fixed(LrRule::new(6, 8).expect("valid")))
+        LrRule::new(6, 8).ok().map(RuleSpec::Fixed)
     };
-    let window = method.window.unwrap_or(match kind.as_str() {
+    let default_window = match kind {
         "k_nearest_neighbour" => 5,
         _ => 1,
-    }) as usize;
+    };
+    let window = v
+        .count_or("method.window", method.window, default_window, 1, 64)
+        .unwrap_or(default_window) as usize;
     let k = method.k.unwrap_or(3) as usize;
-    let one = LrRule::new(1, 1).expect("valid");
-    let config_method = match kind.as_str() {
-        "weighted" | "modified" => Some(Method::DoubleThreshold {
+    let one = LrRule::new(1, 1).ok();
+    let config_method = match kind {
+        "weighted" | "modified" => one.map(|one| Method::DoubleThreshold {
             rules: RuleSpec::Fixed(one),
             resolution: Resolution::Greedy,
         }),
@@ -819,7 +816,7 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         "k_nearest_neighbour" => Some(Method::KNearestNeighbour { k, window }),
         _ => None,
     };
-    if matches!(kind.as_str(), "weighted" | "modified")
+    if matches!(kind, "weighted" | "modified")
         && (method.rule.is_some() || method.schedule.is_some())
     {
         v.add(
@@ -827,18 +824,8 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
             format!("'{kind}' is the classic 1/1 test; use independent_double_threshold or dependent_double_threshold for an L/R rule"),
         );
     }
-    if let Some(w) = method.window
-        && !(1..=64).contains(&w)
-    {
-        v.add("method.window", "must be between 1 and 64");
-    }
-    if let Some(kk) = method.k
-        && (kk == 0 || kk as usize > window)
-    {
-        v.add(
-            "method.k",
-            format!("must be between 1 and window = {window}"),
-        );
+    if method.k.is_some() {
+        v.count_or("method.k", method.k, 3, 1, window as u32);
     }
 
     // Motion model.
@@ -853,11 +840,14 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         );
     }
     let alignment = input.alignment.clone().unwrap_or_default();
-    let tolerance = alignment.tolerance_s.unwrap_or(DEFAULT_TOLERANCE_S);
-    if !(tolerance.is_finite() && tolerance >= 0.0) {
-        v.add("alignment.tolerance_s", "must be a finite number ≥ 0");
-    }
-    let max_gap = alignment.max_gap_s.unwrap_or(DEFAULT_MAX_GAP_S);
+    let tolerance = v
+        .number_or(
+            "alignment.tolerance_s",
+            alignment.tolerance_s,
+            DEFAULT_TOLERANCE_S,
+            Interval::NON_NEGATIVE,
+        )
+        .unwrap_or(DEFAULT_TOLERANCE_S);
     let grid_only = [
         ("alignment.period_s", alignment.period_s.is_some()),
         ("alignment.epoch_s", alignment.epoch_s.is_some()),
@@ -866,51 +856,55 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
             alignment.max_staleness_s.is_some(),
         ),
     ];
-    let mode = match alignment.mode.as_deref() {
-        None | Some("grid") => {
+    let modes = [
+        ("grid", ModeName::Grid),
+        ("predict", ModeName::Predict),
+        ("interpolate", ModeName::Interpolate),
+        ("nearest", ModeName::Nearest),
+    ];
+    let mode_name = v.one_of(
+        "alignment.mode",
+        alignment.mode.as_deref(),
+        Some(ModeName::Grid),
+        &modes,
+    );
+    let mode = match mode_name {
+        Some(ModeName::Grid) => {
             let period = alignment
                 .period_s
-                .and_then(|p| v.positive("alignment.period_s", Some(p)));
-            let epoch = v.number_in(
+                .and_then(|p| v.within("alignment.period_s", p, Interval::POSITIVE));
+            let epoch = v.number_or(
                 "alignment.epoch_s",
-                alignment.epoch_s.or(Some(0.0)),
-                -1e12,
-                1e12,
+                alignment.epoch_s,
+                0.0,
+                Interval::closed(-1e12, 1e12),
             );
-            let max_staleness = alignment.max_staleness_s.and_then(|s| {
-                if s.is_finite() && s >= 0.0 {
-                    Some(s)
-                } else {
-                    v.add("alignment.max_staleness_s", "must be a finite number ≥ 0");
-                    None
-                }
-            });
+            let max_staleness = alignment
+                .max_staleness_s
+                .and_then(|s| v.within("alignment.max_staleness_s", s, Interval::NON_NEGATIVE));
             AlignMode::Grid {
                 period,
                 epoch: epoch.unwrap_or(0.0),
                 max_staleness,
             }
         }
-        Some("nearest") => AlignMode::Nearest,
-        Some("predict") => {
+        Some(ModeName::Predict) => {
             if input.motion_model.is_none() {
                 v.add("alignment.mode", "predict needs a motion_model");
             }
             AlignMode::Predict
         }
-        Some("interpolate") => {
-            if !(max_gap.is_finite() && max_gap > 0.0) {
-                v.add("alignment.max_gap_s", "must be a finite number > 0");
-            }
-            AlignMode::Interpolate { max_gap }
-        }
-        Some(other) => {
-            v.add(
-                "alignment.mode",
-                format!("unknown mode '{other}': grid, predict, interpolate or nearest"),
-            );
-            AlignMode::Nearest
-        }
+        Some(ModeName::Interpolate) => AlignMode::Interpolate {
+            max_gap: v
+                .number_or(
+                    "alignment.max_gap_s",
+                    alignment.max_gap_s,
+                    DEFAULT_MAX_GAP_S,
+                    Interval::POSITIVE,
+                )
+                .unwrap_or(DEFAULT_MAX_GAP_S),
+        },
+        Some(ModeName::Nearest) | None => AlignMode::Nearest,
     };
     if !matches!(mode, AlignMode::Grid { .. }) {
         for (field, given) in grid_only {
@@ -931,41 +925,31 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
         }
         _ => None,
     };
-    let pruning = match input.pruning.as_deref() {
-        None | Some("grid") => Pruning::Grid,
-        Some("none") => Pruning::None,
-        Some(other) => {
-            v.add(
-                "pruning",
-                format!("unknown pruning '{other}': grid or none"),
-            );
-            Pruning::Grid
-        }
-    };
+    let prunings = [("grid", Pruning::Grid), ("none", Pruning::None)];
+    let pruning = v
+        .one_of(
+            "pruning",
+            input.pruning.as_deref(),
+            Some(Pruning::Grid),
+            &prunings,
+        )
+        .unwrap_or(Pruning::Grid);
 
     // H for gains.
     let h = match (&input.measurement_matrix, &layout) {
         (Some(rows), Some(layout)) => {
-            let ok = !rows.is_empty()
-                && rows
-                    .iter()
-                    .all(|r| r.len() == layout.dim && r.iter().all(|x| x.is_finite()));
-            if ok {
-                let m = rows.len();
-                let flat: Vec<f64> = rows
-                    .iter()
-                    .flat_map(|r| layout.vector_to_canonical(r))
-                    .collect();
-                Some(DMatrix::from_row_slice(m, layout.dim, &flat))
-            } else {
-                v.add(
-                    "measurement_matrix",
-                    format!(
-                        "must be a non-empty matrix of finite numbers with {} columns",
-                        layout.dim
-                    ),
-                );
+            if rows.is_empty() {
+                v.add("measurement_matrix", "must hold at least one row");
                 None
+            } else {
+                v.matrix("measurement_matrix", rows, rows.len(), layout.dim)
+                    .map(|_| {
+                        let flat: Vec<f64> = rows
+                            .iter()
+                            .flat_map(|r| layout.vector_to_canonical(r))
+                            .collect();
+                        DMatrix::from_row_slice(rows.len(), layout.dim, &flat)
+                    })
             }
         }
         _ => None,
@@ -986,7 +970,7 @@ fn validate_config(input: &CorrelateInput, v: &mut Violations) -> ConfigParts {
     }
 }
 
-fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
+fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Option<Plan> {
     let ConfigParts {
         layout,
         kind,
@@ -1000,11 +984,11 @@ fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
         tolerance,
         h,
     } = parts;
-    Plan {
-        layout: layout.expect("validated"),
-        method_name: kind,
+    Some(Plan {
+        layout: layout?,
+        method_name: kind.to_string(),
         config: Config {
-            method: config_method.expect("validated"),
+            method: config_method?,
             statistic,
             alpha,
             pruning,
@@ -1015,155 +999,122 @@ fn plan_of(parts: ConfigParts, fuse: Option<bool>) -> Plan {
         tolerance,
         h,
         fuse: fuse.unwrap_or(true),
-    }
+    })
 }
 
-/// Validates the configuration of a request without its nodes (a
-/// streaming session's configuration).
+/// Parses the configuration of a request without its nodes (a streaming
+/// session's configuration).
 pub(super) fn validate_plan(input: &CorrelateInput) -> Result<Plan, ServiceError> {
     let mut v = Violations::new();
     let parts = validate_config(input, &mut v);
-    v.finish()?;
-    Ok(plan_of(parts, input.fuse))
+    v.finish_with(plan_of(parts, input.fuse))
 }
 
-fn validate(input: &CorrelateInput) -> Result<Plan, ServiceError> {
+/// A node of a parsed request: its id, its tracks' ids and their samples
+/// as estimates in canonical order.
+struct ParsedNode {
+    id: String,
+    track_ids: Vec<String>,
+    tracks: Vec<Vec<Estimate>>,
+}
+
+/// A parsed request.
+struct Parsed {
+    plan: Plan,
+    nodes: Vec<ParsedNode>,
+}
+
+fn validate(input: &CorrelateInput) -> Result<Parsed, ServiceError> {
     let mut v = Violations::new();
     let parts = validate_config(input, &mut v);
-    let (layout, h) = (&parts.layout, &parts.h);
+    let has_h = input.measurement_matrix.is_some();
     // Nodes and tracks.
-    if input.nodes.is_empty() {
-        v.add("nodes", "must hold at least one node");
-    } else if input.nodes.len() > MAX_NODES {
-        v.add("nodes", format!("at most {MAX_NODES} nodes per request"));
-    }
+    v.count_within("nodes", input.nodes.len(), MAX_NODES, "node");
     let total: usize = input
         .nodes
         .iter()
         .flat_map(|n| n.tracks.iter())
         .map(|t| t.samples.len())
         .sum();
-    if total > MAX_SAMPLES {
-        v.add(
-            "nodes",
-            format!("{total} samples exceed the limit of {MAX_SAMPLES} per request"),
-        );
-    }
-    let mut node_ids = HashMap::new();
+    v.at_most("nodes", total, MAX_SAMPLES, "samples");
+    let mut node_ids = Ids::new();
+    let mut nodes = Vec::with_capacity(input.nodes.len());
     for (ni, node) in input.nodes.iter().enumerate() {
-        let field = format!("nodes[{ni}]");
-        match node.id.as_deref() {
-            None | Some("") => v.add(format!("{field}.id"), "is required"),
-            Some(id) => {
-                if let Some(prev) = node_ids.insert(id.to_string(), ni) {
-                    v.add(
-                        format!("{field}.id"),
-                        format!("duplicates nodes[{prev}].id '{id}'"),
-                    );
-                }
-            }
-        }
-        let mut track_ids = HashMap::new();
+        let node_id = node_ids.check(&mut v, node.id.as_deref(), ni, |i| format!("nodes[{i}].id"));
+        let mut track_ids = Ids::new();
+        let mut parsed = ParsedNode {
+            id: node_id.unwrap_or_default().to_string(),
+            track_ids: Vec::with_capacity(node.tracks.len()),
+            tracks: Vec::with_capacity(node.tracks.len()),
+        };
         for (ti, track) in node.tracks.iter().enumerate() {
-            let tfield = format!("{field}.tracks[{ti}]");
-            match track.id.as_deref() {
-                None | Some("") => v.add(format!("{tfield}.id"), "is required"),
-                Some(id) => {
-                    if let Some(prev) = track_ids.insert(id.to_string(), ti) {
-                        v.add(
-                            format!("{tfield}.id"),
-                            format!("duplicates {field}.tracks[{prev}].id '{id}'"),
-                        );
-                    }
-                }
-            }
+            let tfield = |t: usize| format!("nodes[{ni}].tracks[{t}]");
+            let id = track_ids.check(&mut v, track.id.as_deref(), ti, |t| {
+                format!("{}.id", tfield(t))
+            });
             if track.samples.is_empty() {
-                v.add(format!("{tfield}.samples"), "must hold at least one sample");
+                v.add(
+                    format!("{}.samples", tfield(ti)),
+                    "must hold at least one sample",
+                );
             }
-            let mut last_t = f64::NEG_INFINITY;
+            let mut times = Increasing::new();
+            let mut samples = Vec::with_capacity(track.samples.len());
             for (si, s) in track.samples.iter().enumerate() {
                 // Built only when a violation needs it (this loop runs per sample).
-                let sfield = || format!("{tfield}.samples[{si}]");
-                match s.t {
-                    None => v.add(format!("{}.t", sfield()), "is required"),
-                    Some(t) if !t.is_finite() => v.add(format!("{}.t", sfield()), "must be finite"),
-                    Some(t) if t <= last_t => v.add(
-                        format!("{}.t", sfield()),
-                        "samples must be in strictly increasing time order",
-                    ),
-                    Some(t) => last_t = t,
-                }
-                if let Some(layout) = &layout {
-                    check_sample(
-                        &mut v,
-                        &sfield(),
-                        s,
-                        layout,
-                        h.as_ref(),
-                        input.measurement_matrix.is_some(),
-                    );
+                let sfield = || format!("{}.samples[{si}]", tfield(ti));
+                let t = times.next(
+                    &mut v,
+                    at(|| format!("{}.t", sfield())),
+                    s.t,
+                    Interval::FINITE,
+                );
+                let ok = parts.layout.as_ref().is_some_and(|layout| {
+                    check_sample(&mut v, &sfield, s, layout, parts.h.as_ref(), has_h)
+                });
+                if let (Some(t), true, Some(layout)) = (t, ok, &parts.layout) {
+                    samples.push(estimate(layout, parts.h.as_ref(), t, s));
                 }
             }
+            parsed.track_ids.push(id.unwrap_or_default().to_string());
+            parsed.tracks.push(samples);
         }
+        nodes.push(parsed);
     }
-    v.finish()?;
-    Ok(plan_of(parts, input.fuse))
+    let plan = plan_of(parts, input.fuse);
+    v.finish_with(plan.map(|plan| Parsed { plan, nodes }))
 }
 
 /// The checks of one reported sample besides its time: state length and
-/// finiteness, covariance shape and definiteness, gain shape. `sfield` is
-/// the sample's field path.
+/// finiteness, covariance shape and definiteness, gain shape. `sfield`
+/// builds the sample's field path. Answers whether the sample is valid.
 pub(super) fn check_sample(
     v: &mut Violations,
-    sfield: &str,
+    sfield: &dyn Fn() -> String,
     s: &SampleInput,
     layout: &Layout,
     h: Option<&DMatrix<f64>>,
     has_h: bool,
-) {
+) -> bool {
     let n = layout.dim;
-    if s.state.len() != n {
-        v.add(
-            format!("{}.state", sfield),
-            format!("has {} components, state_layout has {n}", s.state.len()),
-        );
-    } else if s.state.iter().any(|x| !x.is_finite()) {
-        v.add(format!("{}.state", sfield), "contains a non-finite value");
-    }
-    if s.covariance.len() != n || s.covariance.iter().any(|r| r.len() != n) {
-        v.add(format!("{}.covariance", sfield), format!("must be {n}×{n}"));
-    } else {
-        // Symmetry and definiteness do not depend on the order of
-        // the components: check the request's order on the stack.
-        let mut flat = small::ZERO;
-        for (i, row) in s.covariance.iter().enumerate() {
-            flat[i * n..(i + 1) * n].copy_from_slice(row);
-        }
-        if let Err(e) = small::check_covariance("covariance", &flat[..n * n], n) {
-            v.add(format!("{}.covariance", sfield), covariance_message(&e));
-        }
-    }
-    if let Some(g) = &s.gain {
-        match h {
-            None if !has_h => v.add(
-                format!("{}.gain", sfield),
+    let state = v.vector(at(|| format!("{}.state", sfield())), &s.state, n);
+    let covariance = v.covariance(at(|| format!("{}.covariance", sfield())), &s.covariance, n);
+    let gain = match (&s.gain, h) {
+        (None, _) => true,
+        (Some(_), None) if !has_h => {
+            v.add(
+                format!("{}.gain", sfield()),
                 "a gain needs the request's measurement_matrix H",
-            ),
-            None => {}
-            Some(h) => {
-                let m = h.nrows();
-                if g.len() != n
-                    || g.iter()
-                        .any(|r| r.len() != m || r.iter().any(|x| !x.is_finite()))
-                {
-                    v.add(
-                        format!("{}.gain", sfield),
-                        format!("must be {n}×{m} (state × measurement) finite numbers"),
-                    );
-                }
-            }
+            );
+            false
         }
-    }
+        // H was given but is invalid: its own violation says so.
+        (Some(_), None) => false,
+        (Some(g), Some(h)) => v
+            .matrix(at(|| format!("{}.gain", sfield())), g, n, h.nrows())
+            .is_some(),
+    };
+    state && covariance && gain
 }
 
 fn motion_model(
@@ -1171,16 +1122,12 @@ fn motion_model(
     m: &MotionModelInput,
     layout: &Layout,
 ) -> Option<ConstantVelocity> {
-    match m.kind.as_deref() {
-        None | Some("constant_velocity") => {}
-        Some(other) => {
-            v.add(
-                "motion_model.kind",
-                format!("unknown model '{other}': constant_velocity"),
-            );
-            return None;
-        }
-    }
+    v.one_of(
+        "motion_model.kind",
+        m.kind.as_deref(),
+        Some(()),
+        &[("constant_velocity", ())],
+    )?;
     if !layout.has_velocity {
         v.add(
             "motion_model",
@@ -1188,32 +1135,32 @@ fn motion_model(
         );
         return None;
     }
-    let noise = match m.process_noise.as_deref() {
-        None | Some("dwna") => m
-            .sigma_a_mps2
-            .map(|sigma_a| ProcessNoise::Dwna { sigma_a })
-            .or_else(|| {
-                v.add(
-                    "motion_model.sigma_a_mps2",
-                    "is required for dwna process noise",
-                );
-                None
-            }),
-        Some("cwna") => m.q_m2ps3.map(|q| ProcessNoise::Cwna { q }).or_else(|| {
-            v.add("motion_model.q_m2ps3", "is required for cwna process noise");
-            None
-        }),
-        Some("velocity_proportional") => Some(ProcessNoise::VelocityProportional {
+    #[derive(Clone, Copy)]
+    enum Noise {
+        Dwna,
+        Cwna,
+        VelocityProportional,
+    }
+    let noise = match v.one_of(
+        "motion_model.process_noise",
+        m.process_noise.as_deref(),
+        Some(Noise::Dwna),
+        &[
+            ("dwna", Noise::Dwna),
+            ("cwna", Noise::Cwna),
+            ("velocity_proportional", Noise::VelocityProportional),
+        ],
+    )? {
+        Noise::Dwna => ProcessNoise::Dwna {
+            sigma_a: v.required("motion_model.sigma_a_mps2", m.sigma_a_mps2)?,
+        },
+        Noise::Cwna => ProcessNoise::Cwna {
+            q: v.required("motion_model.q_m2ps3", m.q_m2ps3)?,
+        },
+        Noise::VelocityProportional => ProcessNoise::VelocityProportional {
             factor: m.factor.unwrap_or(0.05),
-        }),
-        Some(other) => {
-            v.add(
-                "motion_model.process_noise",
-                format!("unknown process noise '{other}': dwna, cwna or velocity_proportional"),
-            );
-            None
-        }
-    }?;
+        },
+    };
     v.param("motion_model.", ConstantVelocity::new(layout.axes, noise))
 }
 
@@ -1268,19 +1215,10 @@ pub(super) fn mode_name(m: AlignMode) -> &'static str {
 }
 
 impl Plan {
-    /// A reported sample (validated) at time `t` as an estimate in canonical
+    /// A reported sample (valid) at time `t` as an estimate in canonical
     /// order, with its update factor I − K H when it carries a gain.
     pub(super) fn estimate(&self, t: f64, s: &SampleInput) -> Estimate {
-        let layout = &self.layout;
-        Estimate {
-            t,
-            x: layout.vector_to_canonical(&s.state),
-            p: layout.matrix_to_canonical(&s.covariance),
-            factor: match (&s.gain, &self.h) {
-                (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
-                _ => None,
-            },
-        }
+        estimate(&self.layout, self.h.as_ref(), t, s)
     }
 
     /// The model that brings samples to their instants: the alignment
@@ -1295,13 +1233,18 @@ impl Plan {
     }
 }
 
-/// A track's samples in canonical order, with their update factors.
-fn estimates(track: &TrackInput, plan: &Plan) -> Vec<Estimate> {
-    track
-        .samples
-        .iter()
-        .map(|s| plan.estimate(s.t.expect("validated"), s))
-        .collect()
+/// A reported sample (valid) at time `t` as an estimate in canonical
+/// order, with its update factor I − K H when it carries a gain.
+fn estimate(layout: &Layout, h: Option<&DMatrix<f64>>, t: f64, s: &SampleInput) -> Estimate {
+    Estimate {
+        t,
+        x: layout.vector_to_canonical(&s.state),
+        p: layout.matrix_to_canonical(&s.covariance),
+        factor: match (&s.gain, h) {
+            (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
+            _ => None,
+        },
+    }
 }
 
 /// The grid's period and each node's staleness bound: given, or estimated
@@ -1327,17 +1270,14 @@ pub(super) fn grid_parameters(
 /// Builds the aligned scene; returns it, whether gains were reported,
 /// warnings and the alignment report.
 fn align(
-    input: &CorrelateInput,
+    est: Vec<Vec<Vec<Estimate>>>,
+    node_ids: &[String],
+    tolerance_given: bool,
     plan: &Plan,
 ) -> Result<(Scene, bool, Vec<String>, AlignmentReport), ServiceError> {
     let layout = &plan.layout;
     let dim = layout.dim;
     let model = plan.bring_model();
-    let est: Vec<Vec<Vec<Estimate>>> = input
-        .nodes
-        .iter()
-        .map(|n| n.tracks.iter().map(|t| estimates(t, plan)).collect())
-        .collect();
     let gains_reported = est.iter().flatten().flatten().any(|e| e.factor.is_some());
     let mut times: Vec<f64> = est.iter().flatten().flatten().map(|e| e.t).collect();
     times.sort_by(f64::total_cmp);
@@ -1367,12 +1307,7 @@ fn align(
         unused_samples: 0,
     };
     let mut warnings = Vec::new();
-    if matches!(plan.alignment, AlignMode::Grid { .. })
-        && input
-            .alignment
-            .as_ref()
-            .is_some_and(|a| a.tolerance_s.is_some())
-    {
+    if matches!(plan.alignment, AlignMode::Grid { .. }) && tolerance_given {
         warnings.push(
             "alignment.tolerance_s has no effect on the grid alignment of a batch (it is a \
              session's lateness allowance); give alignment.mode predict or nearest for clusters \
@@ -1489,19 +1424,18 @@ fn align(
             .add_node(tracks)
             .map_err(|e| ServiceError::Internal(e.to_string()))?;
     }
-    report.nodes = input
-        .nodes
+    report.nodes = node_ids
         .iter()
+        .zip(&est)
         .zip(&node_periods)
         .zip(&staleness)
-        .map(|((n, &p), &s)| NodeAlignment {
-            node: n.id.clone().unwrap_or_default(),
-            tracks: n.tracks.len(),
+        .map(|(((id, tracks), &p), &s)| NodeAlignment {
+            node: id.clone(),
+            tracks: tracks.len(),
             scan_period_s: p,
             max_staleness_s: s.filter(|s| s.is_finite()),
         })
         .collect();
-    let node_ids: Vec<String> = report.nodes.iter().map(|n| n.node.clone()).collect();
     let empty: Vec<&str> = report
         .nodes
         .iter()

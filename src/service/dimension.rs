@@ -3,16 +3,18 @@
 //! by mapping, dimension lifting and/or dimension splitting
 //! (`algo::dimension`).
 
-use std::{collections::HashSet, time::Instant};
+use std::time::Instant;
 
-use super::{FieldViolation, ServiceError, Violations, micros_since};
+use super::{
+    FieldViolation, Ids, Increasing, Interval, ServiceError, Violations, at, micros_since,
+};
 use crate::algo::{
     AlgoError,
     dimension::{
         self, AltitudeSource, Config, Filter, KnnParams, LocalTrack, Method, Period, Plot, Radar,
     },
     gating::chi2_threshold,
-    geo::{Ellipsoid, LocalFrame},
+    geo::LocalFrame,
 };
 
 /// Most radars per request.
@@ -313,132 +315,101 @@ fn computation_error(e: AlgoError) -> ServiceError {
 }
 
 fn site(v: &mut Violations, f: &str, s: &SiteInput) -> Option<LocalFrame> {
-    let lat = v.number_in(&format!("{f}.lat_deg"), s.lat_deg, -90.0, 90.0);
-    let lon = v.number_in(&format!("{f}.lon_deg"), s.lon_deg, -180.0, 180.0);
-    let h = v.number_in(&format!("{f}.height_m"), s.height_m, -11_000.0, 100_000.0);
-    let (lat, lon, h) = (lat?, lon?, h?);
-    if lat.abs() == 90.0 {
-        v.add(
-            format!("{f}.lat_deg"),
-            "a site at a pole has no azimuth reference",
-        );
-        return None;
-    }
-    v.check(
-        f,
-        LocalFrame::new(Ellipsoid::WGS84, lat.to_radians(), lon.to_radians(), h),
-    )
+    v.site(f, s.lat_deg, s.lon_deg, s.height_m)
+}
+
+/// The filter names of the API, before the window or σ_a is attached.
+#[derive(Debug, Clone, Copy)]
+enum FilterName {
+    AlphaBeta,
+    Kalman,
 }
 
 fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
     let mut v = Violations::new();
     let mut warnings = Vec::new();
 
-    let mut methods = Vec::new();
+    let choices = [
+        ("mapping", Method::Mapping),
+        ("lifting", Method::Lifting),
+        ("splitting", Method::Splitting),
+    ];
+    let mut methods: Vec<(usize, Method)> = Vec::new();
+    for (i, m) in input.methods.iter().enumerate() {
+        let Some(method) = v.one_of(format!("methods[{i}]"), Some(m), None, &choices) else {
+            continue;
+        };
+        match methods.iter().find(|(_, x)| *x == method) {
+            Some((j, _)) => v.add(
+                format!("methods[{i}]"),
+                format!("duplicates methods[{j}] '{m}'"),
+            ),
+            None => methods.push((i, method)),
+        }
+    }
+    let mut methods: Vec<Method> = methods.into_iter().map(|(_, m)| m).collect();
     if input.methods.is_empty() {
         methods = vec![Method::Mapping, Method::Lifting, Method::Splitting];
     }
-    for (i, m) in input.methods.iter().enumerate() {
-        let method = match m.as_str() {
-            "mapping" => Method::Mapping,
-            "lifting" => Method::Lifting,
-            "splitting" => Method::Splitting,
-            other => {
-                v.add(
-                    format!("methods[{i}]"),
-                    format!("unknown method '{other}': one of {}", METHODS.join(", ")),
-                );
-                continue;
-            }
-        };
-        if methods.contains(&method) {
-            v.add(format!("methods[{i}]"), format!("duplicate method '{m}'"));
-        } else {
-            methods.push(method);
-        }
-    }
 
-    let window = input.window.unwrap_or(DEFAULT_WINDOW);
-    if !(3..=5).contains(&window) {
-        v.add(
-            "window",
-            format!("must lie in 3..=5 (seed 003 §2.1), got {window}"),
-        );
-    }
-    let sigma_a = input.sigma_a_mps2.unwrap_or(DEFAULT_SIGMA_A_MPS2);
-    if !(sigma_a.is_finite() && sigma_a > 0.0) {
-        v.add(
-            "sigma_a_mps2",
-            format!("must be finite and > 0, got {sigma_a}"),
-        );
-    }
-    let filter = match input.filter.as_deref() {
-        None | Some("alpha_beta") => Filter::AlphaBeta {
-            window: window as usize,
-        },
-        Some("kalman") => Filter::Kalman { sigma_a },
-        Some(other) => {
-            v.add(
-                "filter",
-                format!("unknown filter '{other}': one of {}", FILTERS.join(", ")),
-            );
-            Filter::AlphaBeta { window: 4 }
-        }
+    let window = v.count_or("window", input.window, DEFAULT_WINDOW, 3, 5);
+    let sigma_a = v.number_or(
+        "sigma_a_mps2",
+        input.sigma_a_mps2,
+        DEFAULT_SIGMA_A_MPS2,
+        Interval::POSITIVE,
+    );
+    let filters = [
+        ("alpha_beta", FilterName::AlphaBeta),
+        ("kalman", FilterName::Kalman),
+    ];
+    let filter = match v.one_of(
+        "filter",
+        input.filter.as_deref(),
+        Some(FilterName::AlphaBeta),
+        &filters,
+    ) {
+        Some(FilterName::AlphaBeta) => window.map(|w| Filter::AlphaBeta { window: w as usize }),
+        Some(FilterName::Kalman) => sigma_a.map(|sigma_a| Filter::Kalman { sigma_a }),
+        None => None,
     };
-    let n0 = input.n0.unwrap_or(DEFAULT_N0);
-    let k = input.k.unwrap_or(DEFAULT_K);
-    if !(2..=1000).contains(&n0) {
-        v.add("n0", format!("must lie in 2..=1000, got {n0}"));
-    } else if !(n0.div_ceil(2)..=n0).contains(&k) {
-        v.add(
-            "k",
-            format!(
-                "must lie in ⌈N₀/2⌉..=N₀ = {}..={n0}, got {k}",
-                n0.div_ceil(2)
-            ),
-        );
-    }
-    let preset = input.preset_altitude_m.unwrap_or(DEFAULT_PRESET_ALTITUDE_M);
-    if !(preset.is_finite() && (-1000.0..=100_000.0).contains(&preset)) {
-        v.add(
-            "preset_altitude_m",
-            format!("must lie in [-1000, 100000], got {preset}"),
-        );
-    }
-    let altitude_sigma = input.altitude_sigma_m.unwrap_or(DEFAULT_ALTITUDE_SIGMA_M);
-    if !(altitude_sigma.is_finite() && altitude_sigma > 0.0) {
-        v.add(
-            "altitude_sigma_m",
-            format!("must be finite and > 0, got {altitude_sigma}"),
-        );
-    }
-    let gate_sigmas = input.gate_sigmas.unwrap_or(DEFAULT_GATE_SIGMAS);
-    if !(gate_sigmas.is_finite() && gate_sigmas > 0.0) {
-        v.add(
-            "gate_sigmas",
-            format!("must be finite and > 0, got {gate_sigmas}"),
-        );
-    }
-    let significance = input.significance.unwrap_or(DEFAULT_SIGNIFICANCE);
-    let chi2 = if significance > 0.0 && significance < 1.0 {
-        v.param(
-            "",
-            chi2_threshold(2, significance).and_then(|a| Ok((a, chi2_threshold(3, significance)?))),
-        )
-    } else {
-        v.add(
+    let n0 = v.count_or("n0", input.n0, DEFAULT_N0, 2, 1000);
+    let k = n0.and_then(|n0| v.count_or("k", input.k, DEFAULT_K, n0.div_ceil(2), n0));
+    let preset = v.number_or(
+        "preset_altitude_m",
+        input.preset_altitude_m,
+        DEFAULT_PRESET_ALTITUDE_M,
+        Interval::closed(-1000.0, 100_000.0),
+    );
+    let altitude_sigma = v.number_or(
+        "altitude_sigma_m",
+        input.altitude_sigma_m,
+        DEFAULT_ALTITUDE_SIGMA_M,
+        Interval::POSITIVE,
+    );
+    let gate_sigmas = v.number_or(
+        "gate_sigmas",
+        input.gate_sigmas,
+        DEFAULT_GATE_SIGMAS,
+        Interval::POSITIVE,
+    );
+    let chi2 = v
+        .number_or(
             "significance",
-            format!("must lie in (0, 1), got {significance}"),
-        );
-        None
-    };
+            input.significance,
+            DEFAULT_SIGNIFICANCE,
+            Interval::OPEN_UNIT,
+        )
+        .and_then(|significance| {
+            v.param(
+                "",
+                chi2_threshold(2, significance)
+                    .and_then(|a| Ok((a, chi2_threshold(3, significance)?))),
+            )
+        });
 
     // Radars and tracks.
-    if input.radars.is_empty() {
-        v.add("radars", "must hold at least one radar");
-    } else if input.radars.len() > MAX_RADARS {
-        v.add("radars", format!("at most {MAX_RADARS} radars per request"));
-    }
+    v.count_within("radars", input.radars.len(), MAX_RADARS, "radar");
     let n_tracks: usize = input.radars.iter().map(|r| r.tracks.len()).sum();
     if n_tracks == 0 && !input.radars.is_empty() {
         warnings.push(format!(
@@ -446,24 +417,14 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             input.radars.len()
         ));
     }
-    if n_tracks > MAX_TRACKS {
-        v.add(
-            "radars",
-            format!("at most {MAX_TRACKS} tracks per request, got {n_tracks}"),
-        );
-    }
+    v.at_most("radars", n_tracks, MAX_TRACKS, "tracks");
     let n_plots: usize = input
         .radars
         .iter()
         .flat_map(|r| &r.tracks)
         .map(|t| t.plots.len())
         .sum();
-    if n_plots > MAX_PLOTS {
-        v.add(
-            "radars",
-            format!("at most {MAX_PLOTS} plots per request, got {n_plots}"),
-        );
-    }
+    v.at_most("radars", n_plots, MAX_PLOTS, "plots");
     if n_tracks <= MAX_TRACKS {
         let lens: Vec<(usize, usize)> = input
             .radars
@@ -479,53 +440,28 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
                 }
             }
         }
-        if total > MAX_PAIR_SAMPLES {
-            v.add(
-                "radars",
-                format!(
-                    "the pairs of tracks of different radars hold {total} plots to test, \
-                     at most {MAX_PAIR_SAMPLES} per request"
-                ),
-            );
-        }
+        v.at_most(
+            "radars",
+            total,
+            MAX_PAIR_SAMPLES,
+            "plots to test in the pairs of tracks of different radars",
+        );
     }
     let mut radars = Vec::new();
     let mut tracks = Vec::new();
     let mut refs = Vec::new();
-    let mut radar_ids = HashSet::new();
+    let mut radar_ids = Ids::new();
     for (ri, r) in input.radars.iter().enumerate().take(MAX_RADARS) {
         let f = format!("radars[{ri}]");
-        let id = match &r.id {
-            None => {
-                v.add(format!("{f}.id"), "is required");
-                String::new()
-            }
-            Some(id) if id.is_empty() => {
-                v.add(format!("{f}.id"), "must not be empty");
-                String::new()
-            }
-            Some(id) => {
-                if !radar_ids.insert(id.clone()) {
-                    v.add(format!("{f}.id"), format!("duplicate radar id '{id}'"));
-                }
-                id.clone()
-            }
-        };
-        let three_d = match r.kind.as_deref() {
-            Some("2d") => Some(false),
-            Some("3d") => Some(true),
-            None => {
-                v.add(format!("{f}.kind"), "is required");
-                None
-            }
-            Some(other) => {
-                v.add(
-                    format!("{f}.kind"),
-                    format!("unknown kind '{other}': one of 2d, 3d"),
-                );
-                None
-            }
-        };
+        let id = radar_ids
+            .check(&mut v, r.id.as_deref(), ri, |i| format!("radars[{i}].id"))
+            .unwrap_or_default();
+        let three_d = v.one_of(
+            format!("{f}.kind"),
+            r.kind.as_deref(),
+            None,
+            &[("2d", false), ("3d", true)],
+        );
         let frame = match &r.site {
             None => {
                 v.add(format!("{f}.site"), "is required");
@@ -533,10 +469,10 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             }
             Some(s) => site(&mut v, &format!("{f}.site"), s),
         };
-        let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = v.positive(&format!("{f}.sigma_azimuth_deg"), r.sigma_azimuth_deg);
+        let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = v.positive(format!("{f}.sigma_azimuth_deg"), r.sigma_azimuth_deg);
         let se = match (three_d, r.sigma_elevation_deg) {
-            (Some(true), s) => v.positive(&format!("{f}.sigma_elevation_deg"), s),
+            (Some(true), s) => v.positive(format!("{f}.sigma_elevation_deg"), s),
             (Some(false), Some(_)) => {
                 v.add(
                     format!("{f}.sigma_elevation_deg"),
@@ -546,27 +482,15 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             }
             _ => Some(0.0),
         };
-        let scan = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
-        let mut track_ids = HashSet::new();
+        let scan = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
+        let mut track_ids = Ids::new();
         for (ti, t) in r.tracks.iter().enumerate() {
             let ft = format!("{f}.tracks[{ti}]");
-            let tid = match &t.id {
-                None => {
-                    v.add(format!("{ft}.id"), "is required");
-                    String::new()
-                }
-                Some(tid) => {
-                    if tid.is_empty() {
-                        v.add(format!("{ft}.id"), "must not be empty");
-                    } else if !track_ids.insert(tid.clone()) {
-                        v.add(
-                            format!("{ft}.id"),
-                            format!("duplicate track id '{tid}' in radar '{id}'"),
-                        );
-                    }
-                    tid.clone()
-                }
-            };
+            let tid = track_ids
+                .check(&mut v, t.id.as_deref(), ti, |i| {
+                    format!("{f}.tracks[{i}].id")
+                })
+                .unwrap_or_default();
             if t.plots.is_empty() {
                 v.add(format!("{ft}.plots"), "must hold at least one plot");
             } else if t.plots.len() < 3 {
@@ -575,37 +499,34 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
                 ));
             }
             let mut plots = Vec::with_capacity(t.plots.len());
-            let mut last_t = f64::NEG_INFINITY;
+            let mut times = Increasing::new();
             for (pi, p) in t.plots.iter().enumerate() {
-                let fp = format!("{ft}.plots[{pi}]");
-                let time = v.required(&format!("{fp}.t"), p.t);
-                if let Some(time) = time {
-                    if !time.is_finite() {
-                        v.add(format!("{fp}.t"), "must be finite");
-                    } else if time <= last_t {
-                        v.add(
-                            format!("{fp}.t"),
-                            format!("times must increase: {time} after {last_t}"),
-                        );
-                    } else {
-                        last_t = time;
-                    }
-                }
-                let range = v.number_in(&format!("{fp}.range_m"), p.range_m, 0.0, 1e7);
-                if range == Some(0.0) {
-                    v.add(format!("{fp}.range_m"), "must be > 0");
-                }
-                let az = v.number_in(&format!("{fp}.azimuth_deg"), p.azimuth_deg, -360.0, 360.0);
+                let fp = || format!("{ft}.plots[{pi}]");
+                let time = times.next(&mut v, at(|| format!("{}.t", fp())), p.t, Interval::FINITE);
+                let range = v.number(
+                    at(|| format!("{}.range_m", fp())),
+                    p.range_m,
+                    Interval::open_closed(0.0, 1e7),
+                );
+                let az = v.number(
+                    at(|| format!("{}.azimuth_deg", fp())),
+                    p.azimuth_deg,
+                    Interval::closed(-360.0, 360.0),
+                );
                 let el = match (three_d, p.elevation_deg) {
                     (Some(false), Some(_)) => {
                         v.add(
-                            format!("{fp}.elevation_deg"),
-                            "a 2D radar gives no elevation",
+                            format!("{}.elevation_deg", fp()),
+                            "a 2D radar measures no elevation",
                         );
                         None
                     }
                     (Some(true), e) => v
-                        .number_in(&format!("{fp}.elevation_deg"), e, -90.0, 90.0)
+                        .number(
+                            at(|| format!("{}.elevation_deg", fp())),
+                            e,
+                            Interval::closed(-90.0, 90.0),
+                        )
                         .map(Some),
                     _ => Some(None),
                 };
@@ -620,8 +541,8 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             }
             tracks.push(LocalTrack { radar: ri, plots });
             refs.push(TrackRef {
-                radar: id.clone(),
-                track: tid,
+                radar: id.to_string(),
+                track: tid.to_string(),
             });
         }
         if let (Some(frame), Some(three_d), Some(sr), Some(sa), Some(se), Some(scan)) =
@@ -641,23 +562,25 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
         Some(o) => site(&mut v, "origin", o),
         None => radars.first().map(|r| r.frame),
     };
-    v.finish()?;
-    let (chi2_2, chi2_3) = chi2.expect("validated");
-    Ok(Plan {
-        centre: centre.expect("validated"),
-        methods,
-        config: Config {
-            filter,
-            knn: KnnParams { n0, k },
-            preset_altitude: preset,
-            altitude_sigma,
-            gate_sigmas,
-            chi2_2,
-            chi2_3,
-        },
-        radars,
-        tracks,
-        refs,
-        warnings,
-    })
+    let parsed = (|| {
+        let (chi2_2, chi2_3) = chi2?;
+        Some(Plan {
+            centre: centre?,
+            methods,
+            config: Config {
+                filter: filter?,
+                knn: KnnParams { n0: n0?, k: k? },
+                preset_altitude: preset?,
+                altitude_sigma: altitude_sigma?,
+                gate_sigmas: gate_sigmas?,
+                chi2_2,
+                chi2_3,
+            },
+            radars,
+            tracks,
+            refs,
+            warnings,
+        })
+    })();
+    v.finish_with(parsed)
 }

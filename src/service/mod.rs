@@ -1,4 +1,4 @@
-//! The application layer: validated domain requests in, results out. Both
+//! The application layer: requests parsed into typed inputs ([`validate`]), results out. Both
 //! adapters (`http`, `grpc`) call these functions and nothing else; this is the
 //! only place that orchestrates the numerical core.
 
@@ -9,6 +9,9 @@ pub mod jpda;
 pub mod plot_fusion;
 pub mod rules;
 pub mod session;
+pub mod validate;
+
+pub use validate::{Ids, Increasing, Interval, Violations, at};
 
 use std::time::Instant;
 
@@ -51,111 +54,6 @@ pub enum ServiceError {
     Unavailable(String),
 }
 
-/// Collects field violations while a request is validated, so that a client
-/// learns of every bad field at once.
-#[derive(Debug, Default)]
-pub struct Violations(Vec<FieldViolation>);
-
-impl Violations {
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// The invalid-input error of one violation of `field`.
-    pub fn single(field: impl Into<String>, message: impl Into<String>) -> ServiceError {
-        ServiceError::InvalidInput(vec![FieldViolation {
-            field: field.into(),
-            message: message.into(),
-        }])
-    }
-
-    /// Records a violation of `field`.
-    pub fn add(&mut self, field: impl Into<String>, message: impl Into<String>) {
-        self.0.push(FieldViolation {
-            field: field.into(),
-            message: message.into(),
-        });
-    }
-
-    /// Returns the value of a required field, or records that it is missing.
-    pub fn required<T>(&mut self, field: &str, value: Option<T>) -> Option<T> {
-        self.required_at(value, || field.to_string())
-    }
-
-    /// As [`required`](Self::required), with the field path built only when
-    /// the value is missing (for loops over many elements).
-    pub fn required_at<T>(
-        &mut self,
-        value: Option<T>,
-        field: impl FnOnce() -> String,
-    ) -> Option<T> {
-        if value.is_none() {
-            self.add(field(), "is required");
-        }
-        value
-    }
-
-    /// A required number in [lo, hi], or a recorded violation.
-    pub fn number_in(&mut self, field: &str, x: Option<f64>, lo: f64, hi: f64) -> Option<f64> {
-        let x = self.required(field, x)?;
-        if !(x.is_finite() && x >= lo && x <= hi) {
-            self.add(field, format!("must lie in [{lo}, {hi}], got {x}"));
-            return None;
-        }
-        Some(x)
-    }
-
-    /// A required finite number > 0, or a recorded violation.
-    pub fn positive(&mut self, field: &str, x: Option<f64>) -> Option<f64> {
-        let x = self.required(field, x)?;
-        if !(x.is_finite() && x > 0.0) {
-            self.add(field, format!("must be finite and > 0, got {x}"));
-            return None;
-        }
-        Some(x)
-    }
-
-    /// Records `result`'s error, if any, against `field`, and passes the value on.
-    pub fn check<T, E: std::fmt::Display>(
-        &mut self,
-        field: &str,
-        result: Result<T, E>,
-    ) -> Option<T> {
-        result.map_err(|e| self.add(field, e.to_string())).ok()
-    }
-
-    /// Records a parameter error of the numerical core against the field
-    /// `prefix` + the parameter's name (`rules[2].` + `l`), and passes the value on.
-    pub fn param<T>(&mut self, prefix: &str, result: Result<T, AlgoError>) -> Option<T> {
-        match result {
-            Ok(value) => Some(value),
-            Err(e) => {
-                let violation = param_violation(prefix, e);
-                self.0.push(violation);
-                None
-            }
-        }
-    }
-
-    /// The invalid-input error for one parameter error of the numerical core.
-    pub fn from_param(prefix: &str, e: AlgoError) -> ServiceError {
-        ServiceError::InvalidInput(vec![param_violation(prefix, e)])
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
-    }
-
-    /// `Ok(())` when nothing was recorded, otherwise the invalid-input error.
-    pub fn finish(self) -> Result<(), ServiceError> {
-        if self.0.is_empty() {
-            Ok(())
-        } else {
-            Err(ServiceError::InvalidInput(self.0))
-        }
-    }
-}
-
 /// The message for a matrix that is not a covariance, without the
 /// matrix's own name (the field path names it).
 pub fn covariance_message(e: &AlgoError) -> String {
@@ -169,7 +67,7 @@ pub fn covariance_message(e: &AlgoError) -> String {
     }
 }
 
-fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
+pub(crate) fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
     match e {
         AlgoError::InvalidParameter { what, reason } => FieldViolation {
             field: format!("{prefix}{what}"),

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use super::{ServiceError, Violations, micros_since};
+use super::{Interval, ServiceError, Violations, micros_since};
 use crate::algo::correlation::rules::{self, LrRule};
 
 /// Most rules one evaluation request may name.
@@ -61,33 +61,83 @@ pub struct RecommendRuleOutput {
     pub warnings: Vec<String>,
 }
 
+/// An evaluation request, parsed.
+struct Evaluate {
+    alpha: f64,
+    rules: Vec<LrRule>,
+}
+
+/// A recommendation request, parsed.
+struct Recommend {
+    alpha: f64,
+    max_miss: f64,
+    min_ratio: f64,
+    max_r: u32,
+}
+
+/// A rule's L and R, both required, with L ≤ R ≤ the longest window.
+pub(super) fn parse_rule(
+    v: &mut Violations,
+    prefix: &str,
+    l: Option<u32>,
+    r: Option<u32>,
+) -> Option<LrRule> {
+    let l = v.required(format!("{prefix}.l"), l);
+    let r = v.required(format!("{prefix}.r"), r);
+    v.param(&format!("{prefix}."), LrRule::new(l?, r?))
+}
+
+fn parse_evaluate(input: &EvaluateRulesInput) -> Result<Evaluate, ServiceError> {
+    let mut v = Violations::new();
+    let alpha = v.number("alpha", input.alpha, Interval::OPEN_UNIT);
+    v.count_within("rules", input.rules.len(), MAX_RULES, "rule");
+    let rules: Option<Vec<LrRule>> = input
+        .rules
+        .iter()
+        .take(MAX_RULES)
+        .enumerate()
+        .map(|(i, r)| parse_rule(&mut v, &format!("rules[{i}]"), r.l, r.r))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect();
+    v.finish_with(
+        alpha
+            .zip(rules)
+            .map(|(alpha, rules)| Evaluate { alpha, rules }),
+    )
+}
+
+fn parse_recommend(input: &RecommendRuleInput) -> Result<Recommend, ServiceError> {
+    let mut v = Violations::new();
+    let alpha = v.number("alpha", input.alpha, Interval::OPEN_UNIT);
+    let max_miss = v.number(
+        "max_miss_probability",
+        input.max_miss_probability,
+        Interval::OPEN_UNIT,
+    );
+    let min_ratio = v.number_or(
+        "min_l_over_r",
+        input.min_l_over_r,
+        DEFAULT_MIN_L_OVER_R,
+        Interval::open_closed(0.0, 1.0),
+    );
+    let max_r = v.count_or("max_r", input.max_r, DEFAULT_MAX_R, 1, rules::MAX_WINDOW);
+    let parsed = (|| {
+        Some(Recommend {
+            alpha: alpha?,
+            max_miss: max_miss?,
+            min_ratio: min_ratio?,
+            max_r: max_r?,
+        })
+    })();
+    v.finish_with(parsed)
+}
+
 /// Evaluates eq. 23 for every rule of the request.
 pub fn evaluate(input: EvaluateRulesInput) -> Result<EvaluateRulesOutput, ServiceError> {
-    let mut v = Violations::new();
-    let alpha = v.required("alpha", input.alpha);
-    if let Some(a) = alpha {
-        v.param("", rules::check_alpha(a));
-    }
-    if input.rules.is_empty() {
-        v.add("rules", "must name at least one rule");
-    } else if input.rules.len() > MAX_RULES {
-        v.add("rules", format!("at most {MAX_RULES} rules per request"));
-    }
-    let mut parsed = Vec::with_capacity(input.rules.len().min(MAX_RULES));
-    for (i, rule) in input.rules.iter().enumerate().take(MAX_RULES) {
-        let l = v.required(&format!("rules[{i}].l"), rule.l);
-        let r = v.required(&format!("rules[{i}].r"), rule.r);
-        if let (Some(l), Some(r)) = (l, r)
-            && let Some(rule) = v.param(&format!("rules[{i}]."), LrRule::new(l, r))
-        {
-            parsed.push(rule);
-        }
-    }
-    v.finish()?;
-    let alpha = alpha.expect("validated above");
-
+    let Evaluate { alpha, rules } = parse_evaluate(&input)?;
     let start = Instant::now();
-    let evaluations = parsed
+    let evaluations = rules
         .into_iter()
         .map(|rule| {
             let p = rules::miss_probability(rule, alpha).map_err(internal)?;
@@ -103,14 +153,12 @@ pub fn evaluate(input: EvaluateRulesInput) -> Result<EvaluateRulesOutput, Servic
 
 /// Recommends the shortest-window rule meeting the requested miss bound.
 pub fn recommend(input: RecommendRuleInput) -> Result<RecommendRuleOutput, ServiceError> {
-    let mut v = Violations::new();
-    let alpha = v.required("alpha", input.alpha);
-    let max_miss = v.required("max_miss_probability", input.max_miss_probability);
-    let min_ratio = input.min_l_over_r.unwrap_or(DEFAULT_MIN_L_OVER_R);
-    let max_r = input.max_r.unwrap_or(DEFAULT_MAX_R);
-    v.finish()?;
-    let (alpha, max_miss) = (alpha.expect("required"), max_miss.expect("required"));
-
+    let Recommend {
+        alpha,
+        max_miss,
+        min_ratio,
+        max_r,
+    } = parse_recommend(&input)?;
     let start = Instant::now();
     let rec = rules::recommend(alpha, max_miss, min_ratio, max_r)
         .map_err(|e| Violations::from_param("", e))?;

@@ -19,7 +19,7 @@ use crate::{
         motion::MotionModel,
     },
     service::{
-        ServiceError, Violations,
+        Interval, ServiceError, Violations,
         correlation::{self, AlignMode, Links},
         session::Limits,
     },
@@ -38,30 +38,22 @@ impl CorrelationSession {
         let mut v = Violations::new();
         // Validate every report before touching the state.
         let mut accepted: Vec<(usize, String, f64, &ReportInput)> = Vec::new();
+        let choices: Vec<(&str, usize)> = self
+            .node_ids
+            .iter()
+            .enumerate()
+            .map(|(ni, id)| (id.as_str(), ni))
+            .collect();
         for (i, r) in batch.reports.iter().enumerate() {
             let field = format!("reports[{i}]");
-            let node = match r.node.as_deref() {
-                None | Some("") => {
-                    v.add(format!("{field}.node"), "is required");
+            let node = v.one_of(format!("{field}.node"), r.node.as_deref(), None, &choices);
+            let track = match r.track.as_deref() {
+                None => {
+                    v.add(format!("{field}.track"), "is required");
                     None
                 }
-                Some(n) => match self.node_ids.iter().position(|x| x == n) {
-                    Some(ni) => Some(ni),
-                    None => {
-                        v.add(
-                            format!("{field}.node"),
-                            format!(
-                                "unknown node '{n}': the session has {}",
-                                self.node_ids.join(", ")
-                            ),
-                        );
-                        None
-                    }
-                },
-            };
-            let track = match r.track.as_deref() {
-                None | Some("") => {
-                    v.add(format!("{field}.track"), "is required");
+                Some("") => {
+                    v.add(format!("{field}.track"), "must not be empty");
                     None
                 }
                 Some(t) if t.len() > 256 => {
@@ -70,26 +62,16 @@ impl CorrelationSession {
                 }
                 Some(t) => Some(t.to_string()),
             };
-            let t = match r.sample.t {
-                None => {
-                    v.add(format!("{field}.t"), "is required");
-                    None
-                }
-                Some(t) if !t.is_finite() => {
-                    v.add(format!("{field}.t"), "must be finite");
-                    None
-                }
-                Some(t) => Some(t),
-            };
-            correlation::check_sample(
+            let t = v.number(format!("{field}.t"), r.sample.t, Interval::FINITE);
+            let ok = correlation::check_sample(
                 &mut v,
-                &field,
+                &|| field.clone(),
                 &r.sample,
                 &self.plan.layout,
                 self.plan.h.as_ref(),
                 self.spec.config.measurement_matrix.is_some(),
             );
-            if let (Some(n), Some(tr), Some(t)) = (node, track, t) {
+            if let (Some(n), Some(tr), Some(t), true) = (node, track, t, ok) {
                 accepted.push((n, tr, t, r));
             }
         }
