@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{ServiceError, Violations, covariance_message, micros_since};
+use super::{Ids, ServiceError, Violations, covariance_message, micros_since};
 use crate::algo::{
     AlgoError,
     jpda::{self, Clutter, Config, Fallback, Gate, Method, Scan, SensorModel, TrackEstimate},
@@ -293,51 +293,36 @@ const NAMES: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
 
 fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     let mut v = Violations::new();
-    let method = match input.method.as_deref() {
-        None | Some("exact") => Some(Method::Exact),
-        Some("amsjpda") => Some(Method::Amsjpda),
-        Some("nearest_neighbour") => Some(Method::NearestNeighbour),
-        Some("global_nearest_neighbour") => Some(Method::GlobalNearestNeighbour),
-        Some(other) => {
-            v.add(
-                "method",
-                format!("unknown method '{other}': one of {}", METHODS.join(", ")),
-            );
-            None
-        }
-    };
-    let max_exact = input
-        .max_exact_cluster_tracks
-        .unwrap_or(DEFAULT_MAX_EXACT_CLUSTER_TRACKS);
-    if !(1..=MAX_EXACT_CLUSTER_TRACKS).contains(&max_exact) {
-        v.add(
-            "max_exact_cluster_tracks",
-            format!("must lie in 1..={MAX_EXACT_CLUSTER_TRACKS}, got {max_exact}"),
-        );
-    }
+    let method = v.one_of(
+        "method",
+        input.method.as_deref(),
+        Some(Method::Exact),
+        &[
+            ("exact", Method::Exact),
+            ("amsjpda", Method::Amsjpda),
+            ("nearest_neighbour", Method::NearestNeighbour),
+            ("global_nearest_neighbour", Method::GlobalNearestNeighbour),
+        ],
+    );
+    let max_exact = v.count_or(
+        "max_exact_cluster_tracks",
+        input.max_exact_cluster_tracks,
+        DEFAULT_MAX_EXACT_CLUSTER_TRACKS,
+        1,
+        MAX_EXACT_CLUSTER_TRACKS,
+    );
 
     // Tracks.
-    if input.tracks.is_empty() {
-        v.add("tracks", "must hold at least one track");
-    } else if input.tracks.len() > MAX_TRACKS {
-        v.add("tracks", format!("at most {MAX_TRACKS} tracks per request"));
-    }
+    v.count_within("tracks", input.tracks.len(), MAX_TRACKS, "track");
     let n = input.tracks.first().map_or(0, |t| t.state.len());
     let mut tracks = Vec::with_capacity(input.tracks.len().min(MAX_TRACKS));
     let mut track_ids = Vec::with_capacity(tracks.capacity());
-    let mut seen = std::collections::HashSet::new();
+    let mut ids = Ids::new();
     for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
         // Paths are formatted only for a violation: this loop runs per track.
         let f = |rest: &str| format!("tracks[{i}].{rest}");
-        match &t.id {
-            None => v.add(f("id"), "is required"),
-            Some(id) if id.is_empty() => v.add(f("id"), "must not be empty"),
-            Some(id) if !seen.insert(id.clone()) => {
-                v.add(f("id"), format!("duplicate track id '{id}'"))
-            }
-            Some(_) => {}
-        }
-        track_ids.push(t.id.clone().unwrap_or_default());
+        let id = ids.check(&mut v, t.id.as_deref(), i, |j| format!("tracks[{j}].id"));
+        track_ids.push(id.unwrap_or_default().to_string());
         if t.state.is_empty() || t.state.len() > MAX_DIM {
             v.add(f("state"), format!("must have 1 to {MAX_DIM} components"));
             continue;
@@ -382,10 +367,13 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
             if !NAMES.contains(&name.as_str()) {
                 v.add(
                     format!("state_layout[{i}]"),
-                    format!("unknown component '{name}': one of {}", NAMES.join(", ")),
+                    format!("must be one of {}, got '{name}'", NAMES.join(", ")),
                 );
             } else if !names.insert(name.as_str()) {
-                v.add(format!("state_layout[{i}]"), format!("duplicate '{name}'"));
+                v.add(
+                    format!("state_layout[{i}]"),
+                    format!("names '{name}' twice"),
+                );
             }
         }
         if n > 0 && input.state_layout.len() != n {
@@ -448,19 +436,9 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     });
 
     // Sensors.
-    if input.sensors.len() > MAX_SENSORS {
-        v.add(
-            "sensors",
-            format!("at most {MAX_SENSORS} sensors per request"),
-        );
-    }
+    v.at_most("sensors", input.sensors.len(), MAX_SENSORS, "sensors");
     let total: usize = input.sensors.iter().map(|s| s.measurements.len()).sum();
-    if total > MAX_MEASUREMENTS {
-        v.add(
-            "sensors",
-            format!("at most {MAX_MEASUREMENTS} measurements per request, got {total}"),
-        );
-    }
+    v.at_most("sensors", total, MAX_MEASUREMENTS, "measurements");
     if total.saturating_mul(input.tracks.len()) > MAX_PAIRS {
         v.add(
             "sensors",
@@ -479,19 +457,19 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
             scans.push(scan);
         }
     }
-    v.finish()?;
-    Ok(Plan {
+    let parsed = method.zip(max_exact).map(|(method, max_exact)| Plan {
         tracks,
         track_ids,
         sensor_ids,
         scans,
         config: Config {
-            method: method.expect("validated"),
+            method,
             max_exact_tracks: max_exact as usize,
             max_hypotheses: MAX_HYPOTHESES,
         },
         prediction,
-    })
+    });
+    v.finish_with(parsed)
 }
 
 fn sensor(
@@ -614,12 +592,12 @@ fn sensor(
         Some(other) => {
             v.add(
                 format!("{f}.kind"),
-                format!("unknown sensor kind '{other}': linear or polar"),
+                format!("must be one of linear, polar, got '{other}'"),
             );
             None
         }
         None => {
-            v.add(format!("{f}.kind"), "is required: linear or polar");
+            v.add(format!("{f}.kind"), "is required: one of linear, polar");
             None
         }
     };
@@ -691,7 +669,7 @@ fn sensor(
                 if let Some(a) = az
                     && !a.is_finite()
                 {
-                    v.add(mf("azimuth_deg"), "must be finite");
+                    v.add(mf("azimuth_deg"), format!("must be finite, got {a}"));
                 }
                 let el = match (dim, z.elevation_deg) {
                     (3, None) => {

@@ -44,7 +44,7 @@ use crate::algo::{
     tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
     wire::{Reader, Writer},
 };
-use crate::service::{FieldViolation, ServiceError, Violations};
+use crate::service::{FieldViolation, Ids, Interval, ServiceError, Violations};
 
 /// Longest plot range accepted (m): far beyond any radar's horizon.
 const MAX_RANGE_M: f64 = 1.0e7;
@@ -132,26 +132,7 @@ pub fn config_error(e: &AlgoError) -> ServiceError {
 }
 
 fn geodetic(v: &mut Violations, f: &str, g: &GeoInput) -> Option<LocalFrame> {
-    let lat = v.number_in(&format!("{f}.lat_deg"), g.lat_deg, -90.0, 90.0);
-    let lon = v.number_in(&format!("{f}.lon_deg"), g.lon_deg, -180.0, 180.0);
-    let h = v.number_in(
-        &format!("{f}.height_m"),
-        Some(g.height_m.unwrap_or(0.0)),
-        -11_000.0,
-        100_000.0,
-    );
-    let (lat, lon, h) = (lat?, lon?, h?);
-    if lat.abs() > 89.9 {
-        v.add(
-            format!("{f}.lat_deg"),
-            "a site within 0.1° of a pole has no usable north reference",
-        );
-        return None;
-    }
-    v.check(
-        f,
-        LocalFrame::new(Ellipsoid::WGS84, lat.to_radians(), lon.to_radians(), h),
-    )
+    v.site(f, g.lat_deg, g.lon_deg, Some(g.height_m.unwrap_or(0.0)))
 }
 
 enum Site {
@@ -164,18 +145,12 @@ enum Site {
 pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
     let mut v = Violations::new();
     let mut warnings = Vec::new();
-    if spec.radars.is_empty() {
-        v.add("radars", "at least one radar is needed");
-    }
-    if spec.radars.len() > MAX_RADARS {
-        v.add(
-            "radars",
-            format!("{} radars; at most {MAX_RADARS}", spec.radars.len()),
-        );
-        return Err(v.finish().expect_err("a violation was added"));
+    if !v.count_within("radars", spec.radars.len(), MAX_RADARS, "radar") && !spec.radars.is_empty()
+    {
+        return v.finish_with(None);
     }
     let mut ids = Vec::new();
-    let mut index = HashMap::new();
+    let mut radar_ids = Ids::new();
     let mut sites = Vec::new();
     let mut specs = Vec::new();
     let mut sources = Vec::new();
@@ -183,25 +158,14 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     for (i, r) in spec.radars.iter().enumerate() {
         let f = format!("radars[{i}]");
         sources.push(source(&mut v, &f, r.sac, r.sic, i, &mut source_of));
-        let id = r.id.clone().unwrap_or_default();
-        if id.is_empty() {
-            v.add(format!("{f}.id"), "is required");
-        } else if index.insert(id.clone(), i).is_some() {
-            v.add(format!("{f}.id"), format!("duplicate radar id '{id}'"));
-        }
-        ids.push(id);
-        let three_d = match r.kind.as_deref() {
-            Some("2d") => Some(false),
-            Some("3d") => Some(true),
-            None => {
-                v.add(format!("{f}.kind"), "is required: 2d or 3d");
-                None
-            }
-            Some(k) => {
-                v.add(format!("{f}.kind"), format!("unknown kind '{k}': 2d or 3d"));
-                None
-            }
-        };
+        let id = radar_ids.check(&mut v, r.id.as_deref(), i, |j| format!("radars[{j}].id"));
+        ids.push(id.unwrap_or_default().to_string());
+        let three_d = v.one_of(
+            format!("{f}.kind"),
+            r.kind.as_deref(),
+            None,
+            &[("2d", false), ("3d", true)],
+        );
         let site = match &r.site {
             None => {
                 v.add(format!("{f}.site"), "is required");
@@ -232,23 +196,17 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         };
         sites.push(site);
         let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = v.number_in(
-            &format!("{f}.sigma_azimuth_deg"),
+        let sa = v.number(
+            format!("{f}.sigma_azimuth_deg"),
             r.sigma_azimuth_deg,
-            0.0,
-            90.0,
+            Interval::open_closed(0.0, 90.0),
         );
-        if sa == Some(0.0) {
-            v.add(format!("{f}.sigma_azimuth_deg"), "must be > 0");
-        }
         let se = match (three_d, r.sigma_elevation_deg) {
-            (Some(true), s) => {
-                let s = v.number_in(&format!("{f}.sigma_elevation_deg"), s, 0.0, 90.0);
-                if s == Some(0.0) {
-                    v.add(format!("{f}.sigma_elevation_deg"), "must be > 0");
-                }
-                s
-            }
+            (Some(true), s) => v.number(
+                format!("{f}.sigma_elevation_deg"),
+                s,
+                Interval::open_closed(0.0, 90.0),
+            ),
             (Some(false), Some(_)) => {
                 v.add(
                     format!("{f}.sigma_elevation_deg"),
@@ -262,21 +220,22 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             .sigma_radial_velocity_mps
             .and_then(|s| v.positive(&format!("{f}.sigma_radial_velocity_mps"), Some(s)));
         let period = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
-        let pd = r.p_detection.unwrap_or(DEFAULT_P_DETECTION);
-        if !(pd > 0.0 && pd <= 1.0) {
-            v.add(
-                format!("{f}.p_detection"),
-                format!("must lie in (0, 1], got {pd}"),
-            );
-        }
-        let clutter = r.clutter_density.unwrap_or(DEFAULT_CLUTTER_DENSITY);
-        if !(clutter.is_finite() && clutter > 0.0) {
-            v.add(
-                format!("{f}.clutter_density"),
-                format!("must be finite and > 0 (false plots per m·rad), got {clutter}"),
-            );
-        }
-        if let (Some(three_d), Some(sr), Some(sa), Some(period)) = (three_d, sr, sa, period) {
+        let pd = v.number_or(
+            format!("{f}.p_detection"),
+            r.p_detection,
+            DEFAULT_P_DETECTION,
+            Interval::open_closed(0.0, 1.0),
+        );
+        // False plots per m·rad.
+        let clutter = v.number_or(
+            format!("{f}.clutter_density"),
+            r.clutter_density,
+            DEFAULT_CLUTTER_DENSITY,
+            Interval::POSITIVE,
+        );
+        if let (Some(three_d), Some(sr), Some(sa), Some(period), Some(pd), Some(clutter)) =
+            (three_d, sr, sa, period, pd, clutter)
+        {
             specs.push(RadarSpec {
                 site: [0.0; 3],
                 sigma_range: sr,
@@ -304,68 +263,58 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     let tracker = &spec.tracker;
     let axes = match tracker.dimensions {
         None => Some(if any_3d { 3 } else { 2 }),
-        Some(d @ (2 | 3)) => {
-            if d == 2 && any_3d {
+        Some(d) => {
+            let d = v.count_or("tracker.dimensions", Some(d), 3, 2, 3);
+            if d == Some(2) && any_3d {
                 v.add(
                     "tracker.dimensions",
                     "a 2D tracker takes 2d radars only; use 3 (or omit it)",
                 );
             }
-            Some(d as usize)
-        }
-        Some(d) => {
-            v.add("tracker.dimensions", format!("must be 2 or 3, got {d}"));
-            None
+            d.map(|d| d as usize)
         }
     };
-    let mode = match tracker.mode.as_deref() {
-        None | Some("auto") => Some(Mode::Auto),
-        Some("parallel") => Some(Mode::Parallel),
-        Some("serial") => Some(Mode::Serial),
-        Some(m) => {
-            v.add(
-                "tracker.mode",
-                format!("unknown mode '{m}': auto, parallel or serial"),
-            );
-            None
-        }
-    };
-    let noise = match tracker.process_noise.as_deref() {
-        None | Some("cwna") => Some(NoiseModel::Cwna),
-        Some("dwna") => Some(NoiseModel::Dwna),
-        Some(m) => {
-            v.add(
-                "tracker.process_noise",
-                format!("unknown process noise '{m}': cwna or dwna"),
-            );
-            None
-        }
-    };
-    let method = match tracker.association.as_deref() {
-        None | Some("exact") => Some(Method::Exact),
-        Some("amsjpda") => Some(Method::Amsjpda),
-        Some("global_nearest_neighbour") => Some(Method::GlobalNearestNeighbour),
-        Some("nearest_neighbour") => Some(Method::NearestNeighbour),
-        Some(m) => {
-            v.add(
-                "tracker.association",
-                format!("unknown method '{m}': one of {}", ASSOCIATIONS.join(", ")),
-            );
-            None
-        }
-    };
-    v.finish()?;
-    let (axes, mode, method, noise) = (
-        axes.expect("validated"),
-        mode.expect("validated"),
-        method.expect("validated"),
-        noise.expect("validated"),
+    let mode = v.one_of(
+        "tracker.mode",
+        tracker.mode.as_deref(),
+        Some(Mode::Auto),
+        &[
+            ("auto", Mode::Auto),
+            ("parallel", Mode::Parallel),
+            ("serial", Mode::Serial),
+        ],
     );
+    let noise = v.one_of(
+        "tracker.process_noise",
+        tracker.process_noise.as_deref(),
+        Some(NoiseModel::Cwna),
+        &[("cwna", NoiseModel::Cwna), ("dwna", NoiseModel::Dwna)],
+    );
+    let choices: Vec<(&str, Method)> = ASSOCIATIONS
+        .iter()
+        .copied()
+        .zip([
+            Method::Exact,
+            Method::Amsjpda,
+            Method::GlobalNearestNeighbour,
+            Method::NearestNeighbour,
+        ])
+        .collect();
+    let method = v.one_of(
+        "tracker.association",
+        tracker.association.as_deref(),
+        Some(Method::Exact),
+        &choices,
+    );
+    // Every radar's site, when each parsed.
+    let sites: Option<Vec<Site>> = sites.into_iter().collect();
+    let parsed = (|| Some((axes?, mode?, method?, noise?, sites?)))();
+    let (axes, mode, method, noise, sites) = v.finish_with(parsed)?;
 
     // Sites in the fusion frame.
     let mut radar_sites = Vec::with_capacity(specs.len());
     for (spec, site) in specs.iter_mut().zip(&sites) {
-        match site.as_ref().expect("validated") {
+        match site {
             Site::Local(p) => {
                 spec.site = *p;
                 radar_sites.push(RadarSite {
@@ -374,7 +323,13 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
                 });
             }
             Site::Geodetic(radar) => {
-                let fusion = frame.expect("a geodetic site gives a frame");
+                // A geodetic site gives a frame (the origin, or else the
+                // first geodetic site).
+                let Some(fusion) = frame else {
+                    return Err(ServiceError::Internal(
+                        "a geodetic site without a frame".into(),
+                    ));
+                };
                 let (lat, lon, h) = radar.origin_geodetic();
                 spec.site = fusion
                     .geodetic_to_enu(lat, lon, h)
