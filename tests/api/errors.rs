@@ -309,8 +309,12 @@ async fn grpc_bad_input_is_invalid_argument_with_field_violations() {
         .await
         .unwrap_err();
     assert_eq!(status.code(), Code::InvalidArgument);
+    // Every bad field at once: the missing bound, the NaN ratio and R = 0.
     let fields = grpc_fields(&status);
-    assert_eq!(fields, vec!["max_miss_probability"]);
+    assert_eq!(
+        fields,
+        vec!["max_miss_probability", "min_l_over_r", "max_r"]
+    );
 }
 
 #[tokio::test]
@@ -327,4 +331,101 @@ async fn grpc_unknown_method_is_unimplemented() {
         .await
         .unwrap_err();
     assert_eq!(status.code(), Code::Unimplemented);
+}
+
+/// The messages of a problem body, by field.
+fn problem_messages(problem: &serde_json::Value) -> Vec<(String, String)> {
+    problem["errors"]
+        .as_array()
+        .expect("errors")
+        .iter()
+        .map(|e| {
+            (
+                e["field"].as_str().unwrap_or_default().to_string(),
+                e["message"].as_str().unwrap_or_default().to_string(),
+            )
+        })
+        .collect()
+}
+
+#[tokio::test]
+async fn every_endpoint_words_a_kind_of_violation_alike() {
+    // Each endpoint's working example with its second list element's id
+    // set to the first's, and one of its named choices set to 'bogus'.
+    let app = spawn_app().await;
+    let cases: [(&str, &str, &str, &str, &[&str]); 5] = [
+        (
+            "/v1/correlation/tracks",
+            include_str!("../../openapi/examples/correlation_tracks.json"),
+            "nodes",
+            "method.kind",
+            &["method", "kind"],
+        ),
+        (
+            "/v1/dimension/fuse",
+            include_str!("../../openapi/examples/dimension_fuse.json"),
+            "radars",
+            "methods[0]",
+            &["methods", "0"],
+        ),
+        (
+            "/v1/jpda/update",
+            include_str!("../../openapi/examples/jpda_update.json"),
+            "tracks",
+            "method",
+            &["method"],
+        ),
+        (
+            "/v1/plot-fusion/track",
+            include_str!("../../openapi/examples/plot_fusion_track.json"),
+            "radars",
+            "tracker.association",
+            &["tracker", "association"],
+        ),
+        (
+            "/v1/ais-radar/associate",
+            include_str!("../../openapi/examples/ais_radar_associate.json"),
+            "radar_tracks",
+            "ellipsoid",
+            &["ellipsoid"],
+        ),
+    ];
+    for (path, example, list, choice_field, choice_path) in cases {
+        let mut body: serde_json::Value = serde_json::from_str(example).unwrap();
+        let items = body[list].as_array_mut().unwrap();
+        if items.len() < 2 {
+            let copy = items[0].clone();
+            items.push(copy);
+        }
+        let first = items[0]["id"].clone();
+        items[1]["id"] = first.clone();
+        let mut slot = &mut body;
+        for (k, key) in choice_path.iter().enumerate() {
+            if let Ok(i) = key.parse::<usize>() {
+                slot = &mut slot[i];
+            } else {
+                if k + 1 < choice_path.len() && slot.get(*key).is_none() {
+                    slot[*key] = serde_json::json!({});
+                }
+                slot = &mut slot[*key];
+            }
+        }
+        *slot = "bogus".into();
+        let problem = assert_problem(app.post_json(path, &body).await, 422).await;
+        let messages = problem_messages(&problem);
+        let id = first.as_str().unwrap();
+        let duplicate = format!("{list}[1].id");
+        assert!(
+            messages
+                .iter()
+                .any(|(f, m)| *f == duplicate && *m == format!("duplicates {list}[0].id '{id}'")),
+            "{path}: {messages:?}"
+        );
+        assert!(
+            messages.iter().any(|(f, m)| f == choice_field
+                && m.starts_with("must be one of ")
+                && m.ends_with(", got 'bogus'")),
+            "{path}: {messages:?}"
+        );
+    }
 }
