@@ -175,7 +175,7 @@ impl KindName {
                     let known: Vec<&str> = Self::ALL.iter().map(|k| k.name()).collect();
                     Violations::single(
                         field,
-                        format!("unknown session kind '{n}': one of {}", known.join(", ")),
+                        format!("must be one of {}, got '{n}'", known.join(", ")),
                     )
                 }),
         }

@@ -19,7 +19,7 @@ use crate::{
         motion::MotionModel,
     },
     service::{
-        ServiceError, Violations,
+        Ids, Interval, ServiceError, Violations,
         correlation::{self, AlignMode, GroupOutput, Links, Plan, TrackName},
     },
 };
@@ -85,17 +85,20 @@ impl CorrelationSession {
     pub fn new(spec: SessionSpec) -> Result<Self, ServiceError> {
         let plan = plan_of(&spec)?;
         let mut v = Violations::new();
-        let retire = spec.retire_after_s.unwrap_or(DEFAULT_RETIRE_AFTER_S);
-        if !(retire.is_finite() && retire > 0.0) {
-            v.add("retire_after_s", "must be a finite number of seconds > 0");
-        }
-        let history = spec.history_instants.unwrap_or(DEFAULT_HISTORY_INSTANTS);
-        if history == 0 || history > MAX_HISTORY_INSTANTS {
-            v.add(
-                "history_instants",
-                format!("must be between 1 and {MAX_HISTORY_INSTANTS}"),
-            );
-        }
+        // Seconds.
+        let retire = v.number_or(
+            "retire_after_s",
+            spec.retire_after_s,
+            DEFAULT_RETIRE_AFTER_S,
+            Interval::POSITIVE,
+        );
+        let history = v.count_or(
+            "history_instants",
+            spec.history_instants,
+            DEFAULT_HISTORY_INSTANTS,
+            1,
+            MAX_HISTORY_INSTANTS,
+        );
         if let AlignMode::Interpolate { .. } = plan.alignment {
             v.add(
                 "alignment.mode",
@@ -103,24 +106,19 @@ impl CorrelationSession {
                  samples)",
             );
         }
-        let mut seen = HashMap::new();
         if spec.config.nodes.len() < 2 {
             v.add("nodes", "a session needs at least two nodes");
-        } else if spec.config.nodes.len() > correlation::MAX_NODES {
-            v.add("nodes", format!("at most {} nodes", correlation::MAX_NODES));
+        } else {
+            v.at_most(
+                "nodes",
+                spec.config.nodes.len(),
+                correlation::MAX_NODES,
+                "nodes",
+            );
         }
+        let mut ids = Ids::new();
         for (i, n) in spec.config.nodes.iter().enumerate() {
-            match n.id.as_deref() {
-                None | Some("") => v.add(format!("nodes[{i}].id"), "is required"),
-                Some(id) => {
-                    if let Some(prev) = seen.insert(id.to_string(), i) {
-                        v.add(
-                            format!("nodes[{i}].id"),
-                            format!("duplicates nodes[{prev}].id '{id}'"),
-                        );
-                    }
-                }
-            }
+            ids.check(&mut v, n.id.as_deref(), i, |j| format!("nodes[{j}].id"));
             if !n.tracks.is_empty() {
                 v.add(
                     format!("nodes[{i}].tracks"),
@@ -128,7 +126,7 @@ impl CorrelationSession {
                 );
             }
         }
-        v.finish()?;
+        let (retire, history) = v.finish_with(retire.zip(history))?;
         let node_ids = node_ids(&spec);
         let mut scene =
             Scene::new(plan.layout.dim, plan.layout.positions(), Vec::new()).map_err(internal)?;
