@@ -377,11 +377,14 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
         .as_ref()
         .is_some_and(|a| a.tolerance_s.is_some());
     drop(input);
-    let (node_ids, (track_ids, est)): (Vec<String>, (Vec<Vec<String>>, Vec<Vec<Vec<Estimate>>>)) =
-        nodes
-            .into_iter()
-            .map(|n| (n.id, (n.track_ids, n.tracks)))
-            .unzip();
+    let mut node_ids = Vec::with_capacity(nodes.len());
+    let mut track_ids = Vec::with_capacity(nodes.len());
+    let mut est = Vec::with_capacity(nodes.len());
+    for n in nodes {
+        node_ids.push(n.id);
+        track_ids.push(n.track_ids);
+        est.push(n.tracks);
+    }
     let (scene, gains_reported, mut warnings, alignment) =
         align(est, &node_ids, tolerance_given, &plan)?;
     let align_us = micros_since(t_align);
@@ -1449,7 +1452,7 @@ fn align(
             empty.join(", ")
         ));
     }
-    coverage(&scene, &node_ids, &mut report, &mut warnings);
+    coverage(&scene, node_ids, &mut report, &mut warnings);
     match plan.alignment {
         AlignMode::Predict if report.brought > 0 => warnings.push(format!(
             "{} sample(s) were predicted forward (at most {} s) to a common instant",

@@ -480,7 +480,7 @@ fn sensor(
     position: Option<PositionLayout>,
 ) -> Option<Scan> {
     let p_d = v.required(
-        &format!("{f}.detection_probability"),
+        format!("{f}.detection_probability"),
         s.detection_probability,
     );
     if let Some(p) = p_d
@@ -504,7 +504,7 @@ fn sensor(
     }
     let model = match s.kind.as_deref() {
         Some("linear") => {
-            let h_rows = v.required(&format!("{f}.h"), s.h.as_ref());
+            let h_rows = v.required(format!("{f}.h"), s.h.as_ref());
             let m = h_rows.map_or(0, Vec::len);
             if h_rows.is_some() && !(1..=MAX_DIM).contains(&m) {
                 v.add(format!("{f}.h"), format!("must have 1 to {MAX_DIM} rows"));
@@ -513,7 +513,7 @@ fn sensor(
                 .filter(|_| (1..=MAX_DIM).contains(&m) && n > 0)
                 .and_then(|rows| matrix(v, || format!("{f}.h"), rows, m, n));
             let r = v
-                .required(&format!("{f}.r"), s.r.as_ref())
+                .required(format!("{f}.r"), s.r.as_ref())
                 .filter(|_| (1..=MAX_DIM).contains(&m))
                 .and_then(|rows| matrix(v, || format!("{f}.r"), rows, m, m));
             if let Some(r) = &r
@@ -534,7 +534,7 @@ fn sensor(
             Some(SensorModel::Linear { h: h?, r: r? })
         }
         Some("polar") => {
-            let site = v.required(&format!("{f}.site_m"), s.site_m.as_ref());
+            let site = v.required(format!("{f}.site_m"), s.site_m.as_ref());
             if let Some(site) = site
                 && (site.len() != 3 || site.iter().any(|x| !x.is_finite()))
             {
@@ -544,7 +544,7 @@ fn sensor(
                 );
             }
             let positive = |v: &mut Violations, name: &str, x: Option<f64>| {
-                let x = v.required(&format!("{f}.{name}"), x)?;
+                let x = v.required(format!("{f}.{name}"), x)?;
                 if !(x > 0.0 && x.is_finite()) {
                     v.add(
                         format!("{f}.{name}"),

@@ -195,7 +195,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             },
         };
         sites.push(site);
-        let sr = v.positive(&format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
         let sa = v.number(
             format!("{f}.sigma_azimuth_deg"),
             r.sigma_azimuth_deg,
@@ -218,8 +218,8 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         };
         let sv = r
             .sigma_radial_velocity_mps
-            .and_then(|s| v.positive(&format!("{f}.sigma_radial_velocity_mps"), Some(s)));
-        let period = v.positive(&format!("{f}.scan_period_s"), r.scan_period_s);
+            .and_then(|s| v.positive(format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+        let period = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
         let pd = v.number_or(
             format!("{f}.p_detection"),
             r.p_detection,
