@@ -21,7 +21,7 @@ pub mod geometry;
 mod kernels;
 pub mod knn;
 
-use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::algo::{
     AlgoError, assignment,
@@ -469,6 +469,9 @@ fn members_of(parent: &mut [usize], root: usize) -> Vec<usize> {
         .collect()
 }
 
+/// The local filter of one track, fed from the plots directly on fixed-size
+/// measurements (a 3D plot's local ENU position and covariance as
+/// `plot_to_local` gives them; a 2D plot's range and azimuth).
 fn filter_track(
     radar: &Radar,
     track: &LocalTrack,
@@ -476,8 +479,8 @@ fn filter_track(
 ) -> Result<Vec<alpha_beta::Estimate>, AlgoError> {
     let times: Vec<f64> = track.plots.iter().map(|p| p.t).collect();
     if radar.three_d {
-        let mut z = Vec::new();
-        let mut r = Vec::new();
+        let mut z = Vec::with_capacity(track.plots.len());
+        let mut r = Vec::with_capacity(track.plots.len());
         for p in &track.plots {
             let g = plot_to_local(
                 [0.0; 3],
@@ -490,30 +493,23 @@ fn filter_track(
                     sigma_elevation: Some(radar.sigma_elevation),
                 },
             )?;
-            z.push(g.mean().clone());
-            r.push(g.cov().clone());
+            let (mean, cov) = (g.mean(), g.cov());
+            z.push(Vector3::from_fn(|i, _| mean[i]));
+            r.push(Matrix3::from_fn(|i, j| cov[(i, j)]));
         }
-        alpha_beta::filter(filter, &times, &z, &r, &[false; 3], &[1.0; 3])
+        alpha_beta::filter_fixed::<3, 6>(filter, &times, |k| z[k], |k| r[k], &[false; 3], &[1.0; 3])
     } else {
-        let z: Vec<_> = track
-            .plots
-            .iter()
-            .map(|p| DVector::from_vec(vec![p.range, p.azimuth]))
-            .collect();
-        let r = vec![
-            DMatrix::from_diagonal(&DVector::from_vec(vec![
-                radar.sigma_range.powi(2),
-                radar.sigma_azimuth.powi(2)
-            ]));
-            z.len()
-        ];
+        let r = Matrix2::from_diagonal(&nalgebra::Vector2::new(
+            radar.sigma_range.powi(2),
+            radar.sigma_azimuth.powi(2),
+        ));
         let mean_range =
             track.plots.iter().map(|p| p.range).sum::<f64>() / track.plots.len().max(1) as f64;
-        alpha_beta::filter(
+        alpha_beta::filter_fixed::<2, 4>(
             filter,
             &times,
-            &z,
-            &r,
+            |k| nalgebra::Vector2::new(track.plots[k].range, track.plots[k].azimuth),
+            |_| r,
             &[false, true],
             &[1.0, 1.0 / mean_range.max(1.0)],
         )
@@ -556,8 +552,7 @@ fn place(
     let (pos, jac, acceleration, velocity_jump) = if radar.three_d {
         let pos = radar.frame.position_to(centre, [e.x[0], e.x[2], e.x[4]])?;
         let jac = radar.frame.rotation_to(centre);
-        let a = Matrix3::from_fn(|i, j| e.acceleration[(i, j)]);
-        let v = Matrix3::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        let (a, v) = (e.acceleration, e.lag_ahead);
         (
             pos,
             jac,
@@ -572,8 +567,8 @@ fn place(
         let h = h.clamp(hs - 0.9 * rho, hs + 0.9 * rho);
         let (pos, jac) = geometry::place_2d(&radar.frame, centre, rho, th, h)?;
         // Range and azimuth accelerations through the cone; none in height.
-        let a = Matrix2::from_fn(|i, j| e.acceleration[(i, j)]);
-        let v = Matrix2::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        let a: Matrix2<f64> = e.acceleration.fixed_view::<2, 2>(0, 0).into_owned();
+        let v: Matrix2<f64> = e.lag_ahead.fixed_view::<2, 2>(0, 0).into_owned();
         let j2 = jac.fixed_columns::<2>(0);
         (pos, jac, j2 * a * j2.transpose(), j2 * v * j2.transpose())
     };
@@ -587,17 +582,13 @@ fn place(
 
 /// The centre-ENU state of an estimate [`place`]d, with σ_h for a 2D one.
 fn centred_state(radar: &Radar, e: &alpha_beta::Estimate, at: &Placed, sigma_h: f64) -> State6 {
-    let mut y = Vector6::zeros();
-    let mut py = Matrix6::zeros();
-    if radar.three_d {
-        py.copy_from(&e.p);
-    } else {
-        py.view_mut((0, 0), (4, 4)).copy_from(&e.p);
+    // A 2D estimate's state and covariance fill the first 4 rows (the rest
+    // of its fixed-size storage is zero).
+    let y = e.x;
+    let mut py = e.p;
+    if !radar.three_d {
         py[(4, 4)] = sigma_h * sigma_h;
         py[(5, 5)] = CLIMB_SIGMA_MPS * CLIMB_SIGMA_MPS;
-    }
-    for i in 0..e.x.len() {
-        y[i] = e.x[i];
     }
     let v = kernels::interleaved_apply(&at.jac, &y);
     let x = Vector6::new(at.pos[0], v[1], at.pos[1], v[3], at.pos[2], v[5]);
@@ -705,10 +696,10 @@ fn correlate_pair(
         if dim == 2 {
             cov[(2, 2)] = 1.0;
         }
-        let chol = cov.cholesky().ok_or(AlgoError::NotPositiveDefinite {
+        let solved = kernels::cholesky_solve(&cov, &d).ok_or(AlgoError::NotPositiveDefinite {
             what: "pair difference covariance",
         })?;
-        let stat = d.dot(&chol.solve(&d));
+        let stat = d.dot(&solved);
         let hit = (0..dim).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
         state.step(cfg.knn, hit, stat <= threshold);
         sum += stat;
