@@ -134,6 +134,10 @@ pub fn fuse_step(
 /// the backward one as dot products from zero, each in nalgebra's order.
 /// nalgebra's generic code walks dynamic views for these few numbers (a
 /// large share of a pair test); this is the same arithmetic on an array.
+/// A pivot of exactly 1 (the pair test's 2D case pads its 2 × 2 covariance
+/// with a unit third row and column) skips its square root and its
+/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same, and
+/// the two-dimensional test does not wait on them.
 /// `None` when `a` is not positive definite (a zero, negative or NaN pivot).
 pub fn cholesky_solve<const M: usize>(
     a: &SMatrix<f64, M, M>,
@@ -152,15 +156,19 @@ pub fn cholesky_solve<const M: usize>(
         if diag.is_nan() || diag <= 0.0 {
             return None;
         }
+        if diag == 1.0 {
+            continue;
+        }
         let denom = diag.sqrt();
         l[j][j] = denom;
         for r in j + 1..M {
             l[j][r] /= denom;
         }
     }
+    let unit = |d: f64| d == 1.0;
     let mut x = b.data.0[0];
     for i in 0..M {
-        let coeff = x[i] / l[i][i];
+        let coeff = if unit(l[i][i]) { x[i] } else { x[i] / l[i][i] };
         x[i] = coeff;
         for r in i + 1..M {
             x[r] += -coeff * l[i][r];
@@ -171,7 +179,11 @@ pub fn cholesky_solve<const M: usize>(
         for r in i + 1..M {
             dot += l[i][r] * x[r];
         }
-        x[i] = (x[i] - dot) / l[i][i];
+        x[i] = if unit(l[i][i]) {
+            x[i] - dot
+        } else {
+            (x[i] - dot) / l[i][i]
+        };
     }
     Some(SVector::from_data(nalgebra::ArrayStorage([x])))
 }

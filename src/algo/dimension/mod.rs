@@ -197,14 +197,15 @@ pub fn fuse_methods(
         .collect::<Result<Vec<_>, _>>()?;
     // Mapping and the other methods place a 2D estimate at the same preset
     // height and differ only in its σ_h; a 3D estimate does not depend on it.
+    let sites: Vec<Site> = radars.iter().map(|r| Site::new(centre, r)).collect();
     let need_mapped = methods.contains(&Method::Mapping);
     let need_lifted = methods.iter().any(|&m| m != Method::Mapping);
     let (mut mapped, mut lifted) = (Vec::new(), Vec::new());
     for f in &filtered {
-        let radar = &radars[f.radar];
+        let (radar, site) = (&radars[f.radar], &sites[f.radar]);
         let (mut m, mut l) = (Vec::new(), Vec::new());
         for e in &f.est {
-            let at = place(centre, radar, e, cfg.preset_altitude)?;
+            let at = place(centre, radar, site, e, cfg.preset_altitude)?;
             if need_mapped {
                 m.push(centred_state(radar, e, &at, MAPPING_ALTITUDE_SIGMA_M));
             }
@@ -234,7 +235,7 @@ pub fn fuse_methods(
         };
         share.pending_other = other.is_some_and(|o| methods[n + 1..].contains(&o));
         let mut out = fuse_one_sharing(
-            centre, radars, tracks, &filtered, centred, method, cfg, &mut share,
+            centre, radars, &sites, tracks, &filtered, centred, method, cfg, &mut share,
         )?;
         out.compute_us = started.elapsed().as_secs_f64() * 1e6;
         started = std::time::Instant::now();
@@ -306,8 +307,9 @@ fn fuse_one(
     cfg: &Config,
 ) -> Result<Outcome, AlgoError> {
     let mut share = Share::default();
+    let sites: Vec<Site> = radars.iter().map(|r| Site::new(centre, r)).collect();
     fuse_one_sharing(
-        centre, radars, tracks, filtered, centred, method, cfg, &mut share,
+        centre, radars, &sites, tracks, filtered, centred, method, cfg, &mut share,
     )
 }
 
@@ -328,6 +330,7 @@ struct Share {
 fn fuse_one_sharing(
     centre: &LocalFrame,
     radars: &[Radar],
+    sites: &[Site],
     tracks: &[LocalTrack],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
@@ -417,6 +420,7 @@ fn fuse_one_sharing(
                 fused_track(
                     centre,
                     radars,
+                    sites,
                     filtered,
                     centred,
                     g,
@@ -521,6 +525,7 @@ fn filter_track(
 fn to_centre(
     centre: &LocalFrame,
     radar: &Radar,
+    site: &Site,
     e: &alpha_beta::Estimate,
     h: f64,
     sigma_h: f64,
@@ -528,9 +533,28 @@ fn to_centre(
     Ok(centred_state(
         radar,
         e,
-        &place(centre, radar, e, h)?,
+        &place(centre, radar, site, e, h)?,
         sigma_h,
     ))
+}
+
+/// What [`place`] needs of a radar alone, computed once per call of
+/// [`fuse_methods`] rather than once per estimate (same operations, same
+/// bits).
+struct Site {
+    /// A 2D radar's cone of slant range and azimuth.
+    cone: Option<geometry::Cone>,
+    /// The rotation from the radar's ENU axes to the centre's.
+    to_centre: Matrix3<f64>,
+}
+
+impl Site {
+    fn new(centre: &LocalFrame, radar: &Radar) -> Self {
+        Self {
+            cone: (!radar.three_d).then(|| geometry::Cone::new(&radar.frame, centre)),
+            to_centre: radar.frame.rotation_to(centre),
+        }
+    }
 }
 
 /// Where [`to_centre`] puts an estimate, before σ_h enters: the position,
@@ -546,12 +570,13 @@ struct Placed {
 fn place(
     centre: &LocalFrame,
     radar: &Radar,
+    site: &Site,
     e: &alpha_beta::Estimate,
     h: f64,
 ) -> Result<Placed, AlgoError> {
     let (pos, jac, acceleration, velocity_jump) = if radar.three_d {
         let pos = radar.frame.position_to(centre, [e.x[0], e.x[2], e.x[4]])?;
-        let jac = radar.frame.rotation_to(centre);
+        let jac = site.to_centre;
         let (a, v) = (e.acceleration, e.lag_ahead);
         (
             pos,
@@ -565,7 +590,11 @@ fn place(
         // placed at the nearest reachable one, the site's height ± 0.9 ρ.
         let hs = radar.frame.origin_geodetic().2;
         let h = h.clamp(hs - 0.9 * rho, hs + 0.9 * rho);
-        let (pos, jac) = geometry::place_2d(&radar.frame, centre, rho, th, h)?;
+        let cone = site.cone.as_ref().ok_or(AlgoError::DegenerateGeometry {
+            what: "2D radar",
+            reason: "no cone for a 3D radar",
+        })?;
+        let (pos, jac) = cone.place(rho, th, h)?;
         // Range and azimuth accelerations through the cone; none in height.
         let a: Matrix2<f64> = e.acceleration.fixed_view::<2, 2>(0, 0).into_owned();
         let v: Matrix2<f64> = e.lag_ahead.fixed_view::<2, 2>(0, 0).into_owned();
@@ -793,6 +822,7 @@ struct Fused {
 fn fused_track(
     centre: &LocalFrame,
     radars: &[Radar],
+    sites: &[Site],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
     members: Vec<usize>,
@@ -834,11 +864,20 @@ fn fused_track(
     let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
     let mut heights: Vec<(f64, f64, f64)> = Vec::new();
+    // With `keep_spots`, the 3D members' spots at each instant with a 3D
+    // fusion (`spots3[ranges3[n]]` for the n-th such instant), kept from
+    // this pass for the next.
+    let (mut spots3, mut ranges3) = (Vec::new(), Vec::new());
     for &t in &times {
         three_at(t, &mut all, &mut cursor3);
         if all.is_empty() {
             fused3.push(None);
             continue;
+        }
+        if keep_spots {
+            let start = spots3.len();
+            spots3.extend(all.iter().map(Spot::of));
+            ranges3.push(start..spots3.len());
         }
         let (x3, p3) = fuse_independent(&all)?;
         if method != Method::Mapping {
@@ -851,8 +890,7 @@ fn fused_track(
     let mut samples = Vec::with_capacity(times.len());
     let mut split = Vec::new();
     let mut spots = Vec::new();
-    let mut three = Vec::with_capacity(three_d.len());
-    cursor3.fill(0);
+    let mut ranges3 = ranges3.into_iter();
     let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
     for (&t, f3) in times.iter().zip(&fused3) {
@@ -901,7 +939,7 @@ fn fused_track(
             }
             let s = match placement {
                 Some((h, sh)) => extrapolate(
-                    &to_centre(centre, &radars[f.radar], &f.est[k], h, sh)?,
+                    &to_centre(centre, &radars[f.radar], &sites[f.radar], &f.est[k], h, sh)?,
                     t,
                     gap(i),
                 ),
@@ -918,13 +956,15 @@ fn fused_track(
         };
 
         if keep_spots {
-            split.push(if f3.is_some() {
-                three_at(t, &mut three, &mut cursor3);
-                let start = spots.len();
-                spots.extend(three.iter().chain(&all).map(Spot::of));
-                Some((start, three.len(), spots.len()))
-            } else {
-                None
+            // `ranges3` holds one range per instant with a 3D fusion.
+            split.push(match f3.as_ref().and_then(|_| ranges3.next()) {
+                Some(r) => {
+                    let start = spots.len();
+                    spots.extend_from_slice(&spots3[r.clone()]);
+                    spots.extend(all.iter().map(Spot::of));
+                    Some((start, r.len(), spots.len()))
+                }
+                None => None,
             });
         }
         samples.push(Sample { t, x, p, altitude });

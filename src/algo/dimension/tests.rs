@@ -489,6 +489,7 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
                                 to_centre(
                                     &scene.centre,
                                     &scene.radars[f.radar],
+                                    &Site::new(&scene.centre, &scene.radars[f.radar]),
                                     e,
                                     cfg.preset_altitude,
                                     sigma_h,
