@@ -203,7 +203,10 @@ pub fn fuse_methods(
     let (mut mapped, mut lifted) = (Vec::new(), Vec::new());
     for f in &filtered {
         let (radar, site) = (&radars[f.radar], &sites[f.radar]);
-        let (mut m, mut l) = (Vec::new(), Vec::new());
+        let (mut m, mut l) = (
+            Vec::with_capacity(if need_mapped { f.est.len() } else { 0 }),
+            Vec::with_capacity(if need_lifted { f.est.len() } else { 0 }),
+        );
         for e in &f.est {
             let at = place(centre, radar, site, e, cfg.preset_altitude)?;
             if need_mapped {
@@ -355,7 +358,7 @@ fn fuse_one_sharing(
     }
 
     // Pairwise modified K-NN.
-    let mut pairs = Vec::new();
+    let mut pairs = Vec::with_capacity(tracks.len() * tracks.len() / 2);
     for a in 0..tracks.len() {
         for b in a + 1..tracks.len() {
             if tracks[a].radar == tracks[b].radar || centred[a].is_empty() || centred[b].is_empty()
@@ -432,22 +435,36 @@ fn fuse_one_sharing(
             if method == Method::Mapping {
                 return Ok(fuse(g, false)?.track);
             }
-            let fused = match share.tracks.remove(&g) {
+            let mut fused = match share.tracks.remove(&g) {
                 Some(f) => f,
                 None => fuse(
                     g.clone(),
                     method == Method::Splitting || share.pending_other,
                 )?,
             };
-            let track = if method == Method::Splitting {
-                split_track(centre, &fused)?
-            } else {
-                fused.track.clone()
-            };
+            // The fused track is kept for the other method, or moved out.
             if share.pending_other {
+                let track = fused.track.clone();
+                let track = if method == Method::Splitting {
+                    split_track(centre, track, &fused)?
+                } else {
+                    track
+                };
                 share.tracks.insert(g, fused);
+                Ok(track)
+            } else if method == Method::Splitting {
+                let track = std::mem::replace(
+                    &mut fused.track,
+                    SystemTrack {
+                        members: Vec::new(),
+                        samples: Vec::new(),
+                        altitude_known: false,
+                    },
+                );
+                split_track(centre, track, &fused)
+            } else {
+                Ok(fused.track)
             }
-            Ok(track)
         })
         .collect::<Result<Vec<_>, AlgoError>>()?;
     Ok(Outcome {
@@ -863,11 +880,18 @@ fn fused_track(
     // height they give there (t, h, σ_h).
     let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
-    let mut heights: Vec<(f64, f64, f64)> = Vec::new();
+    let mut heights: Vec<(f64, f64, f64)> = Vec::with_capacity(times.len());
     // With `keep_spots`, the 3D members' spots at each instant with a 3D
     // fusion (`spots3[ranges3[n]]` for the n-th such instant), kept from
     // this pass for the next.
-    let (mut spots3, mut ranges3) = (Vec::new(), Vec::new());
+    let (mut spots3, mut ranges3) = if keep_spots {
+        (
+            Vec::with_capacity(times.len() * three_d.len()),
+            Vec::with_capacity(times.len()),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     for &t in &times {
         three_at(t, &mut all, &mut cursor3);
         if all.is_empty() {
@@ -888,8 +912,14 @@ fn fused_track(
         fused3.push(Some((x3, p3)));
     }
     let mut samples = Vec::with_capacity(times.len());
-    let mut split = Vec::new();
-    let mut spots = Vec::new();
+    let (mut split, mut spots) = if keep_spots {
+        (
+            Vec::with_capacity(times.len()),
+            Vec::with_capacity(times.len() * members.len()),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     let mut ranges3 = ranges3.into_iter();
     let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
@@ -983,8 +1013,12 @@ fn fused_track(
 /// Splitting's system track from the one lifting fuses: at every sample with
 /// a 3D member, the direction from the Earth's centre fused from all members
 /// and the geocentric distance from the 3D members replace the position.
-fn split_track(centre: &LocalFrame, fused: &Fused) -> Result<SystemTrack, AlgoError> {
-    let mut track = fused.track.clone();
+/// `track` is the lifted track of `fused` (moved out of it or a copy).
+fn split_track(
+    centre: &LocalFrame,
+    mut track: SystemTrack,
+    fused: &Fused,
+) -> Result<SystemTrack, AlgoError> {
     for (sample, split) in track.samples.iter_mut().zip(&fused.split) {
         let Some(&(start, n3, end)) = split.as_ref() else {
             continue;
