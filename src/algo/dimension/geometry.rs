@@ -204,11 +204,18 @@ pub fn test_space(
             let ell = centre.ellipsoid();
             let ecef = centre.enu_to_ecef(pos)?;
             let (lat, lon, h) = ecef_to_geodetic(&ell, ecef)?;
-            let fp = centre.ecef_to_enu(geodetic_to_ecef(&ell, lat, lon, 0.0)?)?;
             let (sl, cl) = lat.sin_cos();
             let (so, co) = lon.sin_cos();
             let w2 = 1.0 - ell.e2() * sl * sl;
             let n = ell.a() / w2.sqrt();
+            // The footprint, `geodetic_to_ecef(lat, lon, 0)` with its sines,
+            // cosines and N shared (the same operations: the same bits);
+            // lat and lon from `ecef_to_geodetic` are finite and in range.
+            let fp = centre.ecef_to_enu([
+                (n + 0.0) * cl * co,
+                (n + 0.0) * cl * so,
+                (n * (1.0 - ell.e2()) + 0.0) * sl,
+            ])?;
             let m = ell.a() * (1.0 - ell.e2()) / (w2 * w2.sqrt());
             let east = Vector3::new(-so, co, 0.0);
             let north = Vector3::new(-sl * co, -sl * so, cl);
@@ -341,6 +348,27 @@ mod tests {
         // and ~100 m from the flat one.
         assert!((ground - rs * gamma).abs() < 60.0, "ground {ground}");
         assert!(flat - ground > 50.0);
+    }
+
+    #[test]
+    fn lifting_test_point_is_the_footprint_bit_for_bit() {
+        // test_space shares the sines and cosines of the geodetic position
+        // with the footprint it computes; `footprint` goes through
+        // `geodetic_to_ecef`: the same numbers.
+        let ell = Ellipsoid::WGS84;
+        let centre = LocalFrame::new(ell, 30f64.to_radians(), 120f64.to_radians(), 0.0).unwrap();
+        for k in 0..200 {
+            let x = f64::from(k);
+            let pos = [
+                -150_000.0 + 1_537.3 * x,
+                90_000.0 - 911.7 * x,
+                500.0 + 61.1 * x,
+            ];
+            let (_, z, _) = test_space(&centre, super::super::Method::Lifting, pos).unwrap();
+            let fp = footprint(&centre, centre.enu_to_ecef(pos).unwrap()).unwrap();
+            assert_eq!(z[0].to_bits(), fp[0].to_bits(), "{k}");
+            assert_eq!(z[1].to_bits(), fp[1].to_bits(), "{k}");
+        }
     }
 
     #[test]
