@@ -796,12 +796,21 @@ fn fuse_into(
             what: "P1 + P2 - P12 - P21",
         })?;
     }
-    if x.iter().chain(p.iter()).any(|v| !v.is_finite()) {
+    if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
         return Err(AlgoError::NotPositiveDefinite {
             what: "fused covariance",
         });
     }
     Ok((x, p))
+}
+
+/// Whether every value is finite, without a branch per value: v · 0 is ±0
+/// for a finite v and NaN for an infinite or NaN one, and a sum of them is
+/// NaN exactly when one is (the same answer as `iter().all(is_finite)`, in
+/// a loop the compiler vectorises).
+fn all_finite(v: &[f64]) -> bool {
+    let s = v.iter().fold(0.0, |acc, &x| acc + x * 0.0);
+    !s.is_nan()
 }
 
 /// Position and position covariance of a member's state at a system-track

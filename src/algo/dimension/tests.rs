@@ -533,3 +533,17 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
         }
     }
 }
+
+#[test]
+fn all_finite_agrees_with_is_finite() {
+    let vals = [0.0, -0.0, 1.0, -3.5e300, f64::MIN_POSITIVE, f64::MAX, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
+    for &a in &vals {
+        for &b in &vals {
+            for &c in &vals {
+                let v = [a, b, c, 2.0];
+                assert_eq!(all_finite(&v), v.iter().all(|x| x.is_finite()), "{v:?}");
+            }
+        }
+    }
+    assert!(all_finite(&[]));
+}
