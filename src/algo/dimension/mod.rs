@@ -503,20 +503,9 @@ fn filter_track(
         let mut z = Vec::with_capacity(track.plots.len());
         let mut r = Vec::with_capacity(track.plots.len());
         for p in &track.plots {
-            let g = plot_to_local(
-                [0.0; 3],
-                &PolarMeasurement {
-                    range: p.range,
-                    azimuth: p.azimuth,
-                    elevation: p.elevation,
-                    sigma_range: radar.sigma_range,
-                    sigma_azimuth: radar.sigma_azimuth,
-                    sigma_elevation: Some(radar.sigma_elevation),
-                },
-            )?;
-            let (mean, cov) = (g.mean(), g.cov());
-            z.push(Vector3::from_fn(|i, _| mean[i]));
-            r.push(Matrix3::from_fn(|i, j| cov[(i, j)]));
+            let (mean, cov) = local_3d(radar, p)?;
+            z.push(mean);
+            r.push(cov);
         }
         alpha_beta::filter_fixed::<3, 6>(filter, &times, |k| z[k], |k| r[k], &[false; 3], &[1.0; 3])
     } else {
@@ -535,6 +524,80 @@ fn filter_track(
             &[1.0, 1.0 / mean_range.max(1.0)],
         )
     }
+}
+
+/// A 3D plot's local ENU position and covariance J R J' (symmetrised), the
+/// numbers `plot_to_local` gives for a site at the origin, by the same
+/// operations on fixed-size matrices instead of heap-allocated ones. A plot
+/// that is not plainly valid (a non-finite or negative value, an elevation
+/// beyond ±π/2, a covariance its checks would refuse) goes through
+/// `plot_to_local` itself, for its checks and its error.
+fn local_3d(radar: &Radar, p: &Plot) -> Result<(Vector3<f64>, Matrix3<f64>), AlgoError> {
+    let (sr, sa, se) = (
+        radar.sigma_range,
+        radar.sigma_azimuth,
+        radar.sigma_elevation,
+    );
+    let fast = || -> Option<(Vector3<f64>, Matrix3<f64>)> {
+        let (r, az, el) = (p.range, p.azimuth, p.elevation?);
+        let plain = r.is_finite()
+            && r >= 0.0
+            && az.is_finite()
+            && el.is_finite()
+            && (-std::f64::consts::FRAC_PI_2..=std::f64::consts::FRAC_PI_2).contains(&el)
+            && [sr, sa, se].iter().all(|s| s.is_finite() && *s > 0.0);
+        if !plain {
+            return None;
+        }
+        let (s_az, c_az) = az.sin_cos();
+        let (s_el, c_el) = el.sin_cos();
+        let pos = [r * c_el * s_az, r * c_el * c_az, r * s_el];
+        // The site (the origin) plus the offset, as `plot_to_local` adds it.
+        let mean = Vector3::from_fn(|i, _| 0.0 + pos[i]);
+        #[rustfmt::skip]
+        let j = Matrix3::new(
+            c_el * s_az, r * c_el * c_az, -r * s_el * s_az,
+            c_el * c_az, -r * c_el * s_az, -r * s_el * c_az,
+            s_el, 0.0, r * c_el,
+        );
+        let rm = Matrix3::from_diagonal(&Vector3::new(sr * sr, sa * sa, se * se));
+        let mut c = j * rm * j.transpose();
+        for col in 0..3 {
+            for row in col + 1..3 {
+                let m = 0.5 * (c[(row, col)] + c[(col, row)]);
+                c[(row, col)] = m;
+                c[(col, row)] = m;
+            }
+        }
+        // `Gaussian::new`'s checks: finite, and a Cholesky factor with a
+        // positive finite diagonal (exactly symmetric after the above).
+        if !(mean.iter().all(|v| v.is_finite()) && c.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        let l = c.cholesky()?.unpack_dirty();
+        (0..3)
+            .all(|i| l[(i, i)] > 0.0 && l[(i, i)].is_finite())
+            .then_some((mean, c))
+    };
+    if let Some(v) = fast() {
+        return Ok(v);
+    }
+    let g = plot_to_local(
+        [0.0; 3],
+        &PolarMeasurement {
+            range: p.range,
+            azimuth: p.azimuth,
+            elevation: p.elevation,
+            sigma_range: sr,
+            sigma_azimuth: sa,
+            sigma_elevation: Some(se),
+        },
+    )?;
+    let (mean, cov) = (g.mean(), g.cov());
+    Ok((
+        Vector3::from_fn(|i, _| mean[i]),
+        Matrix3::from_fn(|i, j| cov[(i, j)]),
+    ))
 }
 
 /// A local estimate as a centre-ENU state. 2D estimates `[ρ, ρ̇, θ, θ̇]` are
