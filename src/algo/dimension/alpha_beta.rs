@@ -7,8 +7,9 @@
 //! 2D radar, local ENU `[e, n, u]` of a 3D radar) with the interleaved state
 //! `[z₁, ż₁, …, z_m, ż_m]`.
 
-use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, SMatrix, SVector, Vector6};
 
+use super::kernels;
 use crate::algo::{AlgoError, polar::wrap_angle};
 
 /// Tracking index used until the residual window is full.
@@ -60,21 +61,27 @@ pub enum Filter {
     Kalman { sigma_a: f64 },
 }
 
-/// One filtered estimate in the measurement's coordinates.
+/// One filtered estimate in the measurement's coordinates, on fixed-size
+/// storage (no heap allocation per estimate): of the m measured components
+/// (`dim`), `x` holds the 2m interleaved states and `p` their covariance in
+/// its top-left 2m × 2m block, `acceleration` and `lag_ahead` in their
+/// top-left m × m block; the rest is zero.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Estimate {
     pub t: f64,
-    pub x: DVector<f64>,
+    /// The measured components m (2: range and azimuth, 3: local ENU).
+    pub dim: usize,
+    pub x: Vector6<f64>,
     /// The covariance of the estimate's error for the gains actually used
     /// (see [`filter`]).
-    pub p: DMatrix<f64>,
+    pub p: Matrix6<f64>,
     /// α of the α-β filter at this point (1 at initialisation, NaN for Kalman).
     pub alpha: f64,
     /// The covariance (m × m, measurement units per s²) of the white
     /// acceleration the filter's model assumes from this point on: Kalman
     /// σ_a² (scaled), α-β λ² R / T⁴ for the tracking index λ of its gains.
     /// Extrapolations add it as process noise.
-    pub acceleration: DMatrix<f64>,
+    pub acceleration: Matrix3<f64>,
     /// True when the residual of this point was a manoeuvre (see [`filter`]).
     pub manoeuvre: bool,
     /// The velocity-change covariance (m × m) that the next point's
@@ -84,7 +91,7 @@ pub struct Estimate {
     /// point. An extrapolation by dt from this point adds it (Δ (dt/T)² in
     /// position), so a sample between the start of a manoeuvre and its
     /// detection carries the lag.
-    pub lag_ahead: DMatrix<f64>,
+    pub lag_ahead: Matrix3<f64>,
 }
 
 /// The discrete white-noise acceleration factor: the process noise of one
@@ -193,11 +200,31 @@ pub fn filter(
     if times.len() < 2 {
         return Ok(Vec::new());
     }
-    let gate = crate::algo::gating::chi2_threshold(wrap.len(), 0.01)?;
     match wrap.len() {
-        1 => filter_fixed::<1, 2>(filter, times, z, r, wrap, scale, gate),
-        2 => filter_fixed::<2, 4>(filter, times, z, r, wrap, scale, gate),
-        3 => filter_fixed::<3, 6>(filter, times, z, r, wrap, scale, gate),
+        1 => filter_fixed::<1, 2>(
+            filter,
+            times,
+            |k| SVector::from_fn(|i, _| z[k][i]),
+            |k| SMatrix::from_fn(|i, j| r[k][(i, j)]),
+            &[wrap[0]],
+            &[scale[0]],
+        ),
+        2 => filter_fixed::<2, 4>(
+            filter,
+            times,
+            |k| SVector::from_fn(|i, _| z[k][i]),
+            |k| SMatrix::from_fn(|i, j| r[k][(i, j)]),
+            &[wrap[0], wrap[1]],
+            &[scale[0], scale[1]],
+        ),
+        3 => filter_fixed::<3, 6>(
+            filter,
+            times,
+            |k| SVector::from_fn(|i, _| z[k][i]),
+            |k| SMatrix::from_fn(|i, j| r[k][(i, j)]),
+            &[wrap[0], wrap[1], wrap[2]],
+            &[scale[0], scale[1], scale[2]],
+        ),
         m => Err(AlgoError::InvalidParameter {
             what: "measurement dimension",
             reason: format!("must be 1, 2 or 3, got {m}"),
@@ -206,17 +233,20 @@ pub fn filter(
 }
 
 /// [`filter`] for `M` measured components and `N = 2M` states, on
-/// fixed-size matrices (no heap allocation per plot).
-#[allow(clippy::too_many_arguments)]
-fn filter_fixed<const M: usize, const N: usize>(
+/// fixed-size matrices (no heap allocation per plot); `z(k)` and `r(k)` give
+/// the k-th plot's measurement and its covariance.
+pub fn filter_fixed<const M: usize, const N: usize>(
     filter: Filter,
     times: &[f64],
-    z: &[DVector<f64>],
-    r: &[DMatrix<f64>],
-    wrap: &[bool],
-    scale: &[f64],
-    gate: f64,
+    z: impl Fn(usize) -> SVector<f64, M>,
+    r: impl Fn(usize) -> SMatrix<f64, M, M>,
+    wrap: &[bool; M],
+    scale: &[f64; M],
 ) -> Result<Vec<Estimate>, AlgoError> {
+    if times.len() < 2 {
+        return Ok(Vec::new());
+    }
+    let gate = crate::algo::gating::chi2_threshold(M, 0.01)?;
     type V<const D: usize> = SVector<f64, D>;
     type Mx<const R: usize, const C: usize> = SMatrix<f64, R, C>;
     let diff = |a: &V<M>, b: &V<M>| -> V<M> {
@@ -225,14 +255,15 @@ fn filter_fixed<const M: usize, const N: usize>(
             if wrap[i] { wrap_angle(d) } else { d }
         })
     };
-    let zf = |k: usize| V::<M>::from_fn(|i, _| z[k][i]);
-    let rf = |k: usize| Mx::<M, M>::from_fn(|i, j| r[k][(i, j)]);
+    let zf = z;
+    let rf = r;
     let kron_f = kron::<M, N>;
     let h = position_rows::<M, N>();
     let kalman_acc = |sigma_a: f64| {
         Mx::<M, M>::from_diagonal(&V::<M>::from_fn(|i, _| (sigma_a * scale[i]).powi(2)))
     };
-    let dyn_m = |a: &Mx<M, M>| DMatrix::from_fn(M, M, |i, j| a[(i, j)]);
+    // The m × m block of a 3 × 3 (zero beyond it).
+    let pad3 = |a: &Mx<M, M>| Matrix3::from_fn(|i, j| if i < M && j < M { a[(i, j)] } else { 0.0 });
     let mut out = Vec::with_capacity(times.len() - 1);
     let t0 = times[1] - times[0];
     let d0 = diff(&zf(1), &zf(0));
@@ -259,12 +290,13 @@ fn filter_fixed<const M: usize, const N: usize>(
                 manoeuvre: bool| {
         out.push(Estimate {
             t,
-            x: DVector::from_column_slice(x.as_slice()),
-            p: DMatrix::from_column_slice(N, N, p.as_slice()),
+            dim: M,
+            x: Vector6::from_fn(|i, _| if i < N { x[i] } else { 0.0 }),
+            p: Matrix6::from_fn(|i, j| if i < N && j < N { p[(i, j)] } else { 0.0 }),
             alpha,
-            acceleration: dyn_m(acc),
+            acceleration: pad3(acc),
             manoeuvre,
-            lag_ahead: DMatrix::zeros(M, M),
+            lag_ahead: Matrix3::zeros(),
         });
     };
     push(&mut out, times[1], &x, &p, 1.0, &acc0, false);
@@ -278,10 +310,11 @@ fn filter_fixed<const M: usize, const N: usize>(
         let res = diff(&zf(k), &zp);
         let (gain, a_used, alpha_k) = match filter {
             Filter::AlphaBeta { window: w } => {
-                let chol = rk.cholesky().ok_or(AlgoError::NotPositiveDefinite {
-                    what: "plot covariance",
-                })?;
-                let nis = res.dot(&chol.solve(&res)) / M as f64;
+                let solved =
+                    kernels::cholesky_solve(&rk, &res).ok_or(AlgoError::NotPositiveDefinite {
+                        what: "plot covariance",
+                    })?;
+                let nis = res.dot(&solved) / M as f64;
                 window.push(nis);
                 if window.len() > w {
                     window.remove(0);
@@ -302,17 +335,17 @@ fn filter_fixed<const M: usize, const N: usize>(
         };
         let mut pp = f * p * f.transpose() + kron_f(&a_used, white_acceleration(t));
         let s = h * pp * h.transpose() + rk;
-        let nis = s.cholesky().map(|c| res.dot(&c.solve(&res))).ok_or(
-            AlgoError::NotPositiveDefinite {
+        let nis = kernels::cholesky_solve(&s, &res)
+            .map(|x| res.dot(&x))
+            .ok_or(AlgoError::NotPositiveDefinite {
                 what: "residual covariance",
-            },
-        )?;
+            })?;
         let manoeuvre = nis > gate;
         if manoeuvre {
             let lag = res * res.transpose() * (1.0 - 1.0 / nis);
             pp += kron_f(&lag, [1.0, 2.0 / t, 4.0 / (t * t)]);
             if let Some(prev) = out.last_mut() {
-                prev.lag_ahead = dyn_m(&(lag / (t * t)));
+                prev.lag_ahead = pad3(&(lag / (t * t)));
             }
         }
         pp = (pp + pp.transpose()) * 0.5;

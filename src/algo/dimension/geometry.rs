@@ -69,11 +69,7 @@ pub fn plot_at_height(
 
 /// A 2D plot (slant range, azimuth) of `radar` placed at ellipsoidal height
 /// `height`, in the ENU frame of `centre`, with the Jacobian of that position
-/// with respect to (ρ, θ, h). The elevation solves h(P(ρ, θ, E)) = height by
-/// Newton from the sphere's answer with the exact slope dh/dE = n·∂P/∂E (the
-/// gradient of the geodetic height is the unit normal n at the point); the
-/// Jacobian follows by implicit differentiation of the same constraint:
-/// ∂E/∂ρ = −n·P_ρ / n·P_E, ∂E/∂θ = −n·P_θ / n·P_E, ∂E/∂h = 1 / n·P_E.
+/// with respect to (ρ, θ, h): [`Cone::place`] for one plot.
 pub fn place_2d(
     radar: &LocalFrame,
     centre: &LocalFrame,
@@ -81,33 +77,96 @@ pub fn place_2d(
     azimuth: f64,
     height: f64,
 ) -> Result<([f64; 3], Matrix3<f64>), AlgoError> {
-    let ell = radar.ellipsoid();
-    let (lat, _, hs) = radar.origin_geodetic();
-    let e2 = ell.e2();
-    let w = (1.0 - e2 * lat.sin().powi(2)).sqrt();
-    let gauss = ell.a() * (1.0 - e2).sqrt() / (w * w);
-    let mut el = sphere_elevation(range, gauss + hs, gauss + height)?;
-    let (sa, ca) = azimuth.sin_cos();
-    // (ECEF point, its height, the normal in the radar's axes, ∂P/∂E).
-    type Point = (Vector3<f64>, f64, Vector3<f64>, Vector3<f64>);
-    let solve = |el: f64| -> Result<Point, AlgoError> {
-        let (se, ce) = el.sin_cos();
-        let local = Vector3::new(range * ce * sa, range * ce * ca, range * se);
-        let d_el = Vector3::new(-range * se * sa, -range * se * ca, range * ce);
-        let ecef = Vector3::from(radar.enu_to_ecef(local.into())?);
-        let (plat, plon, h) = ecef_to_geodetic(&ell, ecef.into())?;
-        let (sl, cl) = plat.sin_cos();
-        let (so, co) = plon.sin_cos();
-        // The normal in the radar's ENU axes.
-        let normal = radar.rotation() * Vector3::new(cl * co, cl * so, sl);
-        Ok((ecef, h, normal, d_el))
-    };
-    let mut at = solve(el)?;
-    for _ in 0..8 {
-        let (_, h, normal, d_el) = at;
-        if (h - height).abs() < 1e-3 {
-            break;
+    Cone::new(radar, centre).place(range, azimuth, height)
+}
+
+/// What placing a 2D radar's plots in a centre frame needs of the radar
+/// alone (its Gaussian radius, rotations), computed once per radar instead
+/// of once per placement: the same numbers by the same operations, so the
+/// placements keep their bits.
+#[derive(Debug, Clone, Copy)]
+pub struct Cone {
+    radar: LocalFrame,
+    centre: LocalFrame,
+    /// The site's Gaussian radius √(M N) (m), and the site's geocentric
+    /// radius on that sphere, √(M N) + h_site.
+    gauss: f64,
+    site_radius: f64,
+    /// ECEF → the radar's ENU, and the radar's ENU → the centre's.
+    rot: Matrix3<f64>,
+    to_centre: Matrix3<f64>,
+}
+
+impl Cone {
+    pub fn new(radar: &LocalFrame, centre: &LocalFrame) -> Self {
+        let ell = radar.ellipsoid();
+        let (lat, _, hs) = radar.origin_geodetic();
+        let e2 = ell.e2();
+        let w = (1.0 - e2 * lat.sin().powi(2)).sqrt();
+        let gauss = ell.a() * (1.0 - e2).sqrt() / (w * w);
+        Self {
+            radar: *radar,
+            centre: *centre,
+            gauss,
+            site_radius: gauss + hs,
+            rot: radar.rotation(),
+            to_centre: radar.rotation_to(centre),
         }
+    }
+
+    /// The plot (slant range, azimuth) placed at ellipsoidal height
+    /// `height`, in the centre's ENU frame, with the Jacobian of that
+    /// position with respect to (ρ, θ, h). The elevation solves
+    /// h(P(ρ, θ, E)) = height by Newton from the sphere's answer with the
+    /// exact slope dh/dE = n·∂P/∂E (the gradient of the geodetic height is the
+    /// unit normal n at the point); the Jacobian follows by implicit
+    /// differentiation of the same constraint: ∂E/∂ρ = −n·P_ρ / n·P_E,
+    /// ∂E/∂θ = −n·P_θ / n·P_E, ∂E/∂h = 1 / n·P_E.
+    pub fn place(
+        &self,
+        range: f64,
+        azimuth: f64,
+        height: f64,
+    ) -> Result<([f64; 3], Matrix3<f64>), AlgoError> {
+        let radar = &self.radar;
+        let ell = radar.ellipsoid();
+        let mut el = sphere_elevation(range, self.site_radius, self.gauss + height)?;
+        let (sa, ca) = azimuth.sin_cos();
+        // (ECEF point, its height, the normal in the radar's axes, ∂P/∂E,
+        // sin E and cos E).
+        type Point = (Vector3<f64>, f64, Vector3<f64>, Vector3<f64>, (f64, f64));
+        let solve = |el: f64| -> Result<Point, AlgoError> {
+            let (se, ce) = el.sin_cos();
+            let local = Vector3::new(range * ce * sa, range * ce * ca, range * se);
+            let d_el = Vector3::new(-range * se * sa, -range * se * ca, range * ce);
+            let ecef = Vector3::from(radar.enu_to_ecef(local.into())?);
+            let (plat, plon, h) = ecef_to_geodetic(&ell, ecef.into())?;
+            let (sl, cl) = plat.sin_cos();
+            let (so, co) = plon.sin_cos();
+            // The normal in the radar's ENU axes.
+            let normal = self.rot * Vector3::new(cl * co, cl * so, sl);
+            Ok((ecef, h, normal, d_el, (se, ce)))
+        };
+        let mut at = solve(el)?;
+        for _ in 0..8 {
+            let (_, h, normal, d_el, _) = at;
+            if (h - height).abs() < 1e-3 {
+                break;
+            }
+            let slope = normal.dot(&d_el);
+            if !(slope.is_finite() && slope.abs() > 1e-9) {
+                return Err(AlgoError::DegenerateGeometry {
+                    what: "2D plot",
+                    reason: "the height does not change with elevation",
+                });
+            }
+            el = (el - (h - height) / slope).clamp(-1.5, 1.5);
+            at = solve(el)?;
+        }
+        // The sine and cosine of the final elevation are those of its solve.
+        let (ecef, _, normal, d_el, (se, ce)) = at;
+        let d_range = Vector3::new(ce * sa, ce * ca, se);
+        let d_az = Vector3::new(range * ce * ca, -range * ce * sa, 0.0);
         let slope = normal.dot(&d_el);
         if !(slope.is_finite() && slope.abs() > 1e-9) {
             return Err(AlgoError::DegenerateGeometry {
@@ -115,27 +174,14 @@ pub fn place_2d(
                 reason: "the height does not change with elevation",
             });
         }
-        el = (el - (h - height) / slope).clamp(-1.5, 1.5);
-        at = solve(el)?;
+        let local_jac = Matrix3::from_columns(&[
+            d_range - d_el * (normal.dot(&d_range) / slope),
+            d_az - d_el * (normal.dot(&d_az) / slope),
+            d_el / slope,
+        ]);
+        let pos = self.centre.ecef_to_enu(ecef.into())?;
+        Ok((pos, self.to_centre * local_jac))
     }
-    let (ecef, _, normal, d_el) = at;
-    let (se, ce) = el.sin_cos();
-    let d_range = Vector3::new(ce * sa, ce * ca, se);
-    let d_az = Vector3::new(range * ce * ca, -range * ce * sa, 0.0);
-    let slope = normal.dot(&d_el);
-    if !(slope.is_finite() && slope.abs() > 1e-9) {
-        return Err(AlgoError::DegenerateGeometry {
-            what: "2D plot",
-            reason: "the height does not change with elevation",
-        });
-    }
-    let local_jac = Matrix3::from_columns(&[
-        d_range - d_el * (normal.dot(&d_range) / slope),
-        d_az - d_el * (normal.dot(&d_az) / slope),
-        d_el / slope,
-    ]);
-    let pos = centre.ecef_to_enu(ecef.into())?;
-    Ok((pos, radar.rotation_to(centre) * local_jac))
 }
 
 /// The test coordinates of a method at a centre-ENU position, with their
@@ -158,11 +204,18 @@ pub fn test_space(
             let ell = centre.ellipsoid();
             let ecef = centre.enu_to_ecef(pos)?;
             let (lat, lon, h) = ecef_to_geodetic(&ell, ecef)?;
-            let fp = centre.ecef_to_enu(geodetic_to_ecef(&ell, lat, lon, 0.0)?)?;
             let (sl, cl) = lat.sin_cos();
             let (so, co) = lon.sin_cos();
             let w2 = 1.0 - ell.e2() * sl * sl;
             let n = ell.a() / w2.sqrt();
+            // The footprint, `geodetic_to_ecef(lat, lon, 0)` with its sines,
+            // cosines and N shared (the same operations: the same bits);
+            // lat and lon from `ecef_to_geodetic` are finite and in range.
+            let fp = centre.ecef_to_enu([
+                (n + 0.0) * cl * co,
+                (n + 0.0) * cl * so,
+                (n * (1.0 - ell.e2()) + 0.0) * sl,
+            ])?;
             let m = ell.a() * (1.0 - ell.e2()) / (w2 * w2.sqrt());
             let east = Vector3::new(-so, co, 0.0);
             let north = Vector3::new(-sl * co, -sl * so, cl);
@@ -295,6 +348,27 @@ mod tests {
         // and ~100 m from the flat one.
         assert!((ground - rs * gamma).abs() < 60.0, "ground {ground}");
         assert!(flat - ground > 50.0);
+    }
+
+    #[test]
+    fn lifting_test_point_is_the_footprint_bit_for_bit() {
+        // test_space shares the sines and cosines of the geodetic position
+        // with the footprint it computes; `footprint` goes through
+        // `geodetic_to_ecef`: the same numbers.
+        let ell = Ellipsoid::WGS84;
+        let centre = LocalFrame::new(ell, 30f64.to_radians(), 120f64.to_radians(), 0.0).unwrap();
+        for k in 0..200 {
+            let x = f64::from(k);
+            let pos = [
+                -150_000.0 + 1_537.3 * x,
+                90_000.0 - 911.7 * x,
+                500.0 + 61.1 * x,
+            ];
+            let (_, z, _) = test_space(&centre, super::super::Method::Lifting, pos).unwrap();
+            let fp = footprint(&centre, centre.enu_to_ecef(pos).unwrap()).unwrap();
+            assert_eq!(z[0].to_bits(), fp[0].to_bits(), "{k}");
+            assert_eq!(z[1].to_bits(), fp[1].to_bits(), "{k}");
+        }
     }
 
     #[test]

@@ -14,7 +14,7 @@
 // The loops index rows and columns as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{Matrix3, Matrix6, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector6};
 
 /// Column-major storage of a 6 × 6 matrix: `m[c][r]` is row r, column c.
 type Cols = [[f64; 6]; 6];
@@ -34,7 +34,41 @@ fn matrix(c: Cols) -> Matrix6<f64> {
 /// x += gain (y − x);  p −= gain p;  p = (p + p') / 2
 /// ```
 /// `None` when p + q is not positive definite.
+///
+/// On x86-64 with AVX2 the same code is compiled for 4-wide registers
+/// (the rows of 6 take one 4-wide and one 2-wide operation instead of three
+/// 2-wide ones). Each operation is the same IEEE operation either way (Rust
+/// never contracts a product and a sum into a fused multiply-add), so the
+/// bits are too.
 pub fn fuse_step(
+    x: &Vector6<f64>,
+    p: &Matrix6<f64>,
+    y: &Vector6<f64>,
+    q: &Matrix6<f64>,
+) -> Option<(Vector6<f64>, Matrix6<f64>)> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { fuse_step_avx2(x, p, y, q) };
+    }
+    fuse_step_portable(x, p, y, q)
+}
+
+/// [`fuse_step_portable`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn fuse_step_avx2(
+    x: &Vector6<f64>,
+    p: &Matrix6<f64>,
+    y: &Vector6<f64>,
+    q: &Matrix6<f64>,
+) -> Option<(Vector6<f64>, Matrix6<f64>)> {
+    fuse_step_portable(x, p, y, q)
+}
+
+/// The body of [`fuse_step`] for any target.
+#[inline(always)]
+fn fuse_step_portable(
     x: &Vector6<f64>,
     p: &Matrix6<f64>,
     y: &Vector6<f64>,
@@ -126,6 +160,66 @@ pub fn fuse_step(
         }
     }
     Some((xo, matrix(out)))
+}
+
+/// `a⁻¹ b` by Cholesky for a small fixed-size `a`, as nalgebra's
+/// `a.cholesky()?.solve(b)`: the factor column by column in axpy form (only
+/// the lower triangle of `a` is read), the forward solve in axpy form and
+/// the backward one as dot products from zero, each in nalgebra's order.
+/// nalgebra's generic code walks dynamic views for these few numbers (a
+/// large share of a pair test); this is the same arithmetic on an array.
+/// A pivot of exactly 1 (the pair test's 2D case pads its 2 × 2 covariance
+/// with a unit third row and column) skips its square root and its
+/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same, and
+/// the two-dimensional test does not wait on them.
+/// `None` when `a` is not positive definite (a zero, negative or NaN pivot).
+pub fn cholesky_solve<const M: usize>(
+    a: &SMatrix<f64, M, M>,
+    b: &SVector<f64, M>,
+) -> Option<SVector<f64, M>> {
+    // l[c][r]: row r, column c.
+    let mut l = a.data.0;
+    for j in 0..M {
+        for k in 0..j {
+            let factor = -l[k][j];
+            for r in j..M {
+                l[j][r] += factor * l[k][r];
+            }
+        }
+        let diag = l[j][j];
+        if diag.is_nan() || diag <= 0.0 {
+            return None;
+        }
+        if diag == 1.0 {
+            continue;
+        }
+        let denom = diag.sqrt();
+        l[j][j] = denom;
+        for r in j + 1..M {
+            l[j][r] /= denom;
+        }
+    }
+    let unit = |d: f64| d == 1.0;
+    let mut x = b.data.0[0];
+    for i in 0..M {
+        let coeff = if unit(l[i][i]) { x[i] } else { x[i] / l[i][i] };
+        x[i] = coeff;
+        for r in i + 1..M {
+            x[r] += -coeff * l[i][r];
+        }
+    }
+    for i in (0..M).rev() {
+        let mut dot = 0.0;
+        for r in i + 1..M {
+            dot += l[i][r] * x[r];
+        }
+        x[i] = if unit(l[i][i]) {
+            x[i] - dot
+        } else {
+            (x[i] - dot) / l[i][i]
+        };
+    }
+    Some(SVector::from_data(nalgebra::ArrayStorage([x])))
 }
 
 /// `F P F'` for the interleaved constant-velocity transition F (identity
@@ -242,6 +336,68 @@ mod tests {
         let q = -Matrix6::identity() * 2.0;
         assert!((p + q).cholesky().is_none());
         assert!(fuse_step(&Vector6::zeros(), &p, &Vector6::zeros(), &q).is_none());
+    }
+
+    fn check_cholesky_solve<const M: usize>(g: &mut Lcg) {
+        for case in 0..500 {
+            let scale = [1.0, 1e3, 1e6][case % 3];
+            let h = SMatrix::<f64, M, M>::from_fn(|_, _| g.next() * scale);
+            let mut a = h * h.transpose() + SMatrix::<f64, M, M>::identity() * scale;
+            // Only the lower triangle is read: garbage above must not matter.
+            if M > 1 {
+                a[(0, M - 1)] += 0.25 * scale;
+            }
+            let b = SVector::<f64, M>::from_fn(|_, _| g.next() * 1e4);
+            let want = a.cholesky().unwrap().solve(&b);
+            let got = cholesky_solve(&a, &b).unwrap();
+            assert!(
+                same_bits(want.as_slice(), got.as_slice()),
+                "M {M} case {case}"
+            );
+        }
+        let bad = -SMatrix::<f64, M, M>::identity();
+        assert!(bad.cholesky().is_none());
+        assert!(cholesky_solve(&bad, &SVector::<f64, M>::zeros()).is_none());
+        let nan = SMatrix::<f64, M, M>::identity() * f64::NAN;
+        assert!(cholesky_solve(&nan, &SVector::<f64, M>::zeros()).is_none());
+    }
+
+    #[test]
+    fn cholesky_solve_gives_the_bits_of_nalgebra() {
+        let mut g = Lcg(7);
+        check_cholesky_solve::<1>(&mut g);
+        check_cholesky_solve::<2>(&mut g);
+        check_cholesky_solve::<3>(&mut g);
+        // The pair test's 2D case: a 2 × 2 block, exact zeros and a 1 beside it.
+        for _ in 0..200 {
+            let h = nalgebra::Matrix2::from_fn(|_, _| g.next() * 1e3);
+            let c = h * h.transpose() + nalgebra::Matrix2::identity();
+            let mut a = Matrix3::zeros();
+            a.fixed_view_mut::<2, 2>(0, 0).copy_from(&c);
+            a[(2, 2)] = 1.0;
+            let b = nalgebra::Vector3::new(g.next() * 1e3, g.next() * 1e3, 0.0);
+            let want = a.cholesky().unwrap().solve(&b);
+            let got = cholesky_solve(&a, &b).unwrap();
+            assert!(same_bits(want.as_slice(), got.as_slice()));
+        }
+    }
+
+    #[test]
+    fn fuse_step_gives_the_same_bits_with_and_without_avx2() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let mut g = Lcg(9);
+            for case in 0..300 {
+                let scale = [1.0, 1e3, 1e6][case % 3];
+                let (p, q) = (g.spd(scale), g.spd(scale * 2.0));
+                let x = Vector6::from_fn(|_, _| g.next() * 1e5);
+                let y = Vector6::from_fn(|_, _| g.next() * 1e5);
+                let (xa, pa) = unsafe { fuse_step_avx2(&x, &p, &y, &q) }.unwrap();
+                let (xp, pp) = fuse_step_portable(&x, &p, &y, &q).unwrap();
+                assert!(same_bits(xa.as_slice(), xp.as_slice()), "case {case}");
+                assert!(same_bits(pa.as_slice(), pp.as_slice()), "case {case}");
+            }
+        }
     }
 
     #[test]

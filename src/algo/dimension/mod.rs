@@ -21,7 +21,7 @@ pub mod geometry;
 mod kernels;
 pub mod knn;
 
-use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::algo::{
     AlgoError, assignment,
@@ -197,14 +197,18 @@ pub fn fuse_methods(
         .collect::<Result<Vec<_>, _>>()?;
     // Mapping and the other methods place a 2D estimate at the same preset
     // height and differ only in its σ_h; a 3D estimate does not depend on it.
+    let sites: Vec<Site> = radars.iter().map(|r| Site::new(centre, r)).collect();
     let need_mapped = methods.contains(&Method::Mapping);
     let need_lifted = methods.iter().any(|&m| m != Method::Mapping);
     let (mut mapped, mut lifted) = (Vec::new(), Vec::new());
     for f in &filtered {
-        let radar = &radars[f.radar];
-        let (mut m, mut l) = (Vec::new(), Vec::new());
+        let (radar, site) = (&radars[f.radar], &sites[f.radar]);
+        let (mut m, mut l) = (
+            Vec::with_capacity(if need_mapped { f.est.len() } else { 0 }),
+            Vec::with_capacity(if need_lifted { f.est.len() } else { 0 }),
+        );
         for e in &f.est {
-            let at = place(centre, radar, e, cfg.preset_altitude)?;
+            let at = place(centre, radar, site, e, cfg.preset_altitude)?;
             if need_mapped {
                 m.push(centred_state(radar, e, &at, MAPPING_ALTITUDE_SIGMA_M));
             }
@@ -234,7 +238,7 @@ pub fn fuse_methods(
         };
         share.pending_other = other.is_some_and(|o| methods[n + 1..].contains(&o));
         let mut out = fuse_one_sharing(
-            centre, radars, tracks, &filtered, centred, method, cfg, &mut share,
+            centre, radars, &sites, tracks, &filtered, centred, method, cfg, &mut share,
         )?;
         out.compute_us = started.elapsed().as_secs_f64() * 1e6;
         started = std::time::Instant::now();
@@ -306,8 +310,9 @@ fn fuse_one(
     cfg: &Config,
 ) -> Result<Outcome, AlgoError> {
     let mut share = Share::default();
+    let sites: Vec<Site> = radars.iter().map(|r| Site::new(centre, r)).collect();
     fuse_one_sharing(
-        centre, radars, tracks, filtered, centred, method, cfg, &mut share,
+        centre, radars, &sites, tracks, filtered, centred, method, cfg, &mut share,
     )
 }
 
@@ -328,6 +333,7 @@ struct Share {
 fn fuse_one_sharing(
     centre: &LocalFrame,
     radars: &[Radar],
+    sites: &[Site],
     tracks: &[LocalTrack],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
@@ -352,7 +358,7 @@ fn fuse_one_sharing(
     }
 
     // Pairwise modified K-NN.
-    let mut pairs = Vec::new();
+    let mut pairs = Vec::with_capacity(tracks.len() * tracks.len() / 2);
     for a in 0..tracks.len() {
         for b in a + 1..tracks.len() {
             if tracks[a].radar == tracks[b].radar || centred[a].is_empty() || centred[b].is_empty()
@@ -417,6 +423,7 @@ fn fuse_one_sharing(
                 fused_track(
                     centre,
                     radars,
+                    sites,
                     filtered,
                     centred,
                     g,
@@ -428,22 +435,36 @@ fn fuse_one_sharing(
             if method == Method::Mapping {
                 return Ok(fuse(g, false)?.track);
             }
-            let fused = match share.tracks.remove(&g) {
+            let mut fused = match share.tracks.remove(&g) {
                 Some(f) => f,
                 None => fuse(
                     g.clone(),
                     method == Method::Splitting || share.pending_other,
                 )?,
             };
-            let track = if method == Method::Splitting {
-                split_track(centre, &fused)?
-            } else {
-                fused.track.clone()
-            };
+            // The fused track is kept for the other method, or moved out.
             if share.pending_other {
+                let track = fused.track.clone();
+                let track = if method == Method::Splitting {
+                    split_track(centre, track, &fused)?
+                } else {
+                    track
+                };
                 share.tracks.insert(g, fused);
+                Ok(track)
+            } else if method == Method::Splitting {
+                let track = std::mem::replace(
+                    &mut fused.track,
+                    SystemTrack {
+                        members: Vec::new(),
+                        samples: Vec::new(),
+                        altitude_known: false,
+                    },
+                );
+                split_track(centre, track, &fused)
+            } else {
+                Ok(fused.track)
             }
-            Ok(track)
         })
         .collect::<Result<Vec<_>, AlgoError>>()?;
     Ok(Outcome {
@@ -469,6 +490,9 @@ fn members_of(parent: &mut [usize], root: usize) -> Vec<usize> {
         .collect()
 }
 
+/// The local filter of one track, fed from the plots directly on fixed-size
+/// measurements (a 3D plot's local ENU position and covariance as
+/// `plot_to_local` gives them; a 2D plot's range and azimuth).
 fn filter_track(
     radar: &Radar,
     track: &LocalTrack,
@@ -476,48 +500,104 @@ fn filter_track(
 ) -> Result<Vec<alpha_beta::Estimate>, AlgoError> {
     let times: Vec<f64> = track.plots.iter().map(|p| p.t).collect();
     if radar.three_d {
-        let mut z = Vec::new();
-        let mut r = Vec::new();
+        let mut z = Vec::with_capacity(track.plots.len());
+        let mut r = Vec::with_capacity(track.plots.len());
         for p in &track.plots {
-            let g = plot_to_local(
-                [0.0; 3],
-                &PolarMeasurement {
-                    range: p.range,
-                    azimuth: p.azimuth,
-                    elevation: p.elevation,
-                    sigma_range: radar.sigma_range,
-                    sigma_azimuth: radar.sigma_azimuth,
-                    sigma_elevation: Some(radar.sigma_elevation),
-                },
-            )?;
-            z.push(g.mean().clone());
-            r.push(g.cov().clone());
+            let (mean, cov) = local_3d(radar, p)?;
+            z.push(mean);
+            r.push(cov);
         }
-        alpha_beta::filter(filter, &times, &z, &r, &[false; 3], &[1.0; 3])
+        alpha_beta::filter_fixed::<3, 6>(filter, &times, |k| z[k], |k| r[k], &[false; 3], &[1.0; 3])
     } else {
-        let z: Vec<_> = track
-            .plots
-            .iter()
-            .map(|p| DVector::from_vec(vec![p.range, p.azimuth]))
-            .collect();
-        let r = vec![
-            DMatrix::from_diagonal(&DVector::from_vec(vec![
-                radar.sigma_range.powi(2),
-                radar.sigma_azimuth.powi(2)
-            ]));
-            z.len()
-        ];
+        let r = Matrix2::from_diagonal(&nalgebra::Vector2::new(
+            radar.sigma_range.powi(2),
+            radar.sigma_azimuth.powi(2),
+        ));
         let mean_range =
             track.plots.iter().map(|p| p.range).sum::<f64>() / track.plots.len().max(1) as f64;
-        alpha_beta::filter(
+        alpha_beta::filter_fixed::<2, 4>(
             filter,
             &times,
-            &z,
-            &r,
+            |k| nalgebra::Vector2::new(track.plots[k].range, track.plots[k].azimuth),
+            |_| r,
             &[false, true],
             &[1.0, 1.0 / mean_range.max(1.0)],
         )
     }
+}
+
+/// A 3D plot's local ENU position and covariance J R J' (symmetrised), the
+/// numbers `plot_to_local` gives for a site at the origin, by the same
+/// operations on fixed-size matrices instead of heap-allocated ones. A plot
+/// that is not plainly valid (a non-finite or negative value, an elevation
+/// beyond ±π/2, a covariance its checks would refuse) goes through
+/// `plot_to_local` itself, for its checks and its error.
+fn local_3d(radar: &Radar, p: &Plot) -> Result<(Vector3<f64>, Matrix3<f64>), AlgoError> {
+    let (sr, sa, se) = (
+        radar.sigma_range,
+        radar.sigma_azimuth,
+        radar.sigma_elevation,
+    );
+    let fast = || -> Option<(Vector3<f64>, Matrix3<f64>)> {
+        let (r, az, el) = (p.range, p.azimuth, p.elevation?);
+        let plain = r.is_finite()
+            && r >= 0.0
+            && az.is_finite()
+            && el.is_finite()
+            && (-std::f64::consts::FRAC_PI_2..=std::f64::consts::FRAC_PI_2).contains(&el)
+            && [sr, sa, se].iter().all(|s| s.is_finite() && *s > 0.0);
+        if !plain {
+            return None;
+        }
+        let (s_az, c_az) = az.sin_cos();
+        let (s_el, c_el) = el.sin_cos();
+        let pos = [r * c_el * s_az, r * c_el * c_az, r * s_el];
+        // The site (the origin) plus the offset, as `plot_to_local` adds it.
+        let mean = Vector3::from_fn(|i, _| 0.0 + pos[i]);
+        #[rustfmt::skip]
+        let j = Matrix3::new(
+            c_el * s_az, r * c_el * c_az, -r * s_el * s_az,
+            c_el * c_az, -r * c_el * s_az, -r * s_el * c_az,
+            s_el, 0.0, r * c_el,
+        );
+        let rm = Matrix3::from_diagonal(&Vector3::new(sr * sr, sa * sa, se * se));
+        let mut c = j * rm * j.transpose();
+        for col in 0..3 {
+            for row in col + 1..3 {
+                let m = 0.5 * (c[(row, col)] + c[(col, row)]);
+                c[(row, col)] = m;
+                c[(col, row)] = m;
+            }
+        }
+        // `Gaussian::new`'s checks: finite, and a Cholesky factor with a
+        // positive finite diagonal (exactly symmetric after the above).
+        if !(mean.iter().all(|v| v.is_finite()) && c.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        let l = c.cholesky()?.unpack_dirty();
+        (0..3)
+            .all(|i| l[(i, i)] > 0.0 && l[(i, i)].is_finite())
+            .then_some((mean, c))
+    };
+    if let Some(v) = fast() {
+        return Ok(v);
+    }
+    let g = plot_to_local(
+        [0.0; 3],
+        &PolarMeasurement {
+            range: p.range,
+            azimuth: p.azimuth,
+            elevation: p.elevation,
+            sigma_range: sr,
+            sigma_azimuth: sa,
+            sigma_elevation: Some(se),
+        },
+    )?;
+    let (mean, cov) = (g.mean(), g.cov());
+    Ok((
+        Vector3::from_fn(|i, _| mean[i]),
+        Matrix3::from_fn(|i, j| cov[(i, j)]),
+    ))
 }
 
 /// A local estimate as a centre-ENU state. 2D estimates `[ρ, ρ̇, θ, θ̇]` are
@@ -525,6 +605,7 @@ fn filter_track(
 fn to_centre(
     centre: &LocalFrame,
     radar: &Radar,
+    site: &Site,
     e: &alpha_beta::Estimate,
     h: f64,
     sigma_h: f64,
@@ -532,9 +613,28 @@ fn to_centre(
     Ok(centred_state(
         radar,
         e,
-        &place(centre, radar, e, h)?,
+        &place(centre, radar, site, e, h)?,
         sigma_h,
     ))
+}
+
+/// What [`place`] needs of a radar alone, computed once per call of
+/// [`fuse_methods`] rather than once per estimate (same operations, same
+/// bits).
+struct Site {
+    /// A 2D radar's cone of slant range and azimuth.
+    cone: Option<geometry::Cone>,
+    /// The rotation from the radar's ENU axes to the centre's.
+    to_centre: Matrix3<f64>,
+}
+
+impl Site {
+    fn new(centre: &LocalFrame, radar: &Radar) -> Self {
+        Self {
+            cone: (!radar.three_d).then(|| geometry::Cone::new(&radar.frame, centre)),
+            to_centre: radar.frame.rotation_to(centre),
+        }
+    }
 }
 
 /// Where [`to_centre`] puts an estimate, before σ_h enters: the position,
@@ -550,14 +650,14 @@ struct Placed {
 fn place(
     centre: &LocalFrame,
     radar: &Radar,
+    site: &Site,
     e: &alpha_beta::Estimate,
     h: f64,
 ) -> Result<Placed, AlgoError> {
     let (pos, jac, acceleration, velocity_jump) = if radar.three_d {
         let pos = radar.frame.position_to(centre, [e.x[0], e.x[2], e.x[4]])?;
-        let jac = radar.frame.rotation_to(centre);
-        let a = Matrix3::from_fn(|i, j| e.acceleration[(i, j)]);
-        let v = Matrix3::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        let jac = site.to_centre;
+        let (a, v) = (e.acceleration, e.lag_ahead);
         (
             pos,
             jac,
@@ -570,10 +670,14 @@ fn place(
         // placed at the nearest reachable one, the site's height ± 0.9 ρ.
         let hs = radar.frame.origin_geodetic().2;
         let h = h.clamp(hs - 0.9 * rho, hs + 0.9 * rho);
-        let (pos, jac) = geometry::place_2d(&radar.frame, centre, rho, th, h)?;
+        let cone = site.cone.as_ref().ok_or(AlgoError::DegenerateGeometry {
+            what: "2D radar",
+            reason: "no cone for a 3D radar",
+        })?;
+        let (pos, jac) = cone.place(rho, th, h)?;
         // Range and azimuth accelerations through the cone; none in height.
-        let a = Matrix2::from_fn(|i, j| e.acceleration[(i, j)]);
-        let v = Matrix2::from_fn(|i, j| e.lag_ahead[(i, j)]);
+        let a: Matrix2<f64> = e.acceleration.fixed_view::<2, 2>(0, 0).into_owned();
+        let v: Matrix2<f64> = e.lag_ahead.fixed_view::<2, 2>(0, 0).into_owned();
         let j2 = jac.fixed_columns::<2>(0);
         (pos, jac, j2 * a * j2.transpose(), j2 * v * j2.transpose())
     };
@@ -587,17 +691,13 @@ fn place(
 
 /// The centre-ENU state of an estimate [`place`]d, with σ_h for a 2D one.
 fn centred_state(radar: &Radar, e: &alpha_beta::Estimate, at: &Placed, sigma_h: f64) -> State6 {
-    let mut y = Vector6::zeros();
-    let mut py = Matrix6::zeros();
-    if radar.three_d {
-        py.copy_from(&e.p);
-    } else {
-        py.view_mut((0, 0), (4, 4)).copy_from(&e.p);
+    // A 2D estimate's state and covariance fill the first 4 rows (the rest
+    // of its fixed-size storage is zero).
+    let y = e.x;
+    let mut py = e.p;
+    if !radar.three_d {
         py[(4, 4)] = sigma_h * sigma_h;
         py[(5, 5)] = CLIMB_SIGMA_MPS * CLIMB_SIGMA_MPS;
-    }
-    for i in 0..e.x.len() {
-        y[i] = e.x[i];
     }
     let v = kernels::interleaved_apply(&at.jac, &y);
     let x = Vector6::new(at.pos[0], v[1], at.pos[1], v[3], at.pos[2], v[5]);
@@ -705,10 +805,10 @@ fn correlate_pair(
         if dim == 2 {
             cov[(2, 2)] = 1.0;
         }
-        let chol = cov.cholesky().ok_or(AlgoError::NotPositiveDefinite {
+        let solved = kernels::cholesky_solve(&cov, &d).ok_or(AlgoError::NotPositiveDefinite {
             what: "pair difference covariance",
         })?;
-        let stat = d.dot(&chol.solve(&d));
+        let stat = d.dot(&solved);
         let hit = (0..dim).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
         state.step(cfg.knn, hit, stat <= threshold);
         sum += stat;
@@ -759,12 +859,21 @@ fn fuse_into(
             what: "P1 + P2 - P12 - P21",
         })?;
     }
-    if x.iter().chain(p.iter()).any(|v| !v.is_finite()) {
+    if !all_finite(x.as_slice()) || !all_finite(p.as_slice()) {
         return Err(AlgoError::NotPositiveDefinite {
             what: "fused covariance",
         });
     }
     Ok((x, p))
+}
+
+/// Whether every value is finite, without a branch per value: v · 0 is ±0
+/// for a finite v and NaN for an infinite or NaN one, and a sum of them is
+/// NaN exactly when one is (the same answer as `iter().all(is_finite)`, in
+/// a loop the compiler vectorises).
+fn all_finite(v: &[f64]) -> bool {
+    let s = v.iter().fold(0.0, |acc, &x| acc + x * 0.0);
+    !s.is_nan()
 }
 
 /// Position and position covariance of a member's state at a system-track
@@ -802,6 +911,7 @@ struct Fused {
 fn fused_track(
     centre: &LocalFrame,
     radars: &[Radar],
+    sites: &[Site],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
     members: Vec<usize>,
@@ -842,12 +952,28 @@ fn fused_track(
     // height they give there (t, h, σ_h).
     let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
-    let mut heights: Vec<(f64, f64, f64)> = Vec::new();
+    let mut heights: Vec<(f64, f64, f64)> = Vec::with_capacity(times.len());
+    // With `keep_spots`, the 3D members' spots at each instant with a 3D
+    // fusion (`spots3[ranges3[n]]` for the n-th such instant), kept from
+    // this pass for the next.
+    let (mut spots3, mut ranges3) = if keep_spots {
+        (
+            Vec::with_capacity(times.len() * three_d.len()),
+            Vec::with_capacity(times.len()),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     for &t in &times {
         three_at(t, &mut all, &mut cursor3);
         if all.is_empty() {
             fused3.push(None);
             continue;
+        }
+        if keep_spots {
+            let start = spots3.len();
+            spots3.extend(all.iter().map(Spot::of));
+            ranges3.push(start..spots3.len());
         }
         let (x3, p3) = fuse_independent(&all)?;
         if method != Method::Mapping {
@@ -858,10 +984,15 @@ fn fused_track(
         fused3.push(Some((x3, p3)));
     }
     let mut samples = Vec::with_capacity(times.len());
-    let mut split = Vec::new();
-    let mut spots = Vec::new();
-    let mut three = Vec::with_capacity(three_d.len());
-    cursor3.fill(0);
+    let (mut split, mut spots) = if keep_spots {
+        (
+            Vec::with_capacity(times.len()),
+            Vec::with_capacity(times.len() * members.len()),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let mut ranges3 = ranges3.into_iter();
     let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
     for (&t, f3) in times.iter().zip(&fused3) {
@@ -910,7 +1041,7 @@ fn fused_track(
             }
             let s = match placement {
                 Some((h, sh)) => extrapolate(
-                    &to_centre(centre, &radars[f.radar], &f.est[k], h, sh)?,
+                    &to_centre(centre, &radars[f.radar], &sites[f.radar], &f.est[k], h, sh)?,
                     t,
                     gap(i),
                 ),
@@ -927,13 +1058,15 @@ fn fused_track(
         };
 
         if keep_spots {
-            split.push(if f3.is_some() {
-                three_at(t, &mut three, &mut cursor3);
-                let start = spots.len();
-                spots.extend(three.iter().chain(&all).map(Spot::of));
-                Some((start, three.len(), spots.len()))
-            } else {
-                None
+            // `ranges3` holds one range per instant with a 3D fusion.
+            split.push(match f3.as_ref().and_then(|_| ranges3.next()) {
+                Some(r) => {
+                    let start = spots.len();
+                    spots.extend_from_slice(&spots3[r.clone()]);
+                    spots.extend(all.iter().map(Spot::of));
+                    Some((start, r.len(), spots.len()))
+                }
+                None => None,
             });
         }
         samples.push(Sample { t, x, p, altitude });
@@ -952,8 +1085,12 @@ fn fused_track(
 /// Splitting's system track from the one lifting fuses: at every sample with
 /// a 3D member, the direction from the Earth's centre fused from all members
 /// and the geocentric distance from the 3D members replace the position.
-fn split_track(centre: &LocalFrame, fused: &Fused) -> Result<SystemTrack, AlgoError> {
-    let mut track = fused.track.clone();
+/// `track` is the lifted track of `fused` (moved out of it or a copy).
+fn split_track(
+    centre: &LocalFrame,
+    mut track: SystemTrack,
+    fused: &Fused,
+) -> Result<SystemTrack, AlgoError> {
     for (sample, split) in track.samples.iter_mut().zip(&fused.split) {
         let Some(&(start, n3, end)) = split.as_ref() else {
             continue;

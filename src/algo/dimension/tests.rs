@@ -1,6 +1,8 @@
 //! Scenes through the whole pipeline: noise-free plots of known targets.
 
 use super::*;
+use std::f64::consts::FRAC_PI_2;
+
 use crate::algo::{geo::Ellipsoid, polar::enu_to_polar_3d};
 
 fn frame(lat: f64, lon: f64, h: f64) -> LocalFrame {
@@ -489,6 +491,7 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
                                 to_centre(
                                     &scene.centre,
                                     &scene.radars[f.radar],
+                                    &Site::new(&scene.centre, &scene.radars[f.radar]),
                                     e,
                                     cfg.preset_altitude,
                                     sigma_h,
@@ -531,4 +534,73 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
             }
         }
     }
+}
+
+#[test]
+fn all_finite_agrees_with_is_finite() {
+    let vals = [
+        0.0,
+        -0.0,
+        1.0,
+        -3.5e300,
+        f64::MIN_POSITIVE,
+        f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ];
+    for &a in &vals {
+        for &b in &vals {
+            for &c in &vals {
+                let v = [a, b, c, 2.0];
+                assert_eq!(all_finite(&v), v.iter().all(|x| x.is_finite()), "{v:?}");
+            }
+        }
+    }
+    assert!(all_finite(&[]));
+}
+
+#[test]
+fn local_3d_gives_the_bits_of_plot_to_local() {
+    let f = frame(30.0, 120.0, 0.0);
+    let r = radar(f, true);
+    let mut n = 0;
+    for &range in &[0.0, 1.0, 850.0, 37_123.4, 199_999.9] {
+        for k in 0..24 {
+            let azimuth = -7.0 + 0.61 * f64::from(k);
+            for &elevation in &[-1.6, -FRAC_PI_2, -0.3, 0.0, 0.017, 0.9, FRAC_PI_2, 2.0] {
+                let plot = Plot {
+                    t: 0.0,
+                    range,
+                    azimuth,
+                    elevation: Some(elevation),
+                };
+                let exact = plot_to_local(
+                    [0.0; 3],
+                    &PolarMeasurement {
+                        range,
+                        azimuth,
+                        elevation: Some(elevation),
+                        sigma_range: r.sigma_range,
+                        sigma_azimuth: r.sigma_azimuth,
+                        sigma_elevation: Some(r.sigma_elevation),
+                    },
+                );
+                match (local_3d(&r, &plot), exact) {
+                    (Ok((mean, cov)), Ok(g)) => {
+                        n += 1;
+                        for i in 0..3 {
+                            assert_eq!(mean[i].to_bits(), g.mean()[i].to_bits());
+                            for j in 0..3 {
+                                assert_eq!(cov[(i, j)].to_bits(), g.cov()[(i, j)].to_bits());
+                            }
+                        }
+                    }
+                    (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+                    (a, b) => panic!("{range} {azimuth} {elevation}: {a:?} vs {:?}", b.is_ok()),
+                }
+            }
+        }
+    }
+    assert!(n > 400, "{n}");
 }
