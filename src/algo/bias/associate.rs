@@ -430,6 +430,60 @@ fn walk(
     }
 }
 
+/// `walk`'s brackets collected.
+fn walk_brackets(track: &[RadarSample], ship: &[AisPoint], max_gap: f64) -> Vec<Bracket> {
+    let mut b = Vec::new();
+    walk(track, ship, max_gap, |k, a, w| {
+        b.push(Bracket {
+            k: k as u32,
+            a: a as u32,
+            w,
+        })
+    });
+    b
+}
+
+/// Tracks grouped by sample times equal bit for bit: each track's group
+/// index (groups numbered in order of their first track) and each group's
+/// size. Candidates are found by (length, first and last time), then
+/// compared in full, so distinct tracks cost one lookup each.
+fn time_groups(radar: &[Vec<RadarSample>]) -> (Vec<usize>, Vec<usize>) {
+    let bits = |t: &[RadarSample]| {
+        (
+            t.len(),
+            t.first().map_or(0, |s| s.t.to_bits()),
+            t.last().map_or(0, |s| s.t.to_bits()),
+        )
+    };
+    let same = |a: &[RadarSample], b: &[RadarSample]| {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.t.to_bits() == y.t.to_bits())
+    };
+    let mut by_key: HashMap<(usize, u64, u64), Vec<usize>> = HashMap::new();
+    let mut leaders: Vec<usize> = Vec::new();
+    let mut sizes: Vec<usize> = Vec::new();
+    let group = radar
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let candidates = by_key.entry(bits(t)).or_default();
+            match candidates.iter().find(|&&g| same(&radar[leaders[g]], t)) {
+                Some(&g) => {
+                    sizes[g] += 1;
+                    g
+                }
+                None => {
+                    let g = leaders.len();
+                    leaders.push(i);
+                    sizes.push(1);
+                    candidates.push(g);
+                    g
+                }
+            }
+        })
+        .collect();
+    (group, sizes)
+}
+
 /// The interpolated position at bracket (a, w).
 fn at(pos: &[[f64; 2]], a: usize, w: f64) -> [f64; 2] {
     let p = pos[a];
@@ -615,8 +669,14 @@ struct Problem<'a> {
     lower_bounds: Vec<(usize, f64)>,
     /// Pairs with common instants, by implied range bias.
     by_range: Vec<usize>,
-    /// Brackets and raw residuals (with the AIS report index) of each
-    /// pair, built on first use.
+    /// The time group of each track: tracks whose sample times are equal
+    /// bit for bit (a tracker stamping every plot with its scan time) place
+    /// every AIS report at the same bracket, so each ship is walked once per
+    /// group instead of once per track.
+    group: Vec<usize>,
+    /// Brackets of every ship in each time group (groups × nA), built on
+    /// first use; raw residuals (with the AIS report index) of each pair,
+    /// built on first use.
     brackets: Vec<OnceCell<Vec<Bracket>>>,
     residuals: Vec<OnceCell<Vec<Residual>>>,
     /// Gated assignments by bias (bits of range, azimuth) and estimates by
@@ -691,30 +751,42 @@ impl<'a> Problem<'a> {
         } else {
             cfg.max_azimuth_bias
         };
+        let (group, sizes) = time_groups(radar);
+        let brackets: Vec<OnceCell<Vec<Bracket>>> =
+            (0..sizes.len() * cols).map(|_| OnceCell::new()).collect();
         let mut summary = Vec::with_capacity(rows * cols);
         let mut pruned = Vec::new();
         let mut scratch = Vec::new();
         for (i, track) in radar.iter().enumerate() {
+            let g = group[i];
             for (j, ship) in ais.iter().enumerate() {
                 if sectors_r[i].apart(&sectors_a[j], outer, reach) {
                     pruned.push(i * cols + j);
                     summary.push(Summary::default());
                     continue;
                 }
-                scratch.clear();
-                walk(track, ship, cfg.max_gap, |k, a, w| {
-                    scratch.push(Bracket {
-                        k: k as u32,
-                        a: a as u32,
-                        w,
-                    })
-                });
-                let n = scratch.len();
+                // A shared group keeps its brackets for the other tracks;
+                // a track of its own walks into the scratch buffer (its
+                // brackets are rebuilt only if the pair is used later).
+                let br: &[Bracket] = if sizes[g] > 1 {
+                    brackets[g * cols + j].get_or_init(|| walk_brackets(track, ship, cfg.max_gap))
+                } else {
+                    scratch.clear();
+                    walk(track, ship, cfg.max_gap, |k, a, w| {
+                        scratch.push(Bracket {
+                            k: k as u32,
+                            a: a as u32,
+                            w,
+                        })
+                    });
+                    &scratch
+                };
+                let n = br.len();
                 if n < min_common {
                     summary.push(Summary::default());
                     continue;
                 }
-                let acc = sums(&raw[i], ship, &ais_range[j], &scratch);
+                let acc = sums(&raw[i], ship, &ais_range[j], br);
                 let nf = n as f64;
                 let m = acc.map(|s| s / nf);
                 summary.push(Summary {
@@ -748,29 +820,28 @@ impl<'a> Problem<'a> {
             summary,
             lower_bounds,
             by_range,
-            brackets: (0..rows * cols).map(|_| OnceCell::new()).collect(),
+            group,
+            brackets,
             residuals: (0..rows * cols).map(|_| OnceCell::new()).collect(),
             assigned: RefCell::new(HashMap::new()),
             estimates: RefCell::new(HashMap::new()),
         }
     }
 
+    /// Brackets of pair ij (none when it has no summary: fewer than
+    /// `min_common` common instants, or never walked).
     fn brackets(&self, ij: usize) -> &[Bracket] {
-        self.brackets[ij].get_or_init(|| {
-            if self.summary[ij].n == 0 {
-                return Vec::new();
-            }
-            let (i, j) = (ij / self.cols, ij % self.cols);
-            let mut b = Vec::with_capacity(self.summary[ij].n);
-            walk(&self.radar[i], &self.ais[j], self.cfg.max_gap, |k, a, w| {
-                b.push(Bracket {
-                    k: k as u32,
-                    a: a as u32,
-                    w,
-                });
-            });
-            b
-        })
+        if self.summary[ij].n == 0 {
+            return &[];
+        }
+        self.walked(ij)
+    }
+
+    /// Brackets of pair ij however few, shared by its track's time group.
+    fn walked(&self, ij: usize) -> &[Bracket] {
+        let (i, j) = (ij / self.cols, ij % self.cols);
+        self.brackets[self.group[i] * self.cols + j]
+            .get_or_init(|| walk_brackets(&self.radar[i], &self.ais[j], self.cfg.max_gap))
     }
 
     /// Plane positions of every track compensated by `bias`: the raw unit
@@ -832,16 +903,21 @@ impl<'a> Problem<'a> {
     /// `min_common` common instants).
     fn raw_distance(&self, ij: usize) -> f64 {
         let (i, j) = (ij / self.cols, ij % self.cols);
-        let (mut sum, mut n) = (0.0, 0usize);
-        walk(&self.radar[i], &self.ais[j], self.cfg.max_gap, |k, a, w| {
-            sum += dist(at(&self.raw[i], a, w), self.ais[j][k].position);
-            n += 1;
-        });
+        let br = self.walked(ij);
+        let n = br.len();
         if n < self.cfg.min_common.max(1) {
-            f64::INFINITY
-        } else {
-            sum / n as f64
+            return f64::INFINITY;
         }
+        let sum: f64 = br
+            .iter()
+            .map(|b| {
+                dist(
+                    at(&self.raw[i], b.a as usize, b.w),
+                    self.ais[j][b.k as usize].position,
+                )
+            })
+            .sum();
+        sum / n as f64
     }
 
     /// CA-CFAR thresholds and credible pairs exactly as on the full raw
@@ -2016,5 +2092,61 @@ mod tests {
         assert_eq!(bracket(&track, 20.0, 30.0), None);
         assert_eq!(bracket(&track, 60.0, 30.0), None);
         assert_eq!(bracket(&track, -1.0, 30.0), None);
+    }
+
+    /// Tracks share brackets only with tracks whose times are equal bit for
+    /// bit (+0 and −0 differ), and every pair's shared brackets are the ones
+    /// its own track gives (`walk` run on that track alone), on a harbour
+    /// where half the tracks keep the scan times and the rest are moved
+    /// by a per-track offset (a plot timed by its azimuth).
+    #[test]
+    fn time_groups_share_only_identical_brackets() {
+        let mut scene = AisSceneConfig::harbour(24, 500.0, 0.5f64.to_radians())
+            .generate(&mut run_rng(3, 0))
+            .unwrap();
+        for (i, track) in scene.radar.iter_mut().enumerate() {
+            if i % 2 == 1 {
+                let offset = 0.1 * (i % 6) as f64;
+                track.iter_mut().for_each(|s| s.t += offset);
+            }
+        }
+        // The first sample at −0: a group of its own (tracks 2 and 4 keep
+        // +0; track 6 is moved to −0 and so is track 8, which joins it).
+        for i in [6, 8] {
+            scene.radar[i][0].t = -0.0;
+        }
+        let (group, sizes) = time_groups(&scene.radar);
+        for a in 0..scene.radar.len() {
+            for b in 0..scene.radar.len() {
+                let same = scene.radar[a].len() == scene.radar[b].len()
+                    && scene.radar[a]
+                        .iter()
+                        .zip(&scene.radar[b])
+                        .all(|(x, y)| x.t.to_bits() == y.t.to_bits());
+                assert_eq!(group[a] == group[b], same, "tracks {a} and {b}");
+            }
+        }
+        assert_eq!(sizes.iter().sum::<usize>(), scene.radar.len());
+        assert!(sizes.iter().any(|&n| n > 2) && group[6] == group[8] && group[6] != group[2]);
+
+        let cfg = Config::default();
+        let problem = Problem::new(&scene.radar, &scene.ais, &cfg);
+        let key = |b: &[Bracket]| -> Vec<(u32, u32, u64)> {
+            b.iter().map(|b| (b.k, b.a, b.w.to_bits())).collect()
+        };
+        let mut walked = 0;
+        for i in 0..scene.radar.len() {
+            for j in 0..scene.ais.len() {
+                let own = walk_brackets(&scene.radar[i], &scene.ais[j], cfg.max_gap);
+                let ij = i * problem.cols + j;
+                assert_eq!(key(problem.walked(ij)), key(&own), "pair {i}, {j}");
+                if problem.summary[ij].n > 0 {
+                    assert_eq!(problem.summary[ij].n, own.len());
+                    assert_eq!(key(problem.brackets(ij)), key(&own));
+                    walked += 1;
+                }
+            }
+        }
+        assert!(walked > scene.ais.len());
     }
 }
