@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Ids, ServiceError, Violations, covariance_message, micros_since};
+use super::{Ids, ServiceError, Violations, at, covariance_message, micros_since};
 use crate::algo::{
     AlgoError,
     jpda::{self, Clutter, Config, Fallback, Gate, Method, Scan, SensorModel, TrackEstimate},
@@ -728,17 +728,6 @@ fn matrix(
     nrows: usize,
     ncols: usize,
 ) -> Option<DMatrix<f64>> {
-    if rows.len() != nrows || rows.iter().any(|r| r.len() != ncols) {
-        v.add(field(), format!("must be a {nrows} × {ncols} matrix"));
-        return None;
-    }
-    if rows.iter().flatten().any(|x| !x.is_finite()) {
-        v.add(field(), "contains a non-finite value");
-        return None;
-    }
-    Some(DMatrix::from_row_iterator(
-        nrows,
-        ncols,
-        rows.iter().flatten().copied(),
-    ))
+    let flat = v.matrix(at(field), rows, nrows, ncols)?;
+    Some(DMatrix::from_row_slice(nrows, ncols, &flat))
 }

@@ -26,7 +26,7 @@
 //! | matrix | `must be a 4 × 4 matrix` / `contains a non-finite value` |
 //! | covariance | `is not symmetric (…)` / `is not positive definite` |
 
-use std::collections::HashMap;
+use std::collections::{HashMap, hash_map::Entry};
 use std::fmt;
 
 use crate::algo::AlgoError;
@@ -523,21 +523,21 @@ impl<'a> Ids<'a> {
                 v.add(field(index), "must not be empty");
                 None
             }
-            Some(id) => match self.seen.insert(id, index) {
-                Some(prev) => {
-                    v.add(field(index), format!("duplicates {} '{id}'", field(prev)));
-                    // The first keeps the id.
-                    self.seen.insert(id, prev);
+            // The first holder keeps the id.
+            Some(id) => match self.seen.entry(id) {
+                Entry::Occupied(first) => {
+                    v.add(
+                        field(index),
+                        format!("duplicates {} '{id}'", field(*first.get())),
+                    );
                     None
                 }
-                None => Some(id),
+                Entry::Vacant(slot) => {
+                    slot.insert(index);
+                    Some(id)
+                }
             },
         }
-    }
-
-    /// Whether `id` was accepted.
-    pub fn contains(&self, id: &str) -> bool {
-        self.seen.contains_key(id)
     }
 }
 
