@@ -21,6 +21,12 @@
 //! runs 120 and 1000; `cargo bench --bench correlation -- --once 10000`
 //! times one 10k × 10k request each way (brute force there is 10⁸ pairs × 8
 //! instants).
+//!
+//! `cargo bench --bench correlation -- --small [repeat] [n]` repeats the
+//! small request of issue 18 (n = 5 targets, 2 nodes × 8 samples, the body
+//! of `correlation_payload 5 grid`) through the service function and prints
+//! the median and minimum of its compute, align, correlate and fuse times
+//! (and is the loop to run under `perf record`).
 
 use std::{hint::black_box, time::Instant};
 
@@ -143,6 +149,30 @@ fn engine_table(only: Option<usize>, method_only: Option<&str>) {
     }
 }
 
+/// Median and minimum of the small request's timings over `repeat` calls.
+fn small_table(repeat: usize, n: usize) {
+    let input = scene(n, "grid");
+    let mut times: [Vec<f64>; 5] = Default::default();
+    for _ in 0..repeat {
+        let copy = input.clone();
+        let start = Instant::now();
+        let out = black_box(correlate(black_box(copy)).expect("valid scene"));
+        times[0].push(start.elapsed().as_secs_f64() * 1e6);
+        times[1].push(out.timing.compute_us);
+        times[2].push(out.timing.align_us);
+        times[3].push(out.timing.correlate_us);
+        times[4].push(out.timing.fuse_us);
+    }
+    println!("{n}x{n}x8 grid, {repeat} calls, µs: median (min)");
+    for (name, t) in ["call", "compute", "align", "correlate", "fuse"]
+        .iter()
+        .zip(times.iter_mut())
+    {
+        t.sort_by(f64::total_cmp);
+        println!("  {name:>9}: {:8.2} ({:.2})", t[t.len() / 2], t[0]);
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--engine") {
@@ -181,6 +211,15 @@ fn main() {
                 out.pairs.len()
             );
         }
+        return;
+    }
+    if let Some(i) = args.iter().position(|a| a == "--small") {
+        let repeat: usize = args
+            .get(i + 1)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(20_000);
+        let n: usize = args.get(i + 2).and_then(|s| s.parse().ok()).unwrap_or(5);
+        small_table(repeat, n);
         return;
     }
     benches();

@@ -19,10 +19,11 @@ impl AisRadarService for AisRadarGrpc {
         request: Request<pb::AssociateRequest>,
     ) -> Result<Response<pb::AssociateResponse>, Status> {
         let input = associate_input(request.into_inner());
-        let out = service::offload(move || svc::associate(input))
+        // The answer is converted on the compute lane too.
+        let out = service::offload(move || svc::associate(input).map(associate_response))
             .await
             .map_err(to_status)?;
-        Ok(Response::new(associate_response(out)))
+        Ok(Response::new(out))
     }
 }
 

@@ -72,10 +72,13 @@ impl CorrelationService for CorrelationGrpc {
         request: Request<pb::CorrelateTracksRequest>,
     ) -> Result<Response<pb::CorrelateTracksResponse>, Status> {
         let req = request.into_inner();
-        let out = service::offload(move || corr::correlate(correlate_input(req)?))
-            .await
-            .map_err(to_status)?;
-        Ok(Response::new(correlate_response(out)))
+        // The answer is converted on the compute lane too.
+        let out = service::offload(move || {
+            corr::correlate(correlate_input(req)?).map(correlate_response)
+        })
+        .await
+        .map_err(to_status)?;
+        Ok(Response::new(out))
     }
 }
 

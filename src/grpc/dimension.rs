@@ -19,10 +19,11 @@ impl DimensionService for DimensionGrpc {
         request: Request<pb::DimensionFuseRequest>,
     ) -> Result<Response<pb::DimensionFuseResponse>, Status> {
         let input = input(request.into_inner());
-        let out = service::offload(move || svc::fuse(input))
+        // The answer is converted on the compute lane too.
+        let out = service::offload(move || svc::fuse(input).map(response))
             .await
             .map_err(to_status)?;
-        Ok(Response::new(response(out)))
+        Ok(Response::new(out))
     }
 }
 

@@ -19,10 +19,11 @@ impl JpdaService for JpdaGrpc {
         request: Request<pb::JpdaUpdateRequest>,
     ) -> Result<Response<pb::JpdaUpdateResponse>, Status> {
         let req = request.into_inner();
-        let out = service::offload(move || svc::update(input(req)?))
+        // The answer is converted on the compute lane too.
+        let out = service::offload(move || svc::update(input(req)?).map(response))
             .await
             .map_err(to_status)?;
-        Ok(Response::new(response(out)))
+        Ok(Response::new(out))
     }
 }
 

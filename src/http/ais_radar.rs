@@ -1,17 +1,14 @@
 //! REST route for AIS–radar association and radar bias estimation (seed 004).
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{ApiJson, Problem},
+    problem::{JsonBody, Problem},
 };
-use crate::{
-    service::{self, ais_radar as svc},
-    state::AppState,
-};
+use crate::{service::ais_radar as svc, state::AppState};
 
 /// The radar site (WGS84).
 #[derive(Debug, Deserialize, ToSchema)]
@@ -246,8 +243,12 @@ pub struct AssociateResponse {
 )]
 pub async fn associate(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<AssociateRequest>,
-) -> Result<Json<AssociateResponse>, Problem> {
+    body: JsonBody<AssociateRequest>,
+) -> Result<Response, Problem> {
+    body.compute(associate_on_lane).await
+}
+
+fn associate_on_lane(req: AssociateRequest) -> Result<AssociateResponse, Problem> {
     let o = req.options.unwrap_or_default();
     let input = svc::AssociateInput {
         site: req.site.map(|s| svc::SiteInput {
@@ -302,8 +303,8 @@ pub async fn associate(
             ais_time_sigma_s: o.ais_time_sigma_s,
         }),
     };
-    let out = service::offload(move || svc::associate(input)).await?;
-    Ok(Json(AssociateResponse {
+    let out = svc::associate(input)?;
+    Ok(AssociateResponse {
         path: out.path.to_string(),
         s1_m: out.s1_m,
         s2_m: out.s2_m,
@@ -403,5 +404,5 @@ pub async fn associate(
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }

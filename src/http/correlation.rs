@@ -1,15 +1,12 @@
 //! REST route for batch track-to-track correlation (seed 000 and baselines).
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::problem::{ApiJson, Problem};
+use super::problem::{JsonBody, Problem};
 use crate::{
-    service::{
-        self,
-        correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
-    },
+    service::correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
     state::AppState,
 };
 
@@ -316,8 +313,12 @@ pub struct CorrelateTiming {
 )]
 pub async fn correlate(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<CorrelateTracksRequest>,
-) -> Result<Json<CorrelateTracksResponse>, Problem> {
+    body: JsonBody<CorrelateTracksRequest>,
+) -> Result<Response, Problem> {
+    body.compute(correlate_on_lane).await
+}
+
+fn correlate_on_lane(req: CorrelateTracksRequest) -> Result<CorrelateTracksResponse, Problem> {
     let nodes = req
         .nodes
         .into_iter()
@@ -343,8 +344,8 @@ pub async fn correlate(
         req.pruning,
         req.fuse,
     );
-    let out = service::offload(move || svc::correlate(input)).await?;
-    Ok(Json(response(out)))
+    let out = svc::correlate(input)?;
+    Ok(response(out))
 }
 
 pub(super) fn sample_in(s: TrackSample) -> svc::SampleInput {

@@ -1,17 +1,14 @@
 //! REST route for the dimension fusion of seed 003: `POST /v1/dimension/fuse`.
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{ApiJson, Problem},
+    problem::{JsonBody, Problem},
 };
-use crate::{
-    service::{self, dimension as svc},
-    state::AppState,
-};
+use crate::{service::dimension as svc, state::AppState};
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -202,8 +199,12 @@ fn track_ref(r: svc::TrackRef) -> DimensionTrackRef {
 )]
 pub async fn fuse(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<DimensionFuseRequest>,
-) -> Result<Json<DimensionFuseResponse>, Problem> {
+    body: JsonBody<DimensionFuseRequest>,
+) -> Result<Response, Problem> {
+    body.compute(fuse_on_lane).await
+}
+
+fn fuse_on_lane(req: DimensionFuseRequest) -> Result<DimensionFuseResponse, Problem> {
     let input = svc::FuseInput {
         origin: req.origin.map(site),
         methods: req.methods,
@@ -247,8 +248,8 @@ pub async fn fuse(
             })
             .collect(),
     };
-    let out = service::offload(move || svc::fuse(input)).await?;
-    Ok(Json(DimensionFuseResponse {
+    let out = svc::fuse(input)?;
+    Ok(DimensionFuseResponse {
         state_layout: svc::STATE_LAYOUT.iter().map(|s| s.to_string()).collect(),
         results: out
             .results
@@ -302,5 +303,5 @@ pub async fn fuse(
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }

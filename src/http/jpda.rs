@@ -1,17 +1,14 @@
 //! REST route for the JPDA update of seed 002: `POST /v1/jpda/update`.
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{ApiJson, Problem},
+    problem::{JsonBody, Problem},
 };
-use crate::{
-    service::{self, jpda as svc},
-    state::AppState,
-};
+use crate::{service::jpda as svc, state::AppState};
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -164,8 +161,12 @@ pub struct JpdaBeta {
 )]
 pub async fn update(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<JpdaUpdateRequest>,
-) -> Result<Json<JpdaUpdateResponse>, Problem> {
+    body: JsonBody<JpdaUpdateRequest>,
+) -> Result<Response, Problem> {
+    body.compute(update_on_lane).await
+}
+
+fn update_on_lane(req: JpdaUpdateRequest) -> Result<JpdaUpdateResponse, Problem> {
     let input = svc::JpdaInput {
         state_layout: req.state_layout,
         method: req.method,
@@ -212,8 +213,8 @@ pub async fn update(
             })
             .collect(),
     };
-    let out = service::offload(move || svc::update(input)).await?;
-    Ok(Json(JpdaUpdateResponse {
+    let out = svc::update(input)?;
+    Ok(JpdaUpdateResponse {
         method: out.method.into(),
         tracks: out
             .tracks
@@ -259,5 +260,5 @@ pub async fn update(
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }

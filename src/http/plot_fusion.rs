@@ -2,13 +2,13 @@
 //! `POST /v1/plot-fusion/track`. The network and tracker DTOs are shared
 //! with `plot_fusion` sessions (`http::sessions`).
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{ApiJson, Problem},
+    problem::{JsonBody, Problem},
 };
 use crate::{
     algo::tracking::Counters,
@@ -535,16 +535,20 @@ pub(crate) fn counters_out(c: Counters) -> TrackerCounters {
 )]
 pub async fn track(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<PlotFusionRequest>,
-) -> Result<Json<PlotFusionResponse>, Problem> {
+    body: JsonBody<PlotFusionRequest>,
+) -> Result<Response, Problem> {
+    body.compute(track_on_lane).await
+}
+
+fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> {
     let input = svc::TrackInput {
         spec: spec_in(req.origin, req.radars, req.tracker),
         plots: plots_in(req.plots),
         asterix: asterix_in(req.asterix)?,
         history: req.history,
     };
-    let out = service::offload(move || svc::track(input)).await?;
-    Ok(Json(PlotFusionResponse {
+    let out = svc::track(input)?;
+    Ok(PlotFusionResponse {
         mode: out.mode,
         state_layout: out.state_layout.to_vec(),
         tracks: out.tracks.into_iter().map(track_out).collect(),
@@ -563,5 +567,5 @@ pub async fn track(
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }

@@ -206,12 +206,65 @@ impl From<FieldViolation> for ProblemField {
 /// A JSON body whose every rejection is a problem naming the field:
 /// 415 without a JSON content type, 413 over the body limit, 400 for JSON that
 /// does not parse, 422 for a value of the wrong type or a missing field.
+/// Parsed on the async worker; the compute endpoints take a [`JsonBody`]
+/// instead, parsed on the compute lane with the rest of the request.
 pub struct ApiJson<T>(pub T);
 
 impl<S, T> FromRequest<S> for ApiJson<T>
 where
     S: Send + Sync,
     T: DeserializeOwned,
+{
+    type Rejection = Problem;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Problem> {
+        let body = JsonBody::<T>::from_request(req, state).await?;
+        parse_json(&body.bytes).map(ApiJson)
+    }
+}
+
+/// The JSON body of a compute endpoint, its media type checked (415) and its
+/// bytes read within the limit (413), not yet parsed: [`JsonBody::compute`]
+/// parses it (400, 422 as [`ApiJson`]), runs the endpoint and encodes the
+/// answer as one job on a compute lane. Parsing and encoding a large request
+/// cost as much as its algorithm; on one thread they stay off the async
+/// workers, and the request's memory is allocated and freed where it is used
+/// (docs/RESULTS.md, "Request path").
+pub struct JsonBody<T> {
+    bytes: Bytes,
+    request: std::marker::PhantomData<fn() -> T>,
+}
+
+impl<T: DeserializeOwned + 'static> JsonBody<T> {
+    /// Parses the body into `T`, answers it with `work` and encodes the
+    /// answer as a JSON response, on a compute lane.
+    pub async fn compute<R, F>(self, work: F) -> Result<Response, Problem>
+    where
+        R: Serialize,
+        F: FnOnce(T) -> Result<R, Problem> + Send + 'static,
+    {
+        let bytes = self.bytes;
+        let encoded = crate::service::lanes::run(move || -> Result<Vec<u8>, Problem> {
+            let answer = work(parse_json(&bytes)?)?;
+            serde_json::to_vec(&answer).map_err(|e| {
+                Problem::from(ServiceError::Internal(format!("response encoding: {e}")))
+            })
+        })
+        .await??;
+        Ok((
+            [(
+                header::CONTENT_TYPE,
+                HeaderValue::from_static("application/json"),
+            )],
+            encoded,
+        )
+            .into_response())
+    }
+}
+
+impl<S, T> FromRequest<S> for JsonBody<T>
+where
+    S: Send + Sync,
 {
     type Rejection = Problem;
 
@@ -249,7 +302,10 @@ where
                     other.body_text(),
                 ),
             })?;
-        parse_json(&bytes).map(ApiJson)
+        Ok(JsonBody {
+            bytes,
+            request: std::marker::PhantomData,
+        })
     }
 }
 

@@ -1,17 +1,14 @@
 //! REST routes for the L/R double-threshold rules of seed 000 section 4.
 
-use axum::{Json, extract::State};
+use axum::{extract::State, response::Response};
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{ApiJson, Problem},
+    problem::{JsonBody, Problem},
 };
-use crate::{
-    service::{self, rules as svc},
-    state::AppState,
-};
+use crate::{service::rules as svc, state::AppState};
 
 /// An L/R rule: correlated when at least `l` of `r` samples pass the first threshold.
 #[derive(Debug, Deserialize, ToSchema)]
@@ -95,8 +92,12 @@ pub struct RecommendRuleResponse {
 )]
 pub async fn evaluate(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<EvaluateRulesRequest>,
-) -> Result<Json<EvaluateRulesResponse>, Problem> {
+    body: JsonBody<EvaluateRulesRequest>,
+) -> Result<Response, Problem> {
+    body.compute(evaluate_on_lane).await
+}
+
+fn evaluate_on_lane(req: EvaluateRulesRequest) -> Result<EvaluateRulesResponse, Problem> {
     let input = svc::EvaluateRulesInput {
         alpha: Some(req.alpha),
         rules: req
@@ -108,14 +109,14 @@ pub async fn evaluate(
             })
             .collect(),
     };
-    let out = service::offload(move || svc::evaluate(input)).await?;
-    Ok(Json(EvaluateRulesResponse {
+    let out = svc::evaluate(input)?;
+    Ok(EvaluateRulesResponse {
         evaluations: out.evaluations.into_iter().map(Into::into).collect(),
         timing: Timing {
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }
 
 /// The shortest L/R rule whose missed-correlation probability stays under a bound.
@@ -132,23 +133,27 @@ pub async fn evaluate(
 )]
 pub async fn recommend(
     State(_state): State<AppState>,
-    ApiJson(req): ApiJson<RecommendRuleRequest>,
-) -> Result<Json<RecommendRuleResponse>, Problem> {
+    body: JsonBody<RecommendRuleRequest>,
+) -> Result<Response, Problem> {
+    body.compute(recommend_on_lane).await
+}
+
+fn recommend_on_lane(req: RecommendRuleRequest) -> Result<RecommendRuleResponse, Problem> {
     let input = svc::RecommendRuleInput {
         alpha: Some(req.alpha),
         max_miss_probability: Some(req.max_miss_probability),
         min_l_over_r: req.min_l_over_r,
         max_r: req.max_r,
     };
-    let out = service::offload(move || svc::recommend(input)).await?;
-    Ok(Json(RecommendRuleResponse {
+    let out = svc::recommend(input)?;
+    Ok(RecommendRuleResponse {
         recommended: out.recommended.map(Into::into),
         considered: out.considered.into_iter().map(Into::into).collect(),
         timing: Timing {
             compute_us: out.compute_us,
         },
         warnings: out.warnings,
-    }))
+    })
 }
 
 impl From<svc::RuleEvaluation> for RuleEvaluation {

@@ -6,11 +6,13 @@ pub mod ais_radar;
 pub mod correlation;
 pub mod dimension;
 pub mod jpda;
+pub mod lanes;
 pub mod plot_fusion;
 pub mod rules;
 pub mod session;
 pub mod validate;
 
+pub use lanes::offload;
 pub use validate::{Ids, Increasing, Interval, Violations, at};
 
 use std::time::Instant;
@@ -85,20 +87,6 @@ pub(crate) fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
             message: other.to_string(),
         },
     }
-}
-
-/// Runs CPU-bound work on tokio's blocking pool, so that a large request never
-/// stalls the async workers that serve other requests. The number of requests
-/// in flight, and so of blocking tasks, is bounded by the concurrency limit in
-/// front of both servers.
-pub async fn offload<T, F>(work: F) -> Result<T, ServiceError>
-where
-    F: FnOnce() -> Result<T, ServiceError> + Send + 'static,
-    T: Send + 'static,
-{
-    tokio::task::spawn_blocking(work)
-        .await
-        .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")))?
 }
 
 /// Microseconds elapsed since `start`, for the `timing.compute_us` of a response.

@@ -1,0 +1,225 @@
+//! Compute lanes: where the CPU-bound work of a request runs.
+//!
+//! Every endpoint's computation runs off the async workers (a large request
+//! must never stall the requests beside it). tokio's blocking pool did that
+//! with one thread per request in flight: under 64 concurrent small requests
+//! it ran 64 threads on 2 cores, and each request paid a thread wake-up on
+//! the way in and a context switch on the way out. A profile of the small
+//! correlation request under load put ≈ 30 % of the server's CPU in the
+//! kernel's scheduler and futexes, and running the same requests inline
+//! doubled the throughput of the rules endpoint and of the small correlation
+//! request alike (docs/RESULTS.md, "Request path").
+//!
+//! Lanes keep the offload and drop the thrashing: one thread per core, fed
+//! from one FIFO queue. Under load the queue is never empty, so a lane takes
+//! its next job without sleeping and nobody is woken; a lane is woken only
+//! when it sleeps (idle count kept under the queue's lock, so an idle pool
+//! costs one wake-up and a busy one none).
+//!
+//! A long job must not hold every lane: a lane whose current job started
+//! more than [`LONG_JOB`] ago counts as held. While some lane is not held,
+//! work is queued to the lanes (served in order by the lanes not held);
+//! when every lane is held, new work goes to tokio's blocking pool as
+//! before, where the operating system shares the cores among all of it.
+//! So a 10 s request delays nobody by more than [`LONG_JOB`] per lane, and
+//! small requests never wait behind large ones.
+
+use std::{
+    collections::VecDeque,
+    panic::{AssertUnwindSafe, catch_unwind},
+    sync::{
+        Arc, Condvar, Mutex, OnceLock,
+        atomic::{AtomicU64, Ordering},
+    },
+    time::{Duration, Instant},
+};
+
+use super::ServiceError;
+
+/// A lane running one job for longer than this is held: new work does not
+/// queue behind it.
+pub const LONG_JOB: Duration = Duration::from_millis(2);
+
+type Job = Box<dyn FnOnce() + Send>;
+
+/// Runs CPU-bound work on a compute lane (or, when every lane is held by a
+/// long job, on tokio's blocking pool) and awaits its result. A panic in the
+/// work is an internal error of this request only.
+pub async fn offload<T, F>(work: F) -> Result<T, ServiceError>
+where
+    F: FnOnce() -> Result<T, ServiceError> + Send + 'static,
+    T: Send + 'static,
+{
+    run(work).await?
+}
+
+/// [`offload`] for work of any result type: the adapters run a request's
+/// parsing, computation and response encoding as one job, so that the
+/// request's memory is allocated and freed on one thread. `/metrics` counts
+/// the jobs by where they ran
+/// (`compute_jobs_total{lane="compute"|"blocking_pool"}`).
+pub async fn run<T, F>(work: F) -> Result<T, ServiceError>
+where
+    F: FnOnce() -> T + Send + 'static,
+    T: Send + 'static,
+{
+    let lanes = Lanes::global();
+    if lanes.all_held() {
+        metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
+        return tokio::task::spawn_blocking(work)
+            .await
+            .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")));
+    }
+    metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    lanes.push(Box::new(move || {
+        let _ = tx.send(work());
+    }));
+    rx.await
+        .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
+}
+
+/// The process's lanes: one thread per available core, started on first use.
+struct Lanes {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+    /// Per lane: nanoseconds since `epoch` when its current job started
+    /// (plus one, so that 0 means idle).
+    started: Vec<AtomicU64>,
+    epoch: Instant,
+}
+
+#[derive(Default)]
+struct Queue {
+    jobs: VecDeque<Job>,
+    /// Lanes waiting on `ready`.
+    idle: usize,
+}
+
+impl Lanes {
+    fn global() -> &'static Arc<Lanes> {
+        static LANES: OnceLock<Arc<Lanes>> = OnceLock::new();
+        LANES.get_or_init(|| {
+            let n = std::thread::available_parallelism().map_or(1, |n| n.get());
+            Lanes::start(n)
+        })
+    }
+
+    fn start(n: usize) -> Arc<Lanes> {
+        let lanes = Arc::new(Lanes {
+            queue: Mutex::new(Queue::default()),
+            ready: Condvar::new(),
+            started: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            epoch: Instant::now(),
+        });
+        for i in 0..n {
+            let lanes = Arc::clone(&lanes);
+            std::thread::Builder::new()
+                .name(format!("compute-{i}"))
+                .spawn(move || lanes.run(i))
+                .expect("the operating system starts a compute lane");
+        }
+        lanes
+    }
+
+    fn now(&self) -> u64 {
+        u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(u64::MAX - 1) + 1
+    }
+
+    /// Whether every lane is running a job that started over `LONG_JOB` ago.
+    fn all_held(&self) -> bool {
+        let now = self.now();
+        let long = LONG_JOB.as_nanos() as u64;
+        self.started.iter().all(|s| {
+            let t = s.load(Ordering::Relaxed);
+            t != 0 && now.saturating_sub(t) > long
+        })
+    }
+
+    fn push(&self, job: Job) {
+        let wake = {
+            let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+            q.jobs.push_back(job);
+            q.idle > 0
+        };
+        if wake {
+            self.ready.notify_one();
+        }
+    }
+
+    fn run(&self, lane: usize) {
+        loop {
+            let job = {
+                let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+                loop {
+                    if let Some(job) = q.jobs.pop_front() {
+                        break job;
+                    }
+                    q.idle += 1;
+                    q = self.ready.wait(q).unwrap_or_else(|e| e.into_inner());
+                    q.idle -= 1;
+                }
+            };
+            self.started[lane].store(self.now(), Ordering::Relaxed);
+            // The job reports its own result; a panic drops its sender,
+            // which the waiting request reads as an internal error.
+            let _ = catch_unwind(AssertUnwindSafe(job));
+            self.started[lane].store(0, Ordering::Relaxed);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn a_lane_returns_the_work_and_its_error() {
+        assert_eq!(offload(|| Ok(6 * 7)).await.unwrap(), 42);
+        let e = offload::<(), _>(|| Err(ServiceError::Internal("x".into())))
+            .await
+            .unwrap_err();
+        assert!(matches!(e, ServiceError::Internal(m) if m == "x"));
+    }
+
+    #[tokio::test]
+    async fn a_panic_is_an_internal_error_and_the_lane_lives_on() {
+        let e = offload::<(), _>(|| panic!("boom")).await.unwrap_err();
+        assert!(matches!(e, ServiceError::Internal(_)));
+        // Every lane still serves: more jobs than lanes, all answered.
+        let n = Lanes::global().started.len();
+        for i in 0..4 * n {
+            assert_eq!(offload(move || Ok(i)).await.unwrap(), i);
+        }
+    }
+
+    #[test]
+    fn long_jobs_hold_their_lanes_and_new_work_goes_around_them() {
+        // A private pool of two lanes, both given a job that waits on a
+        // gate: once LONG_JOB has passed, both are held.
+        let lanes = Lanes::start(2);
+        let gate = Arc::new((Mutex::new(false), Condvar::new()));
+        for _ in 0..2 {
+            let gate = Arc::clone(&gate);
+            lanes.push(Box::new(move || {
+                let (open, cv) = &*gate;
+                let mut o = open.lock().unwrap();
+                while !*o {
+                    o = cv.wait(o).unwrap();
+                }
+            }));
+        }
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !lanes.all_held() {
+            assert!(Instant::now() < deadline, "the lanes never counted as held");
+            std::thread::sleep(LONG_JOB / 2);
+        }
+        *gate.0.lock().unwrap() = true;
+        gate.1.notify_all();
+        while lanes.started.iter().any(|s| s.load(Ordering::Relaxed) != 0) {
+            assert!(Instant::now() < deadline, "the lanes never finished");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(!lanes.all_held());
+    }
+}
