@@ -22,17 +22,21 @@
 //! times one 10k × 10k request each way (brute force there is 10⁸ pairs × 8
 //! instants).
 //!
-//! `cargo bench --bench correlation -- --small [repeat] [n]` repeats the
-//! small request of issue 18 (n = 5 targets, 2 nodes × 8 samples, the body
-//! of `correlation_payload 5 grid`) through the service function and prints
-//! the median and minimum of its compute, align, correlate and fuse times
-//! (and is the loop to run under `perf record`).
+//! `cargo bench --bench correlation -- --small [repeat] [n] [body.json]`
+//! repeats the small request of issue 18 (n = 5 targets, 2 nodes × 8
+//! samples, the body of `correlation_payload 5 grid`) through the service
+//! function and prints the median and minimum of its compute, align,
+//! correlate and fuse times (and is the loop to run under `perf record`);
+//! given the request's JSON body, it also times the REST adapter's work on
+//! the compute lane: parsing the body, the handler (conversion, service,
+//! answer) and encoding the answer.
 
 use std::{hint::black_box, time::Instant};
 
 use criterion::{BatchSize, Criterion, criterion_group};
 use radar_fusion::{
     algo::correlation::engine::{Decision, Pruning},
+    http::{correlation as http, problem::parse_json},
     service::correlation::{CorrelateInput, MethodInput, correlate},
     sim::benchmark::{
         METHODS, RealisticScene, correlate_scene, correlation_request, engine_config,
@@ -173,6 +177,36 @@ fn small_table(repeat: usize, n: usize) {
     }
 }
 
+/// Median and minimum of the REST adapter's parse, handler and encoding
+/// times for the JSON body in `path`.
+fn small_rest(repeat: usize, path: &str) {
+    let body = std::fs::read(path).expect("the body file reads");
+    let mut times: [Vec<f64>; 3] = Default::default();
+    let mut size = 0;
+    for _ in 0..repeat {
+        let t0 = Instant::now();
+        let req: http::CorrelateTracksRequest =
+            black_box(parse_json(black_box(&body)).expect("the body parses"));
+        let t1 = Instant::now();
+        let answer = black_box(http::correlate_on_lane(req).expect("the request is valid"));
+        let t2 = Instant::now();
+        let encoded = black_box(serde_json::to_vec(&answer).expect("the answer encodes"));
+        let t3 = Instant::now();
+        size = encoded.len();
+        for (k, (a, b)) in [(t0, t1), (t1, t2), (t2, t3)].into_iter().enumerate() {
+            times[k].push((b - a).as_secs_f64() * 1e6);
+        }
+    }
+    println!(
+        "REST on the lane, {} bytes in, {size} bytes out, µs: median (min)",
+        body.len()
+    );
+    for (name, t) in ["parse", "handler", "encode"].iter().zip(times.iter_mut()) {
+        t.sort_by(f64::total_cmp);
+        println!("  {name:>9}: {:8.2} ({:.2})", t[t.len() / 2], t[0]);
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--engine") {
@@ -220,6 +254,9 @@ fn main() {
             .unwrap_or(20_000);
         let n: usize = args.get(i + 2).and_then(|s| s.parse().ok()).unwrap_or(5);
         small_table(repeat, n);
+        if let Some(path) = args.get(i + 3) {
+            small_rest(repeat, path);
+        }
         return;
     }
     benches();

@@ -268,6 +268,155 @@ pub fn mul_t(a: &[f64], b: &[f64], n: usize) -> Sq {
     c
 }
 
+/// The lower Cholesky factor L (L Lᵀ = s) of an n×n row-major matrix, or
+/// `None` when it is not positive definite.
+pub fn cholesky(s: &[f64], n: usize) -> Option<Sq> {
+    let mut l = ZERO;
+    for i in 0..n {
+        for j in 0..=i {
+            let mut sum = s[i * n + j];
+            for k in 0..j {
+                sum -= l[i * n + k] * l[j * n + k];
+            }
+            if i == j {
+                if sum.is_nan() || sum <= 0.0 {
+                    return None;
+                }
+                l[i * n + i] = sum.sqrt();
+            } else {
+                l[i * n + j] = sum / l[j * n + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// y with L y = b, for a lower triangular L (n×n, row-major).
+pub fn solve_lower_vec(l: &[f64], b: &[f64], n: usize) -> [f64; MAX_DIM] {
+    let mut y = [0.0; MAX_DIM];
+    for i in 0..n {
+        let mut sum = b[i];
+        for k in 0..i {
+            sum -= l[i * n + k] * y[k];
+        }
+        y[i] = sum / l[i * n + i];
+    }
+    y
+}
+
+/// Y with L Y = B, for a lower triangular L (n×n, row-major; B n×n).
+pub fn solve_lower(l: &[f64], b: &[f64], n: usize) -> Sq {
+    let mut y = ZERO;
+    for c in 0..n {
+        for i in 0..n {
+            let mut sum = b[i * n + c];
+            for k in 0..i {
+                sum -= l[i * n + k] * y[k * n + c];
+            }
+            y[i * n + c] = sum / l[i * n + i];
+        }
+    }
+    y
+}
+
+/// The inverse of a symmetric positive definite n×n matrix (row-major) by
+/// its Cholesky factor, a⁻¹ = L⁻ᵀ L⁻¹ (exactly symmetric); `None` when it
+/// is not positive definite.
+pub fn inverse_spd(a: &[f64], n: usize) -> Option<Sq> {
+    let l = cholesky(a, n)?;
+    let mut eye = ZERO;
+    for i in 0..n {
+        eye[i * n + i] = 1.0;
+    }
+    let li = solve_lower(&l, &eye, n);
+    let mut inv = ZERO;
+    for i in 0..n {
+        for j in i..n {
+            let e: f64 = (j..n).map(|k| li[k * n + i] * li[k * n + j]).sum();
+            inv[i * n + j] = e;
+            inv[j * n + i] = e;
+        }
+    }
+    Some(inv)
+}
+
+/// aᵀ (n×n, row-major).
+pub fn transpose(a: &[f64], n: usize) -> Sq {
+    let mut t = ZERO;
+    for i in 0..n {
+        for j in 0..n {
+            t[j * n + i] = a[i * n + j];
+        }
+    }
+    t
+}
+
+/// The eigenvalues λ and eigenvectors V (columns, row-major) of a symmetric
+/// n×n matrix, a = V diag(λ) Vᵀ, by cyclic Jacobi rotations (Golub & Van
+/// Loan, algorithm 8.5.3; the rotation of Numerical Recipes §11.1): sweeps
+/// until every off-diagonal entry is below 1e-300 or negligible against its
+/// diagonal pair (at most 100 sweeps; Jacobi converges quadratically, a 6×6
+/// takes 5–7). Accurate to the rounding of the entries, for any spread of
+/// eigenvalues.
+pub fn symmetric_eigen(a: &[f64], n: usize) -> ([f64; MAX_DIM], Sq) {
+    let mut m = ZERO;
+    m[..n * n].copy_from_slice(&a[..n * n]);
+    let mut v = ZERO;
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    for _ in 0..100 {
+        let mut rotated = false;
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = m[p * n + q];
+                let (app, aqq) = (m[p * n + p], m[q * n + q]);
+                // Negligible: below the rounding of both diagonal entries.
+                if apq.abs() < 1e-300 || apq.abs() <= f64::EPSILON * 1e-3 * app.abs().min(aqq.abs())
+                {
+                    m[p * n + q] = 0.0;
+                    m[q * n + p] = 0.0;
+                    continue;
+                }
+                rotated = true;
+                let theta = (aqq - app) / (2.0 * apq);
+                let t = theta.signum() / (theta.abs() + theta.hypot(1.0));
+                let c = 1.0 / t.hypot(1.0);
+                let s = t * c;
+                for k in 0..n {
+                    let (mkp, mkq) = (m[k * n + p], m[k * n + q]);
+                    m[k * n + p] = c * mkp - s * mkq;
+                    m[k * n + q] = s * mkp + c * mkq;
+                }
+                for k in 0..n {
+                    let (mpk, mqk) = (m[p * n + k], m[q * n + k]);
+                    m[p * n + k] = c * mpk - s * mqk;
+                    m[q * n + k] = s * mpk + c * mqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[k * n + p], v[k * n + q]);
+                    v[k * n + p] = c * vkp - s * vkq;
+                    v[k * n + q] = s * vkp + c * vkq;
+                }
+                // The rotated pair exactly (NR eq. 11.1.14): the entry is
+                // zero by construction, not the rounding noise of the sums.
+                m[p * n + p] = app - t * apq;
+                m[q * n + q] = aqq + t * apq;
+                m[p * n + q] = 0.0;
+                m[q * n + p] = 0.0;
+            }
+        }
+        if !rotated {
+            break;
+        }
+    }
+    let mut lambda = [0.0; MAX_DIM];
+    for i in 0..n {
+        lambda[i] = m[i * n + i];
+    }
+    (lambda, v)
+}
+
 /// The largest eigenvalue of a symmetric positive semi-definite 2×2 or 3×3
 /// block, bounded from above by its trace (exact enough for gating bounds:
 /// the trace is never smaller than the largest eigenvalue).
@@ -278,6 +427,71 @@ pub fn trace_bound(s: &[f64], n: usize, idx: &[usize]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn jacobi_eigen_by_hand_and_reconstructs() {
+        // [[2, 1], [1, 2]]: eigenvalues 1 and 3, vectors (1, −1)/√2, (1, 1)/√2.
+        let (l, v) = symmetric_eigen(&[2.0, 1.0, 1.0, 2.0], 2);
+        let mut pairs = [(l[0], v[0], v[2]), (l[1], v[1], v[3])];
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert!((pairs[0].0 - 1.0).abs() < 1e-15 && (pairs[1].0 - 3.0).abs() < 1e-15);
+        let r = std::f64::consts::FRAC_1_SQRT_2;
+        assert!((pairs[0].1.abs() - r).abs() < 1e-15 && (pairs[0].1 + pairs[0].2).abs() < 1e-15);
+        assert!((pairs[1].1 - pairs[1].2).abs() < 1e-15);
+        // A 6×6 with eigenvalues spread over 12 decades: V diag(λ) Vᵀ gives
+        // it back, V is orthonormal, and the λ match nalgebra's.
+        let b = DMatrix::from_fn(6, 6, |i, j| {
+            ((i * 7 + j * 3) % 5) as f64 - 2.0 + (i == j) as u8 as f64
+        });
+        let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
+            1e-6, 1e-3, 1.0, 10.0, 1e3, 1e6,
+        ]));
+        let a = &b * d * b.transpose();
+        let (l, v) = symmetric_eigen(&row_major(&a), 6);
+        let vm = DMatrix::from_row_slice(6, 6, &v[..36]);
+        let back = &vm
+            * DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&l[..6]))
+            * vm.transpose();
+        assert!(
+            (&back - &a).abs().max() <= 1e-9 * a.abs().max(),
+            "{back} vs {a}"
+        );
+        assert!((vm.transpose() * &vm - DMatrix::identity(6, 6)).abs().max() < 1e-13);
+        let mut ours: Vec<f64> = l[..6].to_vec();
+        let mut theirs: Vec<f64> = a
+            .clone()
+            .symmetric_eigen()
+            .eigenvalues
+            .iter()
+            .copied()
+            .collect();
+        ours.sort_by(f64::total_cmp);
+        theirs.sort_by(f64::total_cmp);
+        for (o, t) in ours.iter().zip(&theirs) {
+            assert!(
+                (o - t).abs() <= 1e-9 * a.abs().max(),
+                "{ours:?} vs {theirs:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn triangular_solves_by_hand() {
+        // L = [[2, 0], [1, 3]]: L y = (4, 11) gives y = (2, 3); L Lᵀ = [[4, 2], [2, 10]].
+        let l = cholesky(&[4.0, 2.0, 2.0, 10.0], 2).unwrap();
+        assert_eq!(&l[..4], &[2.0, 0.0, 1.0, 3.0]);
+        assert_eq!(&solve_lower_vec(&l, &[4.0, 11.0], 2)[..2], &[2.0, 3.0]);
+        // L Y = [[4, 2], [11, 4]]: columns (2, 3) and (1, 1).
+        assert_eq!(
+            &solve_lower(&l, &[4.0, 2.0, 11.0, 4.0], 2)[..4],
+            &[2.0, 1.0, 3.0, 1.0]
+        );
+        assert_eq!(
+            &transpose(&[1.0, 2.0, 3.0, 4.0], 2)[..4],
+            &[1.0, 3.0, 2.0, 4.0]
+        );
+        assert!(cholesky(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+    }
 
     #[test]
     fn quadratic_form_by_hand() {

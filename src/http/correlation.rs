@@ -318,7 +318,7 @@ pub async fn correlate(
     body.compute(correlate_on_lane).await
 }
 
-fn correlate_on_lane(req: CorrelateTracksRequest) -> Result<CorrelateTracksResponse, Problem> {
+pub fn correlate_on_lane(req: CorrelateTracksRequest) -> Result<CorrelateTracksResponse, Problem> {
     let nodes = req
         .nodes
         .into_iter()

@@ -330,7 +330,10 @@ fn decode_block(cat: u8, block: &[u8], base: usize, out: &mut Decoded) {
             }
             Err((at, reason)) => {
                 out.errors.push(DecodeError {
-                    offset: base + at,
+                    // A record cut by the end of its block is reported at
+                    // the block's last byte, not one past it (which, for
+                    // the last block, would lie outside the data).
+                    offset: base + at.min(block.len() - 1),
                     reason: format!(
                         "{reason} (record at offset {}; the rest of its CAT {cat:03} block, \
                          {} bytes, is skipped)",
