@@ -44,6 +44,10 @@ use radar_fusion::{
     },
 };
 
+/// The server's allocator, so that allocation costs what it costs there.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn scene(n: usize, pruning: &str) -> CorrelateInput {
     correlation_request(n, pruning)
 }

@@ -56,6 +56,12 @@ async fn metrics_count_routes_and_grpc_methods() {
         text.contains("grpc_request_duration_seconds_bucket"),
         "{text}"
     );
+    // The requests ran on the compute lanes (none long enough to send
+    // work to the blocking pool).
+    assert!(
+        text.contains(r#"compute_jobs_total{lane="compute"}"#),
+        "{text}"
+    );
 }
 
 /// Every POST operation's example request (what "Try it out" sends) works.
