@@ -25,7 +25,7 @@ use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::algo::{
     AlgoError, assignment,
-    geo::{LocalFrame, ecef_to_geodetic},
+    geo::{LocalFrame, ecef_to_vertical},
     polar::{PolarMeasurement, plot_to_local},
 };
 pub use alpha_beta::Filter;
@@ -978,7 +978,7 @@ fn fused_track(
         let (x3, p3) = fuse_independent(&all)?;
         if method != Method::Mapping {
             let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
-            let (_, _, h) = ecef_to_geodetic(&centre.ellipsoid(), ecef)?;
+            let h = ecef_to_vertical(&centre.ellipsoid(), ecef)?.h;
             heights.push((t, h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)));
         }
         fused3.push(Some((x3, p3)));
