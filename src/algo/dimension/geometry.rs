@@ -344,6 +344,31 @@ pub fn from_direction(
     Ok((u * distance).into())
 }
 
+/// The Jacobian of [`from_direction`] followed by `centre.ecef_to_enu`
+/// with respect to (d₁, d₂, distance): with a = d₁/R₀, b = d₂/R₀ and
+/// c = √(1 − a² − b²) the point is r (a, b, c) in the centre's axes, less
+/// the centre itself, so
+/// J = [[r/R₀, 0, a], [0, r/R₀, b], [−r a/(c R₀), −r b/(c R₀), c]].
+pub fn from_direction_jacobian(d: [f64; 2], distance: f64) -> Result<Matrix3<f64>, AlgoError> {
+    let (a, b) = (d[0] / DIRECTION_RADIUS_M, d[1] / DIRECTION_RADIUS_M);
+    let c2 = 1.0 - a * a - b * b;
+    if c2.is_nan() || c2 <= 0.0 {
+        return Err(AlgoError::DegenerateGeometry {
+            what: "direction",
+            reason: "not a unit vector",
+        });
+    }
+    let c = c2.sqrt();
+    let k = distance / DIRECTION_RADIUS_M;
+    #[rustfmt::skip]
+    let j = Matrix3::new(
+        k, 0.0, a,
+        0.0, k, b,
+        -k * a / c, -k * b / c, c,
+    );
+    Ok(j)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -476,6 +501,42 @@ mod tests {
             assert!((z[0] - fp[0]).abs() < 1e-6, "{k}: {} {}", z[0], fp[0]);
             assert!((z[1] - fp[1]).abs() < 1e-6, "{k}: {} {}", z[1], fp[1]);
         }
+    }
+
+    #[test]
+    fn from_direction_jacobian_matches_central_differences() {
+        let ell = Ellipsoid::WGS84;
+        let centre = LocalFrame::new(ell, 30f64.to_radians(), 120f64.to_radians(), 0.0).unwrap();
+        for (e, n, u) in [
+            (0.0, 0.0, 7000.0),
+            (150_000.0, -90_000.0, 3000.0),
+            (-220_000.0, 40_000.0, 11_000.0),
+        ] {
+            let ecef = centre.enu_to_ecef([e, n, u]).unwrap();
+            let d = direction(&centre, ecef).unwrap();
+            let r = Vector3::from(ecef).norm();
+            let jac = from_direction_jacobian(d, r).unwrap();
+            let at = |y: [f64; 3]| {
+                centre
+                    .ecef_to_enu(from_direction(&centre, [y[0], y[1]], y[2]).unwrap())
+                    .unwrap()
+            };
+            for k in 0..3 {
+                let (mut hi, mut lo) = ([d[0], d[1], r], [d[0], d[1], r]);
+                hi[k] += 10.0;
+                lo[k] -= 10.0;
+                let (a, b) = (at(hi), at(lo));
+                for i in 0..3 {
+                    let num = (a[i] - b[i]) / 20.0;
+                    assert!(
+                        (jac[(i, k)] - num).abs() < 1e-7,
+                        "∂{i}/∂{k}: {} vs {num}",
+                        jac[(i, k)]
+                    );
+                }
+            }
+        }
+        assert!(from_direction_jacobian([DIRECTION_RADIUS_M, 1.0], 7e6).is_err());
     }
 
     #[test]

@@ -822,25 +822,6 @@ fn correlate_pair(
     })
 }
 
-/// Central-difference Jacobian of `f` at `x` with steps `h`.
-fn jacobian(
-    f: impl Fn([f64; 3]) -> Result<[f64; 3], AlgoError>,
-    x: [f64; 3],
-    h: [f64; 3],
-) -> Result<Matrix3<f64>, AlgoError> {
-    let mut jac = Matrix3::zeros();
-    for k in 0..3 {
-        let (mut hi, mut lo) = (x, x);
-        hi[k] += h[k];
-        lo[k] -= h[k];
-        let (a, b) = (f(hi)?, f(lo)?);
-        for i in 0..3 {
-            jac[(i, k)] = (a[i] - b[i]) / (2.0 * h[k]);
-        }
-    }
-    Ok(jac)
-}
-
 /// Independent estimates fused by Bar-Shalom–Campo with zero cross-covariance
 /// (the information-weighted mean): x = x₁ + P₁ (P₁ + P₂)⁻¹ (x₂ − x₁),
 /// P = P₁ − P₁ (P₁ + P₂)⁻¹ P₁, one member after the other.
@@ -867,13 +848,12 @@ fn fuse_into(
     Ok((x, p))
 }
 
-/// Whether every value is finite, without a branch per value: v · 0 is ±0
-/// for a finite v and NaN for an infinite or NaN one, and a sum of them is
-/// NaN exactly when one is (the same answer as `iter().all(is_finite)`, in
-/// a loop the compiler vectorises).
+/// Whether every value is finite, without a branch per value: an OR of
+/// `!is_finite` over the values (an integer test of the exponent bits,
+/// which the compiler vectorises; a sum of `x · 0`, as this was, is a chain
+/// of dependent floating-point additions that it may not reorder).
 fn all_finite(v: &[f64]) -> bool {
-    let s = v.iter().fold(0.0, |acc, &x| acc + x * 0.0);
-    !s.is_nan()
+    !v.iter().fold(false, |bad, x| bad | !x.is_finite())
 }
 
 /// Position and position covariance of a member's state at a system-track
@@ -1131,11 +1111,8 @@ fn split_track(
             sum_r += ecef.norm() / var;
         }
         let r = sum_r / info_r;
-        let pos = |y: [f64; 3]| -> Result<[f64; 3], AlgoError> {
-            centre.ecef_to_enu(geometry::from_direction(centre, [y[0], y[1]], y[2])?)
-        };
-        let p0 = pos([d[0], d[1], r])?;
-        let jac = jacobian(pos, [d[0], d[1], r], [1.0; 3])?;
+        let p0 = centre.ecef_to_enu(geometry::from_direction(centre, [d[0], d[1]], r)?)?;
+        let jac = geometry::from_direction_jacobian([d[0], d[1]], r)?;
         let mut cy = Matrix3::zeros();
         cy.fixed_view_mut::<2, 2>(0, 0).copy_from(&cd);
         cy[(2, 2)] = 1.0 / info_r;
