@@ -1,8 +1,9 @@
-//! The 6 × 6 operations of the system-track loop and the small Cholesky
-//! solves of the pair tests, written out for the structure of their
-//! operands.
+//! The 6 × 6 operations of the system-track loop and the small solves of
+//! the pair tests and the local filters, written out for the structure of
+//! their operands.
 //!
-//! [`cholesky_solve`], [`transition_congruence`], [`interleaved_congruence`]
+//! [`cholesky_solve`] (the local filters' residual tests),
+//! [`transition_congruence`], [`interleaved_congruence`]
 //! and [`interleaved_apply`] keep the order of operations of the nalgebra
 //! calls they replace, so they give the same bits (the tests compare them
 //! with nalgebra): nalgebra's fixed-size products sum `Σ_k a[i,k] b[k,j]`
@@ -12,13 +13,14 @@
 //! interleaved transform, the constant-velocity transition) are left out:
 //! adding an exact zero does not change a sum, so only the sign of a zero
 //! result could differ. [`fuse_step`] computes the same fusion as its
-//! nalgebra form by fewer operations (one forward solve, reciprocals), so
-//! it agrees with it to rounding, not to the bit.
+//! nalgebra form by fewer operations (one forward solve, reciprocals), and
+//! [`quadratic_form`] the pair test's statistic without square roots, so
+//! they agree with their nalgebra forms to rounding, not to the bit.
 
 // The loops index rows and columns as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector3, Vector6};
 
 /// Column-major storage of a 6 × 6 matrix: `m[c][r]` is row r, column c.
 type Cols = [[f64; 6]; 6];
@@ -159,10 +161,8 @@ fn fuse_step_portable(
 /// the backward one as dot products from zero, each in nalgebra's order.
 /// nalgebra's generic code walks dynamic views for these few numbers (a
 /// large share of a pair test); this is the same arithmetic on an array.
-/// A pivot of exactly 1 (the pair test's 2D case pads its 2 × 2 covariance
-/// with a unit third row and column) skips its square root and its
-/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same, and
-/// the two-dimensional test does not wait on them.
+/// A pivot of exactly 1 (a padded block) skips its square root and its
+/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same.
 /// `None` when `a` is not positive definite (a zero, negative or NaN pivot).
 pub fn cholesky_solve<const M: usize>(
     a: &SMatrix<f64, M, M>,
@@ -211,6 +211,45 @@ pub fn cholesky_solve<const M: usize>(
         };
     }
     Some(SVector::from_data(nalgebra::ArrayStorage([x])))
+}
+
+/// The pair test's statistic d' C⁻¹ d for the symmetric `c`'s top-left
+/// `dim` × `dim` block (2 or 3; its lower triangle read) without square
+/// roots: for 2 the closed form (c₁₁ d₀² − 2 c₁₀ d₀ d₁ + c₀₀ d₁²) / (c₀₀ c₁₁ − c₁₀²),
+/// for 3 the LDL' factorisation, d' C⁻¹ d = Σ yᵢ² / Dᵢ with L y = d. The same
+/// number as the Cholesky solve's d · (C⁻¹ d) to rounding. `None` when the
+/// block is not positive definite (a pivot, or for 2 the determinant, not
+/// positive, or NaN).
+pub fn quadratic_form(c: &Matrix3<f64>, d: &Vector3<f64>, dim: usize) -> Option<f64> {
+    let positive = |v: f64| v > 0.0; // false for NaN
+    if dim == 2 {
+        let (c00, c10, c11) = (c[(0, 0)], c[(1, 0)], c[(1, 1)]);
+        let det = c00 * c11 - c10 * c10;
+        if !(positive(c00) && positive(det)) {
+            return None;
+        }
+        let num = c11 * d[0] * d[0] - 2.0 * c10 * d[0] * d[1] + c00 * d[1] * d[1];
+        return Some(num / det);
+    }
+    let d0 = c[(0, 0)];
+    if !positive(d0) {
+        return None;
+    }
+    let r0 = 1.0 / d0;
+    let (l10, l20) = (c[(1, 0)] * r0, c[(2, 0)] * r0);
+    let d1 = c[(1, 1)] - l10 * c[(1, 0)];
+    if !positive(d1) {
+        return None;
+    }
+    let r1 = 1.0 / d1;
+    let l21 = (c[(2, 1)] - l20 * c[(1, 0)]) * r1;
+    let d2 = c[(2, 2)] - l20 * c[(2, 0)] - l21 * l21 * d1;
+    if !positive(d2) {
+        return None;
+    }
+    let y1 = d[1] - l10 * d[0];
+    let y2 = d[2] - l20 * d[0] - l21 * y1;
+    Some(d[0] * d[0] * r0 + y1 * y1 * r1 + y2 * y2 / d2)
 }
 
 /// `F P F'` for the interleaved constant-velocity transition F (identity
@@ -388,6 +427,48 @@ mod tests {
             let got = cholesky_solve(&a, &b).unwrap();
             assert!(same_bits(want.as_slice(), got.as_slice()));
         }
+    }
+
+    #[test]
+    fn quadratic_form_agrees_with_the_cholesky_solve() {
+        let mut g = Lcg(5);
+        let mut worst: f64 = 0.0;
+        for case in 0..600 {
+            let scale: f64 = [1.0, 1e3, 1e6][case % 3];
+            // s (G G' + I): a condition number of tens, as the pair tests'
+            // sums of covariances (the two forms differ by the rounding the
+            // condition number amplifies).
+            let h = Matrix3::from_fn(|_, _| g.next() * 2.0 * scale.sqrt());
+            let c = h * h.transpose() + Matrix3::identity() * scale;
+            let d = nalgebra::Vector3::new(g.next(), g.next(), g.next()) * scale.sqrt();
+            for dim in [2, 3] {
+                let mut a = c;
+                let mut dd = d;
+                if dim == 2 {
+                    // The pair test's padding: a unit third pivot, d₂ = 0.
+                    for i in 0..2 {
+                        a[(2, i)] = 0.0;
+                        a[(i, 2)] = 0.0;
+                    }
+                    a[(2, 2)] = 1.0;
+                    dd[2] = 0.0;
+                }
+                let want = dd.dot(&cholesky_solve(&a, &dd).unwrap());
+                let got = quadratic_form(&a, &dd, dim).unwrap();
+                worst = worst.max((got - want).abs() / want);
+            }
+        }
+        assert!(worst < 1e-12, "{worst}");
+        for dim in [2, 3] {
+            let bad = -Matrix3::identity();
+            assert!(quadratic_form(&bad, &nalgebra::Vector3::zeros(), dim).is_none());
+            let nan = Matrix3::identity() * f64::NAN;
+            assert!(quadratic_form(&nan, &nalgebra::Vector3::zeros(), dim).is_none());
+        }
+        // Singular: the determinant, then the last pivot, is zero.
+        let sing = Matrix3::new(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0);
+        assert!(quadratic_form(&sing, &nalgebra::Vector3::zeros(), 2).is_none());
+        assert!(quadratic_form(&sing, &nalgebra::Vector3::zeros(), 3).is_none());
     }
 
     #[test]

@@ -801,14 +801,11 @@ fn correlate_pair(
         }
         let (zb, cb) = op[k].at(dt);
         let d = sp.z - zb;
-        let mut cov = sp.c0 + cb;
-        if dim == 2 {
-            cov[(2, 2)] = 1.0;
-        }
-        let solved = kernels::cholesky_solve(&cov, &d).ok_or(AlgoError::NotPositiveDefinite {
-            what: "pair difference covariance",
-        })?;
-        let stat = d.dot(&solved);
+        let cov = sp.c0 + cb;
+        let stat =
+            kernels::quadratic_form(&cov, &d, dim).ok_or(AlgoError::NotPositiveDefinite {
+                what: "pair difference covariance",
+            })?;
         let hit = (0..dim).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
         state.step(cfg.knn, hit, stat <= threshold);
         sum += stat;
