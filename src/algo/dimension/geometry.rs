@@ -191,19 +191,18 @@ impl Cone {
             if range * step.abs().powi(3) <= Self::HALLEY_ACCEPT_M {
                 // The normal at the stepped point, to first order in the
                 // move (the Hessian of h times it).
-                let (to, _, _) = cone(next);
-                let mv = to - local;
+                let at = cone(next);
+                let mv = at.0 - local;
                 let normal = normal + north * (north.dot(&mv) * km) + east * (east.dot(&mv) * kn);
-                done = Some((next, normal));
+                done = Some((at, normal));
                 break;
             }
             el = next;
         }
-        let (el, normal) = done.ok_or(AlgoError::DegenerateGeometry {
+        let ((local, d_el, (se, ce)), normal) = done.ok_or(AlgoError::DegenerateGeometry {
             what: "2D plot",
             reason: "the elevation for the assumed height did not converge",
         })?;
-        let (local, d_el, (se, ce)) = cone(el);
         let ecef = radar.enu_to_ecef(local.into())?;
         let d_range = Vector3::new(ce * sa, ce * ca, se);
         let d_az = Vector3::new(range * ce * ca, -range * ce * sa, 0.0);
