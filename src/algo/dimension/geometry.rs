@@ -436,7 +436,7 @@ mod tests {
             let cone = Cone::new(&radar, &centre);
             for range in [2_000.0, 15_000.0, 60_000.0, 150_000.0, 240_000.0, 300_000.0] {
                 for k in 0..12 {
-                    let az = f64::from(k) * 0.5236 + 0.1;
+                    let az = f64::from(k) * 0.52 + 0.1;
                     for h in [0.0f64, 1_000.0, 5_000.0, 9_000.0, 15_000.0] {
                         let h = h.clamp(hs - 0.9 * range, hs + 0.9 * range);
                         let Ok((pos, _)) = cone.place(range, az, h) else {
