@@ -159,8 +159,8 @@ fn fuse_step_portable(
 /// `a.cholesky()?.solve(b)`: the factor column by column in axpy form (only
 /// the lower triangle of `a` is read), the forward solve in axpy form and
 /// the backward one as dot products from zero, each in nalgebra's order.
-/// nalgebra's generic code walks dynamic views for these few numbers (a
-/// large share of a pair test); this is the same arithmetic on an array.
+/// nalgebra's generic code walks dynamic views for these few numbers (the
+/// local filters' residual tests); this is the same arithmetic on an array.
 /// A pivot of exactly 1 (a padded block) skips its square root and its
 /// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same.
 /// `None` when `a` is not positive definite (a zero, negative or NaN pivot).
@@ -415,7 +415,7 @@ mod tests {
         check_cholesky_solve::<1>(&mut g);
         check_cholesky_solve::<2>(&mut g);
         check_cholesky_solve::<3>(&mut g);
-        // The pair test's 2D case: a 2 × 2 block, exact zeros and a 1 beside it.
+        // A padded 2 × 2 block: exact zeros and a 1 beside it.
         for _ in 0..200 {
             let h = nalgebra::Matrix2::from_fn(|_, _| g.next() * 1e3);
             let c = h * h.transpose() + nalgebra::Matrix2::identity();
