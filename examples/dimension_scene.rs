@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! cargo run --release --example dimension_scene -- \
-//!     [--aircraft 36] [--duration 300] [--seeds 1,2,3] [--repeat 15]
+//!     [--aircraft 36] [--duration 300] [--seeds 1,2,3] [--repeat 15] \
+//!     [--dump FILE] [--dump-kinds FILE]
 //! ```
 //!
 //! The scene is `sim::experiments::seed003_dimension::bench_scene`: two 3D
@@ -24,7 +25,9 @@
 //!   a digest of the bits of every number of the outcome (pair statistics,
 //!   fused samples and covariances, altitude sources), to check that it
 //!   leaves the estimates as they were; `--dump FILE` writes those numbers
-//!   (one a line) for a comparison when the bits differ.
+//!   (one a line) for a comparison when the bits differ, and
+//!   `--dump-kinds FILE` what each line of that dump is (`method:field`,
+//!   for `checks/compare_dumps.py`).
 
 use std::time::Instant;
 
@@ -78,23 +81,36 @@ fn fnv(bytes: impl Iterator<Item = u8>) -> u64 {
 }
 
 /// Every number of the outcomes in order: per pair its mean statistic, per
-/// system-track sample t, x, p and the altitude source (0, 1, 2).
-fn numbers(outs: &[dimension::Outcome]) -> Vec<f64> {
-    let mut v = Vec::new();
-    for o in outs {
-        v.extend(o.pairs.iter().map(|p| p.mean_statistic));
+/// system-track sample t, x, p (column by column) and the altitude source
+/// (0, 1, 2); with each, what it is (`method:stat`, `:t`, `:x3`, `:p24`
+/// for row 2, column 4, `:alt`).
+fn numbers(outs: &[dimension::Outcome]) -> (Vec<f64>, Vec<String>) {
+    let (mut v, mut kinds) = (Vec::new(), Vec::new());
+    for (o, m) in outs.iter().zip(METHODS) {
+        let mut push = |x: f64, kind: String| {
+            v.push(x);
+            kinds.push(format!("{m:?}:{kind}"));
+        };
+        for p in &o.pairs {
+            push(p.mean_statistic, "stat".into());
+        }
         for s in o.system_tracks.iter().flat_map(|s| &s.samples) {
-            v.push(s.t);
-            v.extend(s.x.iter());
-            v.extend(s.p.iter());
-            v.push(match s.altitude {
+            push(s.t, "t".into());
+            for (i, x) in s.x.iter().enumerate() {
+                push(*x, format!("x{i}"));
+            }
+            for (k, x) in s.p.iter().enumerate() {
+                push(*x, format!("p{}{}", k % 6, k / 6));
+            }
+            let alt = match s.altitude {
                 dimension::AltitudeSource::Measured => 0.0,
                 dimension::AltitudeSource::Lifted => 1.0,
                 dimension::AltitudeSource::Assumed => 2.0,
-            });
+            };
+            push(alt, "alt".into());
         }
     }
-    v
+    (v, kinds)
 }
 
 /// (multi-radar aircraft, those in exactly one pure system track holding all
@@ -125,6 +141,7 @@ fn main() -> anyhow::Result<()> {
     let mut seeds = vec![1u64, 2, 3];
     let mut repeat = 15usize;
     let mut dump: Option<String> = None;
+    let mut dump_kinds: Option<String> = None;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let value = it.next().context("a flag needs a value")?;
@@ -134,11 +151,12 @@ fn main() -> anyhow::Result<()> {
             "--repeat" => repeat = value.parse::<usize>()?.max(1),
             "--seeds" => seeds = value.split(',').map(str::parse).collect::<Result<_, _>>()?,
             "--dump" => dump = Some(value),
+            "--dump-kinds" => dump_kinds = Some(value),
             other => bail!("unknown flag {other}"),
         }
     }
     let chi2_99 = chi2_threshold(3, 0.01)?;
-    let mut dumped = String::new();
+    let (mut dumped, mut kinds_dumped) = (String::new(), String::new());
     for seed in seeds {
         let mut rng = run_rng(seed, 0);
         let scene = bench_scene(aircraft, duration, &mut rng)?;
@@ -177,7 +195,7 @@ fn main() -> anyhow::Result<()> {
                 times.push(start.elapsed().as_secs_f64() * 1e3);
             }
             times.sort_by(f64::total_cmp);
-            let values = numbers(&outs);
+            let (values, kinds) = numbers(&outs);
             println!(
                 "  {fname:<10} compute (3 methods) median {:.2} ms (min {:.2}, max {:.2}), decisions {:016x}, estimates {:016x}",
                 times[times.len() / 2],
@@ -186,10 +204,18 @@ fn main() -> anyhow::Result<()> {
                 digest(&outs),
                 fnv(values.iter().flat_map(|v| v.to_bits().to_le_bytes()))
             );
+            let header = format!("# seed {seed} {fname} {}\n", values.len());
             if dump.is_some() {
-                dumped.push_str(&format!("# seed {seed} {fname} {}\n", values.len()));
+                dumped.push_str(&header);
                 for v in &values {
                     dumped.push_str(&format!("{v:e}\n"));
+                }
+            }
+            if dump_kinds.is_some() {
+                kinds_dumped.push_str(&header);
+                for k in &kinds {
+                    kinds_dumped.push_str(k);
+                    kinds_dumped.push('\n');
                 }
             }
             for (m, o) in METHODS.iter().zip(&outs) {
@@ -213,8 +239,10 @@ fn main() -> anyhow::Result<()> {
             }
         }
     }
-    if let Some(path) = dump {
-        std::fs::write(&path, dumped).with_context(|| format!("writing {path}"))?;
+    for (path, text) in [(dump, dumped), (dump_kinds, kinds_dumped)] {
+        if let Some(path) = path {
+            std::fs::write(&path, text).with_context(|| format!("writing {path}"))?;
+        }
     }
     Ok(())
 }

@@ -111,6 +111,90 @@ pub fn geodetic_to_ecef(
 /// Fails for points within 2 a e² of the centre (about 85 km for WGS 84),
 /// where the closed form is not valid.
 pub fn ecef_to_geodetic(ell: &Ellipsoid, ecef: [f64; 3]) -> Result<(f64, f64, f64), AlgoError> {
+    let Vermeille { k, d, .. } = vermeille(ell, ecef)?;
+    let [x, y, z] = ecef;
+    let dz = d.hypot(z);
+    let lat = 2.0 * z.atan2(d + dz);
+    let h = (k + ell.e2() - 1.0) / k * dz;
+    let lon = y.atan2(x);
+    if lat.is_finite() && h.is_finite() {
+        Ok((lat, lon, h))
+    } else {
+        Err(AlgoError::NonFinite {
+            what: "geodetic position",
+        })
+    }
+}
+
+/// The geodetic height of an ECEF point and the sines and cosines of its
+/// latitude and longitude, without the angles: what a Newton step on the
+/// height or a local frame at the point needs (the unit normal is
+/// `(cos φ cos λ, cos φ sin λ, sin φ)`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vertical {
+    pub h: f64,
+    pub sin_lat: f64,
+    pub cos_lat: f64,
+    pub sin_lon: f64,
+    pub cos_lon: f64,
+}
+
+impl Vertical {
+    /// The outward unit normal of the ellipsoid below the point (ECEF), the
+    /// gradient of the geodetic height.
+    pub fn normal(&self) -> Vector3<f64> {
+        Vector3::new(
+            self.cos_lat * self.cos_lon,
+            self.cos_lat * self.sin_lon,
+            self.sin_lat,
+        )
+    }
+}
+
+/// [`ecef_to_geodetic`] without the angles, by the same closed form: in
+/// Vermeille's notation the latitude is atan2(z, D) and the longitude
+/// atan2(y, x), so their sines and cosines are z/√(D² + z²), D/√(D² + z²),
+/// y/√(x² + y²) and x/√(x² + y²), and h = (k + e² − 1)/k · √(D² + z²). No
+/// atan2, no sine or cosine and a plain square root for `hypot`: the height
+/// agrees with [`ecef_to_geodetic`]'s to rounding (about 1e-9 m), the sines
+/// and cosines with those of its angles to a few ulps. On the polar axis
+/// the longitude is 0, as there.
+pub fn ecef_to_vertical(ell: &Ellipsoid, ecef: [f64; 3]) -> Result<Vertical, AlgoError> {
+    let Vermeille { k, d, rho } = vermeille(ell, ecef)?;
+    let [x, y, z] = ecef;
+    let dz = (d * d + z * z).sqrt();
+    let h = (k + ell.e2() - 1.0) / k * dz;
+    let (sin_lon, cos_lon) = if rho > 0.0 {
+        (y / rho, x / rho)
+    } else {
+        (0.0, 1.0)
+    };
+    let v = Vertical {
+        h,
+        sin_lat: z / dz,
+        cos_lat: d / dz,
+        sin_lon,
+        cos_lon,
+    };
+    if h.is_finite() && v.sin_lat.is_finite() && v.cos_lat.is_finite() {
+        Ok(v)
+    } else {
+        Err(AlgoError::NonFinite {
+            what: "geodetic position",
+        })
+    }
+}
+
+/// Vermeille's k, D = k ρ / (k + e²) and ρ = √(x² + y²) for an ECEF point.
+struct Vermeille {
+    k: f64,
+    d: f64,
+    rho: f64,
+}
+
+/// The steps of Vermeille's (2002) closed form that the latitude and the
+/// height share, for [`ecef_to_geodetic`] and [`ecef_to_vertical`].
+fn vermeille(ell: &Ellipsoid, ecef: [f64; 3]) -> Result<Vermeille, AlgoError> {
     finite_slice("ecef", &ecef)?;
     let [x, y, z] = ecef;
     let a = ell.a;
@@ -134,17 +218,7 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, ecef: [f64; 3]) -> Result<(f64, f64, f6
     let w = e2 * (u + v - q) / (2.0 * v);
     let k = (u + v + w * w).sqrt() - w;
     let d = k * rho / (k + e2);
-    let dz = d.hypot(z);
-    let lat = 2.0 * z.atan2(d + dz);
-    let h = (k + e2 - 1.0) / k * dz;
-    let lon = y.atan2(x);
-    if lat.is_finite() && h.is_finite() {
-        Ok((lat, lon, h))
-    } else {
-        Err(AlgoError::NonFinite {
-            what: "geodetic position",
-        })
-    }
+    Ok(Vermeille { k, d, rho })
 }
 
 /// A local east-north-up frame about an origin on an ellipsoid.
@@ -285,6 +359,37 @@ mod tests {
 
     fn close3(a: [f64; 3], b: [f64; 3], tol: f64) -> bool {
         a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= tol)
+    }
+
+    #[test]
+    fn vertical_agrees_with_the_geodetic_angles() {
+        // ecef_to_vertical's sines and cosines are those of
+        // ecef_to_geodetic's angles to a few ulps, its height the same to
+        // rounding (a square root for hypot); the polar axis has longitude 0.
+        for (lat, lon, h) in [
+            (30.0, 120.0, 7000.0),
+            (-45.0, -170.0, 0.0),
+            (0.0, 0.0, 12_000.0),
+            (89.9, 10.0, -50.0),
+            (31.2, 121.4, 150_000.0),
+            (90.0, 0.0, 1000.0),
+        ] {
+            let p = geodetic_to_ecef(&WGS84, lat * DEG, lon * DEG, h).unwrap();
+            let (la, lo, hh) = ecef_to_geodetic(&WGS84, p).unwrap();
+            let v = ecef_to_vertical(&WGS84, p).unwrap();
+            assert!((v.h - hh).abs() < 1e-8, "{lat} {lon}: {} {hh}", v.h);
+            for (got, want) in [
+                (v.sin_lat, la.sin()),
+                (v.cos_lat, la.cos()),
+                (v.sin_lon, lo.sin()),
+                (v.cos_lon, lo.cos()),
+            ] {
+                assert!((got - want).abs() < 1e-15, "{lat} {lon}: {got} {want}");
+            }
+            assert!((v.normal().norm() - 1.0).abs() < 1e-15);
+        }
+        assert!(ecef_to_vertical(&WGS84, [1.0, 2.0, 3.0]).is_err());
+        assert!(ecef_to_vertical(&WGS84, [f64::NAN, 0.0, 7e6]).is_err());
     }
 
     #[test]

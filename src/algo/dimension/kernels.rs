@@ -1,20 +1,26 @@
-//! The 6 × 6 operations of the system-track loop, written out for the
-//! structure of their operands and with the order of operations of the
-//! nalgebra calls they replace, so that they give the same bits (the tests
-//! compare them with nalgebra).
+//! The 6 × 6 operations of the system-track loop and the small solves of
+//! the pair tests and the local filters, written out for the structure of
+//! their operands.
 //!
-//! nalgebra's fixed-size products sum `Σ_k a[i,k] b[k,j]` from k = 0 up,
-//! its Cholesky factor is the column-by-column axpy form and its triangular
-//! solves are column by column (forward: axpy; backward: a dot product from
-//! zero). Here the 6 right-hand sides of a solve go through one pass, and
-//! terms that are zero by structure (the interleaved transform, the
-//! constant-velocity transition) are left out: adding an exact zero does not
-//! change a sum, so only the sign of a zero result could differ.
+//! [`cholesky_solve`] (the local filters' residual tests),
+//! [`transition_congruence`], [`interleaved_congruence`]
+//! and [`interleaved_apply`] keep the order of operations of the nalgebra
+//! calls they replace, so they give the same bits (the tests compare them
+//! with nalgebra): nalgebra's fixed-size products sum `Σ_k a[i,k] b[k,j]`
+//! from k = 0 up, its Cholesky factor is the column-by-column axpy form and
+//! its triangular solves are column by column (forward: axpy; backward: a
+//! dot product from zero). Terms that are zero by structure (the
+//! interleaved transform, the constant-velocity transition) are left out:
+//! adding an exact zero does not change a sum, so only the sign of a zero
+//! result could differ. [`fuse_step`] computes the same fusion as its
+//! nalgebra form by fewer operations (one forward solve, reciprocals), and
+//! [`quadratic_form`] the pair test's statistic without square roots, so
+//! they agree with their nalgebra forms to rounding, not to the bit.
 
 // The loops index rows and columns as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, SVector, Vector3, Vector6};
 
 /// Column-major storage of a 6 × 6 matrix: `m[c][r]` is row r, column c.
 type Cols = [[f64; 6]; 6];
@@ -27,19 +33,27 @@ fn matrix(c: Cols) -> Matrix6<f64> {
     Matrix6::from_data(nalgebra::ArrayStorage(c))
 }
 
-/// One step of the Bar-Shalom–Campo fusion with zero cross-covariance, as
-/// `mod::fuse_into` wrote it with nalgebra:
+/// One step of the Bar-Shalom–Campo fusion with zero cross-covariance
+/// (Bar-Shalom & Campo 1986 with P₁₂ = 0, the information-weighted mean):
 /// ```text
-/// chol = (p + q).cholesky();  gain = chol.solve(p)';
-/// x += gain (y − x);  p −= gain p;  p = (p + p') / 2
+/// x ← x + P (P + Q)⁻¹ (y − x),   P ← P − P (P + Q)⁻¹ P
 /// ```
-/// `None` when p + q is not positive definite.
+/// by the Cholesky factor L L' = P + Q (its lower triangle read) and one
+/// forward solve W = L⁻¹ P, g = L⁻¹ (y − x): P (P + Q)⁻¹ P = W'W and
+/// P (P + Q)⁻¹ (y − x) = W'g, so no backward solve, no gain matrix, and
+/// the update P − W'W comes out symmetric (the symmetric part of P minus
+/// W'W, whose (i, j) and (j, i) are the same sum). Each pivot's reciprocal
+/// is taken once and multiplied. `None` when P + Q is not positive
+/// definite (a zero, negative or NaN pivot, as nalgebra's Cholesky).
 ///
-/// On x86-64 with AVX2 the same code is compiled for 4-wide registers
-/// (the rows of 6 take one 4-wide and one 2-wide operation instead of three
-/// 2-wide ones). Each operation is the same IEEE operation either way (Rust
-/// never contracts a product and a sum into a fused multiply-add), so the
-/// bits are too.
+/// This is the nalgebra form `gain = (P + Q).cholesky().solve(P)'`,
+/// `x + gain (y − x)`, `(P − gain P)` symmetrised, up to rounding: about a
+/// third of its operations and 6 divisions instead of 87, so the results
+/// differ from it in the last bits (the test bounds the difference).
+///
+/// On x86-64 with AVX2 the same code is compiled for 4-wide registers. Each
+/// operation is the same IEEE operation either way (Rust never contracts a
+/// product and a sum into a fused multiply-add), so the bits are too.
 pub fn fuse_step(
     x: &Vector6<f64>,
     p: &Matrix6<f64>,
@@ -76,87 +90,66 @@ fn fuse_step_portable(
 ) -> Option<(Vector6<f64>, Matrix6<f64>)> {
     let pc = cols(p);
     let qc = cols(q);
-    // The Cholesky factor of p + q, in the lower triangle of `l` (l[c][r]).
+    // The Cholesky factor of P + Q, column by column in the lower triangle
+    // of `l` (l[c][r]), with the reciprocals of its diagonal.
     let mut l: Cols = [[0.0; 6]; 6];
     for c in 0..6 {
-        for r in 0..6 {
+        for r in c..6 {
             l[c][r] = pc[c][r] + qc[c][r];
         }
     }
+    let mut inv = [0.0f64; 6];
     for j in 0..6 {
         for k in 0..j {
-            let factor = -l[k][j];
+            let factor = l[k][j];
             for r in j..6 {
-                l[j][r] += factor * l[k][r];
+                l[j][r] -= factor * l[k][r];
             }
         }
         let diag = l[j][j];
-        // nalgebra refuses a zero, a negative or a NaN pivot.
         if diag.is_nan() || diag <= 0.0 {
             return None;
         }
-        let denom = diag.sqrt();
-        l[j][j] = denom;
+        inv[j] = 1.0 / diag.sqrt();
         for r in j + 1..6 {
-            l[j][r] /= denom;
+            l[j][r] *= inv[j];
         }
     }
-    // Solve (p + q) S = p for the 6 columns of p at once: b[r][c] = S(r, c).
-    let mut b = [[0.0f64; 6]; 6];
+    // Forward solve of L [W | g] = [P | y − x], row by row: b[r][c] is
+    // W(r, c) for c < 6 and g(r) for c = 6 (the 8th column pads the rows
+    // to two 4-wide registers).
+    let mut b = [[0.0f64; 8]; 6];
     for (r, row) in b.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().enumerate() {
-            *v = pc[c][r];
-        }
-    }
-    for i in 0..6 {
-        let diag = l[i][i];
-        let coeff: [f64; 6] = std::array::from_fn(|c| b[i][c] / diag);
-        b[i] = coeff;
-        for r in i + 1..6 {
-            let lri = l[i][r];
-            for c in 0..6 {
-                b[r][c] += -coeff[c] * lri;
-            }
-        }
-    }
-    for i in (0..6).rev() {
-        let mut dot = [0.0f64; 6];
-        for r in i + 1..6 {
-            let lri = l[i][r];
-            for c in 0..6 {
-                dot[c] += lri * b[r][c];
-            }
-        }
-        let diag = l[i][i];
         for c in 0..6 {
-            b[i][c] = (b[i][c] - dot[c]) / diag;
+            row[c] = pc[c][r];
         }
+        row[6] = y[r] - x[r];
     }
-    // gain(i, k) = S(k, i) = b[k][i].
-    let d: [f64; 6] = std::array::from_fn(|k| y[k] - x[k]);
-    let mut xo = *x;
     for i in 0..6 {
-        let mut s = b[0][i] * d[0];
-        for k in 1..6 {
-            s += b[k][i] * d[k];
-        }
-        xo[i] += s;
-    }
-    // p − gain p, column by column, then the symmetric part.
-    let mut po: Cols = pc;
-    for j in 0..6 {
-        for i in 0..6 {
-            let mut s = b[0][i] * pc[j][0];
-            for k in 1..6 {
-                s += b[k][i] * pc[j][k];
+        let scale = inv[i];
+        let bi: [f64; 8] = std::array::from_fn(|c| b[i][c] * scale);
+        b[i] = bi;
+        for r in i + 1..6 {
+            let lri = l[i][r];
+            for c in 0..8 {
+                b[r][c] -= lri * bi[c];
             }
-            po[j][i] -= s;
         }
     }
+    // W'g and W'W, summed over the rows of W in order.
+    let mut wtw = [[0.0f64; 8]; 6];
+    for row in &b {
+        for i in 0..6 {
+            for c in 0..8 {
+                wtw[i][c] += row[i] * row[c];
+            }
+        }
+    }
+    let xo = Vector6::from_fn(|i, _| x[i] + wtw[i][6]);
     let mut out: Cols = [[0.0; 6]; 6];
     for j in 0..6 {
         for i in 0..6 {
-            out[j][i] = (po[j][i] + po[i][j]) * 0.5;
+            out[j][i] = (pc[j][i] + pc[i][j]) * 0.5 - wtw[i][j];
         }
     }
     Some((xo, matrix(out)))
@@ -166,12 +159,10 @@ fn fuse_step_portable(
 /// `a.cholesky()?.solve(b)`: the factor column by column in axpy form (only
 /// the lower triangle of `a` is read), the forward solve in axpy form and
 /// the backward one as dot products from zero, each in nalgebra's order.
-/// nalgebra's generic code walks dynamic views for these few numbers (a
-/// large share of a pair test); this is the same arithmetic on an array.
-/// A pivot of exactly 1 (the pair test's 2D case pads its 2 × 2 covariance
-/// with a unit third row and column) skips its square root and its
-/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same, and
-/// the two-dimensional test does not wait on them.
+/// nalgebra's generic code walks dynamic views for these few numbers (the
+/// local filters' residual tests); this is the same arithmetic on an array.
+/// A pivot of exactly 1 (a padded block) skips its square root and its
+/// divisions: √1 = 1 and x / 1 = x exactly, so the bits are the same.
 /// `None` when `a` is not positive definite (a zero, negative or NaN pivot).
 pub fn cholesky_solve<const M: usize>(
     a: &SMatrix<f64, M, M>,
@@ -220,6 +211,45 @@ pub fn cholesky_solve<const M: usize>(
         };
     }
     Some(SVector::from_data(nalgebra::ArrayStorage([x])))
+}
+
+/// The pair test's statistic d' C⁻¹ d for the symmetric `c`'s top-left
+/// `dim` × `dim` block (2 or 3; its lower triangle read) without square
+/// roots: for 2 the closed form (c₁₁ d₀² − 2 c₁₀ d₀ d₁ + c₀₀ d₁²) / (c₀₀ c₁₁ − c₁₀²),
+/// for 3 the LDL' factorisation, d' C⁻¹ d = Σ yᵢ² / Dᵢ with L y = d. The same
+/// number as the Cholesky solve's d · (C⁻¹ d) to rounding. `None` when the
+/// block is not positive definite (a pivot, or for 2 the determinant, not
+/// positive, or NaN).
+pub fn quadratic_form(c: &Matrix3<f64>, d: &Vector3<f64>, dim: usize) -> Option<f64> {
+    let positive = |v: f64| v > 0.0; // false for NaN
+    if dim == 2 {
+        let (c00, c10, c11) = (c[(0, 0)], c[(1, 0)], c[(1, 1)]);
+        let det = c00 * c11 - c10 * c10;
+        if !(positive(c00) && positive(det)) {
+            return None;
+        }
+        let num = c11 * d[0] * d[0] - 2.0 * c10 * d[0] * d[1] + c00 * d[1] * d[1];
+        return Some(num / det);
+    }
+    let d0 = c[(0, 0)];
+    if !positive(d0) {
+        return None;
+    }
+    let r0 = 1.0 / d0;
+    let (l10, l20) = (c[(1, 0)] * r0, c[(2, 0)] * r0);
+    let d1 = c[(1, 1)] - l10 * c[(1, 0)];
+    if !positive(d1) {
+        return None;
+    }
+    let r1 = 1.0 / d1;
+    let l21 = (c[(2, 1)] - l20 * c[(1, 0)]) * r1;
+    let d2 = c[(2, 2)] - l20 * c[(2, 0)] - l21 * l21 * d1;
+    if !positive(d2) {
+        return None;
+    }
+    let y1 = d[1] - l10 * d[0];
+    let y2 = d[2] - l20 * d[0] - l21 * y1;
+    Some(d[0] * d[0] * r0 + y1 * y1 * r1 + y2 * y2 / d2)
 }
 
 /// `F P F'` for the interleaved constant-velocity transition F (identity
@@ -312,8 +342,14 @@ mod tests {
     }
 
     #[test]
-    fn fuse_step_gives_the_bits_of_the_nalgebra_form() {
+    fn fuse_step_agrees_with_the_nalgebra_form() {
+        // The nalgebra form this replaced (Cholesky solve for the gain,
+        // P − gain P symmetrised): the same fusion by other operations, so
+        // equal to rounding. Differences are measured against the scale of
+        // each entry: √(P_ii P_jj) for the covariance, the size of x and y
+        // for the state.
         let mut g = Lcg(3);
+        let (mut worst_x, mut worst_p): (f64, f64) = (0.0, 0.0);
         for case in 0..500 {
             let scale = [1.0, 1e3, 1e6][case % 3];
             let (p, q) = (g.spd(scale), g.spd(scale * 3.0));
@@ -328,14 +364,25 @@ mod tests {
             pe -= gain * p;
             let pe = (pe + pe.transpose()) * 0.5;
             let (xf, pf) = fuse_step(&x, &p, &y, &q).unwrap();
-            assert!(same_bits(xe.as_slice(), xf.as_slice()), "case {case}");
-            assert!(same_bits(pe.as_slice(), pf.as_slice()), "case {case}");
+            for i in 0..6 {
+                // x and y are of the order of 1e5.
+                worst_x = worst_x.max((xe[i] - xf[i]).abs() / 1e5);
+                for j in 0..6 {
+                    let s = (pe[(i, i)] * pe[(j, j)]).sqrt();
+                    worst_p = worst_p.max((pe[(i, j)] - pf[(i, j)]).abs() / s);
+                    assert_eq!(pf[(i, j)], pf[(j, i)], "symmetric by construction");
+                }
+            }
         }
+        // Measured: 5.5e-15 and 9.7e-15.
+        assert!(worst_x < 1e-13 && worst_p < 1e-13, "{worst_x} {worst_p}");
         // Not positive definite: refused, as nalgebra's cholesky refuses it.
         let p = Matrix6::identity();
         let q = -Matrix6::identity() * 2.0;
         assert!((p + q).cholesky().is_none());
         assert!(fuse_step(&Vector6::zeros(), &p, &Vector6::zeros(), &q).is_none());
+        let nan = Matrix6::identity() * f64::NAN;
+        assert!(fuse_step(&Vector6::zeros(), &p, &Vector6::zeros(), &nan).is_none());
     }
 
     fn check_cholesky_solve<const M: usize>(g: &mut Lcg) {
@@ -368,7 +415,7 @@ mod tests {
         check_cholesky_solve::<1>(&mut g);
         check_cholesky_solve::<2>(&mut g);
         check_cholesky_solve::<3>(&mut g);
-        // The pair test's 2D case: a 2 × 2 block, exact zeros and a 1 beside it.
+        // A padded 2 × 2 block: exact zeros and a 1 beside it.
         for _ in 0..200 {
             let h = nalgebra::Matrix2::from_fn(|_, _| g.next() * 1e3);
             let c = h * h.transpose() + nalgebra::Matrix2::identity();
@@ -380,6 +427,48 @@ mod tests {
             let got = cholesky_solve(&a, &b).unwrap();
             assert!(same_bits(want.as_slice(), got.as_slice()));
         }
+    }
+
+    #[test]
+    fn quadratic_form_agrees_with_the_cholesky_solve() {
+        let mut g = Lcg(5);
+        let mut worst: f64 = 0.0;
+        for case in 0..600 {
+            let scale: f64 = [1.0, 1e3, 1e6][case % 3];
+            // s (G G' + I): a condition number of tens, as the pair tests'
+            // sums of covariances (the two forms differ by the rounding the
+            // condition number amplifies).
+            let h = Matrix3::from_fn(|_, _| g.next() * 2.0 * scale.sqrt());
+            let c = h * h.transpose() + Matrix3::identity() * scale;
+            let d = nalgebra::Vector3::new(g.next(), g.next(), g.next()) * scale.sqrt();
+            for dim in [2, 3] {
+                let mut a = c;
+                let mut dd = d;
+                if dim == 2 {
+                    // The pair test's padding: a unit third pivot, d₂ = 0.
+                    for i in 0..2 {
+                        a[(2, i)] = 0.0;
+                        a[(i, 2)] = 0.0;
+                    }
+                    a[(2, 2)] = 1.0;
+                    dd[2] = 0.0;
+                }
+                let want = dd.dot(&cholesky_solve(&a, &dd).unwrap());
+                let got = quadratic_form(&a, &dd, dim).unwrap();
+                worst = worst.max((got - want).abs() / want);
+            }
+        }
+        assert!(worst < 1e-12, "{worst}");
+        for dim in [2, 3] {
+            let bad = -Matrix3::identity();
+            assert!(quadratic_form(&bad, &nalgebra::Vector3::zeros(), dim).is_none());
+            let nan = Matrix3::identity() * f64::NAN;
+            assert!(quadratic_form(&nan, &nalgebra::Vector3::zeros(), dim).is_none());
+        }
+        // Singular: the determinant, then the last pivot, is zero.
+        let sing = Matrix3::new(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0);
+        assert!(quadratic_form(&sing, &nalgebra::Vector3::zeros(), 2).is_none());
+        assert!(quadratic_form(&sing, &nalgebra::Vector3::zeros(), 3).is_none());
     }
 
     #[test]

@@ -25,7 +25,7 @@ use nalgebra::{Matrix2, Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::algo::{
     AlgoError, assignment,
-    geo::{LocalFrame, ecef_to_geodetic},
+    geo::{LocalFrame, ecef_to_vertical},
     polar::{PolarMeasurement, plot_to_local},
 };
 pub use alpha_beta::Filter;
@@ -150,8 +150,9 @@ pub struct Outcome {
     pub conflicts: usize,
     /// Wall time of this method (µs); the first method of
     /// [`fuse_methods`] includes the local filters and the centre-frame
-    /// states that all methods share, and of lifting and splitting the
-    /// second to run reuses the groups the first fused.
+    /// states that all methods share, of lifting and splitting the second
+    /// to run reuses the groups the first fused, and the first of them
+    /// reuses the 3D members' fusion of the groups mapping formed too.
     pub compute_us: f64,
 }
 
@@ -176,8 +177,9 @@ pub fn fuse(
 
 /// Runs several methods over the scene; the local filters run once, every
 /// estimate is placed in the centre frame once (mapping's states and the
-/// others' differ only in a 2D estimate's σ_h), and a group that lifting and
-/// splitting both form is fused once (see `Share`).
+/// others' differ only in a 2D estimate's σ_h), a group that lifting and
+/// splitting both form is fused once, and its 3D members' fusion is
+/// mapping's when mapping forms it too (see `Share`).
 pub fn fuse_methods(
     centre: &LocalFrame,
     radars: &[Radar],
@@ -237,6 +239,8 @@ pub fn fuse_methods(
             Method::Mapping => None,
         };
         share.pending_other = other.is_some_and(|o| methods[n + 1..].contains(&o));
+        share.pending_lifted =
+            method == Method::Mapping && methods[n + 1..].iter().any(|&m| m != Method::Mapping);
         let mut out = fuse_one_sharing(
             centre, radars, &sites, tracks, &filtered, centred, method, cfg, &mut share,
         )?;
@@ -322,11 +326,19 @@ fn fuse_one(
 /// So when both methods run and form the same group, the group is fused
 /// once: the first of the two keeps it here (with the positions splitting
 /// needs) and the second takes it.
+///
+/// Mapping fuses the 3D members of a group as the other two do (a 3D
+/// estimate does not depend on σ_h): when lifting or splitting runs after
+/// it, mapping keeps the 3D pass of each group here ([`ThreePass`]) and the
+/// first of them to form the same group takes it.
 #[derive(Default)]
 struct Share {
     /// The other method of the two runs later in this call.
     pending_other: bool,
+    /// Lifting or splitting runs later in this call (set for mapping).
+    pending_lifted: bool,
     tracks: std::collections::HashMap<Vec<usize>, Fused>,
+    three: std::collections::HashMap<Vec<usize>, ThreePass>,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -419,7 +431,7 @@ fn fuse_one_sharing(
         .into_iter()
         .filter(|g| g.iter().any(|&i| !centred[i].is_empty()))
         .map(|g| {
-            let fuse = |g: Vec<usize>, spots: bool| {
+            let fuse = |g: Vec<usize>, three: &ThreePass, spots: bool| {
                 fused_track(
                     centre,
                     radars,
@@ -427,20 +439,32 @@ fn fuse_one_sharing(
                     filtered,
                     centred,
                     g,
+                    three,
                     method,
                     cfg.altitude_sigma,
                     spots,
                 )
             };
             if method == Method::Mapping {
-                return Ok(fuse(g, false)?.track);
+                // The 3D pass kept for lifting or splitting keeps the spots
+                // that splitting reads.
+                let three = three_pass(radars, filtered, centred, &g, share.pending_lifted)?;
+                let track = fuse(g.clone(), &three, false)?.track;
+                if share.pending_lifted {
+                    share.three.insert(g, three);
+                }
+                return Ok(track);
             }
             let mut fused = match share.tracks.remove(&g) {
                 Some(f) => f,
-                None => fuse(
-                    g.clone(),
-                    method == Method::Splitting || share.pending_other,
-                )?,
+                None => {
+                    let spots = method == Method::Splitting || share.pending_other;
+                    let three = match share.three.remove(&g) {
+                        Some(three) => three,
+                        None => three_pass(radars, filtered, centred, &g, spots)?,
+                    };
+                    fuse(g.clone(), &three, spots)?
+                }
             };
             // The fused track is kept for the other method, or moved out.
             if share.pending_other {
@@ -801,14 +825,11 @@ fn correlate_pair(
         }
         let (zb, cb) = op[k].at(dt);
         let d = sp.z - zb;
-        let mut cov = sp.c0 + cb;
-        if dim == 2 {
-            cov[(2, 2)] = 1.0;
-        }
-        let solved = kernels::cholesky_solve(&cov, &d).ok_or(AlgoError::NotPositiveDefinite {
-            what: "pair difference covariance",
-        })?;
-        let stat = d.dot(&solved);
+        let cov = sp.c0 + cb;
+        let stat =
+            kernels::quadratic_form(&cov, &d, dim).ok_or(AlgoError::NotPositiveDefinite {
+                what: "pair difference covariance",
+            })?;
         let hit = (0..dim).all(|i| d[i].abs() <= cfg.gate_sigmas * cov[(i, i)].sqrt());
         state.step(cfg.knn, hit, stat <= threshold);
         sum += stat;
@@ -820,25 +841,6 @@ fn correlate_pair(
         state,
         mean_statistic: if n > 0 { sum / n as f64 } else { f64::INFINITY },
     })
-}
-
-/// Central-difference Jacobian of `f` at `x` with steps `h`.
-fn jacobian(
-    f: impl Fn([f64; 3]) -> Result<[f64; 3], AlgoError>,
-    x: [f64; 3],
-    h: [f64; 3],
-) -> Result<Matrix3<f64>, AlgoError> {
-    let mut jac = Matrix3::zeros();
-    for k in 0..3 {
-        let (mut hi, mut lo) = (x, x);
-        hi[k] += h[k];
-        lo[k] -= h[k];
-        let (a, b) = (f(hi)?, f(lo)?);
-        for i in 0..3 {
-            jac[(i, k)] = (a[i] - b[i]) / (2.0 * h[k]);
-        }
-    }
-    Ok(jac)
 }
 
 /// Independent estimates fused by Bar-Shalom–Campo with zero cross-covariance
@@ -867,13 +869,12 @@ fn fuse_into(
     Ok((x, p))
 }
 
-/// Whether every value is finite, without a branch per value: v · 0 is ±0
-/// for a finite v and NaN for an infinite or NaN one, and a sum of them is
-/// NaN exactly when one is (the same answer as `iter().all(is_finite)`, in
-/// a loop the compiler vectorises).
+/// Whether every value is finite, without a branch per value: an OR of
+/// `!is_finite` over the values (an integer test of the exponent bits,
+/// which the compiler vectorises; a sum of `x · 0`, as this was, is a chain
+/// of dependent floating-point additions that it may not reorder).
 fn all_finite(v: &[f64]) -> bool {
-    let s = v.iter().fold(0.0, |acc, &x| acc + x * 0.0);
-    !s.is_nan()
+    !v.iter().fold(false, |bad, x| bad | !x.is_finite())
 }
 
 /// Position and position covariance of a member's state at a system-track
@@ -904,58 +905,41 @@ struct Fused {
     spots: Vec<Spot>,
 }
 
-/// The system track of a group: at every instant of its members, the 3D
-/// members' fusion, then the 2D members (under lifting and splitting at the
-/// 3D members' height) fused into it one by one.
-#[allow(clippy::too_many_arguments)]
-fn fused_track(
-    centre: &LocalFrame,
+/// The 3D members' part of a group's system track, the same under every
+/// method: the instants of all members, and at each the fusion of the 3D
+/// members' estimates (extrapolated to it, `None` when none covers it),
+/// with, when asked for, their [`Spot`]s (`spots3[ranges3[n]]` for the n-th
+/// instant with a 3D fusion).
+struct ThreePass {
+    times: Vec<f64>,
+    fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>>,
+    spots3: Vec<Spot>,
+    ranges3: Vec<std::ops::Range<usize>>,
+}
+
+fn three_pass(
     radars: &[Radar],
-    sites: &[Site],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
-    members: Vec<usize>,
-    method: Method,
-    altitude_sigma: f64,
+    members: &[usize],
     keep_spots: bool,
-) -> Result<Fused, AlgoError> {
-    let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
+) -> Result<ThreePass, AlgoError> {
     let mut times: Vec<f64> = members
         .iter()
         .flat_map(|&i| centred[i].iter().map(|s| s.t))
         .collect();
     times.sort_by(f64::total_cmp);
     times.dedup();
-    let gap = |i: usize| 1.5 * radars[filtered[i].radar].scan_period;
-    let (three_d, two_d): (Vec<usize>, Vec<usize>) = members
+    let three_d: Vec<usize> = members
         .iter()
-        .partition(|&&i| radars[filtered[i].radar].three_d);
+        .copied()
+        .filter(|&i| radars[filtered[i].radar].three_d)
+        .collect();
     // `at_time` for non-decreasing t: each member's latest sample at or
     // before t found by a forward scan from the previous instant's.
-    let three_at = |t: f64, into: &mut Vec<State6>, cursor: &mut [usize]| {
-        into.clear();
-        for (&i, k) in three_d.iter().zip(cursor.iter_mut()) {
-            let tr = &centred[i];
-            while *k < tr.len() && tr[*k].t <= t {
-                *k += 1;
-            }
-            if let Some(s) = k
-                .checked_sub(1)
-                .and_then(|k| extrapolate(&tr[k], t, gap(i)))
-            {
-                into.push(s);
-            }
-        }
-    };
-    let mut cursor3 = vec![0; three_d.len()];
-    // The fusion of the 3D members at every instant they cover, and the
-    // height they give there (t, h, σ_h).
-    let mut all: Vec<State6> = Vec::with_capacity(members.len());
-    let mut fused3: Vec<Option<(Vector6<f64>, Matrix6<f64>)>> = Vec::with_capacity(times.len());
-    let mut heights: Vec<(f64, f64, f64)> = Vec::with_capacity(times.len());
-    // With `keep_spots`, the 3D members' spots at each instant with a 3D
-    // fusion (`spots3[ranges3[n]]` for the n-th such instant), kept from
-    // this pass for the next.
+    let mut cursor = vec![0; three_d.len()];
+    let mut all: Vec<State6> = Vec::with_capacity(three_d.len());
+    let mut fused3 = Vec::with_capacity(times.len());
     let (mut spots3, mut ranges3) = if keep_spots {
         (
             Vec::with_capacity(times.len() * three_d.len()),
@@ -965,7 +949,17 @@ fn fused_track(
         (Vec::new(), Vec::new())
     };
     for &t in &times {
-        three_at(t, &mut all, &mut cursor3);
+        all.clear();
+        for (&i, k) in three_d.iter().zip(cursor.iter_mut()) {
+            let tr = &centred[i];
+            while *k < tr.len() && tr[*k].t <= t {
+                *k += 1;
+            }
+            let gap = 1.5 * radars[filtered[i].radar].scan_period;
+            if let Some(s) = k.checked_sub(1).and_then(|k| extrapolate(&tr[k], t, gap)) {
+                all.push(s);
+            }
+        }
         if all.is_empty() {
             fused3.push(None);
             continue;
@@ -975,14 +969,53 @@ fn fused_track(
             spots3.extend(all.iter().map(Spot::of));
             ranges3.push(start..spots3.len());
         }
-        let (x3, p3) = fuse_independent(&all)?;
-        if method != Method::Mapping {
-            let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
-            let (_, _, h) = ecef_to_geodetic(&centre.ellipsoid(), ecef)?;
-            heights.push((t, h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)));
-        }
-        fused3.push(Some((x3, p3)));
+        fused3.push(Some(fuse_independent(&all)?));
     }
+    Ok(ThreePass {
+        times,
+        fused3,
+        spots3,
+        ranges3,
+    })
+}
+
+/// The system track of a group: at every instant of its members, the 3D
+/// members' fusion (`three`, from [`three_pass`] with the spots when
+/// `keep_spots`), then the 2D members (under lifting and splitting at the
+/// 3D members' height) fused into it one by one.
+#[allow(clippy::too_many_arguments)]
+fn fused_track(
+    centre: &LocalFrame,
+    radars: &[Radar],
+    sites: &[Site],
+    filtered: &[Filtered],
+    centred: &[Vec<State6>],
+    members: Vec<usize>,
+    three: &ThreePass,
+    method: Method,
+    altitude_sigma: f64,
+    keep_spots: bool,
+) -> Result<Fused, AlgoError> {
+    let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
+    let (times, fused3) = (&three.times, &three.fused3);
+    let gap = |i: usize| 1.5 * radars[filtered[i].radar].scan_period;
+    let two_d: Vec<usize> = members
+        .iter()
+        .copied()
+        .filter(|&i| !radars[filtered[i].radar].three_d)
+        .collect();
+    // The height the 3D members give at each instant they cover (t, h, σ_h).
+    let mut heights: Vec<(f64, f64, f64)> = Vec::with_capacity(times.len());
+    if method != Method::Mapping {
+        for (&t, f3) in times.iter().zip(fused3) {
+            if let Some((x3, p3)) = f3 {
+                let ecef = centre.enu_to_ecef([x3[0], x3[2], x3[4]])?;
+                let h = ecef_to_vertical(&centre.ellipsoid(), ecef)?.h;
+                heights.push((t, h, p3[(4, 4)].sqrt().max(MAPPING_ALTITUDE_SIGMA_M)));
+            }
+        }
+    }
+    let mut all: Vec<State6> = Vec::with_capacity(members.len());
     let mut samples = Vec::with_capacity(times.len());
     let (mut split, mut spots) = if keep_spots {
         (
@@ -992,10 +1025,10 @@ fn fused_track(
     } else {
         (Vec::new(), Vec::new())
     };
-    let mut ranges3 = ranges3.into_iter();
+    let mut ranges3 = three.ranges3.iter();
     let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
-    for (&t, f3) in times.iter().zip(&fused3) {
+    for (&t, f3) in times.iter().zip(fused3) {
         all.clear();
         while next_height + 1 < heights.len() && heights[next_height + 1].0 <= t {
             next_height += 1;
@@ -1062,7 +1095,7 @@ fn fused_track(
             split.push(match f3.as_ref().and_then(|_| ranges3.next()) {
                 Some(r) => {
                     let start = spots.len();
-                    spots.extend_from_slice(&spots3[r.clone()]);
+                    spots.extend_from_slice(&three.spots3[r.clone()]);
                     spots.extend(all.iter().map(Spot::of));
                     Some((start, r.len(), spots.len()))
                 }
@@ -1131,11 +1164,8 @@ fn split_track(
             sum_r += ecef.norm() / var;
         }
         let r = sum_r / info_r;
-        let pos = |y: [f64; 3]| -> Result<[f64; 3], AlgoError> {
-            centre.ecef_to_enu(geometry::from_direction(centre, [y[0], y[1]], y[2])?)
-        };
-        let p0 = pos([d[0], d[1], r])?;
-        let jac = jacobian(pos, [d[0], d[1], r], [1.0; 3])?;
+        let p0 = centre.ecef_to_enu(geometry::from_direction(centre, [d[0], d[1]], r)?)?;
+        let jac = geometry::from_direction_jacobian([d[0], d[1]], r)?;
         let mut cy = Matrix3::zeros();
         cy.fixed_view_mut::<2, 2>(0, 0).copy_from(&cd);
         cy[(2, 2)] = 1.0 / info_r;
