@@ -42,6 +42,9 @@ pub const LONG_JOB: Duration = Duration::from_millis(2);
 
 type Job = Box<dyn FnOnce() + Send>;
 
+/// The `started` mark of a lane whose thread could not be started.
+const NEVER_STARTED: u64 = u64::MAX;
+
 /// Runs CPU-bound work on a compute lane (or, when every lane is held by a
 /// long job, on tokio's blocking pool) and awaits its result. A panic in the
 /// work is an internal error of this request only.
@@ -113,17 +116,23 @@ impl Lanes {
             epoch: Instant::now(),
         });
         for i in 0..n {
-            let lanes = Arc::clone(&lanes);
-            std::thread::Builder::new()
+            let lane = Arc::clone(&lanes);
+            let started = std::thread::Builder::new()
                 .name(format!("compute-{i}"))
-                .spawn(move || lanes.run(i))
-                .expect("the operating system starts a compute lane");
+                .spawn(move || lane.run(i));
+            if let Err(e) = started {
+                // A lane that could not start counts as held for ever:
+                // work goes to the others, or to the blocking pool when
+                // none started.
+                tracing::error!(lane = i, error = %e, "a compute lane could not start");
+                lanes.started[i].store(NEVER_STARTED, Ordering::Relaxed);
+            }
         }
         lanes
     }
 
     fn now(&self) -> u64 {
-        u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(u64::MAX - 1) + 1
+        u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(NEVER_STARTED - 2) + 1
     }
 
     /// Whether every lane is running a job that started over `LONG_JOB` ago.
@@ -132,7 +141,7 @@ impl Lanes {
         let long = LONG_JOB.as_nanos() as u64;
         self.started.iter().all(|s| {
             let t = s.load(Ordering::Relaxed);
-            t != 0 && now.saturating_sub(t) > long
+            t == NEVER_STARTED || (t != 0 && now.saturating_sub(t) > long)
         })
     }
 
@@ -221,5 +230,16 @@ mod tests {
             std::thread::sleep(Duration::from_millis(1));
         }
         assert!(!lanes.all_held());
+    }
+
+    #[test]
+    fn a_lane_that_never_started_is_held_from_the_first_instant() {
+        let lanes = Lanes::start(1);
+        assert!(!lanes.all_held());
+        lanes.started[0].store(NEVER_STARTED, Ordering::Relaxed);
+        assert!(
+            lanes.all_held(),
+            "work would queue for a lane that never runs"
+        );
     }
 }
