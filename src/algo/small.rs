@@ -268,27 +268,30 @@ pub fn mul_t(a: &[f64], b: &[f64], n: usize) -> Sq {
     c
 }
 
-/// The lower Cholesky factor L (L Lᵀ = s) of an n×n row-major matrix, or
+/// The lower Cholesky factor L (L Lᵀ = s) of an n×n row-major matrix,
+/// row-major in a stack buffer ([`cholesky_n`] at the exact size), or
 /// `None` when it is not positive definite.
 pub fn cholesky(s: &[f64], n: usize) -> Option<Sq> {
-    let mut l = ZERO;
-    for i in 0..n {
-        for j in 0..=i {
-            let mut sum = s[i * n + j];
-            for k in 0..j {
-                sum -= l[i * n + k] * l[j * n + k];
-            }
-            if i == j {
-                if sum.is_nan() || sum <= 0.0 {
-                    return None;
-                }
-                l[i * n + i] = sum.sqrt();
-            } else {
-                l[i * n + j] = sum / l[j * n + j];
-            }
+    fn flat<const N: usize>(s: &[f64]) -> Option<Sq> {
+        let l = cholesky_n::<N>(s)?;
+        let mut out = ZERO;
+        for (i, row) in l.iter().enumerate() {
+            out[i * N..(i + 1) * N].copy_from_slice(row);
         }
+        Some(out)
     }
-    Some(l)
+    match n {
+        1 => flat::<1>(s),
+        2 => flat::<2>(s),
+        3 => flat::<3>(s),
+        4 => flat::<4>(s),
+        5 => flat::<5>(s),
+        6 => flat::<6>(s),
+        7 => flat::<7>(s),
+        8 => flat::<8>(s),
+        9 => flat::<9>(s),
+        _ => None,
+    }
 }
 
 /// y with L y = b, for a lower triangular L (n×n, row-major).
@@ -323,12 +326,17 @@ pub fn solve_lower(l: &[f64], b: &[f64], n: usize) -> Sq {
 /// its Cholesky factor, a⁻¹ = L⁻ᵀ L⁻¹ (exactly symmetric); `None` when it
 /// is not positive definite.
 pub fn inverse_spd(a: &[f64], n: usize) -> Option<Sq> {
-    let l = cholesky(a, n)?;
+    Some(inverse_from_cholesky(&cholesky(a, n)?, n))
+}
+
+/// a⁻¹ = L⁻ᵀ L⁻¹ from the lower Cholesky factor L of a (n×n, row-major),
+/// exactly symmetric.
+pub fn inverse_from_cholesky(l: &[f64], n: usize) -> Sq {
     let mut eye = ZERO;
     for i in 0..n {
         eye[i * n + i] = 1.0;
     }
-    let li = solve_lower(&l, &eye, n);
+    let li = solve_lower(l, &eye, n);
     let mut inv = ZERO;
     for i in 0..n {
         for j in i..n {
@@ -337,7 +345,7 @@ pub fn inverse_spd(a: &[f64], n: usize) -> Option<Sq> {
             inv[j * n + i] = e;
         }
     }
-    Some(inv)
+    inv
 }
 
 /// aᵀ (n×n, row-major).

@@ -158,9 +158,7 @@ fn ci_pair(
     };
     // The fused estimate from the inverses at that ω: accurate whatever the
     // spread of the dᵢ (T S Tᵀ is not, when they span many decades).
-    let i1 = small::inverse_spd(p1, n).ok_or(AlgoError::NotPositiveDefinite {
-        what: "fused covariance",
-    })?;
+    let i1 = small::inverse_from_cholesky(&l, n);
     let i2 = small::inverse_spd(p2, n).ok_or(AlgoError::NotPositiveDefinite {
         what: "member covariance",
     })?;
