@@ -23,6 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     tonic_prost_build::configure()
         // Malformed protobuf is INVALID_ARGUMENT, not INTERNAL (src/proto/codec.rs).
         .codec_path("crate::proto::codec::ProtoCodec")
+        // Decoded by hand: packed doubles a chunk at a time (src/proto/matrix.rs).
+        .extern_path(".radar.fusion.v1.Matrix", "crate::proto::matrix::Matrix")
         .build_client(true)
         .build_server(true)
         .compile_fds(fds)?;

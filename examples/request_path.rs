@@ -31,6 +31,8 @@ struct Args {
     repeat: usize,
     /// Write the JSON request to this file and exit (for wrk or perf).
     dump: Option<String>,
+    /// Run only this transport (`rest` or `grpc`), e.g. under a profiler.
+    only: Option<String>,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -40,6 +42,7 @@ fn args() -> anyhow::Result<Args> {
         targets: 500,
         repeat: 200,
         dump: None,
+        only: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -53,6 +56,7 @@ fn args() -> anyhow::Result<Args> {
             "--targets" => a.targets = value()?.parse()?,
             "--repeat" => a.repeat = value()?.parse()?,
             "--dump" => a.dump = Some(value()?),
+            "--only" => a.only = Some(value()?),
             other => anyhow::bail!("unknown flag {other}"),
         }
     }
@@ -154,11 +158,15 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// One line per transport. The server's time is a mean (the histogram's
+/// sum over its count), so it is set against the mean compute; the
+/// client's median against the median compute.
 fn report(name: &str, compute: Vec<f64>, client: Vec<f64>, server_mean_ms: f64) {
+    let mean = compute.iter().sum::<f64>() / compute.len() as f64;
     let (c, w) = (median(compute), median(client));
     println!(
-        "{name:<6} compute {c:7.3} ms | server {server_mean_ms:7.3} ms (mean) = {:5.2}× compute | client {w:7.3} ms (median) = {:5.2}× compute",
-        server_mean_ms / c,
+        "{name:<6} compute {c:7.3} ms (median), {mean:7.3} ms (mean) | server {server_mean_ms:7.3} ms (mean) = {:5.2}× compute | client {w:7.3} ms (median) = {:5.2}× compute",
+        server_mean_ms / mean,
         w / c
     );
 }
@@ -179,7 +187,20 @@ async fn main() -> anyhow::Result<()> {
         a.repeat
     );
     let client = reqwest::Client::new();
-    let json_body = axum::body::Bytes::from(json_body);
+    if a.only.as_deref() != Some("grpc") {
+        rest(&a, &client, axum::body::Bytes::from(json_body)).await?;
+    }
+    if a.only.as_deref() != Some("rest") {
+        grpc(&a, &client, proto).await?;
+    }
+    Ok(())
+}
+
+async fn rest(
+    a: &Args,
+    client: &reqwest::Client,
+    json_body: axum::body::Bytes,
+) -> anyhow::Result<()> {
     // Warm-up of both paths.
     for _ in 0..5 {
         client
@@ -192,7 +213,7 @@ async fn main() -> anyhow::Result<()> {
             .await?;
     }
     let route = ["route=\"/v1/jpda/update\""];
-    let before = histogram(&client, &a.url, "http_request_duration_seconds", &route).await;
+    let before = histogram(client, &a.url, "http_request_duration_seconds", &route).await;
     let (mut compute, mut wall) = (Vec::new(), Vec::new());
     for _ in 0..a.repeat {
         let start = Instant::now();
@@ -208,10 +229,17 @@ async fn main() -> anyhow::Result<()> {
         let v: Value = serde_json::from_slice(&bytes)?;
         compute.push(v["timing"]["compute_us"].as_f64().expect("compute_us") / 1e3);
     }
-    let after = histogram(&client, &a.url, "http_request_duration_seconds", &route).await;
+    let after = histogram(client, &a.url, "http_request_duration_seconds", &route).await;
     let server = (after.0 - before.0) / (after.1 - before.1) * 1e3;
     report("REST", compute, wall, server);
+    Ok(())
+}
 
+async fn grpc(
+    a: &Args,
+    client: &reqwest::Client,
+    proto: pb::JpdaUpdateRequest,
+) -> anyhow::Result<()> {
     let channel = tonic::transport::Channel::from_shared(a.grpc.clone())?
         .connect_timeout(Duration::from_secs(5))
         .connect()
@@ -222,7 +250,7 @@ async fn main() -> anyhow::Result<()> {
         grpc.update(proto.clone()).await?;
     }
     let method = ["method=\"/radar.fusion.v1.JpdaService/Update\""];
-    let before = histogram(&client, &a.url, "grpc_request_duration_seconds", &method).await;
+    let before = histogram(client, &a.url, "grpc_request_duration_seconds", &method).await;
     let (mut compute, mut wall) = (Vec::new(), Vec::new());
     for _ in 0..a.repeat {
         let request = proto.clone();
@@ -231,7 +259,7 @@ async fn main() -> anyhow::Result<()> {
         wall.push(start.elapsed().as_secs_f64() * 1e3);
         compute.push(response.timing.map_or(f64::NAN, |t| t.compute_us) / 1e3);
     }
-    let after = histogram(&client, &a.url, "grpc_request_duration_seconds", &method).await;
+    let after = histogram(client, &a.url, "grpc_request_duration_seconds", &method).await;
     let server = (after.0 - before.0) / (after.1 - before.1) * 1e3;
     report("gRPC", compute, wall, server);
     Ok(())

@@ -3,10 +3,10 @@
 
 use tonic::{Request, Response, Status};
 
-use super::{error::to_status, matrix, rows};
+use super::{error::to_status, flat_matrix, flat_rows};
 use crate::{
     proto::{self as pb, jpda_service_server::JpdaService},
-    service::{self, ServiceError, Violations, jpda as svc},
+    service::{self, Rows, ServiceError, Violations, at, jpda as svc, validate::Field},
 };
 
 #[derive(Debug, Clone, Default)]
@@ -36,7 +36,11 @@ fn input(req: pb::JpdaUpdateRequest) -> Result<svc::JpdaInput, ServiceError> {
         .map(|(i, t)| svc::TrackInput {
             id: t.id,
             state: t.state,
-            covariance: required_rows(&mut v, &format!("tracks[{i}].covariance"), t.covariance),
+            covariance: required_rows(
+                &mut v,
+                at(|| format!("tracks[{i}].covariance")),
+                t.covariance,
+            ),
         })
         .collect();
     let sensors = req
@@ -47,9 +51,9 @@ fn input(req: pb::JpdaUpdateRequest) -> Result<svc::JpdaInput, ServiceError> {
             id: s.id,
             kind: s.kind,
             h: s.h
-                .map(|m| rows(&mut v, &format!("sensors[{i}].h"), &m).unwrap_or_default()),
+                .map(|m| flat_rows(&mut v, format!("sensors[{i}].h"), m).unwrap_or_default()),
             r: s.r
-                .map(|m| rows(&mut v, &format!("sensors[{i}].r"), &m).unwrap_or_default()),
+                .map(|m| flat_rows(&mut v, format!("sensors[{i}].r"), m).unwrap_or_default()),
             site_m: (!s.site_m.is_empty()).then_some(s.site_m),
             sigma_range_m: s.sigma_range_m,
             sigma_azimuth_deg: s.sigma_azimuth_deg,
@@ -84,15 +88,15 @@ fn input(req: pb::JpdaUpdateRequest) -> Result<svc::JpdaInput, ServiceError> {
     })
 }
 
-/// A required `Matrix` as nested rows (empty, with a violation, when missing
-/// or when its values do not fill rows × cols).
-fn required_rows(v: &mut Violations, field: &str, m: Option<pb::Matrix>) -> Vec<Vec<f64>> {
+/// A required `Matrix` as request rows (empty, with a violation, when
+/// missing or when its values do not fill rows × cols).
+fn required_rows(v: &mut Violations, field: impl Field, m: Option<pb::Matrix>) -> Rows {
     match m {
         None => {
             v.add(field, "is required");
-            Vec::new()
+            Rows::default()
         }
-        Some(m) => rows(v, field, &m).unwrap_or_default(),
+        Some(m) => flat_rows(v, field, m).unwrap_or_default(),
     }
 }
 
@@ -103,7 +107,7 @@ fn response(out: svc::JpdaOutput) -> pb::JpdaUpdateResponse {
             .tracks
             .into_iter()
             .map(|t| pb::JpdaTrackResult {
-                covariance: Some(matrix(&t.covariance)),
+                covariance: Some(flat_matrix(t.covariance)),
                 id: t.id,
                 state: t.state,
             })

@@ -62,6 +62,36 @@ pub(crate) fn rows(
     Some(m.values.chunks(c).map(<[f64]>::to_vec).collect())
 }
 
+/// A `Matrix` as request [`Rows`], its values moved, not copied; `None`
+/// (with a violation naming `field`) when they do not fill rows × cols.
+pub(crate) fn flat_rows(
+    v: &mut crate::service::Violations,
+    field: impl crate::service::validate::Field,
+    m: crate::proto::Matrix,
+) -> Option<crate::service::Rows> {
+    let (r, c, len) = (m.rows, m.cols, m.values.len());
+    let rows = (r > 0 && c > 0)
+        .then(|| crate::service::Rows::from_flat(m.values, r as usize, c as usize))
+        .flatten();
+    if rows.is_none() {
+        v.add(
+            field,
+            format!("rows × cols = {r} × {c} does not match {len} values"),
+        );
+    }
+    rows
+}
+
+/// Answer [`Rows`] as a row-major `Matrix`, the values moved.
+pub(crate) fn flat_matrix(rows: crate::service::Rows) -> crate::proto::Matrix {
+    let (r, c) = rows.shape().unwrap_or((rows.nrows(), 0));
+    crate::proto::Matrix {
+        rows: r as u32,
+        cols: c as u32,
+        values: rows.into_values(),
+    }
+}
+
 /// Nested rows as a row-major `Matrix`.
 pub(crate) fn matrix(rows: &[Vec<f64>]) -> crate::proto::Matrix {
     crate::proto::Matrix {

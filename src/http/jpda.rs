@@ -8,7 +8,10 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{service::jpda as svc, state::AppState};
+use crate::{
+    service::{Rows, jpda as svc},
+    state::AppState,
+};
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -48,7 +51,8 @@ pub struct JpdaTrack {
     pub id: String,
     pub state: Vec<f64>,
     /// Symmetric positive definite, row-major nested rows.
-    pub covariance: Vec<Vec<f64>>,
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub covariance: Rows,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -59,9 +63,11 @@ pub struct JpdaSensor {
     #[schema(example = "linear")]
     pub kind: String,
     /// Linear sensors: measurement matrix H (rows × state dimension).
-    pub h: Option<Vec<Vec<f64>>>,
+    #[schema(value_type = Option<Vec<Vec<f64>>>)]
+    pub h: Option<Rows>,
     /// Linear sensors: measurement noise covariance R.
-    pub r: Option<Vec<Vec<f64>>>,
+    #[schema(value_type = Option<Vec<Vec<f64>>>)]
+    pub r: Option<Rows>,
     /// Polar sensors: site `[east, north, up]` in the local frame.
     pub site_m: Option<Vec<f64>>,
     pub sigma_range_m: Option<f64>,
@@ -106,7 +112,8 @@ pub struct JpdaUpdateResponse {
 pub struct JpdaTrackResult {
     pub id: String,
     pub state: Vec<f64>,
-    pub covariance: Vec<Vec<f64>>,
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub covariance: Rows,
 }
 
 #[derive(Debug, Serialize, ToSchema)]

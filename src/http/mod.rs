@@ -9,6 +9,7 @@ pub mod jpda;
 pub mod ops;
 pub mod plot_fusion;
 pub mod problem;
+pub mod rows;
 pub mod rules;
 pub mod sessions;
 

@@ -9,3 +9,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
     include_bytes!(concat!(env!("OUT_DIR"), "/radar_fusion_descriptor.bin"));
 
 pub mod codec;
+pub mod matrix;
+
+pub use matrix::Matrix;

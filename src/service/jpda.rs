@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Ids, ServiceError, Violations, at, covariance_message, micros_since};
+use super::{Ids, Rows, ServiceError, Violations, at, covariance_message, micros_since, rows};
 use crate::algo::{
     AlgoError,
     jpda::{self, Clutter, Config, Fallback, Gate, Method, Scan, SensorModel, TrackEstimate},
@@ -67,7 +67,7 @@ pub struct PredictionInput {
 pub struct TrackInput {
     pub id: Option<String>,
     pub state: Vec<f64>,
-    pub covariance: Vec<Vec<f64>>,
+    pub covariance: Rows,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -75,8 +75,8 @@ pub struct SensorInput {
     pub id: Option<String>,
     /// `linear` or `polar`.
     pub kind: Option<String>,
-    pub h: Option<Vec<Vec<f64>>>,
-    pub r: Option<Vec<Vec<f64>>>,
+    pub h: Option<Rows>,
+    pub r: Option<Rows>,
     pub site_m: Option<Vec<f64>>,
     pub sigma_range_m: Option<f64>,
     pub sigma_azimuth_deg: Option<f64>,
@@ -112,7 +112,7 @@ pub struct JpdaOutput {
 pub struct TrackOutput {
     pub id: String,
     pub state: Vec<f64>,
-    pub covariance: Vec<Vec<f64>>,
+    pub covariance: Rows,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -223,9 +223,7 @@ pub fn update(input: JpdaInput) -> Result<JpdaOutput, ServiceError> {
             .map(|(t, id)| TrackOutput {
                 id,
                 state: t.x.iter().copied().collect(),
-                covariance: (0..t.p.nrows())
-                    .map(|i| t.p.row(i).iter().copied().collect())
-                    .collect(),
+                covariance: rows::from_column_major(t.p.nrows(), t.p.ncols(), t.p.as_slice()),
             })
             .collect(),
         sensors,
@@ -317,7 +315,7 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     let n = input.tracks.first().map_or(0, |t| t.state.len());
     let mut tracks = Vec::with_capacity(input.tracks.len().min(MAX_TRACKS));
     let mut track_ids = Vec::with_capacity(tracks.capacity());
-    let mut ids = Ids::new();
+    let mut ids = Ids::with_capacity(tracks.capacity());
     for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
         // Paths are formatted only for a violation: this loop runs per track.
         let f = |rest: &str| format!("tracks[{i}].{rest}");
@@ -505,7 +503,7 @@ fn sensor(
     let model = match s.kind.as_deref() {
         Some("linear") => {
             let h_rows = v.required(format!("{f}.h"), s.h.as_ref());
-            let m = h_rows.map_or(0, Vec::len);
+            let m = h_rows.map_or(0, Rows::nrows);
             if h_rows.is_some() && !(1..=MAX_DIM).contains(&m) {
                 v.add(format!("{f}.h"), format!("must have 1 to {MAX_DIM} rows"));
             }
@@ -720,11 +718,11 @@ fn sensor(
     })
 }
 
-/// Nested rows as an `rows × cols` matrix, or a violation naming `field`.
+/// Request rows as an `rows × cols` matrix, or a violation naming `field`.
 fn matrix(
     v: &mut Violations,
     field: impl Fn() -> String,
-    rows: &[Vec<f64>],
+    rows: &Rows,
     nrows: usize,
     ncols: usize,
 ) -> Option<DMatrix<f64>> {

@@ -8,11 +8,13 @@ pub mod dimension;
 pub mod jpda;
 pub mod lanes;
 pub mod plot_fusion;
+pub mod rows;
 pub mod rules;
 pub mod session;
 pub mod validate;
 
 pub use lanes::offload;
+pub use rows::Rows;
 pub use validate::{Ids, Increasing, Interval, Violations, at};
 
 use std::time::Instant;

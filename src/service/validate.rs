@@ -26,6 +26,7 @@
 //! | matrix | `must be a 4 × 4 matrix` / `contains a non-finite value` |
 //! | covariance | `is not symmetric (…)` / `is not positive definite` |
 
+use std::borrow::Cow;
 use std::collections::{HashMap, hash_map::Entry};
 use std::fmt;
 
@@ -33,7 +34,7 @@ use crate::algo::AlgoError;
 use crate::algo::geo::{Ellipsoid, LocalFrame};
 use crate::algo::small;
 
-use super::{FieldViolation, ServiceError, covariance_message, param_violation};
+use super::{FieldViolation, Rows, ServiceError, covariance_message, param_violation};
 
 /// A field path, built only when a violation needs it: `&str` and `String`
 /// are paths as they are; [`at`] wraps a closure for loops over many
@@ -384,36 +385,38 @@ impl Violations {
     pub fn matrix(
         &mut self,
         field: impl Field,
-        rows: &[Vec<f64>],
+        rows: &(impl RowMajor + ?Sized),
         nrows: usize,
         ncols: usize,
     ) -> Option<Vec<f64>> {
-        if rows.len() != nrows || rows.iter().any(|r| r.len() != ncols) {
+        if !has_shape(rows, nrows, ncols) {
             self.add(field, format!("must be a {nrows} × {ncols} matrix"));
             return None;
         }
-        if rows.iter().flatten().any(|x| !x.is_finite()) {
+        let flat = rows.flat();
+        if flat.iter().any(|x| !x.is_finite()) {
             self.add(field, "contains a non-finite value");
             return None;
         }
-        Some(rows.concat())
+        Some(flat.into_owned())
     }
 
     /// An n × n covariance (finite, symmetric, positive definite),
     /// n ≤ [`small::MAX_DIM`], checked on the stack; records a violation
     /// and answers false otherwise.
-    pub fn covariance(&mut self, field: impl Field, rows: &[Vec<f64>], n: usize) -> bool {
-        if n > small::MAX_DIM || rows.len() != n || rows.iter().any(|r| r.len() != n) {
+    pub fn covariance(
+        &mut self,
+        field: impl Field,
+        rows: &(impl RowMajor + ?Sized),
+        n: usize,
+    ) -> bool {
+        if n > small::MAX_DIM || !has_shape(rows, n, n) {
             self.add(field, format!("must be a {n} × {n} matrix"));
             return false;
         }
         // Symmetry and definiteness do not depend on the order of the
         // components: the request's order is checked as it is.
-        let mut flat = small::ZERO;
-        for (i, row) in rows.iter().enumerate() {
-            flat[i * n..(i + 1) * n].copy_from_slice(row);
-        }
-        match small::check_covariance("covariance", &flat[..n * n], n) {
+        match small::check_covariance("covariance", &rows.flat(), n) {
             Ok(()) => true,
             Err(e) => {
                 self.add(field, covariance_message(&e));
@@ -493,6 +496,56 @@ impl Violations {
     }
 }
 
+/// A matrix as a request gives it: nested rows or flat [`Rows`].
+pub trait RowMajor {
+    /// `(rows, cols)` when every row has the same length (`(0, 0)` for no
+    /// rows), `None` for ragged rows.
+    fn shape(&self) -> Option<(usize, usize)>;
+    /// The values row after row.
+    fn flat(&self) -> Cow<'_, [f64]>;
+}
+
+/// Whether `rows` is `nrows × ncols` (no rows at all is `0 × anything`).
+fn has_shape(rows: &(impl RowMajor + ?Sized), nrows: usize, ncols: usize) -> bool {
+    match rows.shape() {
+        Some((0, _)) => nrows == 0,
+        shape => shape == Some((nrows, ncols)),
+    }
+}
+
+impl RowMajor for [Vec<f64>] {
+    fn shape(&self) -> Option<(usize, usize)> {
+        let cols = self.first().map_or(0, Vec::len);
+        self.iter()
+            .all(|r| r.len() == cols)
+            .then_some((self.len(), cols))
+    }
+
+    fn flat(&self) -> Cow<'_, [f64]> {
+        Cow::Owned(self.concat())
+    }
+}
+
+impl RowMajor for Vec<Vec<f64>> {
+    fn shape(&self) -> Option<(usize, usize)> {
+        self.as_slice().shape()
+    }
+
+    fn flat(&self) -> Cow<'_, [f64]> {
+        self.as_slice().flat()
+    }
+}
+
+impl RowMajor for Rows {
+    fn shape(&self) -> Option<(usize, usize)> {
+        Rows::shape(self)
+    }
+
+    fn flat(&self) -> Cow<'_, [f64]> {
+        Cow::Borrowed(self.values())
+    }
+}
+
 /// Ids that must be present, non-empty and unique within their list.
 #[derive(Debug, Default)]
 pub struct Ids<'a> {
@@ -502,6 +555,13 @@ pub struct Ids<'a> {
 impl<'a> Ids<'a> {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// For a list of `n` elements (the map is not grown on the way).
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            seen: HashMap::with_capacity(n),
+        }
     }
 
     /// The id of element `index` of the list; `field(i)` is the path of
