@@ -142,7 +142,7 @@ pub struct AssociationOutput {
 
 /// Validates, predicts if asked, and runs the sequential JPDA update.
 pub fn update(input: JpdaInput) -> Result<JpdaOutput, ServiceError> {
-    let plan = validate(&input)?;
+    let plan = validate(input)?;
     let start = Instant::now();
     let mut tracks = plan.tracks;
     if let Some((model, dt)) = plan.prediction {
@@ -289,7 +289,7 @@ const CV_2D: [&str; 4] = ["x", "vx", "y", "vy"];
 const CV_3D: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
 const NAMES: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
 
-fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
+fn validate(mut input: JpdaInput) -> Result<Plan, ServiceError> {
     let mut v = Violations::new();
     let method = v.one_of(
         "method",
@@ -313,14 +313,24 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     // Tracks.
     v.count_within("tracks", input.tracks.len(), MAX_TRACKS, "track");
     let n = input.tracks.first().map_or(0, |t| t.state.len());
-    let mut tracks = Vec::with_capacity(input.tracks.len().min(MAX_TRACKS));
+    let n_tracks = input.tracks.len();
+    {
+        // The ids first, as they borrow the request; then the tracks are
+        // moved out of it.
+        let mut ids = Ids::with_capacity(n_tracks.min(MAX_TRACKS));
+        for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
+            ids.check(&mut v, t.id.as_deref(), i, |j| format!("tracks[{j}].id"));
+        }
+    }
+    let mut tracks = Vec::with_capacity(n_tracks.min(MAX_TRACKS));
     let mut track_ids = Vec::with_capacity(tracks.capacity());
-    let mut ids = Ids::with_capacity(tracks.capacity());
-    for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
+    let track_inputs = std::mem::take(&mut input.tracks);
+    for (i, t) in track_inputs.into_iter().enumerate().take(MAX_TRACKS) {
         // Paths are formatted only for a violation: this loop runs per track.
         let f = |rest: &str| format!("tracks[{i}].{rest}");
-        let id = ids.check(&mut v, t.id.as_deref(), i, |j| format!("tracks[{j}].id"));
-        track_ids.push(id.unwrap_or_default().to_string());
+        // A missing or repeated id is a violation above: the request then
+        // fails whatever is kept here.
+        track_ids.push(t.id.unwrap_or_default());
         if t.state.is_empty() || t.state.len() > MAX_DIM {
             v.add(f("state"), format!("must have 1 to {MAX_DIM} components"));
             continue;
@@ -344,7 +354,7 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
             continue;
         }
         tracks.push(TrackEstimate {
-            x: DVector::from_vec(t.state.clone()),
+            x: DVector::from_vec(t.state),
             p,
         });
     }
@@ -437,7 +447,7 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     v.at_most("sensors", input.sensors.len(), MAX_SENSORS, "sensors");
     let total: usize = input.sensors.iter().map(|s| s.measurements.len()).sum();
     v.at_most("sensors", total, MAX_MEASUREMENTS, "measurements");
-    if total.saturating_mul(input.tracks.len()) > MAX_PAIRS {
+    if total.saturating_mul(n_tracks) > MAX_PAIRS {
         v.add(
             "sensors",
             format!(
@@ -448,9 +458,9 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
     }
     let mut scans = Vec::new();
     let mut sensor_ids = Vec::new();
-    for (si, s) in input.sensors.iter().enumerate().take(MAX_SENSORS) {
+    for (si, s) in input.sensors.iter_mut().enumerate().take(MAX_SENSORS) {
         let f = format!("sensors[{si}]");
-        sensor_ids.push(s.id.clone().unwrap_or_else(|| si.to_string()));
+        sensor_ids.push(s.id.take().unwrap_or_else(|| si.to_string()));
         if let Some(scan) = sensor(&mut v, &f, s, n, position) {
             scans.push(scan);
         }
@@ -473,7 +483,7 @@ fn validate(input: &JpdaInput) -> Result<Plan, ServiceError> {
 fn sensor(
     v: &mut Violations,
     f: &str,
-    s: &SensorInput,
+    s: &mut SensorInput,
     n: usize,
     position: Option<PositionLayout>,
 ) -> Option<Scan> {
@@ -637,12 +647,12 @@ fn sensor(
         );
     }
     let mut measurements = Vec::with_capacity(s.measurements.len());
-    for (j, z) in s.measurements.iter().enumerate() {
+    for (j, z) in s.measurements.iter_mut().enumerate() {
         // Formatted only for a violation: this loop runs per measurement.
         let mf = |rest: &str| format!("{f}.measurements[{j}].{rest}");
         match (&model, dim) {
             (Some(SensorModel::Linear { .. }), Some(dim)) => {
-                let Some(values) = v.required_at(z.z.as_ref(), || mf("z")) else {
+                let Some(values) = v.required_at(z.z.take(), || mf("z")) else {
                     continue;
                 };
                 if values.len() != dim {
@@ -653,7 +663,7 @@ fn sensor(
                 } else if values.iter().any(|x| !x.is_finite()) {
                     v.add(mf("z"), "contains a non-finite value");
                 } else {
-                    measurements.push(DVector::from_vec(values.clone()));
+                    measurements.push(DVector::from_vec(values));
                 }
             }
             (Some(SensorModel::Polar { .. }), Some(dim)) => {
@@ -726,6 +736,6 @@ fn matrix(
     nrows: usize,
     ncols: usize,
 ) -> Option<DMatrix<f64>> {
-    let flat = v.matrix(at(field), rows, nrows, ncols)?;
+    let flat = v.matrix_values(at(field), rows, nrows, ncols)?;
     Some(DMatrix::from_row_slice(nrows, ncols, &flat))
 }

@@ -389,6 +389,18 @@ impl Violations {
         nrows: usize,
         ncols: usize,
     ) -> Option<Vec<f64>> {
+        self.matrix_values(field, rows, nrows, ncols)
+            .map(Cow::into_owned)
+    }
+
+    /// [`Violations::matrix`], its values borrowed from flat [`Rows`].
+    pub fn matrix_values<'r>(
+        &mut self,
+        field: impl Field,
+        rows: &'r (impl RowMajor + ?Sized),
+        nrows: usize,
+        ncols: usize,
+    ) -> Option<Cow<'r, [f64]>> {
         if !has_shape(rows, nrows, ncols) {
             self.add(field, format!("must be a {nrows} × {ncols} matrix"));
             return None;
@@ -398,7 +410,7 @@ impl Violations {
             self.add(field, "contains a non-finite value");
             return None;
         }
-        Some(flat.into_owned())
+        Some(flat)
     }
 
     /// An n × n covariance (finite, symmetric, positive definite),
