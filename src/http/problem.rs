@@ -246,9 +246,14 @@ impl<T: DeserializeOwned + 'static> JsonBody<T> {
         let bytes = self.bytes;
         let encoded = crate::service::lanes::run(move || -> Result<Vec<u8>, Problem> {
             let answer = work(parse_json(&bytes)?)?;
-            serde_json::to_vec(&answer).map_err(|e| {
+            // Answers are about as large as their requests (a JPDA update
+            // returns each track it was given): sized once, the buffer is
+            // not copied through a dozen doublings on the way.
+            let mut encoded = Vec::with_capacity(bytes.len().clamp(1 << 10, 1 << 24));
+            serde_json::to_writer(&mut encoded, &answer).map_err(|e| {
                 Problem::from(ServiceError::Internal(format!("response encoding: {e}")))
-            })
+            })?;
+            Ok(encoded)
         })
         .await??;
         Ok((

@@ -538,6 +538,16 @@ impl RowMajor for [Vec<f64>] {
     }
 }
 
+impl<const N: usize> RowMajor for [Vec<f64>; N] {
+    fn shape(&self) -> Option<(usize, usize)> {
+        self.as_slice().shape()
+    }
+
+    fn flat(&self) -> Cow<'_, [f64]> {
+        self.as_slice().flat()
+    }
+}
+
 impl RowMajor for Vec<Vec<f64>> {
     fn shape(&self) -> Option<(usize, usize)> {
         self.as_slice().shape()
@@ -794,6 +804,16 @@ mod tests {
         assert_eq!(v.matrix("m1", &[vec![f64::NAN]], 1, 1), None);
         assert!(!v.vector("x", &[1.0], 2));
         assert!(v.vector("x0", &[1.0, 2.0], 2));
+        // Flat rows: the same checks, the same words.
+        let flat = Rows::from_nested(&good);
+        assert!(v.covariance("q", &flat, 2));
+        assert_eq!(v.matrix("n", &flat, 2, 2), Some(vec![2.0, 0.5, 0.5, 1.0]));
+        let ragged = Rows::from_nested(&[vec![2.0, 0.5], vec![0.5]]);
+        assert!(!v.covariance("q1", &ragged, 2));
+        assert_eq!(v.matrix("n1", &ragged, 2, 2), None);
+        // No rows at all is 0 × anything.
+        assert_eq!(v.matrix("n0", &Rows::default(), 0, 3), Some(vec![]));
+        assert_eq!(v.matrix("n2", &Rows::default(), 1, 1), None);
         assert_eq!(
             messages(v),
             [
@@ -801,6 +821,9 @@ mod tests {
                 ("p2", "is not positive definite"),
                 ("m1", "contains a non-finite value"),
                 ("x", "must have 2 components, got 1"),
+                ("q1", "must be a 2 × 2 matrix"),
+                ("n1", "must be a 2 × 2 matrix"),
+                ("n2", "must be a 1 × 1 matrix"),
             ]
             .map(|(f, m)| (f.to_string(), m.to_string()))
         );
