@@ -6,6 +6,30 @@ use nalgebra::DMatrix;
 
 use crate::algo::AlgoError;
 
+/// Calls `f::<N>(args)` with N the runtime dimension n, 1 to [`MAX_DIM`]
+/// (one kernel per dimension, its matrices on the stack at their exact
+/// size); any other n gives `None`, or the third argument when there is one.
+macro_rules! by_dim {
+    ($n:expr, $f:ident ( $($arg:expr),* )) => {
+        $crate::algo::small::by_dim!($n, $f($($arg),*), None)
+    };
+    ($n:expr, $f:ident ( $($arg:expr),* ), $other:expr) => {
+        match $n {
+            1 => $f::<1>($($arg),*),
+            2 => $f::<2>($($arg),*),
+            3 => $f::<3>($($arg),*),
+            4 => $f::<4>($($arg),*),
+            5 => $f::<5>($($arg),*),
+            6 => $f::<6>($($arg),*),
+            7 => $f::<7>($($arg),*),
+            8 => $f::<8>($($arg),*),
+            9 => $f::<9>($($arg),*),
+            _ => $other,
+        }
+    };
+}
+pub(crate) use by_dim;
+
 /// Largest state dimension the stack routines handle.
 pub const MAX_DIM: usize = 9;
 
@@ -22,18 +46,7 @@ pub fn quad_form_inv(s: &[f64], d: &[f64], n: usize) -> Option<f64> {
     debug_assert!(n <= MAX_DIM && s.len() >= n * n && d.len() >= n);
     // One monomorphised kernel per dimension keeps the factor on the stack
     // at its exact size (no zeroing of a 9×9 buffer for a 4×4 problem).
-    match n {
-        1 => quad_form_inv_n::<1>(s, d),
-        2 => quad_form_inv_n::<2>(s, d),
-        3 => quad_form_inv_n::<3>(s, d),
-        4 => quad_form_inv_n::<4>(s, d),
-        5 => quad_form_inv_n::<5>(s, d),
-        6 => quad_form_inv_n::<6>(s, d),
-        7 => quad_form_inv_n::<7>(s, d),
-        8 => quad_form_inv_n::<8>(s, d),
-        9 => quad_form_inv_n::<9>(s, d),
-        _ => None,
-    }
+    by_dim!(n, quad_form_inv_n(s, d))
 }
 
 /// The lower Cholesky factor of a row-major N×N matrix, or `None` when it is
@@ -154,18 +167,7 @@ pub fn mul_t_n<const N: usize>(a: &[f64], b: &[f64]) -> [[f64; N]; N] {
 /// with S = L L', trace(S⁻¹) = ‖L⁻¹‖²_F. `None` when S is not positive definite.
 pub fn trace_inverse(s: &[f64], n: usize) -> Option<f64> {
     debug_assert!(n <= MAX_DIM && s.len() >= n * n);
-    match n {
-        1 => trace_inverse_n::<1>(s),
-        2 => trace_inverse_n::<2>(s),
-        3 => trace_inverse_n::<3>(s),
-        4 => trace_inverse_n::<4>(s),
-        5 => trace_inverse_n::<5>(s),
-        6 => trace_inverse_n::<6>(s),
-        7 => trace_inverse_n::<7>(s),
-        8 => trace_inverse_n::<8>(s),
-        9 => trace_inverse_n::<9>(s),
-        _ => None,
-    }
+    by_dim!(n, trace_inverse_n(s))
 }
 
 #[allow(clippy::needless_range_loop)]
@@ -224,7 +226,12 @@ pub fn check_covariance(what: &'static str, p: &[f64], n: usize) -> Result<(), A
 
 /// The entries of a matrix in row-major order (nalgebra stores columns).
 pub fn row_major(m: &DMatrix<f64>) -> Vec<f64> {
-    m.transpose().as_slice().to_vec()
+    let (r, c) = m.shape();
+    let mut out = Vec::with_capacity(r * c);
+    for i in 0..r {
+        out.extend((0..c).map(|j| m[(i, j)]));
+    }
+    out
 }
 
 /// A square matrix of dimension ≤ [`MAX_DIM`] in a stack buffer, row-major.
@@ -280,31 +287,7 @@ pub fn cholesky(s: &[f64], n: usize) -> Option<Sq> {
         }
         Some(out)
     }
-    match n {
-        1 => flat::<1>(s),
-        2 => flat::<2>(s),
-        3 => flat::<3>(s),
-        4 => flat::<4>(s),
-        5 => flat::<5>(s),
-        6 => flat::<6>(s),
-        7 => flat::<7>(s),
-        8 => flat::<8>(s),
-        9 => flat::<9>(s),
-        _ => None,
-    }
-}
-
-/// y with L y = b, for a lower triangular L (n×n, row-major).
-pub fn solve_lower_vec(l: &[f64], b: &[f64], n: usize) -> [f64; MAX_DIM] {
-    let mut y = [0.0; MAX_DIM];
-    for i in 0..n {
-        let mut sum = b[i];
-        for k in 0..i {
-            sum -= l[i * n + k] * y[k];
-        }
-        y[i] = sum / l[i * n + i];
-    }
-    y
+    by_dim!(n, flat(s))
 }
 
 /// Y with L Y = B, for a lower triangular L (n×n, row-major; B n×n).
@@ -485,10 +468,9 @@ mod tests {
 
     #[test]
     fn triangular_solves_by_hand() {
-        // L = [[2, 0], [1, 3]]: L y = (4, 11) gives y = (2, 3); L Lᵀ = [[4, 2], [2, 10]].
+        // L = [[2, 0], [1, 3]]: L Lᵀ = [[4, 2], [2, 10]].
         let l = cholesky(&[4.0, 2.0, 2.0, 10.0], 2).unwrap();
         assert_eq!(&l[..4], &[2.0, 0.0, 1.0, 3.0]);
-        assert_eq!(&solve_lower_vec(&l, &[4.0, 11.0], 2)[..2], &[2.0, 3.0]);
         // L Y = [[4, 2], [11, 4]]: columns (2, 3) and (1, 1).
         assert_eq!(
             &solve_lower(&l, &[4.0, 2.0, 11.0, 4.0], 2)[..4],

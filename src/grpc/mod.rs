@@ -39,15 +39,16 @@ use jpda::JpdaGrpc;
 use plot_fusion::PlotFusionGrpc;
 use sessions::SessionGrpc;
 
-/// A row-major `Matrix` as nested rows; `None` (with a violation naming
-/// `field`) when its values do not fill rows × cols.
-pub(crate) fn rows(
+/// Whether a `Matrix`'s values fill its rows × cols (both > 0); otherwise
+/// a violation naming `field`.
+fn fills_shape(
     v: &mut crate::service::Violations,
-    field: &str,
+    field: impl crate::service::validate::Field,
     m: &crate::proto::Matrix,
-) -> Option<Vec<Vec<f64>>> {
+) -> bool {
     let (r, c) = (m.rows as usize, m.cols as usize);
-    if r == 0 || c == 0 || r.checked_mul(c) != Some(m.values.len()) {
+    let fills = r > 0 && c > 0 && r.checked_mul(c) == Some(m.values.len());
+    if !fills {
         v.add(
             field,
             format!(
@@ -57,9 +58,23 @@ pub(crate) fn rows(
                 m.values.len()
             ),
         );
-        return None;
     }
-    Some(m.values.chunks(c).map(<[f64]>::to_vec).collect())
+    fills
+}
+
+/// A row-major `Matrix` as nested rows; `None` (with a violation naming
+/// `field`) when its values do not fill rows × cols.
+pub(crate) fn rows(
+    v: &mut crate::service::Violations,
+    field: &str,
+    m: &crate::proto::Matrix,
+) -> Option<Vec<Vec<f64>>> {
+    fills_shape(v, field, m).then(|| {
+        m.values
+            .chunks(m.cols as usize)
+            .map(<[f64]>::to_vec)
+            .collect()
+    })
 }
 
 /// A `Matrix` as request [`Rows`], its values moved, not copied; `None`
@@ -69,17 +84,11 @@ pub(crate) fn flat_rows(
     field: impl crate::service::validate::Field,
     m: crate::proto::Matrix,
 ) -> Option<crate::service::Rows> {
-    let (r, c, len) = (m.rows, m.cols, m.values.len());
-    let rows = (r > 0 && c > 0)
-        .then(|| crate::service::Rows::from_flat(m.values, r as usize, c as usize))
-        .flatten();
-    if rows.is_none() {
-        v.add(
-            field,
-            format!("rows × cols = {r} × {c} does not match {len} values"),
-        );
+    if !fills_shape(v, field, &m) {
+        return None;
     }
-    rows
+    let (r, c) = (m.rows as usize, m.cols as usize);
+    crate::service::Rows::from_flat(m.values, r, c)
 }
 
 /// Answer [`Rows`] as a row-major `Matrix`, the values moved.

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Ids, Rows, ServiceError, Violations, at, covariance_message, micros_since, rows};
+use super::{Ids, Rows, ServiceError, Violations, at, covariance_message, micros_since};
 use crate::algo::{
     AlgoError,
     jpda::{self, Clutter, Config, Fallback, Gate, Method, Scan, SensorModel, TrackEstimate},
@@ -223,7 +223,7 @@ pub fn update(input: JpdaInput) -> Result<JpdaOutput, ServiceError> {
             .map(|(t, id)| TrackOutput {
                 id,
                 state: t.x.iter().copied().collect(),
-                covariance: rows::from_column_major(t.p.nrows(), t.p.ncols(), t.p.as_slice()),
+                covariance: Rows::from_matrix(&t.p),
             })
             .collect(),
         sensors,

@@ -4,6 +4,10 @@
 //! a ragged matrix is kept as such for validation to name
 //! ([`Violations::matrix`](super::Violations::matrix)).
 
+use nalgebra::DMatrix;
+
+use crate::algo::small;
+
 /// Row-major values with the request's shape.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Rows {
@@ -31,6 +35,15 @@ impl Rows {
             out.push_row(row.as_ref());
         }
         out
+    }
+
+    /// A computed matrix (nalgebra stores columns) as answer rows.
+    pub fn from_matrix(m: &DMatrix<f64>) -> Self {
+        Self {
+            values: small::row_major(m),
+            nrows: m.nrows(),
+            ncols: Some(m.ncols()),
+        }
     }
 
     /// An empty matrix (no rows) whose values will take about `capacity`
@@ -90,41 +103,29 @@ impl Rows {
 
     /// The rows of a rectangular matrix (none for a ragged one).
     pub fn rows(&self) -> impl Iterator<Item = &[f64]> {
-        let cols = match self.shape() {
-            Some((_, c)) if c > 0 => c,
-            _ => usize::MAX,
-        };
-        self.values
-            .chunks(cols)
-            .take(self.shape().map_or(0, |(r, _)| r))
-    }
-
-    /// The rows as nested vectors.
-    pub fn to_nested(&self) -> Vec<Vec<f64>> {
-        match self.shape() {
-            Some((r, 0)) => vec![Vec::new(); r],
-            _ => self.rows().map(<[f64]>::to_vec).collect(),
-        }
-    }
-}
-
-/// An `nrows × ncols` row-major matrix from a column-major slice (nalgebra's
-/// storage).
-pub fn from_column_major(nrows: usize, ncols: usize, values: &[f64]) -> Rows {
-    let mut flat = Vec::with_capacity(nrows * ncols);
-    for i in 0..nrows {
-        flat.extend((0..ncols).map(|j| values[j * nrows + i]));
-    }
-    Rows {
-        values: flat,
-        nrows,
-        ncols: Some(ncols),
+        // Ragged: no rows. Rows of no values: the empty values give none.
+        let (r, c) = self.shape().unwrap_or((0, 1));
+        self.values.chunks(c.max(1)).take(r)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    trait Nested {
+        fn to_nested(&self) -> Vec<Vec<f64>>;
+    }
+
+    /// The rows as nested vectors, to compare with literals.
+    impl Nested for Rows {
+        fn to_nested(&self) -> Vec<Vec<f64>> {
+            match self.shape() {
+                Some((r, 0)) => vec![Vec::new(); r],
+                _ => self.rows().map(<[f64]>::to_vec).collect(),
+            }
+        }
+    }
 
     #[test]
     fn shapes_of_rectangular_ragged_and_empty_rows() {
@@ -155,7 +156,11 @@ mod tests {
     #[test]
     fn column_major_is_transposed_into_rows() {
         // nalgebra stores [[1, 2, 3], [4, 5, 6]] as 1, 4, 2, 5, 3, 6.
-        let m = from_column_major(2, 3, &[1.0, 4.0, 2.0, 5.0, 3.0, 6.0]);
+        let m = Rows::from_matrix(&DMatrix::from_column_slice(
+            2,
+            3,
+            &[1.0, 4.0, 2.0, 5.0, 3.0, 6.0],
+        ));
         assert_eq!(
             m.to_nested(),
             vec![vec![1.0, 2.0, 3.0], vec![4.0, 5.0, 6.0]]

@@ -428,7 +428,9 @@ impl Violations {
         }
         // Symmetry and definiteness do not depend on the order of the
         // components: the request's order is checked as it is.
-        match small::check_covariance("covariance", &rows.flat(), n) {
+        let mut flat = small::ZERO;
+        rows.write_flat(&mut flat[..n * n]);
+        match small::check_covariance("covariance", &flat[..n * n], n) {
             Ok(()) => true,
             Err(e) => {
                 self.add(field, covariance_message(&e));
@@ -515,6 +517,11 @@ pub trait RowMajor {
     fn shape(&self) -> Option<(usize, usize)>;
     /// The values row after row.
     fn flat(&self) -> Cow<'_, [f64]>;
+    /// The values row after row into `out` (as long as they are), without
+    /// an allocation.
+    fn write_flat(&self, out: &mut [f64]) {
+        out.copy_from_slice(&self.flat());
+    }
 }
 
 /// Whether `rows` is `nrows × ncols` (no rows at all is `0 × anything`).
@@ -536,25 +543,28 @@ impl RowMajor for [Vec<f64>] {
     fn flat(&self) -> Cow<'_, [f64]> {
         Cow::Owned(self.concat())
     }
-}
 
-impl<const N: usize> RowMajor for [Vec<f64>; N] {
-    fn shape(&self) -> Option<(usize, usize)> {
-        self.as_slice().shape()
-    }
-
-    fn flat(&self) -> Cow<'_, [f64]> {
-        self.as_slice().flat()
+    fn write_flat(&self, out: &mut [f64]) {
+        let mut at = 0;
+        for row in self {
+            out[at..at + row.len()].copy_from_slice(row);
+            at += row.len();
+        }
     }
 }
 
-impl RowMajor for Vec<Vec<f64>> {
+/// Nested rows held in a `Vec` or an array.
+impl<T: AsRef<[Vec<f64>]>> RowMajor for T {
     fn shape(&self) -> Option<(usize, usize)> {
-        self.as_slice().shape()
+        self.as_ref().shape()
     }
 
     fn flat(&self) -> Cow<'_, [f64]> {
-        self.as_slice().flat()
+        self.as_ref().flat()
+    }
+
+    fn write_flat(&self, out: &mut [f64]) {
+        self.as_ref().write_flat(out);
     }
 }
 

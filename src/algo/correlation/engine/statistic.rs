@@ -15,25 +15,6 @@ use crate::algo::{
     small::{self, MAX_DIM, Sq},
 };
 
-/// Calls `$f::<N>(args)` with N the runtime dimension `$n` (1 to
-/// [`MAX_DIM`]), so that the kernels work on exact-size stack matrices.
-macro_rules! by_dim {
-    ($n:expr, $f:ident ( $($arg:expr),* )) => {
-        match $n {
-            1 => $f::<1>($($arg),*),
-            2 => $f::<2>($($arg),*),
-            3 => $f::<3>($($arg),*),
-            4 => $f::<4>($($arg),*),
-            5 => $f::<5>($($arg),*),
-            6 => $f::<6>($($arg),*),
-            7 => $f::<7>($($arg),*),
-            8 => $f::<8>($($arg),*),
-            9 => $f::<9>($($arg),*),
-            _ => unreachable!("the scene checks the dimension"),
-        }
-    };
-}
-
 /// Most step lengths whose F and Q are kept.
 const STEPS_KEPT: usize = 64;
 
@@ -139,7 +120,11 @@ impl PairCorrelator<'_> {
         let (xa, xb) = (ta.x(k, dim), tb.x(k, dim));
         let (pa, pb) = (ta.p(k, dim), tb.p(k, dim));
         let cross = p.cross.as_deref();
-        let (stat, singular) = by_dim!(dim, statistic_n(xa, xb, pa, pb, cross));
+        let (stat, singular) = small::by_dim!(
+            dim,
+            statistic_n(xa, xb, pa, pb, cross),
+            unreachable!("the scene checks the dimension")
+        );
         if singular {
             // P_a + P_b − P_ab − P_ab' is a covariance only when the
             // reported covariances, gains and model are consistent;
@@ -251,7 +236,11 @@ impl PairCorrelator<'_> {
         let first = self.scene.first();
         let fa = self.factors_a.get(a, k - first);
         let fb = self.factors_b.get(b, k - first);
-        by_dim!(dim, cross_step_n(f, q, fa, fb, c));
+        small::by_dim!(
+            dim,
+            cross_step_n(f, q, fa, fb, c),
+            unreachable!("the scene checks the dimension")
+        );
         true
     }
 }
@@ -359,7 +348,11 @@ pub(super) fn filter_factors(
                 let (p_prev, p_now) = (track.p(kp, dim), track.p(k, dim));
                 match steps.get(model, dt, dim) {
                     Some((f, Some(q))) => {
-                        by_dim!(dim, factor_n(f, q, p_prev, p_now, slot))?;
+                        small::by_dim!(
+                            dim,
+                            factor_n(f, q, p_prev, p_now, slot),
+                            unreachable!("the scene checks the dimension")
+                        )?;
                     }
                     // Q depends on the state, or the model refuses the
                     // step (the error it gives).
@@ -396,7 +389,11 @@ pub fn filter_factor(
     let f = small::row_major(&model.transition(dt)?);
     let q = small::row_major(&model.process_noise(dt, &x)?);
     let mut a = small::ZERO;
-    by_dim!(dim, factor_n(&f, &q, p_prev, p_now, &mut a[..dim * dim]))?;
+    small::by_dim!(
+        dim,
+        factor_n(&f, &q, p_prev, p_now, &mut a[..dim * dim]),
+        unreachable!("the scene checks the dimension")
+    )?;
     Ok(Some(a))
 }
 
