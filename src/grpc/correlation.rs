@@ -3,11 +3,11 @@
 
 use tonic::{Request, Response, Status};
 
-use super::{error::to_status, matrix, rows};
+use super::{error::to_status, flat_rows, matrix, rows};
 use crate::{
     proto::{self as pb, correlation_service_server::CorrelationService},
     service::{
-        self, ServiceError, Violations,
+        self, ServiceError, Violations, at,
         correlation::{self as corr, decision_name, fusion_name, reason_name, statistic_name},
         rules as svc,
     },
@@ -118,24 +118,11 @@ pub(super) fn correlate_input(
                         .into_iter()
                         .enumerate()
                         .map(|(si, s)| {
-                            let field = format!("nodes[{ni}].tracks[{ti}].samples[{si}]");
-                            let covariance = match &s.covariance {
-                                Some(m) => rows(&mut v, &format!("{field}.covariance"), m),
-                                None => {
-                                    v.add(format!("{field}.covariance"), "is required");
-                                    None
-                                }
-                            };
-                            let gain = s
-                                .gain
-                                .as_ref()
-                                .and_then(|m| rows(&mut v, &format!("{field}.gain"), m));
-                            corr::SampleInput {
-                                t: s.t,
-                                state: s.state,
-                                covariance: covariance.unwrap_or_default(),
-                                gain,
-                            }
+                            sample_in(
+                                &mut v,
+                                &|| format!("nodes[{ni}].tracks[{ti}].samples[{si}]"),
+                                s,
+                            )
                         })
                         .collect(),
                 })
@@ -292,5 +279,30 @@ impl From<svc::RuleEvaluation> for pb::RuleEvaluation {
             misses_from: e.misses_from,
             miss_probability: e.miss_probability,
         }
+    }
+}
+
+/// A track sample as the service's input; its field paths (`field()` is the
+/// sample's) are formatted only for a violation.
+pub(super) fn sample_in(
+    v: &mut Violations,
+    field: &dyn Fn() -> String,
+    s: pb::TrackSample,
+) -> corr::SampleInput {
+    let covariance = match s.covariance {
+        Some(m) => flat_rows(v, at(|| format!("{}.covariance", field())), m),
+        None => {
+            v.add(format!("{}.covariance", field()), "is required");
+            None
+        }
+    };
+    let gain = s
+        .gain
+        .and_then(|m| flat_rows(v, at(|| format!("{}.gain", field())), m));
+    corr::SampleInput {
+        t: s.t,
+        state: s.state,
+        covariance: covariance.unwrap_or_default(),
+        gain,
     }
 }

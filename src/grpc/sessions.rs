@@ -9,12 +9,11 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Code, Request, Response, Status, Streaming};
 
 use super::{
-    correlation::{correlate_input, finite, pair_result, system_track, track_ref},
+    correlation::{correlate_input, finite, pair_result, sample_in, system_track, track_ref},
     error::to_status,
     plot_fusion::{
         asterix_in, asterix_out, counters_out, plots_in, spec_in as plot_spec_in, track_out,
     },
-    rows,
 };
 use crate::{
     auth::{DEFAULT_TENANT, Tenant},
@@ -124,28 +123,11 @@ fn batch_in(req: pb::PushBatchRequest) -> Result<Batch<domain::BatchInput>, Serv
         .into_iter()
         .enumerate()
         .map(|(i, r)| {
-            let field = format!("reports[{i}]");
             let s = r.sample.unwrap_or_default();
-            let covariance = match &s.covariance {
-                Some(m) => rows(&mut v, &format!("{field}.covariance"), m),
-                None => {
-                    v.add(format!("{field}.covariance"), "is required");
-                    None
-                }
-            };
-            let gain = s
-                .gain
-                .as_ref()
-                .and_then(|m| rows(&mut v, &format!("{field}.gain"), m));
             domain::ReportInput {
                 node: (!r.node.is_empty()).then_some(r.node),
                 track: (!r.track.is_empty()).then_some(r.track),
-                sample: corr::SampleInput {
-                    t: s.t,
-                    state: s.state,
-                    covariance: covariance.unwrap_or_default(),
-                    gain,
-                },
+                sample: sample_in(&mut v, &|| format!("reports[{i}]"), s),
             }
         })
         .collect();

@@ -6,7 +6,10 @@ use utoipa::ToSchema;
 
 use super::problem::{JsonBody, Problem};
 use crate::{
-    service::correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
+    service::{
+        Rows,
+        correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
+    },
     state::AppState,
 };
 
@@ -184,9 +187,11 @@ pub struct TrackSample {
     #[schema(example = json!([1000.0, 100.0, 2000.0, -50.0]))]
     pub state: Vec<f64>,
     /// Symmetric positive definite, row-major nested arrays.
-    pub covariance: Vec<Vec<f64>>,
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub covariance: Rows,
     /// The local filter's gain K (state × measurement), optional.
-    pub gain: Option<Vec<Vec<f64>>>,
+    #[schema(value_type = Option<Vec<Vec<f64>>>)]
+    pub gain: Option<Rows>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]

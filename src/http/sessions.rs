@@ -25,7 +25,7 @@ use super::{
 use crate::{
     auth::Tenant,
     service::{
-        ServiceError, Violations, correlation as corr,
+        Rows, ServiceError, Violations, correlation as corr,
         session::{
             Batch, KindName, Spec, Update, View,
             correlation::{self as domain, CorrelationSession, change_name},
@@ -121,9 +121,11 @@ pub struct TrackReport {
     #[schema(example = json!([1000.0, 100.0, 2000.0, -50.0]))]
     pub state: Vec<f64>,
     /// Symmetric positive definite, row-major nested arrays.
-    pub covariance: Vec<Vec<f64>>,
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub covariance: Rows,
     /// The local filter's gain K (state × measurement), optional.
-    pub gain: Option<Vec<Vec<f64>>>,
+    #[schema(value_type = Option<Vec<Vec<f64>>>)]
+    pub gain: Option<Rows>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]

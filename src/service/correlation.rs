@@ -17,7 +17,7 @@ use std::{collections::HashMap, time::Instant};
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Ids, Increasing, Interval, ServiceError, Violations, at, micros_since};
+use super::{Ids, Increasing, Interval, Rows, ServiceError, Violations, at, micros_since};
 use crate::algo::{
     AlgoError,
     correlation::{
@@ -124,8 +124,8 @@ pub struct TrackInput {
 pub struct SampleInput {
     pub t: Option<f64>,
     pub state: Vec<f64>,
-    pub covariance: Vec<Vec<f64>>,
-    pub gain: Option<Vec<Vec<f64>>>,
+    pub covariance: Rows,
+    pub gain: Option<Rows>,
 }
 
 /// The method names of the API.
@@ -334,12 +334,13 @@ impl Layout {
         self.from_request.iter().map(|&i| v[i]).collect()
     }
 
-    pub(super) fn matrix_to_canonical(&self, m: &[Vec<f64>]) -> Vec<f64> {
+    pub(super) fn matrix_to_canonical(&self, m: &Rows) -> Vec<f64> {
         let n = self.dim;
+        let m = m.values();
         let mut out = vec![0.0; n * n];
         for (i, &ri) in self.from_request.iter().enumerate() {
             for (j, &rj) in self.from_request.iter().enumerate() {
-                out[i * n + j] = m[ri][rj];
+                out[i * n + j] = m[ri * n + rj];
             }
         }
         out
@@ -1244,7 +1245,7 @@ fn estimate(layout: &Layout, h: Option<&DMatrix<f64>>, t: f64, s: &SampleInput) 
         x: layout.vector_to_canonical(&s.state),
         p: layout.matrix_to_canonical(&s.covariance),
         factor: match (&s.gain, h) {
-            (Some(g), Some(h)) => Some(align::gain_factor(g, h, &layout.from_request)),
+            (Some(g), Some(h)) => Some(align::gain_factor(g.values(), h, &layout.from_request)),
             _ => None,
         },
     }

@@ -20,9 +20,12 @@ use super::{
 };
 use crate::{
     algo::correlation::engine::Decision,
-    service::correlation::{
-        AlignmentInput, CorrelateInput, CorrelateOutput, MethodInput, MotionModelInput, NodeInput,
-        SampleInput, TrackInput,
+    service::{
+        Rows,
+        correlation::{
+            AlignmentInput, CorrelateInput, CorrelateOutput, MethodInput, MotionModelInput,
+            NodeInput, SampleInput, TrackInput,
+        },
     },
 };
 
@@ -144,9 +147,7 @@ pub fn generate(net: &Network, rng: &mut SimRng) -> Result<NetworkRun, SimError>
                     samples.push(SampleInput {
                         t: Some(t),
                         state: e.x.as_slice().to_vec(),
-                        covariance: (0..4)
-                            .map(|i| (0..4).map(|j| e.p[(i, j)]).collect())
-                            .collect(),
+                        covariance: Rows::from_matrix(&e.p),
                         gain: None,
                     });
                 }

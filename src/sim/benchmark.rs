@@ -44,7 +44,7 @@ use crate::algo::{
 use crate::service::correlation::{
     CorrelateInput, MethodInput, MotionModelInput, NodeInput, RuleInput, SampleInput, TrackInput,
 };
-use crate::service::plot_fusion;
+use crate::service::{Rows, plot_fusion};
 
 /// Position and velocity error σ of the benchmark's local tracks.
 pub const SIGMA_POSITION_M: f64 = 200.0;
@@ -68,12 +68,12 @@ pub fn correlation_request(n: usize, pruning: &str) -> CorrelateInput {
         })
         .collect();
     let (sp, sv) = (SIGMA_POSITION_M, SIGMA_VELOCITY_MPS);
-    let cov = vec![
-        vec![sp * sp, 0.0, 0.0, 0.0],
-        vec![0.0, sv * sv, 0.0, 0.0],
-        vec![0.0, 0.0, sp * sp, 0.0],
-        vec![0.0, 0.0, 0.0, sv * sv],
-    ];
+    let cov = Rows::from_nested(&[
+        [sp * sp, 0.0, 0.0, 0.0],
+        [0.0, sv * sv, 0.0, 0.0],
+        [0.0, 0.0, sp * sp, 0.0],
+        [0.0, 0.0, 0.0, sv * sv],
+    ]);
     let nodes = ["n1", "n2"]
         .iter()
         .map(|id| NodeInput {
@@ -306,13 +306,17 @@ pub fn realistic_scene(n: usize, instants: usize, gains: bool) -> RealisticScene
                 samples.push(SampleInput {
                     t: Some(times[j]),
                     state: x.as_slice().to_vec(),
-                    covariance: (0..4)
-                        .map(|i| (0..4).map(|c| p[(i, c)]).collect())
-                        .collect(),
+                    covariance: Rows::from_nested(
+                        &(0..4)
+                            .map(|i| [p[(i, 0)], p[(i, 1)], p[(i, 2)], p[(i, 3)]])
+                            .collect::<Vec<_>>(),
+                    ),
                     gain: gains.then(|| {
-                        (0..4)
-                            .map(|i| (0..2).map(|c| gain[(i, c)]).collect())
-                            .collect()
+                        Rows::from_nested(
+                            &(0..4)
+                                .map(|i| [gain[(i, 0)], gain[(i, 1)]])
+                                .collect::<Vec<_>>(),
+                        )
                     }),
                 });
             }

@@ -138,16 +138,16 @@ pub fn bring(
     Ok(Some((xp.as_slice().to_vec(), small::row_major(&pp))))
 }
 
-/// I − K H in canonical order, from a gain K whose rows follow the request's
-/// state layout (`from_request[i]` is the request's index of canonical
-/// component i).
-pub fn gain_factor(k_rows: &[Vec<f64>], h: &DMatrix<f64>, from_request: &[usize]) -> Vec<f64> {
+/// I − K H in canonical order, from a gain K (row-major, state × H's rows)
+/// whose rows follow the request's state layout (`from_request[i]` is the
+/// request's index of canonical component i).
+pub fn gain_factor(k_rows: &[f64], h: &DMatrix<f64>, from_request: &[usize]) -> Vec<f64> {
     let dim = from_request.len();
     let m = h.nrows();
     let mut k = DMatrix::zeros(dim, m);
     for (i, &ri) in from_request.iter().enumerate() {
-        for (j, v) in k_rows[ri].iter().enumerate().take(m) {
-            k[(i, j)] = *v;
+        for j in 0..m {
+            k[(i, j)] = k_rows[ri * m + j];
         }
     }
     small::row_major(&(DMatrix::<f64>::identity(dim, dim) - &k * h))
@@ -404,7 +404,7 @@ mod tests {
         // H picks x: [1, 0] in canonical order. I − K H with canonical
         // K = [0.6, 0.2]': [[0.4, 0], [-0.2, 1]].
         let h = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
-        let f = gain_factor(&[vec![0.2], vec![0.6]], &h, &[1, 0]);
+        let f = gain_factor(&[0.2, 0.6], &h, &[1, 0]);
         let want = [0.4, 0.0, -0.2, 1.0];
         for (a, b) in f.iter().zip(want) {
             assert!((a - b).abs() < 1e-15, "{f:?}");

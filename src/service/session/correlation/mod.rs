@@ -39,7 +39,7 @@ use crate::{
         wire::{Reader, Writer},
     },
     service::{
-        ServiceError,
+        Rows, ServiceError,
         correlation::{CorrelateInput, GroupOutput, PairOutput, SampleInput, TrackName},
     },
 };
@@ -211,9 +211,11 @@ impl SessionKind for CorrelationSession {
             let s = &r.sample;
             h.opt_f64(s.t);
             s.state.iter().for_each(|&x| h.f64(x));
-            s.covariance.iter().flatten().for_each(|&x| h.f64(x));
+            // Row after row, as when the rows were nested: a retry keeps
+            // its fingerprint across versions.
+            s.covariance.values().iter().for_each(|&x| h.f64(x));
             h.bytes(&[u8::from(s.gain.is_some())]);
-            s.gain.iter().flatten().flatten().for_each(|&x| h.f64(x));
+            s.gain.iter().flat_map(Rows::values).for_each(|&x| h.f64(x));
         }
         Some(h.0)
     }

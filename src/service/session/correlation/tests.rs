@@ -5,6 +5,7 @@ use super::*;
 use crate::{
     algo::correlation::engine::Decision,
     service::{
+        Rows,
         correlation::{
             AlignmentInput, MethodInput, MotionModelInput, NodeInput, RuleInput, TrackInput,
             correlate,
@@ -137,12 +138,12 @@ fn scenario_with(mode: &str, offset_b: f64) -> CorrelateInput {
                         y0 + vy * t + e * noise.next(),
                         vy + noise.next(),
                     ],
-                    covariance: vec![
-                        vec![400.0, 10.0, 0.0, 0.0],
-                        vec![10.0, 25.0, 0.0, 0.0],
-                        vec![0.0, 0.0, 400.0, 10.0],
-                        vec![0.0, 0.0, 10.0, 25.0],
-                    ],
+                    covariance: Rows::from_nested(&[
+                        [400.0, 10.0, 0.0, 0.0],
+                        [10.0, 25.0, 0.0, 0.0],
+                        [0.0, 0.0, 400.0, 10.0],
+                        [0.0, 0.0, 10.0, 25.0],
+                    ]),
                     gain: None,
                 });
             }
@@ -581,7 +582,9 @@ fn limits_and_bad_reports_are_refused_without_change() {
     ));
     let mut bad = reports[0].clone();
     bad.node = Some("zz".into());
-    bad.sample.covariance[0][0] = -1.0;
+    let mut values = bad.sample.covariance.values().to_vec();
+    values[0] = -1.0;
+    bad.sample.covariance = Rows::from_flat(values, 4, 4).unwrap();
     let Err(ServiceError::InvalidInput(v)) = s.push(
         "s",
         TestBatch {
