@@ -5,16 +5,31 @@
 //! (gating, clustering, β, combined update); `beta/*` is β alone on the
 //! scene's clusters, where naive enumeration is run when the product of
 //! the gate sizes (a bound on the number of joint events) is at most 10⁸.
+//!
+//! `cargo bench --bench jpda -- --request BODY.json BODY.pb [repeat]` times
+//! issue 18's request in process, one stage at a time: the REST adapter's
+//! parse, handler (conversion, validation, compute, answer) and encoding of
+//! the JSON body, and the gRPC adapter's decoding, handler and encoding of
+//! the protobuf message, with the algorithm's own `compute_us` beside them
+//! (`request_path --dump BODY.json --dump-proto BODY.pb` writes both).
 
-use std::hint::black_box;
+use std::{hint::black_box, time::Instant};
 
-use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use criterion::{BatchSize, Criterion, criterion_group};
+use prost::Message;
 use radar_fusion::{
     algo::jpda::{
         self, Config, Method, amsjpda_marginals, cluster_problems, exact_marginals, naive_marginals,
     },
+    grpc, http,
+    http::problem::parse_json,
+    proto as pb,
     sim::experiments::seed002_jpda::bench_scene,
 };
+
+/// The server's allocator, so that allocation costs what it costs there.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 const DETECTIONS: usize = 6;
 const NAIVE_EVENT_BOUND: f64 = 1e8;
@@ -101,4 +116,95 @@ fn bench_jpda(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench_jpda);
-criterion_main!(benches);
+
+/// Median and minimum of each stage of the request over `repeat` calls per
+/// transport, calls alternating between the transports.
+fn request_table(json_path: &str, proto_path: &str, repeat: usize) {
+    let json = std::fs::read(json_path).expect("the JSON body reads");
+    let proto = std::fs::read(proto_path).expect("the protobuf body reads");
+    let mut rest: [Vec<f64>; 4] = Default::default();
+    let mut grpc: [Vec<f64>; 4] = Default::default();
+    let mut sizes = (0, 0);
+    let us = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e6;
+    for _ in 0..repeat {
+        let t0 = Instant::now();
+        let req: http::jpda::JpdaUpdateRequest =
+            black_box(parse_json(black_box(&json)).expect("the body parses"));
+        let t1 = Instant::now();
+        let answer = black_box(http::jpda::update_on_lane(req).expect("the request is valid"));
+        let t2 = Instant::now();
+        let encoded = black_box(serde_json::to_vec(&answer).expect("the answer encodes"));
+        let t3 = Instant::now();
+        sizes.0 = encoded.len();
+        for (k, t) in [us(t0, t1), us(t1, t2), answer.timing.compute_us, us(t2, t3)]
+            .into_iter()
+            .enumerate()
+        {
+            rest[k].push(t);
+        }
+        drop((answer, encoded));
+        let t0 = Instant::now();
+        let req = black_box(pb::JpdaUpdateRequest::decode(black_box(&proto[..])).expect("decodes"));
+        let t1 = Instant::now();
+        let answer = black_box(grpc::jpda::update_on_lane(req).expect("the request is valid"));
+        let t2 = Instant::now();
+        let encoded = black_box(answer.encode_to_vec());
+        let t3 = Instant::now();
+        sizes.1 = encoded.len();
+        let compute = answer.timing.map_or(f64::NAN, |t| t.compute_us);
+        for (k, t) in [us(t0, t1), us(t1, t2), compute, us(t2, t3)]
+            .into_iter()
+            .enumerate()
+        {
+            grpc[k].push(t);
+        }
+    }
+    println!(
+        "REST, {} bytes in, {} bytes out; gRPC, {} bytes in, {} bytes out; {repeat} calls each, µs: median (min)",
+        json.len(),
+        sizes.0,
+        proto.len(),
+        sizes.1
+    );
+    let names = ["parse", "handler", "compute", "encode"];
+    for (label, times) in [("REST", rest), ("gRPC", grpc)] {
+        let medians: Vec<f64> = times.iter().map(|t| median(t.clone())).collect();
+        let line: Vec<String> = names
+            .iter()
+            .zip(&times)
+            .zip(&medians)
+            .map(|((name, t), m)| {
+                let min = t.iter().copied().fold(f64::INFINITY, f64::min);
+                format!("{name} {m:.1} ({min:.1})")
+            })
+            .collect();
+        let total = medians[0] + medians[1] + medians[3];
+        println!(
+            "  {label}: {}; parse + handler + encode = {total:.1} = {:.2}× compute",
+            line.join(", "),
+            total / medians[2]
+        );
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--request") {
+        let (Some(json), Some(proto)) = (args.get(i + 1), args.get(i + 2)) else {
+            eprintln!("usage: --request BODY.json BODY.pb [repeat]");
+            std::process::exit(2);
+        };
+        let repeat = args.get(i + 3).and_then(|s| s.parse().ok()).unwrap_or(200);
+        request_table(json, proto, repeat);
+        return;
+    }
+    benches();
+    criterion::Criterion::default()
+        .configure_from_args()
+        .final_summary();
+}

@@ -13,6 +13,7 @@
 //! cargo run --release --bin radar-fusion &    # or any running server
 //! cargo run --release --example request_path -- [--url http://127.0.0.1:8080]
 //!     [--grpc http://127.0.0.1:50051] [--targets 500] [--repeat 200] [--dump FILE]
+//!     [--dump-proto FILE] [--only rest|grpc]
 //! ```
 
 use std::time::{Duration, Instant};
@@ -31,6 +32,8 @@ struct Args {
     repeat: usize,
     /// Write the JSON request to this file and exit (for wrk or perf).
     dump: Option<String>,
+    /// Write the protobuf request message to this file and exit.
+    dump_proto: Option<String>,
     /// Run only this transport (`rest` or `grpc`), e.g. under a profiler.
     only: Option<String>,
 }
@@ -42,6 +45,7 @@ fn args() -> anyhow::Result<Args> {
         targets: 500,
         repeat: 200,
         dump: None,
+        dump_proto: None,
         only: None,
     };
     let mut it = std::env::args().skip(1);
@@ -56,6 +60,7 @@ fn args() -> anyhow::Result<Args> {
             "--targets" => a.targets = value()?.parse()?,
             "--repeat" => a.repeat = value()?.parse()?,
             "--dump" => a.dump = Some(value()?),
+            "--dump-proto" => a.dump_proto = Some(value()?),
             "--only" => a.only = Some(value()?),
             other => anyhow::bail!("unknown flag {other}"),
         }
@@ -177,6 +182,11 @@ async fn main() -> anyhow::Result<()> {
     let (json_body, proto) = requests(a.targets);
     if let Some(path) = &a.dump {
         std::fs::write(path, &json_body)?;
+    }
+    if let Some(path) = &a.dump_proto {
+        std::fs::write(path, prost::Message::encode_to_vec(&proto))?;
+    }
+    if a.dump.is_some() || a.dump_proto.is_some() {
         return Ok(());
     }
     println!(

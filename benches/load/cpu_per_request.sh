@@ -3,7 +3,8 @@
 # requests/s and the server's CPU µs per request (user + system time of the
 # process from /proc over the requests wrk counted) for the rules endpoint
 # and the small correlation request at 64 connections, then the JPDA
-# 500-target update's compute / server / client times over REST and gRPC.
+# 500-target update's compute / server / client times and the server's CPU
+# per call over REST and gRPC.
 #   cargo run --release --example correlation_payload -- 5 grid > /tmp/corr-5.json
 #   benches/load/cpu_per_request.sh target/release/radar-fusion
 # Alternate binaries (before, after, before, after) on a shared machine.
@@ -27,4 +28,13 @@ one() {
 }
 one "rules endpoint" wrk -t2 -c64 -d6s -s benches/load/evaluate.lua http://127.0.0.1:8080
 BODY=$BODY one "small correlation" wrk -t2 -c64 -d6s -s benches/load/correlation.lua http://127.0.0.1:8080
-cargo run --quiet --release --example request_path -- --repeat 150 | grep -E '^(REST|gRPC)'
+# The JPDA update one transport at a time, with the server's CPU per call
+# (the 5 warm-up calls counted in).
+REPEAT=${REPEAT:-150}
+cargo build --quiet --release --example request_path
+for transport in rest grpc; do
+  t0=$(ticks)
+  line=$(target/release/examples/request_path --repeat "$REPEAT" --only "$transport" | grep -E '^(REST|gRPC)')
+  t1=$(ticks)
+  echo "$line | server CPU $(awk -v a="$t0" -v b="$t1" -v n="$((REPEAT + 5))" -v hz="$hz" 'BEGIN {printf "%.3f", (b - a) * 1e3 / hz / n}') ms per call"
+done

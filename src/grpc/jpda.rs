@@ -20,11 +20,17 @@ impl JpdaService for JpdaGrpc {
     ) -> Result<Response<pb::JpdaUpdateResponse>, Status> {
         let req = request.into_inner();
         // The answer is converted on the compute lane too.
-        let out = service::offload(move || svc::update(input(req)?).map(response))
+        let out = service::offload(move || update_on_lane(req))
             .await
             .map_err(to_status)?;
         Ok(Response::new(out))
     }
+}
+
+/// The method's work on the compute lane between decoding and encoding
+/// (public for the request-path benchmark, `benches/jpda.rs`).
+pub fn update_on_lane(req: pb::JpdaUpdateRequest) -> Result<pb::JpdaUpdateResponse, ServiceError> {
+    svc::update(input(req)?).map(response)
 }
 
 fn input(req: pb::JpdaUpdateRequest) -> Result<svc::JpdaInput, ServiceError> {

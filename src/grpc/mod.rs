@@ -163,6 +163,7 @@ pub fn services(state: &AppState) -> Result<GrpcServices, tonic_reflection::serv
         .add_service(reflection_v1alpha)
         .prepare()
         .into_axum_router()
+        .layer(middleware::from_fn(on_lane))
         .layer(middleware::from_fn_with_state(state.clone(), admit))
         .layer(middleware::from_fn_with_state(state.clone(), authenticate))
         .layer(middleware::from_fn(record_metrics));
@@ -210,6 +211,56 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
         ))
         .into_http(),
     }
+}
+
+/// The stateless fusion services' calls run whole on a compute lane:
+/// decoding the message, the computation and encoding the answer are one job
+/// there, as REST's `JsonBody::compute` makes parsing, computation and
+/// encoding one job. Decoded on an async worker and freed on a lane, a
+/// request's thousands of small allocations cost the lane a cross-thread
+/// collection, and its answer was encoded on the worker while the response
+/// streamed, outside the call's measured time (docs/RESULTS.md, "gRPC calls
+/// on the lanes").
+///
+/// The message is already in memory (`admit` read it), so the call's awaits
+/// complete without the reactor ([`crate::service::lanes::block_on`]), and
+/// its compute, offloaded from within the job, runs in place. The answer's
+/// frames are collected on the lane and replayed. The session service, whose
+/// calls await the store, stays on the async workers.
+async fn on_lane(req: Request, next: Next) -> Response {
+    if !runs_on_lane(req.uri().path()) {
+        return next.run(req).await;
+    }
+    let answered = crate::service::lanes::run(move || {
+        crate::service::lanes::block_on(async move { buffered(next.run(req).await).await })
+    })
+    .await;
+    answered.unwrap_or_else(|e| error::to_status(e).into_http())
+}
+
+/// The stateless services, whose unary calls [`on_lane`] runs on a lane.
+fn runs_on_lane(path: &str) -> bool {
+    let Some((service, _method)) = path.trim_start_matches('/').split_once('/') else {
+        return false;
+    };
+    service != SESSION_SERVICE && SERVICE_NAMES.contains(&service)
+}
+
+/// A response with its body read into memory: its data frames, then its
+/// trailers (the gRPC status), replayed as they came.
+async fn buffered(response: Response) -> Response {
+    use http_body_util::BodyExt;
+    let (parts, mut body) = response.into_parts();
+    let mut frames = Vec::new();
+    while let Some(frame) = body.frame().await {
+        let end = frame.is_err();
+        frames.push(frame);
+        if end {
+            break;
+        }
+    }
+    let replay = http_body_util::StreamBody::new(tokio_stream::iter(frames));
+    Response::from_parts(parts, axum::body::Body::new(replay))
 }
 
 /// The streaming methods: their body is the stream, read batch by batch
@@ -444,6 +495,27 @@ mod tests {
             .await
             .unwrap();
         Ok(String::from_utf8(body.to_vec()).unwrap())
+    }
+
+    #[test]
+    fn the_stateless_services_run_on_the_lanes_and_the_sessions_do_not() {
+        for path in [
+            "/radar.fusion.v1.JpdaService/Update",
+            "/radar.fusion.v1.CorrelationService/CorrelateTracks",
+            "/radar.fusion.v1.DimensionService/Fuse",
+        ] {
+            assert!(runs_on_lane(path), "{path}");
+        }
+        for path in [
+            "/radar.fusion.v1.SessionService/PushBatch",
+            "/radar.fusion.v1.SessionService/Stream",
+            "/grpc.health.v1.Health/Check",
+            "/radar.fusion.v1.JpdaServiceX/Update",
+            "/radar.fusion.v1.JpdaService",
+            "/",
+        ] {
+            assert!(!runs_on_lane(path), "{path}");
+        }
     }
 
     #[tokio::test]

@@ -173,7 +173,9 @@ pub async fn update(
     body.compute(update_on_lane).await
 }
 
-fn update_on_lane(req: JpdaUpdateRequest) -> Result<JpdaUpdateResponse, Problem> {
+/// The endpoint's work on the compute lane between parsing and encoding
+/// (public for the request-path benchmark, `benches/jpda.rs`).
+pub fn update_on_lane(req: JpdaUpdateRequest) -> Result<JpdaUpdateResponse, Problem> {
     let input = svc::JpdaInput {
         state_layout: req.state_layout,
         method: req.method,

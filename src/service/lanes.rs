@@ -61,25 +61,76 @@ where
 /// request's memory is allocated and freed on one thread. `/metrics` counts
 /// the jobs by where they ran
 /// (`compute_jobs_total{lane="compute"|"blocking_pool"}`).
+///
+/// Work offloaded from within a job (a gRPC call run whole on a lane,
+/// [`block_on`]) runs in place: it is already off the async workers, and a
+/// job that waited on the lanes for another could wait on itself.
 pub async fn run<T, F>(work: F) -> Result<T, ServiceError>
 where
     F: FnOnce() -> T + Send + 'static,
     T: Send + 'static,
 {
+    if IN_JOB.get() {
+        return Ok(work());
+    }
     let lanes = Lanes::global();
     if lanes.all_held() {
         metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
-        return tokio::task::spawn_blocking(work)
+        return tokio::task::spawn_blocking(|| in_job(work))
             .await
             .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")));
     }
     metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
     let (tx, rx) = tokio::sync::oneshot::channel();
     lanes.push(Box::new(move || {
-        let _ = tx.send(work());
+        let _ = tx.send(in_job(work));
     }));
     rx.await
         .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
+}
+
+thread_local! {
+    /// Whether this thread is running a job of [`run`].
+    static IN_JOB: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `work` marked as a job of [`run`] (the mark is cleared again on the
+/// way out, by unwinding too).
+fn in_job<T>(work: impl FnOnce() -> T) -> T {
+    struct Clear;
+    impl Drop for Clear {
+        fn drop(&mut self) {
+            IN_JOB.set(false);
+        }
+    }
+    IN_JOB.set(true);
+    let _clear = Clear;
+    work()
+}
+
+/// Drives a future to completion on the current thread, parking it while
+/// the future waits. For work run whole on a lane whose awaits complete
+/// without the async runtime's reactor or timers: a gRPC call whose message
+/// is already in memory, its compute offloaded in place ([`run`]).
+pub fn block_on<F: std::future::Future>(future: F) -> F::Output {
+    struct Unpark(std::thread::Thread);
+    impl std::task::Wake for Unpark {
+        fn wake(self: Arc<Self>) {
+            self.0.unpark();
+        }
+        fn wake_by_ref(self: &Arc<Self>) {
+            self.0.unpark();
+        }
+    }
+    let waker = std::task::Waker::from(Arc::new(Unpark(std::thread::current())));
+    let mut cx = std::task::Context::from_waker(&waker);
+    let mut future = std::pin::pin!(future);
+    loop {
+        if let std::task::Poll::Ready(out) = future.as_mut().poll(&mut cx) {
+            return out;
+        }
+        std::thread::park();
+    }
 }
 
 /// The process's lanes: one thread per available core, started on first use.
@@ -200,6 +251,40 @@ mod tests {
         for i in 0..4 * n {
             assert_eq!(offload(move || Ok(i)).await.unwrap(), i);
         }
+    }
+
+    #[tokio::test]
+    async fn work_offloaded_from_a_job_runs_in_place() {
+        // The inner `run` answers on the job's own thread, without queueing
+        // behind (or waiting for) the job that runs it.
+        let (outer, inner) = run(|| {
+            let outer = std::thread::current().id();
+            let inner = block_on(run(|| std::thread::current().id()));
+            (outer, inner.expect("the inner work ran"))
+        })
+        .await
+        .unwrap();
+        assert_eq!(outer, inner);
+        assert!(!IN_JOB.get(), "the async worker is not marked");
+    }
+
+    #[test]
+    fn block_on_parks_until_the_future_is_woken() {
+        // A future that is pending until another thread sends its value.
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let sender = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(20));
+            tx.send(7).unwrap();
+        });
+        assert_eq!(block_on(rx), Ok(7));
+        sender.join().unwrap();
+    }
+
+    #[test]
+    fn the_job_mark_is_cleared_by_a_panic() {
+        let r = catch_unwind(|| in_job::<()>(|| panic!("boom")));
+        assert!(r.is_err());
+        assert!(!IN_JOB.get());
     }
 
     #[test]
