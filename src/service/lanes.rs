@@ -73,17 +73,18 @@ where
     if IN_JOB.get() {
         return Ok(work());
     }
+    let context = Context::current();
     let lanes = Lanes::global();
     if lanes.all_held() {
         metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
-        return tokio::task::spawn_blocking(|| in_job(work))
+        return tokio::task::spawn_blocking(move || context.in_job(work))
             .await
             .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")));
     }
     metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
     let (tx, rx) = tokio::sync::oneshot::channel();
     lanes.push(Box::new(move || {
-        let _ = tx.send(in_job(work));
+        let _ = tx.send(context.in_job(work));
     }));
     rx.await
         .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
@@ -94,18 +95,39 @@ thread_local! {
     static IN_JOB: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Runs `work` marked as a job of [`run`] (the mark is cleared again on the
-/// way out, by unwinding too).
-fn in_job<T>(work: impl FnOnce() -> T) -> T {
-    struct Clear;
-    impl Drop for Clear {
-        fn drop(&mut self) {
-            IN_JOB.set(false);
+/// What a job takes along from the request that queued it: the log
+/// subscriber and the request's span (its `request_id`), so that a line
+/// logged on a lane names the request as one logged on the async worker
+/// does.
+struct Context {
+    dispatch: tracing::Dispatch,
+    span: tracing::Span,
+}
+
+impl Context {
+    fn current() -> Self {
+        Self {
+            dispatch: tracing::dispatcher::get_default(Clone::clone),
+            span: tracing::Span::current(),
         }
     }
-    IN_JOB.set(true);
-    let _clear = Clear;
-    work()
+
+    /// Runs `work` in the request's span, marked as a job of [`run`] (the
+    /// mark is cleared again on the way out, by unwinding too).
+    fn in_job<T>(self, work: impl FnOnce() -> T) -> T {
+        struct Clear;
+        impl Drop for Clear {
+            fn drop(&mut self) {
+                IN_JOB.set(false);
+            }
+        }
+        tracing::dispatcher::with_default(&self.dispatch, || {
+            let _entered = self.span.enter();
+            IN_JOB.set(true);
+            let _clear = Clear;
+            work()
+        })
+    }
 }
 
 /// Drives a future to completion on the current thread, parking it while
@@ -282,9 +304,38 @@ mod tests {
 
     #[test]
     fn the_job_mark_is_cleared_by_a_panic() {
-        let r = catch_unwind(|| in_job::<()>(|| panic!("boom")));
+        let r = catch_unwind(|| Context::current().in_job::<()>(|| panic!("boom")));
         assert!(r.is_err());
         assert!(!IN_JOB.get());
+    }
+
+    #[tokio::test]
+    async fn a_job_runs_in_the_span_of_the_request_that_queued_it() {
+        use tracing::Instrument;
+        // A subscriber for this thread only; the lane is another thread.
+        let _subscriber =
+            tracing::subscriber::set_default(tracing_subscriber::registry::Registry::default());
+        let span = tracing::info_span!("request", request_id = "r-42");
+        let seen = async {
+            run(|| {
+                let current = tracing::Span::current();
+                (
+                    std::thread::current().name().map(str::to_string),
+                    current.metadata().map(|m| m.name()),
+                    current.id(),
+                )
+            })
+            .await
+            .unwrap()
+        }
+        .instrument(span.clone())
+        .await;
+        assert_ne!(seen.0, std::thread::current().name().map(str::to_string));
+        assert_eq!(seen.1, Some("request"));
+        assert_eq!(seen.2, span.id());
+        // Outside the request, a job runs in no span.
+        let outside = run(|| tracing::Span::current().is_none()).await.unwrap();
+        assert!(outside);
     }
 
     #[test]
