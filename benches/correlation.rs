@@ -33,6 +33,7 @@
 
 use std::{hint::black_box, time::Instant};
 
+use common::{median, median_min};
 use criterion::{BatchSize, Criterion, criterion_group};
 use radar_fusion::{
     algo::correlation::engine::{Decision, Pruning},
@@ -43,6 +44,8 @@ use radar_fusion::{
         realistic_scene,
     },
 };
+
+mod common;
 
 /// The server's allocator, so that allocation costs what it costs there.
 #[global_allocator]
@@ -86,11 +89,6 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench_engine, bench);
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 /// One line of the engine table: median engine compute over `runs` runs and
 /// the service's correlate time (median over `service_runs`).
@@ -178,8 +176,8 @@ fn small_table(repeat: usize, n: usize) {
 /// One line per timing: its median and (minimum).
 fn print_median_min<const N: usize>(names: &[&str; N], times: [Vec<f64>; N]) {
     for (name, t) in names.iter().zip(times) {
-        let min = t.iter().copied().fold(f64::INFINITY, f64::min);
-        println!("  {name:>9}: {:8.2} ({min:.2})", median(t));
+        let (median, min) = median_min(&t);
+        println!("  {name:>9}: {median:8.2} ({min:.2})");
     }
 }
 

@@ -15,6 +15,7 @@
 
 use std::{hint::black_box, time::Instant};
 
+use common::median_min;
 use criterion::{BatchSize, Criterion, criterion_group};
 use prost::Message;
 use radar_fusion::{
@@ -26,6 +27,8 @@ use radar_fusion::{
     proto as pb,
     sim::experiments::seed002_jpda::bench_scene,
 };
+
+mod common;
 
 /// The server's allocator, so that allocation costs what it costs there.
 #[global_allocator]
@@ -136,12 +139,10 @@ fn request_table(json_path: &str, proto_path: &str, repeat: usize) {
         let encoded = black_box(serde_json::to_vec(&answer).expect("the answer encodes"));
         let t3 = Instant::now();
         sizes.0 = encoded.len();
-        for (k, t) in [us(t0, t1), us(t1, t2), answer.timing.compute_us, us(t2, t3)]
-            .into_iter()
-            .enumerate()
-        {
-            rest[k].push(t);
-        }
+        record(
+            &mut rest,
+            [us(t0, t1), us(t1, t2), answer.timing.compute_us, us(t2, t3)],
+        );
         drop((answer, encoded));
         let t0 = Instant::now();
         let req = black_box(pb::JpdaUpdateRequest::decode(black_box(&proto[..])).expect("decodes"));
@@ -152,12 +153,7 @@ fn request_table(json_path: &str, proto_path: &str, repeat: usize) {
         let t3 = Instant::now();
         sizes.1 = encoded.len();
         let compute = answer.timing.map_or(f64::NAN, |t| t.compute_us);
-        for (k, t) in [us(t0, t1), us(t1, t2), compute, us(t2, t3)]
-            .into_iter()
-            .enumerate()
-        {
-            grpc[k].push(t);
-        }
+        record(&mut grpc, [us(t0, t1), us(t1, t2), compute, us(t2, t3)]);
     }
     println!(
         "REST, {} bytes in, {} bytes out; gRPC, {} bytes in, {} bytes out; {repeat} calls each, µs: median (min)",
@@ -168,15 +164,12 @@ fn request_table(json_path: &str, proto_path: &str, repeat: usize) {
     );
     let names = ["parse", "handler", "compute", "encode"];
     for (label, times) in [("REST", rest), ("gRPC", grpc)] {
-        let medians: Vec<f64> = times.iter().map(|t| median(t.clone())).collect();
+        let stats: Vec<(f64, f64)> = times.iter().map(|t| median_min(t)).collect();
+        let medians: Vec<f64> = stats.iter().map(|&(m, _)| m).collect();
         let line: Vec<String> = names
             .iter()
-            .zip(&times)
-            .zip(&medians)
-            .map(|((name, t), m)| {
-                let min = t.iter().copied().fold(f64::INFINITY, f64::min);
-                format!("{name} {m:.1} ({min:.1})")
-            })
+            .zip(&stats)
+            .map(|(name, (m, min))| format!("{name} {m:.1} ({min:.1})"))
             .collect();
         let total = medians[0] + medians[1] + medians[3];
         println!(
@@ -187,9 +180,11 @@ fn request_table(json_path: &str, proto_path: &str, repeat: usize) {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+/// Appends one call's stage times to their series.
+fn record<const N: usize>(series: &mut [Vec<f64>; N], times: [f64; N]) {
+    for (s, t) in series.iter_mut().zip(times) {
+        s.push(t);
+    }
 }
 
 fn main() {
