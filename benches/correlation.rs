@@ -1,7 +1,7 @@
 //! Benchmarks of batch track-to-track correlation.
 //!
 //! Engine (issue 14): every method on the realistic scene of
-//! `radar_fusion::sim::benchmark::realistic_scene` (two radars' Kalman
+//! `eval::benchmark::realistic_scene` (two radars' Kalman
 //! tracks of the same targets, already aligned), timing the pair correlator
 //! and the grouping on the prebuilt scene, so that alignment changes do not
 //! move the figures. `cargo bench --bench correlation` runs 120 × 120 tracks
@@ -17,7 +17,7 @@
 //! Service: two nodes, n targets each, 8 samples per track, the independent
 //! double-threshold method (6/8), with the spatial grid and by brute force
 //! over all pairs, through the service-layer function the endpoints call
-//! (scene: `radar_fusion::sim::benchmark::correlation_request`). Criterion
+//! (scene: `eval::benchmark::correlation_request`). Criterion
 //! runs 120 and 1000; `cargo bench --bench correlation -- --once 10000`
 //! times one 10k × 10k request each way (brute force there is 10⁸ pairs × 8
 //! instants).
@@ -33,17 +33,14 @@
 
 use std::{hint::black_box, time::Instant};
 
+use algo::correlation::engine::{Decision, Pruning};
 use common::{median, median_min};
 use criterion::{BatchSize, Criterion, criterion_group};
-use radar_fusion::{
-    algo::correlation::engine::{Decision, Pruning},
-    http::{correlation as http, problem::parse_json},
-    service::correlation::{CorrelateInput, MethodInput, correlate},
-    sim::benchmark::{
-        METHODS, RealisticScene, correlate_scene, correlation_request, engine_config,
-        realistic_scene,
-    },
+use eval::benchmark::{
+    METHODS, RealisticScene, correlate_scene, correlation_request, engine_config, realistic_scene,
 };
+use radar_fusion::http::{correlation as http, problem::parse_json};
+use service::correlation::{CorrelateInput, MethodInput, correlate};
 
 mod common;
 

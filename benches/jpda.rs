@@ -15,18 +15,14 @@
 
 use std::{hint::black_box, time::Instant};
 
+use algo::jpda::{
+    self, Config, Method, amsjpda_marginals, cluster_problems, exact_marginals, naive_marginals,
+};
 use common::median_min;
 use criterion::{BatchSize, Criterion, criterion_group};
+use eval::experiments::seed002_jpda::bench_scene;
 use prost::Message;
-use radar_fusion::{
-    algo::jpda::{
-        self, Config, Method, amsjpda_marginals, cluster_problems, exact_marginals, naive_marginals,
-    },
-    grpc, http,
-    http::problem::parse_json,
-    proto as pb,
-    sim::experiments::seed002_jpda::bench_scene,
-};
+use radar_fusion::{grpc, http, http::problem::parse_json, proto as pb};
 
 mod common;
 

@@ -3,11 +3,9 @@
 
 use std::hint::black_box;
 
+use algo::correlation::rules::{LrRule, miss_probability, recommend};
 use criterion::{Criterion, criterion_group, criterion_main};
-use radar_fusion::{
-    algo::correlation::rules::{LrRule, miss_probability, recommend},
-    service::rules::{EvaluateRulesInput, RuleInput, evaluate},
-};
+use service::rules::{EvaluateRulesInput, RuleInput, evaluate};
 
 fn bench_rules(c: &mut Criterion) {
     let rule = LrRule::new(6, 8).expect("valid rule");

@@ -6,7 +6,7 @@ Two radars (b reports 1 s after a, scans every 2 s, six targets) stream
 their track reports into one session in sequenced batches through nginx;
 both replicas serve batches (their /metrics say so), replica 1 is killed
 (SIGKILL) halfway, the session finishes on replica 2 (a batch that meets the
-dying replica is retried with the same sequence number, as the README tells
+dying replica is retried with the same sequence number, as docs/sessions.md tells
 clients to), and its decisions equal the batch endpoint's. Exits non-zero on
 any difference.
 """
@@ -59,7 +59,7 @@ def scenario():
               "method": {"kind": "independent_double_threshold", "rule": {"l": 3, "r": 4}},
               "motion_model": {"process_noise": "dwna", "sigma_a_mps2": 1.0},
               # Fixed grid: the session's instants are the batch call's
-              # whatever the batching (README, streaming sessions).
+              # whatever the batching (docs/sessions.md).
               "alignment": {"period_s": 2.0, "max_staleness_s": 3.0}}
     return dict(config, nodes=nodes), dict(config, kind="correlation", nodes=["a", "b"],
                                            history_instants=1024), reports

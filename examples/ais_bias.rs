@@ -32,9 +32,9 @@
 
 use std::time::Instant;
 
-use radar_fusion::algo::bias::associate::{self, Config};
-use radar_fusion::sim::ais::AisSceneConfig;
-use radar_fusion::sim::montecarlo::run_rng;
+use algo::bias::associate::{self, Config};
+use eval::ais::AisSceneConfig;
+use eval::montecarlo::run_rng;
 
 /// A scene kind from its range and azimuth bias.
 type MakeScene = fn(f64, f64) -> AisSceneConfig;
@@ -52,7 +52,7 @@ fn nees(d: [f64; 2], c: [[f64; 2]; 2]) -> f64 {
 }
 
 fn coverage(runs: usize) {
-    use radar_fusion::algo::bias::associate::quantisation_sigma;
+    use algo::bias::associate::quantisation_sigma;
     let bias = [500.0, 0.5f64.to_radians()];
     let kinds = [
         ("harbour72", AisSceneConfig::harbour(72, bias[0], bias[1])),
@@ -119,7 +119,7 @@ fn coverage(runs: usize) {
 }
 
 fn dump(seeds: u64) {
-    use radar_fusion::algo::bias::associate::Seeding;
+    use algo::bias::associate::Seeding;
     let kinds: [(&str, MakeScene); 3] = [
         ("harbour72", |b, a| AisSceneConfig::harbour(72, b, a)),
         ("open_sea30", |b, a| AisSceneConfig::open_sea(30, b, a)),

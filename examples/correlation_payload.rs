@@ -6,7 +6,7 @@
 //! wrk -t2 -c4 -d10s --latency -s benches/load/correlation.lua http://127.0.0.1:8080
 //! ```
 
-use radar_fusion::sim::benchmark::correlation_request;
+use eval::benchmark::correlation_request;
 use serde_json::{Value, json};
 
 fn main() -> anyhow::Result<()> {

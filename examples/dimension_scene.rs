@@ -31,16 +31,16 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, bail};
-use radar_fusion::{
-    algo::dimension::{self, Config, Filter, KnnParams, Method},
-    algo::gating::chi2_threshold,
-    service::dimension as svc,
-    sim::{
-        experiments::seed003_dimension::{BenchScene, bench_scene, position_nees},
-        montecarlo::run_rng,
-    },
+use algo::{
+    dimension::{self, Config, Filter, KnnParams, Method},
+    gating::chi2_threshold,
 };
+use anyhow::{Context, bail};
+use eval::{
+    experiments::seed003_dimension::{BenchScene, bench_scene, position_nees},
+    montecarlo::run_rng,
+};
+use service::dimension as svc;
 
 const METHODS: [Method; 3] = [Method::Mapping, Method::Lifting, Method::Splitting];
 

@@ -17,13 +17,13 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, ensure};
+use eval::benchmark::plot_fusion_scene;
 use radar_fusion::{
     app::Application,
     config::Settings,
     proto::{self as pb, session_service_client::SessionServiceClient},
-    service::plot_fusion as svc,
-    sim::benchmark::plot_fusion_scene,
 };
+use service::plot_fusion as svc;
 use tokio::sync::oneshot;
 use tonic::transport::Channel;
 

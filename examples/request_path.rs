@@ -18,11 +18,9 @@
 
 use std::time::{Duration, Instant};
 
-use radar_fusion::{
-    algo::jpda::{Clutter, SensorModel},
-    proto as pb,
-    sim::experiments::seed002_jpda::bench_scene,
-};
+use algo::jpda::{Clutter, SensorModel};
+use eval::experiments::seed002_jpda::bench_scene;
+use radar_fusion::proto as pb;
 use serde_json::{Value, json};
 
 struct Args {

@@ -29,11 +29,11 @@ use radar_fusion::{
     app::Application,
     config::Settings,
     proto::{self as pb, session_service_client::SessionServiceClient},
-    store::SessionStore,
 };
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use serde_json::{Value, json};
+use store::SessionStore;
 use tokio::sync::oneshot;
 use tonic::transport::Channel;
 

@@ -12,9 +12,9 @@ use crate::{
     config::Settings,
     grpc, http, serve,
     state::{AppState, Readiness, StoreHealth},
-    store::SessionStore,
     telemetry,
 };
+use store::SessionStore;
 
 /// How often the gRPC health status is recomputed from readiness (session store ping).
 const HEALTH_CHECK_EVERY: Duration = Duration::from_secs(1);
@@ -114,7 +114,9 @@ impl Application {
             }
         };
         // Bound (and its session created) before readiness is reported.
-        let asterix_udp = crate::asterix_udp::spawn(&state).await?;
+        let asterix_udp =
+            crate::asterix_udp::spawn(&state, crate::http::sessions::plot_fusion_spec_from_json)
+                .await?;
         set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));

@@ -27,16 +27,14 @@ use std::{
 use anyhow::Context;
 use tokio::{net::UdpSocket, task::JoinHandle};
 
-use crate::{
-    service::{
-        ServiceError,
-        plot_fusion::{SpecInput, asterix::AsterixInput},
-        session::{
-            Batch, Spec,
-            plot_fusion::{BatchInput, PlotFusionSession},
-        },
+use crate::state::AppState;
+use service::{
+    ServiceError,
+    plot_fusion::{SpecInput, asterix::AsterixInput},
+    session::{
+        Batch, Spec,
+        plot_fusion::{BatchInput, PlotFusionSession},
     },
-    state::AppState,
 };
 
 /// Most datagrams pushed as one batch.
@@ -44,9 +42,18 @@ pub const MAX_DATAGRAMS_PER_BATCH: usize = 64;
 /// Largest datagram read (the UDP maximum).
 const DATAGRAM_BYTES: usize = 65_536;
 
+/// Reads the session spec file into a spec: the body of `POST
+/// /v1/sessions`, parsed by the REST adapter (`app` passes
+/// `http::sessions::plot_fusion_spec_from_json`, so that this listener
+/// does not depend on its sibling adapter).
+pub type SpecParser = fn(&str) -> Result<Spec<SpecInput>, String>;
+
 /// Binds the configured address (joining a multicast group) and spawns the
 /// listener; `None` when `--asterix-udp` is not set.
-pub async fn spawn(state: &AppState) -> anyhow::Result<Option<JoinHandle<()>>> {
+pub async fn spawn(
+    state: &AppState,
+    parse_spec: SpecParser,
+) -> anyhow::Result<Option<JoinHandle<()>>> {
     let settings = state.settings();
     let Some(addr) = settings.asterix_udp else {
         return Ok(None);
@@ -57,7 +64,7 @@ pub async fn spawn(state: &AppState) -> anyhow::Result<Option<JoinHandle<()>>> {
         .context("--asterix-udp needs --asterix-session-spec")?;
     let json = std::fs::read_to_string(&path)
         .with_context(|| format!("reading --asterix-session-spec {}", path.display()))?;
-    let spec = crate::http::sessions::plot_fusion_spec_from_json(&json)
+    let spec = parse_spec(&json)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--asterix-session-spec {}", path.display()))?;
     let socket = bind(addr, settings.asterix_interface)

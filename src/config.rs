@@ -1,12 +1,12 @@
 //! Typed settings: embedded defaults, overridden by `FUSION_*` environment
-//! variables, overridden by command-line flags. README.md documents them in
+//! variables, overridden by command-line flags. docs/operations.md documents them in
 //! one table; keep the two in step.
 
 use std::{net::SocketAddr, path::PathBuf, time::Duration};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use crate::store::StoreSettings;
+use store::StoreSettings;
 
 /// The radar fusion service: track-to-track correlation, JPDA, dimension fusion
 /// and AIS–radar bias estimation over REST and gRPC.
@@ -38,44 +38,14 @@ pub enum Command {
         #[arg(long, default_value = "127.0.0.1:8080")]
         addr: SocketAddr,
     },
-    /// Run a seeded Monte Carlo experiment of the papers and write
-    /// DIR/EXPERIMENT.md, .csv and .svg plots (`eval --list` lists them).
-    Eval(EvalArgs),
-}
-
-/// Arguments of `radar-fusion eval`.
-#[derive(Debug, Clone, Args)]
-pub struct EvalArgs {
-    /// The experiment to run (see `--list`).
-    #[arg(required_unless_present = "list")]
-    pub experiment: Option<String>,
-    /// List the experiments with a one-line description and exit.
-    #[arg(long)]
-    pub list: bool,
-    /// Number of Monte Carlo runs.
-    #[arg(long, default_value_t = 50)]
-    pub runs: usize,
-    /// Master seed; run i draws from ChaCha stream i of this seed.
-    #[arg(long, default_value_t = 18)]
-    pub seed: u64,
-    /// Output directory (created if needed).
-    #[arg(long, default_value = "eval-out")]
-    pub out: PathBuf,
-    /// Worker threads (0 = all cores); results do not depend on it.
-    #[arg(long, default_value_t = 0)]
-    pub threads: usize,
-    /// Override the experiment's number of targets.
-    #[arg(long)]
-    pub targets: Option<usize>,
-    /// Override the experiment's number of scans.
-    #[arg(long)]
-    pub scans: Option<usize>,
-    /// Override the σ in metres of the seed 000 initial-position region (denser scenes).
-    #[arg(long)]
-    pub region_sigma_m: Option<u32>,
-    /// Always draw the progress bar on stderr (by default only on a terminal).
-    #[arg(long)]
-    pub progress: bool,
+    /// Moved: the experiments are the `radar-fusion-eval` binary of the
+    /// `eval` crate; this prints where and exits with status 2.
+    #[command(hide = true)]
+    Eval {
+        /// Ignored: whatever followed `eval`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -265,8 +235,8 @@ impl Settings {
     }
 
     /// The limits of one streaming session.
-    pub fn session_limits(&self) -> crate::service::session::Limits {
-        crate::service::session::Limits {
+    pub fn session_limits(&self) -> service::session::Limits {
+        service::session::Limits {
             max_tracks: self.max_tracks_per_session,
             max_batch_reports: self.max_batch_reports,
         }

@@ -1,10 +1,13 @@
-//! The fusion centre of a radar network as a service.
+//! The radar fusion server: the adapters and the process around the
+//! libraries of the workspace.
 //!
-//! `algo` is the pure numerical core; `service` is the application layer over
-//! it; `http` (axum) and `grpc` (tonic) are sibling adapters over `service`;
-//! `app` wires them into one process. See ARCHITECTURE.md.
+//! `http` (axum) and `grpc` (tonic) are sibling adapters over the `service`
+//! crate; `asterix_udp` feeds a session from radar datagrams; `app` wires
+//! them, the `store` and the `telemetry` into one process, `serve` is the
+//! accept loop, `config` the settings. The numerical core (`algo`) is not a
+//! dependency of this crate: the adapters see only service types. See
+//! ARCHITECTURE.md.
 
-pub mod algo;
 pub mod app;
 pub mod asterix_udp;
 pub mod auth;
@@ -13,8 +16,5 @@ pub mod grpc;
 pub mod http;
 pub mod proto;
 pub mod serve;
-pub mod service;
-pub mod sim;
 pub mod state;
-pub mod store;
 pub mod telemetry;

@@ -4,8 +4,8 @@
 use clap::Parser;
 use radar_fusion::{
     app::{Application, shutdown_signal},
-    config::{Cli, Command, EvalArgs},
-    http, sim, telemetry,
+    config::{Cli, Command},
+    http, telemetry,
 };
 
 /// mimalloc instead of glibc's malloc: a profile of the JPDA 500-target
@@ -24,7 +24,7 @@ async fn main() -> anyhow::Result<()> {
     {
         Command::Openapi => print_ignoring_closed_pipe(&http::openapi_json()),
         Command::Healthcheck { addr } => healthcheck(addr).await,
-        Command::Eval(args) => eval(args),
+        Command::Eval { .. } => eval_moved(),
         Command::Serve(settings) => {
             telemetry::init_logging(&settings.log, settings.log_format);
             let app = Application::build(*settings).await?;
@@ -33,34 +33,13 @@ async fn main() -> anyhow::Result<()> {
     }
 }
 
-/// `eval`: list the experiments, or run one and write its files.
-fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    use sim::experiments::{EvalOptions, listing, run_and_write};
-    use sim::montecarlo::Progress;
-    let Some(name) = args.experiment.filter(|_| !args.list) else {
-        return print_ignoring_closed_pipe(&listing());
-    };
-    let mut opts = EvalOptions::new(args.runs, args.seed);
-    opts.runner.threads = args.threads;
-    opts.runner.progress = if args.progress {
-        Progress::Always
-    } else {
-        Progress::Auto
-    };
-    opts.targets = args.targets;
-    opts.scans = args.scans;
-    opts.region_sigma_m = args.region_sigma_m;
-    let started = std::time::Instant::now();
-    let written = run_and_write(&name, &opts, &args.out)?;
-    for p in written {
-        println!("{}", p.display());
-    }
+/// `radar-fusion eval` moved to its own binary: say where, exit 2.
+fn eval_moved() -> anyhow::Result<()> {
     eprintln!(
-        "{name}: {} runs in {:.2} s",
-        args.runs,
-        started.elapsed().as_secs_f64()
+        "`radar-fusion eval` moved to its own binary: run `radar-fusion-eval --list` \
+         (from a checkout: `cargo run -p eval --release -- --list`)"
     );
-    Ok(())
+    std::process::exit(2)
 }
 
 /// Writes `text` to standard output; a reader that stops early (`| head`)

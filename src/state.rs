@@ -10,9 +10,9 @@ use std::sync::{
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
-use crate::{
-    auth::ApiKeys, config::Settings, service::session::persist::Sessions, store::SessionStore,
-};
+use crate::{auth::ApiKeys, config::Settings};
+use service::session::persist::Sessions;
+use store::SessionStore;
 
 #[derive(Clone)]
 pub struct AppState {

@@ -9,22 +9,20 @@
 
 use std::{future::Future, task::Poll, time::Duration};
 
-use radar_fusion::{
-    algo::{
-        AlgoError,
-        wire::{self, Reader, Writer},
-    },
-    service::{
-        ServiceError, Violations,
-        correlation::{CorrelateInput, MethodInput, MotionModelInput, NodeInput, RuleInput},
-        session::{
-            Batch, Limits, SessionKind, Spec,
-            correlation::{self as corr, CorrelationSession},
-            persist::Sessions,
-        },
-    },
-    store::{SessionStore, StoreSettings},
+use algo::{
+    AlgoError,
+    wire::{self, Reader, Writer},
 };
+use service::{
+    ServiceError, Violations,
+    correlation::{CorrelateInput, MethodInput, MotionModelInput, NodeInput, RuleInput},
+    session::{
+        Batch, Limits, SessionKind, Spec,
+        correlation::{self as corr, CorrelationSession},
+        persist::Sessions,
+    },
+};
+use store::{SessionStore, StoreSettings};
 
 #[path = "common/redis.rs"]
 mod redis_harness;

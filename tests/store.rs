@@ -10,7 +10,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use radar_fusion::store::{CasOutcome, SessionStore, StoreError, StoreSettings, Stored};
+use store::{CasOutcome, SessionStore, StoreError, StoreSettings, Stored};
 
 #[path = "common/redis.rs"]
 mod redis_harness;

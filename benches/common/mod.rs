@@ -1,5 +1,8 @@
 //! Helpers shared by the benchmarks' hand-written tables.
 
+// Helpers shared by test targets: `pub` is for the modules that use them.
+#![allow(unreachable_pub)]
+
 /// The median of `v` (the upper one of an even count).
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);

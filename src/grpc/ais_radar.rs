@@ -4,10 +4,8 @@
 use tonic::{Request, Response, Status};
 
 use super::error::to_status;
-use crate::{
-    proto::{self as pb, ais_radar_service_server::AisRadarService},
-    service::{self, ais_radar as svc},
-};
+use crate::proto::{self as pb, ais_radar_service_server::AisRadarService};
+use service::{self, ais_radar as svc};
 
 #[derive(Debug, Clone, Default)]
 pub struct AisRadarGrpc;

@@ -4,13 +4,11 @@
 use tonic::{Request, Response, Status};
 
 use super::{error::to_status, flat_rows, matrix, rows};
-use crate::{
-    proto::{self as pb, correlation_service_server::CorrelationService},
-    service::{
-        self, ServiceError, Violations, at,
-        correlation::{self as corr, decision_name, fusion_name, reason_name, statistic_name},
-        rules as svc,
-    },
+use crate::proto::{self as pb, correlation_service_server::CorrelationService};
+use service::{
+    self, ServiceError, Violations, at,
+    correlation::{self as corr, decision_name, fusion_name, reason_name, statistic_name},
+    rules as svc,
 };
 
 #[derive(Debug, Clone, Default)]

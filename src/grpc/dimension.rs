@@ -4,10 +4,8 @@
 use tonic::{Request, Response, Status};
 
 use super::{error::to_status, matrix};
-use crate::{
-    proto::{self as pb, dimension_service_server::DimensionService},
-    service::{self, dimension as svc},
-};
+use crate::proto::{self as pb, dimension_service_server::DimensionService};
+use service::{self, dimension as svc};
 
 #[derive(Debug, Clone, Default)]
 pub struct DimensionGrpc;

@@ -4,7 +4,7 @@
 use tonic::{Code, Status};
 use tonic_types::{ErrorDetails, FieldViolation, StatusExt};
 
-use crate::service::ServiceError;
+use service::ServiceError;
 
 pub fn to_status(e: ServiceError) -> Status {
     match e {

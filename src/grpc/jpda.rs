@@ -4,10 +4,8 @@
 use tonic::{Request, Response, Status};
 
 use super::{error::to_status, flat_matrix, flat_rows};
-use crate::{
-    proto::{self as pb, jpda_service_server::JpdaService},
-    service::{self, Rows, ServiceError, Violations, at, jpda as svc, validate::Field},
-};
+use crate::proto::{self as pb, jpda_service_server::JpdaService};
+use service::{self, Rows, ServiceError, Violations, at, jpda as svc, validate::Field};
 
 #[derive(Debug, Clone, Default)]
 pub struct JpdaGrpc;

@@ -42,8 +42,8 @@ use sessions::SessionGrpc;
 /// Whether a `Matrix`'s values fill its rows × cols (both > 0); otherwise
 /// a violation naming `field`.
 fn fills_shape(
-    v: &mut crate::service::Violations,
-    field: impl crate::service::validate::Field,
+    v: &mut service::Violations,
+    field: impl service::validate::Field,
     m: &crate::proto::Matrix,
 ) -> bool {
     let (r, c) = (m.rows as usize, m.cols as usize);
@@ -65,7 +65,7 @@ fn fills_shape(
 /// A row-major `Matrix` as nested rows; `None` (with a violation naming
 /// `field`) when its values do not fill rows × cols.
 pub(crate) fn rows(
-    v: &mut crate::service::Violations,
+    v: &mut service::Violations,
     field: &str,
     m: &crate::proto::Matrix,
 ) -> Option<Vec<Vec<f64>>> {
@@ -80,19 +80,19 @@ pub(crate) fn rows(
 /// A `Matrix` as request [`Rows`], its values moved, not copied; `None`
 /// (with a violation naming `field`) when they do not fill rows × cols.
 pub(crate) fn flat_rows(
-    v: &mut crate::service::Violations,
-    field: impl crate::service::validate::Field,
+    v: &mut service::Violations,
+    field: impl service::validate::Field,
     m: crate::proto::Matrix,
-) -> Option<crate::service::Rows> {
+) -> Option<service::Rows> {
     if !fills_shape(v, field, &m) {
         return None;
     }
     let (r, c) = (m.rows as usize, m.cols as usize);
-    crate::service::Rows::from_flat(m.values, r, c)
+    service::Rows::from_flat(m.values, r, c)
 }
 
 /// Answer [`Rows`] as a row-major `Matrix`, the values moved.
-pub(crate) fn flat_matrix(rows: crate::service::Rows) -> crate::proto::Matrix {
+pub(crate) fn flat_matrix(rows: service::Rows) -> crate::proto::Matrix {
     let (r, c) = rows.shape().unwrap_or((rows.nrows(), 0));
     crate::proto::Matrix {
         rows: r as u32,
@@ -223,7 +223,7 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
 /// on the lanes").
 ///
 /// The message is already in memory (`admit` read it), so the call's awaits
-/// complete without the reactor ([`crate::service::lanes::block_on`]), and
+/// complete without the reactor ([`service::lanes::block_on`]), and
 /// its compute, offloaded from within the job, runs in place. The answer's
 /// frames are collected on the lane and replayed. The session service, whose
 /// calls await the store, stays on the async workers.
@@ -231,8 +231,8 @@ async fn on_lane(req: Request, next: Next) -> Response {
     if !runs_on_lane(req.uri().path()) {
         return next.run(req).await;
     }
-    let answered = crate::service::lanes::run(move || {
-        crate::service::lanes::block_on(async move { buffered(next.run(req).await).await })
+    let answered = service::lanes::run(move || {
+        service::lanes::block_on(async move { buffered(next.run(req).await).await })
     })
     .await;
     answered.unwrap_or_else(|e| error::to_status(e).into_http())
@@ -456,7 +456,7 @@ mod tests {
         settings.api_keys = Some("k1secret=acme,k2secret=globex".into());
         let api_keys = ApiKeys::from_settings(&settings).unwrap();
         let state = {
-            let store = crate::store::SessionStore::Memory(crate::store::memory::MemoryStore::new(
+            let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
                 &settings.store_settings(),
             ));
             AppState::new(

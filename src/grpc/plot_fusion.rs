@@ -4,11 +4,9 @@
 use tonic::{Request, Response, Status};
 
 use super::{error::to_status, matrix};
-use crate::{
-    algo::tracking::Counters,
-    proto::{self as pb, plot_fusion_service_server::PlotFusionService},
-    service::{self, plot_fusion as svc},
-};
+use crate::proto::{self as pb, plot_fusion_service_server::PlotFusionService};
+use service::plot_fusion::TrackerCounters as Counters;
+use service::{self, plot_fusion as svc};
 
 #[derive(Debug, Clone, Default)]
 pub struct PlotFusionGrpc;

@@ -18,17 +18,17 @@ use super::{
 use crate::{
     auth::{DEFAULT_TENANT, Tenant},
     proto::{self as pb, session_service_server::SessionService, stream_request::Kind},
-    service::{
-        ServiceError, Violations, correlation as corr,
-        session::{
-            Batch, KindName, Spec, Update, View,
-            correlation::{self as domain, CorrelationSession, change_name},
-            persist::AnyView,
-            plot_fusion::{self as pf, PlotFusionSession, track_change_name},
-            refuse_foreign_fields,
-        },
-    },
     state::AppState,
+};
+use service::{
+    ServiceError, Violations, correlation as corr,
+    session::{
+        Batch, KindName, Spec, Update, View,
+        correlation::{self as domain, CorrelationSession, change_name},
+        persist::AnyView,
+        plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+        refuse_foreign_fields,
+    },
 };
 
 #[derive(Clone)]
@@ -46,7 +46,7 @@ fn tenant<T>(request: &Request<T>) -> String {
 /// A create request: the kind it names and its configuration.
 enum KindSpec {
     Correlation(Spec<domain::SessionSpec>),
-    PlotFusion(Spec<crate::service::plot_fusion::SpecInput>),
+    PlotFusion(Spec<service::plot_fusion::SpecInput>),
 }
 
 fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {

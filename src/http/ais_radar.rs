@@ -8,7 +8,8 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{service::ais_radar as svc, state::AppState};
+use crate::state::AppState;
+use service::ais_radar as svc;
 
 /// The radar site (WGS84).
 #[derive(Debug, Deserialize, ToSchema)]

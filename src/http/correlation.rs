@@ -5,12 +5,10 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::problem::{JsonBody, Problem};
-use crate::{
-    service::{
-        Rows,
-        correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
-    },
-    state::AppState,
+use crate::state::AppState;
+use service::{
+    Rows,
+    correlation::{self as svc, decision_name, fusion_name, reason_name, statistic_name},
 };
 
 /// Local tracks of M ≥ 1 radar nodes to correlate.

@@ -8,7 +8,8 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{service::dimension as svc, state::AppState};
+use crate::state::AppState;
+use service::dimension as svc;
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]

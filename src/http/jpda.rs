@@ -8,10 +8,8 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{
-    service::{Rows, jpda as svc},
-    state::AppState,
-};
+use crate::state::AppState;
+use service::{Rows, jpda as svc};
 
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]

@@ -9,7 +9,6 @@ pub mod jpda;
 pub mod ops;
 pub mod plot_fusion;
 pub mod problem;
-pub mod rows;
 pub mod rules;
 pub mod sessions;
 
@@ -209,7 +208,7 @@ impl utoipa::Modify for BearerAuth {
 }
 
 /// A working request for each POST operation ("Try it out" on the docs
-/// page sends it; a test posts each and expects success), the README's
+/// page sends it; a test posts each and expects success), the docs'
 /// examples in full.
 fn request_example(path: &str) -> Option<serde_json::Value> {
     let text = match path {
@@ -478,7 +477,7 @@ mod tests {
         settings.api_keys = keys.map(Into::into);
         let api_keys = ApiKeys::from_settings(&settings).unwrap();
         {
-            let store = crate::store::SessionStore::Memory(crate::store::memory::MemoryStore::new(
+            let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
                 &settings.store_settings(),
             ));
             AppState::new(

@@ -10,11 +10,9 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{
-    algo::tracking::Counters,
-    service::{self, plot_fusion as svc},
-    state::AppState,
-};
+use crate::state::AppState;
+use service::plot_fusion::TrackerCounters as Counters;
+use service::{self, plot_fusion as svc};
 
 /// A WGS84 position (height above the ellipsoid, default 0).
 #[derive(Debug, Deserialize, ToSchema)]

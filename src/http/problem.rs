@@ -13,10 +13,8 @@ use axum::{
 use serde::{Serialize, de::DeserializeOwned};
 use utoipa::ToSchema;
 
-use crate::{
-    auth::AuthError,
-    service::{FieldViolation, ServiceError},
-};
+use crate::auth::AuthError;
+use service::{FieldViolation, ServiceError};
 
 pub const PROBLEM_JSON: &str = "application/problem+json";
 
@@ -244,7 +242,7 @@ impl<T: DeserializeOwned + 'static> JsonBody<T> {
         F: FnOnce(T) -> Result<R, Problem> + Send + 'static,
     {
         let bytes = self.bytes;
-        let encoded = crate::service::lanes::run(move || -> Result<Vec<u8>, Problem> {
+        let encoded = service::lanes::run(move || -> Result<Vec<u8>, Problem> {
             let answer = work(parse_json(&bytes)?)?;
             // Answers are about as large as their requests (a JPDA update
             // returns each track it was given): sized once, the buffer is

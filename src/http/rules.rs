@@ -8,7 +8,8 @@ use super::{
     Timing,
     problem::{JsonBody, Problem},
 };
-use crate::{service::rules as svc, state::AppState};
+use crate::state::AppState;
+use service::rules as svc;
 
 /// An L/R rule: correlated when at least `l` of `r` samples pass the first threshold.
 #[derive(Debug, Deserialize, ToSchema)]

@@ -22,19 +22,16 @@ use super::{
     },
     problem::{ApiJson, Problem},
 };
-use crate::{
-    auth::Tenant,
-    service::{
-        Rows, ServiceError, Violations, correlation as corr,
-        session::{
-            Batch, KindName, Spec, Update, View,
-            correlation::{self as domain, CorrelationSession, change_name},
-            persist::AnyView,
-            plot_fusion::{self as pf, PlotFusionSession, track_change_name},
-            refuse_foreign_fields,
-        },
+use crate::{auth::Tenant, state::AppState};
+use service::{
+    Rows, ServiceError, Violations, correlation as corr,
+    session::{
+        Batch, KindName, Spec, Update, View,
+        correlation::{self as domain, CorrelationSession, change_name},
+        persist::AnyView,
+        plot_fusion::{self as pf, PlotFusionSession, track_change_name},
+        refuse_foreign_fields,
     },
-    state::AppState,
 };
 
 /// A streaming session. `kind` names what it does: `correlation` (the
@@ -308,7 +305,7 @@ fn only_fields_of(kind: KindName, req: &CreateSessionRequest) -> Result<(), Serv
     )
 }
 
-fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<crate::service::plot_fusion::SpecInput> {
+fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<service::plot_fusion::SpecInput> {
     Spec {
         idle_expiry_s: req.idle_expiry_s,
         body: spec_in(req.origin, req.radars.unwrap_or_default(), req.tracker),
@@ -319,7 +316,7 @@ fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<crate::service::plot_f
 /// request (the ASTERIX UDP listener's `--asterix-session-spec` file).
 pub fn plot_fusion_spec_from_json(
     json: &str,
-) -> Result<Spec<crate::service::plot_fusion::SpecInput>, String> {
+) -> Result<Spec<service::plot_fusion::SpecInput>, String> {
     let req: CreateSessionRequest = serde_json::from_str(json).map_err(|e| e.to_string())?;
     let kind = KindName::parse(req.kind.as_deref(), "kind").map_err(|e| e.to_string())?;
     if kind != KindName::PlotFusion {

@@ -5,10 +5,10 @@
 //! samples at the AIS times as biased polar measurements, so the bias must
 //! come back to rounding.
 
-use radar_fusion::algo::bias::projection::LocalPlane;
-use radar_fusion::algo::geo::Ellipsoid;
+use algo::bias::projection::LocalPlane;
+use algo::geo::Ellipsoid;
+use eval::ais::{PositionReport, nmea_checksum};
 use radar_fusion::proto::{self as pb, ais_radar_service_client::AisRadarServiceClient};
-use radar_fusion::sim::ais::{PositionReport, nmea_checksum};
 use serde_json::{Value, json};
 use tonic_types::StatusExt;
 
@@ -268,7 +268,7 @@ async fn grpc_associates_from_nmea_with_tag_blocks() {
             // truncates the receive time to the whole second t, which the
             // service takes at the middle of its second, t + 0.5.
             let (lat, lon) = plane.inverse(at(t + 0.5));
-            let report = radar_fusion::sim::ais::AisReport {
+            let report = eval::ais::AisReport {
                 t,
                 mmsi: 235_000_000 + k as u32,
                 lat_deg: lat.to_degrees(),

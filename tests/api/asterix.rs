@@ -9,12 +9,10 @@
 //! 1 ft = 0.3048 m).
 
 use base64::Engine as _;
-use radar_fusion::{
-    algo::tracking::asterix,
-    proto::{self as pb, plot_fusion_service_client::PlotFusionServiceClient},
-    service::plot_fusion::{self as svc, asterix::AsterixInput},
-};
+use formats::asterix;
+use radar_fusion::proto::{self as pb, plot_fusion_service_client::PlotFusionServiceClient};
 use serde_json::{Value, json};
+use service::plot_fusion::{self as svc, asterix::AsterixInput};
 
 use crate::helpers::{assert_problem, problem_fields, spawn_app, spawn_app_with};
 
@@ -382,7 +380,7 @@ fn a_session_fed_asterix_in_two_batches_gives_the_batch_calls_tracks() {
     // Cut at a data block boundary; the second batch has no date: its
     // times of day are taken nearest to the session's last frame.
     let cut = block_boundary_near(SCENE_BIN.len() / 2);
-    use radar_fusion::service::session::{
+    use service::session::{
         Limits, SessionKind,
         plot_fusion::{BatchInput, PlotFusionSession},
     };

@@ -2,13 +2,11 @@
 //! one target give one system track, both transports agree, and bad input is
 //! named by field on both.
 
-use radar_fusion::{
-    algo::{
-        geo::{Ellipsoid, LocalFrame},
-        polar::enu_to_polar_3d,
-    },
-    proto::{self as pb, dimension_service_client::DimensionServiceClient},
+use algo::{
+    geo::{Ellipsoid, LocalFrame},
+    polar::enu_to_polar_3d,
 };
+use radar_fusion::proto::{self as pb, dimension_service_client::DimensionServiceClient};
 use serde_json::{Value, json};
 use tonic::Code;
 

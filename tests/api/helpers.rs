@@ -1,5 +1,8 @@
 //! `spawn_app`: the real application on port 0, with clients for both transports.
 
+// Helpers shared by test targets: `pub` is for the modules that use them.
+#![allow(unreachable_pub)]
+
 use std::net::SocketAddr;
 
 use radar_fusion::{

@@ -387,3 +387,18 @@ fn the_cli_survives_a_closed_pipe_and_names_the_address_it_probes() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("http://127.0.0.1:1/healthz"), "{stderr}");
 }
+
+/// `radar-fusion eval` moved to the `eval` crate's binary: the server says
+/// where in one line on stderr and exits 2, whatever the arguments.
+#[test]
+fn eval_points_to_its_own_binary() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radar-fusion"))
+        .args(["eval", "seed000-correlation", "--runs", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("radar-fusion-eval --list"), "{err}");
+    assert!(out.stdout.is_empty());
+}

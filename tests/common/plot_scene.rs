@@ -6,9 +6,11 @@
 //! pyproj elsewhere): truth ENU → ECEF → the radar's ENU → range, azimuth
 //! (and elevation), and the radial velocity from the true velocity.
 
+// Helpers shared by test targets: `pub` is for the modules that use them.
+#![allow(unreachable_pub)]
 #![allow(dead_code)]
 
-use radar_fusion::algo::geo::{Ellipsoid, LocalFrame};
+use algo::geo::{Ellipsoid, LocalFrame};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;

@@ -2,6 +2,9 @@
 //! `tests/sessions_redis.rs`: reports of two radars as JSON, the session
 //! configuration, and their gRPC forms.
 
+// Helpers shared by test targets: `pub` is for the modules that use them.
+#![allow(unreachable_pub)]
+
 use radar_fusion::proto as pb;
 use serde_json::{Value, json};
 

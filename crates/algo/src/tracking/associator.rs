@@ -1,0 +1,481 @@
+//! Hypothesiser, associator and updater of confirmed tracks: JPDA with an
+//! (extended) Kalman update (seed 001 steps 5 and 6).
+//!
+//! Serial mode (step 6): one radar's scan group is one [`jpda::Scan`] with
+//! the polar [`SensorModel::Polar`] at the radar's site, so the update is
+//! the patent's EKF on (ρ, θ(, φ)) and all of `jpda` (exact / AMSJPDA /
+//! NN / GNN, clusters, eqs. 6–7) is reused unchanged. A 2D radar measures
+//! the horizontal range (layout without z, also in a 3D tracker).
+//!
+//! Parallel mode (step 5): the fused plots of one instant are Cartesian
+//! positions with a covariance of their own (it depends on range, on the
+//! radars fused and on the extrapolation), which `jpda::Scan` (one R per
+//! scan) cannot express. [`associate_cartesian`] therefore builds the same
+//! per-cluster [`ClusterProblem`] as `jpda` — a_tj = P_D N(ν_tj; 0, S_tj)/λ_j,
+//! b_t = 1 − P_D P_G — with S_tj = H_j P H_j′ + R_j per pair, gets β from
+//! [`exact_marginals`] / [`amsjpda_marginals`] (or NN / GNN), and updates
+//! by Gaussian-mixture reduction of the per-measurement Kalman updates
+//! (Joseph form): x⁺ = Σ_j β_j x_j, P⁺ = Σ_j β_j (P_j + (x_j − x⁺)(x_j − x⁺)′)
+//! with j = 0 the prediction. With a common R this equals eqs. 6–7 of seed
+//! 002 exactly. λ_j is the sum over the instant's radars of the same
+//! dimension of their polar clutter density divided by the Jacobian
+//! determinant of the polar → Cartesian map at z_j (ρ for 2D, r² cos φ for
+//! 3D). The fused scan's P_D is 1 − Π(1 − P_D,i) over the radars that
+//! delivered plots in the instant.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::assignment;
+use crate::error::AlgoError;
+use crate::gating::SortedByFirst;
+use crate::gaussian::{check_covariance, cholesky, symmetrize};
+use crate::jpda::{
+    self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
+    amsjpda_marginals, exact_marginals,
+};
+use crate::kalman::{self, PositionLayout};
+use crate::tracking::config::{Plot, RadarSpec};
+use crate::tracking::registration::CartesianPlot;
+use crate::tracking::track::{chi2_gates, position_selector};
+
+/// What the association of one frame decided.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// Per track: the measurement with the largest β when the track was
+    /// detected (β_miss < 1), else `None`.
+    pub hit: Vec<Option<usize>>,
+    /// Per measurement: inside the gate of at least one track (such plots
+    /// take part in track association and are not used for initiation).
+    pub used: Vec<bool>,
+}
+
+/// Serial mode: JPDA + EKF of `tracks` (predicted to the scan time) with the
+/// polar plots of one radar.
+pub fn associate_polar(
+    tracks: &mut [TrackEstimate],
+    radar: &RadarSpec,
+    plots: &[Plot],
+    axes: usize,
+    gate_probability: f64,
+    config: &Config,
+) -> Result<Outcome, AlgoError> {
+    let layout = if radar.is_3d() && axes == 3 {
+        PositionLayout::CV_3D
+    } else {
+        PositionLayout::CV_2D
+    };
+    let model = SensorModel::Polar {
+        site: radar.site,
+        layout,
+        sigma_range: radar.sigma_range,
+        sigma_azimuth: radar.sigma_azimuth,
+        sigma_elevation: radar.sigma_elevation,
+    };
+    let dim = model.dim();
+    let measurements = plots
+        .iter()
+        .map(|p| {
+            let mut v = vec![p.range, p.azimuth];
+            v.extend(p.elevation);
+            DVector::from_vec(v)
+        })
+        .collect();
+    let scan = Scan {
+        model,
+        measurements,
+        detection_probability: radar.detection_probability,
+        gate: Gate::from_probability(dim, gate_probability)?,
+        clutter: Clutter::Density(radar.clutter_density),
+    };
+    let report = jpda::scan(tracks, &scan, config)?;
+    let mut used = vec![false; plots.len()];
+    let hit = report
+        .associations
+        .iter()
+        .map(|a| {
+            for &(j, _) in &a.measurements {
+                used[j] = true;
+            }
+            best(a.miss, &a.measurements)
+        })
+        .collect();
+    Ok(Outcome { hit, used })
+}
+
+/// Parallel mode: JPDA of `tracks` with Cartesian plots of their own
+/// covariance; `clutter[j]` is λ_j > 0 in the space of plot j.
+pub fn associate_cartesian(
+    tracks: &mut [TrackEstimate],
+    plots: &[CartesianPlot],
+    clutter: &[f64],
+    detection_probability: f64,
+    gate_probability: f64,
+    config: &Config,
+) -> Result<Outcome, AlgoError> {
+    let gates = chi2_gates(gate_probability)?;
+    // Hypothesise: every gated (track, plot) pair with its Kalman update.
+    // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 with S_00 = P_00 + R_00, so only
+    // plots whose first component (east) lies within √(γ S_00) of the
+    // track's can pass; found by binary search in the plots sorted by it.
+    let by_first = SortedByFirst::new(plots.iter().map(|p| p.z[0]));
+    let max_r00 = plots.iter().map(|p| p.r[(0, 0)]).fold(0.0, f64::max);
+    let gate_max = gates[0].max(gates[1]);
+    let mut candidates: Vec<usize> = Vec::new();
+    let mut hyps: Vec<Vec<Hypothesis>> = Vec::with_capacity(tracks.len());
+    for track in tracks.iter() {
+        let axes = track.x.len() / 2;
+        let mut row = Vec::new();
+        let reach = (gate_max * (track.p[(0, 0)] + max_r00)).sqrt() * (1.0 + 1e-9);
+        by_first.within(track.x[0], reach, &mut candidates);
+        for &j in &candidates {
+            let plot = &plots[j];
+            let k = plot.z.len();
+            let h = position_selector(k, axes);
+            let nu = &plot.z - &h * &track.x;
+            let mut s = &h * &track.p * h.transpose() + &plot.r;
+            symmetrize(&mut s);
+            let chol = cholesky("innovation covariance", &s)?;
+            let w = chol
+                .l()
+                .solve_lower_triangular(&nu)
+                .ok_or(AlgoError::NotPositiveDefinite {
+                    what: "innovation covariance",
+                })?;
+            let d2 = w.norm_squared();
+            if d2 <= gates[k - 2] {
+                let ln_det: f64 = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
+                let ln_norm = -0.5 * (ln_det + k as f64 * (2.0 * std::f64::consts::PI).ln());
+                row.push(Hypothesis {
+                    measurement: j,
+                    d2,
+                    ln_likelihood: ln_norm - 0.5 * d2,
+                });
+            }
+        }
+        hyps.push(row);
+    }
+    let mut used = vec![false; plots.len()];
+    for h in hyps.iter().flatten() {
+        used[h.measurement] = true;
+    }
+    // Associate: β per track (row 0 = miss, then its hypotheses in order).
+    let beta = match config.method {
+        Method::NearestNeighbour => hard(&hyps, nearest(&hyps)),
+        Method::GlobalNearestNeighbour => {
+            let edges: Vec<(usize, usize, f64)> = hyps
+                .iter()
+                .enumerate()
+                .flat_map(|(t, row)| row.iter().map(move |h| (t, h.measurement, h.d2)))
+                .collect();
+            let unassigned = gates[1] * (1.0 + 1e-12) + 1e-12;
+            hard(&hyps, assignment::solve(&edges, unassigned))
+        }
+        Method::Exact | Method::Amsjpda => soft(
+            &hyps,
+            plots.len(),
+            clutter,
+            detection_probability,
+            gate_probability,
+            config,
+        ),
+    };
+    // Update: mixture reduction of the per-hypothesis Kalman updates.
+    let mut hit = Vec::with_capacity(tracks.len());
+    for (t, track) in tracks.iter_mut().enumerate() {
+        let row = &hyps[t];
+        let b = &beta[t];
+        let pairs: Vec<(usize, f64)> = row
+            .iter()
+            .map(|h| h.measurement)
+            .zip(b[1..].iter().copied())
+            .collect();
+        hit.push(best(b[0], &pairs));
+        if b[0] >= 1.0 {
+            continue;
+        }
+        let axes = track.x.len() / 2;
+        let mut comps: Vec<(f64, DVector<f64>, DMatrix<f64>)> = Vec::new();
+        if b[0] > 0.0 {
+            comps.push((b[0], track.x.clone(), track.p.clone()));
+        }
+        for (h, &bj) in row.iter().zip(&b[1..]) {
+            if bj > 0.0 {
+                let plot = &plots[h.measurement];
+                let hm = position_selector(plot.z.len(), axes);
+                let u = kalman::update_linear(&track.x, &track.p, &plot.z, &hm, &plot.r)?;
+                comps.push((bj, u.x, u.p));
+            }
+        }
+        let (x, p) = reduce(&comps)?;
+        track.x = x;
+        track.p = p;
+    }
+    Ok(Outcome { hit, used })
+}
+
+/// The clutter density of a fused plot (see the module header).
+pub fn cartesian_clutter(plot: &CartesianPlot, radars: &[&RadarSpec]) -> f64 {
+    let three = plot.z.len() == 3;
+    radars
+        .iter()
+        .filter(|r| r.is_3d() == three)
+        .map(|r| {
+            let e = plot.z[0] - r.site[0];
+            let n = plot.z[1] - r.site[1];
+            let rho = e.hypot(n).max(1.0);
+            let det = if three {
+                let u = plot.z[2] - r.site[2];
+                // r² cos φ = (ρ² + u²)·ρ/√(ρ² + u²) = ρ √(ρ² + u²).
+                rho * rho.hypot(u)
+            } else {
+                rho
+            };
+            r.clutter_density / det
+        })
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE)
+}
+
+struct Hypothesis {
+    measurement: usize,
+    d2: f64,
+    /// ln N(ν; 0, S).
+    ln_likelihood: f64,
+}
+
+/// The measurement of largest β (ties: lowest index) when β_miss < 1.
+fn best(miss: f64, betas: &[(usize, f64)]) -> Option<usize> {
+    if miss >= 1.0 {
+        return None;
+    }
+    betas
+        .iter()
+        .filter(|(_, b)| *b > 0.0)
+        .fold(None, |acc: Option<(usize, f64)>, &(j, b)| match acc {
+            Some((_, bb)) if bb >= b => acc,
+            _ => Some((j, b)),
+        })
+        .map(|(j, _)| j)
+}
+
+fn nearest(hyps: &[Vec<Hypothesis>]) -> Vec<(usize, usize)> {
+    hyps.iter()
+        .enumerate()
+        .filter_map(|(t, row)| {
+            row.iter()
+                .min_by(|a, b| a.d2.total_cmp(&b.d2))
+                .map(|h| (t, h.measurement))
+        })
+        .collect()
+}
+
+/// β ∈ {0, 1} from chosen (track, measurement) pairs.
+fn hard(hyps: &[Vec<Hypothesis>], chosen: Vec<(usize, usize)>) -> Vec<Vec<f64>> {
+    let mut beta: Vec<Vec<f64>> = hyps
+        .iter()
+        .map(|row| {
+            let mut b = vec![0.0; row.len() + 1];
+            b[0] = 1.0;
+            b
+        })
+        .collect();
+    for (t, j) in chosen {
+        let k = hyps[t]
+            .iter()
+            .position(|h| h.measurement == j)
+            .expect("a gated pair");
+        beta[t][0] = 0.0;
+        beta[t][k + 1] = 1.0;
+    }
+    beta
+}
+
+/// JPDA β per connected cluster of tracks sharing gated plots.
+fn soft(
+    hyps: &[Vec<Hypothesis>],
+    measurements: usize,
+    clutter: &[f64],
+    p_d: f64,
+    p_g: f64,
+    config: &Config,
+) -> Vec<Vec<f64>> {
+    let mut beta: Vec<Vec<f64>> = hyps.iter().map(|row| vec![0.0; row.len() + 1]).collect();
+    let ln_b = (1.0 - p_d * p_g).ln();
+    for (tracks, meas) in jpda::clusters(hyps, measurements, |h| h.measurement) {
+        let mut gates = Vec::with_capacity(tracks.len());
+        let mut miss = Vec::with_capacity(tracks.len());
+        for &t in &tracks {
+            let ln_a: Vec<f64> = hyps[t]
+                .iter()
+                .map(|h| p_d.ln() + h.ln_likelihood - clutter[h.measurement].ln())
+                .collect();
+            let top = ln_a.iter().copied().fold(ln_b, f64::max);
+            miss.push((ln_b - top).exp());
+            gates.push(
+                hyps[t]
+                    .iter()
+                    .zip(&ln_a)
+                    .map(|(h, &la)| {
+                        let local = meas.binary_search(&h.measurement).expect("in cluster");
+                        (local, (la - top).exp())
+                    })
+                    .collect(),
+            );
+        }
+        let problem = ClusterProblem {
+            measurements: meas.len(),
+            gates,
+            miss,
+            count_factor: None,
+        };
+        let marginals =
+            if config.method == Method::Amsjpda || tracks.len() > config.max_exact_tracks {
+                amsjpda_marginals(&problem)
+            } else {
+                exact_marginals(&problem, config.max_hypotheses)
+                    .unwrap_or_else(|_| amsjpda_marginals(&problem))
+            };
+        for (local, &t) in tracks.iter().enumerate() {
+            beta[t].clone_from(&marginals.beta[local]);
+        }
+    }
+    beta
+}
+
+/// Moment-matched Gaussian of a mixture Σ w_i N(x_i, P_i) with Σ w_i = 1.
+fn reduce(
+    comps: &[(f64, DVector<f64>, DMatrix<f64>)],
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    let total: f64 = comps.iter().map(|c| c.0).sum();
+    let n = comps[0].1.len();
+    let mut x = DVector::zeros(n);
+    for (w, xi, _) in comps {
+        x.axpy(*w / total, xi, 1.0);
+    }
+    let mut p = DMatrix::zeros(n, n);
+    for (w, xi, pi) in comps {
+        let d = xi - &x;
+        p += pi * (*w / total);
+        p.ger(*w / total, &d, &d, 1.0);
+    }
+    symmetrize(&mut p);
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(AlgoError::NonFinite {
+            what: "updated state",
+        });
+    }
+    check_covariance("updated covariance", &p)?;
+    Ok((x, p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{dmatrix, dvector};
+
+    fn cfg(method: Method) -> Config {
+        Config {
+            method,
+            max_exact_tracks: 10,
+            max_hypotheses: 100_000,
+        }
+    }
+
+    fn plot(x: f64, y: f64, var: f64) -> CartesianPlot {
+        CartesianPlot {
+            t: 0.0,
+            z: dvector![x, y],
+            r: DMatrix::from_diagonal(&dvector![var, var]),
+            radars: vec![0],
+        }
+    }
+
+    #[test]
+    fn one_track_one_plot_is_the_kalman_update_weighted_by_beta() {
+        // Track at 0 with P = diag(100, 1, 100, 1), plot at (10, 0), R = 100 I:
+        // S = 200 I, d² = 100/200 = 0.5, N = exp(−0.25)/(2π·200).
+        // a = P_D N/λ, b = 1 − P_D P_G; β_1 = a/(a + b).
+        // Kalman: K_pos = 100/200 = 0.5 → x_1 = 5, P_1,xx = 50.
+        // Mixture: x = β₁·5, P_xx = β₀·100 + β₁·50 + β₀β₁·25.
+        let (p_d, p_g, lambda) = (0.9, 0.99, 1e-5);
+        let mut tracks = vec![TrackEstimate {
+            x: dvector![0.0, 0.0, 0.0, 0.0],
+            p: DMatrix::from_diagonal(&dvector![100.0, 1.0, 100.0, 1.0]),
+        }];
+        let out = associate_cartesian(
+            &mut tracks,
+            &[plot(10.0, 0.0, 100.0)],
+            &[lambda],
+            p_d,
+            p_g,
+            &cfg(Method::Exact),
+        )
+        .unwrap();
+        let n = (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0);
+        let a = p_d * n / lambda;
+        let b = 1.0 - p_d * p_g;
+        let b1 = a / (a + b);
+        let b0 = 1.0 - b1;
+        assert_eq!(out.hit, vec![Some(0)]);
+        assert_eq!(out.used, vec![true]);
+        assert!((tracks[0].x[0] - 5.0 * b1).abs() < 1e-9);
+        let want = b0 * 100.0 + b1 * 50.0 + b0 * b1 * 25.0;
+        assert!(
+            (tracks[0].p[(0, 0)] - want).abs() < 1e-9,
+            "{}",
+            tracks[0].p[(0, 0)]
+        );
+    }
+
+    #[test]
+    fn gnn_gives_each_track_its_own_plot_and_ignores_the_far_plot() {
+        let mut tracks = vec![
+            TrackEstimate {
+                x: dvector![0.0, 0.0, 0.0, 0.0],
+                p: DMatrix::identity(4, 4) * 100.0,
+            },
+            TrackEstimate {
+                x: dvector![40.0, 0.0, 0.0, 0.0],
+                p: DMatrix::identity(4, 4) * 100.0,
+            },
+        ];
+        let plots = [
+            plot(35.0, 0.0, 100.0),
+            plot(5.0, 0.0, 100.0),
+            plot(1e4, 0.0, 100.0),
+        ];
+        let out = associate_cartesian(
+            &mut tracks,
+            &plots,
+            &[1e-6; 3],
+            0.9,
+            0.99,
+            &cfg(Method::GlobalNearestNeighbour),
+        )
+        .unwrap();
+        assert_eq!(out.hit, vec![Some(1), Some(0)]);
+        assert_eq!(out.used, vec![true, true, false]);
+        // Kalman with gain 1/2: 0 → 2.5 and 40 → 37.5.
+        assert!((tracks[0].x[0] - 2.5).abs() < 1e-12);
+        assert!((tracks[1].x[0] - 37.5).abs() < 1e-12);
+        assert!((tracks[0].p.view((0, 0), (1, 1)) - dmatrix![50.0]).amax() < 1e-12);
+    }
+
+    #[test]
+    fn clutter_density_is_converted_by_the_jacobian() {
+        // 2D radar at the origin, λ = 2e-3 per m·rad; plot at (300, 400): ρ = 500,
+        // λ_cart = 2e-3/500 = 4e-6 per m².
+        let radar = RadarSpec {
+            site: [0.0; 3],
+            sigma_range: 1.0,
+            sigma_azimuth: 1e-3,
+            sigma_elevation: None,
+            sigma_radial_velocity: Some(1.0),
+            scan_period: 1.0,
+            detection_probability: 1.0,
+            clutter_density: 2e-3,
+        };
+        let l = cartesian_clutter(&plot(300.0, 400.0, 1.0), &[&radar]);
+        assert!((l - 4e-6).abs() < 1e-18);
+    }
+}

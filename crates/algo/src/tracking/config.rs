@@ -1,0 +1,524 @@
+//! The tracker's inputs: radar descriptions, plots and options (seed 001,
+//! the multi-radar plot-fusion patent, steps 1–8), with their validation.
+//!
+//! Option names follow MATLAB's `trackerJPDA` and `trackHistoryLogic` where
+//! they exist (confirmation M-of-N, deletion M-of-N, time tolerance for
+//! simultaneous detections). Units are SI, angles in radians, azimuth
+//! clockwise from north, positions in the fusion centre's ENU frame.
+
+use crate::error::{AlgoError, finite, finite_slice, non_negative, positive};
+use crate::jpda::{Config as JpdaConfig, Method};
+
+/// How plots reach the tracks (seed 001 step 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Parallel when every configured radar measures Doppler, else serial
+    /// (the patent's test "do all radar data contain Doppler?"), decided
+    /// once from the radar list so that a resumed tracker never changes mode.
+    Auto,
+    /// Steps 3–5: time registration to fusion instants by radial
+    /// extrapolation, plot-to-plot GNN, ML fusion, JPDA of fused plots.
+    Parallel,
+    /// Step 6: plots in time order, one radar scan group at a time, each a
+    /// JPDA/EKF update of the tracks predicted to its time.
+    Serial,
+}
+
+/// The process noise of the constant-velocity model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseModel {
+    /// Continuous white-noise acceleration, spectral density q_i = σ_i²
+    /// (m²/s³) per axis: Q = q [[Δt³/3, Δt²/2], [Δt²/2, Δt]]. Consistent
+    /// whatever the sampling (Q over 4 s = Q over 4 × 1 s), which serial
+    /// fusion of unsynchronised radars needs: the default.
+    Cwna,
+    /// Discrete white-noise acceleration, piecewise-constant acceleration of
+    /// σ_i per interval: Q = σ² [[Δt⁴/4, Δt³/2], [Δt³/2, Δt²]]. Its total
+    /// noise depends on how often the track is predicted (more radars, less
+    /// noise), so it suits a fixed-period tracker only.
+    Dwna,
+}
+
+/// One radar of the network. Its index in [`TrackerConfig::radars`] is the
+/// radar's id in [`Plot::radar`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct RadarSpec {
+    /// Site in the fusion ENU frame `[e, n, u]` (m): the patent's [a, b].
+    pub site: [f64; 3],
+    /// Range standard deviation σ_ρ (m), > 0.
+    pub sigma_range: f64,
+    /// Azimuth standard deviation σ_θ (rad), > 0.
+    pub sigma_azimuth: f64,
+    /// Elevation standard deviation (rad): `Some` makes this a 3D radar
+    /// (its plots must carry an elevation), `None` a 2D radar.
+    pub sigma_elevation: Option<f64>,
+    /// Radial-velocity standard deviation (m/s): `Some` for a Doppler radar.
+    pub sigma_radial_velocity: Option<f64>,
+    /// Scan period (s), > 0 (used for the default options only).
+    pub scan_period: f64,
+    /// Detection probability P_D in (0, 1].
+    pub detection_probability: f64,
+    /// Clutter density λ > 0: false plots per unit volume of the radar's
+    /// polar measurement space (per m·rad for 2D, per m·rad² for 3D).
+    pub clutter_density: f64,
+}
+
+impl RadarSpec {
+    /// `true` for a 3D radar (range, azimuth, elevation).
+    pub fn is_3d(&self) -> bool {
+        self.sigma_elevation.is_some()
+    }
+
+    /// `true` for a radar that measures the radial velocity.
+    pub fn has_doppler(&self) -> bool {
+        self.sigma_radial_velocity.is_some()
+    }
+}
+
+/// One plot (detection) of one radar, in that radar's polar coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plot {
+    /// Index of the radar in [`TrackerConfig::radars`].
+    pub radar: usize,
+    /// Detection time τ (s).
+    pub t: f64,
+    /// Range ρ (m), > 0.
+    pub range: f64,
+    /// Azimuth θ (rad), clockwise from north.
+    pub azimuth: f64,
+    /// Elevation (rad); required from a 3D radar, absent from a 2D radar.
+    pub elevation: Option<f64>,
+    /// Radial (Doppler) velocity ṙ (m/s), positive receding; required from
+    /// every radar in parallel mode.
+    pub radial_velocity: Option<f64>,
+}
+
+/// The velocity gate of the logic-based initiation (step 7, 7a).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum VelocityGate {
+    /// Speed band [v_min, v_max] (m/s) on the displacement's length: the
+    /// patent's gate for a target of unknown heading.
+    Speed {
+        /// Minimum speed (m/s), ≥ 0.
+        v_min: f64,
+        /// Maximum speed (m/s), > v_min.
+        v_max: f64,
+    },
+    /// Per-axis bands as printed in the patent (Fig. 6 uses x ∈ [100, 800],
+    /// y ∈ [−100, 100] m/s); the z entries are used by 3D plot pairs only.
+    PerAxis {
+        /// Minimum velocity per axis `[e, n, u]` (m/s).
+        v_min: [f64; 3],
+        /// Maximum velocity per axis (m/s), ≥ v_min.
+        v_max: [f64; 3],
+    },
+}
+
+/// Logic-based track initiation (step 7).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Initiation {
+    /// Confirmation M of M-of-N: hits among the last N frames of a
+    /// tentative track (its first two plots count as two hits), ≥ 2.
+    pub confirm_m: u32,
+    /// Confirmation N, M ≤ N ≤ 64.
+    pub confirm_n: u32,
+    /// The velocity gate between a root plot and a second plot.
+    pub velocity: VelocityGate,
+    /// Gate probability of the χ² tests of the initiation (the D_ij ≤ γ
+    /// test of 7a and the gate about the extrapolated point of 7b), in (0, 1).
+    pub gate_probability: f64,
+    /// Smallest time between a root and its second plot (s), > 0; plots
+    /// closer in time (e.g. the same target seen by two radars at once)
+    /// give no usable velocity and are not paired.
+    pub min_dt: f64,
+    /// A root waits at most this long for its second plot (s), ≥ `min_dt`.
+    pub max_dt: f64,
+}
+
+/// Track deletion (step 8 and 7c): any rule that is set deletes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deletion {
+    /// Delete after this many consecutive missed frames (K ≥ 1).
+    pub max_consecutive_misses: Option<u32>,
+    /// Delete when at least M_d of the last N_d frames were misses
+    /// (1 ≤ M_d ≤ N_d ≤ 64).
+    pub misses_m_of_n: Option<(u32, u32)>,
+    /// Delete when the horizontal position standard deviation
+    /// √(P_xx + P_yy) exceeds this (m).
+    pub max_position_sigma: Option<f64>,
+}
+
+impl Deletion {
+    /// Deletion after `k` consecutive missed frames only.
+    pub fn after_misses(k: u32) -> Self {
+        Self {
+            max_consecutive_misses: Some(k),
+            misses_m_of_n: None,
+            max_position_sigma: None,
+        }
+    }
+}
+
+/// Everything the tracker needs; see [`TrackerConfig::new`] for defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerConfig {
+    /// Spatial axes of the tracks: 2 (`[x, vx, y, vy]`) or 3
+    /// (`[x, vx, y, vy, z, vz]`). A 2D tracker takes 2D radars only.
+    pub axes: usize,
+    /// The radars; a plot names its radar by index.
+    pub radars: Vec<RadarSpec>,
+    /// Parallel, serial or decided from the radars.
+    pub mode: Mode,
+    /// Parallel mode: period T of the fusion instants t_k = epoch + k·T (s).
+    pub fusion_period: f64,
+    /// Parallel mode: origin of the fusion instants (s).
+    pub fusion_epoch: f64,
+    /// Serial mode: consecutive plots of one radar within this time of the
+    /// group's first plot are one scan group, processed as simultaneous at
+    /// the group's last time (s), ≥ 0.
+    pub time_tolerance: f64,
+    /// Plot-to-track association (steps 5–6): method and exact-JPDA limits.
+    pub association: JpdaConfig,
+    /// Gate probability of the plot-to-plot χ² gate of step 4, in (0, 1).
+    pub plot_gate_probability: f64,
+    /// Gate probability P_G of the plot-to-track gate, in (0, 1).
+    pub track_gate_probability: f64,
+    /// Track initiation (step 7).
+    pub initiation: Initiation,
+    /// Track deletion.
+    pub deletion: Deletion,
+    /// Acceleration noise per axis `[e, n, u]`, ≥ 0: σ (m/s²) for DWNA, √q
+    /// (q in m²/s³) for CWNA.
+    pub sigma_a: [f64; 3],
+    /// The process-noise model.
+    pub noise: NoiseModel,
+    /// 3D tracker: height (m, fusion frame `u`) given to 2D plots when a
+    /// track is started from them (seed 003's mapping).
+    pub default_height: f64,
+    /// Standard deviation of `default_height` (m), > 0.
+    pub default_height_sigma: f64,
+    /// Parallel mode: σ (m/s) of a target's speed across its line of sight,
+    /// ≥ 0. Step 3 holds the plot's angles while moving it to the fusion
+    /// instant, so a target crossing the line of sight at speed v_t is
+    /// displaced by v_t·|t − τ| that the radial velocity cannot see; the
+    /// extrapolated plot's covariance gets (σ_t·|t − τ|)² across the line of
+    /// sight to stay consistent (0: the patent's covariance, optimistic).
+    pub sigma_tangential_speed: f64,
+    /// Duplicate deletion: two confirmed tracks whose best plot of a frame
+    /// is the same and whose states differ by less than the χ²_n quantile
+    /// at this probability are one target; the younger is deleted. In
+    /// [0, 1); 0 disables the rule.
+    pub duplicate_probability: f64,
+}
+
+impl TrackerConfig {
+    /// Defaults: mode `Auto`; fusion period = the shortest scan period,
+    /// epoch 0; time tolerance 0; exact JPDA (clusters up to 12 tracks,
+    /// 2·10⁶ hypothesis edges); gates 0.99; confirmation 3-of-4 with a speed
+    /// band [0, 600] m/s, pairing 1 s to twice the longest scan period;
+    /// CWNA with q = 9 m²/s³ per axis (√q = 3: aircraft turning at 2–4 m/s²
+    /// keep a consistent NEES, `seed001-montecarlo`); deletion by
+    /// [`TrackerConfig::default_deletion`] (2 × radars, at least 3, missed frames in
+    /// serial mode, 3 in parallel mode); default height
+    /// 0 ± 1000 m; tangential speed σ 300 m/s (parallel mode; 100 m/s left
+    /// its plots overconfident for 100–300 m/s targets); duplicates deleted
+    /// inside the 99 % χ² gate.
+    pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
+        let misses = default_misses(Mode::Auto, &radars);
+        let min_period = radars
+            .iter()
+            .map(|r| r.scan_period)
+            .fold(f64::INFINITY, f64::min);
+        let max_period = radars.iter().map(|r| r.scan_period).fold(0.0, f64::max);
+        Self {
+            axes,
+            radars,
+            mode: Mode::Auto,
+            fusion_period: if min_period.is_finite() {
+                min_period
+            } else {
+                1.0
+            },
+            fusion_epoch: 0.0,
+            time_tolerance: 0.0,
+            association: JpdaConfig {
+                method: Method::Exact,
+                max_exact_tracks: 12,
+                max_hypotheses: 2_000_000,
+            },
+            plot_gate_probability: 0.99,
+            track_gate_probability: 0.99,
+            initiation: Initiation {
+                confirm_m: 3,
+                confirm_n: 4,
+                velocity: VelocityGate::Speed {
+                    v_min: 0.0,
+                    v_max: 600.0,
+                },
+                gate_probability: 0.99,
+                min_dt: 1.0,
+                max_dt: (2.0 * max_period).max(1.0),
+            },
+            deletion: Deletion::after_misses(misses),
+            sigma_a: [3.0; 3],
+            noise: NoiseModel::Cwna,
+            default_height: 0.0,
+            default_height_sigma: 1000.0,
+            sigma_tangential_speed: 300.0,
+            duplicate_probability: 0.99,
+        }
+    }
+
+    /// Sets the mode and the default deletion rule that goes with it
+    /// ([`TrackerConfig::default_deletion`]); set `deletion` afterwards to
+    /// override it.
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.mode = mode;
+        self.deletion = self.default_deletion();
+    }
+
+    /// The default deletion rule for the configured mode:
+    /// [`Deletion::after_misses`] of `2 × radars` (at least 3) missed frames
+    /// in serial mode (a frame is one radar's scan group, so about two scans
+    /// of each radar; `seed001-montecarlo` compares 3, 2 × and 3 × radars),
+    /// 3 in parallel mode (a frame is a fusion instant holding
+    /// every radar's plots).
+    pub fn default_deletion(&self) -> Deletion {
+        Deletion::after_misses(default_misses(self.mode, &self.radars))
+    }
+
+    /// `true` when plots are processed in parallel mode (after `Auto` is
+    /// resolved: every radar has Doppler).
+    pub fn is_parallel(&self) -> bool {
+        match self.mode {
+            Mode::Parallel => true,
+            Mode::Serial => false,
+            Mode::Auto => self.radars.iter().all(RadarSpec::has_doppler),
+        }
+    }
+
+    /// Checks every option; the error names the option.
+    pub fn validate(&self) -> Result<(), AlgoError> {
+        if !(self.axes == 2 || self.axes == 3) {
+            return Err(invalid(
+                "axes",
+                format!("must be 2 or 3, got {}", self.axes),
+            ));
+        }
+        if self.radars.is_empty() {
+            return Err(invalid("radars", "at least one radar is needed".into()));
+        }
+        for r in &self.radars {
+            validate_radar(r, self.axes)?;
+        }
+        if self.mode == Mode::Parallel && !self.radars.iter().all(RadarSpec::has_doppler) {
+            return Err(invalid(
+                "mode",
+                "parallel mode needs the radial velocity of every radar".into(),
+            ));
+        }
+        positive("fusion_period", self.fusion_period)?;
+        finite("fusion_epoch", self.fusion_epoch)?;
+        non_negative("time_tolerance", self.time_tolerance)?;
+        // The JPDA endpoint's bound: exact enumeration beyond 128 tracks
+        // in one cluster would never finish.
+        if !(1..=128).contains(&self.association.max_exact_tracks) {
+            return Err(invalid(
+                "max_exact_tracks",
+                format!(
+                    "must lie in 1..=128, got {}",
+                    self.association.max_exact_tracks
+                ),
+            ));
+        }
+        open_probability("plot_gate_probability", self.plot_gate_probability)?;
+        open_probability("track_gate_probability", self.track_gate_probability)?;
+        validate_initiation(&self.initiation)?;
+        validate_deletion(&self.deletion)?;
+        for &s in &self.sigma_a {
+            non_negative("sigma_a", s)?;
+        }
+        finite("default_height", self.default_height)?;
+        positive("default_height_sigma", self.default_height_sigma)?;
+        non_negative("sigma_tangential_speed", self.sigma_tangential_speed)?;
+        let p = self.duplicate_probability;
+        if !(0.0..1.0).contains(&p) {
+            return Err(invalid(
+                "duplicate_probability",
+                format!("must lie in [0, 1), got {p}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks a plot against its radar: radar index, finite values, range
+    /// > 0, elevation iff the radar is 3D, radial velocity in parallel mode.
+    pub fn validate_plot(&self, plot: &Plot) -> Result<(), AlgoError> {
+        let radar = self
+            .radars
+            .get(plot.radar)
+            .ok_or_else(|| invalid("radar", format!("no radar {}", plot.radar)))?;
+        finite("t", plot.t)?;
+        positive("range", plot.range)?;
+        finite("azimuth", plot.azimuth)?;
+        match (radar.is_3d(), plot.elevation) {
+            (true, Some(el)) => {
+                finite("elevation", el)?;
+                if el.abs() >= std::f64::consts::FRAC_PI_2 {
+                    return Err(invalid(
+                        "elevation",
+                        format!("must lie in (-pi/2, pi/2), got {el}"),
+                    ));
+                }
+            }
+            (true, None) => return Err(invalid("elevation", "required from a 3D radar".into())),
+            (false, Some(_)) => {
+                return Err(invalid("elevation", "a 2D radar gives no elevation".into()));
+            }
+            (false, None) => {}
+        }
+        if let Some(v) = plot.radial_velocity {
+            finite("radial_velocity", v)?;
+        } else if self.is_parallel() {
+            return Err(invalid(
+                "radial_velocity",
+                "required in parallel mode (time registration)".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn default_misses(mode: Mode, radars: &[RadarSpec]) -> u32 {
+    let parallel = match mode {
+        Mode::Parallel => true,
+        Mode::Serial => false,
+        Mode::Auto => radars.iter().all(RadarSpec::has_doppler),
+    };
+    if parallel {
+        3
+    } else {
+        (2 * radars.len().clamp(1, 30) as u32).max(3)
+    }
+}
+
+fn validate_radar(r: &RadarSpec, axes: usize) -> Result<(), AlgoError> {
+    finite_slice("site", &r.site)?;
+    positive("sigma_range", r.sigma_range)?;
+    positive("sigma_azimuth", r.sigma_azimuth)?;
+    if let Some(s) = r.sigma_elevation {
+        positive("sigma_elevation", s)?;
+        if axes == 2 {
+            return Err(invalid(
+                "sigma_elevation",
+                "a 2D tracker takes 2D radars only; use a 3D tracker".into(),
+            ));
+        }
+    }
+    if let Some(s) = r.sigma_radial_velocity {
+        positive("sigma_radial_velocity", s)?;
+    }
+    positive("scan_period", r.scan_period)?;
+    let pd = r.detection_probability;
+    if !(pd > 0.0 && pd <= 1.0) {
+        return Err(invalid(
+            "detection_probability",
+            format!("must lie in (0, 1], got {pd}"),
+        ));
+    }
+    positive("clutter_density", r.clutter_density)?;
+    Ok(())
+}
+
+fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
+    if !(2 <= i.confirm_m && i.confirm_m <= i.confirm_n && i.confirm_n <= 64) {
+        return Err(invalid(
+            "confirm_m_of_n",
+            format!(
+                "need 2 <= M <= N <= 64, got {}/{}",
+                i.confirm_m, i.confirm_n
+            ),
+        ));
+    }
+    match i.velocity {
+        VelocityGate::Speed { v_min, v_max } => {
+            non_negative("v_min", v_min)?;
+            positive("v_max", v_max)?;
+            if v_min >= v_max {
+                return Err(invalid("v_max", format!("must exceed v_min = {v_min}")));
+            }
+        }
+        VelocityGate::PerAxis { v_min, v_max } => {
+            finite_slice("v_min", &v_min)?;
+            finite_slice("v_max", &v_max)?;
+            if v_min.iter().zip(&v_max).any(|(lo, hi)| lo > hi) {
+                return Err(invalid("v_max", "must be >= v_min on every axis".into()));
+            }
+        }
+    }
+    open_probability("initiation_gate_probability", i.gate_probability)?;
+    positive("min_dt", i.min_dt)?;
+    positive("max_dt", i.max_dt)?;
+    if i.max_dt < i.min_dt {
+        return Err(invalid(
+            "max_dt",
+            format!("must be >= min_dt = {}", i.min_dt),
+        ));
+    }
+    Ok(())
+}
+
+fn validate_deletion(d: &Deletion) -> Result<(), AlgoError> {
+    if d.max_consecutive_misses == Some(0) {
+        return Err(invalid("max_consecutive_misses", "must be >= 1".into()));
+    }
+    if let Some((m, n)) = d.misses_m_of_n {
+        if !(1 <= m && m <= n && n <= 64) {
+            return Err(invalid(
+                "deletion_m_of_n",
+                format!("need 1 <= M <= N <= 64, got {m}/{n}"),
+            ));
+        }
+    }
+    if let Some(s) = d.max_position_sigma {
+        positive("max_position_sigma", s)?;
+    }
+    Ok(())
+}
+
+fn open_probability(what: &'static str, p: f64) -> Result<(), AlgoError> {
+    if !(p > 0.0 && p < 1.0) {
+        Err(invalid(what, format!("must lie in (0, 1), got {p}")))
+    } else if 1.0 - p == 1.0 {
+        // The χ² gate is the quantile at 1 − p: below 2⁻⁵³ that is 1 in
+        // floating point, a gate of zero width (and no quantile).
+        Err(invalid(
+            what,
+            format!("must be at least 1.2e-16 (a gate of this probability has no width), got {p}"),
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+fn invalid(what: &'static str, reason: String) -> AlgoError {
+    AlgoError::InvalidParameter { what, reason }
+}
+
+#[cfg(test)]
+mod probability_tests {
+    use super::open_probability;
+
+    #[test]
+    fn a_gate_probability_whose_complement_rounds_to_one_is_refused() {
+        // 1 − 5e-324 and 1 − 2⁻⁵⁴ round to 1.0 in binary64 (the spacing of
+        // doubles just below 1 is 2⁻⁵³): no χ² quantile exists there.
+        assert!(open_probability("p", 5e-324).is_err());
+        assert!(open_probability("p", 2f64.powi(-54)).is_err());
+        // 1 − 2⁻⁵³ = 0.99999999999999989 is a double: a valid, tiny gate.
+        assert!(open_probability("p", 2f64.powi(-53)).is_ok());
+        assert!(open_probability("p", 0.99).is_ok());
+        assert!(open_probability("p", 0.0).is_err());
+        assert!(open_probability("p", 1.0).is_err());
+    }
+}

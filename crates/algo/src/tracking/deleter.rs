@@ -1,0 +1,177 @@
+//! Deletion of confirmed tracks (seed 001 step 7c "delete the tracks that
+//! keep finding no plot in their gate", step 8): any configured rule
+//! deletes — K consecutive missed frames, M_d misses among the last N_d
+//! frames (MATLAB `trackHistoryLogic`'s deletion threshold), or a
+//! horizontal position standard deviation √(P_xx + P_yy) above a bound
+//! (the height is left out so that a 3D tracker fed by 2D radars, whose
+//! height is never measured, is not deleted for it); and [`duplicates`],
+//! the tracks that follow the same target as an older one.
+
+use crate::error::AlgoError;
+use crate::gating::chi2_threshold;
+use crate::gaussian::mahalanobis_sq;
+use crate::tracking::config::Deletion;
+use crate::tracking::track::Track;
+
+/// `true` when `track` must be deleted under `rule`.
+pub(crate) fn should_delete(track: &Track, rule: &Deletion) -> bool {
+    let consecutive = rule
+        .max_consecutive_misses
+        .is_some_and(|k| track.consecutive_misses >= k);
+    let m_of_n = rule
+        .misses_m_of_n
+        .is_some_and(|(m, n)| track.misses_in_last(n) >= m);
+    let sigma = rule
+        .max_position_sigma
+        .is_some_and(|s| horizontal_sigma(track) > s);
+    consecutive || m_of_n || sigma
+}
+
+/// √(P_xx + P_yy) of an interleaved state.
+pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
+    (track.p[(0, 0)] + track.p[(2, 2)]).sqrt()
+}
+
+/// Which confirmed tracks duplicate another: two tracks whose best plot of
+/// this frame (`hit`) is the same plot and whose states are statistically
+/// indistinguishable, (x₁ − x₂)′(P₁ + P₂)⁻¹(x₁ − x₂) below the χ²_n
+/// quantile at `probability` (n the state size; P₁ + P₂ ignores the
+/// correlation of two tracks fed the same plots, so the test is
+/// conservative). Of such a pair the track with fewer hits (then the
+/// higher id) is the duplicate. JPDA feeds both tracks of a target from its
+/// plots, so neither would ever miss; without this they live on side by
+/// side. `probability` 0 disables the rule.
+pub(super) fn duplicates(
+    tracks: &[Track],
+    hit: &[Option<usize>],
+    probability: f64,
+) -> Result<Vec<bool>, AlgoError> {
+    let mut out = vec![false; tracks.len()];
+    if probability <= 0.0 || tracks.len() < 2 {
+        return Ok(out);
+    }
+    let n = tracks[0].x.len();
+    let threshold = chi2_threshold(n, 1.0 - probability)?;
+    // Tracks by their best plot; only tracks sharing one are compared.
+    let mut by_plot: Vec<(usize, usize)> = hit
+        .iter()
+        .enumerate()
+        .filter_map(|(i, h)| h.map(|j| (j, i)))
+        .collect();
+    by_plot.sort_unstable();
+    for group in by_plot.chunk_by(|a, b| a.0 == b.0) {
+        if group.len() < 2 {
+            continue;
+        }
+        let mut members: Vec<usize> = group.iter().map(|&(_, i)| i).collect();
+        members.sort_by(|&a, &b| {
+            tracks[b]
+                .hits
+                .cmp(&tracks[a].hits)
+                .then(tracks[a].id.cmp(&tracks[b].id))
+        });
+        for (k, &i) in members.iter().enumerate() {
+            for &keeper in &members[..k] {
+                if out[keeper] {
+                    continue;
+                }
+                let d = &tracks[i].x - &tracks[keeper].x;
+                let s = &tracks[i].p + &tracks[keeper].p;
+                if mahalanobis_sq(&d, &s)? <= threshold {
+                    out[i] = true;
+                    break;
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, dvector};
+
+    fn track(frames: &[bool], var: f64) -> Track {
+        let mut t = Track::fresh(
+            0,
+            dvector![0.0, 0.0, 0.0, 0.0],
+            DMatrix::identity(4, 4) * var,
+        );
+        for &h in frames {
+            t.record(h.then(Vec::new));
+        }
+        t
+    }
+
+    #[test]
+    fn each_rule_deletes_on_its_own() {
+        let none = Deletion {
+            max_consecutive_misses: None,
+            misses_m_of_n: None,
+            max_position_sigma: None,
+        };
+        let k3 = Deletion {
+            max_consecutive_misses: Some(3),
+            ..none
+        };
+        let m_of_n = Deletion {
+            misses_m_of_n: Some((3, 5)),
+            ..none
+        };
+        let sigma = Deletion {
+            max_position_sigma: Some(100.0),
+            ..none
+        };
+        // hit, miss, miss, hit, miss, miss: 2 consecutive, 4 misses of the last 5.
+        let t = track(&[true, false, false, true, false, false], 1.0);
+        assert!(!should_delete(&t, &none));
+        assert!(!should_delete(&t, &k3));
+        assert!(should_delete(&t, &m_of_n));
+        assert!(!should_delete(&t, &sigma));
+        let t = track(&[true, false, false, false], 1.0);
+        assert!(should_delete(&t, &k3));
+        // √(5001 + 5001) = 100.005 > 100; √(4999·2) = 99.99 ≤ 100.
+        assert!(should_delete(&track(&[true], 5001.0), &sigma));
+        assert!(!should_delete(&track(&[true], 4999.0), &sigma));
+    }
+
+    #[test]
+    fn the_younger_of_two_tracks_on_one_plot_with_one_state_is_the_duplicate() {
+        // P = 100 I per track: S = 200 I; states 20 m apart in x only give
+        // d²= 400/200 = 2, below χ²_4 at 0.95 (7.779... is the 0.05 upper
+        // quantile; the 0.05 lower quantile is 0.7107) → not a duplicate at
+        // p = 0.05, a duplicate at p = 0.5 (χ²_4 median 3.357).
+        let p = DMatrix::<f64>::identity(4, 4) * 100.0;
+        let mut a = Track::fresh(1, dvector![0.0, 100.0, 0.0, 0.0], p.clone());
+        a.hits = 10;
+        let mut b = Track::fresh(2, dvector![20.0, 100.0, 0.0, 0.0], p.clone());
+        b.hits = 4;
+        let c = Track::fresh(3, dvector![5.0, 100.0, 0.0, 0.0], p.clone());
+        let tracks = vec![b.clone(), a.clone()];
+        assert_eq!(
+            duplicates(&tracks, &[Some(7), Some(7)], 0.05).unwrap(),
+            vec![false, false]
+        );
+        assert_eq!(
+            duplicates(&tracks, &[Some(7), Some(7)], 0.5).unwrap(),
+            vec![true, false]
+        );
+        // Different best plots: never duplicates; 0 disables the rule.
+        assert_eq!(
+            duplicates(&tracks, &[Some(7), Some(8)], 0.5).unwrap(),
+            vec![false, false]
+        );
+        assert_eq!(
+            duplicates(&tracks, &[Some(7), Some(7)], 0.0).unwrap(),
+            vec![false, false]
+        );
+        // 5 m apart: d² = 25/200 = 0.125 < 0.7107 → the one with fewer hits
+        // (c, 0 hits) goes at p = 0.05.
+        let tracks = vec![a, c];
+        assert_eq!(
+            duplicates(&tracks, &[Some(1), Some(1)], 0.05).unwrap(),
+            vec![false, true]
+        );
+    }
+}

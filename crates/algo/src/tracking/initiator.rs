@@ -1,0 +1,499 @@
+//! Logic-based track initiation (seed 001 step 7, 7a–7c).
+//!
+//! Frames are the tracker's processing frames (a radar scan group in
+//! serial mode, a fusion instant in parallel mode); only plots that fell in
+//! no confirmed track's gate reach the initiator. Per frame:
+//!
+//! 1. (7b) Every tentative track is predicted to the frame and takes the
+//!    nearest plot inside its χ² gate ν′(H P H′ + R)⁻¹ν ≤ γ; competing
+//!    tentatives are resolved by global nearest neighbour
+//!    ([`assignment::solve`] on d²/γ). A hit is a linear Kalman update.
+//! 2. (7c) A tentative with ≥ M hits among its last N frames is confirmed;
+//!    one with more than N − M misses among them can no longer be and is
+//!    dropped. Its first two plots count as two hits.
+//! 3. (7a) Roots (unused plots of earlier frames, at most `max_dt` old) are
+//!    paired with this frame's free plots at least `min_dt` later that pass
+//!    the velocity gate: with Δ = z_j − z_i over the axes both plots have,
+//!    d is the part of Δ outside the allowed displacement
+//!    ([v_min Δt, v_max Δt] on |Δ| for a speed band, per component for
+//!    per-axis bands, signed), and the pair passes when
+//!    D = d′(R_i + R_j)⁻¹d ≤ γ (χ² with p degrees of freedom). This is the
+//!    patent's reading: "the gate restricts the speed to [v_min, v_max],
+//!    R expressing the tolerated position error". The patent sums two
+//!    non-negative max terms per component; the signed excess used here
+//!    gives the same D for uncorrelated components. Every passing pair
+//!    starts a tentative track by two-point initialisation in Cartesian
+//!    coordinates: x = z_j, v = (z_j − z_i)/Δt, P = [[R_j, R_j/Δt],
+//!    [R_j/Δt, (R_i + R_j)/Δt²]] per axis pair (seed 000 eq. 30 with
+//!    R_i ≠ R_j). In a 3D tracker a 2D plot is given the configured
+//!    default height and its σ first.
+//! 4. Paired roots are consumed; plots used by neither a tentative nor a
+//!    pair become roots.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::assignment;
+use crate::error::AlgoError;
+use crate::gaussian::{mahalanobis_sq, symmetrize};
+use crate::kalman;
+use crate::tracking::config::{TrackerConfig, VelocityGate};
+use crate::tracking::registration::CartesianPlot;
+use crate::tracking::track::{Track, chi2_gates, position_selector};
+
+/// Roots and tentative tracks, carried between frames.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Initiator {
+    pub roots: Vec<CartesianPlot>,
+    pub tentatives: Vec<Track>,
+}
+
+/// What one frame of initiation did.
+#[derive(Debug, Default)]
+pub(crate) struct Initiated {
+    /// Tentative tracks that reached M of N (removed from the initiator).
+    pub confirmed: Vec<Track>,
+    /// Number of tentative tracks dropped.
+    pub dropped: usize,
+    /// Number of tentative tracks started.
+    pub started: usize,
+}
+
+impl Initiator {
+    /// One frame at time `t` with the plots no confirmed track used.
+    pub(crate) fn step(
+        &mut self,
+        t: f64,
+        plots: Vec<CartesianPlot>,
+        cfg: &TrackerConfig,
+        next_id: &mut u64,
+    ) -> Result<Initiated, AlgoError> {
+        let init = &cfg.initiation;
+        let gates = chi2_gates(init.gate_probability)?;
+        let mut out = Initiated::default();
+        let mut taken = vec![false; plots.len()];
+
+        // 7b: extend the tentative tracks.
+        let mut edges = Vec::new();
+        for (i, track) in self.tentatives.iter_mut().enumerate() {
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+            for (j, plot) in plots.iter().enumerate() {
+                let k = plot.z.len();
+                // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
+                let nu0 = plot.z[0] - track.x[0];
+                if nu0 * nu0 > gates[k - 2] * (track.p[(0, 0)] + plot.r[(0, 0)]) {
+                    continue;
+                }
+                let h = position_selector(k, cfg.axes);
+                let s = &h * &track.p * h.transpose() + &plot.r;
+                let d2 = mahalanobis_sq(&(&plot.z - &h * &track.x), &s)?;
+                if d2 <= gates[k - 2] {
+                    edges.push((i, j, d2 / gates[k - 2]));
+                }
+            }
+        }
+        let mut hit = vec![None; self.tentatives.len()];
+        for (i, j) in assignment::solve(&edges, 1.0 + 1e-12) {
+            hit[i] = Some(j);
+            taken[j] = true;
+        }
+        for (track, hit) in self.tentatives.iter_mut().zip(hit) {
+            match hit {
+                Some(j) => {
+                    let plot = &plots[j];
+                    let h = position_selector(plot.z.len(), cfg.axes);
+                    let u = kalman::update_linear(&track.x, &track.p, &plot.z, &h, &plot.r)?;
+                    track.x = u.x;
+                    track.p = u.p;
+                    track.record(Some(plot.radars.clone()));
+                }
+                None => track.record(None),
+            }
+        }
+
+        // 7a: pair the roots with the free plots.
+        self.roots.retain(|r| t - r.t <= init.max_dt);
+        let mut paired_root = vec![false; self.roots.len()];
+        let mut paired_plot = vec![false; plots.len()];
+        for (i, root) in self.roots.iter().enumerate() {
+            let dt = t - root.t;
+            if dt < init.min_dt {
+                continue;
+            }
+            for (j, plot) in plots.iter().enumerate() {
+                if taken[j] {
+                    continue;
+                }
+                let k = root.z.len().min(plot.z.len());
+                if velocity_bound(root, plot, dt, &init.velocity) > gates[k - 2] {
+                    continue;
+                }
+                if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
+                    let (x, p) = two_point(root, plot, dt, cfg);
+                    self.tentatives
+                        .push(new_tentative(next_id, x, p, t, root, plot));
+                    out.started += 1;
+                    paired_root[i] = true;
+                    paired_plot[j] = true;
+                }
+            }
+        }
+        let mut keep = paired_root.iter().map(|p| !p);
+        self.roots
+            .retain(|_| keep.next().expect("one flag per root"));
+        for (j, plot) in plots.into_iter().enumerate() {
+            if !taken[j] && !paired_plot[j] {
+                self.roots.push(plot);
+            }
+        }
+
+        // 7c: confirm or drop.
+        let (m, n) = (init.confirm_m, init.confirm_n);
+        let mut remaining = Vec::with_capacity(self.tentatives.len());
+        for track in self.tentatives.drain(..) {
+            if track.hits_in_last(n) >= m {
+                out.confirmed.push(track);
+            } else if track.misses_in_last(n) > n - m {
+                out.dropped += 1;
+            } else {
+                remaining.push(track);
+            }
+        }
+        self.tentatives = remaining;
+        Ok(out)
+    }
+}
+
+/// A lower bound of [`velocity_statistic`] without allocation, for
+/// pruning: D = d'S⁻¹d ≥ |d|²/λ_max(S) ≥ |d|²/tr(S), and per axis
+/// D ≥ d_i²/S_ii.
+pub fn velocity_bound(a: &CartesianPlot, b: &CartesianPlot, dt: f64, gate: &VelocityGate) -> f64 {
+    let k = a.z.len().min(b.z.len());
+    match *gate {
+        VelocityGate::Speed { v_min, v_max } => {
+            let mut s2 = 0.0;
+            let mut trace = 0.0;
+            for i in 0..k {
+                let d = b.z[i] - a.z[i];
+                s2 += d * d;
+                trace += a.r[(i, i)] + b.r[(i, i)];
+            }
+            let s = s2.sqrt();
+            let excess = if s > v_max * dt {
+                s - v_max * dt
+            } else if s < v_min * dt {
+                v_min * dt - s
+            } else {
+                0.0
+            };
+            excess * excess / trace
+        }
+        VelocityGate::PerAxis { v_min, v_max } => (0..k)
+            .map(|i| {
+                let delta = b.z[i] - a.z[i];
+                let d = (delta - v_max[i] * dt).max(0.0) - (v_min[i] * dt - delta).max(0.0);
+                d * d / (a.r[(i, i)] + b.r[(i, i)])
+            })
+            .fold(0.0, f64::max),
+    }
+}
+
+/// D = d′(R_i + R_j)⁻¹d of the velocity gate (see the module header).
+pub fn velocity_statistic(
+    a: &CartesianPlot,
+    b: &CartesianPlot,
+    dt: f64,
+    gate: &VelocityGate,
+) -> Result<f64, AlgoError> {
+    let k = a.z.len().min(b.z.len());
+    let delta = DVector::from_fn(k, |i, _| b.z[i] - a.z[i]);
+    let d = match *gate {
+        VelocityGate::Speed { v_min, v_max } => {
+            let s = delta.norm();
+            let (lo, hi) = (v_min * dt, v_max * dt);
+            let excess = if s > hi {
+                s - hi
+            } else if s < lo {
+                s - lo
+            } else {
+                0.0
+            };
+            if s > 0.0 {
+                &delta * (excess / s)
+            } else {
+                DVector::from_fn(k, |i, _| if i == 0 { excess } else { 0.0 })
+            }
+        }
+        VelocityGate::PerAxis { v_min, v_max } => DVector::from_fn(k, |i, _| {
+            let (lo, hi) = (v_min[i] * dt, v_max[i] * dt);
+            (delta[i] - hi).max(0.0) - (lo - delta[i]).max(0.0)
+        }),
+    };
+    let mut s = DMatrix::from_fn(k, k, |i, j| a.r[(i, j)] + b.r[(i, j)]);
+    symmetrize(&mut s);
+    mahalanobis_sq(&d, &s)
+}
+
+/// Two-point initialisation from plots `a` then `b`, `dt` apart.
+fn two_point(
+    a: &CartesianPlot,
+    b: &CartesianPlot,
+    dt: f64,
+    cfg: &TrackerConfig,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let (za, ra) = lift(a, cfg);
+    let (zb, rb) = lift(b, cfg);
+    let n = cfg.axes;
+    let mut x = DVector::zeros(2 * n);
+    let mut p = DMatrix::zeros(2 * n, 2 * n);
+    for i in 0..n {
+        x[2 * i] = zb[i];
+        x[2 * i + 1] = (zb[i] - za[i]) / dt;
+        for j in 0..n {
+            p[(2 * i, 2 * j)] = rb[(i, j)];
+            p[(2 * i, 2 * j + 1)] = rb[(i, j)] / dt;
+            p[(2 * i + 1, 2 * j)] = rb[(i, j)] / dt;
+            p[(2 * i + 1, 2 * j + 1)] = (ra[(i, j)] + rb[(i, j)]) / (dt * dt);
+        }
+    }
+    symmetrize(&mut p);
+    (x, p)
+}
+
+/// A plot's position in the tracker's axes: a 2D plot in a 3D tracker at
+/// the default height (independent σ), a 3D plot in a 2D tracker marginalised.
+fn lift(plot: &CartesianPlot, cfg: &TrackerConfig) -> (DVector<f64>, DMatrix<f64>) {
+    let n = cfg.axes;
+    let k = plot.z.len();
+    let mut z = DVector::from_element(n, cfg.default_height);
+    let mut r = DMatrix::zeros(n, n);
+    for i in 0..n {
+        if i < k {
+            z[i] = plot.z[i];
+            for j in 0..n.min(k) {
+                r[(i, j)] = plot.r[(i, j)];
+            }
+        } else {
+            r[(i, i)] = cfg.default_height_sigma.powi(2);
+        }
+    }
+    (z, r)
+}
+
+fn new_tentative(
+    next_id: &mut u64,
+    x: DVector<f64>,
+    p: DMatrix<f64>,
+    t: f64,
+    root: &CartesianPlot,
+    plot: &CartesianPlot,
+) -> Track {
+    let id = *next_id;
+    *next_id += 1;
+    let mut radars = root.radars.clone();
+    radars.extend(&plot.radars);
+    radars.sort_unstable();
+    radars.dedup();
+    Track {
+        id,
+        x,
+        p,
+        t,
+        history: 0b11,
+        age: 2,
+        hits: 2,
+        misses: 0,
+        consecutive_misses: 0,
+        radars,
+        last_update: t,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tracking::config::RadarSpec;
+    use crate::tracking::tests::Lcg;
+    use nalgebra::dvector;
+
+    fn cfg() -> TrackerConfig {
+        let radar = RadarSpec {
+            site: [0.0; 3],
+            sigma_range: 10.0,
+            sigma_azimuth: 1e-3,
+            sigma_elevation: None,
+            sigma_radial_velocity: None,
+            scan_period: 1.0,
+            detection_probability: 1.0,
+            clutter_density: 1e-6,
+        };
+        let mut c = TrackerConfig::new(2, vec![radar]);
+        c.initiation.velocity = VelocityGate::Speed {
+            v_min: 0.0,
+            v_max: 50.0,
+        };
+        c.initiation.min_dt = 0.5;
+        c.initiation.max_dt = 2.0;
+        c.sigma_a = [0.1; 3];
+        c
+    }
+
+    fn plot(t: f64, x: f64, y: f64) -> CartesianPlot {
+        CartesianPlot {
+            t,
+            z: dvector![x, y],
+            r: DMatrix::from_diagonal(&dvector![1.0, 1.0]),
+            radars: vec![0],
+        }
+    }
+
+    #[test]
+    fn a_straight_target_confirms_at_the_third_scan_with_3_of_4() {
+        // Scan 1: root (1 hit). Scan 2: pair → tentative with 2 hits.
+        // Scan 3: gated hit → 3 hits among the last 4 frames → confirmed.
+        let c = cfg();
+        let mut ini = Initiator::default();
+        let mut id = 7;
+        let mut confirmed_at = None;
+        for k in 0..5 {
+            let t = k as f64;
+            let out = ini
+                .step(t, vec![plot(t, 10.0 * t, 100.0)], &c, &mut id)
+                .unwrap();
+            if k == 1 {
+                assert_eq!(out.started, 1);
+                assert_eq!(ini.tentatives.len(), 1);
+                // Two-point init: x = z₂, v = (z₂ − z₁)/1 = (10, 0), P_vv = (1 + 1)/1.
+                let tr = &ini.tentatives[0];
+                assert_eq!(tr.x, dvector![10.0, 10.0, 100.0, 0.0]);
+                assert_eq!(tr.p[(1, 1)], 2.0);
+                assert_eq!(tr.p[(0, 1)], 1.0);
+            }
+            if !out.confirmed.is_empty() {
+                assert!(confirmed_at.is_none());
+                confirmed_at = Some(k);
+                assert_eq!(out.confirmed[0].id, 7);
+                assert_eq!(out.confirmed[0].hits, 3);
+            }
+        }
+        assert_eq!(confirmed_at, Some(2));
+    }
+
+    #[test]
+    fn misses_drop_a_tentative_that_cannot_reach_m() {
+        // Root, pair (2 hits), then two empty frames: misses 2 > N − M = 1 → dropped.
+        let c = cfg();
+        let mut ini = Initiator::default();
+        let mut id = 0;
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+            .unwrap();
+        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, &mut id)
+            .unwrap();
+        let a = ini.step(2.0, vec![], &c, &mut id).unwrap();
+        assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
+        let b = ini.step(3.0, vec![], &c, &mut id).unwrap();
+        assert_eq!((b.dropped, ini.tentatives.len()), (1, 0));
+    }
+
+    #[test]
+    fn the_velocity_gate_rejects_pairs_outside_the_speed_band() {
+        // 1000 m in 1 s with v_max = 50: excess 950 m, D = 950²/2 ≫ γ.
+        let g = VelocityGate::Speed {
+            v_min: 0.0,
+            v_max: 50.0,
+        };
+        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(1.0, 1000.0, 0.0), 1.0, &g).unwrap();
+        assert!((d - 950.0f64.powi(2) / 2.0).abs() < 1e-6);
+        // Inside the band: D = 0.
+        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(1.0, 30.0, 40.0), 1.0, &g).unwrap();
+        assert_eq!(d, 0.0);
+        // Too slow for v_min = 100: |Δ| = 5, shortfall −95 along Δ: D = 95²/2.
+        let slow = VelocityGate::Speed {
+            v_min: 100.0,
+            v_max: 200.0,
+        };
+        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(1.0, 3.0, 4.0), 1.0, &slow).unwrap();
+        assert!((d - 95.0f64.powi(2) / 2.0).abs() < 1e-6);
+        // Per-axis band of the patent's Fig. 6 (x ∈ [100, 800], y ∈ [−100, 100], 5 s):
+        // Δ = (2500, 0) inside; Δ = (2500, 600) exceeds y by 100 → D = 100²/2.
+        let axis = VelocityGate::PerAxis {
+            v_min: [100.0, -100.0, 0.0],
+            v_max: [800.0, 100.0, 0.0],
+        };
+        let d =
+            velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 0.0), 5.0, &axis).unwrap();
+        assert_eq!(d, 0.0);
+        let d = velocity_statistic(&plot(0.0, 0.0, 0.0), &plot(5.0, 2500.0, 600.0), 5.0, &axis)
+            .unwrap();
+        assert!((d - 5000.0).abs() < 1e-9);
+
+        // And no tentative is started from such a pair.
+        let c = cfg();
+        let mut ini = Initiator::default();
+        let mut id = 0;
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+            .unwrap();
+        let out = ini
+            .step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, &mut id)
+            .unwrap();
+        assert_eq!(out.started, 0);
+        assert_eq!(ini.roots.len(), 2); // the new plot is a root; the old one waits
+    }
+
+    #[test]
+    fn the_pruning_bound_never_exceeds_the_statistic() {
+        // Random-ish pairs, correlated covariances: bound ≤ D always.
+        let gates = [
+            VelocityGate::Speed {
+                v_min: 50.0,
+                v_max: 300.0,
+            },
+            VelocityGate::PerAxis {
+                v_min: [100.0, -100.0, -50.0],
+                v_max: [800.0, 100.0, 50.0],
+            },
+        ];
+        for k in 0..200 {
+            let f = k as f64;
+            let mut a = plot(0.0, 900.0 * (f * 0.7).sin(), 700.0 * (f * 1.3).cos());
+            let b = plot(2.0, 1200.0 * (f * 0.3).cos(), 500.0 * (f * 0.9).sin());
+            a.r = DMatrix::from_row_slice(2, 2, &[100.0, 0.0, 0.0, 400.0]);
+            a.r[(0, 1)] = 150.0 * (f * 0.2).sin();
+            a.r[(1, 0)] = a.r[(0, 1)];
+            for g in &gates {
+                let bound = velocity_bound(&a, &b, 2.0, g);
+                let d = velocity_statistic(&a, &b, 2.0, g).unwrap();
+                assert!(bound <= d * (1.0 + 1e-12) + 1e-12, "k {k}: {bound} > {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn clutter_alone_confirms_nothing() {
+        // Uniform pseudo-clutter, 5 plots per 1 s frame over 10 km × 10 km,
+        // 30 frames, speed band [0, 600] m/s, σ = 10 m.
+        let mut c = cfg();
+        c.initiation.velocity = VelocityGate::Speed {
+            v_min: 0.0,
+            v_max: 600.0,
+        };
+        let mut rng = Lcg(12345);
+        let mut ini = Initiator::default();
+        let mut id = 0;
+        let (mut started, mut confirmed) = (0, 0);
+        for k in 0..30 {
+            let t = k as f64;
+            let plots = (0..5)
+                .map(|_| {
+                    let mut p = plot(t, 1e4 * rng.uniform(), 1e4 * rng.uniform());
+                    p.r *= 100.0;
+                    p
+                })
+                .collect();
+            let out = ini.step(t, plots, &c, &mut id).unwrap();
+            started += out.started;
+            confirmed += out.confirmed.len();
+        }
+        assert!(started > 0, "the clutter should start some candidates");
+        assert_eq!(confirmed, 0);
+    }
+}

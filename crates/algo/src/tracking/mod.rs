@@ -1,0 +1,470 @@
+//! Multi-radar plot-fusion tracking (seed 001, the multi-radar plot fusion
+//! patent, steps 1–8): a [`Tracker`] fed with polar plots of several radars
+//! that keeps confirmed and tentative tracks in the fusion centre's ENU frame.
+//!
+//! The loop, per frame, reads like Stone Soup's `tracker/simple.py`:
+//! predict (`track`), hypothesise/associate/update (`associator`: JPDA with
+//! an EKF), delete (`deleter`), initiate (`initiator`, the logic method).
+//! What a frame is depends on the mode (step 2):
+//! - **parallel** (every radar gives Doppler): fusion instants
+//!   t_k = epoch + k·T. The plots with τ ∈ (t_{k−1}, t_k] are registered
+//!   (`registration`, step 1), extrapolated to t_k along their line of
+//!   sight (step 3), associated across radars by GNN and fused by ML
+//!   weights (`plot_association`, step 4), then associated with the tracks
+//!   (step 5). Instants without plots are skipped (no prediction, no miss).
+//! - **serial** (step 6): plots in time order; each run of consecutive
+//!   plots of one radar within `time_tolerance` of its first plot is a scan
+//!   group, processed at the time of its last plot with that radar's polar
+//!   EKF, tracks predicted over the variable Δt.
+//!
+//! Streaming: plots are buffered and a frame is processed only once it is
+//! complete — a later frame's plot has arrived, or [`Tracker::flush`] is
+//! called. So feeding plots in chunks that arrive in time order (every
+//! plot of a later chunk no earlier than every plot of an earlier one)
+//! gives bit-for-bit the state of one call with all plots, also when the
+//! tracker is encoded and decoded between chunks ([`Tracker::encode`]).
+//! Within a call plots are sorted by time, stably. A plot older than the
+//! last processed frame (serial: t < its time; parallel: τ ≤ the last
+//! processed instant) is *late*: it is dropped, counted, and its index
+//! returned in [`StepReport::late`] (no out-of-sequence update).
+//!
+//! Errors: plots are validated before the tracker changes; a numerical
+//! error later in a call leaves the tracker part-way through the call, so
+//! a caller that must stay consistent keeps the encoded state and retries
+//! from it.
+
+pub mod associator;
+pub mod codec;
+pub mod config;
+mod deleter;
+pub mod initiator;
+pub mod plot_association;
+pub mod registration;
+mod track;
+
+#[cfg(test)]
+mod tests;
+
+pub use codec::FORMAT_VERSION;
+pub use config::{
+    Deletion, Initiation, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate,
+};
+pub use registration::{CartesianPlot, Doppler};
+pub use track::{TrackOutput, TrackStatus};
+
+use crate::error::AlgoError;
+use crate::jpda::TrackEstimate;
+use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutter};
+use initiator::Initiator;
+use plot_association::associate_and_fuse;
+use registration::{extrapolate, register};
+use track::Track;
+
+/// Running totals since the tracker was created.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Plots accepted (not late).
+    pub plots: u64,
+    /// Late plots dropped.
+    pub late: u64,
+    /// Frames processed (scan groups or fusion instants).
+    pub frames: u64,
+    /// Fused plots produced by parallel mode (one per associated group).
+    pub fused_plots: u64,
+    /// Tentative tracks started, confirmed, dropped; confirmed tracks deleted.
+    pub started: u64,
+    pub confirmed: u64,
+    pub dropped: u64,
+    pub deleted: u64,
+    /// Confirmed tracks deleted as duplicates of another (see
+    /// [`TrackerConfig::duplicate_probability`]).
+    pub merged: u64,
+}
+
+/// What one call of [`Tracker::process`] or [`Tracker::flush`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StepReport {
+    /// Frames processed.
+    pub frames: usize,
+    /// Indices (into the call's plots) of the late plots, dropped.
+    pub late: Vec<usize>,
+    /// Ids of the tracks confirmed, in order.
+    pub confirmed: Vec<u64>,
+    /// The tracks deleted, as they were when deleted (status `Deleted`).
+    pub deleted: Vec<TrackOutput>,
+    /// Plots buffered for a frame not yet complete.
+    pub pending: usize,
+}
+
+/// The tracker: configuration plus everything carried between calls.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tracker {
+    config: TrackerConfig,
+    parallel: bool,
+    /// Confirmed tracks.
+    tracks: Vec<Track>,
+    initiator: Initiator,
+    /// Accepted plots of frames not yet complete, sorted by time (stable).
+    pending: Vec<Plot>,
+    next_id: u64,
+    /// Time of the last processed frame.
+    last_time: Option<f64>,
+    /// Parallel mode: index k of the last processed fusion instant.
+    last_instant: Option<i64>,
+    counters: Counters,
+}
+
+/// A frame's plots as the associator needs them.
+enum Source {
+    /// Serial mode: one radar's raw plots (polar EKF).
+    Radar { index: usize, plots: Vec<Plot> },
+    /// Parallel mode: fused Cartesian plots with their clutter densities.
+    Fused {
+        clutter: Vec<f64>,
+        detection_probability: f64,
+    },
+}
+
+impl Tracker {
+    /// A tracker without tracks; fails when the configuration is invalid.
+    pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
+        config.validate()?;
+        Ok(Self {
+            parallel: config.is_parallel(),
+            config,
+            tracks: Vec::new(),
+            initiator: Initiator::default(),
+            pending: Vec::new(),
+            next_id: 1,
+            last_time: None,
+            last_instant: None,
+            counters: Counters::default(),
+        })
+    }
+
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The resolved mode: `Mode::Parallel` or `Mode::Serial`.
+    pub fn mode(&self) -> Mode {
+        if self.parallel {
+            Mode::Parallel
+        } else {
+            Mode::Serial
+        }
+    }
+
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Time of the last processed frame.
+    pub fn last_time(&self) -> Option<f64> {
+        self.last_time
+    }
+
+    /// Number of buffered plots.
+    pub fn pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Confirmed tracks then tentative tracks, each by ascending id.
+    pub fn tracks(&self) -> Vec<TrackOutput> {
+        let mut confirmed = self.confirmed_tracks();
+        let mut tentative: Vec<TrackOutput> = self
+            .initiator
+            .tentatives
+            .iter()
+            .map(|t| t.output(TrackStatus::Tentative))
+            .collect();
+        tentative.sort_by_key(|t| t.id);
+        confirmed.extend(tentative);
+        confirmed
+    }
+
+    /// Accepts plots (any order; sorted by time inside, stably), processes
+    /// every frame that is complete, and buffers the rest.
+    pub fn process(&mut self, plots: &[Plot]) -> Result<StepReport, AlgoError> {
+        self.process_with(plots, false, &mut |_| {})
+    }
+
+    /// [`Tracker::process`], then [`Tracker::flush`] when `flush`, calling
+    /// `after_frame` with the tracker after every processed frame (for a
+    /// track history). Plots already sorted by time are inserted in O(1).
+    pub fn process_with(
+        &mut self,
+        plots: &[Plot],
+        flush: bool,
+        after_frame: &mut dyn FnMut(&Self),
+    ) -> Result<StepReport, AlgoError> {
+        for plot in plots {
+            self.config.validate_plot(plot)?;
+            if self.parallel {
+                self.instant_of(plot.t)?;
+            }
+        }
+        let mut report = StepReport::default();
+        for (i, plot) in plots.iter().enumerate() {
+            if self.is_late(plot)? {
+                report.late.push(i);
+                self.counters.late += 1;
+                continue;
+            }
+            self.counters.plots += 1;
+            if self.pending.last().is_none_or(|p| p.t <= plot.t) {
+                self.pending.push(*plot);
+            } else {
+                let at = self.pending.partition_point(|p| p.t <= plot.t);
+                self.pending.insert(at, *plot);
+            }
+        }
+        self.drain(flush, &mut report, after_frame)?;
+        Ok(report)
+    }
+
+    /// Processes every buffered plot, closing the last frame. Plots that
+    /// arrive later for that frame will be late.
+    pub fn flush(&mut self) -> Result<StepReport, AlgoError> {
+        self.process_with(&[], true, &mut |_| {})
+    }
+
+    /// The ids of every live track, confirmed and tentative (no copies of
+    /// their states).
+    pub fn track_ids(&self) -> impl Iterator<Item = u64> + '_ {
+        self.tracks
+            .iter()
+            .chain(&self.initiator.tentatives)
+            .map(|t| t.id)
+    }
+
+    /// The confirmed tracks by ascending id.
+    pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
+        let mut confirmed: Vec<TrackOutput> = self
+            .tracks
+            .iter()
+            .map(|t| t.output(TrackStatus::Confirmed))
+            .collect();
+        confirmed.sort_by_key(|t| t.id);
+        confirmed
+    }
+
+    /// The tracker as bytes (configuration included), for
+    /// [`Tracker::decode`].
+    pub fn encode(&self) -> Vec<u8> {
+        codec::encode(self)
+    }
+
+    /// A tracker from [`Tracker::encode`]'s bytes; the configuration is
+    /// validated and every matrix checked.
+    pub fn decode(bytes: &[u8]) -> Result<Self, AlgoError> {
+        codec::decode(bytes)
+    }
+
+    fn is_late(&self, plot: &Plot) -> Result<bool, AlgoError> {
+        Ok(if self.parallel {
+            let k = self.instant_of(plot.t)?;
+            self.last_instant.is_some_and(|last| k <= last)
+        } else {
+            self.last_time.is_some_and(|last| plot.t < last)
+        })
+    }
+
+    /// Index k of the fusion instant of a plot at τ: the smallest k with
+    /// τ ≤ epoch + k·T.
+    fn instant_of(&self, tau: f64) -> Result<i64, AlgoError> {
+        let k = ((tau - self.config.fusion_epoch) / self.config.fusion_period).ceil();
+        if k.abs() < 9.0e15 {
+            Ok(k as i64)
+        } else {
+            Err(AlgoError::InvalidParameter {
+                what: "t",
+                reason: format!("{tau} is too far from fusion_epoch for fusion_period"),
+            })
+        }
+    }
+
+    fn instant_time(&self, k: i64) -> f64 {
+        self.config.fusion_epoch + k as f64 * self.config.fusion_period
+    }
+
+    /// Processes the complete frames at the head of `pending` (all with `flush`).
+    fn drain(
+        &mut self,
+        flush: bool,
+        report: &mut StepReport,
+        after_frame: &mut dyn FnMut(&Self),
+    ) -> Result<(), AlgoError> {
+        while !self.pending.is_empty() {
+            let first = self.pending[0];
+            let len = if self.parallel {
+                let k = self.instant_of(first.t)?;
+                let mut n = 0;
+                while n < self.pending.len() && self.instant_of(self.pending[n].t)? == k {
+                    n += 1;
+                }
+                n
+            } else {
+                let tol = self.config.time_tolerance;
+                self.pending
+                    .iter()
+                    .take_while(|p| p.radar == first.radar && p.t - first.t <= tol)
+                    .count()
+            };
+            if len == self.pending.len() && !flush {
+                break;
+            }
+            let frame: Vec<Plot> = self.pending.drain(..len).collect();
+            if self.parallel {
+                self.parallel_frame(self.instant_of(first.t)?, frame, report)?;
+            } else {
+                self.serial_frame(frame, report)?;
+            }
+            after_frame(self);
+        }
+        report.pending = self.pending.len();
+        Ok(())
+    }
+
+    /// Step 6: one radar's scan group at the time of its last plot.
+    fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
+        let index = frame[0].radar;
+        let t = frame[frame.len() - 1].t;
+        let radar = &self.config.radars[index];
+        let plots = frame
+            .iter()
+            .map(|p| register(radar, index, p))
+            .collect::<Result<Vec<_>, _>>()?;
+        let source = Source::Radar {
+            index,
+            plots: frame,
+        };
+        self.run_frame(t, source, plots, report)
+    }
+
+    /// Steps 3–5: the plots of fusion instant k.
+    fn parallel_frame(
+        &mut self,
+        k: i64,
+        frame: Vec<Plot>,
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
+        let t = self.instant_time(k);
+        let registered = frame
+            .iter()
+            .map(|p| {
+                extrapolate(
+                    &self.config.radars[p.radar],
+                    p.radar,
+                    p,
+                    t,
+                    self.config.sigma_tangential_speed,
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let fused = associate_and_fuse(&registered, self.config.plot_gate_probability)?;
+        let mut radars: Vec<usize> = frame.iter().map(|p| p.radar).collect();
+        radars.sort_unstable();
+        radars.dedup();
+        let specs: Vec<&RadarSpec> = radars.iter().map(|&i| &self.config.radars[i]).collect();
+        let miss: f64 = specs
+            .iter()
+            .map(|r| 1.0 - r.detection_probability)
+            .product();
+        let clutter = fused.iter().map(|f| cartesian_clutter(f, &specs)).collect();
+        self.counters.fused_plots += fused.len() as u64;
+        let source = Source::Fused {
+            clutter,
+            detection_probability: 1.0 - miss,
+        };
+        self.run_frame(t, source, fused, report)?;
+        self.last_instant = Some(k);
+        Ok(())
+    }
+
+    /// The tracking loop of one frame: predict, associate and update,
+    /// delete, initiate.
+    fn run_frame(
+        &mut self,
+        t: f64,
+        source: Source,
+        plots: Vec<CartesianPlot>,
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
+        let cfg = &self.config;
+        for track in &mut self.tracks {
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+        }
+        let mut estimates: Vec<TrackEstimate> = self
+            .tracks
+            .iter()
+            .map(|tr| TrackEstimate {
+                x: tr.x.clone(),
+                p: tr.p.clone(),
+            })
+            .collect();
+        let Outcome { hit, used } = match &source {
+            Source::Radar { index, plots: raw } => associate_polar(
+                &mut estimates,
+                &cfg.radars[*index],
+                raw,
+                cfg.axes,
+                cfg.track_gate_probability,
+                &cfg.association,
+            )?,
+            Source::Fused {
+                clutter,
+                detection_probability,
+            } => associate_cartesian(
+                &mut estimates,
+                &plots,
+                clutter,
+                *detection_probability,
+                cfg.track_gate_probability,
+                &cfg.association,
+            )?,
+        };
+        for ((track, est), hit) in self.tracks.iter_mut().zip(estimates).zip(&hit) {
+            track.x = est.x;
+            track.p = est.p;
+            track.record(hit.map(|j| plots[j].radars.clone()));
+        }
+
+        let duplicate = deleter::duplicates(&self.tracks, &hit, cfg.duplicate_probability)?;
+        let rule = cfg.deletion;
+        let mut kept = Vec::with_capacity(self.tracks.len());
+        for (track, duplicate) in self.tracks.drain(..).zip(duplicate) {
+            if duplicate {
+                report.deleted.push(track.output(TrackStatus::Deleted));
+                self.counters.merged += 1;
+            } else if deleter::should_delete(&track, &rule) {
+                report.deleted.push(track.output(TrackStatus::Deleted));
+                self.counters.deleted += 1;
+            } else {
+                kept.push(track);
+            }
+        }
+        self.tracks = kept;
+
+        let leftovers = plots
+            .into_iter()
+            .zip(used)
+            .filter_map(|(p, used)| (!used).then_some(p))
+            .collect();
+        let initiated = self
+            .initiator
+            .step(t, leftovers, &self.config, &mut self.next_id)?;
+        self.counters.started += initiated.started as u64;
+        self.counters.dropped += initiated.dropped as u64;
+        for track in initiated.confirmed {
+            report.confirmed.push(track.id);
+            self.counters.confirmed += 1;
+            self.tracks.push(track);
+        }
+
+        self.last_time = Some(t);
+        self.counters.frames += 1;
+        report.frames += 1;
+        Ok(())
+    }
+}

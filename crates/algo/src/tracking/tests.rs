@@ -1,0 +1,421 @@
+//! End-to-end tests of the tracker: the patent's Fig. 5 scene in serial
+//! mode, a Doppler scene in parallel mode, a 2D + 3D radar mix, chunked
+//! processing with encode/decode equal to one call, late plots.
+
+use super::*;
+use crate::gaussian::check_covariance;
+use crate::jpda;
+
+/// Knuth's MMIX LCG with Box–Muller normals (tests only: `rand` is not an
+/// `algo` dependency).
+pub(super) struct Lcg(pub(super) u64);
+
+impl Lcg {
+    pub(super) fn uniform(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+
+    pub(super) fn normal(&mut self) -> f64 {
+        let (u1, u2) = (self.uniform(), self.uniform());
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Target {
+    p0: [f64; 3],
+    v: [f64; 3],
+}
+
+impl Target {
+    fn at(&self, t: f64) -> [f64; 3] {
+        [0, 1, 2].map(|i| self.p0[i] + self.v[i] * t)
+    }
+}
+
+/// Plots of every radar scan `offset + k·period ≤ duration` of every
+/// target, with Gaussian polar noise, sorted by time (stable: radar order,
+/// then target order, at equal times).
+fn scene(
+    radars: &[RadarSpec],
+    offsets: &[f64],
+    targets: &[Target],
+    duration: f64,
+    rng: &mut Lcg,
+) -> Vec<Plot> {
+    let mut plots = Vec::new();
+    for (i, r) in radars.iter().enumerate() {
+        let mut k = 0;
+        loop {
+            let t = offsets[i] + k as f64 * r.scan_period;
+            if t > duration {
+                break;
+            }
+            for target in targets {
+                let p = target.at(t);
+                let rel = [0, 1, 2].map(|a| p[a] - r.site[a]);
+                let horizontal = rel[0].hypot(rel[1]);
+                let range = if r.is_3d() {
+                    horizontal.hypot(rel[2])
+                } else {
+                    horizontal
+                };
+                let radial = if r.is_3d() {
+                    (0..3).map(|a| rel[a] * target.v[a]).sum::<f64>() / range
+                } else {
+                    (rel[0] * target.v[0] + rel[1] * target.v[1]) / range
+                };
+                plots.push(Plot {
+                    radar: i,
+                    t,
+                    range: range + r.sigma_range * rng.normal(),
+                    azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
+                    elevation: r
+                        .sigma_elevation
+                        .map(|s| rel[2].atan2(horizontal) + s * rng.normal()),
+                    radial_velocity: r.sigma_radial_velocity.map(|s| radial + s * rng.normal()),
+                });
+            }
+            k += 1;
+        }
+    }
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    plots
+}
+
+fn radar(site: [f64; 3], period: f64, doppler: bool) -> RadarSpec {
+    RadarSpec {
+        site,
+        // 100 m in range and ≈ 100 m across at the scene's ≈ 43 km.
+        sigma_range: 100.0,
+        sigma_azimuth: 100.0 / 43_000.0,
+        sigma_elevation: None,
+        sigma_radial_velocity: doppler.then_some(1.0),
+        scan_period: period,
+        detection_probability: 0.99,
+        clutter_density: 1e-7,
+    }
+}
+
+/// The patent's Fig. 5 targets: from [−25, 35] and [−26, 31] km at
+/// [30, −50] and [50, 20] m/s. They cross near t ≈ 55 s.
+fn fig5_targets() -> [Target; 2] {
+    [
+        Target {
+            p0: [-25_000.0, 35_000.0, 0.0],
+            v: [30.0, -50.0, 0.0],
+        },
+        Target {
+            p0: [-26_000.0, 31_000.0, 0.0],
+            v: [50.0, 20.0, 0.0],
+        },
+    ]
+}
+
+fn fig5_config(doppler: bool) -> TrackerConfig {
+    let radars = vec![
+        radar([-200.0, 0.0, 0.0], 10.0, doppler),
+        radar([200.0, 0.0, 0.0], 8.0, doppler),
+    ];
+    let mut c = TrackerConfig::new(2, radars);
+    c.sigma_a = [0.05; 3];
+    c.initiation.velocity = VelocityGate::Speed {
+        v_min: 0.0,
+        v_max: 150.0,
+    };
+    c
+}
+
+/// Confirmed (time, [x, y]) samples of one track.
+type Trace = Vec<(f64, [f64; 2])>;
+/// Per confirmed track id, its samples.
+type Samples = Vec<(u64, Trace)>;
+
+/// Feeds `plots` one time instant per call, checking every covariance, and
+/// returns per confirmed track id its (time, position) samples.
+fn run_by_instants(tracker: &mut Tracker, plots: &[Plot]) -> Samples {
+    let mut samples: Samples = Vec::new();
+    let mut start = 0;
+    while start < plots.len() {
+        let end = start
+            + plots[start..]
+                .iter()
+                .take_while(|p| p.t == plots[start].t)
+                .count();
+        tracker.process(&plots[start..end]).unwrap();
+        start = end;
+        record(tracker, &mut samples);
+    }
+    tracker.flush().unwrap();
+    record(tracker, &mut samples);
+    samples
+}
+
+fn record(tracker: &Tracker, samples: &mut Samples) {
+    for tr in tracker.tracks() {
+        assert_spd(&tr.covariance);
+        if tr.status != TrackStatus::Confirmed {
+            continue;
+        }
+        let s = (tr.t, [tr.state[0], tr.state[2]]);
+        match samples.iter_mut().find(|(id, _)| *id == tr.id) {
+            Some((_, v)) => {
+                if v.last().is_none_or(|l| l.0 != s.0) {
+                    v.push(s);
+                }
+            }
+            None => samples.push((tr.id, vec![s])),
+        }
+    }
+}
+
+fn assert_spd(p: &nalgebra::DMatrix<f64>) {
+    assert_eq!(p, &p.transpose(), "covariance not exactly symmetric");
+    check_covariance("covariance", p).unwrap();
+}
+
+/// Each track is matched to the target nearest its first confirmed
+/// position (the targets are 4 km apart then); asserts that it is still
+/// within 500 m of that target once the targets have separated again
+/// after their crossing (t ≥ 75 s, 2.4 km apart: a swap would be ≥ 2 km
+/// off) and returns its position RMSE against that target.
+fn follow(samples: &[(u64, Trace)], targets: &[Target]) -> Vec<f64> {
+    samples
+        .iter()
+        .map(|(id, v)| {
+            let error = |k: usize, (t, p): &(f64, [f64; 2])| {
+                let q = targets[k].at(*t);
+                (p[0] - q[0]).hypot(p[1] - q[1])
+            };
+            let k = (0..targets.len())
+                .min_by(|&a, &b| error(a, &v[0]).total_cmp(&error(b, &v[0])))
+                .unwrap();
+            let mut sq = 0.0;
+            for s in v {
+                let e = error(k, s);
+                assert!(
+                    s.0 < 75.0 || e < 500.0,
+                    "track {id} lost target {k} at t = {}",
+                    s.0
+                );
+                sq += e * e;
+            }
+            (sq / v.len() as f64).sqrt()
+        })
+        .collect()
+}
+
+#[test]
+fn fig5_serial_jpda_confirms_two_tracks_without_swaps() {
+    let cfg = fig5_config(false);
+    let mut tracker = Tracker::new(cfg.clone()).unwrap();
+    assert_eq!(tracker.mode(), Mode::Serial);
+    let targets = fig5_targets();
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &targets, 100.0, &mut Lcg(1));
+    let samples = run_by_instants(&mut tracker, &plots);
+    let c = tracker.counters();
+    assert_eq!((c.confirmed, c.deleted), (2, 0), "{c:?}");
+    assert_eq!(samples.len(), 2);
+    // Frames: radar 1 at 0, 10, …, 100 (11) and radar 2 at 0, 8, …, 96 (13).
+    assert_eq!(c.frames, 24);
+    // Confirmed at the third frame with a velocity: r1@0 root, r2@8 pair, r1@10 hit.
+    for (_, v) in &samples {
+        assert_eq!(v[0].0, 10.0);
+    }
+    let rmse = follow(&samples, &targets);
+    // One plot's position error: √(100² + (43 km · σ_θ)²) ≈ 141 m.
+    for r in rmse {
+        assert!(r < 100.0, "position RMSE {r} m");
+    }
+}
+
+#[test]
+fn fig5_every_association_method_keeps_the_two_targets() {
+    for method in [
+        jpda::Method::Amsjpda,
+        jpda::Method::NearestNeighbour,
+        jpda::Method::GlobalNearestNeighbour,
+    ] {
+        let mut cfg = fig5_config(false);
+        cfg.association.method = method;
+        let mut tracker = Tracker::new(cfg.clone()).unwrap();
+        let targets = fig5_targets();
+        let plots = scene(&cfg.radars, &[0.0, 0.0], &targets, 100.0, &mut Lcg(2));
+        let samples = run_by_instants(&mut tracker, &plots);
+        assert_eq!(tracker.counters().confirmed, 2, "{method:?}");
+        for r in follow(&samples, &targets) {
+            assert!(r < 141.0, "{method:?}: RMSE {r}");
+        }
+    }
+}
+
+#[test]
+fn parallel_mode_fuses_doppler_plots_and_tracks_the_fig5_targets() {
+    // Both radars every 5 s, radar 2 half a second earlier: fusion instants
+    // every 5 s take one plot per radar and target, radar 2's extrapolated
+    // by 0.5 s along its line of sight.
+    let mut cfg = fig5_config(true);
+    cfg.radars[0].scan_period = 5.0;
+    cfg.radars[1].scan_period = 5.0;
+    cfg.fusion_period = 5.0;
+    cfg.initiation.max_dt = 10.0;
+    let mut tracker = Tracker::new(cfg.clone()).unwrap();
+    assert_eq!(tracker.mode(), Mode::Parallel);
+    let targets = fig5_targets();
+    let plots = scene(&cfg.radars, &[5.0, 4.5], &targets, 100.0, &mut Lcg(3));
+    let samples = run_by_instants(&mut tracker, &plots);
+    let c = tracker.counters();
+    assert_eq!((c.confirmed, c.deleted), (2, 0), "{c:?}");
+    // Instants 5, 10, …, 100: 20 frames with 2 targets × 2 radars; a pair of
+    // plots of one target fuses into one plot unless it fails the 99 % gate
+    // (or the crossing targets confuse the GNN), so about 40 fused plots.
+    assert_eq!(c.frames, 20);
+    assert!((40..=46).contains(&c.fused_plots), "{c:?}");
+    for r in follow(&samples, &targets) {
+        assert!(r < 100.0, "position RMSE {r} m");
+    }
+}
+
+#[test]
+fn a_3d_tracker_takes_a_2d_and_a_3d_radar() {
+    let mut r3 = radar([-200.0, 0.0, 0.0], 10.0, false);
+    r3.sigma_elevation = Some(100.0 / 43_000.0);
+    let r2 = radar([200.0, 0.0, 0.0], 8.0, false);
+    let mut cfg = TrackerConfig::new(3, vec![r3, r2]);
+    cfg.sigma_a = [0.05; 3];
+    cfg.default_height = 4000.0;
+    let targets = fig5_targets().map(|mut t| {
+        t.p0[2] = 5000.0;
+        t
+    });
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &targets, 100.0, &mut Lcg(4));
+    let mut tracker = Tracker::new(cfg).unwrap();
+    tracker.process(&plots).unwrap();
+    tracker.flush().unwrap();
+    assert_eq!(tracker.counters().confirmed, 2);
+    for tr in tracker.tracks() {
+        assert_eq!(tr.state.len(), 6);
+        assert_spd(&tr.covariance);
+        // The 3D radar measures the height: σ_z ≈ 43 km · σ_φ = 100 m per plot.
+        assert!(
+            (tr.state[4] - 5000.0).abs() < 300.0,
+            "height {}",
+            tr.state[4]
+        );
+    }
+}
+
+#[test]
+fn chunks_with_encode_decode_equal_one_call() {
+    for doppler in [false, true] {
+        let cfg = fig5_config(doppler);
+        let targets = fig5_targets();
+        let plots = scene(&cfg.radars, &[0.0, 0.0], &targets, 100.0, &mut Lcg(5));
+        let mut whole = Tracker::new(cfg.clone()).unwrap();
+        whole.process(&plots).unwrap();
+        whole.flush().unwrap();
+        assert!(whole.counters().confirmed >= 2);
+
+        // Cuts anywhere, also inside a radar's scan group.
+        let cuts = [0, 1, 3, 4, 7, 8, 20, 21, 33, plots.len()];
+        let mut bytes = Tracker::new(cfg.clone()).unwrap().encode();
+        for w in cuts.windows(2) {
+            let mut t = Tracker::decode(&bytes).unwrap();
+            t.process(&plots[w[0]..w[1]]).unwrap();
+            bytes = t.encode();
+        }
+        let mut chunked = Tracker::decode(&bytes).unwrap();
+        chunked.flush().unwrap();
+        assert_eq!(chunked, whole, "doppler = {doppler}");
+        assert_eq!(chunked.encode(), whole.encode());
+    }
+}
+
+#[test]
+fn a_late_plot_is_counted_and_dropped() {
+    let cfg = fig5_config(false);
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &fig5_targets(), 40.0, &mut Lcg(6));
+    let mut tracker = Tracker::new(cfg).unwrap();
+    tracker.process(&plots).unwrap();
+    let before = tracker.clone();
+    // Frames up to radar 1's group at t = 40 are processed; radar 2's group
+    // at t = 40 is pending (no later plot has closed it).
+    assert_eq!(tracker.last_time(), Some(40.0));
+    assert_eq!(tracker.pending(), 2);
+    let mut late = plots[0];
+    late.t = 39.0;
+    let on_time = *plots.last().unwrap();
+    assert_eq!((on_time.radar, on_time.t), (1, 40.0));
+    let report = tracker.process(&[on_time, late]).unwrap();
+    assert_eq!(report.late, vec![1]);
+    assert_eq!(tracker.counters().late, 1);
+    assert_eq!(tracker.counters().plots, before.counters().plots + 1);
+    assert_eq!(tracker.tracks(), before.tracks());
+    // Parallel mode: a plot of an already processed fusion instant is late.
+    let cfg = fig5_config(true);
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &fig5_targets(), 40.0, &mut Lcg(7));
+    let mut tracker = Tracker::new(cfg).unwrap();
+    tracker.process(&plots).unwrap();
+    let instant = tracker.last_time().unwrap();
+    let report = tracker
+        .process(&[Plot {
+            t: instant,
+            ..plots[0]
+        }])
+        .unwrap();
+    assert_eq!(report.late, vec![0]);
+}
+
+#[test]
+fn bad_input_is_an_error_without_a_state_change() {
+    let cfg = fig5_config(false);
+    let mut tracker = Tracker::new(cfg.clone()).unwrap();
+    let good = Plot {
+        radar: 0,
+        t: 0.0,
+        range: 40_000.0,
+        azimuth: 0.5,
+        elevation: None,
+        radial_velocity: None,
+    };
+    let bad = [
+        Plot { radar: 2, ..good },
+        Plot { range: 0.0, ..good },
+        Plot {
+            t: f64::NAN,
+            ..good
+        },
+        Plot {
+            elevation: Some(0.1),
+            ..good
+        },
+    ];
+    for b in bad {
+        assert!(tracker.process(&[good, b]).is_err());
+        assert_eq!(tracker.pending(), 0);
+    }
+    // Parallel mode needs the radial velocity.
+    let mut parallel = Tracker::new(fig5_config(true)).unwrap();
+    assert!(parallel.process(&[good]).is_err());
+    // Invalid configurations.
+    let mut c = cfg.clone();
+    c.axes = 4;
+    assert!(Tracker::new(c).is_err());
+    let mut c = cfg.clone();
+    c.mode = Mode::Parallel;
+    assert!(Tracker::new(c).is_err());
+    let mut c = cfg.clone();
+    c.initiation.confirm_m = 5;
+    assert!(Tracker::new(c).is_err());
+    let mut c = cfg;
+    c.radars[0].sigma_elevation = Some(0.01);
+    assert!(Tracker::new(c).is_err(), "a 3D radar in a 2D tracker");
+    // Corrupt encodings.
+    let bytes = tracker.encode();
+    assert!(Tracker::decode(&bytes[..bytes.len() - 1]).is_err());
+    assert!(Tracker::decode(b"nope").is_err());
+}

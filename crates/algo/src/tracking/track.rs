@@ -1,0 +1,246 @@
+//! A track of the tracker (tentative or confirmed, seed 001 steps 7–8) with
+//! its frame history, and the predictor: constant velocity with discrete
+//! white-noise acceleration over a variable Δt (the patent's F₁, F₂ for
+//! plot intervals T₁, T₂ − T₁ of serial processing).
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::AlgoError;
+use crate::gating::chi2_threshold;
+use crate::kalman;
+use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
+use crate::tracking::config::NoiseModel;
+
+/// Where a track stands in its life.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrackStatus {
+    /// Started by the logic-based initiation, not yet M-of-N confirmed.
+    Tentative,
+    /// Confirmed, maintained by JPDA.
+    Confirmed,
+    /// Deleted in this step (reported once).
+    Deleted,
+}
+
+/// A track as the tracker reports it. The state is in the fusion ENU frame,
+/// `[x, vx, y, vy]` or `[x, vx, y, vy, z, vz]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackOutput {
+    /// Stable identifier, kept from tentative to confirmed.
+    pub id: u64,
+    pub status: TrackStatus,
+    /// Time of the state (the last frame the track was predicted to) (s).
+    pub t: f64,
+    pub state: DVector<f64>,
+    pub covariance: DMatrix<f64>,
+    /// Radars whose plots updated the track at its last update, ascending.
+    pub radars: Vec<usize>,
+    /// Frames with an associated plot (times updated; the initiation's
+    /// first two plots count).
+    pub hits: u32,
+    /// Frames without one.
+    pub misses: u32,
+    /// Misses since the last hit.
+    pub consecutive_misses: u32,
+    /// Frames since the track was started (its first two plots count as 2).
+    pub age: u32,
+    /// Time of the last update by a plot (s).
+    pub last_update: f64,
+}
+
+/// A track inside the tracker.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Track {
+    pub id: u64,
+    pub x: DVector<f64>,
+    pub p: DMatrix<f64>,
+    pub t: f64,
+    /// Bit i = 1 when the frame i frames ago was a hit (bit 0 = latest).
+    pub history: u64,
+    pub age: u32,
+    pub hits: u32,
+    pub misses: u32,
+    pub consecutive_misses: u32,
+    pub radars: Vec<usize>,
+    pub last_update: f64,
+}
+
+impl Track {
+    /// A track at time 0 with no frames recorded (for tests).
+    #[cfg(test)]
+    pub(crate) fn fresh(id: u64, x: DVector<f64>, p: DMatrix<f64>) -> Self {
+        Self {
+            id,
+            x,
+            p,
+            t: 0.0,
+            history: 0,
+            age: 0,
+            hits: 0,
+            misses: 0,
+            consecutive_misses: 0,
+            radars: vec![],
+            last_update: 0.0,
+        }
+    }
+
+    /// Records a frame: a hit with the radars of the plot(s), or a miss.
+    pub(crate) fn record(&mut self, hit: Option<Vec<usize>>) {
+        self.history <<= 1;
+        self.age = self.age.saturating_add(1);
+        match hit {
+            Some(radars) => {
+                self.history |= 1;
+                self.hits = self.hits.saturating_add(1);
+                self.consecutive_misses = 0;
+                self.radars = radars;
+                self.last_update = self.t;
+            }
+            None => {
+                self.misses = self.misses.saturating_add(1);
+                self.consecutive_misses = self.consecutive_misses.saturating_add(1);
+            }
+        }
+    }
+
+    /// Hits among the last `n` frames (n ≤ 64).
+    pub(crate) fn hits_in_last(&self, n: u32) -> u32 {
+        (self.history & window(n)).count_ones()
+    }
+
+    /// Misses among the last `n` frames, counting only frames the track lived.
+    pub(crate) fn misses_in_last(&self, n: u32) -> u32 {
+        n.min(self.age) - self.hits_in_last(n)
+    }
+
+    /// Predicts the track to time `t` (Δt = t − self.t, any sign).
+    pub(crate) fn predict(
+        &mut self,
+        t: f64,
+        sigma_a: &[f64; 3],
+        noise: NoiseModel,
+    ) -> Result<(), AlgoError> {
+        let (x, p) = predict(&self.x, &self.p, t - self.t, sigma_a, noise)?;
+        self.x = x;
+        self.p = p;
+        self.t = t;
+        Ok(())
+    }
+
+    pub(crate) fn output(&self, status: TrackStatus) -> TrackOutput {
+        TrackOutput {
+            id: self.id,
+            status,
+            t: self.t,
+            state: self.x.clone(),
+            covariance: self.p.clone(),
+            radars: self.radars.clone(),
+            hits: self.hits,
+            misses: self.misses,
+            consecutive_misses: self.consecutive_misses,
+            age: self.age,
+            last_update: self.last_update,
+        }
+    }
+}
+
+/// Constant-velocity prediction over `dt`, F = blockdiag([[1, Δt], [0, 1]]),
+/// with per-axis process noise: DWNA of standard deviation σ_i,
+/// Q = σ_i² [[Δt⁴/4, Δt³/2], [Δt³/2, Δt²]], or CWNA of spectral density
+/// q_i = σ_i², Q = q_i [[Δt³/3, Δt²/2], [Δt²/2, Δt]].
+pub(super) fn predict(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    dt: f64,
+    sigma_a: &[f64; 3],
+    noise: NoiseModel,
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    let axes = x.len() / 2;
+    let f = cv_transition(axes, dt)?;
+    let mut q = DMatrix::zeros(2 * axes, 2 * axes);
+    for (i, &s) in sigma_a.iter().enumerate().take(axes) {
+        let block = match noise {
+            NoiseModel::Dwna => dwna_process_noise(1, dt, s)?,
+            NoiseModel::Cwna => cwna_process_noise(1, dt, s * s)?,
+        };
+        q.view_mut((2 * i, 2 * i), (2, 2)).copy_from(&block);
+    }
+    kalman::predict(x, p, &f, &q)
+}
+
+/// The measurement matrix selecting the first `k` position components
+/// (e, n(, u)) of an interleaved state with `axes` axes.
+pub(super) fn position_selector(k: usize, axes: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(k, 2 * axes, |i, j| if j == 2 * i { 1.0 } else { 0.0 })
+}
+
+/// The χ² thresholds γ of a gate with probability `p` for 2 and 3 degrees
+/// of freedom (positions in the plane or in space): index `dim − 2`.
+pub(super) fn chi2_gates(p: f64) -> Result<[f64; 2], AlgoError> {
+    Ok([chi2_threshold(2, 1.0 - p)?, chi2_threshold(3, 1.0 - p)?])
+}
+
+fn window(n: u32) -> u64 {
+    if n >= 64 { u64::MAX } else { (1u64 << n) - 1 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::dvector;
+
+    #[test]
+    fn history_counts_a_sliding_window() {
+        let mut t = Track::fresh(1, dvector![0.0, 0.0], DMatrix::identity(2, 2));
+        // Frames: hit, hit, miss, hit, miss, miss → newest first 0 0 1 0 1 1.
+        for h in [true, true, false, true, false, false] {
+            t.record(h.then(|| vec![0]));
+        }
+        assert_eq!(t.hits_in_last(4), 1); // miss, miss, hit, miss
+        assert_eq!(t.misses_in_last(4), 3);
+        assert_eq!(t.hits_in_last(64), 3);
+        assert_eq!(t.misses_in_last(64), 3); // only 6 frames lived
+        assert_eq!(
+            (t.hits, t.misses, t.consecutive_misses, t.age),
+            (3, 3, 2, 6)
+        );
+    }
+
+    #[test]
+    fn prediction_by_hand() {
+        // 2 axes, Δt = 2, σ = (1, 0): x = [0, 10, 5, −1] → [20, 10, 3, −1];
+        // P = I: F F' per axis = [[1 + 4, 2], [2, 1]], Q_x = [[4, 4], [4, 4]].
+        let x = dvector![0.0, 10.0, 5.0, -1.0];
+        let (x1, p1) = predict(
+            &x,
+            &DMatrix::identity(4, 4),
+            2.0,
+            &[1.0, 0.0, 0.0],
+            NoiseModel::Dwna,
+        )
+        .unwrap();
+        assert_eq!(x1, dvector![20.0, 10.0, 3.0, -1.0]);
+        assert_eq!(p1[(0, 0)], 9.0);
+        assert_eq!(p1[(0, 1)], 6.0);
+        assert_eq!(p1[(1, 1)], 5.0);
+        assert_eq!(p1[(2, 2)], 5.0);
+        assert_eq!(p1[(2, 3)], 2.0);
+        assert_eq!(p1[(0, 2)], 0.0);
+        // CWNA, q = 1: Q_x = [[8/3, 2], [2, 2]] → P_xx = 5 + 8/3, P_xv = 4,
+        // P_vv = 3.
+        let (_, p2) = predict(
+            &x,
+            &DMatrix::identity(4, 4),
+            2.0,
+            &[1.0, 0.0, 0.0],
+            NoiseModel::Cwna,
+        )
+        .unwrap();
+        assert!((p2[(0, 0)] - (5.0 + 8.0 / 3.0)).abs() < 1e-12);
+        assert!((p2[(0, 1)] - 4.0).abs() < 1e-12 && (p2[(1, 1)] - 3.0).abs() < 1e-12);
+        assert_eq!(p2[(2, 2)], 5.0);
+        let h = position_selector(2, 3);
+        assert_eq!(h.ncols(), 6);
+        assert_eq!((h[(0, 0)], h[(1, 2)], h[(1, 3)]), (1.0, 1.0, 0.0));
+    }
+}

@@ -1,0 +1,340 @@
+//! Multi-radar plot fusion (seed 001): radar plots in, fused tracks out,
+//! over the tracker of `algo::tracking`.
+//!
+//! This module owns the wire-level vocabulary of the tracker: radars named
+//! by string ids with sites in WGS84 or as local offsets about the request's
+//! `origin`, angles in degrees, the tracker's options with defaults, and
+//! tracks with latitude and longitude. [`network`] validates a request into
+//! a [`Network`] (the geometry and ids) and a `TrackerConfig`, and plots
+//! into the core's [`Plot`]s; [`output`] turns the core's tracks back into
+//! wire tracks. [`track`] is the batch endpoint; the session kind
+//! (`service::session::plot_fusion`) uses the same pieces.
+
+pub mod asterix;
+pub mod network;
+pub mod output;
+
+use std::time::Instant;
+
+use super::{ServiceError, micros_since};
+use algo::{
+    AlgoError,
+    tracking::{Counters, Mode, Plot, Tracker, TrackerConfig},
+};
+pub use network::Network;
+pub use output::{HistoryEntry, TrackView, TrackerCounters};
+
+/// Most radars in a network.
+pub const MAX_RADARS: usize = 64;
+/// Most plots in one batch request.
+pub const MAX_PLOTS: usize = 1_000_000;
+/// Default detection probability of a radar.
+pub const DEFAULT_P_DETECTION: f64 = 0.9;
+/// Default clutter density: false plots per m·rad (2D) or m·rad² (3D).
+/// 1e-7 is about one false plot per scan over 250 km × 360° for a 2D radar.
+pub const DEFAULT_CLUTTER_DENSITY: f64 = 1e-7;
+/// Most history entries × tracks in one response (a history bigger than
+/// this is cut, with a warning).
+pub const MAX_HISTORY_TRACK_STATES: usize = 2_000_000;
+
+/// A WGS84 position: the dimension service's site input, shared.
+pub use super::dimension::SiteInput as GeoInput;
+
+/// A radar site: WGS84 (`geodetic`) or a local offset `[e, n, u]` from the
+/// request's origin; exactly one.
+#[derive(Debug, Clone, Default)]
+pub struct SiteInput {
+    pub geodetic: Option<GeoInput>,
+    pub position_m: Option<Vec<f64>>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct RadarInput {
+    pub id: Option<String>,
+    /// `2d` or `3d`.
+    pub kind: Option<String>,
+    pub site: Option<SiteInput>,
+    pub sigma_range_m: Option<f64>,
+    pub sigma_azimuth_deg: Option<f64>,
+    pub sigma_elevation_deg: Option<f64>,
+    /// Present: the radar measures the radial (Doppler) velocity.
+    pub sigma_radial_velocity_mps: Option<f64>,
+    pub scan_period_s: Option<f64>,
+    pub p_detection: Option<f64>,
+    pub clutter_density: Option<f64>,
+    /// ASTERIX System Area Code and System Identification Code (I048/010):
+    /// the radar's records in ASTERIX input. Both or neither, 0 to 255.
+    pub sac: Option<u32>,
+    pub sic: Option<u32>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct InitiationInput {
+    pub m: Option<u32>,
+    pub n: Option<u32>,
+    pub v_min_mps: Option<f64>,
+    pub v_max_mps: Option<f64>,
+    /// Per-axis velocity gate `[e, n(, u)]`, instead of the speed band.
+    pub v_min_axis_mps: Option<Vec<f64>>,
+    pub v_max_axis_mps: Option<Vec<f64>>,
+    pub gate_probability: Option<f64>,
+    pub min_dt_s: Option<f64>,
+    pub max_dt_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct DeletionInput {
+    pub max_consecutive_misses: Option<u32>,
+    /// M_d of the M_d-of-N_d miss rule.
+    pub m: Option<u32>,
+    pub n: Option<u32>,
+    pub max_position_sigma_m: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct TrackerInput {
+    /// 2 or 3; default 3 when any radar is 3D, else 2.
+    pub dimensions: Option<u32>,
+    /// `auto` (default), `parallel` or `serial`.
+    pub mode: Option<String>,
+    pub fusion_period_s: Option<f64>,
+    pub fusion_epoch_s: Option<f64>,
+    pub time_tolerance_s: Option<f64>,
+    /// `exact` (default), `amsjpda`, `global_nearest_neighbour`, `nearest_neighbour`.
+    pub association: Option<String>,
+    pub max_exact_cluster_tracks: Option<u32>,
+    pub plot_gate_probability: Option<f64>,
+    pub track_gate_probability: Option<f64>,
+    pub initiation: Option<InitiationInput>,
+    pub deletion: Option<DeletionInput>,
+    /// `cwna` (default) or `dwna`.
+    pub process_noise: Option<String>,
+    pub sigma_a_mps2: Option<f64>,
+    pub sigma_a_vertical_mps2: Option<f64>,
+    pub default_height_m: Option<f64>,
+    pub default_height_sigma_m: Option<f64>,
+    pub sigma_tangential_speed_mps: Option<f64>,
+    pub duplicate_gate_probability: Option<f64>,
+}
+
+/// Everything that configures a tracker: the network and the options.
+#[derive(Debug, Clone, Default)]
+pub struct SpecInput {
+    /// The fusion centre (ENU origin); absent: the first radar given in
+    /// WGS84, or (all sites local) none, and tracks carry no lat/lon.
+    pub origin: Option<GeoInput>,
+    pub radars: Vec<RadarInput>,
+    pub tracker: TrackerInput,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct PlotInput {
+    pub radar_id: Option<String>,
+    pub t: Option<f64>,
+    pub range_m: Option<f64>,
+    pub azimuth_deg: Option<f64>,
+    pub elevation_deg: Option<f64>,
+    pub radial_velocity_mps: Option<f64>,
+}
+
+/// A batch request: the network, its plots (any order) and whether to
+/// return the confirmed tracks after every processing instant.
+#[derive(Debug, Clone, Default)]
+pub struct TrackInput {
+    pub spec: SpecInput,
+    pub plots: Vec<PlotInput>,
+    /// Raw ASTERIX beside (or instead of) `plots`.
+    pub asterix: Option<asterix::AsterixInput>,
+    pub history: bool,
+}
+
+/// The batch response.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackOutput {
+    /// The resolved mode, `parallel` or `serial`.
+    pub mode: &'static str,
+    pub state_layout: &'static [&'static str],
+    /// Confirmed then tentative tracks at the end of the data.
+    pub tracks: Vec<TrackView>,
+    /// Confirmed tracks deleted during the data, as they were when deleted.
+    pub deleted: Vec<TrackView>,
+    pub history: Option<Vec<HistoryEntry>>,
+    pub counters: TrackerCounters,
+    /// What the ASTERIX input gave, when there was one.
+    pub asterix: Option<asterix::AsterixSummary>,
+    pub compute_us: f64,
+    pub warnings: Vec<String>,
+}
+
+/// The name of a resolved mode.
+pub fn mode_name(m: Mode) -> &'static str {
+    match m {
+        Mode::Parallel => "parallel",
+        Mode::Serial => "serial",
+        Mode::Auto => "auto",
+    }
+}
+
+/// Tracks every plot of the request from scratch and closes the last frame.
+pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
+    let (network, config, mut warnings) = network::validate(&input.spec)?;
+    let asterix_bound = input
+        .asterix
+        .as_ref()
+        .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
+    if input.plots.len() + asterix_bound > MAX_PLOTS {
+        return Err(ServiceError::TooLarge(format!(
+            "{} plots (ASTERIX counted as one per {} bytes); at most {MAX_PLOTS} per request \
+             (stream larger data through a plot_fusion session)",
+            input.plots.len() + asterix_bound,
+            asterix::MIN_PLOT_RECORD_BYTES
+        )));
+    }
+    let clock = match &input.asterix {
+        Some(a) => Some(asterix::clock(a, "asterix", None)?),
+        None => None,
+    };
+    let mut plots = network.plots(&input.plots, &config, "plots")?;
+    let start = Instant::now();
+    let summary = match (&input.asterix, clock) {
+        (Some(a), Some(clock)) => {
+            let from = asterix::plots(&network, &config, &a.data, clock);
+            plots.extend(from.plots);
+            warnings.extend(from.warnings);
+            Some(from.summary)
+        }
+        _ => None,
+    };
+    if plots.is_empty() {
+        warnings.push(if input.asterix.is_some() {
+            "no plot to track: `plots` is empty and the ASTERIX data gave no usable target \
+             report (see asterix.errors and its counts)"
+                .to_string()
+        } else {
+            "no plot to track: give `plots`, an `asterix` block, or both".to_string()
+        });
+    }
+    // Stable: plots of equal time keep the request's order, as a session
+    // fed the same plots in order would.
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    let mut tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+    let mut history = input.history.then(Vec::new);
+    let mut states = 0usize;
+    let mut cut = false;
+    let report = tracker
+        .process_with(&plots, true, &mut |t: &Tracker| {
+            if let Some(h) = history.as_mut() {
+                let confirmed = t.confirmed_tracks();
+                if states + confirmed.len() > MAX_HISTORY_TRACK_STATES {
+                    cut = true;
+                    return;
+                }
+                states += confirmed.len();
+                h.push((t.last_time().unwrap_or(f64::NAN), confirmed));
+            }
+        })
+        .map_err(computation_error)?;
+    let compute_us = micros_since(start);
+    if cut {
+        warnings.push(format!(
+            "history cut after {states} track states (limit {MAX_HISTORY_TRACK_STATES}); \
+             send fewer plots per request or use a plot_fusion session"
+        ));
+    }
+    let tracks = tracker.tracks();
+    let counters = tracker.counters();
+    warnings.extend(outcome_warnings(
+        &network,
+        tracker.config(),
+        &plots,
+        &counters,
+        &tracks,
+    ));
+    Ok(TrackOutput {
+        mode: mode_name(tracker.mode()),
+        state_layout: output::layout(tracker.config().axes),
+        tracks: tracks.iter().map(|t| network.track_view(t)).collect(),
+        deleted: report
+            .deleted
+            .iter()
+            .map(|t| network.track_view(t))
+            .collect(),
+        history: history.map(|h| {
+            h.into_iter()
+                .map(|(t, tracks)| HistoryEntry {
+                    t,
+                    tracks: tracks.iter().map(|tr| network.track_view(tr)).collect(),
+                })
+                .collect()
+        }),
+        counters: counters.into(),
+        asterix: summary,
+        compute_us,
+        warnings,
+    })
+}
+
+/// Warnings about what the data gave: radars without plots, nothing
+/// confirmed.
+pub fn outcome_warnings(
+    network: &Network,
+    config: &TrackerConfig,
+    plots: &[Plot],
+    counters: &Counters,
+    tracks: &[algo::tracking::TrackOutput],
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let mut seen = vec![false; network.radar_ids.len()];
+    for p in plots {
+        seen[p.radar] = true;
+    }
+    if !plots.is_empty() {
+        let silent: Vec<&str> = network
+            .radar_ids
+            .iter()
+            .zip(&seen)
+            .filter(|(_, s)| !**s)
+            .map(|(id, _)| id.as_str())
+            .collect();
+        if !silent.is_empty() {
+            warnings.push(format!(
+                "radar(s) {} gave no plot in this request",
+                silent.join(", ")
+            ));
+        }
+    }
+    if counters.plots > 0 && counters.confirmed == 0 && tracks.is_empty() {
+        warnings.push(format!(
+            "no track was started from {} plots over {} frames: check the initiation \
+             (tracker.initiation.v_max_mps, min_dt_s, max_dt_s) and the plots' times",
+            counters.plots, counters.frames
+        ));
+    } else if counters.plots > 0 && counters.confirmed == 0 {
+        warnings.push(format!(
+            "no track was confirmed from {} plots over {} frames ({} tentative): \
+             confirmation needs {} hits of the last {} frames; lower tracker.initiation.m \
+             or send more scans",
+            counters.plots,
+            counters.frames,
+            tracks.len(),
+            config.initiation.confirm_m,
+            config.initiation.confirm_n
+        ));
+    }
+    warnings
+}
+
+/// An error of the tracker after validation: a geometry or conditioning
+/// problem of the data, reported against the plots.
+pub fn computation_error(e: AlgoError) -> ServiceError {
+    let message = match &e {
+        AlgoError::DegenerateGeometry { .. } => {
+            "a plot or a predicted track lies at (or straight above) a radar's site".to_string()
+        }
+        other => format!("tracking failed numerically: {other}"),
+    };
+    ServiceError::InvalidInput(vec![super::FieldViolation {
+        field: "plots".into(),
+        message,
+    }])
+}

@@ -1,0 +1,924 @@
+//! The radar network of a plot-fusion request: validation of the radars,
+//! the origin and the tracker's options into a [`Network`] and a
+//! [`TrackerConfig`], and of the plots into the core's [`Plot`]s.
+//!
+//! Geometry. The fusion frame is the ENU frame at `origin`. A radar given
+//! in WGS84 has its site converted exactly, and its own ENU axes differ
+//! from the fusion frame's by a rotation (the meridians converge and the
+//! horizon tilts, about 0.9° per 100 km). Each plot is therefore
+//! re-expressed in the fusion axes at its radar's site: its line of sight
+//! `u` (from azimuth and elevation; a 2D plot is taken as horizontal in
+//! the radar's frame) is rotated, `u_f = M u` with `M` the rotation from
+//! the radar's ENU to the fusion ENU, and the azimuth (and elevation) of
+//! `u_f` replace the measured ones; the range and the radial velocity are
+//! invariant. The angle noise is kept (the rotation is a few degrees at
+//! most, so the error of keeping σ_θ, σ_φ is of second order). A radar
+//! given as a local `position_m` is the patent's flat model: its axes are
+//! the fusion frame's and its plots are used as measured.
+//!
+//! Slant range. A 2D radar measures the slant range ρ to a target at an
+//! unknown height; the tracker's plane needs the horizontal position. The
+//! targets are assumed at `tracker.default_height_m` H (default 0): for a
+//! geodetic site H is the ellipsoidal height and the elevation of the line
+//! of sight follows from the triangle centre–site–target on a sphere of
+//! radius R = 6371 km, sin ε = ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ)
+//! (h the site's height); for a local site (flat model) sin ε = (H − u)/ρ,
+//! so H = u gives the patent's horizontal range ρ exactly. The line of
+//! sight is re-expressed in the fusion axes like a 3D plot's and its
+//! horizontal part kept (range ρ cos ε_f, azimuth). ε is clamped to ±89°
+//! (a target nearly overhead, or a slant range too short for H).
+
+use std::collections::HashMap;
+
+use nalgebra::Matrix3;
+
+use super::{
+    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, SpecInput,
+    TrackView,
+};
+use crate::{FieldViolation, Ids, Interval, ServiceError, Violations};
+use algo::{
+    AlgoError,
+    geo::{Ellipsoid, LocalFrame},
+    jpda::Method,
+    polar::{enu_to_polar_3d, polar_to_enu_3d},
+    tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
+    wire::{Reader, Writer},
+};
+
+/// Longest plot range accepted (m): far beyond any radar's horizon.
+const MAX_RANGE_M: f64 = 1.0e7;
+/// Largest |t| accepted (s): about 31,700 years, so Unix times fit.
+const MAX_ABS_T_S: f64 = 1.0e12;
+/// Most violations reported for the plots of one request.
+const MAX_PLOT_VIOLATIONS: usize = 100;
+
+/// What the service keeps of a validated network besides the core's
+/// configuration: the fusion frame, the radars' ids and their rotations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Network {
+    /// The fusion frame; `None` when every site is local and no origin was
+    /// given (tracks then carry no latitude and longitude).
+    pub frame: Option<LocalFrame>,
+    pub radar_ids: Vec<String>,
+    /// Per radar: the rotation from its ENU axes to the fusion frame's
+    /// (`None` for a local site: axes parallel) and its height (WGS84
+    /// ellipsoidal for a geodetic site, the `up` offset for a local one).
+    pub sites: Vec<RadarSite>,
+    /// The height assumed for targets seen by 2D radars
+    /// (`tracker.default_height_m`): ellipsoidal for geodetic sites and for
+    /// the latitude/longitude of 2D tracks, fusion-frame `up` for local sites.
+    pub target_height: f64,
+    /// Per radar: its ASTERIX (SAC, SIC), if declared.
+    pub sources: Vec<Option<(u8, u8)>>,
+    index: HashMap<String, usize>,
+    source_index: HashMap<(u8, u8), usize>,
+}
+
+/// A radar's site as the plot conversion needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadarSite {
+    pub rotation: Option<Matrix3<f64>>,
+    pub height: f64,
+}
+
+/// Earth radius of the spherical slant-range geometry of 2D plots (m).
+const EARTH_RADIUS_M: f64 = 6_371_000.0;
+/// Largest elevation given to a 2D plot (a target nearly overhead).
+const MAX_2D_ELEVATION_RAD: f64 = 89.0 * std::f64::consts::PI / 180.0;
+
+/// The association method names.
+pub const ASSOCIATIONS: &[&str] = &[
+    "exact",
+    "amsjpda",
+    "global_nearest_neighbour",
+    "nearest_neighbour",
+];
+
+fn wire_name(what: &str) -> &'static str {
+    match what {
+        "axes" => "tracker.dimensions",
+        "mode" => "tracker.mode",
+        "fusion_period" => "tracker.fusion_period_s",
+        "fusion_epoch" => "tracker.fusion_epoch_s",
+        "time_tolerance" => "tracker.time_tolerance_s",
+        "max_exact_tracks" => "tracker.max_exact_cluster_tracks",
+        "plot_gate_probability" => "tracker.plot_gate_probability",
+        "track_gate_probability" => "tracker.track_gate_probability",
+        "confirm_m_of_n" => "tracker.initiation.m",
+        "v_min" => "tracker.initiation.v_min_mps",
+        "v_max" => "tracker.initiation.v_max_mps",
+        "initiation_gate_probability" => "tracker.initiation.gate_probability",
+        "min_dt" => "tracker.initiation.min_dt_s",
+        "max_dt" => "tracker.initiation.max_dt_s",
+        "max_consecutive_misses" => "tracker.deletion.max_consecutive_misses",
+        "deletion_m_of_n" => "tracker.deletion.m",
+        "max_position_sigma" => "tracker.deletion.max_position_sigma_m",
+        "sigma_a" => "tracker.sigma_a_mps2",
+        "default_height" => "tracker.default_height_m",
+        "default_height_sigma" => "tracker.default_height_sigma_m",
+        "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
+        "duplicate_probability" => "tracker.duplicate_gate_probability",
+        _ => "tracker",
+    }
+}
+
+/// A configuration error of the core, named by its wire field.
+pub fn config_error(e: &AlgoError) -> ServiceError {
+    match e {
+        AlgoError::InvalidParameter { what, reason } => Violations::single(wire_name(what), reason),
+        other => Violations::single("tracker", other.to_string()),
+    }
+}
+
+fn geodetic(v: &mut Violations, f: &str, g: &GeoInput) -> Option<LocalFrame> {
+    v.site(f, g.lat_deg, g.lon_deg, Some(g.height_m.unwrap_or(0.0)))
+}
+
+enum Site {
+    Geodetic(LocalFrame),
+    Local([f64; 3]),
+}
+
+/// Validates a network and the tracker's options; the warnings say what
+/// was decided for the caller (the mode, a missing origin).
+pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
+    let mut v = Violations::new();
+    let mut warnings = Vec::new();
+    if !v.count_within("radars", spec.radars.len(), MAX_RADARS, "radar") && !spec.radars.is_empty()
+    {
+        return v.finish_with(None);
+    }
+    let mut ids = Vec::new();
+    let mut radar_ids = Ids::new();
+    let mut sites = Vec::new();
+    let mut specs = Vec::new();
+    let mut sources = Vec::new();
+    let mut source_of: HashMap<(u8, u8), usize> = HashMap::new();
+    for (i, r) in spec.radars.iter().enumerate() {
+        let f = format!("radars[{i}]");
+        sources.push(source(&mut v, &f, r.sac, r.sic, i, &mut source_of));
+        let id = radar_ids.check(&mut v, r.id.as_deref(), i, |j| format!("radars[{j}].id"));
+        ids.push(id.unwrap_or_default().to_string());
+        let three_d = v.one_of(
+            format!("{f}.kind"),
+            r.kind.as_deref(),
+            None,
+            &[("2d", false), ("3d", true)],
+        );
+        let site = match &r.site {
+            None => {
+                v.add(format!("{f}.site"), "is required");
+                None
+            }
+            Some(s) => match (&s.geodetic, &s.position_m) {
+                (Some(g), None) => geodetic(&mut v, &format!("{f}.site"), g).map(Site::Geodetic),
+                (None, Some(p)) => {
+                    let field = format!("{f}.site.position_m");
+                    if !(p.len() == 2 || p.len() == 3) || p.iter().any(|x| !x.is_finite()) {
+                        v.add(
+                            field,
+                            "must be 2 or 3 finite numbers [east, north(, up)] in m",
+                        );
+                        None
+                    } else {
+                        Some(Site::Local([p[0], p[1], p.get(2).copied().unwrap_or(0.0)]))
+                    }
+                }
+                _ => {
+                    v.add(
+                        format!("{f}.site"),
+                        "give either lat_deg/lon_deg/height_m or position_m",
+                    );
+                    None
+                }
+            },
+        };
+        sites.push(site);
+        let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
+        let sa = v.number(
+            format!("{f}.sigma_azimuth_deg"),
+            r.sigma_azimuth_deg,
+            Interval::open_closed(0.0, 90.0),
+        );
+        let se = match (three_d, r.sigma_elevation_deg) {
+            (Some(true), s) => v.number(
+                format!("{f}.sigma_elevation_deg"),
+                s,
+                Interval::open_closed(0.0, 90.0),
+            ),
+            (Some(false), Some(_)) => {
+                v.add(
+                    format!("{f}.sigma_elevation_deg"),
+                    "a 2d radar has no elevation; declare kind 3d",
+                );
+                None
+            }
+            _ => None,
+        };
+        let sv = r
+            .sigma_radial_velocity_mps
+            .and_then(|s| v.positive(format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+        let period = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
+        let pd = v.number_or(
+            format!("{f}.p_detection"),
+            r.p_detection,
+            DEFAULT_P_DETECTION,
+            Interval::open_closed(0.0, 1.0),
+        );
+        // False plots per m·rad.
+        let clutter = v.number_or(
+            format!("{f}.clutter_density"),
+            r.clutter_density,
+            DEFAULT_CLUTTER_DENSITY,
+            Interval::POSITIVE,
+        );
+        if let (Some(three_d), Some(sr), Some(sa), Some(period), Some(pd), Some(clutter)) =
+            (three_d, sr, sa, period, pd, clutter)
+        {
+            specs.push(RadarSpec {
+                site: [0.0; 3],
+                sigma_range: sr,
+                sigma_azimuth: sa.to_radians(),
+                sigma_elevation: if three_d {
+                    se.map(f64::to_radians)
+                } else {
+                    None
+                },
+                sigma_radial_velocity: sv,
+                scan_period: period,
+                detection_probability: pd,
+                clutter_density: clutter,
+            });
+        }
+    }
+    let frame = match &spec.origin {
+        Some(o) => geodetic(&mut v, "origin", o),
+        None => sites.iter().find_map(|s| match s {
+            Some(Site::Geodetic(f)) => Some(*f),
+            _ => None,
+        }),
+    };
+    let any_3d = spec.radars.iter().any(|r| r.kind.as_deref() == Some("3d"));
+    let tracker = &spec.tracker;
+    let axes = match tracker.dimensions {
+        None => Some(if any_3d { 3 } else { 2 }),
+        Some(d) => {
+            let d = v.count_or("tracker.dimensions", Some(d), 3, 2, 3);
+            if d == Some(2) && any_3d {
+                v.add(
+                    "tracker.dimensions",
+                    "a 2D tracker takes 2d radars only; use 3 (or omit it)",
+                );
+            }
+            d.map(|d| d as usize)
+        }
+    };
+    let mode = v.one_of(
+        "tracker.mode",
+        tracker.mode.as_deref(),
+        Some(Mode::Auto),
+        &[
+            ("auto", Mode::Auto),
+            ("parallel", Mode::Parallel),
+            ("serial", Mode::Serial),
+        ],
+    );
+    let noise = v.one_of(
+        "tracker.process_noise",
+        tracker.process_noise.as_deref(),
+        Some(NoiseModel::Cwna),
+        &[("cwna", NoiseModel::Cwna), ("dwna", NoiseModel::Dwna)],
+    );
+    let choices: Vec<(&str, Method)> = ASSOCIATIONS
+        .iter()
+        .copied()
+        .zip([
+            Method::Exact,
+            Method::Amsjpda,
+            Method::GlobalNearestNeighbour,
+            Method::NearestNeighbour,
+        ])
+        .collect();
+    let method = v.one_of(
+        "tracker.association",
+        tracker.association.as_deref(),
+        Some(Method::Exact),
+        &choices,
+    );
+    // Every radar's site, when each parsed.
+    let sites: Option<Vec<Site>> = sites.into_iter().collect();
+    let parsed = (|| Some((axes?, mode?, method?, noise?, sites?)))();
+    let (axes, mode, method, noise, sites) = v.finish_with(parsed)?;
+
+    // Sites in the fusion frame.
+    let mut radar_sites = Vec::with_capacity(specs.len());
+    for (spec, site) in specs.iter_mut().zip(&sites) {
+        match site {
+            Site::Local(p) => {
+                spec.site = *p;
+                radar_sites.push(RadarSite {
+                    rotation: None,
+                    height: p[2],
+                });
+            }
+            Site::Geodetic(radar) => {
+                // A geodetic site gives a frame (the origin, or else the
+                // first geodetic site).
+                let Some(fusion) = frame else {
+                    return Err(ServiceError::Internal(
+                        "a geodetic site without a frame".into(),
+                    ));
+                };
+                let (lat, lon, h) = radar.origin_geodetic();
+                spec.site = fusion
+                    .geodetic_to_enu(lat, lon, h)
+                    .map_err(|e| Violations::single("radars", e.to_string()))?;
+                radar_sites.push(RadarSite {
+                    rotation: Some(radar.rotation_to(&fusion)),
+                    height: h,
+                });
+            }
+        }
+    }
+    if frame.is_none() {
+        warnings.push(
+            "no origin: every site is a local position_m, so tracks carry no lat_deg/lon_deg; \
+             give origin (WGS84) to have them"
+                .into(),
+        );
+    }
+
+    let mut config = TrackerConfig::new(axes, specs);
+    config.set_mode(mode);
+    config.noise = noise;
+    config.association.method = method;
+    if let Some(n) = tracker.max_exact_cluster_tracks {
+        config.association.max_exact_tracks = n as usize;
+    }
+    if let Some(p) = tracker.fusion_period_s {
+        config.fusion_period = p;
+    }
+    if let Some(e) = tracker.fusion_epoch_s {
+        config.fusion_epoch = e;
+    }
+    if let Some(t) = tracker.time_tolerance_s {
+        config.time_tolerance = t;
+    }
+    if let Some(p) = tracker.plot_gate_probability {
+        config.plot_gate_probability = p;
+    }
+    if let Some(p) = tracker.track_gate_probability {
+        config.track_gate_probability = p;
+    }
+    if let Some(s) = tracker.sigma_a_mps2 {
+        config.sigma_a[0] = s;
+        config.sigma_a[1] = s;
+        config.sigma_a[2] = s;
+    }
+    if let Some(s) = tracker.sigma_a_vertical_mps2 {
+        config.sigma_a[2] = s;
+    }
+    if let Some(h) = tracker.default_height_m {
+        config.default_height = h;
+    }
+    if let Some(s) = tracker.default_height_sigma_m {
+        config.default_height_sigma = s;
+    }
+    if let Some(s) = tracker.sigma_tangential_speed_mps {
+        config.sigma_tangential_speed = s;
+    }
+    if let Some(p) = tracker.duplicate_gate_probability {
+        config.duplicate_probability = p;
+    }
+    if let Some(i) = &tracker.initiation {
+        let init = &mut config.initiation;
+        if let Some(m) = i.m {
+            init.confirm_m = m;
+        }
+        if let Some(n) = i.n {
+            init.confirm_n = n;
+        }
+        if let Some(p) = i.gate_probability {
+            init.gate_probability = p;
+        }
+        if let Some(d) = i.min_dt_s {
+            init.min_dt = d;
+        }
+        if let Some(d) = i.max_dt_s {
+            init.max_dt = d;
+        }
+        match (&i.v_min_axis_mps, &i.v_max_axis_mps) {
+            (None, None) => {
+                if let VelocityGate::Speed { v_min, v_max } = &mut init.velocity {
+                    if let Some(x) = i.v_min_mps {
+                        *v_min = x;
+                    }
+                    if let Some(x) = i.v_max_mps {
+                        *v_max = x;
+                    }
+                }
+            }
+            (Some(lo), Some(hi)) => {
+                let axis = |field: &str, x: &[f64]| -> Result<[f64; 3], ServiceError> {
+                    match x {
+                        [e, n] => Ok([*e, *n, f64::NAN]),
+                        [e, n, u] => Ok([*e, *n, *u]),
+                        _ => Err(Violations::single(
+                            field,
+                            "must be 2 or 3 numbers [east, north(, up)] in m/s",
+                        )),
+                    }
+                };
+                let mut lo = axis("tracker.initiation.v_min_axis_mps", lo)?;
+                let mut hi = axis("tracker.initiation.v_max_axis_mps", hi)?;
+                if lo[2].is_nan() {
+                    // Vertical band not given: wide open.
+                    lo[2] = -1.0e6;
+                    hi[2] = 1.0e6;
+                }
+                if i.v_min_mps.is_some() || i.v_max_mps.is_some() {
+                    return Err(Violations::single(
+                        "tracker.initiation",
+                        "give either the speed band (v_min_mps, v_max_mps) or the per-axis \
+                         band (v_min_axis_mps, v_max_axis_mps), not both",
+                    ));
+                }
+                init.velocity = VelocityGate::PerAxis {
+                    v_min: lo,
+                    v_max: hi,
+                };
+            }
+            (Some(_), None) => {
+                return Err(Violations::single(
+                    "tracker.initiation.v_max_axis_mps",
+                    "is required with v_min_axis_mps",
+                ));
+            }
+            (None, Some(_)) => {
+                return Err(Violations::single(
+                    "tracker.initiation.v_min_axis_mps",
+                    "is required with v_max_axis_mps",
+                ));
+            }
+        }
+    }
+    if let Some(d) = &tracker.deletion {
+        let rule = Deletion {
+            max_consecutive_misses: d.max_consecutive_misses,
+            misses_m_of_n: match (d.m, d.n) {
+                (Some(m), Some(n)) => Some((m, n)),
+                (None, None) => None,
+                (Some(_), None) => {
+                    return Err(Violations::single(
+                        "tracker.deletion.n",
+                        "is required with deletion.m",
+                    ));
+                }
+                (None, Some(_)) => {
+                    return Err(Violations::single(
+                        "tracker.deletion.m",
+                        "is required with deletion.n",
+                    ));
+                }
+            },
+            max_position_sigma: d.max_position_sigma_m,
+        };
+        if rule.max_consecutive_misses.is_none()
+            && rule.misses_m_of_n.is_none()
+            && rule.max_position_sigma.is_none()
+        {
+            return Err(Violations::single(
+                "tracker.deletion",
+                "set at least one rule (max_consecutive_misses, m and n, or \
+                 max_position_sigma_m): a track that is never deleted coasts forever",
+            ));
+        }
+        config.deletion = rule;
+    }
+    config.validate().map_err(|e| config_error(&e))?;
+
+    let doppler = config.radars.iter().filter(|r| r.has_doppler()).count();
+    if mode == Mode::Auto && doppler > 0 && doppler < config.radars.len() {
+        let without: Vec<&str> = config
+            .radars
+            .iter()
+            .zip(&ids)
+            .filter(|(r, _)| !r.has_doppler())
+            .map(|(_, id)| id.as_str())
+            .collect();
+        warnings.push(format!(
+            "mode auto chose serial: radar(s) {} give no Doppler (parallel fusion needs \
+             sigma_radial_velocity_mps on every radar)",
+            without.join(", ")
+        ));
+    }
+    if config.is_parallel() {
+        for (r, id) in config.radars.iter().zip(&ids) {
+            if config.fusion_period > r.scan_period {
+                warnings.push(format!(
+                    "tracker.fusion_period_s = {} exceeds radar {id}'s scan period {} s: two \
+                     plots of one target from that radar can fall in one fusion instant and \
+                     are then fused as if from two radars; use a period of at most {} s",
+                    config.fusion_period, r.scan_period, r.scan_period
+                ));
+            }
+        }
+    }
+    Ok((
+        Network::from_parts(frame, ids, radar_sites, config.default_height).with_sources(sources),
+        config,
+        warnings,
+    ))
+}
+
+impl Network {
+    /// A network from its stored parts.
+    pub fn from_parts(
+        frame: Option<LocalFrame>,
+        radar_ids: Vec<String>,
+        sites: Vec<RadarSite>,
+        target_height: f64,
+    ) -> Self {
+        let index = radar_ids
+            .iter()
+            .enumerate()
+            .map(|(i, id)| (id.clone(), i))
+            .collect();
+        Self {
+            frame,
+            sources: vec![None; radar_ids.len()],
+            radar_ids,
+            sites,
+            target_height,
+            index,
+            source_index: HashMap::new(),
+        }
+    }
+
+    /// The network with the radars' ASTERIX (SAC, SIC), one per radar.
+    pub fn with_sources(mut self, sources: Vec<Option<(u8, u8)>>) -> Self {
+        self.source_index = sources
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| s.map(|s| (s, i)))
+            .collect();
+        self.sources = sources;
+        self
+    }
+
+    /// The radar (index) of an ASTERIX (SAC, SIC).
+    pub fn radar_of_source(&self, source: (u8, u8)) -> Option<usize> {
+        self.source_index.get(&source).copied()
+    }
+
+    /// The elevation (degrees, in the radar's own frame) of a target at
+    /// `height` seen at slant range `range` by radar `radar`: the geometry
+    /// of the 2D plots' assumed height (module header), solved for a
+    /// measured height. For a local site sin ε = (H − u)/ρ; for a geodetic
+    /// site, on the sphere of radius R through it,
+    /// sin ε = ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ). `None` when no
+    /// elevation fits (|sin ε| > 1).
+    pub fn elevation_deg_at_height(&self, radar: usize, range: f64, height: f64) -> Option<f64> {
+        let site = &self.sites[radar];
+        let sin_el = match site.rotation {
+            None => (height - site.height) / range,
+            Some(_) => {
+                let (rh, rt) = (EARTH_RADIUS_M + site.height, EARTH_RADIUS_M + height);
+                (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
+            }
+        };
+        (sin_el.abs() < 1.0).then(|| sin_el.asin().to_degrees())
+    }
+
+    /// Whether any radar declares its SAC/SIC.
+    pub fn has_sources(&self) -> bool {
+        !self.source_index.is_empty()
+    }
+
+    /// Validates plots against the network and re-expresses their angles in
+    /// the fusion axes; violations name `{field}[i].…`.
+    pub fn plots(
+        &self,
+        inputs: &[PlotInput],
+        config: &TrackerConfig,
+        field: &str,
+    ) -> Result<Vec<Plot>, ServiceError> {
+        let parallel = config.is_parallel();
+        let mut out = Vec::with_capacity(inputs.len());
+        let mut bad: Vec<FieldViolation> = Vec::new();
+        let mut more = 0usize;
+        for (i, p) in inputs.iter().enumerate() {
+            match self.plot(p, config, parallel) {
+                Ok(plot) => out.push(plot),
+                Err((name, message)) => {
+                    if bad.len() < MAX_PLOT_VIOLATIONS {
+                        bad.push(FieldViolation {
+                            field: format!("{field}[{i}].{name}"),
+                            message,
+                        });
+                    } else {
+                        more += 1;
+                    }
+                }
+            }
+        }
+        if bad.is_empty() {
+            return Ok(out);
+        }
+        if more > 0 {
+            bad.push(FieldViolation {
+                field: field.to_string(),
+                message: format!("{more} more invalid plots not listed"),
+            });
+        }
+        Err(ServiceError::InvalidInput(bad))
+    }
+
+    /// One plot validated and re-expressed, or the name of its bad field
+    /// and why.
+    pub fn plot(
+        &self,
+        p: &PlotInput,
+        config: &TrackerConfig,
+        parallel: bool,
+    ) -> Result<Plot, (&'static str, String)> {
+        let id = p
+            .radar_id
+            .as_deref()
+            .ok_or(("radar_id", "is required".to_string()))?;
+        let &radar = self.index.get(id).ok_or_else(|| {
+            (
+                "radar_id",
+                format!(
+                    "no radar '{id}' in the network (radars: {})",
+                    self.radar_ids.join(", ")
+                ),
+            )
+        })?;
+        let spec = &config.radars[radar];
+        let t = p.t.ok_or(("t", "is required".to_string()))?;
+        if !(t.is_finite() && t.abs() <= MAX_ABS_T_S) {
+            return Err((
+                "t",
+                format!("must be finite and within ±{MAX_ABS_T_S:e} s, got {t}"),
+            ));
+        }
+        let range = p.range_m.ok_or(("range_m", "is required".to_string()))?;
+        if !(range.is_finite() && range > 0.0 && range <= MAX_RANGE_M) {
+            return Err((
+                "range_m",
+                format!("must be > 0 and at most {MAX_RANGE_M:e} m, got {range}"),
+            ));
+        }
+        let az = p
+            .azimuth_deg
+            .ok_or(("azimuth_deg", "is required".to_string()))?;
+        if !(az.is_finite() && az.abs() <= 720.0) {
+            return Err((
+                "azimuth_deg",
+                format!("must be finite, in [-720, 720], got {az}"),
+            ));
+        }
+        let elevation = match (spec.is_3d(), p.elevation_deg) {
+            (true, None) => {
+                return Err(("elevation_deg", format!("radar '{id}' is 3d: required")));
+            }
+            (true, Some(el)) => {
+                if !(el.is_finite() && el.abs() < 90.0) {
+                    return Err(("elevation_deg", format!("must lie in (-90, 90), got {el}")));
+                }
+                Some(el.to_radians())
+            }
+            (false, Some(_)) => {
+                return Err((
+                    "elevation_deg",
+                    format!("radar '{id}' is 2d and gives no elevation"),
+                ));
+            }
+            (false, None) => None,
+        };
+        let radial_velocity = match (spec.has_doppler(), p.radial_velocity_mps) {
+            (false, Some(_)) => {
+                return Err((
+                    "radial_velocity_mps",
+                    format!(
+                        "radar '{id}' is declared without Doppler (give its \
+                         sigma_radial_velocity_mps)"
+                    ),
+                ));
+            }
+            (true, Some(v)) => {
+                if !(v.is_finite() && v.abs() < 1.0e5) {
+                    return Err(("radial_velocity_mps", format!("must be finite, got {v}")));
+                }
+                Some(v)
+            }
+            (_, None) if parallel => {
+                return Err((
+                    "radial_velocity_mps",
+                    "required in parallel mode (time registration)".to_string(),
+                ));
+            }
+            (_, None) => None,
+        };
+        let site = &self.sites[radar];
+        let (range, azimuth, elevation, radial_velocity) = if spec.is_3d() {
+            let (azimuth, elevation) = match &site.rotation {
+                None => (az.to_radians(), elevation),
+                Some(m) => rotate(m, az.to_radians(), elevation),
+            };
+            (range, azimuth, elevation, radial_velocity)
+        } else {
+            // A 2D radar measures the slant range ρ to a target of unknown
+            // height: with the target at `target_height` its elevation is
+            // sin ε = Δh/ρ (flat, local sites) or, on a sphere of radius R
+            // through the site, ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ).
+            // The line of sight at that elevation is re-expressed in the
+            // fusion axes and its horizontal part kept: the horizontal range
+            // ρ cos ε_f and azimuth in the fusion frame. In level flight the
+            // horizontal radial velocity is ṙ / cos ε.
+            let (h, big_h) = (site.height, self.target_height);
+            let sin_el = match site.rotation {
+                None => (big_h - h) / range,
+                Some(_) => {
+                    let (rh, rt) = (EARTH_RADIUS_M + h, EARTH_RADIUS_M + big_h);
+                    (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
+                }
+            };
+            let el = sin_el
+                .clamp(-1.0, 1.0)
+                .asin()
+                .clamp(-MAX_2D_ELEVATION_RAD, MAX_2D_ELEVATION_RAD);
+            let (azimuth, el_f) = match &site.rotation {
+                None => (az.to_radians(), el),
+                Some(m) => {
+                    let (a, e) = rotate(m, az.to_radians(), Some(el));
+                    (a, e.expect("an elevation in, one out"))
+                }
+            };
+            (
+                range * el_f.cos(),
+                azimuth,
+                None,
+                radial_velocity.map(|v| v / el.cos()),
+            )
+        };
+        Ok(Plot {
+            radar,
+            t,
+            range,
+            azimuth,
+            elevation,
+            radial_velocity,
+        })
+    }
+
+    /// A core track as a wire track (ids, and lat/lon from the frame).
+    pub fn track_view(&self, t: &algo::tracking::TrackOutput) -> TrackView {
+        super::output::view(self, t)
+    }
+
+    /// The SAC/SIC pairs (the plot_fusion session payload's format 2).
+    pub fn encode_sources(&self, w: &mut Writer) {
+        for s in &self.sources {
+            w.opt(s.as_ref(), |w, &(a, b)| {
+                w.u8(a);
+                w.u8(b);
+            });
+        }
+    }
+
+    pub fn decode_sources(self, r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+        let sources = (0..self.radar_ids.len())
+            .map(|_| r.opt(|r| Ok((r.u8()?, r.u8()?))))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(self.with_sources(sources))
+    }
+
+    pub fn encode(&self, w: &mut Writer) {
+        w.opt(self.frame.as_ref(), |w, f| {
+            let (lat, lon, h) = f.origin_geodetic();
+            w.f64(lat);
+            w.f64(lon);
+            w.f64(h);
+        });
+        w.f64(self.target_height);
+        w.usize(self.radar_ids.len());
+        for (id, site) in self.radar_ids.iter().zip(&self.sites) {
+            w.str(id);
+            w.opt(site.rotation.as_ref(), |w, m| w.f64s(m.as_slice()));
+            w.f64(site.height);
+        }
+    }
+
+    pub fn decode(r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+        let frame = r.opt(|r| {
+            let (lat, lon, h) = (r.f64()?, r.f64()?, r.f64()?);
+            LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)
+        })?;
+        let target_height = r.f64()?;
+        let n = r.len(17)?;
+        let mut ids = Vec::with_capacity(n);
+        let mut sites = Vec::with_capacity(n);
+        for _ in 0..n {
+            ids.push(r.str()?);
+            let rotation = r.opt(|r| {
+                let v = r.f64s()?;
+                if v.len() != 9 {
+                    return Err(algo::wire::corrupt("radar rotation"));
+                }
+                Ok(Matrix3::from_column_slice(&v))
+            })?;
+            sites.push(RadarSite {
+                rotation,
+                height: r.f64()?,
+            });
+        }
+        Ok(Self::from_parts(frame, ids, sites, target_height))
+    }
+}
+
+/// A radar's ASTERIX (SAC, SIC): both or neither, each 0 to 255, no two
+/// radars with the same pair.
+fn source(
+    v: &mut Violations,
+    f: &str,
+    sac: Option<u32>,
+    sic: Option<u32>,
+    i: usize,
+    seen: &mut HashMap<(u8, u8), usize>,
+) -> Option<(u8, u8)> {
+    let (sac, sic) = match (sac, sic) {
+        (None, None) => return None,
+        (Some(_), None) => {
+            v.add(format!("{f}.sic"), "is required with sac");
+            return None;
+        }
+        (None, Some(_)) => {
+            v.add(format!("{f}.sac"), "is required with sic");
+            return None;
+        }
+        (Some(a), Some(b)) => (a, b),
+    };
+    let mut ok = true;
+    for (name, x) in [("sac", sac), ("sic", sic)] {
+        if x > 255 {
+            v.add(format!("{f}.{name}"), format!("must be 0 to 255, got {x}"));
+            ok = false;
+        }
+    }
+    if !ok {
+        return None;
+    }
+    let pair = (sac as u8, sic as u8);
+    if let Some(j) = seen.insert(pair, i) {
+        v.add(
+            format!("{f}.sic"),
+            format!("SAC/SIC {sac}/{sic} is also radars[{j}]'s"),
+        );
+    }
+    Some(pair)
+}
+
+/// Azimuth (and elevation) of a line of sight re-expressed through `m`.
+/// A 2D plot's line of sight is horizontal in its radar's frame; only the
+/// azimuth of its rotated direction is kept.
+fn rotate(m: &Matrix3<f64>, azimuth: f64, elevation: Option<f64>) -> (f64, Option<f64>) {
+    let u = polar_to_enu_3d(1.0, azimuth, elevation.unwrap_or(0.0))
+        .expect("unit range and finite angles");
+    let uf = m * nalgebra::Vector3::new(u[0], u[1], u[2]);
+    let [_, az, el] = enu_to_polar_3d(uf[0], uf[1], uf[2]).expect("a unit vector");
+    (az, elevation.map(|_| el))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_of_the_line_of_sight_keeps_angles_when_frames_coincide() {
+        let (az, el) = rotate(&Matrix3::identity(), 0.3, Some(0.1));
+        assert!((az - 0.3).abs() < 1e-12 && (el.unwrap() - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_radar_east_of_the_origin_sees_north_turned_by_the_meridian_convergence() {
+        // Radar 1° of longitude east of the origin, both at latitude 45°:
+        // the radar's north, seen in the origin's frame, is turned towards
+        // the west by the meridian convergence Δλ·sin φ = 1°·sin 45° = 0.7071°
+        // (spherical approximation; WGS84 agrees to ~1e-3°).
+        let o = LocalFrame::new(Ellipsoid::WGS84, 45f64.to_radians(), 0.0, 0.0).unwrap();
+        let r =
+            LocalFrame::new(Ellipsoid::WGS84, 45f64.to_radians(), 1f64.to_radians(), 0.0).unwrap();
+        let m = r.rotation_to(&o);
+        let (az, _) = rotate(&m, 0.0, None);
+        let want = -(1f64.to_radians() * 45f64.to_radians().sin());
+        assert!(
+            algo::polar::wrap_angle(az - want).abs() < 2e-5,
+            "az {} want {}",
+            az.to_degrees(),
+            want.to_degrees()
+        );
+    }
+}

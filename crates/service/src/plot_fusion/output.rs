@@ -1,0 +1,188 @@
+//! Tracks as the wire shows them: the core's track with radar ids instead
+//! of indices, nested covariance rows, and WGS84 latitude/longitude (and
+//! height for a 3D tracker) of its position.
+
+use super::Network;
+use algo::geo::LocalFrame;
+use algo::tracking::{TrackOutput, TrackStatus};
+
+/// State layouts of the 2D and 3D trackers.
+pub const LAYOUT_2D: [&str; 4] = ["x", "vx", "y", "vy"];
+pub const LAYOUT_3D: [&str; 6] = ["x", "vx", "y", "vy", "z", "vz"];
+
+/// The layout of a tracker with `axes` spatial axes.
+pub fn layout(axes: usize) -> &'static [&'static str] {
+    if axes == 3 { &LAYOUT_3D } else { &LAYOUT_2D }
+}
+
+/// One track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackView {
+    pub id: u64,
+    /// `tentative`, `confirmed` or `deleted`.
+    pub status: &'static str,
+    pub t: f64,
+    pub state: Vec<f64>,
+    pub covariance: Vec<Vec<f64>>,
+    /// Absent when the request has no origin. A 2D track's is the point
+    /// above its (e, n) at `tracker.default_height_m`.
+    pub lat_deg: Option<f64>,
+    pub lon_deg: Option<f64>,
+    /// 3D trackers only (WGS84 ellipsoidal height).
+    pub height_m: Option<f64>,
+    /// Radars whose plots updated the track at its last update.
+    pub radars: Vec<String>,
+    pub hits: u32,
+    pub misses: u32,
+    pub consecutive_misses: u32,
+    /// Frames since the track started.
+    pub age: u32,
+    pub last_update_t: f64,
+}
+
+/// The confirmed tracks after one processing instant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HistoryEntry {
+    pub t: f64,
+    pub tracks: Vec<TrackView>,
+}
+
+pub fn status_name(s: TrackStatus) -> &'static str {
+    match s {
+        TrackStatus::Tentative => "tentative",
+        TrackStatus::Confirmed => "confirmed",
+        TrackStatus::Deleted => "deleted",
+    }
+}
+
+/// The geodetic position of the point above the fusion plane's (e, n) at
+/// ellipsoidal height `h` (a 2D track's targets are assumed there): up is
+/// found by fixed-point iteration u ← u + (h − height(u)), which converges
+/// in a few steps because the fusion up and the local vertical differ by
+/// the small angle d/R.
+fn at_height(f: &LocalFrame, e: f64, n: f64, h: f64) -> Option<(f64, f64, f64)> {
+    let mut u = h;
+    let mut geo = f.enu_to_geodetic([e, n, u]).ok()?;
+    for _ in 0..4 {
+        u += h - geo.2;
+        geo = f.enu_to_geodetic([e, n, u]).ok()?;
+    }
+    Some(geo)
+}
+
+pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
+    let n = t.state.len();
+    let three_d = n == 6;
+    let position = [
+        t.state[0],
+        t.state[2],
+        if three_d { t.state[4] } else { 0.0 },
+    ];
+    let geo = network.frame.as_ref().and_then(|f| {
+        if three_d {
+            f.enu_to_geodetic(position).ok()
+        } else {
+            at_height(f, position[0], position[1], network.target_height)
+        }
+    });
+    TrackView {
+        id: t.id,
+        status: status_name(t.status),
+        t: t.t,
+        state: t.state.iter().copied().collect(),
+        covariance: (0..n)
+            .map(|i| (0..n).map(|j| t.covariance[(i, j)]).collect())
+            .collect(),
+        lat_deg: geo.map(|g| g.0.to_degrees()),
+        lon_deg: geo.map(|g| g.1.to_degrees()),
+        height_m: geo.filter(|_| three_d).map(|g| g.2),
+        radars: t
+            .radars
+            .iter()
+            .map(|&r| network.radar_ids[r].clone())
+            .collect(),
+        hits: t.hits,
+        misses: t.misses,
+        consecutive_misses: t.consecutive_misses,
+        age: t.age,
+        last_update_t: t.last_update,
+    }
+}
+
+/// The tracker's running totals since it was created, as a client reads
+/// them (the service's own type: the adapters do not see `algo`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TrackerCounters {
+    /// Plots accepted (not late).
+    pub plots: u64,
+    /// Late plots dropped.
+    pub late: u64,
+    /// Frames processed (scan groups or fusion instants).
+    pub frames: u64,
+    /// Fused plots produced by parallel mode (one per associated group).
+    pub fused_plots: u64,
+    /// Tentative tracks started.
+    pub started: u64,
+    /// Tentative tracks confirmed.
+    pub confirmed: u64,
+    /// Tentative tracks dropped without being confirmed.
+    pub dropped: u64,
+    /// Confirmed tracks deleted.
+    pub deleted: u64,
+    /// Confirmed tracks deleted as duplicates of another.
+    pub merged: u64,
+}
+
+impl From<algo::tracking::Counters> for TrackerCounters {
+    fn from(c: algo::tracking::Counters) -> Self {
+        let algo::tracking::Counters {
+            plots,
+            late,
+            frames,
+            fused_plots,
+            started,
+            confirmed,
+            dropped,
+            deleted,
+            merged,
+        } = c;
+        Self {
+            plots,
+            late,
+            frames,
+            fused_plots,
+            started,
+            confirmed,
+            dropped,
+            deleted,
+            merged,
+        }
+    }
+}
+
+impl From<TrackerCounters> for algo::tracking::Counters {
+    fn from(c: TrackerCounters) -> Self {
+        let TrackerCounters {
+            plots,
+            late,
+            frames,
+            fused_plots,
+            started,
+            confirmed,
+            dropped,
+            deleted,
+            merged,
+        } = c;
+        Self {
+            plots,
+            late,
+            frames,
+            fused_plots,
+            started,
+            confirmed,
+            dropped,
+            deleted,
+            merged,
+        }
+    }
+}

@@ -1,0 +1,786 @@
+//! The plot-fusion kind of session (seed 001 as a stream): the tracker of
+//! `algo::tracking` kept between batches of radar plots.
+//!
+//! A batch is plots as they arrive, in any order within the batch. The
+//! tracker buffers them and processes a frame (a radar's scan group in
+//! serial mode, a fusion instant in parallel mode) once a plot of a later
+//! frame has arrived, or when the batch asks for a `flush` (the end of the
+//! data, or a quiet radar network). So plots pushed in time order over N
+//! batches, the last with `flush`, give exactly the tracks of the batch
+//! endpoint over the same plots (tested).
+//!
+//! A plot older than the last processed frame is *late*: it is dropped
+//! (no retrodiction), counted, and named in the update and a warning.
+//!
+//! A batch may carry raw ASTERIX beside its plots (`asterix`,
+//! `service::plot_fusion::asterix`): its plots follow the JSON plots, its
+//! late plots are named by record offset in `asterix.late_offsets`, and a
+//! batch without a date takes the times of day nearest to the session's
+//! last processed frame.
+//!
+//! Each update lists the tracks the batch touched: every live track when a
+//! frame was processed (each frame predicts every track), with what
+//! happened to it (`initiated`, `confirmed`, `updated`), the tracks
+//! deleted, and the ids of tentative tracks dropped.
+
+use std::collections::HashSet;
+
+use super::{Fnv, Limits, SessionKind};
+use crate::{
+    ServiceError,
+    plot_fusion::{
+        Network, PlotInput, SpecInput, TrackView, TrackerCounters,
+        asterix::{self, AsterixInput, AsterixSummary},
+        computation_error, mode_name, network, output,
+    },
+};
+use algo::{
+    AlgoError,
+    tracking::{
+        Tracker,
+        codec::{decode_counters, encode_counters},
+    },
+    wire::{Reader, Writer, corrupt},
+};
+
+/// Format of the kind's payload: 2 = format 1 (the network and the
+/// tracker) plus the radars' ASTERIX SAC/SIC; format 1 is read as radars
+/// without SAC/SIC.
+pub const FORMAT_VERSION: u8 = 2;
+
+/// Bit 31 of an encoded update's `frames` flags the ASTERIX summary after
+/// its counters (a batch never processes 2³¹ frames), so kept updates of
+/// earlier releases read unchanged.
+const ASTERIX_FLAG: u32 = 1 << 31;
+
+/// A batch of plots.
+#[derive(Debug, Clone, Default)]
+pub struct BatchInput {
+    pub plots: Vec<PlotInput>,
+    /// Raw ASTERIX; its plots follow `plots`.
+    pub asterix: Option<AsterixInput>,
+    /// Close the open frame now: process every buffered plot. Plots that
+    /// arrive later for that frame are late.
+    pub flush: bool,
+}
+
+/// What happened to a track in a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrackChange {
+    /// Started (tentative) in this batch.
+    Initiated,
+    /// Confirmed in this batch (possibly started in it too).
+    Confirmed,
+    /// Predicted and, if a plot was associated, updated.
+    Updated,
+}
+
+pub const TRACK_CHANGES: [TrackChange; 3] = [
+    TrackChange::Initiated,
+    TrackChange::Confirmed,
+    TrackChange::Updated,
+];
+
+pub fn track_change_name(c: TrackChange) -> &'static str {
+    match c {
+        TrackChange::Initiated => "initiated",
+        TrackChange::Confirmed => "confirmed",
+        TrackChange::Updated => "updated",
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChangedTrack {
+    pub change: TrackChange,
+    pub track: TrackView,
+}
+
+/// What one batch changed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BatchUpdate {
+    /// Frames processed by this batch.
+    pub frames: u32,
+    /// Plots buffered for a frame not yet complete.
+    pub pending_plots: u32,
+    /// Indices (into the batch's plots) of the late plots, dropped.
+    pub late_plots: Vec<u32>,
+    pub tracks: Vec<ChangedTrack>,
+    /// Confirmed tracks deleted, as they were when deleted.
+    pub deleted: Vec<TrackView>,
+    /// Tentative tracks dropped without being confirmed.
+    pub dropped: Vec<u64>,
+    pub counters: TrackerCounters,
+    /// What the batch's ASTERIX gave, when it had some.
+    pub asterix: Option<AsterixSummary>,
+}
+
+/// The session as a client reads it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionView {
+    pub mode: &'static str,
+    pub state_layout: &'static [&'static str],
+    pub radars: Vec<String>,
+    /// Time of the last processed frame.
+    pub last_frame_t: Option<f64>,
+    pub pending_plots: u32,
+    pub counters: TrackerCounters,
+    /// Confirmed then tentative tracks.
+    pub tracks: Vec<TrackView>,
+}
+
+/// The state: the network (ids, frame, rotations) and the tracker.
+pub struct PlotFusionSession {
+    network: Network,
+    tracker: Tracker,
+}
+
+fn status_code(s: &str) -> u8 {
+    match s {
+        "tentative" => 0,
+        "confirmed" => 1,
+        _ => 2,
+    }
+}
+
+fn status_of(code: u8) -> Result<&'static str, AlgoError> {
+    match code {
+        0 => Ok("tentative"),
+        1 => Ok("confirmed"),
+        2 => Ok("deleted"),
+        _ => Err(corrupt("track status")),
+    }
+}
+
+fn encode_track(w: &mut Writer, t: &TrackView) {
+    w.u64(t.id);
+    w.u8(status_code(t.status));
+    w.f64(t.t);
+    w.f64s(&t.state);
+    for row in &t.covariance {
+        w.f64_run(row);
+    }
+    w.opt(t.lat_deg, Writer::f64);
+    w.opt(t.lon_deg, Writer::f64);
+    w.opt(t.height_m, Writer::f64);
+    w.usize(t.radars.len());
+    for r in &t.radars {
+        w.str(r);
+    }
+    w.u32(t.hits);
+    w.u32(t.misses);
+    w.u32(t.consecutive_misses);
+    w.u32(t.age);
+    w.f64(t.last_update_t);
+}
+
+fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, AlgoError> {
+    let id = r.u64()?;
+    let status = status_of(r.u8()?)?;
+    let t = r.f64()?;
+    let state = r.f64s()?;
+    let n = state.len();
+    if !(n == 4 || n == 6) {
+        return Err(corrupt("track state size"));
+    }
+    let mut covariance = Vec::with_capacity(n);
+    for _ in 0..n {
+        let mut row = Vec::with_capacity(n);
+        for _ in 0..n {
+            row.push(r.f64()?);
+        }
+        covariance.push(row);
+    }
+    let lat_deg = r.opt(Reader::f64)?;
+    let lon_deg = r.opt(Reader::f64)?;
+    let height_m = r.opt(Reader::f64)?;
+    let k = r.len(8)?;
+    let radars = (0..k).map(|_| r.str()).collect::<Result<_, _>>()?;
+    Ok(TrackView {
+        id,
+        status,
+        t,
+        state,
+        covariance,
+        lat_deg,
+        lon_deg,
+        height_m,
+        radars,
+        hits: r.u32()?,
+        misses: r.u32()?,
+        consecutive_misses: r.u32()?,
+        age: r.u32()?,
+        last_update_t: r.f64()?,
+    })
+}
+
+fn stored(e: AlgoError) -> ServiceError {
+    ServiceError::Internal(format!("stored plot_fusion session: {e}"))
+}
+
+impl SessionKind for PlotFusionSession {
+    const TAG: u8 = 2;
+    const NAME: &'static str = "plot_fusion";
+    const BATCH_FIELD: &'static str = "plots";
+
+    type Spec = SpecInput;
+    type Batch = BatchInput;
+    type Update = BatchUpdate;
+    type View = SessionView;
+
+    fn create(spec: SpecInput, warnings: &mut Vec<String>) -> Result<Self, ServiceError> {
+        let (network, config, decided) = network::validate(&spec)?;
+        warnings.extend(decided);
+        let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+        Ok(Self { network, tracker })
+    }
+
+    fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
+        let asterix = batch
+            .asterix
+            .as_ref()
+            .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
+        if asterix == 0 {
+            limits.check_batch(batch.plots.len(), "plots")
+        } else {
+            limits.check_batch(
+                batch.plots.len() + asterix,
+                "plots (ASTERIX counted as one per 10 bytes)",
+            )
+        }
+    }
+
+    fn apply(
+        &mut self,
+        batch: &BatchInput,
+        limits: &Limits,
+        warnings: &mut Vec<String>,
+    ) -> Result<BatchUpdate, ServiceError> {
+        let mut plots = self
+            .network
+            .plots(&batch.plots, self.tracker.config(), "plots")?;
+        let json_plots = plots.len();
+        let mut summary = None;
+        let mut offsets = Vec::new();
+        if let Some(a) = &batch.asterix {
+            let reference = self.tracker.last_time().or(a.reference_t);
+            let clock = asterix::clock(a, "asterix", reference)?;
+            let from = asterix::plots(&self.network, self.tracker.config(), &a.data, clock);
+            plots.extend(from.plots);
+            offsets = from.offsets;
+            warnings.extend(from.warnings);
+            summary = Some(from.summary);
+        }
+        let before: HashSet<u64> = self.tracker.track_ids().collect();
+        let mut report = self
+            .tracker
+            .process_with(&plots, batch.flush, &mut |_| {})
+            .map_err(computation_error)?;
+        let late_json: Vec<usize> = report
+            .late
+            .iter()
+            .copied()
+            .filter(|&i| i < json_plots)
+            .collect();
+        if let Some(s) = summary.as_mut() {
+            s.late_offsets = report
+                .late
+                .iter()
+                .filter(|&&i| i >= json_plots)
+                .map(|&i| offsets[i - json_plots])
+                .collect();
+            s.late = s.late_offsets.len();
+        }
+        let live = self.tracker.tracks();
+        if live.len() > limits.max_tracks {
+            return Err(ServiceError::QuotaExceeded(format!(
+                "the session would hold {} tracks (confirmed and tentative); the limit is {} \
+                 per session: lower the clutter density's effect (tracker.initiation) or use \
+                 more sessions",
+                live.len(),
+                limits.max_tracks
+            )));
+        }
+        if !report.late.is_empty() {
+            let first = match (late_json.first(), &summary) {
+                (Some(i), _) => format!("plots[{i}]"),
+                (None, Some(s)) => format!(
+                    "the ASTERIX record at offset {}",
+                    s.late_offsets.first().copied().unwrap_or(0)
+                ),
+                (None, None) => "plots".into(),
+            };
+            warnings.push(format!(
+                "{} late plot(s) dropped (older than the last processed frame at t = {}; \
+                 first {first}): send plots in time order, or flush less often",
+                report.late.len(),
+                self.tracker.last_time().unwrap_or(f64::NAN),
+            ));
+        }
+        report.late = late_json;
+        let confirmed: HashSet<u64> = report.confirmed.iter().copied().collect();
+        let deleted_ids: HashSet<u64> = report.deleted.iter().map(|t| t.id).collect();
+        let live_ids: HashSet<u64> = live.iter().map(|t| t.id).collect();
+        let mut dropped: Vec<u64> = before
+            .iter()
+            .filter(|id| !live_ids.contains(id) && !deleted_ids.contains(id))
+            .copied()
+            .collect();
+        dropped.sort_unstable();
+        let tracks = if report.frames == 0 {
+            Vec::new()
+        } else {
+            live.iter()
+                .map(|t| ChangedTrack {
+                    change: if confirmed.contains(&t.id) {
+                        TrackChange::Confirmed
+                    } else if !before.contains(&t.id) {
+                        TrackChange::Initiated
+                    } else {
+                        TrackChange::Updated
+                    },
+                    track: self.network.track_view(t),
+                })
+                .collect()
+        };
+        Ok(BatchUpdate {
+            frames: report.frames as u32,
+            pending_plots: report.pending as u32,
+            late_plots: std::mem::take(&mut report.late)
+                .into_iter()
+                .map(|i| i as u32)
+                .collect(),
+            tracks,
+            deleted: report
+                .deleted
+                .iter()
+                .map(|t| self.network.track_view(t))
+                .collect(),
+            dropped,
+            counters: self.tracker.counters().into(),
+            asterix: summary,
+        })
+    }
+
+    fn acknowledgement(&self) -> BatchUpdate {
+        BatchUpdate {
+            frames: 0,
+            pending_plots: self.tracker.pending() as u32,
+            late_plots: Vec::new(),
+            tracks: Vec::new(),
+            deleted: Vec::new(),
+            dropped: Vec::new(),
+            counters: self.tracker.counters().into(),
+            asterix: None,
+        }
+    }
+
+    fn fingerprint(batch: &BatchInput) -> Option<u64> {
+        let asterix = batch.asterix.as_ref().filter(|a| !a.data.is_empty());
+        if batch.plots.is_empty() && asterix.is_none() {
+            return None;
+        }
+        let mut h = Fnv::default();
+        h.bytes(&[u8::from(batch.flush)]);
+        if let Some(a) = asterix {
+            h.bytes(&a.data);
+            h.str(a.date.as_deref());
+            h.opt_f64(a.day_start_t);
+        }
+        for p in &batch.plots {
+            h.str(p.radar_id.as_deref());
+            for x in [
+                p.t,
+                p.range_m,
+                p.azimuth_deg,
+                p.elevation_deg,
+                p.radial_velocity_mps,
+            ] {
+                h.opt_f64(x);
+            }
+        }
+        Some(h.0)
+    }
+
+    fn view(&self) -> Result<SessionView, ServiceError> {
+        Ok(SessionView {
+            mode: mode_name(self.tracker.mode()),
+            state_layout: output::layout(self.tracker.config().axes),
+            radars: self.network.radar_ids.clone(),
+            last_frame_t: self.tracker.last_time(),
+            pending_plots: self.tracker.pending() as u32,
+            counters: self.tracker.counters().into(),
+            tracks: self
+                .tracker
+                .tracks()
+                .iter()
+                .map(|t| self.network.track_view(t))
+                .collect(),
+        })
+    }
+
+    fn encode(&self, w: &mut Writer) {
+        w.u8(FORMAT_VERSION);
+        self.network.encode(w);
+        w.bytes(&self.tracker.encode());
+        self.network.encode_sources(w);
+    }
+
+    fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
+        let format = r.u8().map_err(stored)?;
+        if !(1..=FORMAT_VERSION).contains(&format) {
+            return Err(ServiceError::Internal(format!(
+                "stored plot_fusion session has format {format}; this release reads 1 to \
+                 {FORMAT_VERSION}"
+            )));
+        }
+        let network = Network::decode(r).map_err(stored)?;
+        let tracker = Tracker::decode(&r.bytes().map_err(stored)?).map_err(stored)?;
+        let network = if format >= 2 {
+            network.decode_sources(r).map_err(stored)?
+        } else {
+            network
+        };
+        if tracker.config().radars.len() != network.radar_ids.len() {
+            return Err(stored(corrupt("radar count")));
+        }
+        Ok(Self { network, tracker })
+    }
+
+    fn encode_update(u: &BatchUpdate, w: &mut Writer) {
+        w.u32(u.frames | if u.asterix.is_some() { ASTERIX_FLAG } else { 0 });
+        w.u32(u.pending_plots);
+        w.usize(u.late_plots.len());
+        for &i in &u.late_plots {
+            w.u32(i);
+        }
+        w.usize(u.tracks.len());
+        for c in &u.tracks {
+            w.u8(TRACK_CHANGES
+                .iter()
+                .position(|k| *k == c.change)
+                .unwrap_or(0) as u8);
+            encode_track(w, &c.track);
+        }
+        w.usize(u.deleted.len());
+        for t in &u.deleted {
+            encode_track(w, t);
+        }
+        w.usize(u.dropped.len());
+        for &id in &u.dropped {
+            w.u64(id);
+        }
+        encode_counters(w, &u.counters.into());
+        if let Some(a) = &u.asterix {
+            encode_summary(w, a);
+        }
+    }
+
+    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+        let frames = r.u32()?;
+        let has_asterix = frames & ASTERIX_FLAG != 0;
+        let frames = frames & !ASTERIX_FLAG;
+        let pending_plots = r.u32()?;
+        let n = r.len(4)?;
+        let late_plots = (0..n).map(|_| r.u32()).collect::<Result<_, _>>()?;
+        let n = r.len(8)?;
+        let mut tracks = Vec::with_capacity(n);
+        for _ in 0..n {
+            let change = *TRACK_CHANGES
+                .get(r.u8()? as usize)
+                .ok_or_else(|| corrupt("track change"))?;
+            tracks.push(ChangedTrack {
+                change,
+                track: decode_track(r)?,
+            });
+        }
+        let n = r.len(8)?;
+        let deleted = (0..n).map(|_| decode_track(r)).collect::<Result<_, _>>()?;
+        let n = r.len(8)?;
+        let dropped = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
+        Ok(BatchUpdate {
+            frames,
+            pending_plots,
+            late_plots,
+            tracks,
+            deleted,
+            dropped,
+            counters: decode_counters(r)?.into(),
+            asterix: if has_asterix {
+                Some(decode_summary(r)?)
+            } else {
+                None
+            },
+        })
+    }
+}
+
+fn encode_summary(w: &mut Writer, a: &AsterixSummary) {
+    for n in [
+        a.bytes,
+        a.blocks,
+        a.records,
+        a.target_reports,
+        a.plots,
+        a.north_markers,
+        a.sector_crossings,
+        a.other_service_messages,
+        a.unmapped,
+        a.test_targets,
+        a.incomplete,
+        a.rejected,
+        a.late,
+        a.errors_not_listed,
+    ] {
+        w.usize(n);
+    }
+    w.usize(a.late_offsets.len());
+    a.late_offsets.iter().for_each(|&o| w.usize(o));
+    w.opt(a.first_t, Writer::f64);
+    w.opt(a.last_t, Writer::f64);
+    w.usize(a.errors.len());
+    for e in &a.errors {
+        w.usize(e.offset);
+        w.str(&e.reason);
+    }
+}
+
+fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, AlgoError> {
+    let mut n = [0usize; 14];
+    for x in &mut n {
+        *x = r.usize()?;
+    }
+    let k = r.len(8)?;
+    let late_offsets = (0..k).map(|_| r.usize()).collect::<Result<_, _>>()?;
+    let first_t = r.opt(Reader::f64)?;
+    let last_t = r.opt(Reader::f64)?;
+    let k = r.len(9)?;
+    let mut errors = Vec::with_capacity(k);
+    for _ in 0..k {
+        errors.push(formats::asterix::DecodeError {
+            offset: r.usize()?,
+            reason: r.str()?,
+        });
+    }
+    Ok(AsterixSummary {
+        bytes: n[0],
+        blocks: n[1],
+        records: n[2],
+        target_reports: n[3],
+        plots: n[4],
+        north_markers: n[5],
+        sector_crossings: n[6],
+        other_service_messages: n[7],
+        unmapped: n[8],
+        test_targets: n[9],
+        incomplete: n[10],
+        rejected: n[11],
+        late: n[12],
+        errors_not_listed: n[13],
+        late_offsets,
+        first_t,
+        last_t,
+        errors,
+    })
+}
+
+// The batch endpoint's types, for the equality test below.
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plot_fusion::{self as pf, RadarInput, SiteInput, TrackInput};
+
+    fn spec() -> SpecInput {
+        SpecInput {
+            origin: None,
+            radars: [("a", -200.0, 10.0), ("b", 200.0, 8.0)]
+                .into_iter()
+                .map(|(id, x, period)| RadarInput {
+                    id: Some(id.into()),
+                    kind: Some("2d".into()),
+                    site: Some(SiteInput {
+                        geodetic: None,
+                        position_m: Some(vec![x, 0.0]),
+                    }),
+                    sigma_range_m: Some(100.0),
+                    sigma_azimuth_deg: Some(0.1),
+                    scan_period_s: Some(period),
+                    ..Default::default()
+                })
+                .collect(),
+            tracker: Default::default(),
+        }
+    }
+
+    /// Two crossing targets seen every 10 s and 8 s, with a deterministic
+    /// wobble standing in for noise.
+    fn plots() -> Vec<PlotInput> {
+        let mut out = Vec::new();
+        for (id, x, period) in [("a", -200.0, 10.0), ("b", 200.0, 8.0)] {
+            let mut t: f64 = 0.0;
+            let mut k = 0.0;
+            while t <= 120.0 {
+                for (e0, n0, ve, vn) in [
+                    (-25_000.0, 35_000.0, 30.0, -50.0),
+                    (-26_000.0, 31_000.0, 50.0, 20.0),
+                ] {
+                    let (e, n): (f64, f64) = (e0 + ve * t - x, n0 + vn * t);
+                    k += 1.0;
+                    out.push(PlotInput {
+                        radar_id: Some(id.into()),
+                        t: Some(t),
+                        range_m: Some(e.hypot(n) + 60.0 * (k * 1.7f64).sin()),
+                        azimuth_deg: Some(e.atan2(n).to_degrees() + 0.05 * (k * 2.3f64).cos()),
+                        ..Default::default()
+                    });
+                }
+                t += period;
+            }
+        }
+        out.sort_by(|a, b| a.t.unwrap().total_cmp(&b.t.unwrap()));
+        out
+    }
+
+    #[test]
+    fn batches_in_time_order_give_the_batch_endpoints_tracks_across_encode_and_decode() {
+        let all = plots();
+        let whole = pf::track(TrackInput {
+            spec: spec(),
+            plots: all.clone(),
+            asterix: None,
+            history: false,
+        })
+        .unwrap();
+        let limits = Limits {
+            max_tracks: 100,
+            max_batch_reports: 1000,
+        };
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
+        let chunks: Vec<&[PlotInput]> = all.chunks(7).collect();
+        let n = chunks.len();
+        for (i, chunk) in chunks.into_iter().enumerate() {
+            let mut w = Writer::default();
+            session.encode(&mut w);
+            session = PlotFusionSession::decode(&mut Reader::new(&w.buf)).unwrap();
+            let mut warnings = Vec::new();
+            let update = session
+                .apply(
+                    &BatchInput {
+                        plots: chunk.to_vec(),
+                        flush: i + 1 == n,
+                        ..Default::default()
+                    },
+                    &limits,
+                    &mut warnings,
+                )
+                .unwrap();
+            assert!(warnings.is_empty(), "{warnings:?}");
+            let mut w = Writer::default();
+            PlotFusionSession::encode_update(&update, &mut w);
+            let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
+            assert_eq!(back, update);
+        }
+        let view = session.view().unwrap();
+        assert_eq!(view.tracks, whole.tracks);
+        assert_eq!(view.counters, whole.counters);
+        assert_eq!(view.pending_plots, 0);
+        assert_eq!(whole.tracks.len(), 2);
+    }
+
+    #[test]
+    fn a_late_plot_is_dropped_and_named_and_a_failed_batch_is_an_error() {
+        let limits = Limits {
+            max_tracks: 100,
+            max_batch_reports: 1000,
+        };
+        let all = plots();
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
+        let mut warnings = Vec::new();
+        session
+            .apply(
+                &BatchInput {
+                    plots: all[..20].to_vec(),
+                    flush: true,
+                    ..Default::default()
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap();
+        let mut late = all[0].clone();
+        late.t = Some(0.0);
+        let update = session
+            .apply(
+                &BatchInput {
+                    plots: vec![all[20].clone(), late],
+                    flush: false,
+                    ..Default::default()
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap();
+        assert_eq!(update.late_plots, vec![1]);
+        assert_eq!(update.counters.late, 1);
+        assert!(warnings[0].contains("late"), "{warnings:?}");
+        let mut bad = all[21].clone();
+        bad.radar_id = Some("zz".into());
+        let err = session
+            .apply(
+                &BatchInput {
+                    plots: vec![bad],
+                    flush: false,
+                    ..Default::default()
+                },
+                &limits,
+                &mut warnings,
+            )
+            .unwrap_err();
+        match err {
+            ServiceError::InvalidInput(v) => assert_eq!(v[0].field, "plots[0].radar_id"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn format_1_payloads_read_without_sac_sic_and_asterix_updates_round_trip() {
+        let mut with_sources = spec();
+        with_sources.radars[0].sac = Some(25);
+        with_sources.radars[0].sic = Some(1);
+        let session = PlotFusionSession::create(with_sources, &mut Vec::new()).unwrap();
+        let mut w = Writer::default();
+        session.encode(&mut w);
+        let back = PlotFusionSession::decode(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), Some(0));
+        // Format 1, as the release before ASTERIX wrote it: no SAC/SIC.
+        let mut old = Writer::default();
+        old.u8(1);
+        session.network.encode(&mut old);
+        old.bytes(&session.tracker.encode());
+        let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), None);
+        assert_eq!(back.network.radar_ids, session.network.radar_ids);
+        // An update with an ASTERIX summary round-trips; one without is
+        // encoded as before (bit 31 of frames clear).
+        let mut update = session.acknowledgement();
+        update.frames = 3;
+        let mut plain = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut plain);
+        assert_eq!(plain.buf[..4], 3u32.to_le_bytes());
+        update.asterix = Some(AsterixSummary {
+            bytes: 40,
+            records: 3,
+            late: 1,
+            late_offsets: vec![17],
+            first_t: Some(1.5),
+            errors: vec![formats::asterix::DecodeError {
+                offset: 30,
+                reason: "cut".into(),
+            }],
+            ..Default::default()
+        });
+        let mut w = Writer::default();
+        PlotFusionSession::encode_update(&update, &mut w);
+        let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
+        assert_eq!(back, update);
+    }
+}
