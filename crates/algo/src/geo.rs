@@ -132,10 +132,15 @@ pub fn ecef_to_geodetic(ell: &Ellipsoid, ecef: [f64; 3]) -> Result<(f64, f64, f6
 /// `(cos φ cos λ, cos φ sin λ, sin φ)`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Vertical {
+    /// Geodetic (ellipsoidal) height (m).
     pub h: f64,
+    /// Sine of the geodetic latitude φ.
     pub sin_lat: f64,
+    /// Cosine of the geodetic latitude φ.
     pub cos_lat: f64,
+    /// Sine of the longitude λ.
     pub sin_lon: f64,
+    /// Cosine of the longitude λ.
     pub cos_lon: f64,
 }
 

@@ -1,3 +1,4 @@
+#![warn(missing_docs)]
 //! The numerical core: pure functions over nalgebra and std. No I/O, no async,
 //! no serialisation; every later algorithm builds on these pieces.
 

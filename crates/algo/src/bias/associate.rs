@@ -50,15 +50,20 @@ use crate::polar::wrap_angle;
 /// A raw radar plot of a track: time, range (m), azimuth (rad, from north).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RadarSample {
+    /// Time of the plot (s).
     pub t: f64,
+    /// Measured range (m).
     pub range: f64,
+    /// Measured azimuth (rad, clockwise from north).
     pub azimuth: f64,
 }
 
 /// An AIS report in the radar's local plane.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AisPoint {
+    /// Time of the report (s).
     pub t: f64,
+    /// Position (east, north) in the radar's local plane (m).
     pub position: [f64; 2],
     /// Standard deviation of the report's time (s): a whole-second time
     /// stamp taken at the middle of its second is uniform within ±0.5 s,
@@ -87,7 +92,9 @@ pub fn quantisation_sigma(resolution: f64) -> f64 {
 /// A range and azimuth bias (m, rad).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Bias {
+    /// Range bias Δρ (m).
     pub range: f64,
+    /// Azimuth bias Δθ (rad).
     pub azimuth: f64,
 }
 
@@ -106,7 +113,9 @@ pub enum Seeding {
 /// The path that produced the reported result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Path {
+    /// Seeded by the CA-CFAR credible pairs (the paper's path).
     Cfar,
+    /// Seeded by the bias search over pair-implied hypotheses.
     BiasSearch,
     /// Nothing could be associated; no bias was estimated.
     None,
@@ -121,18 +130,24 @@ pub const AMBIGUOUS_DISTANCE_RATIO: f64 = 1.5;
 /// The widened search looks this many times past the bounds.
 pub const WIDEN_FACTOR: f64 = 4.0;
 
+/// Parameters of [`associate`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Config {
     /// Longest gap between two radar samples interpolated across (s); no
     /// extrapolation beyond a track's first or last sample.
     pub max_gap: f64,
+    /// The CA-CFAR detector of the credible pairs (eqs. 7–10).
     pub cfar: CfarConfig,
     /// Gate on the mean distance of an associated pair (m).
     pub gate: f64,
+    /// How the initial bias is found.
     pub seeding: Seeding,
+    /// Most rounds of compensation, assignment and re-estimation in a
+    /// refinement (1 to 1000).
     pub max_iterations: usize,
     /// Bounds of the bias search.
     pub max_range_bias: f64,
+    /// Largest azimuth bias searched (rad).
     pub max_azimuth_bias: f64,
     /// Most hypotheses ranked (the most time-consistent pairs first).
     pub max_hypotheses: usize,
@@ -145,7 +160,9 @@ pub struct Config {
     /// The radar's stated errors (m, rad) and the AIS position error per
     /// axis (m): the model of the residuals' spread.
     pub sigma_range: f64,
+    /// The radar's stated azimuth error, one standard deviation (rad).
     pub sigma_azimuth: f64,
+    /// The AIS position error per axis, one standard deviation (m).
     pub sigma_ais: f64,
     /// Fewest common instants for a pair to enter the distance matrix
     /// (at least 2: one instant implies any bias exactly).
@@ -176,6 +193,8 @@ impl Default for Config {
 /// A bias estimate with its covariance (rows/cols: range m, azimuth rad).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BiasEstimate {
+    /// The estimated bias: the mean range and azimuth residuals over all
+    /// samples.
     pub bias: Bias,
     /// The reported covariance: cluster-robust CR2 over pairs scaled to the
     /// small-sample 95 % quantile (Hotelling T² with the effective number of
@@ -189,47 +208,67 @@ pub struct BiasEstimate {
     /// Root mean square of the residuals after compensation in units of
     /// their stated standard deviations (1 when the stated errors hold).
     pub residual_ratio: f64,
+    /// Pairs with residuals in the estimate.
     pub pairs: usize,
+    /// Residual samples in the estimate (N: the pairs' common instants).
     pub samples: usize,
 }
 
 /// One associated pair: radar track index, AIS ship index, eq. 6 distances.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Association {
+    /// Radar track index.
     pub radar: usize,
+    /// AIS ship index.
     pub ais: usize,
+    /// Eq. 6 mean distance before compensation (m).
     pub distance_before: f64,
+    /// Eq. 6 mean distance after compensation by the estimated bias (m).
     pub distance_after: f64,
+    /// Common instants of the pair (AIS report times within the track).
     pub common: usize,
 }
 
 /// A distinct bias that associates as many pairs nearly as well.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Alternative {
+    /// The alternative bias, refined.
     pub bias: Bias,
+    /// Pairs it gates.
     pub pairs: usize,
+    /// Mean eq. 6 distance of those pairs after compensation by it (m).
     pub mean_distance: f64,
 }
 
+/// The result of [`associate`]: the path taken, the bias estimate, the
+/// associated pairs and the diagnostics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outcome {
+    /// The path that produced the result.
     pub path: Path,
+    /// CA-CFAR thresholds S1 and S2, when the detector ran and found them.
     pub thresholds: Option<Thresholds>,
     /// Credible pairs of eq. 7 (radar, AIS, raw eq. 6 distance).
     pub credible_pairs: Vec<(usize, usize, f64)>,
+    /// The bias estimate; `None` when nothing could be associated.
     pub estimate: Option<BiasEstimate>,
+    /// Refinement rounds of the chosen path.
     pub iterations: usize,
     /// Whether the refinement ended with an unchanged association.
     pub converged: bool,
+    /// The associated pairs after refinement with the estimated bias.
     pub associations: Vec<Association>,
     /// Mean distance radar–AIS over the associated pairs' common instants,
     /// before and after compensation.
     pub mean_error_before: Option<f64>,
+    /// Mean distance radar–AIS over the associated pairs' common instants
+    /// after compensation (m).
     pub mean_error_after: Option<f64>,
     /// Gated pairs reached from each seed, when it ran: (CA-CFAR, search).
     pub gated_by_seed: (Option<usize>, Option<usize>),
     /// Pair-implied biases ranked, and scored exactly, by the search.
     pub hypotheses: usize,
+    /// Pair-implied biases scored exactly by the search.
     pub evaluated: usize,
     /// The search went past the bounds: (gated pairs there, best within).
     pub widened: Option<(usize, usize)>,

@@ -28,6 +28,8 @@ impl Default for CfarConfig {
 }
 
 impl CfarConfig {
+    /// Checks the parameters' ranges: N from 1 to 1000, at most 100 guard
+    /// cells, K finite and > 0, h finite and ≥ 1.
     pub fn validate(&self) -> Result<(), AlgoError> {
         let bad = |what, reason: &str| {
             Err(AlgoError::InvalidParameter {

@@ -81,6 +81,7 @@ impl TransverseMercator {
         })
     }
 
+    /// The ellipsoid projected.
     pub fn ellipsoid(&self) -> Ellipsoid {
         self.ellipsoid
     }

@@ -29,7 +29,9 @@ pub const STALENESS_PERIODS: f64 = 1.5;
 /// One reported estimate of a local track in canonical order.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Estimate {
+    /// Time of the estimate (s).
     pub t: f64,
+    /// State vector.
     pub x: Vec<f64>,
     /// Row-major.
     pub p: Vec<f64>,

@@ -9,7 +9,9 @@ use crate::{AlgoError, small};
 /// A fused estimate and how it was obtained.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fused {
+    /// Fused state.
     pub x: DVector<f64>,
+    /// Fused covariance.
     pub p: DMatrix<f64>,
     /// Covariance-intersection weights of the successive fusions (empty for
     /// Bar-Shalom–Campo).

@@ -12,15 +12,20 @@ pub type TrackRef = (usize, usize);
 /// statistic (the order of eqs. 18–20).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Link {
+    /// One track of the pair.
     pub a: TrackRef,
+    /// The other track, of another node.
     pub b: TrackRef,
+    /// Correlation quality m: samples passing the first threshold.
     pub m: u32,
+    /// Mean test statistic over the pair's samples.
     pub mean_statistic: f64,
 }
 
 /// A rejected link and the track it collided with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Conflict {
+    /// The rejected link.
     pub link: Link,
     /// The node that would hold two tracks in one group.
     pub node: usize,
@@ -32,7 +37,10 @@ pub struct Conflict {
 /// first member) and the links rejected to keep them consistent.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Grouping {
+    /// Groups of correlated tracks.
     pub groups: Vec<Vec<TrackRef>>,
+    /// Links rejected because they would put two tracks of one node in a
+    /// group.
     pub conflicts: Vec<Conflict>,
 }
 

@@ -16,6 +16,7 @@ use crate::{AlgoError, polar::wrap_angle};
 pub const INITIAL_TRACKING_INDEX: f64 = 0.5;
 /// Bounds of the adaptive α (keeps 1 − α away from 0).
 pub const ALPHA_MIN: f64 = 0.05;
+/// Upper bound of the adaptive α.
 pub const ALPHA_MAX: f64 = 0.95;
 
 /// Kalata's steady-state gains for tracking index λ = σ_w T² / σ_v:
@@ -55,10 +56,16 @@ pub fn steady_covariance(alpha: f64, beta: f64, t: f64) -> [f64; 3] {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Filter {
     /// Adaptive α-β with a residual window of `window` (3 to 5) points.
-    AlphaBeta { window: usize },
+    AlphaBeta {
+        /// Residual window (points).
+        window: usize,
+    },
     /// Constant velocity, discrete white-noise acceleration of standard
     /// deviation `sigma_a` (m/s²; divided by the range for an azimuth).
-    Kalman { sigma_a: f64 },
+    Kalman {
+        /// Standard deviation of the white-noise acceleration (m/s²).
+        sigma_a: f64,
+    },
 }
 
 /// One filtered estimate in the measurement's coordinates, on fixed-size
@@ -68,9 +75,12 @@ pub enum Filter {
 /// top-left m × m block; the rest is zero.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Estimate {
+    /// Time of the plot the estimate is at (s).
     pub t: f64,
     /// The measured components m (2: range and azimuth, 3: local ENU).
     pub dim: usize,
+    /// The interleaved state `[z₁, ż₁, …, z_m, ż_m]` in the first 2m
+    /// entries.
     pub x: Vector6<f64>,
     /// The covariance of the estimate's error for the gains actually used
     /// (see [`filter`]).

@@ -98,6 +98,8 @@ pub struct Cone {
 }
 
 impl Cone {
+    /// What placing plots of the 2D radar with frame `radar` in the ENU frame
+    /// of `centre` needs.
     pub fn new(radar: &LocalFrame, centre: &LocalFrame) -> Self {
         let ell = radar.ellipsoid();
         let (lat, _, hs) = radar.origin_geodetic();

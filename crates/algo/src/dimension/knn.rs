@@ -16,8 +16,11 @@
 /// The association state of a pair.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Period {
+    /// The first N₀ tests: component-threshold hits are counted.
     Association,
+    /// χ² tests with the counter T_ij; the pair forms a system track.
     Check,
+    /// The pair stays correlated; no more tests.
     Hold,
     /// Rejected in the association period; never tested again.
     Rejected,
@@ -35,10 +38,13 @@ pub struct KnnParams {
 /// The counters of one pair.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PairState {
+    /// The period the pair is in.
     pub period: Period,
     /// Tests in the current association period.
     pub tests: u32,
+    /// Hits among those tests.
     pub hits: u32,
+    /// Misses among those tests.
     pub misses: u32,
     /// T_ij of the check period.
     pub counter: i32,
@@ -49,6 +55,7 @@ pub struct PairState {
 }
 
 impl PairState {
+    /// A pair at the start of its association period, every counter zero.
     pub fn new() -> Self {
         Self {
             period: Period::Association,

@@ -37,40 +37,70 @@ pub const CLIMB_SIGMA_MPS: f64 = 10.0;
 /// tolerance of the order of a flight level.
 pub const MAPPING_ALTITUDE_SIGMA_M: f64 = 300.0;
 
+/// The fusion method of seed 003 §1: where a 2D track's height comes from
+/// and in which space pairs are tested.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Method {
+    /// 2D tracks at the preset altitude (σ_h = 300 m); 3D test.
     Mapping,
+    /// 2D tracks at the preset altitude with σ_h = `altitude_sigma`; test on
+    /// the horizontal footprint; fusion puts a 2D track at the correlated 3D
+    /// tracks' height.
     Lifting,
+    /// As lifting, test on the direction from the Earth's centre; fusion of
+    /// the direction from all tracks and of the geocentric distance from 3D
+    /// tracks only.
     Splitting,
 }
 
+/// A radar of the scene: its site, whether it measures elevation, its
+/// measurement errors and its scan period.
 #[derive(Debug, Clone)]
 pub struct Radar {
+    /// The radar's local ENU frame, at its site.
     pub frame: LocalFrame,
+    /// Whether the radar measures elevation (3D); a 2D radar measures slant
+    /// range and azimuth only.
     pub three_d: bool,
+    /// Slant-range standard deviation (m).
     pub sigma_range: f64,
+    /// Azimuth standard deviation (rad).
     pub sigma_azimuth: f64,
+    /// Elevation standard deviation (rad); read for 3D radars only.
     pub sigma_elevation: f64,
+    /// Scan period (s).
     pub scan_period: f64,
 }
 
+/// A plot of a local track in its radar's measurement coordinates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plot {
+    /// Time of the plot (s).
     pub t: f64,
+    /// Slant range (m).
     pub range: f64,
+    /// Azimuth (rad, clockwise from north).
     pub azimuth: f64,
+    /// Elevation above the radar's local horizontal (rad); `None` from a 2D
+    /// radar.
     pub elevation: Option<f64>,
 }
 
+/// A local track: the plots one radar reported for one target.
 #[derive(Debug, Clone)]
 pub struct LocalTrack {
+    /// Index of the radar (into the scene's radars).
     pub radar: usize,
+    /// The plots, in time order.
     pub plots: Vec<Plot>,
 }
 
+/// Parameters of the fusion.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Config {
+    /// The filter run on every local track.
     pub filter: Filter,
+    /// Parameters of the modified K-NN association.
     pub knn: KnnParams,
     /// Mapping's preset altitude and the nominal height of 2D tracks (m).
     pub preset_altitude: f64,
@@ -80,14 +110,19 @@ pub struct Config {
     pub gate_sigmas: f64,
     /// χ² thresholds of the check period for 2 and 3 degrees of freedom.
     pub chi2_2: f64,
+    /// χ² threshold of the check period for 3 degrees of freedom (mapping's
+    /// test).
     pub chi2_3: f64,
 }
 
 /// A centre-ENU estimate `[x, vx, y, vy, z, vz]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct State6 {
+    /// Time of the estimate (s).
     pub t: f64,
+    /// The state `[x, vx, y, vy, z, vz]` in centre ENU (m, m/s).
     pub x: Vector6<f64>,
+    /// Covariance of `x`.
     pub p: Matrix6<f64>,
     /// The white-acceleration covariance (centre ENU, 3 × 3) of the local
     /// filter's model: an extrapolation by dt adds `A ⊗ [[dt⁴/4, dt³/2],
@@ -117,34 +152,49 @@ pub enum AltitudeSource {
 /// A system-track sample: the fused state and where its height comes from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sample {
+    /// Time of the sample (s).
     pub t: f64,
+    /// The fused state `[x, vx, y, vy, z, vz]` in centre ENU (m, m/s).
     pub x: Vector6<f64>,
+    /// Covariance of `x`.
     pub p: Matrix6<f64>,
+    /// Where the height comes from.
     pub altitude: AltitudeSource,
 }
 
+/// The modified K-NN result of one pair of local tracks of different
+/// radars.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairReport {
+    /// The smaller local track index.
     pub a: usize,
+    /// The larger local track index.
     pub b: usize,
+    /// The pair's K-NN counters after its last test.
     pub state: PairState,
     /// Mean test statistic d'S⁻¹d over all tests.
     pub mean_statistic: f64,
 }
 
+/// A system track: a group of correlated local tracks (or one track
+/// alone), fused.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SystemTrack {
     /// Local track indices, sorted.
     pub members: Vec<usize>,
+    /// The fused samples, in time order.
     pub samples: Vec<Sample>,
     /// False when no 3D radar sees the track (and the method is not mapping):
     /// the height is the nominal one and must not be trusted.
     pub altitude_known: bool,
 }
 
+/// What one method made of the scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outcome {
+    /// Every pair of local tracks of different radars that was tested.
     pub pairs: Vec<PairReport>,
+    /// The system tracks.
     pub system_tracks: Vec<SystemTrack>,
     /// Groups that would hold two tracks of one radar (links dropped).
     pub conflicts: usize,

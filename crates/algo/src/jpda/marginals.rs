@@ -48,6 +48,7 @@ pub struct ClusterProblem {
 /// (in the order of `ClusterProblem::gates[t]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Marginals {
+    /// Per track, β_t0 followed by β_tj of each gated measurement.
     pub beta: Vec<Vec<f64>>,
     /// Work done: merged hypothesis-tree edges (exact), joint events (naive)
     /// or products P_tj · F_tj (AMSJPDA).

@@ -31,7 +31,9 @@ pub use marginals::{
 /// A track's Gaussian estimate `x`, `P` (predicted on input, updated on output).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackEstimate {
+    /// State vector.
     pub x: DVector<f64>,
+    /// State covariance.
     pub p: DMatrix<f64>,
 }
 
@@ -39,14 +41,23 @@ pub struct TrackEstimate {
 #[derive(Debug, Clone, PartialEq)]
 pub enum SensorModel {
     /// z = H x + w, w ~ N(0, R).
-    Linear { h: DMatrix<f64>, r: DMatrix<f64> },
+    Linear {
+        /// Measurement matrix H.
+        h: DMatrix<f64>,
+        /// Measurement noise covariance R.
+        r: DMatrix<f64>,
+    },
     /// z = [range, azimuth(, elevation)] of the target relative to `site`
     /// (local ENU metres), angles in radians, azimuth clockwise from north;
     /// updated by an extended Kalman filter.
     Polar {
+        /// Sensor position (local ENU, m).
         site: [f64; 3],
+        /// Where the position components lie in the track state.
         layout: PositionLayout,
+        /// Range standard deviation (m).
         sigma_range: f64,
+        /// Azimuth standard deviation (rad).
         sigma_azimuth: f64,
         /// Present for a 3D radar (then measurements have three components).
         sigma_elevation: Option<f64>,
@@ -79,7 +90,9 @@ pub enum Clutter {
 /// target's own measurement falls inside it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gate {
+    /// χ² threshold γ (∞ for an unbounded gate).
     pub threshold: f64,
+    /// P_G, the probability that the target's own measurement falls inside.
     pub probability: f64,
 }
 
@@ -121,11 +134,15 @@ impl Gate {
 /// One sensor's scan.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scan {
+    /// How the sensor measures a target state.
     pub model: SensorModel,
+    /// The scan's measurements.
     pub measurements: Vec<DVector<f64>>,
     /// P_D in (0, 1].
     pub detection_probability: f64,
+    /// The validation gate.
     pub gate: Gate,
+    /// The clutter model.
     pub clutter: Clutter,
 }
 
@@ -145,6 +162,7 @@ pub enum Method {
 /// Limits of the exact computation; beyond them a cluster falls back to AMSJPDA.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Config {
+    /// How β is computed.
     pub method: Method,
     /// Largest cluster (number of tracks) computed exactly.
     pub max_exact_tracks: usize,
@@ -155,8 +173,12 @@ pub struct Config {
 /// Why a cluster was not computed exactly.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fallback {
+    /// The cluster has more tracks than `max_exact_tracks`.
     TooManyTracks,
+    /// The merged hypothesis tree would exceed `max_hypotheses` edges.
     TooManyHypotheses,
+    /// More than 128 measurements are relevant at once to the partial
+    /// hypotheses.
     FrontierTooWide,
 }
 
@@ -171,6 +193,8 @@ pub struct ClusterReport {
     pub method: Method,
     /// Set when `Method::Exact` was asked for but AMSJPDA was used.
     pub fallback: Option<Fallback>,
+    /// Work done: [`Marginals::hypotheses`] (exact, AMSJPDA), or the gated
+    /// track–measurement pairs (nearest neighbour, global nearest neighbour).
     pub hypotheses: u64,
 }
 
@@ -186,6 +210,7 @@ pub struct Association {
 /// What one scan did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScanReport {
+    /// One report per cluster.
     pub clusters: Vec<ClusterReport>,
     /// Per track.
     pub associations: Vec<Association>,

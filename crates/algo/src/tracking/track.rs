@@ -28,10 +28,13 @@ pub enum TrackStatus {
 pub struct TrackOutput {
     /// Stable identifier, kept from tentative to confirmed.
     pub id: u64,
+    /// Where the track stands in its life.
     pub status: TrackStatus,
     /// Time of the state (the last frame the track was predicted to) (s).
     pub t: f64,
+    /// State vector in the fusion ENU frame (m, m/s).
     pub state: DVector<f64>,
+    /// Covariance of the state.
     pub covariance: DMatrix<f64>,
     /// Radars whose plots updated the track at its last update, ascending.
     pub radars: Vec<usize>,

@@ -39,7 +39,10 @@ pub enum Statistic {
 /// number of samples accumulated in the cycle (entry l − 1 has r = l).
 #[derive(Debug, Clone, PartialEq)]
 pub enum RuleSpec {
+    /// One L/R rule for every cycle.
     Fixed(LrRule),
+    /// A rule per number of accumulated samples; the last one holds from
+    /// then on.
     Schedule(Vec<LrRule>),
 }
 
@@ -60,17 +63,30 @@ pub enum Method {
     /// double-threshold correlation; with the fixed rule 1/1 it reduces to the
     /// classic weighted or modified test (seed 000 §3.3).
     DoubleThreshold {
+        /// The second threshold.
         rules: RuleSpec,
+        /// How competing candidates are resolved.
         resolution: Resolution,
     },
     /// Greedy nearest neighbour on the mean statistic over the last `window`
     /// common samples, gated by χ²(n·w).
-    NearestNeighbour { window: usize },
+    NearestNeighbour {
+        /// Common samples the mean statistic is taken over (1 to 64).
+        window: usize,
+    },
     /// Global optimal assignment on the same cost and gate.
-    GlobalAssignment { window: usize },
+    GlobalAssignment {
+        /// Common samples the mean statistic is taken over (1 to 64).
+        window: usize,
+    },
     /// K-nearest-neighbour: correlated when the two tracks were each other's
     /// nearest gated neighbour in at least `k` of the last `window` instants.
-    KNearestNeighbour { k: usize, window: usize },
+    KNearestNeighbour {
+        /// Instants as mutual nearest gated neighbours needed (1 to `window`).
+        k: usize,
+        /// Most recent common instants looked at (1 to 64).
+        window: usize,
+    },
 }
 
 /// How candidate pairs are found at each instant (the decisions are the same
@@ -86,18 +102,24 @@ pub enum Pruning {
 /// Everything the engine needs besides the data.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
+    /// The correlation method.
     pub method: Method,
+    /// The test statistic compared with the first threshold.
     pub statistic: Statistic,
     /// Significance level α of the first threshold (eq. 14).
     pub alpha: f64,
+    /// How candidate pairs are found at each instant.
     pub pruning: Pruning,
 }
 
 /// A pair's decision.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Decision {
+    /// The two tracks are one target.
     Correlated,
+    /// The two tracks are not one target.
     NotCorrelated,
+    /// No decision yet.
     Undecided,
 }
 
@@ -141,7 +163,9 @@ pub struct PairReport {
     pub a: usize,
     /// Track index in the second node.
     pub b: usize,
+    /// The pair's decision.
     pub decision: Decision,
+    /// Why the pair holds its decision.
     pub reason: Reason,
     /// A trial system track of eq. 21 (undecided, provisionally paired).
     pub trial: bool,
@@ -236,10 +260,14 @@ struct Pair {
 /// Which node of a correlated pair a track belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Side {
+    /// The first node of the pair (`na`).
     A,
+    /// The second node of the pair (`nb`).
     B,
 }
 
+/// Every [`Reason`]; a reason's index here is its one-byte code when a
+/// [`CorrelatorState`] is encoded.
 pub const REASONS: [Reason; 14] = [
     Reason::Testing,
     Reason::Threshold,
