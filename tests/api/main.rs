@@ -8,6 +8,7 @@ mod compression;
 mod connections;
 mod correlation;
 mod dimension;
+mod docs_examples;
 mod errors;
 mod fuzz;
 mod grpc;

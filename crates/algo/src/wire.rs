@@ -7,22 +7,27 @@ use super::AlgoError;
 /// Appends values to a byte buffer.
 #[derive(Debug, Default)]
 pub struct Writer {
+    /// The bytes written so far.
     pub buf: Vec<u8>,
 }
 
 impl Writer {
+    /// One byte.
     pub fn u8(&mut self, v: u8) {
         self.buf.push(v);
     }
 
+    /// A boolean as one byte, 0 or 1.
     pub fn bool(&mut self, v: bool) {
         self.buf.push(u8::from(v));
     }
 
+    /// A u32, little-endian.
     pub fn u32(&mut self, v: u32) {
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
 
+    /// A u64, little-endian.
     pub fn u64(&mut self, v: u64) {
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
@@ -32,10 +37,12 @@ impl Writer {
         self.u64(v as u64);
     }
 
+    /// An f64, its bits little-endian.
     pub fn f64(&mut self, v: f64) {
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
 
+    /// A length, then the values.
     pub fn f64s(&mut self, v: &[f64]) {
         self.usize(v.len());
         self.f64_run(v);
@@ -49,11 +56,13 @@ impl Writer {
         }
     }
 
+    /// A length, then the UTF-8 bytes.
     pub fn str(&mut self, v: &str) {
         self.usize(v.len());
         self.buf.extend_from_slice(v.as_bytes());
     }
 
+    /// A length, then the bytes.
     pub fn bytes(&mut self, v: &[u8]) {
         self.usize(v.len());
         self.buf.extend_from_slice(v);
@@ -77,6 +86,7 @@ pub struct Reader<'a> {
     buf: &'a [u8],
 }
 
+/// The error of a buffer that is not a valid encoding, saying why.
 pub fn corrupt(reason: &str) -> AlgoError {
     AlgoError::InvalidParameter {
         what: "state",
@@ -85,10 +95,12 @@ pub fn corrupt(reason: &str) -> AlgoError {
 }
 
 impl<'a> Reader<'a> {
+    /// A reader at the start of `buf`.
     pub fn new(buf: &'a [u8]) -> Self {
         Self { buf }
     }
 
+    /// Whether every byte has been read.
     pub fn is_empty(&self) -> bool {
         self.buf.is_empty()
     }
@@ -102,10 +114,12 @@ impl<'a> Reader<'a> {
         Ok(head)
     }
 
+    /// One byte.
     pub fn u8(&mut self) -> Result<u8, AlgoError> {
         Ok(self.take(1)?[0])
     }
 
+    /// A boolean; a byte other than 0 or 1 is an error.
     pub fn bool(&mut self) -> Result<bool, AlgoError> {
         match self.u8()? {
             0 => Ok(false),
@@ -114,11 +128,13 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// A little-endian u32.
     pub fn u32(&mut self) -> Result<u32, AlgoError> {
         let b = self.take(4)?;
         Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
     }
 
+    /// A little-endian u64.
     pub fn u64(&mut self) -> Result<u64, AlgoError> {
         let b = self.take(8)?;
         Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
@@ -139,26 +155,31 @@ impl<'a> Reader<'a> {
         Ok(n)
     }
 
+    /// An f64 from its little-endian bits.
     pub fn f64(&mut self) -> Result<f64, AlgoError> {
         let b = self.take(8)?;
         Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
     }
 
+    /// What [`Writer::f64s`] wrote.
     pub fn f64s(&mut self) -> Result<Vec<f64>, AlgoError> {
         let n = self.len(8)?;
         (0..n).map(|_| self.f64()).collect()
     }
 
+    /// What [`Writer::str`] wrote; bad UTF-8 is an error.
     pub fn str(&mut self) -> Result<String, AlgoError> {
         let n = self.len(1)?;
         String::from_utf8(self.take(n)?.to_vec()).map_err(|_| corrupt("bad UTF-8"))
     }
 
+    /// What [`Writer::bytes`] wrote.
     pub fn bytes(&mut self) -> Result<Vec<u8>, AlgoError> {
         let n = self.len(1)?;
         Ok(self.take(n)?.to_vec())
     }
 
+    /// What [`Writer::opt`] wrote, the value read by `f`.
     pub fn opt<T>(
         &mut self,
         f: impl FnOnce(&mut Self) -> Result<T, AlgoError>,

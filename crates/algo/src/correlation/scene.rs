@@ -96,10 +96,12 @@ impl Scene {
         Ok(self.nodes.len() - 1)
     }
 
+    /// State dimension of every track.
     pub fn dim(&self) -> usize {
         self.dim
     }
 
+    /// Indices of the position components in the state (2 or 3).
     pub fn position_indices(&self) -> &[usize] {
         &self.pos
     }
@@ -177,6 +179,7 @@ impl Scene {
         t.gain_factor = None;
     }
 
+    /// Track `track` of node `node`, to set its estimates.
     pub fn track_mut(&mut self, node: usize, track: usize) -> &mut Track {
         &mut self.nodes[node][track]
     }
@@ -322,10 +325,12 @@ impl Scene {
         Ok(scene)
     }
 
+    /// The tracks of every node, by node index.
     pub fn nodes(&self) -> &[Vec<Track>] {
         &self.nodes
     }
 
+    /// Track `track` of node `node`.
     pub fn track(&self, node: usize, track: usize) -> &Track {
         &self.nodes[node][track]
     }
@@ -390,11 +395,14 @@ impl Track {
         k >= self.first && self.present.get(k - self.first).copied().unwrap_or(false)
     }
 
+    /// The state at global instant `k` (present there), `dim` values.
     pub fn x(&self, k: usize, dim: usize) -> &[f64] {
         let k = k - self.first;
         &self.x[k * dim..(k + 1) * dim]
     }
 
+    /// The covariance at global instant `k` (present there), `dim` × `dim`
+    /// values row-major.
     pub fn p(&self, k: usize, dim: usize) -> &[f64] {
         let k = k - self.first;
         &self.p[k * dim * dim..(k + 1) * dim * dim]

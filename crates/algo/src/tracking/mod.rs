@@ -71,10 +71,13 @@ pub struct Counters {
     pub frames: u64,
     /// Fused plots produced by parallel mode (one per associated group).
     pub fused_plots: u64,
-    /// Tentative tracks started, confirmed, dropped; confirmed tracks deleted.
+    /// Tentative tracks started.
     pub started: u64,
+    /// Tentative tracks confirmed.
     pub confirmed: u64,
+    /// Tentative tracks dropped without being confirmed.
     pub dropped: u64,
+    /// Confirmed tracks deleted.
     pub deleted: u64,
     /// Confirmed tracks deleted as duplicates of another (see
     /// [`TrackerConfig::duplicate_probability`]).
@@ -142,6 +145,7 @@ impl Tracker {
         })
     }
 
+    /// The validated configuration.
     pub fn config(&self) -> &TrackerConfig {
         &self.config
     }
@@ -155,6 +159,7 @@ impl Tracker {
         }
     }
 
+    /// Running totals since the tracker was created.
     pub fn counters(&self) -> Counters {
         self.counters
     }
