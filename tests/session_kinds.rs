@@ -9,10 +9,7 @@
 
 use std::{future::Future, task::Poll, time::Duration};
 
-use algo::{
-    AlgoError,
-    wire::{self, Reader, Writer},
-};
+use formats::wire::{self, FormatError, Reader, Writer};
 use service::{
     ServiceError, Violations,
     correlation::{CorrelateInput, MethodInput, MotionModelInput, NodeInput, RuleInput},
@@ -99,7 +96,7 @@ impl SessionKind for Counter {
     }
 
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
-        let bad = |e: AlgoError| ServiceError::Internal(e.to_string());
+        let bad = |e: FormatError| ServiceError::Internal(e.to_string());
         if r.u8().map_err(bad)? != 1 {
             return Err(ServiceError::Internal("counter format".into()));
         }
@@ -113,7 +110,7 @@ impl SessionKind for Counter {
         w.u64(*u as u64);
     }
 
-    fn decode_update(r: &mut Reader<'_>) -> Result<i64, AlgoError> {
+    fn decode_update(r: &mut Reader<'_>) -> Result<i64, FormatError> {
         r.u64()
             .map(|v| v as i64)
             .map_err(|_| wire::corrupt("counter update"))

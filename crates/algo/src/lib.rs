@@ -16,7 +16,6 @@ pub mod motion;
 pub mod polar;
 pub mod small;
 pub mod tracking;
-pub mod wire;
 
 pub use error::AlgoError;
 pub use gaussian::Gaussian;

@@ -1,6 +1,7 @@
-//! Byte formats at the edges of the radar fusion service: EUROCONTROL
-//! ASTERIX input ([`asterix`]: CAT048 target reports, CAT034 service
-//! messages) and NMEA 0183 AIS sentences ([`nmea`]: `!AIVDM`/`!AIVDO`).
+//! Byte formats of the radar fusion service: EUROCONTROL ASTERIX input
+//! ([`asterix`]: CAT048 target reports, CAT034 service messages), NMEA 0183
+//! AIS sentences ([`nmea`]: `!AIVDM`/`!AIVDO`), and the stored-state codecs
+//! of streaming sessions ([`wire`], [`state`]).
 //!
 //! Decoders never panic on any input: every error carries where it was
 //! found and why, and decoding resumes at the next unit it can trust (the
@@ -8,3 +9,5 @@
 
 pub mod asterix;
 pub mod nmea;
+pub mod state;
+pub mod wire;

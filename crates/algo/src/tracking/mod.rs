@@ -22,7 +22,8 @@
 //! called. So feeding plots in chunks that arrive in time order (every
 //! plot of a later chunk no earlier than every plot of an earlier one)
 //! gives bit-for-bit the state of one call with all plots, also when the
-//! tracker is encoded and decoded between chunks ([`Tracker::encode`]).
+//! tracker is taken apart and rebuilt between chunks ([`Tracker::state`],
+//! [`Tracker::from_parts`]; the `formats` crate stores those parts as bytes).
 //! Within a call plots are sorted by time, stably. A plot older than the
 //! last processed frame (serial: t < its time; parallel: τ ≤ the last
 //! processed instant) is *late*: it is dropped, counted, and its index
@@ -30,27 +31,27 @@
 //!
 //! Errors: plots are validated before the tracker changes; a numerical
 //! error later in a call leaves the tracker part-way through the call, so
-//! a caller that must stay consistent keeps the encoded state and retries
+//! a caller that must stay consistent keeps the stored state and retries
 //! from it.
 
 pub mod associator;
-pub mod codec;
 pub mod config;
 mod deleter;
 pub mod initiator;
 pub mod plot_association;
 pub mod registration;
+mod state;
 mod track;
 
 #[cfg(test)]
 mod tests;
 
-pub use codec::FORMAT_VERSION;
 pub use config::{
     Deletion, Initiation, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate,
 };
 pub use registration::{CartesianPlot, Doppler};
-pub use track::{TrackOutput, TrackStatus};
+pub use state::{TrackerParts, TrackerState};
+pub use track::{Track, TrackOutput, TrackStatus};
 
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
@@ -58,7 +59,6 @@ use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutte
 use initiator::Initiator;
 use plot_association::associate_and_fuse;
 use registration::{extrapolate, register};
-use track::Track;
 
 /// Running totals since the tracker was created.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -252,18 +252,6 @@ impl Tracker {
             .collect();
         confirmed.sort_by_key(|t| t.id);
         confirmed
-    }
-
-    /// The tracker as bytes (configuration included), for
-    /// [`Tracker::decode`].
-    pub fn encode(&self) -> Vec<u8> {
-        codec::encode(self)
-    }
-
-    /// A tracker from [`Tracker::encode`]'s bytes; the configuration is
-    /// validated and every matrix checked.
-    pub fn decode(bytes: &[u8]) -> Result<Self, AlgoError> {
-        codec::decode(bytes)
     }
 
     fn is_late(&self, plot: &Plot) -> Result<bool, AlgoError> {

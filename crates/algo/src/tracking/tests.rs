@@ -1,6 +1,7 @@
 //! End-to-end tests of the tracker: the patent's Fig. 5 scene in serial
 //! mode, a Doppler scene in parallel mode, a 2D + 3D radar mix, chunked
-//! processing with encode/decode equal to one call, late plots.
+//! processing with the tracker taken apart and rebuilt between chunks equal
+//! to one call, late plots.
 
 use super::*;
 use crate::gaussian::check_covariance;
@@ -310,7 +311,7 @@ fn a_3d_tracker_takes_a_2d_and_a_3d_radar() {
 }
 
 #[test]
-fn chunks_with_encode_decode_equal_one_call() {
+fn chunks_with_the_state_rebuilt_from_parts_equal_one_call() {
     for doppler in [false, true] {
         let cfg = fig5_config(doppler);
         let targets = fig5_targets();
@@ -322,16 +323,48 @@ fn chunks_with_encode_decode_equal_one_call() {
 
         // Cuts anywhere, also inside a radar's scan group.
         let cuts = [0, 1, 3, 4, 7, 8, 20, 21, 33, plots.len()];
-        let mut bytes = Tracker::new(cfg.clone()).unwrap().encode();
+        let mut parts = Tracker::new(cfg.clone()).unwrap().state().to_parts();
         for w in cuts.windows(2) {
-            let mut t = Tracker::decode(&bytes).unwrap();
+            let mut t = Tracker::from_parts(parts).unwrap();
             t.process(&plots[w[0]..w[1]]).unwrap();
-            bytes = t.encode();
+            parts = t.state().to_parts();
         }
-        let mut chunked = Tracker::decode(&bytes).unwrap();
+        let mut chunked = Tracker::from_parts(parts).unwrap();
         chunked.flush().unwrap();
         assert_eq!(chunked, whole, "doppler = {doppler}");
-        assert_eq!(chunked.encode(), whole.encode());
+    }
+}
+
+#[test]
+fn parts_that_no_tracker_could_hold_are_rejected() {
+    let cfg = fig5_config(false);
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &fig5_targets(), 60.0, &mut Lcg(8));
+    let mut tracker = Tracker::new(cfg).unwrap();
+    tracker.process(&plots).unwrap();
+    let good = tracker.state().to_parts();
+    assert!(!good.tracks.is_empty() && !good.pending.is_empty());
+    assert_eq!(Tracker::from_parts(good.clone()).unwrap(), tracker);
+    type Mutation = (&'static str, fn(&mut TrackerParts));
+    let mutations: [Mutation; 8] = [
+        ("short state", |p| {
+            p.tracks[0].x = nalgebra::DVector::zeros(3);
+        }),
+        ("not positive definite", |p| p.tracks[0].p[(0, 0)] = -1.0),
+        ("not finite", |p| p.tracks[0].x[1] = f64::NAN),
+        ("radar index", |p| p.tracks[0].radars = vec![2]),
+        ("id at the next id", |p| p.next_id = p.tracks[0].id),
+        ("pending plot", |p| p.pending[0].range = -1.0),
+        ("pending order", |p| {
+            let mut late = p.pending[0];
+            late.t -= 10.0;
+            p.pending.push(late);
+        }),
+        ("configuration", |p| p.config.axes = 4),
+    ];
+    for (what, mutate) in mutations {
+        let mut p = good.clone();
+        mutate(&mut p);
+        assert!(Tracker::from_parts(p).is_err(), "{what}");
     }
 }
 
@@ -414,8 +447,4 @@ fn bad_input_is_an_error_without_a_state_change() {
     let mut c = cfg;
     c.radars[0].sigma_elevation = Some(0.01);
     assert!(Tracker::new(c).is_err(), "a 3D radar in a 2D tracker");
-    // Corrupt encodings.
-    let bytes = tracker.encode();
-    assert!(Tracker::decode(&bytes[..bytes.len() - 1]).is_err());
-    assert!(Tracker::decode(b"nope").is_err());
 }

@@ -51,20 +51,33 @@ pub struct TrackOutput {
     pub last_update: f64,
 }
 
-/// A track inside the tracker.
+/// A track inside the tracker (tentative or confirmed), with what its life
+/// so far has recorded. Public so that a codec outside this crate can store
+/// a tracker ([`super::TrackerState`]); a tracker rebuilt from parts checks
+/// every field ([`super::Tracker::from_parts`]).
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Track {
+pub struct Track {
+    /// Stable identifier, kept from tentative to confirmed.
     pub id: u64,
+    /// State in the fusion ENU frame, `[x, vx, y, vy(, z, vz)]` (m, m/s).
     pub x: DVector<f64>,
+    /// Covariance of the state.
     pub p: DMatrix<f64>,
+    /// Time of the state (s).
     pub t: f64,
     /// Bit i = 1 when the frame i frames ago was a hit (bit 0 = latest).
     pub history: u64,
+    /// Frames since the track was started.
     pub age: u32,
+    /// Frames with an associated plot.
     pub hits: u32,
+    /// Frames without one.
     pub misses: u32,
+    /// Misses since the last hit.
     pub consecutive_misses: u32,
+    /// Radars whose plots updated the track at its last update, ascending.
     pub radars: Vec<usize>,
+    /// Time of the last update by a plot (s).
     pub last_update: f64,
 }
 

@@ -43,8 +43,8 @@ use algo::{
     jpda::Method,
     polar::{enu_to_polar_3d, polar_to_enu_3d},
     tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
-    wire::{Reader, Writer},
 };
+use formats::wire::{FormatError, Reader, Writer};
 
 /// Longest plot range accepted (m): far beyond any radar's horizon.
 const MAX_RANGE_M: f64 = 1.0e7;
@@ -789,7 +789,7 @@ impl Network {
         }
     }
 
-    pub fn decode_sources(self, r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+    pub fn decode_sources(self, r: &mut Reader<'_>) -> Result<Self, FormatError> {
         let sources = (0..self.radar_ids.len())
             .map(|_| r.opt(|r| Ok((r.u8()?, r.u8()?))))
             .collect::<Result<Vec<_>, _>>()?;
@@ -812,10 +812,10 @@ impl Network {
         }
     }
 
-    pub fn decode(r: &mut Reader<'_>) -> Result<Self, AlgoError> {
+    pub fn decode(r: &mut Reader<'_>) -> Result<Self, FormatError> {
         let frame = r.opt(|r| {
             let (lat, lon, h) = (r.f64()?, r.f64()?, r.f64()?);
-            LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)
+            Ok(LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)?)
         })?;
         let target_height = r.f64()?;
         let n = r.len(17)?;
@@ -826,7 +826,7 @@ impl Network {
             let rotation = r.opt(|r| {
                 let v = r.f64s()?;
                 if v.len() != 9 {
-                    return Err(algo::wire::corrupt("radar rotation"));
+                    return Err(formats::wire::corrupt("radar rotation"));
                 }
                 Ok(Matrix3::from_column_slice(&v))
             })?;

@@ -29,10 +29,7 @@ pub mod plot_fusion;
 use std::fmt;
 
 use super::{FieldViolation, ServiceError, Violations};
-use algo::{
-    AlgoError,
-    wire::{Reader, Writer},
-};
+use formats::wire::{FormatError, Reader, Writer};
 
 /// First byte of every session written by this release: the envelope's
 /// format. Correlation sessions of earlier releases start with their own
@@ -123,7 +120,7 @@ pub trait SessionKind: Sized + Send + 'static {
     /// Reads what [`SessionKind::encode`] wrote (any format this release knows).
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError>;
     fn encode_update(u: &Self::Update, w: &mut Writer);
-    fn decode_update(r: &mut Reader<'_>) -> Result<Self::Update, AlgoError>;
+    fn decode_update(r: &mut Reader<'_>) -> Result<Self::Update, FormatError>;
     /// A session this kind wrote before the envelope existed (its first byte
     /// is below [`ENVELOPE_FORMAT`]); only the first kind has one.
     fn decode_legacy(buf: &[u8]) -> Result<Envelope<Self>, ServiceError> {
@@ -335,7 +332,7 @@ pub enum Admission<U> {
     Duplicate(Update<U>),
 }
 
-fn corrupt(e: AlgoError) -> ServiceError {
+fn corrupt(e: FormatError) -> ServiceError {
     ServiceError::Internal(format!("stored session: {e}"))
 }
 

@@ -34,13 +34,10 @@ use crate::{
         computation_error, mode_name, network, output,
     },
 };
-use algo::{
-    AlgoError,
-    tracking::{
-        Tracker,
-        codec::{decode_counters, encode_counters},
-    },
-    wire::{Reader, Writer, corrupt},
+use algo::tracking::Tracker;
+use formats::{
+    state::tracker::{decode_counters, decode_tracker, encode_counters, encode_tracker},
+    wire::{FormatError, Reader, Writer, corrupt},
 };
 
 /// Format of the kind's payload: 2 = format 1 (the network and the
@@ -142,7 +139,7 @@ fn status_code(s: &str) -> u8 {
     }
 }
 
-fn status_of(code: u8) -> Result<&'static str, AlgoError> {
+fn status_of(code: u8) -> Result<&'static str, FormatError> {
     match code {
         0 => Ok("tentative"),
         1 => Ok("confirmed"),
@@ -173,7 +170,7 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
     w.f64(t.last_update_t);
 }
 
-fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, AlgoError> {
+fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, FormatError> {
     let id = r.u64()?;
     let status = status_of(r.u8()?)?;
     let t = r.f64()?;
@@ -213,7 +210,7 @@ fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, AlgoError> {
     })
 }
 
-fn stored(e: AlgoError) -> ServiceError {
+fn stored(e: FormatError) -> ServiceError {
     ServiceError::Internal(format!("stored plot_fusion session: {e}"))
 }
 
@@ -421,7 +418,7 @@ impl SessionKind for PlotFusionSession {
     fn encode(&self, w: &mut Writer) {
         w.u8(FORMAT_VERSION);
         self.network.encode(w);
-        w.bytes(&self.tracker.encode());
+        w.bytes(&encode_tracker(&self.tracker));
         self.network.encode_sources(w);
     }
 
@@ -434,7 +431,7 @@ impl SessionKind for PlotFusionSession {
             )));
         }
         let network = Network::decode(r).map_err(stored)?;
-        let tracker = Tracker::decode(&r.bytes().map_err(stored)?).map_err(stored)?;
+        let tracker = decode_tracker(&r.bytes().map_err(stored)?).map_err(stored)?;
         let network = if format >= 2 {
             network.decode_sources(r).map_err(stored)?
         } else {
@@ -475,7 +472,7 @@ impl SessionKind for PlotFusionSession {
         }
     }
 
-    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
         let frames = r.u32()?;
         let has_asterix = frames & ASTERIX_FLAG != 0;
         let frames = frames & !ASTERIX_FLAG;
@@ -544,7 +541,7 @@ fn encode_summary(w: &mut Writer, a: &AsterixSummary) {
     }
 }
 
-fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, AlgoError> {
+fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, FormatError> {
     let mut n = [0usize; 14];
     for x in &mut n {
         *x = r.usize()?;
@@ -755,7 +752,7 @@ mod tests {
         let mut old = Writer::default();
         old.u8(1);
         session.network.encode(&mut old);
-        old.bytes(&session.tracker.encode());
+        old.bytes(&encode_tracker(&session.tracker));
         let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
         assert_eq!(back.network.radar_of_source((25, 1)), None);
         assert_eq!(back.network.radar_ids, session.network.radar_ids);

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use super::{OrdF64, PairCorrelator, Reason, Sample, Status};
+use super::{OrdF64, PairCorrelator, PairStatus, Reason, Sample};
 use crate::{AlgoError, assignment};
 
 impl PairCorrelator<'_> {
@@ -11,7 +11,7 @@ impl PairCorrelator<'_> {
     /// neighbour (greedy) or global optimal assignment.
     pub(super) fn decide_window(&mut self, active: &[u32], k: usize, window: usize, optimal: bool) {
         for &pi in active {
-            if self.pairs[pi as usize].status == Status::Decided {
+            if self.pairs[pi as usize].status == PairStatus::Decided {
                 self.undecide(pi, Reason::Testing);
             }
             self.pairs[pi as usize].cycle_done = false;
@@ -27,7 +27,7 @@ impl PairCorrelator<'_> {
                 gated.push((pi, cost));
             } else {
                 self.pairs[pi as usize].reason = Reason::Gate;
-                self.pairs[pi as usize].status = Status::Testing;
+                self.pairs[pi as usize].status = PairStatus::Testing;
             }
         }
         let chosen: Vec<u32> = if optimal {
@@ -79,7 +79,7 @@ impl PairCorrelator<'_> {
     /// last `window` instants.
     pub(super) fn decide_knn(&mut self, active: &[u32], k: usize, need: usize, window: usize) {
         for &pi in active {
-            if self.pairs[pi as usize].status == Status::Decided {
+            if self.pairs[pi as usize].status == PairStatus::Decided {
                 self.undecide(pi, Reason::Testing);
             }
             self.pairs[pi as usize].cycle_done = false;

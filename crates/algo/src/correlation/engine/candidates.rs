@@ -5,7 +5,7 @@
 
 use std::collections::VecDeque;
 
-use super::{Pair, PairCorrelator, Pruning, Reason, Statistic, Status};
+use super::{Pair, PairCorrelator, PairStatus, Pruning, Reason, Statistic};
 use crate::{correlation::scene::Track, small};
 
 impl PairCorrelator<'_> {
@@ -30,7 +30,7 @@ impl PairCorrelator<'_> {
             self.pairs.push(Pair {
                 a,
                 b,
-                status: Status::Testing,
+                status: PairStatus::Testing,
                 reason: Reason::Testing,
                 trial: false,
                 l: 0,

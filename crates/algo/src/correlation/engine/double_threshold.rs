@@ -3,7 +3,9 @@
 //! assignment), revocation of decided pairs and trial system tracks; and the
 //! rule schedules.
 
-use super::{Method, OrdF64, Pair, PairCorrelator, Reason, Resolution, RuleSpec, Sample, Status};
+use super::{
+    Method, OrdF64, Pair, PairCorrelator, PairStatus, Reason, Resolution, RuleSpec, Sample,
+};
 use crate::{AlgoError, assignment, correlation::rules::LrRule};
 
 impl PairCorrelator<'_> {
@@ -25,9 +27,9 @@ impl PairCorrelator<'_> {
             return;
         };
         let p = &mut self.pairs[pi as usize];
-        if p.status != Status::Decided && p.l >= r_final {
+        if p.status != PairStatus::Decided && p.l >= r_final {
             p.cycle_done = true;
-            if p.status == Status::Testing && p.m < l_final && p.reason == Reason::Testing {
+            if p.status == PairStatus::Testing && p.m < l_final && p.reason == Reason::Testing {
                 p.reason = Reason::BelowRule;
             }
         }
@@ -46,7 +48,7 @@ impl PairCorrelator<'_> {
         // longer meet the rule is revoked and both tracks are freed.
         for &pi in active {
             let p = &self.pairs[pi as usize];
-            if p.status != Status::Decided || p.decided_at == Some(k) {
+            if p.status != PairStatus::Decided || p.decided_at == Some(k) {
                 continue;
             }
             let window = monitor_window(p, rf as usize);
@@ -72,7 +74,7 @@ impl PairCorrelator<'_> {
         };
         let qualified = |me: &Self, pi: u32| {
             let p = &me.pairs[pi as usize];
-            p.status == Status::Testing
+            p.status == PairStatus::Testing
                 && !p.cycle_done
                 && p.l > 0
                 && p.m >= rule_at(p.l).l()
@@ -165,7 +167,7 @@ impl PairCorrelator<'_> {
                     self.decide(pi, k, reason);
                 }
                 for pi in ready {
-                    if self.pairs[pi as usize].status != Status::Decided {
+                    if self.pairs[pi as usize].status != PairStatus::Decided {
                         self.pairs[pi as usize].reason = Reason::AmbiguityLost;
                     }
                 }
@@ -187,7 +189,7 @@ impl PairCorrelator<'_> {
             .copied()
             .filter(|&pi| {
                 let p = &self.pairs[pi as usize];
-                p.status == Status::Testing && !p.cycle_done && p.m >= 1 && self.is_free(pi)
+                p.status == PairStatus::Testing && !p.cycle_done && p.m >= 1 && self.is_free(pi)
             })
             .collect();
         trial.sort_by_key(|&pi| {

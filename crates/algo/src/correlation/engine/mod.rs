@@ -221,40 +221,75 @@ pub struct PairCorrelator<'a> {
     pub singular_tests: usize,
 }
 
-#[derive(Debug, Clone)]
-struct Sample {
-    k: u32,
-    stat: f64,
-    posdiff: f64,
-    hit: bool,
+/// One test of a candidate pair, kept in its history window (for the
+/// sliding-window baselines and K-of-N).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Instant of the test (global index).
+    pub k: u32,
+    /// The test statistic.
+    pub stat: f64,
+    /// Norm of the position difference.
+    pub posdiff: f64,
+    /// Whether the statistic passed the first threshold.
+    pub hit: bool,
 }
 
+/// Where a candidate pair stands in its test cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Status {
+pub enum PairStatus {
+    /// Being tested in the current cycle.
     Testing,
+    /// Stopped early (the rule can no longer be met) until the next cycle.
     Stopped,
+    /// Decided correlated.
     Decided,
 }
 
-#[derive(Debug, Clone)]
-struct Pair {
-    a: u32,
-    b: u32,
-    status: Status,
-    reason: Reason,
-    trial: bool,
-    l: u32,
-    m: u32,
-    c: u32,
-    sum_stat: f64,
-    sum_posdiff: f64,
-    cycle_done: bool,
-    decided_at: Option<usize>,
-    decided_time: Option<f64>,
-    hist: VecDeque<Sample>,
+/// Every [`PairStatus`]; a status's index here is its one-byte code when a
+/// [`CorrelatorState`] is stored.
+pub const PAIR_STATUSES: [PairStatus; 3] = [
+    PairStatus::Testing,
+    PairStatus::Stopped,
+    PairStatus::Decided,
+];
+
+/// The whole state of one candidate pair between instants (public so that
+/// a codec outside this crate can store a [`CorrelatorState`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pair {
+    /// Track index in the first node.
+    pub a: u32,
+    /// Track index in the second node.
+    pub b: u32,
+    /// Where the pair stands in its cycle.
+    pub status: PairStatus,
+    /// Why it holds its decision.
+    pub reason: Reason,
+    /// A trial system track of eq. 21.
+    pub trial: bool,
+    /// Samples tested in the current cycle (l).
+    pub l: u32,
+    /// Correlation quality m.
+    pub m: u32,
+    /// Departure quality C.
+    pub c: u32,
+    /// Sum of the statistics behind m and C.
+    pub sum_stat: f64,
+    /// Sum of the position-difference norms behind m and C.
+    pub sum_posdiff: f64,
+    /// Whether the current cycle has completed (l = R reached).
+    pub cycle_done: bool,
+    /// Instant at which the current decision was taken.
+    pub decided_at: Option<usize>,
+    /// Time of that instant.
+    pub decided_time: Option<f64>,
+    /// The recent tests, oldest first.
+    pub hist: VecDeque<Sample>,
     /// P_ab, dim × dim row-major (modified statistic).
-    cross: Option<Box<[f64]>>,
-    last_common: Option<usize>,
+    pub cross: Option<Box<[f64]>>,
+    /// Last instant at which both tracks were present.
+    pub last_common: Option<usize>,
 }
 
 /// Which node of a correlated pair a track belongs to.
@@ -480,7 +515,7 @@ impl<'a> PairCorrelator<'a> {
     pub fn correlated(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.pairs
             .iter()
-            .filter(|p| p.status == Status::Decided)
+            .filter(|p| p.status == PairStatus::Decided)
             .map(|p| (p.a as usize, p.b as usize))
     }
 
@@ -517,9 +552,9 @@ impl<'a> PairCorrelator<'a> {
             }
         };
         let decision = match p.status {
-            Status::Decided => Decision::Correlated,
-            Status::Stopped => Decision::NotCorrelated,
-            Status::Testing => match p.reason {
+            PairStatus::Decided => Decision::Correlated,
+            PairStatus::Stopped => Decision::NotCorrelated,
+            PairStatus::Testing => match p.reason {
                 Reason::Testing | Reason::Revoked => Decision::Undecided,
                 _ => Decision::NotCorrelated,
             },
@@ -571,7 +606,7 @@ impl<'a> PairCorrelator<'a> {
 
     fn decide(&mut self, pi: u32, k: usize, reason: Reason) {
         let p = &mut self.pairs[pi as usize];
-        p.status = Status::Decided;
+        p.status = PairStatus::Decided;
         p.reason = reason;
         p.trial = false;
         p.decided_at = Some(k);
@@ -583,7 +618,7 @@ impl<'a> PairCorrelator<'a> {
 
     fn undecide(&mut self, pi: u32, reason: Reason) {
         let p = &mut self.pairs[pi as usize];
-        p.status = Status::Testing;
+        p.status = PairStatus::Testing;
         p.reason = reason;
         p.decided_at = None;
         p.decided_time = None;

@@ -6,7 +6,7 @@
 
 use nalgebra::DVector;
 
-use super::{PairCorrelator, Reason, Sample, Statistic, Status};
+use super::{PairCorrelator, PairStatus, Reason, Sample, Statistic};
 use crate::{
     AlgoError,
     correlation::scene::Scene,
@@ -148,8 +148,8 @@ impl PairCorrelator<'_> {
             p.sum_stat = 0.0;
             p.sum_posdiff = 0.0;
             p.cycle_done = false;
-            if p.status == Status::Stopped {
-                p.status = Status::Testing;
+            if p.status == PairStatus::Stopped {
+                p.status = PairStatus::Testing;
             }
             p.reason = Reason::Testing;
         }
@@ -171,10 +171,10 @@ impl PairCorrelator<'_> {
         p.sum_stat += stat;
         p.sum_posdiff += posdiff;
         if let Some((l_final, r_final)) = rf
-            && p.status == Status::Testing
+            && p.status == PairStatus::Testing
             && p.c > r_final - l_final
         {
-            p.status = Status::Stopped;
+            p.status = PairStatus::Stopped;
             p.reason = Reason::EarlyStop;
         }
     }

@@ -17,14 +17,16 @@ use crate::{
     },
     session::{Envelope, Kept, corrupt},
 };
-use algo::{
-    AlgoError,
-    correlation::{
-        align::Estimate,
-        engine::{self, CorrelatorState, Decision},
-        scene::Scene,
+use algo::correlation::{
+    align::Estimate,
+    engine::{self, Decision},
+};
+use formats::{
+    state::{
+        correlator::{decode_correlator, encode_correlator},
+        scene::{decode_scene, encode_scene},
     },
-    wire::{self, Reader, Writer},
+    wire::{self, FormatError, Reader, Writer},
 };
 
 /// Appends the session's payload (format 3).
@@ -45,7 +47,7 @@ pub(super) fn encode(s: &CorrelationSession, w: &mut Writer) {
 /// The scene, the slots, the correlators and the pending reports: the same
 /// in every format (the scene says its own format).
 fn encode_tail(s: &CorrelationSession, w: &mut Writer) {
-    s.scene.encode(w);
+    encode_scene(&s.scene, w);
     for slots in &s.slots {
         w.usize(slots.len());
         for slot in slots {
@@ -55,7 +57,7 @@ fn encode_tail(s: &CorrelationSession, w: &mut Writer) {
     }
     let dim = s.plan.layout.dim;
     for c in &s.correlators {
-        c.encode(w, dim);
+        encode_correlator(c, w, dim);
     }
     w.usize(s.pending.len());
     for p in &s.pending {
@@ -72,7 +74,7 @@ fn encode_estimate(w: &mut Writer, e: &Estimate) {
     w.opt(e.factor.as_deref(), Writer::f64s);
 }
 
-fn decode_estimate(r: &mut Reader<'_>, dim: usize) -> Result<Estimate, AlgoError> {
+fn decode_estimate(r: &mut Reader<'_>, dim: usize) -> Result<Estimate, FormatError> {
     let t = r.f64()?;
     let x = r.f64s()?;
     let p = r.f64s()?;
@@ -102,7 +104,7 @@ fn encode_grid(s: &CorrelationSession, w: &mut Writer) {
     }
 }
 
-fn decode_grid(r: &mut Reader<'_>, s: &mut CorrelationSession) -> Result<(), AlgoError> {
+fn decode_grid(r: &mut Reader<'_>, s: &mut CorrelationSession) -> Result<(), FormatError> {
     let dim = s.plan.layout.dim;
     s.grid_period = r.opt(Reader::f64)?;
     for iv in s.intervals.iter_mut() {
@@ -210,7 +212,7 @@ fn decode_tail(
     let plan = plan_of(&spec)?;
     let node_ids = node_ids(&spec);
     let n = node_ids.len();
-    let scene = Scene::decode(r, scene_format).map_err(corrupt)?;
+    let scene = decode_scene(r, scene_format).map_err(corrupt)?;
     if scene.nodes().len() != n || scene.dim() != plan.layout.dim {
         return Err(ServiceError::Internal("stored session: scene shape".into()));
     }
@@ -241,7 +243,7 @@ fn decode_tail(
     let dim = plan.layout.dim;
     let mut correlators = Vec::new();
     for _ in 0..n * (n - 1) / 2 {
-        correlators.push(CorrelatorState::decode(r, dim).map_err(corrupt)?);
+        correlators.push(decode_correlator(r, dim).map_err(corrupt)?);
     }
     let np = r.len(24).map_err(corrupt)?;
     let mut pending = Vec::with_capacity(np);
@@ -308,7 +310,7 @@ fn code_of<T: PartialEq>(list: &[T], v: &T) -> u8 {
         .expect("every variant is listed") as u8
 }
 
-fn of_code<T: Copy>(list: &[T], r: &mut Reader<'_>, what: &str) -> Result<T, AlgoError> {
+fn of_code<T: Copy>(list: &[T], r: &mut Reader<'_>, what: &str) -> Result<T, FormatError> {
     let c = r.u8()?;
     list.get(usize::from(c))
         .copied()
@@ -320,7 +322,7 @@ fn encode_name(w: &mut Writer, n: &TrackName) {
     w.str(&n.track);
 }
 
-fn decode_name(r: &mut Reader<'_>) -> Result<TrackName, AlgoError> {
+fn decode_name(r: &mut Reader<'_>) -> Result<TrackName, FormatError> {
     Ok(TrackName {
         node: r.str()?,
         track: r.str()?,
@@ -329,8 +331,8 @@ fn decode_name(r: &mut Reader<'_>) -> Result<TrackName, AlgoError> {
 
 fn decode_list<'a, T>(
     r: &mut Reader<'a>,
-    f: impl Fn(&mut Reader<'a>) -> Result<T, AlgoError>,
-) -> Result<Vec<T>, AlgoError> {
+    f: impl Fn(&mut Reader<'a>) -> Result<T, FormatError>,
+) -> Result<Vec<T>, FormatError> {
     let n = r.len(1)?;
     (0..n).map(|_| f(r)).collect()
 }
@@ -377,7 +379,7 @@ pub(super) fn encode_update(w: &mut Writer, u: &BatchUpdate) {
 }
 
 /// Reads a batch update written by [`encode_update`].
-pub(super) fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+pub(super) fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
     let instants = r.f64s()?;
     let pending_reports = r.u32()?;
     let changes = decode_list(r, |r| {
@@ -435,7 +437,7 @@ pub(super) fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError
 
 /// Reads the update kept by a session of format 2: its sequence number, the
 /// body of [`decode_update`], then its warnings.
-fn decode_legacy_update(r: &mut Reader<'_>) -> Result<Kept<BatchUpdate>, AlgoError> {
+fn decode_legacy_update(r: &mut Reader<'_>) -> Result<Kept<BatchUpdate>, FormatError> {
     let sequence = r.opt(Reader::u64)?;
     let body = decode_update(r)?;
     let warnings = decode_list(r, Reader::str)?;
@@ -517,7 +519,7 @@ impl Spec {
 /// expiry, read and dropped here (the envelope holds the effective one).
 /// Before format 4 an omitted alignment mode meant `predict` with a motion
 /// model and `nearest` without: such sessions keep it.
-fn decode_spec(r: &mut Reader<'_>, format: Spec) -> Result<SessionSpec, AlgoError> {
+fn decode_spec(r: &mut Reader<'_>, format: Spec) -> Result<SessionSpec, FormatError> {
     let legacy = format == Spec::Legacy;
     let n = r.len(8)?;
     let state_layout = (0..n).map(|_| r.str()).collect::<Result<_, _>>()?;
@@ -591,7 +593,7 @@ fn decode_spec(r: &mut Reader<'_>, format: Spec) -> Result<SessionSpec, AlgoErro
                 tracks: Vec::new(),
             })
         })
-        .collect::<Result<_, AlgoError>>()?;
+        .collect::<Result<_, FormatError>>()?;
     let pruning = s(r)?;
     let fuse = r.opt(Reader::bool)?;
     Ok(SessionSpec {

@@ -37,10 +37,7 @@ use crate::{
     Rows, ServiceError,
     correlation::{CorrelateInput, GroupOutput, PairOutput, SampleInput, TrackName},
 };
-use algo::{
-    AlgoError,
-    wire::{Reader, Writer},
-};
+use formats::wire::{FormatError, Reader, Writer};
 
 /// First byte of a correlation session's payload inside the envelope; a
 /// later release that changes it bumps it and keeps a decoder for the older
@@ -234,7 +231,7 @@ impl SessionKind for CorrelationSession {
         codec::encode_update(w, u);
     }
 
-    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, AlgoError> {
+    fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
         codec::decode_update(r)
     }
 

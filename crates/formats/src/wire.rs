@@ -1,8 +1,23 @@
 //! A minimal little-endian binary writer and reader for persisted state
-//! (streaming sessions). Every read is bounds-checked: a truncated or corrupt
-//! buffer gives an error, never a panic.
+//! (streaming sessions), and the error of bytes that are not a valid
+//! encoding. Every read is bounds-checked: a truncated or corrupt buffer
+//! gives an error, never a panic.
 
-use super::AlgoError;
+use algo::AlgoError;
+
+/// Why stored bytes could not be read back.
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    /// The bytes are not an encoding this crate writes (truncated, an
+    /// unknown tag or version, trailing bytes).
+    #[error("corrupt encoded state: {0}")]
+    Corrupt(String),
+    /// The bytes decode, but to values the numerical core rejects (a
+    /// configuration, a covariance that is not positive definite, an index
+    /// out of range).
+    #[error("encoded state is not valid: {0}")]
+    Invalid(#[from] AlgoError),
+}
 
 /// Appends values to a byte buffer.
 #[derive(Debug, Default)]
@@ -87,11 +102,8 @@ pub struct Reader<'a> {
 }
 
 /// The error of a buffer that is not a valid encoding, saying why.
-pub fn corrupt(reason: &str) -> AlgoError {
-    AlgoError::InvalidParameter {
-        what: "state",
-        reason: format!("corrupt encoded state: {reason}"),
-    }
+pub fn corrupt(reason: &str) -> FormatError {
+    FormatError::Corrupt(reason.to_string())
 }
 
 impl<'a> Reader<'a> {
@@ -105,7 +117,7 @@ impl<'a> Reader<'a> {
         self.buf.is_empty()
     }
 
-    fn take(&mut self, n: usize) -> Result<&'a [u8], AlgoError> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], FormatError> {
         if self.buf.len() < n {
             return Err(corrupt("truncated"));
         }
@@ -115,12 +127,12 @@ impl<'a> Reader<'a> {
     }
 
     /// One byte.
-    pub fn u8(&mut self) -> Result<u8, AlgoError> {
+    pub fn u8(&mut self) -> Result<u8, FormatError> {
         Ok(self.take(1)?[0])
     }
 
     /// A boolean; a byte other than 0 or 1 is an error.
-    pub fn bool(&mut self) -> Result<bool, AlgoError> {
+    pub fn bool(&mut self) -> Result<bool, FormatError> {
         match self.u8()? {
             0 => Ok(false),
             1 => Ok(true),
@@ -129,25 +141,25 @@ impl<'a> Reader<'a> {
     }
 
     /// A little-endian u32.
-    pub fn u32(&mut self) -> Result<u32, AlgoError> {
+    pub fn u32(&mut self) -> Result<u32, FormatError> {
         let b = self.take(4)?;
         Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
     }
 
     /// A little-endian u64.
-    pub fn u64(&mut self) -> Result<u64, AlgoError> {
+    pub fn u64(&mut self) -> Result<u64, FormatError> {
         let b = self.take(8)?;
         Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
     }
 
     /// A length or index; lengths are bounded by the bytes left so that a
     /// corrupt length cannot make the caller allocate without bound.
-    pub fn usize(&mut self) -> Result<usize, AlgoError> {
+    pub fn usize(&mut self) -> Result<usize, FormatError> {
         usize::try_from(self.u64()?).map_err(|_| corrupt("index out of range"))
     }
 
     /// A count of items each at least `item_bytes` long.
-    pub fn len(&mut self, item_bytes: usize) -> Result<usize, AlgoError> {
+    pub fn len(&mut self, item_bytes: usize) -> Result<usize, FormatError> {
         let n = self.usize()?;
         if n.saturating_mul(item_bytes.max(1)) > self.buf.len() {
             return Err(corrupt("length beyond the buffer"));
@@ -156,25 +168,25 @@ impl<'a> Reader<'a> {
     }
 
     /// An f64 from its little-endian bits.
-    pub fn f64(&mut self) -> Result<f64, AlgoError> {
+    pub fn f64(&mut self) -> Result<f64, FormatError> {
         let b = self.take(8)?;
         Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
     }
 
     /// What [`Writer::f64s`] wrote.
-    pub fn f64s(&mut self) -> Result<Vec<f64>, AlgoError> {
+    pub fn f64s(&mut self) -> Result<Vec<f64>, FormatError> {
         let n = self.len(8)?;
         (0..n).map(|_| self.f64()).collect()
     }
 
     /// What [`Writer::str`] wrote; bad UTF-8 is an error.
-    pub fn str(&mut self) -> Result<String, AlgoError> {
+    pub fn str(&mut self) -> Result<String, FormatError> {
         let n = self.len(1)?;
         String::from_utf8(self.take(n)?.to_vec()).map_err(|_| corrupt("bad UTF-8"))
     }
 
     /// What [`Writer::bytes`] wrote.
-    pub fn bytes(&mut self) -> Result<Vec<u8>, AlgoError> {
+    pub fn bytes(&mut self) -> Result<Vec<u8>, FormatError> {
         let n = self.len(1)?;
         Ok(self.take(n)?.to_vec())
     }
@@ -182,8 +194,8 @@ impl<'a> Reader<'a> {
     /// What [`Writer::opt`] wrote, the value read by `f`.
     pub fn opt<T>(
         &mut self,
-        f: impl FnOnce(&mut Self) -> Result<T, AlgoError>,
-    ) -> Result<Option<T>, AlgoError> {
+        f: impl FnOnce(&mut Self) -> Result<T, FormatError>,
+    ) -> Result<Option<T>, FormatError> {
         match self.u8()? {
             0 => Ok(None),
             1 => f(self).map(Some),

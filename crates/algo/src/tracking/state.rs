@@ -1,0 +1,175 @@
+//! A [`Tracker`] taken apart and put back together, so that a codec outside
+//! this crate (the `formats` crate's stored-state codec) can keep a tracker
+//! in a session without this crate doing any serialisation.
+//!
+//! [`Tracker::state`] lends every field; [`Tracker::from_parts`] rebuilds a
+//! tracker from owned parts and checks them as it would check a request, so
+//! that parts read from corrupt bytes give an error here, never a panic in
+//! a later call.
+
+use super::{CartesianPlot, Counters, Plot, Track, Tracker, TrackerConfig};
+use crate::error::AlgoError;
+use crate::gaussian::check_covariance;
+use crate::tracking::initiator::Initiator;
+
+/// Everything a tracker carries between calls, borrowed.
+#[derive(Debug, Clone, Copy)]
+pub struct TrackerState<'a> {
+    /// The validated configuration.
+    pub config: &'a TrackerConfig,
+    /// Confirmed tracks.
+    pub tracks: &'a [Track],
+    /// The initiator's roots: plots that may start a track.
+    pub roots: &'a [CartesianPlot],
+    /// The initiator's tentative tracks.
+    pub tentatives: &'a [Track],
+    /// Accepted plots of frames not yet complete, in time order.
+    pub pending: &'a [Plot],
+    /// The identifier the next track will get.
+    pub next_id: u64,
+    /// Time of the last processed frame.
+    pub last_time: Option<f64>,
+    /// Parallel mode: index of the last processed fusion instant.
+    pub last_instant: Option<i64>,
+    /// The running counters.
+    pub counters: Counters,
+}
+
+/// Everything a tracker carries between calls, owned: what
+/// [`Tracker::from_parts`] rebuilds a tracker from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerParts {
+    /// The configuration (validated again).
+    pub config: TrackerConfig,
+    /// Confirmed tracks.
+    pub tracks: Vec<Track>,
+    /// The initiator's roots.
+    pub roots: Vec<CartesianPlot>,
+    /// The initiator's tentative tracks.
+    pub tentatives: Vec<Track>,
+    /// Pending plots, in time order.
+    pub pending: Vec<Plot>,
+    /// The identifier the next track will get.
+    pub next_id: u64,
+    /// Time of the last processed frame.
+    pub last_time: Option<f64>,
+    /// Parallel mode: index of the last processed fusion instant.
+    pub last_instant: Option<i64>,
+    /// The running counters.
+    pub counters: Counters,
+}
+
+impl TrackerState<'_> {
+    /// The same state, owned.
+    pub fn to_parts(&self) -> TrackerParts {
+        TrackerParts {
+            config: self.config.clone(),
+            tracks: self.tracks.to_vec(),
+            roots: self.roots.to_vec(),
+            tentatives: self.tentatives.to_vec(),
+            pending: self.pending.to_vec(),
+            next_id: self.next_id,
+            last_time: self.last_time,
+            last_instant: self.last_instant,
+            counters: self.counters,
+        }
+    }
+}
+
+fn bad(reason: impl Into<String>) -> AlgoError {
+    AlgoError::InvalidParameter {
+        what: "tracker state",
+        reason: reason.into(),
+    }
+}
+
+impl Tracker {
+    /// Every field the tracker carries between calls, borrowed.
+    pub fn state(&self) -> TrackerState<'_> {
+        TrackerState {
+            config: &self.config,
+            tracks: &self.tracks,
+            roots: &self.initiator.roots,
+            tentatives: &self.initiator.tentatives,
+            pending: &self.pending,
+            next_id: self.next_id,
+            last_time: self.last_time,
+            last_instant: self.last_instant,
+            counters: self.counters,
+        }
+    }
+
+    /// A tracker from its parts, which continues exactly as the tracker
+    /// they were taken from. Checks the configuration as [`Tracker::new`]
+    /// does, every plot as a request's, every track's dimension (2 × axes),
+    /// finiteness and covariance (symmetric positive definite), every
+    /// root's, every radar index, that pending plots are in time order and
+    /// that no track id reaches `next_id`.
+    pub fn from_parts(parts: TrackerParts) -> Result<Self, AlgoError> {
+        let mut tr = Tracker::new(parts.config)?;
+        let c = &tr.config;
+        let radars = |v: &[usize]| -> Result<(), AlgoError> {
+            match v.iter().find(|&&i| i >= c.radars.len()) {
+                Some(i) => Err(bad(format!(
+                    "radar index {i} with {} radars",
+                    c.radars.len()
+                ))),
+                None => Ok(()),
+            }
+        };
+        let n = 2 * c.axes;
+        for t in parts.tracks.iter().chain(&parts.tentatives) {
+            if t.x.len() != n || t.p.shape() != (n, n) {
+                return Err(bad(format!(
+                    "track {} has dimension {} ({}×{} covariance), the configuration {n}",
+                    t.id,
+                    t.x.len(),
+                    t.p.nrows(),
+                    t.p.ncols()
+                )));
+            }
+            if t.x.iter().any(|v| !v.is_finite()) || !t.t.is_finite() {
+                return Err(bad(format!("track {} is not finite", t.id)));
+            }
+            check_covariance("track covariance", &t.p)?;
+            radars(&t.radars)?;
+            if t.id >= parts.next_id {
+                return Err(bad(format!(
+                    "track id {} not below the next id {}",
+                    t.id, parts.next_id
+                )));
+            }
+        }
+        for r in &parts.roots {
+            let k = r.z.len();
+            if !(2..=c.axes).contains(&k) || r.r.shape() != (k, k) {
+                return Err(bad(format!("root plot of dimension {k}")));
+            }
+            if r.z.iter().any(|v| !v.is_finite()) || !r.t.is_finite() {
+                return Err(bad("root plot is not finite"));
+            }
+            check_covariance("plot covariance", &r.r)?;
+            radars(&r.radars)?;
+        }
+        for p in &parts.pending {
+            c.validate_plot(p)?;
+        }
+        if parts.pending.windows(2).any(|w| w[1].t < w[0].t) {
+            return Err(bad("pending plots out of time order"));
+        }
+        if parts.last_time.is_some_and(|t| !t.is_finite()) {
+            return Err(bad("last time is not finite"));
+        }
+        tr.tracks = parts.tracks;
+        tr.initiator = Initiator {
+            roots: parts.roots,
+            tentatives: parts.tentatives,
+        };
+        tr.pending = parts.pending;
+        tr.next_id = parts.next_id;
+        tr.last_time = parts.last_time;
+        tr.last_instant = parts.last_instant;
+        tr.counters = parts.counters;
+        Ok(tr)
+    }
+}
