@@ -3,9 +3,11 @@
 //!
 //! Edition: CAT062 **1.20** (2023-02-13), as the machine-readable
 //! definition of `zoranbosnjak/asterix-specs` (`specs/cat062/cat-1.20.ast`)
-//! gives it; libasterix decodes editions 1.16 to 1.21, and every item
-//! written here has the same layout in all of them. Checked against
-//! libasterix's decoder: `checks/cat062_oracle.sh`, the fixtures under
+//! gives it. libasterix decodes editions 1.16 to 1.21; the UAP and every
+//! item written here are the same in all of them, but for I062/340
+//! HEIGHT, unsigned before 1.19 (a receiver of 1.16–1.18 reads a negative
+//! measured height as a large positive one). Checked against libasterix's
+//! decoder: `checks/cat062_oracle.sh`, the fixtures under
 //! `tests/fixtures/cat062/`.
 //!
 //! A data block is `CAT = 62 | LEN (2 bytes, big-endian, the whole block)

@@ -6,6 +6,8 @@
 use super::*;
 use proptest::prelude::*;
 
+mod oracle;
+
 fn cfg() -> Cat062Config {
     Cat062Config {
         sac: 25,
