@@ -68,7 +68,8 @@
 //! - I062/290 ages and I062/500 accuracies: "maximum value means maximum
 //!   value or above", so a value above the maximum is written as the
 //!   maximum and reported in [`Encoded::saturated`] (a negative one is
-//!   left out, as usual).
+//!   left out, as usual; COV, signed, saturates in magnitude at
+//!   ±16,383.5 m).
 //!
 //! Records: I062/010, /040, /070 and /080 are always written and a record
 //! needs a position (I062/100 or /105). A record whose time is not finite
@@ -294,7 +295,8 @@ pub struct Encoded {
     pub blocks: Vec<Vec<u8>>,
     /// Items (or subfields) left out, and records not written.
     pub skipped: Vec<Skip>,
-    /// Values written as the maximum of their subfield.
+    /// Values written as the maximum of their subfield (for I062/500 COV,
+    /// a negative one as the minimum).
     pub saturated: Vec<Skip>,
 }
 
