@@ -1,11 +1,11 @@
 //! Byte formats at the edges of the radar fusion service: EUROCONTROL
 //! ASTERIX input ([`asterix`]: CAT048 target reports, CAT034 service
 //! messages) and NMEA 0183 AIS sentences ([`nmea`]: `!AIVDM`/`!AIVDO`).
-//! Output: [`cat062`] encodes ASTERIX CAT062 SDPS track messages.
 //!
 //! Decoders never panic on any input: every error carries where it was
 //! found and why, and decoding resumes at the next unit it can trust (the
 //! next ASTERIX data block, the next NMEA line).
+//! The one encoder, [`cat062`] (ASTERIX CAT062 SDPS track output), never panics either.
 
 pub mod asterix;
 pub mod cat062;
