@@ -6,8 +6,10 @@
 //! Decoders never panic on any input: every error carries where it was
 //! found and why, and decoding resumes at the next unit it can trust (the
 //! next ASTERIX data block, the next NMEA line).
+//! [`cat062`] encodes ASTERIX CAT062 SDPS track output, never panicking either.
 
 pub mod asterix;
+pub mod cat062;
 pub mod nmea;
 pub mod state;
 pub mod wire;
