@@ -128,6 +128,20 @@ pub(crate) fn spec_in(
             default_height_sigma_m: t.default_height_sigma_m,
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
             duplicate_gate_probability: t.duplicate_gate_probability,
+            motion: t.motion,
+            imm_models: (!t.imm_models.is_empty()).then(|| {
+                t.imm_models
+                    .into_iter()
+                    .map(|m| svc::ImmModelInput {
+                        model: Some(m.model),
+                        sigma_a_mps2: m.sigma_a_mps2,
+                        sigma_a_vertical_mps2: m.sigma_a_vertical_mps2,
+                        turn_rate_dps: m.turn_rate_dps,
+                        mean_sojourn_s: m.mean_sojourn_s,
+                        initial_probability: m.initial_probability,
+                    })
+                    .collect()
+            }),
         },
     }
 }
@@ -202,6 +216,15 @@ pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
         consecutive_misses: t.consecutive_misses,
         age: t.age,
         last_update_t: t.last_update_t,
+        modes: t
+            .modes
+            .into_iter()
+            .map(|m| pb::TrackMode {
+                model: m.model,
+                probability: m.probability,
+            })
+            .collect(),
+        turn_rate_dps: t.turn_rate_dps,
     }
 }
 

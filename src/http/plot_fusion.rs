@@ -158,7 +158,9 @@ pub struct TrackerOptions {
     /// `dwna` (discrete, σ per prediction interval).
     pub process_noise: Option<String>,
     /// Acceleration noise per horizontal axis (default 3): √q for cwna, σ
-    /// (m/s²) for dwna.
+    /// (m/s²) for dwna. The noise of tentative tracks, and of confirmed
+    /// ones with `motion` `cv`; under the IMM confirmed tracks use
+    /// `imm_models`' noise.
     pub sigma_a_mps2: Option<f64>,
     /// Vertical σ (default `sigma_a_mps2`).
     pub sigma_a_vertical_mps2: Option<f64>,
@@ -178,6 +180,39 @@ pub struct TrackerOptions {
     /// younger is deleted (counted in `merged`). In [0, 1): default 0.99; 0 disables.
     #[schema(minimum = 0.0, exclusive_maximum = 1.0)]
     pub duplicate_gate_probability: Option<f64>,
+    /// The predictor of confirmed tracks: `imm` (default: an interacting
+    /// multiple model of `imm_models`) or `cv` (one constant-velocity model
+    /// with `sigma_a_mps2`).
+    #[schema(example = "imm")]
+    pub motion: Option<String>,
+    /// The IMM's models (2 to 8). Default: `cv` √q 0.5 (mean sojourn 60 s,
+    /// initial probability 0.8), `ct` +3 °/s and −3 °/s √q 1.5 (20 s, 0.1
+    /// each): straight legs and standard-rate turns of aircraft.
+    pub imm_models: Option<Vec<ImmModel>>,
+}
+
+/// One model of the IMM.
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ImmModel {
+    /// `cv` (constant velocity) or `ct` (coordinated turn at a known rate
+    /// in the horizontal plane, constant velocity vertically).
+    #[schema(example = "ct")]
+    pub model: String,
+    /// Noise per horizontal axis, as `sigma_a_mps2` (default 0.5 for cv,
+    /// 1.5 for ct).
+    pub sigma_a_mps2: Option<f64>,
+    /// Vertical noise (default the horizontal one).
+    pub sigma_a_vertical_mps2: Option<f64>,
+    /// `ct` only, required: turn rate (°/s, positive to the left), non-zero, |ω| ≤ 28.
+    pub turn_rate_dps: Option<f64>,
+    /// Mean time the target stays in this model (s, > 0; default 60 for
+    /// cv, 20 for ct). Switching between models follows the
+    /// continuous-time Markov chain of these times.
+    pub mean_sojourn_s: Option<f64>,
+    /// Mode probability of a newly confirmed track, in (0, 1]; give it for
+    /// every model (summing to 1) or for none (equal shares).
+    pub initial_probability: Option<f64>,
 }
 
 /// Raw ASTERIX (CAT048 target reports, CAT034 north markers and sector
@@ -341,6 +376,24 @@ pub struct FusedTrack {
     /// Frames since the track started.
     pub age: u32,
     pub last_update_t: f64,
+    /// A confirmed IMM track's mode probabilities, one per model of
+    /// `tracker.imm_models` in order (models named `cv`, `ct_left`,
+    /// `ct_right`, with `_2`, … for repeats); absent for tentative tracks
+    /// and with `motion` `cv`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub modes: Vec<TrackMode>,
+    /// A confirmed IMM track's turn rate Σ μ_j ω_j (°/s, positive to the
+    /// left), when the models include a turn.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turn_rate_dps: Option<f64>,
+}
+
+/// One model's probability in an IMM track.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TrackMode {
+    #[schema(example = "ct_left")]
+    pub model: String,
+    pub probability: f64,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -457,6 +510,20 @@ pub(crate) fn spec_in(
             default_height_sigma_m: t.default_height_sigma_m,
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
             duplicate_gate_probability: t.duplicate_gate_probability,
+            motion: t.motion,
+            imm_models: t.imm_models.map(|models| {
+                models
+                    .into_iter()
+                    .map(|m| svc::ImmModelInput {
+                        model: Some(m.model),
+                        sigma_a_mps2: m.sigma_a_mps2,
+                        sigma_a_vertical_mps2: m.sigma_a_vertical_mps2,
+                        turn_rate_dps: m.turn_rate_dps,
+                        mean_sojourn_s: m.mean_sojourn_s,
+                        initial_probability: m.initial_probability,
+                    })
+                    .collect()
+            }),
         },
     }
 }
@@ -499,6 +566,15 @@ pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
         consecutive_misses: t.consecutive_misses,
         age: t.age,
         last_update_t: t.last_update_t,
+        modes: t
+            .modes
+            .into_iter()
+            .map(|m| TrackMode {
+                model: m.model,
+                probability: m.probability,
+            })
+            .collect(),
+        turn_rate_dps: t.turn_rate_dps,
     }
 }
 

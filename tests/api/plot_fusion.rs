@@ -293,14 +293,21 @@ async fn local_sites_without_origin_are_the_patents_flat_model_and_say_so() {
                    "sigma_range_m": 100.0, "sigma_azimuth_deg": 0.1, "scan_period_s": period})
         })
         .collect();
+    // One constant-velocity model: on noise-free plots it converges onto
+    // the line, so the tolerance below tests the flat geometry alone (the
+    // default IMM's turn models pull such a track by about a metre).
     let out = app
-        .post_ok(PATH, &json!({"radars": radars, "plots": plots}))
+        .post_ok(
+            PATH,
+            &json!({"radars": radars, "plots": plots, "tracker": {"motion": "cv"}}),
+        )
         .await;
     let tracks = out["tracks"].as_array().unwrap();
     assert_eq!(tracks.len(), 1, "{tracks:?}");
     let t = &tracks[0];
     assert_eq!(t["status"], "confirmed");
     assert!(t.get("lat_deg").is_none());
+    assert!(t.get("modes").is_none(), "one model has no modes");
     // Noise-free plots: the track is on the truth to well under 1 m·s.
     let time = f(&t["t"]);
     let s = &t["state"];
@@ -397,6 +404,146 @@ async fn bad_radars_and_options_are_named_by_field() {
     req["radars"][0]["site"] = json!({"lat_deg": 52.0, "lon_deg": 4.0, "position_m": [0, 0]});
     let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
     assert_eq!(problem_fields(&body), vec!["radars[0].site"]);
+}
+
+#[tokio::test]
+async fn the_default_imm_reports_its_modes_on_both_transports() {
+    let app = spawn_app().await;
+    let req = with_height(request(false, 7));
+    let rest = app.post_ok(PATH, &req).await;
+    let confirmed: Vec<&Value> = rest["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .collect();
+    assert!(!confirmed.is_empty());
+    for t in &confirmed {
+        let modes = t["modes"].as_array().unwrap();
+        let names: Vec<&str> = modes.iter().map(|m| m["model"].as_str().unwrap()).collect();
+        assert_eq!(names, ["cv", "ct_left", "ct_right"]);
+        let sum: f64 = modes.iter().map(|m| f(&m["probability"])).sum();
+        assert!((sum - 1.0).abs() < 1e-9, "{modes:?}");
+        // The turn rate is the mixture's: (μ_left − μ_right) · 3 °/s.
+        let want = 3.0 * (f(&modes[1]["probability"]) - f(&modes[2]["probability"]));
+        assert!((f(&t["turn_rate_dps"]) - want).abs() < 1e-9);
+    }
+    let tentative = rest["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "tentative");
+    for t in tentative {
+        assert!(t.get("modes").is_none() && t.get("turn_rate_dps").is_none());
+    }
+    let grpc = client(&app)
+        .await
+        .track(proto_request(&req))
+        .await
+        .unwrap()
+        .into_inner();
+    for (g, r) in grpc.tracks.iter().zip(rest["tracks"].as_array().unwrap()) {
+        let want: Vec<(String, f64)> = r["modes"]
+            .as_array()
+            .map(|m| {
+                m.iter()
+                    .map(|m| {
+                        (
+                            m["model"].as_str().unwrap().to_string(),
+                            f(&m["probability"]),
+                        )
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let got: Vec<(String, f64)> = g
+            .modes
+            .iter()
+            .map(|m| (m.model.clone(), m.probability))
+            .collect();
+        assert_eq!(got, want);
+        assert_eq!(g.turn_rate_dps, r["turn_rate_dps"].as_f64());
+    }
+}
+
+#[tokio::test]
+async fn bad_motion_options_are_named_by_field_on_both_transports() {
+    let app = spawn_app().await;
+    let mut req = small_request();
+    req["plots"] = json!([]);
+    let cases = [
+        (json!({"motion": "kalman"}), "tracker.motion"),
+        (
+            json!({"motion": "cv", "imm_models": [{"model": "cv"}, {"model": "cv"}]}),
+            "tracker.imm_models",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv"}]}),
+            "tracker.imm_models",
+        ),
+        (
+            json!({"imm_models": [{"model": "ca"}, {"model": "cv"}]}),
+            "tracker.imm_models[0].model",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv"}, {"model": "ct"}]}),
+            "tracker.imm_models[1].turn_rate_dps",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv"}, {"model": "ct", "turn_rate_dps": 0.0}]}),
+            "tracker.imm_models[1].turn_rate_dps",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv", "mean_sojourn_s": 0.0}, {"model": "cv"}]}),
+            "tracker.imm_models[0].mean_sojourn_s",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv", "initial_probability": 1.5},
+                                  {"model": "cv", "initial_probability": 0.5}]}),
+            "tracker.imm_models[0].initial_probability",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv", "initial_probability": 0.3},
+                                  {"model": "cv", "initial_probability": 0.3}]}),
+            "tracker.imm_models",
+        ),
+        (
+            json!({"imm_models": [{"model": "cv", "sigma_a_mps2": -1.0}, {"model": "cv"}]}),
+            "tracker.imm_models[0].sigma_a_mps2",
+        ),
+    ];
+    for (tracker, field) in cases {
+        req["tracker"] = tracker.clone();
+        let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+        assert_eq!(problem_fields(&body), vec![field], "{tracker}");
+    }
+    // gRPC: INVALID_ARGUMENT naming the same field.
+    let mut p = proto_request(&small_request());
+    p.plots.clear();
+    let tracker = p.tracker.get_or_insert_with(Default::default);
+    tracker.imm_models = vec![
+        pb::ImmModel {
+            model: "cv".into(),
+            ..Default::default()
+        },
+        pb::ImmModel {
+            model: "ct".into(),
+            turn_rate_dps: Some(90.0),
+            ..Default::default()
+        },
+    ];
+    let status = client(&app).await.track(p).await.unwrap_err();
+    assert_eq!(status.code(), Code::InvalidArgument);
+    assert_eq!(
+        grpc_fields(&status),
+        ["tracker.imm_models[1].turn_rate_dps"]
+    );
+    // A session created with a bad model set does not exist.
+    let mut create = session_create(&with_height(request(false, 7)));
+    create["tracker"] = json!({"imm_models": [{"model": "ct", "turn_rate_dps": 3.0}]});
+    let res = app.post_json("/v1/sessions", &create).await;
+    let body = assert_problem(res, 422).await;
+    assert_eq!(problem_fields(&body), vec!["tracker.imm_models"]);
 }
 
 // ------------------------------------------------------------ sessions

@@ -47,6 +47,9 @@ pub struct Outcome {
     /// Per measurement: inside the gate of at least one track (such plots
     /// take part in track association and are not used for initiation).
     pub used: Vec<bool>,
+    /// Per track: β_0 and β_m of its gated measurements, for the updater of
+    /// IMM tracks.
+    pub associations: Vec<jpda::Association>,
 }
 
 /// Serial mode: JPDA + EKF of `tracks` (predicted to the scan time) with the
@@ -59,11 +62,7 @@ pub fn associate_polar(
     gate_probability: f64,
     config: &Config,
 ) -> Result<Outcome, AlgoError> {
-    let layout = if radar.is_3d() && axes == 3 {
-        PositionLayout::CV_3D
-    } else {
-        PositionLayout::CV_2D
-    };
+    let layout = polar_layout(radar, axes);
     let model = SensorModel::Polar {
         site: radar.site,
         layout,
@@ -99,7 +98,22 @@ pub fn associate_polar(
             best(a.miss, &a.measurements)
         })
         .collect();
-    Ok(Outcome { hit, used })
+    Ok(Outcome {
+        hit,
+        used,
+        associations: report.associations,
+    })
+}
+
+/// Where a radar's polar plots see the state: with the height for a 3D
+/// radar in a 3D tracker, horizontally otherwise (a 2D radar measures the
+/// horizontal range, also in a 3D tracker).
+pub fn polar_layout(radar: &RadarSpec, axes: usize) -> PositionLayout {
+    if radar.is_3d() && axes == 3 {
+        PositionLayout::CV_3D
+    } else {
+        PositionLayout::CV_2D
+    }
 }
 
 /// Parallel mode: JPDA of `tracks` with Cartesian plots of their own
@@ -181,6 +195,7 @@ pub fn associate_cartesian(
     };
     // Update: mixture reduction of the per-hypothesis Kalman updates.
     let mut hit = Vec::with_capacity(tracks.len());
+    let mut associations = Vec::with_capacity(tracks.len());
     for (t, track) in tracks.iter_mut().enumerate() {
         let row = &hyps[t];
         let b = &beta[t];
@@ -190,6 +205,10 @@ pub fn associate_cartesian(
             .zip(b[1..].iter().copied())
             .collect();
         hit.push(best(b[0], &pairs));
+        associations.push(jpda::Association {
+            miss: b[0],
+            measurements: pairs,
+        });
         if b[0] >= 1.0 {
             continue;
         }
@@ -210,7 +229,11 @@ pub fn associate_cartesian(
         track.x = x;
         track.p = p;
     }
-    Ok(Outcome { hit, used })
+    Ok(Outcome {
+        hit,
+        used,
+        associations,
+    })
 }
 
 /// The clutter density of a fused plot (see the module header).

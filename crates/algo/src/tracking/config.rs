@@ -159,6 +159,96 @@ impl Deletion {
     }
 }
 
+/// One motion model of the predictor, over the constant-velocity state
+/// `[x, vx, y, vy(, z, vz)]`; its process noise takes the tracker's
+/// [`NoiseModel`] with this model's σ per axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotionModel {
+    /// Constant velocity, acceleration noise `sigma_a` per axis `[e, n, u]`
+    /// (σ for DWNA, √q for CWNA), ≥ 0.
+    ConstantVelocity {
+        /// Noise per axis.
+        sigma_a: [f64; 3],
+    },
+    /// A horizontal coordinated turn at the known rate `turn_rate` (rad/s,
+    /// positive counter-clockwise seen from above, i.e. a left turn;
+    /// non-zero), constant velocity vertically; noise per axis as for
+    /// constant velocity.
+    CoordinatedTurn {
+        /// ω (rad/s), non-zero and |ω| ≤ 0.5.
+        turn_rate: f64,
+        /// Noise per axis.
+        sigma_a: [f64; 3],
+    },
+}
+
+impl MotionModel {
+    /// The model's turn rate (0 for constant velocity).
+    pub fn turn_rate(&self) -> f64 {
+        match self {
+            MotionModel::ConstantVelocity { .. } => 0.0,
+            MotionModel::CoordinatedTurn { turn_rate, .. } => *turn_rate,
+        }
+    }
+
+    /// The model's noise per axis.
+    pub fn sigma_a(&self) -> [f64; 3] {
+        match self {
+            MotionModel::ConstantVelocity { sigma_a }
+            | MotionModel::CoordinatedTurn { sigma_a, .. } => *sigma_a,
+        }
+    }
+}
+
+/// An interacting-multiple-model predictor: the models, how long the
+/// target stays in each, and the mode split of a new track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imm {
+    /// The models (2 to 8).
+    pub models: Vec<MotionModel>,
+    /// Mean sojourn time τ_i of each model (s), > 0: the target leaves
+    /// model i at rate 1/τ_i, into each other model equally (a
+    /// continuous-time Markov chain, so irregular serial steps switch
+    /// consistently; [`crate::tracking::predictor::switching`]).
+    pub mean_sojourn: Vec<f64>,
+    /// Mode probabilities of a newly confirmed track (sum 1, each > 0).
+    pub initial_probabilities: Vec<f64>,
+}
+
+impl Imm {
+    /// The default for aircraft: constant velocity with √q = 0.5 m/s^1.5
+    /// (straight legs, held for 60 s on average) and two coordinated turns
+    /// at ±3 °/s, the standard rate turn, with √q = 1.5 (turns, 20 s), 80 %
+    /// of a new track in constant velocity.
+    pub fn aircraft() -> Self {
+        let rate = 3.0_f64.to_radians();
+        Self {
+            models: vec![
+                MotionModel::ConstantVelocity { sigma_a: [0.5; 3] },
+                MotionModel::CoordinatedTurn {
+                    turn_rate: rate,
+                    sigma_a: [1.5; 3],
+                },
+                MotionModel::CoordinatedTurn {
+                    turn_rate: -rate,
+                    sigma_a: [1.5; 3],
+                },
+            ],
+            mean_sojourn: vec![60.0, 20.0, 20.0],
+            initial_probabilities: vec![0.8, 0.1, 0.1],
+        }
+    }
+}
+
+/// The predictor of confirmed tracks.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Motion {
+    /// One constant-velocity model with [`TrackerConfig::sigma_a`].
+    ConstantVelocity,
+    /// An interacting multiple model.
+    Imm(Imm),
+}
+
 /// Everything the tracker needs; see [`TrackerConfig::new`] for defaults.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackerConfig {
@@ -192,6 +282,11 @@ pub struct TrackerConfig {
     pub sigma_a: [f64; 3],
     /// The process-noise model.
     pub noise: NoiseModel,
+    /// The predictor of confirmed tracks: one constant-velocity model with
+    /// `sigma_a`, or an IMM. Tentative tracks always use one
+    /// constant-velocity model with `sigma_a`; a track confirmed under an
+    /// IMM starts with [`Imm::initial_probabilities`].
+    pub motion: Motion,
     /// 3D tracker: height (m, fusion frame `u`) given to 2D plots when a
     /// track is started from them (seed 003's mapping).
     pub default_height: f64,
@@ -262,6 +357,7 @@ impl TrackerConfig {
             deletion: Deletion::after_misses(misses),
             sigma_a: [3.0; 3],
             noise: NoiseModel::Cwna,
+            motion: Motion::Imm(Imm::aircraft()),
             default_height: 0.0,
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
@@ -337,6 +433,9 @@ impl TrackerConfig {
         validate_deletion(&self.deletion)?;
         for &s in &self.sigma_a {
             non_negative("sigma_a", s)?;
+        }
+        if let Motion::Imm(imm) = &self.motion {
+            validate_imm(imm)?;
         }
         finite("default_height", self.default_height)?;
         positive("default_height_sigma", self.default_height_sigma)?;
@@ -463,6 +562,57 @@ fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
         return Err(invalid(
             "max_dt",
             format!("must be >= min_dt = {}", i.min_dt),
+        ));
+    }
+    Ok(())
+}
+
+fn validate_imm(imm: &Imm) -> Result<(), AlgoError> {
+    let r = imm.models.len();
+    if !(2..=8).contains(&r) {
+        return Err(invalid(
+            "models",
+            format!("an IMM needs 2 to 8 models, got {r}"),
+        ));
+    }
+    for m in &imm.models {
+        for s in m.sigma_a() {
+            non_negative("sigma_a", s)?;
+        }
+        if let MotionModel::CoordinatedTurn { turn_rate, .. } = m {
+            finite("turn_rate", *turn_rate)?;
+            if *turn_rate == 0.0 || turn_rate.abs() > 0.5 {
+                return Err(invalid(
+                    "turn_rate",
+                    format!("must be non-zero with |ω| ≤ 0.5 rad/s, got {turn_rate}"),
+                ));
+            }
+        }
+    }
+    if imm.mean_sojourn.len() != r {
+        return Err(invalid(
+            "mean_sojourn",
+            format!(
+                "one per model: {r} models, {} values",
+                imm.mean_sojourn.len()
+            ),
+        ));
+    }
+    for &t in &imm.mean_sojourn {
+        positive("mean_sojourn", t)?;
+    }
+    let p = &imm.initial_probabilities;
+    if p.len() != r {
+        return Err(invalid(
+            "initial_probabilities",
+            format!("one per model: {r} models, {} values", p.len()),
+        ));
+    }
+    let sum: f64 = p.iter().sum();
+    if p.iter().any(|v| !(v.is_finite() && *v > 0.0)) || (sum - 1.0).abs() > 1e-9 {
+        return Err(invalid(
+            "initial_probabilities",
+            format!("each must be > 0 and they must sum to 1, got {p:?}"),
         ));
     }
     Ok(())

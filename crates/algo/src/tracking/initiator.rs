@@ -305,6 +305,7 @@ fn new_tentative(
         consecutive_misses: 0,
         radars,
         last_update: t,
+        modes: Vec::new(),
     }
 }
 

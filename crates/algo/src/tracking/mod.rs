@@ -39,15 +39,18 @@ pub mod config;
 mod deleter;
 pub mod initiator;
 pub mod plot_association;
+pub mod predictor;
 pub mod registration;
 mod state;
 mod track;
+pub mod updater;
 
 #[cfg(test)]
 mod tests;
 
 pub use config::{
-    Deletion, Initiation, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate,
+    Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec,
+    TrackerConfig, VelocityGate,
 };
 pub use registration::{CartesianPlot, Doppler};
 pub use state::{TrackerParts, TrackerState};
@@ -55,10 +58,11 @@ pub use track::{Track, TrackOutput, TrackStatus};
 
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
-use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutter};
+use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout};
 use initiator::Initiator;
 use plot_association::associate_and_fuse;
 use registration::{extrapolate, register};
+use updater::{Measurements, update_imm};
 
 /// Running totals since the tracker was created.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -386,7 +390,7 @@ impl Tracker {
     ) -> Result<(), AlgoError> {
         let cfg = &self.config;
         for track in &mut self.tracks {
-            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+            track.predict_with(t, cfg)?;
         }
         let mut estimates: Vec<TrackEstimate> = self
             .tracks
@@ -396,30 +400,64 @@ impl Tracker {
                 p: tr.p.clone(),
             })
             .collect();
-        let Outcome { hit, used } = match &source {
-            Source::Radar { index, plots: raw } => associate_polar(
-                &mut estimates,
-                &cfg.radars[*index],
-                raw,
-                cfg.axes,
-                cfg.track_gate_probability,
-                &cfg.association,
-            )?,
+        let (
+            Outcome {
+                hit,
+                used,
+                associations,
+            },
+            measurements,
+        ) = match &source {
+            Source::Radar { index, plots: raw } => {
+                let radar = &cfg.radars[*index];
+                let outcome = associate_polar(
+                    &mut estimates,
+                    radar,
+                    raw,
+                    cfg.axes,
+                    cfg.track_gate_probability,
+                    &cfg.association,
+                )?;
+                let layout = polar_layout(radar, cfg.axes);
+                (
+                    outcome,
+                    Measurements::Polar {
+                        radar,
+                        layout,
+                        plots: raw,
+                    },
+                )
+            }
             Source::Fused {
                 clutter,
                 detection_probability,
-            } => associate_cartesian(
-                &mut estimates,
-                &plots,
-                clutter,
-                *detection_probability,
-                cfg.track_gate_probability,
-                &cfg.association,
-            )?,
+            } => (
+                associate_cartesian(
+                    &mut estimates,
+                    &plots,
+                    clutter,
+                    *detection_probability,
+                    cfg.track_gate_probability,
+                    &cfg.association,
+                )?,
+                Measurements::Cartesian { plots: &plots },
+            ),
         };
-        for ((track, est), hit) in self.tracks.iter_mut().zip(estimates).zip(&hit) {
-            track.x = est.x;
-            track.p = est.p;
+        for (((track, est), hit), assoc) in self
+            .tracks
+            .iter_mut()
+            .zip(estimates)
+            .zip(&hit)
+            .zip(&associations)
+        {
+            if track.modes.is_empty() {
+                track.x = est.x;
+                track.p = est.p;
+            } else {
+                let (x, p) = update_imm(&mut track.modes, assoc, &measurements)?;
+                track.x = x;
+                track.p = p;
+            }
             track.record(hit.map(|j| plots[j].radars.clone()));
         }
 
@@ -449,7 +487,10 @@ impl Tracker {
             .step(t, leftovers, &self.config, &mut self.next_id)?;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
-        for track in initiated.confirmed {
+        for mut track in initiated.confirmed {
+            if let Motion::Imm(imm) = &self.config.motion {
+                track.start_modes(imm);
+            }
             report.confirmed.push(track.id);
             self.counters.confirmed += 1;
             self.tracks.push(track);

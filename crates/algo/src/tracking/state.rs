@@ -7,7 +7,7 @@
 //! that parts read from corrupt bytes give an error here, never a panic in
 //! a later call.
 
-use super::{CartesianPlot, Counters, Plot, Track, Tracker, TrackerConfig};
+use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
 use crate::tracking::initiator::Initiator;
@@ -83,6 +83,48 @@ fn bad(reason: impl Into<String>) -> AlgoError {
     }
 }
 
+/// An IMM track's modes: one per model of the configuration's IMM (none
+/// without one, and none for a tentative track, checked by the caller),
+/// each of the track's dimension, finite, positive definite, probabilities
+/// in (0, 1] summing to 1.
+fn check_modes(t: &Track, c: &TrackerConfig) -> Result<(), AlgoError> {
+    if t.modes.is_empty() {
+        return Ok(());
+    }
+    let r = match &c.motion {
+        Motion::Imm(imm) => imm.models.len(),
+        Motion::ConstantVelocity => 0,
+    };
+    if t.modes.len() != r {
+        return Err(bad(format!(
+            "track {} has {} modes, the configuration {r} models",
+            t.id,
+            t.modes.len()
+        )));
+    }
+    let n = t.x.len();
+    for m in &t.modes {
+        if m.x.len() != n || m.p.shape() != (n, n) || m.x.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!("track {} has a malformed mode", t.id)));
+        }
+        check_covariance("mode covariance", &m.p)?;
+        if !(m.probability > 0.0 && m.probability <= 1.0) {
+            return Err(bad(format!(
+                "track {} has mode probability {}",
+                t.id, m.probability
+            )));
+        }
+    }
+    let sum: f64 = t.modes.iter().map(|m| m.probability).sum();
+    if (sum - 1.0).abs() > 1e-6 {
+        return Err(bad(format!(
+            "track {}'s mode probabilities sum to {sum}",
+            t.id
+        )));
+    }
+    Ok(())
+}
+
 impl Tracker {
     /// Every field the tracker carries between calls, borrowed.
     pub fn state(&self) -> TrackerState<'_> {
@@ -133,12 +175,16 @@ impl Tracker {
             }
             check_covariance("track covariance", &t.p)?;
             radars(&t.radars)?;
+            check_modes(t, c)?;
             if t.id >= parts.next_id {
                 return Err(bad(format!(
                     "track id {} not below the next id {}",
                     t.id, parts.next_id
                 )));
             }
+        }
+        if parts.tentatives.iter().any(|t| !t.modes.is_empty()) {
+            return Err(bad("a tentative track with IMM modes"));
         }
         for r in &parts.roots {
             let k = r.z.len();

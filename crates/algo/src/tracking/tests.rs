@@ -448,3 +448,121 @@ fn bad_input_is_an_error_without_a_state_change() {
     c.radars[0].sigma_elevation = Some(0.01);
     assert!(Tracker::new(c).is_err(), "a 3D radar in a 2D tracker");
 }
+
+/// East at 150 m/s from (−20, 30) km for 100 s, a left standard-rate turn
+/// (3 °/s, ω = π/60 rad/s) for 60 s (half a circle of radius
+/// 150/ω ≈ 2865 m), then west: position at time t in closed form.
+fn turning_target(t: f64) -> [f64; 3] {
+    let (v, w) = (150.0, std::f64::consts::PI / 60.0);
+    let (x0, y0) = (-20_000.0, 30_000.0);
+    if t <= 100.0 {
+        return [x0 + v * t, y0, 0.0];
+    }
+    let radius = v / w;
+    let (xa, ya) = (x0 + v * 100.0, y0);
+    if t <= 160.0 {
+        let a = w * (t - 100.0);
+        // Centre at (xa, ya + R); heading east turning left (north).
+        return [xa + radius * a.sin(), ya + radius * (1.0 - a.cos()), 0.0];
+    }
+    [xa - v * (t - 160.0), ya + 2.0 * radius, 0.0]
+}
+
+fn turning_plots(radars: &[RadarSpec], duration: f64, rng: &mut Lcg) -> Vec<Plot> {
+    let mut plots = Vec::new();
+    for (i, r) in radars.iter().enumerate() {
+        let mut t = 0.7 * i as f64;
+        while t <= duration {
+            let p = turning_target(t);
+            let rel = [p[0] - r.site[0], p[1] - r.site[1]];
+            plots.push(Plot {
+                radar: i,
+                t,
+                range: rel[0].hypot(rel[1]) + r.sigma_range * rng.normal(),
+                azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
+                elevation: None,
+                radial_velocity: None,
+            });
+            t += r.scan_period;
+        }
+    }
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    plots
+}
+
+/// Per segment (straight before the turn, in the turn), the RMS position
+/// error of the confirmed track at its own time, and the largest
+/// probability of the left-turn model (index 1 of `Imm::aircraft`) seen
+/// in the turn.
+fn run_turn(motion: Motion, seed: u64) -> ([f64; 2], f64) {
+    let mut radars = vec![
+        radar([-10_000.0, 0.0, 0.0], 4.0, false),
+        radar([10_000.0, 0.0, 0.0], 5.0, false),
+    ];
+    for r in &mut radars {
+        r.sigma_range = 50.0;
+        r.sigma_azimuth = 0.1_f64.to_radians();
+    }
+    let mut cfg = TrackerConfig::new(2, radars);
+    cfg.motion = motion;
+    cfg.sigma_a = [0.5; 3];
+    let plots = turning_plots(&cfg.radars, 220.0, &mut Lcg(seed));
+    let mut tracker = Tracker::new(cfg).unwrap();
+    let (mut sums, mut counts, mut left) = ([0.0; 2], [0usize; 2], 0.0f64);
+    let mut start = 0;
+    while start < plots.len() {
+        let end = start + 1;
+        tracker.process(&plots[start..end]).unwrap();
+        start = end;
+        for tr in tracker.confirmed_tracks() {
+            let truth = turning_target(tr.t);
+            let e2 = (tr.state[0] - truth[0]).powi(2) + (tr.state[2] - truth[1]).powi(2);
+            let seg = if (40.0..100.0).contains(&tr.t) {
+                0
+            } else if (110.0..160.0).contains(&tr.t) {
+                if let Some(&p) = tr.modes.get(1) {
+                    left = left.max(p);
+                }
+                1
+            } else {
+                continue;
+            };
+            sums[seg] += e2;
+            counts[seg] += 1;
+        }
+    }
+    assert!(counts.iter().all(|&c| c > 10), "{counts:?}");
+    ([0, 1].map(|s| (sums[s] / counts[s] as f64).sqrt()), left)
+}
+
+/// The IMM holds a standard-rate turn that a low-noise constant-velocity
+/// filter cannot, with its left-turn model taking over, and loses little
+/// on the straight leg (the reason it is the default; seed-001 Monte
+/// Carlo and the real-traffic check measure it properly). Seeds 1–5 gave
+/// a turn RMSE of 66 m (IMM) against 350 m (CV √q = 0.5) and 40 m against
+/// 35 m on the straight leg.
+#[test]
+fn the_imm_follows_a_turn_that_low_noise_cv_cannot() {
+    let (mut cv, mut imm) = ([0.0; 2], [0.0; 2]);
+    for seed in 1..=5 {
+        let (e_cv, _) = run_turn(Motion::ConstantVelocity, seed);
+        let (e_imm, left) = run_turn(Motion::Imm(Imm::aircraft()), seed);
+        assert!(left > 0.5, "left-turn model {left} (seed {seed})");
+        for s in 0..2 {
+            cv[s] += e_cv[s] / 5.0;
+            imm[s] += e_imm[s] / 5.0;
+        }
+    }
+    assert!(
+        imm[1] < 0.7 * cv[1],
+        "turn: IMM {} m, CV {} m",
+        imm[1],
+        cv[1]
+    );
+    assert!(
+        imm[0] < 1.3 * cv[0],
+        "straight: IMM {} m, CV {} m",
+        imm[0],
+        cv[0]
+    );
+}

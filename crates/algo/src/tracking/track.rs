@@ -8,8 +8,9 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::AlgoError;
 use crate::gating::chi2_threshold;
 use crate::kalman;
-use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
-use crate::tracking::config::NoiseModel;
+use crate::motion::cv_transition;
+use crate::tracking::config::{Imm, Motion, NoiseModel, TrackerConfig};
+use crate::tracking::predictor::{ModeState, predict_imm, process_noise};
 
 /// Where a track stands in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,6 +50,9 @@ pub struct TrackOutput {
     pub age: u32,
     /// Time of the last update by a plot (s).
     pub last_update: f64,
+    /// Mode probabilities of an IMM track, in the order of the
+    /// configuration's models (empty for a single-model track).
+    pub modes: Vec<f64>,
 }
 
 /// A track inside the tracker (tentative or confirmed), with what its life
@@ -79,6 +83,10 @@ pub struct Track {
     pub radars: Vec<usize>,
     /// Time of the last update by a plot (s).
     pub last_update: f64,
+    /// An IMM track's models, in the order of [`Imm::models`], each with its
+    /// mode probability and state; `x`, `p` are then their combination.
+    /// Empty for a single constant-velocity Gaussian.
+    pub modes: Vec<ModeState>,
 }
 
 impl Track {
@@ -97,6 +105,7 @@ impl Track {
             consecutive_misses: 0,
             radars: vec![],
             last_update: 0.0,
+            modes: Vec::new(),
         }
     }
 
@@ -143,8 +152,38 @@ impl Track {
         Ok(())
     }
 
+    /// Predicts the track to time `t` with the tracker's predictor: one
+    /// constant-velocity model, or the IMM of its modes.
+    pub(crate) fn predict_with(&mut self, t: f64, cfg: &TrackerConfig) -> Result<(), AlgoError> {
+        match (&cfg.motion, self.modes.is_empty()) {
+            (Motion::Imm(imm), false) => {
+                let (x, p) = predict_imm(imm, cfg.noise, &mut self.modes, t - self.t)?;
+                self.x = x;
+                self.p = p;
+                self.t = t;
+                Ok(())
+            }
+            _ => self.predict(t, &cfg.sigma_a, cfg.noise),
+        }
+    }
+
+    /// Starts the modes of a track just confirmed under an IMM: every model
+    /// at the track's estimate, with the prior mode split.
+    pub(crate) fn start_modes(&mut self, imm: &Imm) {
+        self.modes = imm
+            .initial_probabilities
+            .iter()
+            .map(|&probability| ModeState {
+                probability,
+                x: self.x.clone(),
+                p: self.p.clone(),
+            })
+            .collect();
+    }
+
     pub(crate) fn output(&self, status: TrackStatus) -> TrackOutput {
         TrackOutput {
+            modes: self.modes.iter().map(|m| m.probability).collect(),
             id: self.id,
             status,
             t: self.t,
@@ -173,14 +212,7 @@ pub(super) fn predict(
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let axes = x.len() / 2;
     let f = cv_transition(axes, dt)?;
-    let mut q = DMatrix::zeros(2 * axes, 2 * axes);
-    for (i, &s) in sigma_a.iter().enumerate().take(axes) {
-        let block = match noise {
-            NoiseModel::Dwna => dwna_process_noise(1, dt, s)?,
-            NoiseModel::Cwna => cwna_process_noise(1, dt, s * s)?,
-        };
-        q.view_mut((2 * i, 2 * i), (2, 2)).copy_from(&block);
-    }
+    let q = process_noise(axes, dt, sigma_a, noise)?;
     kalman::predict(x, p, &f, &q)
 }
 

@@ -20,7 +20,10 @@
 //! - duration D = 300 s (`--scans` × 5 s).
 //!
 //! Trackers, all with `TrackerConfig::new`'s defaults unless stated: exact
-//! JPDA, CWNA process noise √q = 3 per axis, 3-of-4 initiation with a
+//! JPDA, the IMM of `Imm::aircraft` (CV √q = 0.5 and ±3 °/s turns √q =
+//! 1.5) for confirmed tracks, CWNA √q = 3 per axis for tentative ones (the
+//! "CV" variants: one constant-velocity model for both, the default before
+//! the IMM), 3-of-4 initiation with a
 //! [0, 600] m/s speed gate, deletion by `TrackerConfig::default_deletion`
 //! (2 × radars, at least 3, consecutive missed frames in serial mode, 3 in parallel
 //! mode), 99 % gates, σ_t = 300 m/s for the unseen cross-range motion of
@@ -56,7 +59,7 @@ use crate::sensor::Radar;
 use crate::truth::{Leg, Manoeuvre, TargetPlan, Trajectory, simulate, velocity};
 use crate::{STANDARD_GRAVITY, SimError, SimRng};
 use algo::jpda::Method;
-use algo::tracking::{Mode, NoiseModel, Plot, RadarSpec, TrackerConfig};
+use algo::tracking::{Mode, Motion, NoiseModel, Plot, RadarSpec, TrackerConfig};
 
 const RADAR_COUNTS: [usize; 3] = [2, 3, 4];
 const DEFAULT_TARGETS: usize = 50;
@@ -81,7 +84,8 @@ struct Variant {
     mode: Mode,
     /// Each radar alone (`mode` ignored), the best RMSE of them kept.
     single: bool,
-    /// `Some`: process noise model and σ_a (or √q) per axis.
+    /// `Some`: one constant-velocity model instead of the default IMM, with
+    /// this process noise model and σ_a (or √q) per axis.
     noise: Option<(NoiseModel, f64)>,
     /// `Some`: σ_t of parallel mode (m/s).
     sigma_t: Option<f64>,
@@ -100,7 +104,27 @@ const FORMER_SIGMA_T: Option<f64> = Some(100.0);
 const FORMER_MISSES: Option<u32> = Some(3);
 const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
-const VARIANTS: [Variant; 11] = [
+const VARIANTS: [Variant; 13] = [
+    Variant {
+        name: "parallel CV √q = 3 (the default before the IMM)",
+        mode: Mode::Parallel,
+        single: false,
+        noise: Some((NoiseModel::Cwna, 3.0)),
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+    },
+    Variant {
+        name: "serial CV √q = 3 (the default before the IMM)",
+        mode: Mode::Serial,
+        single: false,
+        noise: Some((NoiseModel::Cwna, 3.0)),
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+    },
     Variant {
         name: "parallel former defaults",
         mode: Mode::Parallel,
@@ -686,6 +710,7 @@ fn one_run(
                 let variant = |specs: Vec<RadarSpec>| {
                     let mut c = config(specs, v.mode);
                     if let Some((noise, sigma)) = v.noise {
+                        c.motion = Motion::ConstantVelocity;
                         c.noise = noise;
                         c.sigma_a = [sigma; 3];
                     }

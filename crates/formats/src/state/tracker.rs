@@ -3,9 +3,13 @@
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
-//! Layout: magic `RFTK`, format version (u32, currently 1), the
+//! Layout: magic `RFTK`, format version (u32, currently 2), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
+//! Format 2 adds the predictor (`motion`) after the configuration and each
+//! track's IMM modes after the track; format 1 (trackers stored before the
+//! IMM) is read as one constant-velocity model without modes, so such a
+//! tracker continues exactly as it would have.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -13,8 +17,9 @@
 
 use algo::jpda::{Config as JpdaConfig, Method};
 use algo::tracking::{
-    CartesianPlot, Counters, Deletion, Initiation, Mode, NoiseModel, Plot, RadarSpec, Track,
-    Tracker, TrackerConfig, TrackerParts, VelocityGate,
+    CartesianPlot, Counters, Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel,
+    Plot, RadarSpec, Track, Tracker, TrackerConfig, TrackerParts, VelocityGate,
+    predictor::ModeState,
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -22,7 +27,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
@@ -96,13 +101,13 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     }
     let mut r = Reader::new(&bytes[4..]);
     let version = r.u32()?;
-    if version != FORMAT_VERSION {
+    if !(1..=FORMAT_VERSION).contains(&version) {
         return Err(corrupt(&format!("unknown tracker format {version}")));
     }
-    let config = read_config(&mut r)?;
+    let config = read_config(&mut r, version)?;
     let n = r.len(8)?;
     let tracks = (0..n)
-        .map(|_| read_track(&mut r))
+        .map(|_| read_track(&mut r, version))
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let roots = (0..n)
@@ -110,7 +115,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let tentatives = (0..n)
-        .map(|_| read_track(&mut r))
+        .map(|_| read_track(&mut r, version))
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let pending = (0..n)
@@ -206,9 +211,61 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     w.f64(c.default_height_sigma);
     w.f64(c.sigma_tangential_speed);
     w.f64(c.duplicate_probability);
+    match &c.motion {
+        Motion::ConstantVelocity => w.u8(0),
+        Motion::Imm(imm) => {
+            w.u8(1);
+            w.usize(imm.models.len());
+            for m in &imm.models {
+                match m {
+                    MotionModel::ConstantVelocity { sigma_a } => {
+                        w.u8(0);
+                        w.f64_run(sigma_a);
+                    }
+                    MotionModel::CoordinatedTurn { turn_rate, sigma_a } => {
+                        w.u8(1);
+                        w.f64(*turn_rate);
+                        w.f64_run(sigma_a);
+                    }
+                }
+            }
+            w.f64_run(&imm.mean_sojourn);
+            w.f64_run(&imm.initial_probabilities);
+        }
+    }
 }
 
-fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, FormatError> {
+fn read_motion(r: &mut Reader<'_>) -> Result<Motion, FormatError> {
+    match r.u8()? {
+        0 => Ok(Motion::ConstantVelocity),
+        1 => {
+            let n = r.len(8)?;
+            let mut models = Vec::with_capacity(n);
+            for _ in 0..n {
+                models.push(match r.u8()? {
+                    0 => MotionModel::ConstantVelocity {
+                        sigma_a: [r.f64()?, r.f64()?, r.f64()?],
+                    },
+                    1 => MotionModel::CoordinatedTurn {
+                        turn_rate: r.f64()?,
+                        sigma_a: [r.f64()?, r.f64()?, r.f64()?],
+                    },
+                    _ => return Err(corrupt("bad motion model")),
+                });
+            }
+            let mean_sojourn = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
+            let initial_probabilities = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
+            Ok(Motion::Imm(Imm {
+                models,
+                mean_sojourn,
+                initial_probabilities,
+            }))
+        }
+        _ => Err(corrupt("bad motion")),
+    }
+}
+
+fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, FormatError> {
     let axes = r.usize()?;
     let n = r.len(8)?;
     let mut radars = Vec::with_capacity(n);
@@ -279,6 +336,15 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, FormatError> {
         1 => NoiseModel::Dwna,
         _ => return Err(corrupt("bad noise model")),
     };
+    let default_height = r.f64()?;
+    let default_height_sigma = r.f64()?;
+    let sigma_tangential_speed = r.f64()?;
+    let duplicate_probability = r.f64()?;
+    let motion = if version >= 2 {
+        read_motion(r)?
+    } else {
+        Motion::ConstantVelocity
+    };
     Ok(TrackerConfig {
         axes,
         radars,
@@ -293,10 +359,11 @@ fn read_config(r: &mut Reader<'_>) -> Result<TrackerConfig, FormatError> {
         deletion,
         sigma_a,
         noise,
-        default_height: r.f64()?,
-        default_height_sigma: r.f64()?,
-        sigma_tangential_speed: r.f64()?,
-        duplicate_probability: r.f64()?,
+        motion,
+        default_height,
+        default_height_sigma,
+        sigma_tangential_speed,
+        duplicate_probability,
     })
 }
 
@@ -312,11 +379,17 @@ fn track(w: &mut Writer, t: &Track) {
     w.u32(t.consecutive_misses);
     radars(w, &t.radars);
     w.f64(t.last_update);
+    w.usize(t.modes.len());
+    for m in &t.modes {
+        w.f64(m.probability);
+        w.f64_run(m.x.as_slice());
+        w.f64_run(m.p.as_slice());
+    }
 }
 
 /// A track as stored; its dimension, covariance and radar indices are
 /// checked by [`Tracker::from_parts`] against the configuration.
-fn read_track(r: &mut Reader<'_>) -> Result<Track, FormatError> {
+fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
     let id = r.u64()?;
     let x = r.f64s()?;
     let p = r.f64s()?;
@@ -336,6 +409,24 @@ fn read_track(r: &mut Reader<'_>) -> Result<Track, FormatError> {
         consecutive_misses: r.u32()?,
         radars: read_radars(r)?,
         last_update: r.f64()?,
+        modes: if version >= 2 {
+            let k = r.len(8 * (1 + n + n * n))?;
+            (0..k)
+                .map(|_| {
+                    Ok(ModeState {
+                        probability: r.f64()?,
+                        x: DVector::from_vec((0..n).map(|_| r.f64()).collect::<Result<_, _>>()?),
+                        p: DMatrix::from_vec(
+                            n,
+                            n,
+                            (0..n * n).map(|_| r.f64()).collect::<Result<_, _>>()?,
+                        ),
+                    })
+                })
+                .collect::<Result<_, FormatError>>()?
+        } else {
+            Vec::new()
+        },
     })
 }
 
@@ -490,6 +581,47 @@ mod tests {
         }
     }
 
+    /// Trackers stored in format 1 (before the IMM; written by
+    /// `tracker_v1_fixture`, kept in `tests/fixtures`, from this module's
+    /// scene without Doppler cut at half its plots) decode as one
+    /// constant-velocity model and continue exactly as they would have:
+    /// the second half on the decoded mid-run tracker gives the stored end.
+    #[test]
+    fn format_1_trackers_decode_and_continue() {
+        let mid = decode_tracker(include_bytes!(
+            "../../../../tests/fixtures/tracker_v1_mid.bin"
+        ))
+        .unwrap();
+        let end = decode_tracker(include_bytes!(
+            "../../../../tests/fixtures/tracker_v1_end.bin"
+        ))
+        .unwrap();
+        assert_eq!(mid.config().motion, Motion::ConstantVelocity);
+        let plots = plots(mid.config(), 100.0);
+        assert_eq!(plots.len(), 48);
+        let mut t = mid;
+        t.process(&plots[24..]).unwrap();
+        t.flush().unwrap();
+        assert_eq!(t, end);
+        assert_eq!(t.counters().confirmed, 2);
+        // Written again it is format 2 and reads back the same.
+        let bytes = encode_tracker(&t);
+        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
+        assert_eq!(decode_tracker(&bytes).unwrap(), t);
+    }
+
+    #[test]
+    fn imm_trackers_round_trip() {
+        let cfg = config(false);
+        assert!(matches!(cfg.motion, Motion::Imm(_)));
+        let mut t = Tracker::new(cfg.clone()).unwrap();
+        t.process(&plots(&cfg, 100.0)).unwrap();
+        assert!(t.state().tracks.iter().all(|tr| tr.modes.len() == 3));
+        assert!(!t.state().tracks.is_empty());
+        let bytes = encode_tracker(&t);
+        assert_eq!(decode_tracker(&bytes).unwrap(), t);
+    }
+
     #[test]
     fn corrupt_bytes_are_errors_never_panics() {
         let cfg = config(false);
@@ -517,9 +649,9 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v2 = bytes.clone();
-        v2[4] = 2;
-        assert!(matches!(decode_tracker(&v2), Err(FormatError::Corrupt(_))));
+        let mut v3 = bytes.clone();
+        v3[4] = 3;
+        assert!(matches!(decode_tracker(&v3), Err(FormatError::Corrupt(_))));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {

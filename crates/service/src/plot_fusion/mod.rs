@@ -22,7 +22,7 @@ use algo::{
     tracking::{Counters, Mode, Plot, Tracker, TrackerConfig},
 };
 pub use network::Network;
-pub use output::{HistoryEntry, TrackView, TrackerCounters};
+pub use output::{HistoryEntry, ModeView, TrackView, TrackerCounters, model_names};
 
 /// Most radars in a network.
 pub const MAX_RADARS: usize = 64;
@@ -115,6 +115,28 @@ pub struct TrackerInput {
     pub default_height_sigma_m: Option<f64>,
     pub sigma_tangential_speed_mps: Option<f64>,
     pub duplicate_gate_probability: Option<f64>,
+    /// `imm` (default) or `cv` (one constant-velocity model with
+    /// `sigma_a_mps2`).
+    pub motion: Option<String>,
+    /// The IMM's models; absent: `algo::tracking::Imm::aircraft`.
+    pub imm_models: Option<Vec<ImmModelInput>>,
+}
+
+/// One model of the IMM.
+#[derive(Debug, Clone, Default)]
+pub struct ImmModelInput {
+    /// `cv` (constant velocity) or `ct` (coordinated turn).
+    pub model: Option<String>,
+    /// Noise per horizontal axis (√q for CWNA); default 0.5 (cv), 1.5 (ct).
+    pub sigma_a_mps2: Option<f64>,
+    /// Vertical noise; default `sigma_a_mps2`.
+    pub sigma_a_vertical_mps2: Option<f64>,
+    /// `ct`: turn rate (°/s, positive to the left), required.
+    pub turn_rate_dps: Option<f64>,
+    /// Mean time in the model (s); default 60 (cv), 20 (ct).
+    pub mean_sojourn_s: Option<f64>,
+    /// Mode probability of a new track; all or none (then equal shares).
+    pub initial_probability: Option<f64>,
 }
 
 /// Everything that configures a tracker: the network and the options.
@@ -250,20 +272,27 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &counters,
         &tracks,
     ));
+    let motion = &tracker.config().motion;
     Ok(TrackOutput {
         mode: mode_name(tracker.mode()),
         state_layout: output::layout(tracker.config().axes),
-        tracks: tracks.iter().map(|t| network.track_view(t)).collect(),
+        tracks: tracks
+            .iter()
+            .map(|t| network.track_view(motion, t))
+            .collect(),
         deleted: report
             .deleted
             .iter()
-            .map(|t| network.track_view(t))
+            .map(|t| network.track_view(motion, t))
             .collect(),
         history: history.map(|h| {
             h.into_iter()
                 .map(|(t, tracks)| HistoryEntry {
                     t,
-                    tracks: tracks.iter().map(|tr| network.track_view(tr)).collect(),
+                    tracks: tracks
+                        .iter()
+                        .map(|tr| network.track_view(motion, tr))
+                        .collect(),
                 })
                 .collect()
         }),

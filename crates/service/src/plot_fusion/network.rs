@@ -42,7 +42,10 @@ use algo::{
     geo::{Ellipsoid, LocalFrame},
     jpda::Method,
     polar::{enu_to_polar_3d, polar_to_enu_3d},
-    tracking::{Deletion, Mode, NoiseModel, Plot, RadarSpec, TrackerConfig, VelocityGate},
+    tracking::{
+        Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, TrackerConfig,
+        VelocityGate,
+    },
 };
 use formats::wire::{FormatError, Reader, Writer};
 
@@ -119,6 +122,7 @@ fn wire_name(what: &str) -> &'static str {
         "default_height_sigma" => "tracker.default_height_sigma_m",
         "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
         "duplicate_probability" => "tracker.duplicate_gate_probability",
+        "models" | "turn_rate" | "mean_sojourn" | "initial_probabilities" => "tracker.imm_models",
         _ => "tracker",
     }
 }
@@ -496,6 +500,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         }
         config.deletion = rule;
     }
+    config.motion = motion(tracker, &mut warnings)?;
     config.validate().map_err(|e| config_error(&e))?;
 
     let doppler = config.radars.iter().filter(|r| r.has_doppler()).count();
@@ -530,6 +535,142 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         config,
         warnings,
     ))
+}
+
+/// The predictor: `tracker.motion` and `tracker.imm_models`.
+fn motion(
+    tracker: &super::TrackerInput,
+    warnings: &mut Vec<String>,
+) -> Result<Motion, ServiceError> {
+    let mut v = Violations::new();
+    let kind = v.one_of(
+        "tracker.motion",
+        tracker.motion.as_deref(),
+        Some(true),
+        &[("imm", true), ("cv", false)],
+    );
+    let Some(imm) = kind else {
+        return Err(v.finish_with(None::<()>).unwrap_err());
+    };
+    if !imm {
+        if tracker.imm_models.is_some() {
+            return Err(Violations::single(
+                "tracker.imm_models",
+                "is for tracker.motion \"imm\" (the default); remove it or the motion",
+            ));
+        }
+        return Ok(Motion::ConstantVelocity);
+    }
+    if tracker.sigma_a_mps2.is_some() || tracker.sigma_a_vertical_mps2.is_some() {
+        warnings.push(
+            "tracker.sigma_a_mps2 sets the noise of tentative tracks; confirmed tracks follow \
+             the IMM's models (tracker.imm_models), or set tracker.motion to \"cv\" for one \
+             constant-velocity model with that noise"
+                .into(),
+        );
+    }
+    let Some(models) = &tracker.imm_models else {
+        return Ok(Motion::Imm(Imm::aircraft()));
+    };
+    if !(2..=8).contains(&models.len()) {
+        return Err(Violations::single(
+            "tracker.imm_models",
+            format!("an IMM needs 2 to 8 models, got {}", models.len()),
+        ));
+    }
+    let given = models
+        .iter()
+        .filter(|m| m.initial_probability.is_some())
+        .count();
+    if given != 0 && given != models.len() {
+        return Err(Violations::single(
+            "tracker.imm_models",
+            "give initial_probability for every model or for none (equal shares)",
+        ));
+    }
+    let mut out = Imm {
+        models: Vec::with_capacity(models.len()),
+        mean_sojourn: Vec::with_capacity(models.len()),
+        initial_probabilities: Vec::with_capacity(models.len()),
+    };
+    for (i, m) in models.iter().enumerate() {
+        let f = |name: &str| format!("tracker.imm_models[{i}].{name}");
+        let turn = v.one_of(
+            f("model"),
+            m.model.as_deref(),
+            None,
+            &[("cv", false), ("ct", true)],
+        );
+        let default_sigma = if turn == Some(true) { 1.5 } else { 0.5 };
+        let sigma = v.number_or(
+            f("sigma_a_mps2"),
+            m.sigma_a_mps2,
+            default_sigma,
+            Interval::closed(0.0, 1.0e3),
+        );
+        let vertical = v.number_or(
+            f("sigma_a_vertical_mps2"),
+            m.sigma_a_vertical_mps2,
+            sigma.unwrap_or(default_sigma),
+            Interval::closed(0.0, 1.0e3),
+        );
+        let sojourn = v.number_or(
+            f("mean_sojourn_s"),
+            m.mean_sojourn_s,
+            if turn == Some(true) { 20.0 } else { 60.0 },
+            Interval::open_closed(0.0, 1.0e7),
+        );
+        let p = m
+            .initial_probability
+            .map(|x| v.within(f("initial_probability"), x, Interval::open_closed(0.0, 1.0)));
+        let (Some(turn), Some(sigma), Some(vertical), Some(sojourn), None | Some(Some(_))) =
+            (turn, sigma, vertical, sojourn, p)
+        else {
+            continue;
+        };
+        let p = p.flatten();
+        let sigma_a = [sigma, sigma, vertical];
+        let model = if turn {
+            let rate = v.required(f("turn_rate_dps"), m.turn_rate_dps);
+            match rate {
+                Some(r) if r.is_finite() && r != 0.0 && r.abs() <= 28.0 => {
+                    MotionModel::CoordinatedTurn {
+                        turn_rate: r.to_radians(),
+                        sigma_a,
+                    }
+                }
+                Some(r) => {
+                    v.add(
+                        f("turn_rate_dps"),
+                        format!("must be non-zero with |ω| ≤ 28 °/s, got {r}"),
+                    );
+                    continue;
+                }
+                None => continue,
+            }
+        } else {
+            if m.turn_rate_dps.is_some() {
+                v.add(f("turn_rate_dps"), "is for a \"ct\" model");
+            }
+            MotionModel::ConstantVelocity { sigma_a }
+        };
+        out.models.push(model);
+        out.mean_sojourn.push(sojourn);
+        out.initial_probabilities
+            .push(p.unwrap_or(1.0 / models.len() as f64));
+    }
+    v.finish_with(Some(()))?;
+    let sum: f64 = out.initial_probabilities.iter().sum();
+    if (sum - 1.0).abs() > 1e-6 {
+        return Err(Violations::single(
+            "tracker.imm_models",
+            format!("the initial_probability values must sum to 1, got {sum}"),
+        ));
+    }
+    for p in &mut out.initial_probabilities {
+        *p /= sum;
+    }
+    Ok(Motion::Imm(out))
 }
 
 impl Network {
@@ -775,8 +916,12 @@ impl Network {
     }
 
     /// A core track as a wire track (ids, and lat/lon from the frame).
-    pub fn track_view(&self, t: &algo::tracking::TrackOutput) -> TrackView {
-        super::output::view(self, t)
+    pub fn track_view(
+        &self,
+        motion: &algo::tracking::Motion,
+        t: &algo::tracking::TrackOutput,
+    ) -> TrackView {
+        super::output::view(self, motion, t)
     }
 
     /// The SAC/SIC pairs (the plot_fusion session payload's format 2).

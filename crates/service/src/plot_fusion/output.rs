@@ -4,7 +4,7 @@
 
 use super::Network;
 use algo::geo::LocalFrame;
-use algo::tracking::{TrackOutput, TrackStatus};
+use algo::tracking::{Motion, MotionModel, TrackOutput, TrackStatus};
 
 /// State layouts of the 2D and 3D trackers.
 pub const LAYOUT_2D: [&str; 4] = ["x", "vx", "y", "vy"];
@@ -38,6 +38,47 @@ pub struct TrackView {
     /// Frames since the track started.
     pub age: u32,
     pub last_update_t: f64,
+    /// An IMM track's mode probabilities by model, in the configuration's
+    /// order (empty for a single-model or tentative track).
+    pub modes: Vec<ModeView>,
+    /// An IMM track's turn rate Σ μ_j ω_j (°/s, positive to the left),
+    /// when its models include a turn.
+    pub turn_rate_dps: Option<f64>,
+}
+
+/// One model's probability in an IMM track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModeView {
+    /// The model's name ([`model_names`]).
+    pub model: String,
+    pub probability: f64,
+}
+
+/// The names of an IMM's models: `cv` for constant velocity, `ct_left` /
+/// `ct_right` for a turn to the left (ω > 0) / right, with `_2`, `_3`, …
+/// after a name already taken. Empty for a single model.
+pub fn model_names(motion: &Motion) -> Vec<String> {
+    let Motion::Imm(imm) = motion else {
+        return Vec::new();
+    };
+    let mut names: Vec<String> = Vec::with_capacity(imm.models.len());
+    for m in &imm.models {
+        let base = match m {
+            MotionModel::ConstantVelocity { .. } => "cv",
+            MotionModel::CoordinatedTurn { turn_rate, .. } if *turn_rate > 0.0 => "ct_left",
+            MotionModel::CoordinatedTurn { .. } => "ct_right",
+        };
+        let taken = names
+            .iter()
+            .filter(|n| n.as_str() == base || n.starts_with(&format!("{base}_")))
+            .count();
+        names.push(if taken == 0 {
+            base.to_string()
+        } else {
+            format!("{base}_{}", taken + 1)
+        });
+    }
+    names
 }
 
 /// The confirmed tracks after one processing instant.
@@ -70,7 +111,7 @@ fn at_height(f: &LocalFrame, e: f64, n: f64, h: f64) -> Option<(f64, f64, f64)> 
     Some(geo)
 }
 
-pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
+pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> TrackView {
     let n = t.state.len();
     let three_d = n == 6;
     let position = [
@@ -106,6 +147,30 @@ pub(super) fn view(network: &Network, t: &TrackOutput) -> TrackView {
         consecutive_misses: t.consecutive_misses,
         age: t.age,
         last_update_t: t.last_update,
+        modes: model_names(motion)
+            .into_iter()
+            .zip(&t.modes)
+            .map(|(model, &probability)| ModeView { model, probability })
+            .collect(),
+        turn_rate_dps: match motion {
+            Motion::Imm(imm)
+                if !t.modes.is_empty()
+                    && imm
+                        .models
+                        .iter()
+                        .any(|m| matches!(m, MotionModel::CoordinatedTurn { .. })) =>
+            {
+                Some(
+                    imm.models
+                        .iter()
+                        .zip(&t.modes)
+                        .map(|(m, mu)| mu * m.turn_rate())
+                        .sum::<f64>()
+                        .to_degrees(),
+                )
+            }
+            _ => None,
+        },
     }
 }
 

@@ -29,7 +29,7 @@ use super::{Fnv, Limits, SessionKind};
 use crate::{
     ServiceError,
     plot_fusion::{
-        Network, PlotInput, SpecInput, TrackView, TrackerCounters,
+        ModeView, Network, PlotInput, SpecInput, TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         computation_error, mode_name, network, output,
     },
@@ -49,6 +49,10 @@ pub const FORMAT_VERSION: u8 = 2;
 /// its counters (a batch never processes 2³¹ frames), so kept updates of
 /// earlier releases read unchanged.
 const ASTERIX_FLAG: u32 = 1 << 31;
+/// Set in the frame count of a kept update whose tracks carry their IMM
+/// modes and turn rate (every update this release writes; updates kept by
+/// earlier releases have none).
+const MODES_FLAG: u32 = 1 << 30;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -168,9 +172,15 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
     w.u32(t.consecutive_misses);
     w.u32(t.age);
     w.f64(t.last_update_t);
+    w.usize(t.modes.len());
+    for m in &t.modes {
+        w.str(&m.model);
+        w.f64(m.probability);
+    }
+    w.opt(t.turn_rate_dps, Writer::f64);
 }
 
-fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, FormatError> {
+fn decode_track(r: &mut Reader<'_>, with_modes: bool) -> Result<TrackView, FormatError> {
     let id = r.u64()?;
     let status = status_of(r.u8()?)?;
     let t = r.f64()?;
@@ -192,6 +202,22 @@ fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, FormatError> {
     let height_m = r.opt(Reader::f64)?;
     let k = r.len(8)?;
     let radars = (0..k).map(|_| r.str()).collect::<Result<_, _>>()?;
+    let (hits, misses, consecutive_misses, age) = (r.u32()?, r.u32()?, r.u32()?, r.u32()?);
+    let last_update_t = r.f64()?;
+    let (modes, turn_rate_dps) = if with_modes {
+        let k = r.len(16)?;
+        let modes = (0..k)
+            .map(|_| {
+                Ok(ModeView {
+                    model: r.str()?,
+                    probability: r.f64()?,
+                })
+            })
+            .collect::<Result<_, FormatError>>()?;
+        (modes, r.opt(Reader::f64)?)
+    } else {
+        (Vec::new(), None)
+    };
     Ok(TrackView {
         id,
         status,
@@ -202,11 +228,13 @@ fn decode_track(r: &mut Reader<'_>) -> Result<TrackView, FormatError> {
         lon_deg,
         height_m,
         radars,
-        hits: r.u32()?,
-        misses: r.u32()?,
-        consecutive_misses: r.u32()?,
-        age: r.u32()?,
-        last_update_t: r.f64()?,
+        hits,
+        misses,
+        consecutive_misses,
+        age,
+        last_update_t,
+        modes,
+        turn_rate_dps,
     })
 }
 
@@ -335,7 +363,7 @@ impl SessionKind for PlotFusionSession {
                     } else {
                         TrackChange::Updated
                     },
-                    track: self.network.track_view(t),
+                    track: self.network.track_view(&self.tracker.config().motion, t),
                 })
                 .collect()
         };
@@ -350,7 +378,7 @@ impl SessionKind for PlotFusionSession {
             deleted: report
                 .deleted
                 .iter()
-                .map(|t| self.network.track_view(t))
+                .map(|t| self.network.track_view(&self.tracker.config().motion, t))
                 .collect(),
             dropped,
             counters: self.tracker.counters().into(),
@@ -410,7 +438,7 @@ impl SessionKind for PlotFusionSession {
                 .tracker
                 .tracks()
                 .iter()
-                .map(|t| self.network.track_view(t))
+                .map(|t| self.network.track_view(&self.tracker.config().motion, t))
                 .collect(),
         })
     }
@@ -444,7 +472,7 @@ impl SessionKind for PlotFusionSession {
     }
 
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
-        w.u32(u.frames | if u.asterix.is_some() { ASTERIX_FLAG } else { 0 });
+        w.u32(u.frames | MODES_FLAG | if u.asterix.is_some() { ASTERIX_FLAG } else { 0 });
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -475,7 +503,8 @@ impl SessionKind for PlotFusionSession {
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
         let frames = r.u32()?;
         let has_asterix = frames & ASTERIX_FLAG != 0;
-        let frames = frames & !ASTERIX_FLAG;
+        let with_modes = frames & MODES_FLAG != 0;
+        let frames = frames & !(ASTERIX_FLAG | MODES_FLAG);
         let pending_plots = r.u32()?;
         let n = r.len(4)?;
         let late_plots = (0..n).map(|_| r.u32()).collect::<Result<_, _>>()?;
@@ -487,11 +516,13 @@ impl SessionKind for PlotFusionSession {
                 .ok_or_else(|| corrupt("track change"))?;
             tracks.push(ChangedTrack {
                 change,
-                track: decode_track(r)?,
+                track: decode_track(r, with_modes)?,
             });
         }
         let n = r.len(8)?;
-        let deleted = (0..n).map(|_| decode_track(r)).collect::<Result<_, _>>()?;
+        let deleted = (0..n)
+            .map(|_| decode_track(r, with_modes))
+            .collect::<Result<_, _>>()?;
         let n = r.len(8)?;
         let dropped = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
         Ok(BatchUpdate {

@@ -1,0 +1,307 @@
+//! The predictor of the tracker: motion models over a variable Δt and the
+//! interacting-multiple-model (IMM) predictor that mixes them (Blom and
+//! Bar-Shalom 1988; Bar-Shalom, Li and Kirubarajan, *Estimation with
+//! Applications to Tracking and Navigation*, §11.6.6).
+//!
+//! Every model works on the constant-velocity state `[x, vx, y, vy(, z,
+//! vz)]`, so mixing needs no state conversion:
+//! - constant velocity: F = blockdiag([[1, Δt], [0, 1]]);
+//! - coordinated turn at a known rate ω in the horizontal plane
+//!   (counter-clockwise for ω > 0), constant velocity vertically:
+//!   x⁺ = x + (sin ωΔt / ω) vx − ((1 − cos ωΔt) / ω) vy,
+//!   vx⁺ = cos ωΔt vx − sin ωΔt vy, and symmetrically for y
+//!   (Bar-Shalom et al. eq. 11.7.1-4).
+//!
+//! The process noise of every model is per axis, CWNA or DWNA
+//! ([`NoiseModel`]) with the model's σ (for a turn, the standard
+//! approximation of the noise of a constant-velocity step).
+//!
+//! IMM prediction over Δt from mode probabilities μ_i and model states
+//! (x_i, P_i), with the switching matrix π_ij(Δt) = P(model j after Δt |
+//! model i) of a continuous-time Markov chain of mean sojourn times τ_i
+//! ([`switching`]):
+//! c_j = Σ_i π_ij μ_i, μ_{i|j} = π_ij μ_i / c_j,
+//! x⁰_j = Σ_i μ_{i|j} x_i, P⁰_j = Σ_i μ_{i|j} (P_i + (x_i − x⁰_j)(x_i − x⁰_j)′),
+//! then each model predicts (x⁰_j, P⁰_j) with its own F and Q, and its
+//! predicted mode probability is c_j. The combined (moment-matched)
+//! prediction x̄ = Σ c_j x_j, P̄ = Σ c_j (P_j + (x_j − x̄)(x_j − x̄)′) is what
+//! the hypothesiser gates and associates with.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::AlgoError;
+use crate::kalman;
+use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
+use crate::tracking::config::{Imm, MotionModel, NoiseModel};
+
+/// One model's part of an IMM track: its mode probability and its state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModeState {
+    /// Mode probability μ_j.
+    pub probability: f64,
+    /// The model-conditioned state.
+    pub x: DVector<f64>,
+    /// Its covariance.
+    pub p: DMatrix<f64>,
+}
+
+/// Smallest mode probability held, so that a model that has not fitted for
+/// a long time can come back (and mixing never divides by zero).
+pub const MIN_PROBABILITY: f64 = 1e-9;
+
+/// Per-axis process noise over `dt` with σ per axis.
+pub fn process_noise(
+    axes: usize,
+    dt: f64,
+    sigma_a: &[f64; 3],
+    noise: NoiseModel,
+) -> Result<DMatrix<f64>, AlgoError> {
+    let mut q = DMatrix::zeros(2 * axes, 2 * axes);
+    for (i, &s) in sigma_a.iter().enumerate().take(axes) {
+        let block = match noise {
+            NoiseModel::Dwna => dwna_process_noise(1, dt, s)?,
+            NoiseModel::Cwna => cwna_process_noise(1, dt, s * s)?,
+        };
+        q.view_mut((2 * i, 2 * i), (2, 2)).copy_from(&block);
+    }
+    Ok(q)
+}
+
+/// The transition matrix of `model` over `dt` for `axes` axes.
+pub fn transition(model: &MotionModel, axes: usize, dt: f64) -> Result<DMatrix<f64>, AlgoError> {
+    let mut f = cv_transition(axes, dt)?;
+    if let MotionModel::CoordinatedTurn { turn_rate: w, .. } = model {
+        let (s, c) = (w * dt).sin_cos();
+        // sin(ωΔt)/ω and (1 − cos ωΔt)/ω, written to stay exact as ωΔt → 0.
+        let a = s / w;
+        let b = 2.0 * (0.5 * w * dt).sin().powi(2) / w;
+        // [x, vx, y, vy]
+        f[(0, 1)] = a;
+        f[(0, 3)] = -b;
+        f[(1, 1)] = c;
+        f[(1, 3)] = -s;
+        f[(2, 1)] = b;
+        f[(2, 3)] = a;
+        f[(3, 1)] = s;
+        f[(3, 3)] = c;
+    }
+    Ok(f)
+}
+
+/// Kalman prediction of (x, P) over `dt` with `model`.
+pub fn predict_model(
+    model: &MotionModel,
+    noise: NoiseModel,
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    dt: f64,
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    let axes = x.len() / 2;
+    let f = transition(model, axes, dt)?;
+    let q = process_noise(axes, dt, &model.sigma_a(), noise)?;
+    kalman::predict(x, p, &f, &q)
+}
+
+/// π(Δt) = exp(G |Δt|), row i = from, column j = to: the transition matrix
+/// of the continuous-time Markov chain whose generator G leaves model i at
+/// rate 1/τ_i into each other model equally (g_ii = −1/τ_i, g_ij =
+/// 1/(τ_i (r − 1))). So π(Δt₁ + Δt₂) = π(Δt₁) π(Δt₂): two radars' scan
+/// groups switch the modes as one step of the same total length would,
+/// and a long gap tends to the chain's stationary split. Computed by
+/// scaling and squaring with a Taylor series (r ≤ 8, entries ≤ 1).
+pub fn switching(mean_sojourn: &[f64], dt: f64) -> DMatrix<f64> {
+    let r = mean_sojourn.len();
+    let dt = dt.abs();
+    let mut a = DMatrix::from_fn(r, r, |i, j| {
+        let rate = dt / mean_sojourn[i];
+        if i == j { -rate } else { rate / (r - 1) as f64 }
+    });
+    // ‖A‖∞ = 2 max_i Δt/τ_i; halve until it is below 1/2.
+    let norm = 2.0 * mean_sojourn.iter().map(|t| dt / t).fold(0.0, f64::max);
+    let mut squarings = 0;
+    let mut scaled = norm;
+    while scaled > 0.5 && squarings < 64 {
+        scaled /= 2.0;
+        squarings += 1;
+    }
+    a /= 2f64.powi(squarings);
+    let mut term = DMatrix::identity(r, r);
+    let mut sum = DMatrix::identity(r, r);
+    for k in 1..=16 {
+        term = &term * &a / k as f64;
+        sum += &term;
+    }
+    for _ in 0..squarings {
+        sum = &sum * &sum;
+    }
+    // Rows are probabilities: clear rounding below zero and renormalise.
+    for i in 0..r {
+        let mut row_sum = 0.0;
+        for j in 0..r {
+            sum[(i, j)] = sum[(i, j)].max(0.0);
+            row_sum += sum[(i, j)];
+        }
+        for j in 0..r {
+            sum[(i, j)] /= row_sum;
+        }
+    }
+    sum
+}
+
+/// The moment-matched Gaussian of a mixture: x̄ = Σ w x, P̄ = Σ w (P + d d′).
+pub fn combine<'a>(
+    parts: impl Iterator<Item = (f64, &'a DVector<f64>, &'a DMatrix<f64>)> + Clone,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let (_, x0, p0) = parts.clone().next().expect("a mixture has a component");
+    let mut x = DVector::zeros(x0.len());
+    for (w, xi, _) in parts.clone() {
+        x.axpy(w, xi, 1.0);
+    }
+    let mut p = DMatrix::zeros(p0.nrows(), p0.ncols());
+    for (w, xi, pi) in parts {
+        let d = xi - &x;
+        p += pi * w;
+        p.ger(w, &d, &d, 1.0);
+    }
+    crate::gaussian::symmetrize(&mut p);
+    (x, p)
+}
+
+/// IMM prediction of `modes` over `dt` (module documentation); returns the
+/// combined prediction. The modes hold the predicted states and the
+/// predicted probabilities c_j afterwards.
+pub fn predict_imm(
+    imm: &Imm,
+    noise: NoiseModel,
+    modes: &mut [ModeState],
+    dt: f64,
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    let r = modes.len();
+    let pi = switching(&imm.mean_sojourn, dt);
+    let c: Vec<f64> = (0..r)
+        .map(|j| (0..r).map(|i| pi[(i, j)] * modes[i].probability).sum())
+        .collect();
+    let mut mixed = Vec::with_capacity(r);
+    for j in 0..r {
+        let weights: Vec<f64> = (0..r)
+            .map(|i| pi[(i, j)] * modes[i].probability / c[j])
+            .collect();
+        let (x0, p0) = combine(modes.iter().zip(&weights).map(|(m, &w)| (w, &m.x, &m.p)));
+        mixed.push((x0, p0));
+    }
+    for (j, ((x0, p0), mode)) in mixed.into_iter().zip(modes.iter_mut()).enumerate() {
+        let (x, p) = predict_model(&imm.models[j], noise, &x0, &p0, dt)?;
+        mode.x = x;
+        mode.p = p;
+        mode.probability = c[j];
+    }
+    Ok(combine(modes.iter().map(|m| (m.probability, &m.x, &m.p))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::dvector;
+
+    #[test]
+    fn a_turn_rotates_the_velocity_and_tends_to_constant_velocity() {
+        // A quarter turn: ω = π/20 rad/s for Δt = 10 s from (0, 0) heading
+        // east at 100 m/s turns left (counter-clockwise) to heading north;
+        // the centre of the circle is at (0, R), R = v/ω = 2000/π, so the
+        // end point is (R, R).
+        let w = std::f64::consts::PI / 20.0;
+        let ct = MotionModel::CoordinatedTurn {
+            turn_rate: w,
+            sigma_a: [0.0; 3],
+        };
+        let f = transition(&ct, 2, 10.0).unwrap();
+        let x = &f * dvector![0.0, 100.0, 0.0, 0.0];
+        let radius = 100.0 / w;
+        for (got, want) in x.iter().zip([radius, 0.0, radius, 100.0]) {
+            assert!((got - want).abs() < 1e-9, "{x}");
+        }
+        // A tiny rate is constant velocity to rounding.
+        let slow = MotionModel::CoordinatedTurn {
+            turn_rate: 1e-12,
+            sigma_a: [0.0; 3],
+        };
+        let f = transition(&slow, 3, 4.0).unwrap();
+        let cv = cv_transition(3, 4.0).unwrap();
+        assert!((f - cv).abs().max() < 1e-9);
+    }
+
+    #[test]
+    fn switching_is_the_markov_chain_of_the_sojourn_times() {
+        // Two models, rates a = 1/τ₀ (0 → 1) and b = 1/τ₁ (1 → 0): the
+        // closed form π₀₀(Δt) = b/(a+b) + a/(a+b) e^{−(a+b)Δt},
+        // π₁₁ = a/(a+b) + b/(a+b) e^{−(a+b)Δt}.
+        let (t0, t1) = (60.0, 20.0);
+        let (a, b) = (1.0 / t0, 1.0 / t1);
+        for dt in [0.0, 0.5, 4.0, 30.0, 1e4] {
+            let pi = switching(&[t0, t1], dt);
+            let e = (-(a + b) * dt).exp();
+            assert!(
+                (pi[(0, 0)] - (b / (a + b) + a / (a + b) * e)).abs() < 1e-13,
+                "{dt}"
+            );
+            assert!(
+                (pi[(1, 1)] - (a / (a + b) + b / (a + b) * e)).abs() < 1e-13,
+                "{dt}"
+            );
+        }
+        // Three models: rows are probabilities, steps compose, and a long
+        // gap tends to the stationary split (∝ τ_i for equal shares).
+        let taus = [60.0, 20.0, 20.0];
+        let (p1, p2) = (switching(&taus, 3.0), switching(&taus, 6.0));
+        assert!((&p1 * &p1 - &p2).abs().max() < 1e-13);
+        for i in 0..3 {
+            let row: f64 = (0..3).map(|j| p2[(i, j)]).sum();
+            assert!((row - 1.0).abs() < 1e-15);
+        }
+        let far = switching(&taus, 1e5);
+        for i in 0..3 {
+            assert!((far[(i, 0)] - 0.6).abs() < 1e-9);
+            assert!((far[(i, 1)] - 0.2).abs() < 1e-9);
+        }
+        assert_eq!(switching(&taus, 0.0), DMatrix::identity(3, 3));
+    }
+
+    #[test]
+    fn mixing_by_hand() {
+        // 1D-like check on a 2-axis state, two CV models with no noise and
+        // Δt = 0 (no motion): π = I, so mixing leaves each model alone and
+        // the combination is the moment match: μ = (0.25, 0.75),
+        // x₀ = 0, x₁ = 4 (first component) → x̄ = 3,
+        // P̄₀₀ = 0.25 (1 + 9) + 0.75 (1 + 1) = 4.
+        let imm = Imm {
+            models: vec![
+                MotionModel::ConstantVelocity { sigma_a: [0.0; 3] },
+                MotionModel::ConstantVelocity { sigma_a: [0.0; 3] },
+            ],
+            mean_sojourn: vec![10.0, 10.0],
+            initial_probabilities: vec![0.5, 0.5],
+        };
+        let mut modes = vec![
+            ModeState {
+                probability: 0.25,
+                x: dvector![0.0, 0.0, 0.0, 0.0],
+                p: DMatrix::identity(4, 4),
+            },
+            ModeState {
+                probability: 0.75,
+                x: dvector![4.0, 0.0, 0.0, 0.0],
+                p: DMatrix::identity(4, 4),
+            },
+        ];
+        let (x, p) = predict_imm(&imm, NoiseModel::Cwna, &mut modes, 0.0).unwrap();
+        assert_eq!(x[0], 3.0);
+        assert_eq!(p[(0, 0)], 4.0);
+        assert_eq!(p[(1, 1)], 1.0);
+        assert_eq!(modes[1].x[0], 4.0);
+        // Δt → ∞ with equal sojourns: π_ij → 1/2 (the stationary split), so
+        // both models mix to the same x⁰ = Σ μ_i x_i = 3.
+        let (_, _) = predict_imm(&imm, NoiseModel::Cwna, &mut modes, 1e6).unwrap();
+        assert!((modes[0].x[0] - modes[1].x[0]).abs() < 1e-9);
+        assert!((modes[0].probability - 0.5).abs() < 1e-9);
+    }
+}
