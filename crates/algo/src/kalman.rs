@@ -181,6 +181,100 @@ pub fn update_polar(
     update_with_innovation(x, p, innovation, &h, &meas.noise_covariance())
 }
 
+/// [`update_polar`] with the plot's range rate as a further measurement
+/// (a Doppler radar): z = [r, az(, el), ṙ] with ṙ = (p − s)·v / r, the
+/// velocity v of each position component being the state component after
+/// it (the interleaved layout `[x, vx, y, vy(, z, vz)]`). The range rate's
+/// Jacobian is ∂ṙ/∂p = v/r − ṙ (p − s)/r², ∂ṙ/∂v = (p − s)/r, over the
+/// same components as the range (horizontal for a layout without height);
+/// R = diag(σ_ρ², σ_θ²(, σ_el²), σ_ṙ²).
+pub fn update_polar_doppler(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    meas: &PolarMeasurement,
+    range_rate: f64,
+    sigma_range_rate: f64,
+    layout: PositionLayout,
+    site: [f64; 3],
+) -> Result<Update, AlgoError> {
+    let n = x.len();
+    check_vector("state", x, n)?;
+    check_matrix("covariance", p, n, n)?;
+    check_covariance("covariance", p)?;
+    layout.validate(n)?;
+    meas.validate()?;
+    finite_slice("site", &site)?;
+    if !range_rate.is_finite() {
+        return Err(AlgoError::NonFinite { what: "range rate" });
+    }
+    if !(sigma_range_rate.is_finite() && sigma_range_rate > 0.0) {
+        return Err(AlgoError::InvalidParameter {
+            what: "sigma_range_rate",
+            reason: format!("must be finite and > 0, got {sigma_range_rate}"),
+        });
+    }
+    let cols = [Some(layout.x), Some(layout.y), layout.z];
+    if cols.iter().flatten().any(|&c| c + 1 >= n) {
+        return Err(AlgoError::InvalidParameter {
+            what: "layout",
+            reason: "each position needs its velocity after it".to_owned(),
+        });
+    }
+    let with_elevation = meas.elevation.is_some();
+    if with_elevation && layout.z.is_none() {
+        return Err(AlgoError::InvalidParameter {
+            what: "layout",
+            reason: "a measurement with elevation needs a state with a height (layout.z)"
+                .to_owned(),
+        });
+    }
+    let rel = [
+        x[layout.x] - site[0],
+        x[layout.y] - site[1],
+        layout.z.map_or(0.0, |k| x[k] - site[2]),
+    ];
+    let vel = [
+        x[layout.x + 1],
+        x[layout.y + 1],
+        layout.z.map_or(0.0, |k| x[k + 1]),
+    ];
+    let (h_pos, j) = polar_measurement_model(rel, with_elevation)?;
+    let m = h_pos.len();
+    let r = h_pos[0];
+    let rdot = (0..3).map(|k| rel[k] * vel[k]).sum::<f64>() / r;
+    let mut h = DMatrix::zeros(m + 1, n);
+    for (k, col) in cols.iter().enumerate() {
+        if let Some(c) = col {
+            for row in 0..m {
+                h[(row, *c)] = j[(row, k)];
+            }
+            h[(m, *c)] = vel[k] / r - rdot * rel[k] / (r * r);
+            h[(m, c + 1)] = rel[k] / r;
+        }
+    }
+    let mut z = meas.vector().iter().copied().collect::<Vec<_>>();
+    z.push(range_rate);
+    let mut innovation = DVector::from_vec(z);
+    for row in 0..m {
+        innovation[row] -= h_pos[row];
+    }
+    innovation[m] -= rdot;
+    innovation[1] = wrap_angle(innovation[1]);
+    let mut noise = vec![0.0; m + 1];
+    let rp = meas.noise_covariance();
+    for k in 0..m {
+        noise[k] = rp[(k, k)];
+    }
+    noise[m] = sigma_range_rate * sigma_range_rate;
+    update_with_innovation(
+        x,
+        p,
+        innovation,
+        &h,
+        &DMatrix::from_diagonal(&DVector::from_vec(noise)),
+    )
+}
+
 /// The shared update once ν, H (or its Jacobian) and R are known and valid.
 fn update_with_innovation(
     x: &DVector<f64>,
@@ -223,6 +317,74 @@ mod tests {
 
     fn close(a: f64, b: f64, tol: f64) -> bool {
         (a - b).abs() <= tol
+    }
+
+    #[test]
+    fn the_range_rate_jacobian_matches_finite_differences_and_the_update_uses_it() {
+        // 3D state [x, vx, y, vy, z, vz] 30 km east, 40 km north, 8 km up
+        // from a radar at (100, −50, 20), flying at (−120, 80, 5) m/s.
+        let x = dvector![30_000.0, -120.0, 40_000.0, 80.0, 8000.0, 5.0];
+        let site = [100.0, -50.0, 20.0];
+        let rdot = |x: &DVector<f64>| {
+            let rel = [x[0] - site[0], x[2] - site[1], x[4] - site[2]];
+            let v = [x[1], x[3], x[5]];
+            let r = (rel[0] * rel[0] + rel[1] * rel[1] + rel[2] * rel[2]).sqrt();
+            (rel[0] * v[0] + rel[1] * v[1] + rel[2] * v[2]) / r
+        };
+        let p = DMatrix::from_diagonal(&dvector![1e4, 100.0, 1e4, 100.0, 1e4, 100.0]);
+        let meas = PolarMeasurement {
+            range: 50_000.0,
+            azimuth: 0.64,
+            elevation: Some(0.16),
+            sigma_range: 50.0,
+            sigma_azimuth: 0.002,
+            sigma_elevation: Some(0.003),
+        };
+        let u = update_polar_doppler(
+            &x,
+            &p,
+            &meas,
+            rdot(&x) + 2.0,
+            1.0,
+            PositionLayout::CV_3D,
+            site,
+        )
+        .unwrap();
+        // The innovation of the range rate is the 2 m/s added.
+        assert!((u.innovation[3] - 2.0).abs() < 1e-9);
+        // K = P H' S⁻¹, so H = recovered from S − R = H P H' is not unique;
+        // check H's last row by finite differences through S instead:
+        // S_33 − σ² = Σ_k h_k² P_kk for a diagonal P.
+        let mut h = [0.0; 6];
+        for (k, hk) in h.iter_mut().enumerate() {
+            let d = if k % 2 == 0 { 1e-3 } else { 1e-4 };
+            let mut xp = x.clone();
+            xp[k] += d;
+            let mut xm = x.clone();
+            xm[k] -= d;
+            *hk = (rdot(&xp) - rdot(&xm)) / (2.0 * d);
+        }
+        let s33: f64 = (0..6).map(|k| h[k] * h[k] * p[(k, k)]).sum::<f64>() + 1.0;
+        assert!(
+            (u.s[(3, 3)] - s33).abs() < 1e-6 * s33,
+            "{} vs {s33}",
+            u.s[(3, 3)]
+        );
+        // The velocity moved towards the measured range rate.
+        assert!(rdot(&u.x) > rdot(&x) + 0.5);
+        // Without height (2D layout) the range rate is horizontal.
+        let x2 = dvector![30_000.0, -120.0, 40_000.0, 80.0];
+        let p2 = DMatrix::from_diagonal(&dvector![1e4, 100.0, 1e4, 100.0]);
+        let m2 = PolarMeasurement {
+            elevation: None,
+            sigma_elevation: None,
+            ..meas
+        };
+        let want = ((30_000.0 - 100.0) * -120.0 + (40_000.0 + 50.0) * 80.0)
+            / (29_900.0f64).hypot(40_050.0);
+        let u2 =
+            update_polar_doppler(&x2, &p2, &m2, want, 1.0, PositionLayout::CV_2D, site).unwrap();
+        assert!(u2.innovation[2].abs() < 1e-9);
     }
 
     #[test]

@@ -595,6 +595,7 @@ fn sensor(
                 sigma_range: sr?,
                 sigma_azimuth: sa?.to_radians(),
                 sigma_elevation: se?.map(f64::to_radians),
+                sigma_range_rate: None,
             })
         }
         Some(other) => {

@@ -47,9 +47,11 @@ pub enum SensorModel {
         /// Measurement noise covariance R.
         r: DMatrix<f64>,
     },
-    /// z = [range, azimuth(, elevation)] of the target relative to `site`
-    /// (local ENU metres), angles in radians, azimuth clockwise from north;
-    /// updated by an extended Kalman filter.
+    /// z = [range, azimuth(, elevation)(, range rate)] of the target
+    /// relative to `site` (local ENU metres), angles in radians, azimuth
+    /// clockwise from north; updated by an extended Kalman filter. The
+    /// range rate ṙ = (p − s)·v/r needs the interleaved layout (each
+    /// velocity after its position; [`crate::kalman::update_polar_doppler`]).
     Polar {
         /// Sensor position (local ENU, m).
         site: [f64; 3],
@@ -61,6 +63,9 @@ pub enum SensorModel {
         sigma_azimuth: f64,
         /// Present for a 3D radar (then measurements have three components).
         sigma_elevation: Option<f64>,
+        /// Present for a Doppler radar whose range rate is measured (then
+        /// it is each measurement's last component).
+        sigma_range_rate: Option<f64>,
     },
 }
 
@@ -70,8 +75,12 @@ impl SensorModel {
         match self {
             SensorModel::Linear { h, .. } => h.nrows(),
             SensorModel::Polar {
-                sigma_elevation, ..
-            } => 2 + usize::from(sigma_elevation.is_some()),
+                sigma_elevation,
+                sigma_range_rate,
+                ..
+            } => {
+                2 + usize::from(sigma_elevation.is_some()) + usize::from(sigma_range_rate.is_some())
+            }
         }
     }
 }
@@ -602,26 +611,52 @@ fn linearise(track: &TrackEstimate, model: &SensorModel) -> Result<Linearised, A
             sigma_range,
             sigma_azimuth,
             sigma_elevation,
+            sigma_range_rate,
         } => {
             layout.validate(n)?;
+            let cols = [Some(layout.x), Some(layout.y), layout.z];
+            if sigma_range_rate.is_some() && cols.iter().flatten().any(|&c| c + 1 >= n) {
+                return Err(AlgoError::InvalidParameter {
+                    what: "layout",
+                    reason: "a range rate needs each position's velocity after it".into(),
+                });
+            }
             let rel = [
                 track.x[layout.x] - site[0],
                 track.x[layout.y] - site[1],
                 layout.z.map_or(0.0, |k| track.x[k] - site[2]),
             ];
-            let (z_pred, j) = polar_measurement_model(rel, sigma_elevation.is_some())?;
-            let m = z_pred.len();
-            let mut h = DMatrix::zeros(m, n);
-            for (k, col) in [Some(layout.x), Some(layout.y), layout.z]
-                .iter()
-                .enumerate()
-            {
+            let (z_pos, j) = polar_measurement_model(rel, sigma_elevation.is_some())?;
+            let m = z_pos.len();
+            let rows = m + usize::from(sigma_range_rate.is_some());
+            let mut h = DMatrix::zeros(rows, n);
+            let mut z_pred = DVector::zeros(rows);
+            z_pred.rows_mut(0, m).copy_from(&z_pos);
+            for (k, col) in cols.iter().enumerate() {
                 if let Some(c) = col {
-                    h.set_column(*c, &j.column(k));
+                    h.view_mut((0, *c), (m, 1)).copy_from(&j.column(k));
+                }
+            }
+            if sigma_range_rate.is_some() {
+                // ṙ = (p − s)·v / r: ∂ṙ/∂p = v/r − ṙ (p − s)/r², ∂ṙ/∂v = (p − s)/r.
+                let vel = [
+                    track.x[layout.x + 1],
+                    track.x[layout.y + 1],
+                    layout.z.map_or(0.0, |k| track.x[k + 1]),
+                ];
+                let r = z_pos[0];
+                let rdot = (0..3).map(|k| rel[k] * vel[k]).sum::<f64>() / r;
+                z_pred[m] = rdot;
+                for (k, col) in cols.iter().enumerate() {
+                    if let Some(c) = col {
+                        h[(m, *c)] = vel[k] / r - rdot * rel[k] / (r * r);
+                        h[(m, c + 1)] = rel[k] / r;
+                    }
                 }
             }
             let mut d = vec![sigma_range.powi(2), sigma_azimuth.powi(2)];
             d.extend(sigma_elevation.map(|s| s * s));
+            d.extend(sigma_range_rate.map(|s| s * s));
             (z_pred, h, DMatrix::from_diagonal(&DVector::from_vec(d)))
         }
     };

@@ -377,6 +377,7 @@ fn polar_sensor_updates_by_ekf() {
             sigma_range: 50.0,
             sigma_azimuth: 0.002,
             sigma_elevation: None,
+            sigma_range_rate: None,
         },
         measurements: vec![dvector![10_000.0, 2.0 * std::f64::consts::PI - 1e-12]],
         detection_probability: 0.9,

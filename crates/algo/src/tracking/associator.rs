@@ -3,7 +3,8 @@
 //!
 //! Serial mode (step 6): one radar's scan group is one [`jpda::Scan`] with
 //! the polar [`SensorModel::Polar`] at the radar's site, so the update is
-//! the patent's EKF on (ρ, θ(, φ)) and all of `jpda` (exact / AMSJPDA /
+//! the patent's EKF on (ρ, θ(, φ)), with the range rate ṙ of a Doppler
+//! radar's plots as a further component, and all of `jpda` (exact / AMSJPDA /
 //! NN / GNN, clusters, eqs. 6–7) is reused unchanged. A 2D radar measures
 //! the horizontal range (layout without z, also in a 3D tracker).
 //!
@@ -63,12 +64,19 @@ pub fn associate_polar(
     config: &Config,
 ) -> Result<Outcome, AlgoError> {
     let layout = polar_layout(radar, axes);
+    // The range rate joins the measurement when the radar gives it and
+    // every plot of the scan group has one (so it also decides β: two
+    // crossing targets of different radial speeds are told apart).
+    let range_rate = radar
+        .sigma_radial_velocity
+        .filter(|_| plots.iter().all(|p| p.radial_velocity.is_some()));
     let model = SensorModel::Polar {
         site: radar.site,
         layout,
         sigma_range: radar.sigma_range,
         sigma_azimuth: radar.sigma_azimuth,
         sigma_elevation: radar.sigma_elevation,
+        sigma_range_rate: range_rate,
     };
     let dim = model.dim();
     let measurements = plots
@@ -76,6 +84,9 @@ pub fn associate_polar(
         .map(|p| {
             let mut v = vec![p.range, p.azimuth];
             v.extend(p.elevation);
+            if range_rate.is_some() {
+                v.extend(p.radial_velocity);
+            }
             DVector::from_vec(v)
         })
         .collect();

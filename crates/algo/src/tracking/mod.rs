@@ -419,12 +419,16 @@ impl Tracker {
                     &cfg.association,
                 )?;
                 let layout = polar_layout(radar, cfg.axes);
+                // As the associator decided (`associate_polar`).
+                let range_rate = radar.sigma_radial_velocity.is_some()
+                    && raw.iter().all(|p| p.radial_velocity.is_some());
                 (
                     outcome,
                     Measurements::Polar {
                         radar,
                         layout,
                         plots: raw,
+                        range_rate,
                     },
                 )
             }

@@ -566,3 +566,63 @@ fn the_imm_follows_a_turn_that_low_noise_cv_cannot() {
         cv[0]
     );
 }
+
+/// Serial mode associates and updates with the range rate of Doppler
+/// radars: on the same plots, the error of the tracks' radial velocity
+/// (what ṙ measures) after 60 s is clearly smaller than with the radial
+/// velocities removed (before, serial mode gave the same result with and
+/// without them). Seeds 1–4 gave 0.71 m/s against 3.68 m/s with the
+/// default IMM (0.28 against 0.96 with one CV model of √q = 0.05). Using ṙ
+/// in the update but not in the association made it worse (3.5 m/s for
+/// CV): at the crossing a plot of the other target, 41 m/s apart in
+/// radial speed, pulled the velocity.
+#[test]
+fn serial_mode_uses_the_range_rate() {
+    let mut cfg = fig5_config(true);
+    cfg.set_mode(Mode::Serial);
+    let targets = fig5_targets();
+    let (mut with, mut without) = (0.0, 0.0);
+    for seed in 1..=4 {
+        let plots = scene(&cfg.radars, &[0.0, 3.0], &targets, 120.0, &mut Lcg(seed));
+        let stripped: Vec<Plot> = plots
+            .iter()
+            .map(|p| Plot {
+                radial_velocity: None,
+                ..*p
+            })
+            .collect();
+        for (plots, sum) in [(&plots, &mut with), (&stripped, &mut without)] {
+            let mut tracker = Tracker::new(cfg.clone()).unwrap();
+            let (mut e2, mut n) = (0.0, 0usize);
+            for chunk in plots.chunks(2) {
+                tracker.process(chunk).unwrap();
+                for tr in tracker.confirmed_tracks().iter().filter(|tr| tr.t >= 60.0) {
+                    // The nearest target's velocity.
+                    let v = targets
+                        .iter()
+                        .min_by(|a, b| {
+                            let d = |g: &Target| {
+                                let p = g.at(tr.t);
+                                (p[0] - tr.state[0]).hypot(p[1] - tr.state[2])
+                            };
+                            d(a).total_cmp(&d(b))
+                        })
+                        .unwrap()
+                        .v;
+                    // Its radial component as the radars (both near the
+                    // origin) see it: what the range rate measures.
+                    let (east, north) = (tr.state[0], tr.state[2]);
+                    let u = [east / east.hypot(north), north / east.hypot(north)];
+                    e2 += ((tr.state[1] - v[0]) * u[0] + (tr.state[3] - v[1]) * u[1]).powi(2);
+                    n += 1;
+                }
+            }
+            assert!(n > 20);
+            *sum += (e2 / n as f64).sqrt() / 4.0;
+        }
+    }
+    assert!(
+        with < 0.8 * without,
+        "velocity RMSE {with} with ṙ, {without} without"
+    );
+}

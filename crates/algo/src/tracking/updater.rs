@@ -30,7 +30,9 @@ use crate::tracking::track::position_selector;
 /// The measurements of one frame as the updater sees them.
 #[derive(Debug, Clone, Copy)]
 pub enum Measurements<'a> {
-    /// One radar's plots, updated by the polar EKF at the radar's site.
+    /// One radar's plots, updated by the polar EKF at the radar's site,
+    /// with the range rate when the radar gives it (Doppler) and the plot
+    /// has one.
     Polar {
         /// The radar.
         radar: &'a RadarSpec,
@@ -39,6 +41,9 @@ pub enum Measurements<'a> {
         layout: PositionLayout,
         /// The plots, indexed as in the association.
         plots: &'a [Plot],
+        /// Whether the range rate is measured (the radar gives it and every
+        /// plot has one, as the association decided).
+        range_rate: bool,
     },
     /// Fused Cartesian plots with their own covariance.
     Cartesian {
@@ -71,9 +76,16 @@ impl Measurements<'_> {
                 radar,
                 layout,
                 plots,
+                range_rate,
             } => {
-                let meas = polar_measurement(radar, &plots[j]);
-                kalman::update_polar(x, p, &meas, *layout, radar.site)?
+                let plot = &plots[j];
+                let meas = polar_measurement(radar, plot);
+                match (plot.radial_velocity, radar.sigma_radial_velocity) {
+                    (Some(v), Some(sigma)) if *range_rate => {
+                        kalman::update_polar_doppler(x, p, &meas, v, sigma, *layout, radar.site)?
+                    }
+                    _ => kalman::update_polar(x, p, &meas, *layout, radar.site)?,
+                }
             }
             Measurements::Cartesian { plots } => {
                 let plot = &plots[j];

@@ -273,6 +273,7 @@ fn one_run(n: usize, scans: usize, rng: &mut SimRng) -> Result<[Outcome; 4], Sim
                             sigma_range: r.sigma_range,
                             sigma_azimuth: r.sigma_azimuth,
                             sigma_elevation: Some(r.sigma_elevation),
+                            sigma_range_rate: None,
                         },
                         measurements: plots
                             .iter()

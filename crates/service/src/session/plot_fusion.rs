@@ -787,13 +787,19 @@ mod tests {
         let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
         assert_eq!(back.network.radar_of_source((25, 1)), None);
         assert_eq!(back.network.radar_ids, session.network.radar_ids);
-        // An update with an ASTERIX summary round-trips; one without is
-        // encoded as before (bit 31 of frames clear).
+        // An update with an ASTERIX summary round-trips; one without has
+        // bit 31 of frames clear (bit 30 says its tracks carry modes).
         let mut update = session.acknowledgement();
         update.frames = 3;
         let mut plain = Writer::default();
         PlotFusionSession::encode_update(&update, &mut plain);
-        assert_eq!(plain.buf[..4], 3u32.to_le_bytes());
+        assert_eq!(plain.buf[..4], (3u32 | MODES_FLAG).to_le_bytes());
+        // An update kept by the release before the IMM (no bit 30, tracks
+        // without modes) still reads.
+        let mut before = plain.buf.clone();
+        before[..4].copy_from_slice(&3u32.to_le_bytes());
+        let read = PlotFusionSession::decode_update(&mut Reader::new(&before)).unwrap();
+        assert_eq!(read.frames, 3);
         update.asterix = Some(AsterixSummary {
             bytes: 40,
             records: 3,
