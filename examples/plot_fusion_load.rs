@@ -4,7 +4,7 @@
 //! ```text
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
-//!     [--batch-s 1] [--doppler] [--skip-compute]
+//!     [--batch-s 1] [--doppler] [--skip-compute] [--motion imm|cv]
 //! ```
 //!
 //! - compute: `service::plot_fusion::track` on every plot at once, in
@@ -35,6 +35,8 @@ struct Args {
     batch_s: f64,
     doppler: bool,
     skip_compute: bool,
+    /// `tracker.motion`: absent = the service's default.
+    motion: Option<String>,
 }
 
 fn parse_args() -> anyhow::Result<Args> {
@@ -46,6 +48,7 @@ fn parse_args() -> anyhow::Result<Args> {
         batch_s: 1.0,
         doppler: false,
         skip_compute: false,
+        motion: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -60,6 +63,7 @@ fn parse_args() -> anyhow::Result<Args> {
                     "--duration" => args.duration = value.parse()?,
                     "--clutter" => args.clutter = value.parse()?,
                     "--batch-s" => args.batch_s = value.parse()?,
+                    "--motion" => args.motion = Some(value),
                     other => anyhow::bail!("unknown flag {other}"),
                 }
             }
@@ -96,7 +100,10 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
                 sic: None,
             })
             .collect(),
-        tracker: None,
+        tracker: Some(pb::TrackerOptions {
+            motion: spec.tracker.motion.clone(),
+            ..Default::default()
+        }),
     }
 }
 
@@ -142,17 +149,24 @@ fn batches(plots: &[svc::PlotInput], batch_s: f64) -> Vec<pb::PushBatchRequest> 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let args = parse_args()?;
-    let (spec, plots) = plot_fusion_scene(
+    let (mut spec, plots) = plot_fusion_scene(
         args.targets,
         args.radars,
         args.duration,
         args.clutter,
         args.doppler,
     );
+    spec.tracker.motion = args.motion.clone();
     let n = plots.len();
     println!(
-        "scene: {} targets, {} radars, {} s, {} clutter plots per scan, doppler {}: {n} plots",
-        args.targets, args.radars, args.duration, args.clutter, args.doppler
+        "scene: {} targets, {} radars, {} s, {} clutter plots per scan, doppler {}, motion {}: \
+         {n} plots",
+        args.targets,
+        args.radars,
+        args.duration,
+        args.clutter,
+        args.doppler,
+        args.motion.as_deref().unwrap_or("default")
     );
 
     if !args.skip_compute {

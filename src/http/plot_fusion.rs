@@ -130,7 +130,7 @@ pub struct TrackerOptions {
     /// 2 or 3 (default 3 when any radar is 3d, else 2).
     #[schema(minimum = 2, maximum = 3)]
     pub dimensions: Option<u32>,
-    /// `auto` (default: parallel when every radar gives Doppler), `parallel` or `serial`.
+    /// `auto` (default: serial, with the range rate of Doppler radars), `parallel` (the patent's mode; every radar must give Doppler) or `serial`.
     #[schema(example = "auto")]
     pub mode: Option<String>,
     /// Parallel mode: period of the fusion instants (default the shortest scan period).

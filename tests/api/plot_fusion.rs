@@ -124,18 +124,21 @@ async fn radars_200_km_away_2d_and_3d_track_aircraft_at_altitude() {
 }
 
 #[tokio::test]
-async fn parallel_fusion_when_every_radar_gives_doppler() {
+async fn parallel_fusion_when_asked_and_serial_by_default_with_doppler() {
     let app = spawn_app().await;
+    // `auto` is serial also when every radar gives Doppler (the more
+    // accurate mode with the range rate in the update).
     let out = app.post_ok(PATH, &with_height(request(true, 11))).await;
+    assert_eq!(out["mode"], "serial");
+    check_tracks(&out, 400.0);
+    assert_eq!(out["counters"]["fused_plots"], 0);
+    // The patent's parallel mode on the same plots also tracks every target.
+    let mut req = with_height(request(true, 11));
+    req["tracker"]["mode"] = json!("parallel");
+    let out = app.post_ok(PATH, &req).await;
     assert_eq!(out["mode"], "parallel");
     check_tracks(&out, 400.0);
     assert!(out["counters"]["fused_plots"].as_u64().unwrap() > 0);
-    // Forcing serial mode on the same plots also tracks every target.
-    let mut req = with_height(request(true, 11));
-    req["tracker"]["mode"] = json!("serial");
-    let out = app.post_ok(PATH, &req).await;
-    assert_eq!(out["mode"], "serial");
-    check_tracks(&out, 400.0);
 }
 
 #[tokio::test]
@@ -252,7 +255,7 @@ async fn grpc_gives_the_tracks_of_rest() {
         .await
         .unwrap()
         .into_inner();
-    assert_eq!(grpc.mode, "parallel");
+    assert_eq!(grpc.mode, "serial");
     let tracks = rest["tracks"].as_array().unwrap();
     assert_eq!(grpc.tracks.len(), tracks.len());
     for (g, r) in grpc.tracks.iter().zip(tracks) {
@@ -421,7 +424,7 @@ async fn the_default_imm_reports_its_modes_on_both_transports() {
     for t in &confirmed {
         let modes = t["modes"].as_array().unwrap();
         let names: Vec<&str> = modes.iter().map(|m| m["model"].as_str().unwrap()).collect();
-        assert_eq!(names, ["cv", "ct_left", "ct_right"]);
+        assert_eq!(names, ["cv", "ct_left", "ct_right", "cv_2"]);
         let sum: f64 = modes.iter().map(|m| f(&m["probability"])).sum();
         assert!((sum - 1.0).abs() < 1e-9, "{modes:?}");
         // The turn rate is the mixture's: (μ_left − μ_right) · 3 °/s.
@@ -759,7 +762,7 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
         .unwrap()
         .into_inner();
     let pf = state.plot_fusion.expect("a plot_fusion state");
-    assert_eq!(pf.mode, "parallel");
+    assert_eq!(pf.mode, "serial");
     assert_eq!(pf.tracks, whole.tracks);
     assert_eq!(pf.counters, whole.counters);
 }
@@ -821,11 +824,12 @@ async fn extreme_but_valid_values_get_an_answer_or_a_named_error_never_a_500() {
 
 #[tokio::test]
 async fn a_session_says_at_creation_what_was_decided_for_it() {
-    // Local sites and no origin; one radar with Doppler, one without.
+    // Local sites and no origin; one radar with Doppler, one without; the
+    // constant-velocity noise set under the default IMM.
     let app = spawn_app().await;
     let created = create_session(
         &app,
-        &json!({"kind": "plot_fusion", "radars": [
+        &json!({"kind": "plot_fusion", "tracker": {"sigma_a_mps2": 2.0}, "radars": [
             {"id": "a", "kind": "2d", "site": {"position_m": [0.0, 0.0]},
              "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 4.0,
              "sigma_radial_velocity_mps": 1.0},
@@ -847,7 +851,7 @@ async fn a_session_says_at_creation_what_was_decided_for_it() {
     assert!(
         warnings
             .iter()
-            .any(|w| w.contains("chose serial") && w.contains('b')),
+            .any(|w| w.contains("tentative") && w.contains("imm_models")),
         "{warnings:?}"
     );
     // A later read carries none.

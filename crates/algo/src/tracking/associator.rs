@@ -36,7 +36,7 @@ use crate::jpda::{
 };
 use crate::kalman::{self, PositionLayout};
 use crate::tracking::config::{Plot, RadarSpec};
-use crate::tracking::registration::CartesianPlot;
+use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::track::{chi2_gates, position_selector};
 
 /// What the association of one frame decided.

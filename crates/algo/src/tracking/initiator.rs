@@ -37,7 +37,8 @@ use crate::error::AlgoError;
 use crate::gaussian::{mahalanobis_sq, symmetrize};
 use crate::kalman;
 use crate::tracking::config::{TrackerConfig, VelocityGate};
-use crate::tracking::registration::CartesianPlot;
+use crate::tracking::conversion::CartesianPlot;
+use crate::tracking::sweep::View;
 use crate::tracking::track::{Track, chi2_gates, position_selector};
 
 /// Roots and tentative tracks, carried between frames.
@@ -65,6 +66,7 @@ impl Initiator {
         t: f64,
         plots: Vec<CartesianPlot>,
         cfg: &TrackerConfig,
+        view: View,
         next_id: &mut u64,
     ) -> Result<Initiated, AlgoError> {
         let init = &cfg.initiation;
@@ -106,7 +108,8 @@ impl Initiator {
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
                 }
-                None => track.record(None),
+                None if view.misses(&track.x, track.last_update) => track.record(None),
+                None => {}
             }
         }
 
@@ -358,7 +361,7 @@ mod tests {
         for k in 0..5 {
             let t = k as f64;
             let out = ini
-                .step(t, vec![plot(t, 10.0 * t, 100.0)], &c, &mut id)
+                .step(t, vec![plot(t, 10.0 * t, 100.0)], &c, View::All, &mut id)
                 .unwrap();
             if k == 1 {
                 assert_eq!(out.started, 1);
@@ -385,13 +388,13 @@ mod tests {
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, View::All, &mut id)
             .unwrap();
-        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, &mut id)
+        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, View::All, &mut id)
             .unwrap();
-        let a = ini.step(2.0, vec![], &c, &mut id).unwrap();
+        let a = ini.step(2.0, vec![], &c, View::All, &mut id).unwrap();
         assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
-        let b = ini.step(3.0, vec![], &c, &mut id).unwrap();
+        let b = ini.step(3.0, vec![], &c, View::All, &mut id).unwrap();
         assert_eq!((b.dropped, ini.tentatives.len()), (1, 0));
     }
 
@@ -431,10 +434,10 @@ mod tests {
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, &mut id)
+        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, View::All, &mut id)
             .unwrap();
         let out = ini
-            .step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, &mut id)
+            .step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, View::All, &mut id)
             .unwrap();
         assert_eq!(out.started, 0);
         assert_eq!(ini.roots.len(), 2); // the new plot is a root; the old one waits
@@ -490,7 +493,7 @@ mod tests {
                     p
                 })
                 .collect();
-            let out = ini.step(t, plots, &c, &mut id).unwrap();
+            let out = ini.step(t, plots, &c, View::All, &mut id).unwrap();
             started += out.started;
             confirmed += out.confirmed.len();
         }

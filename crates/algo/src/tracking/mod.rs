@@ -8,7 +8,7 @@
 //! What a frame is depends on the mode (step 2):
 //! - **parallel** (every radar gives Doppler): fusion instants
 //!   t_k = epoch + k·T. The plots with τ ∈ (t_{k−1}, t_k] are registered
-//!   (`registration`, step 1), extrapolated to t_k along their line of
+//!   (`conversion`, step 1), extrapolated to t_k along their line of
 //!   sight (step 3), associated across radars by GNN and fused by ML
 //!   weights (`plot_association`, step 4), then associated with the tracks
 //!   (step 5). Instants without plots are skipped (no prediction, no miss).
@@ -36,12 +36,13 @@
 
 pub mod associator;
 pub mod config;
+pub mod conversion;
 mod deleter;
 pub mod initiator;
 pub mod plot_association;
 pub mod predictor;
-pub mod registration;
 mod state;
+mod sweep;
 mod track;
 pub mod updater;
 
@@ -52,16 +53,17 @@ pub use config::{
     Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec,
     TrackerConfig, VelocityGate,
 };
-pub use registration::{CartesianPlot, Doppler};
+pub use conversion::{CartesianPlot, Doppler};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
 use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout};
+use conversion::{extrapolate, register};
 use initiator::Initiator;
 use plot_association::associate_and_fuse;
-use registration::{extrapolate, register};
+use sweep::View;
 use updater::{Measurements, update_imm};
 
 /// Running totals since the tracker was created.
@@ -119,6 +121,9 @@ pub struct Tracker {
     /// Parallel mode: index k of the last processed fusion instant.
     last_instant: Option<i64>,
     counters: Counters,
+    /// Serial mode, per radar: time and azimuth of the last plot of its
+    /// last frame (where its beam was; [`sweep`]).
+    beams: Vec<Option<(f64, f64)>>,
 }
 
 /// A frame's plots as the associator needs them.
@@ -136,6 +141,7 @@ impl Tracker {
     /// A tracker without tracks; fails when the configuration is invalid.
     pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
         config.validate()?;
+        let beams = vec![None; config.radars.len()];
         Ok(Self {
             parallel: config.is_parallel(),
             config,
@@ -146,6 +152,7 @@ impl Tracker {
             last_time: None,
             last_instant: None,
             counters: Counters::default(),
+            beams,
         })
     }
 
@@ -326,8 +333,11 @@ impl Tracker {
     /// Step 6: one radar's scan group at the time of its last plot.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
-        let t = frame[frame.len() - 1].t;
+        let last = frame[frame.len() - 1];
+        let t = last.t;
         let radar = &self.config.radars[index];
+        let view = View::of_frame(radar, self.beams[index], t, last.azimuth);
+        self.beams[index] = Some((t, last.azimuth));
         let plots = frame
             .iter()
             .map(|p| register(radar, index, p))
@@ -336,7 +346,7 @@ impl Tracker {
             index,
             plots: frame,
         };
-        self.run_frame(t, source, plots, report)
+        self.run_frame(t, source, plots, view, report)
     }
 
     /// Steps 3–5: the plots of fusion instant k.
@@ -374,7 +384,7 @@ impl Tracker {
             clutter,
             detection_probability: 1.0 - miss,
         };
-        self.run_frame(t, source, fused, report)?;
+        self.run_frame(t, source, fused, View::All, report)?;
         self.last_instant = Some(k);
         Ok(())
     }
@@ -386,6 +396,7 @@ impl Tracker {
         t: f64,
         source: Source,
         plots: Vec<CartesianPlot>,
+        view: View,
         report: &mut StepReport,
     ) -> Result<(), AlgoError> {
         let cfg = &self.config;
@@ -462,7 +473,11 @@ impl Tracker {
                 track.x = x;
                 track.p = p;
             }
-            track.record(hit.map(|j| plots[j].radars.clone()));
+            match hit {
+                Some(j) => track.record(Some(plots[*j].radars.clone())),
+                None if view.misses(&track.x, track.last_update) => track.record(None),
+                None => {}
+            }
         }
 
         let duplicate = deleter::duplicates(&self.tracks, &hit, cfg.duplicate_probability)?;
@@ -488,7 +503,7 @@ impl Tracker {
             .collect();
         let initiated = self
             .initiator
-            .step(t, leftovers, &self.config, &mut self.next_id)?;
+            .step(t, leftovers, &self.config, view, &mut self.next_id)?;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {

@@ -26,7 +26,7 @@ use crate::assignment;
 use crate::error::AlgoError;
 use crate::gating::SortedByFirst;
 use crate::gaussian::{cholesky, mahalanobis_sq, symmetrize};
-use crate::tracking::registration::CartesianPlot;
+use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::track::chi2_gates;
 
 /// Associates the plots of one fusion instant across radars and fuses the

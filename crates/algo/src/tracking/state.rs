@@ -33,6 +33,9 @@ pub struct TrackerState<'a> {
     pub last_instant: Option<i64>,
     /// The running counters.
     pub counters: Counters,
+    /// Serial mode, per radar: time and azimuth of the last plot of its
+    /// last frame (`None` before its first).
+    pub beams: &'a [Option<(f64, f64)>],
 }
 
 /// Everything a tracker carries between calls, owned: what
@@ -57,6 +60,8 @@ pub struct TrackerParts {
     pub last_instant: Option<i64>,
     /// The running counters.
     pub counters: Counters,
+    /// Per radar, where its beam was at its last frame (empty: none yet).
+    pub beams: Vec<Option<(f64, f64)>>,
 }
 
 impl TrackerState<'_> {
@@ -72,6 +77,7 @@ impl TrackerState<'_> {
             last_time: self.last_time,
             last_instant: self.last_instant,
             counters: self.counters,
+            beams: self.beams.to_vec(),
         }
     }
 }
@@ -138,6 +144,7 @@ impl Tracker {
             last_time: self.last_time,
             last_instant: self.last_instant,
             counters: self.counters,
+            beams: &self.beams,
         }
     }
 
@@ -216,6 +223,24 @@ impl Tracker {
         tr.last_time = parts.last_time;
         tr.last_instant = parts.last_instant;
         tr.counters = parts.counters;
+        if !parts.beams.is_empty() {
+            if parts.beams.len() != tr.config.radars.len() {
+                return Err(bad(format!(
+                    "{} beam positions for {} radars",
+                    parts.beams.len(),
+                    tr.config.radars.len()
+                )));
+            }
+            if parts
+                .beams
+                .iter()
+                .flatten()
+                .any(|(t, az)| !(t.is_finite() && az.is_finite()))
+            {
+                return Err(bad("a beam position is not finite"));
+            }
+            tr.beams = parts.beams;
+        }
         Ok(tr)
     }
 }

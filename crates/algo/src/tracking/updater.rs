@@ -23,8 +23,8 @@ use crate::error::AlgoError;
 use crate::jpda::Association;
 use crate::kalman::{self, PositionLayout};
 use crate::tracking::config::{Plot, RadarSpec};
+use crate::tracking::conversion::{CartesianPlot, polar_measurement};
 use crate::tracking::predictor::{MIN_PROBABILITY, ModeState, combine};
-use crate::tracking::registration::{CartesianPlot, polar_measurement};
 use crate::tracking::track::position_selector;
 
 /// The measurements of one frame as the updater sees them.

@@ -59,7 +59,7 @@ use crate::sensor::Radar;
 use crate::truth::{Leg, Manoeuvre, TargetPlan, Trajectory, simulate, velocity};
 use crate::{STANDARD_GRAVITY, SimError, SimRng};
 use algo::jpda::Method;
-use algo::tracking::{Mode, Motion, NoiseModel, Plot, RadarSpec, TrackerConfig};
+use algo::tracking::{Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, TrackerConfig};
 
 const RADAR_COUNTS: [usize; 3] = [2, 3, 4];
 const DEFAULT_TARGETS: usize = 50;
@@ -94,6 +94,98 @@ struct Variant {
     /// `Some`: `duplicate_probability` (0 disables duplicate deletion).
     duplicate: Option<f64>,
     method: Method,
+    /// `Some`: this IMM instead of the default one.
+    imm: Option<fn() -> Imm>,
+}
+
+/// Candidate IMMs for the default (the table's variants compare them).
+fn imm_cv_cv() -> Imm {
+    Imm {
+        models: vec![
+            MotionModel::ConstantVelocity { sigma_a: [0.5; 3] },
+            MotionModel::ConstantVelocity { sigma_a: [5.0; 3] },
+        ],
+        mean_sojourn: vec![60.0, 20.0],
+        initial_probabilities: vec![0.8, 0.2],
+    }
+}
+
+fn imm_ct(rate_dps: f64, sigma_cv: f64, sigma_ct: f64) -> Imm {
+    let rate = rate_dps.to_radians();
+    Imm {
+        models: vec![
+            MotionModel::ConstantVelocity {
+                sigma_a: [sigma_cv; 3],
+            },
+            MotionModel::CoordinatedTurn {
+                turn_rate: rate,
+                sigma_a: [sigma_ct; 3],
+            },
+            MotionModel::CoordinatedTurn {
+                turn_rate: -rate,
+                sigma_a: [sigma_ct; 3],
+            },
+        ],
+        mean_sojourn: vec![60.0, 20.0, 20.0],
+        initial_probabilities: vec![0.8, 0.1, 0.1],
+    }
+}
+
+fn imm_ct_1_5() -> Imm {
+    imm_ct(1.5, 0.5, 2.0)
+}
+
+fn imm_ct_3_noisy() -> Imm {
+    imm_ct(3.0, 1.0, 3.0)
+}
+
+/// Constant velocity √q = 0.5 with turns at every `rates` (°/s, both
+/// sides, noise `sigma_ct`) and optionally a manoeuvre CV model.
+fn imm_set(rates: &[f64], sigma_ct: f64, manoeuvre: Option<f64>) -> Imm {
+    let mut models = vec![MotionModel::ConstantVelocity { sigma_a: [0.5; 3] }];
+    let mut mean_sojourn = vec![60.0];
+    for &r in rates {
+        for sign in [1.0, -1.0] {
+            models.push(MotionModel::CoordinatedTurn {
+                turn_rate: sign * r.to_radians(),
+                sigma_a: [sigma_ct; 3],
+            });
+            mean_sojourn.push(20.0);
+        }
+    }
+    if let Some(s) = manoeuvre {
+        models.push(MotionModel::ConstantVelocity { sigma_a: [s; 3] });
+        mean_sojourn.push(20.0);
+    }
+    let n = models.len();
+    let mut initial_probabilities = vec![0.3 / (n - 1) as f64; n];
+    initial_probabilities[0] = 0.7;
+    Imm {
+        models,
+        mean_sojourn,
+        initial_probabilities,
+    }
+}
+
+fn imm_d() -> Imm {
+    imm_set(&[1.5, 3.0], 1.5, None)
+}
+
+fn imm_e() -> Imm {
+    imm_set(&[3.0], 3.0, Some(5.0))
+}
+
+fn imm_g() -> Imm {
+    imm_set(&[1.5, 3.0], 2.0, None)
+}
+
+fn imm_cv_ct_cv() -> Imm {
+    let mut imm = imm_ct(1.5, 0.5, 1.5);
+    imm.models
+        .push(MotionModel::ConstantVelocity { sigma_a: [5.0; 3] });
+    imm.mean_sojourn.push(20.0);
+    imm.initial_probabilities = vec![0.7, 0.1, 0.1, 0.1];
+    imm
 }
 
 /// The defaults before commits 4fc2c52, 114755c and 5f66756: DWNA
@@ -104,7 +196,161 @@ const FORMER_SIGMA_T: Option<f64> = Some(100.0);
 const FORMER_MISSES: Option<u32> = Some(3);
 const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
-const VARIANTS: [Variant; 13] = [
+const VARIANTS: [Variant; 27] = [
+    Variant {
+        name: "serial IMM cv 0.5 + ct ±1.5, ±3°/s 1.5",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_d),
+    },
+    Variant {
+        name: "serial IMM cv 0.5 + ct ±3°/s 3 + cv 5",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_e),
+    },
+    Variant {
+        name: "serial IMM cv 0.5 + ct ±1.5, ±3°/s 2",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_g),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + ct ±1.5, ±3°/s 1.5",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_d),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + ct ±3°/s 3 + cv 5",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_e),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + ct ±1.5, ±3°/s 2",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_g),
+    },
+    Variant {
+        name: "serial IMM cv 0.5 + cv 5",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_cv_cv),
+    },
+    Variant {
+        name: "serial IMM cv 0.5 + ct ±1.5°/s 2",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_ct_1_5),
+    },
+    Variant {
+        name: "serial IMM cv 1 + ct ±3°/s 3",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_ct_3_noisy),
+    },
+    Variant {
+        name: "serial IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5",
+        mode: Mode::Serial,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_cv_ct_cv),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + cv 5",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_cv_cv),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + ct ±1.5°/s 2",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_ct_1_5),
+    },
+    Variant {
+        name: "parallel IMM cv 1 + ct ±3°/s 3",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_ct_3_noisy),
+    },
+    Variant {
+        name: "parallel IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5",
+        mode: Mode::Parallel,
+        single: false,
+        noise: None,
+        sigma_t: None,
+        max_misses: None,
+        duplicate: None,
+        method: Method::Exact,
+        imm: Some(imm_cv_ct_cv),
+    },
     Variant {
         name: "parallel CV √q = 3 (the default before the IMM)",
         mode: Mode::Parallel,
@@ -114,6 +360,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial CV √q = 3 (the default before the IMM)",
@@ -124,6 +371,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "parallel former defaults",
@@ -134,6 +382,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial former defaults",
@@ -144,6 +393,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "best single radar former defaults",
@@ -154,6 +404,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "parallel σ_t = 100 m/s",
@@ -164,6 +415,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "parallel 3 × radars misses delete",
@@ -174,6 +426,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial 3 × radars misses delete",
@@ -184,6 +437,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial 3 misses delete",
@@ -194,6 +448,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: FORMER_MISSES,
         duplicate: None,
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial without duplicate deletion",
@@ -204,6 +459,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: Some(0.0),
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "parallel without duplicate deletion",
@@ -214,6 +470,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: Some(0.0),
         method: Method::Exact,
+        imm: None,
     },
     Variant {
         name: "serial GNN",
@@ -224,6 +481,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: None,
         method: Method::GlobalNearestNeighbour,
+        imm: None,
     },
     Variant {
         name: "parallel GNN",
@@ -234,6 +492,7 @@ const VARIANTS: [Variant; 13] = [
         max_misses: None,
         duplicate: None,
         method: Method::GlobalNearestNeighbour,
+        imm: None,
     },
 ];
 
@@ -724,6 +983,9 @@ fn one_run(
                         c.duplicate_probability = p;
                     }
                     c.association.method = v.method;
+                    if let Some(imm) = v.imm {
+                        c.motion = Motion::Imm(imm());
+                    }
                     c
                 };
                 if !v.single {

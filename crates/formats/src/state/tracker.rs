@@ -6,8 +6,9 @@
 //! Layout: magic `RFTK`, format version (u32, currently 2), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
-//! Format 2 adds the predictor (`motion`) after the configuration and each
-//! track's IMM modes after the track; format 1 (trackers stored before the
+//! Format 2 adds the predictor (`motion`) after the configuration, each
+//! track's IMM modes after the track and, at the end, each radar's last
+//! beam position (serial frames' sweeps); format 1 (trackers stored before the
 //! IMM) is read as one constant-velocity model without modes, so such a
 //! tracker continues exactly as it would have.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
@@ -56,6 +57,13 @@ pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     w.opt(s.last_time, Writer::f64);
     w.opt(s.last_instant, |w, k| w.u64(k as u64));
     encode_counters(&mut w, &s.counters);
+    w.usize(s.beams.len());
+    for b in s.beams {
+        w.opt(*b, |w, (t, az)| {
+            w.f64(t);
+            w.f64(az);
+        });
+    }
     w.buf
 }
 
@@ -125,6 +133,14 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     let last_time = r.opt(Reader::f64)?;
     let last_instant = r.opt(|r| r.u64().map(|k| k as i64))?;
     let counters = decode_counters(&mut r)?;
+    let beams = if version >= 2 {
+        let n = r.len(1)?;
+        (0..n)
+            .map(|_| r.opt(|r| Ok((r.f64()?, r.f64()?))))
+            .collect::<Result<_, FormatError>>()?
+    } else {
+        Vec::new()
+    };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
@@ -138,6 +154,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         last_time,
         last_instant,
         counters,
+        beams,
     })?)
 }
 
@@ -344,6 +361,13 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
         read_motion(r)?
     } else {
         Motion::ConstantVelocity
+    };
+    // Format 1 resolved `Auto` to parallel when every radar gave Doppler:
+    // keep the mode such a tracker ran in.
+    let mode = if version == 1 && mode == Mode::Auto && radars.iter().all(RadarSpec::has_doppler) {
+        Mode::Parallel
+    } else {
+        mode
     };
     Ok(TrackerConfig {
         axes,
@@ -602,12 +626,40 @@ mod tests {
         let mut t = mid;
         t.process(&plots[24..]).unwrap();
         t.flush().unwrap();
-        assert_eq!(t, end);
+        // Equal but for the beam positions the continued tracker now
+        // holds (format 1 has none; every frame here is a whole scan).
+        let mut parts = t.state().to_parts();
+        parts.beams = vec![None; 2];
+        assert_eq!(parts, end.state().to_parts());
         assert_eq!(t.counters().confirmed, 2);
         // Written again it is format 2 and reads back the same.
         let bytes = encode_tracker(&t);
         assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
+    }
+
+    /// A format-1 tracker in mode `Auto` with Doppler on every radar ran in
+    /// parallel mode; it is read back as parallel (`Auto` is serial now).
+    #[test]
+    fn a_format_1_auto_tracker_with_doppler_stays_parallel() {
+        let mut cfg = config(true);
+        cfg.motion = Motion::ConstantVelocity;
+        assert_eq!(cfg.mode, Mode::Auto);
+        let fresh = Tracker::new(cfg).unwrap();
+        assert_eq!(fresh.mode(), Mode::Serial);
+        let mut bytes = encode_tracker(&fresh);
+        // Format 1: no beams at the end (a count and two absent options:
+        // 8 + 2 bytes) and no motion byte. A fresh tracker ends with four
+        // empty lists (4 × 8 bytes), next id (8), two absent options (2)
+        // and the counters (72) after the motion byte.
+        bytes.truncate(bytes.len() - 10);
+        let at = bytes.len() - (32 + 8 + 2 + 72) - 1;
+        assert_eq!(bytes[at], 0, "the motion byte of one CV model");
+        bytes.remove(at);
+        bytes[4..8].copy_from_slice(&1u32.to_le_bytes());
+        let old = decode_tracker(&bytes).unwrap();
+        assert_eq!(old.mode(), Mode::Parallel);
+        assert_eq!(old.config().motion, Motion::ConstantVelocity);
     }
 
     #[test]
@@ -616,7 +668,7 @@ mod tests {
         assert!(matches!(cfg.motion, Motion::Imm(_)));
         let mut t = Tracker::new(cfg.clone()).unwrap();
         t.process(&plots(&cfg, 100.0)).unwrap();
-        assert!(t.state().tracks.iter().all(|tr| tr.modes.len() == 3));
+        assert!(t.state().tracks.iter().all(|tr| tr.modes.len() == 4));
         assert!(!t.state().tracks.is_empty());
         let bytes = encode_tracker(&t);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);

@@ -503,21 +503,6 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     config.motion = motion(tracker, &mut warnings)?;
     config.validate().map_err(|e| config_error(&e))?;
 
-    let doppler = config.radars.iter().filter(|r| r.has_doppler()).count();
-    if mode == Mode::Auto && doppler > 0 && doppler < config.radars.len() {
-        let without: Vec<&str> = config
-            .radars
-            .iter()
-            .zip(&ids)
-            .filter(|(r, _)| !r.has_doppler())
-            .map(|(_, id)| id.as_str())
-            .collect();
-        warnings.push(format!(
-            "mode auto chose serial: radar(s) {} give no Doppler (parallel fusion needs \
-             sigma_radial_velocity_mps on every radar)",
-            without.join(", ")
-        ));
-    }
     if config.is_parallel() {
         for (r, id) in config.radars.iter().zip(&ids) {
             if config.fusion_period > r.scan_period {

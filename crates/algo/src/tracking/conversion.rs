@@ -1,5 +1,8 @@
-//! Spatial registration (seed 001 step 1, Fig. 2) and time registration by
-//! extrapolation (step 3, 3a–3b).
+//! Plots converted to the fusion frame: the patent's "spatial
+//! registration" (seed 001 step 1, Fig. 2), polar to ENU, and its "time
+//! registration" by extrapolation to a fusion instant (step 3, 3a–3b). (In
+//! radar literature registration means estimating sensor biases; this
+//! module only converts.)
 //!
 //! Step 1: a plot z′ = (ρ, θ(, φ)) measured in the frame of a radar at
 //! [a, b(, c)] becomes the fusion-frame position `[a, b] + ρ[sin θ, cos θ]`
