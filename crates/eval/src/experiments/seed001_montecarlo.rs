@@ -198,7 +198,7 @@ const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
 const VARIANTS: [Variant; 27] = [
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5, ±3°/s 1.5",
+        name: "serial IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
         mode: Mode::Serial,
         single: false,
         noise: None,
@@ -220,7 +220,7 @@ const VARIANTS: [Variant; 27] = [
         imm: Some(imm_e),
     },
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5, ±3°/s 2",
+        name: "serial IMM cv 0.5 + ct ±1.5 and ±3°/s 2",
         mode: Mode::Serial,
         single: false,
         noise: None,
@@ -231,7 +231,7 @@ const VARIANTS: [Variant; 27] = [
         imm: Some(imm_g),
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5, ±3°/s 1.5",
+        name: "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
         mode: Mode::Parallel,
         single: false,
         noise: None,
@@ -253,7 +253,7 @@ const VARIANTS: [Variant; 27] = [
         imm: Some(imm_e),
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5, ±3°/s 2",
+        name: "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 2",
         mode: Mode::Parallel,
         single: false,
         noise: None,
