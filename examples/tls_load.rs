@@ -9,14 +9,17 @@
 //!
 //! ```sh
 //! openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 30 \
-//!   -subj /CN=localhost -addext subjectAltName=DNS:localhost -keyout key.pem -out cert.pem
+//!   -subj /CN=localhost -addext subjectAltName=DNS:localhost,IP:127.0.0.1 \
+//!   -addext basicConstraints=critical,CA:FALSE -keyout key.pem -out cert.pem
 //! FUSION_HTTP_ADDR=127.0.0.1:8080 FUSION_GRPC_ADDR=127.0.0.1:50051 target/release/radar-fusion &
 //! FUSION_HTTP_ADDR=127.0.0.1:8443 FUSION_GRPC_ADDR=127.0.0.1:50443 \
 //!   FUSION_TLS_CERT=cert.pem FUSION_TLS_KEY=key.pem target/release/radar-fusion &
 //! cargo run --release --example tls_load -- --plain 127.0.0.1:8080 --tls 127.0.0.1:8443 \
 //!   --tls-ca cert.pem [--server-name localhost] [--connections 64] [--seconds 5] [--rounds 3]
-//!   [--handshakes 1000]
+//!   [--handshakes 1000] [--plain-pid PID --tls-pid PID]
 //! ```
+//! With the servers' process ids, each figure also gets the server's CPU
+//! time per connection or request (`/proc/PID/stat`, user + system).
 
 use std::{
     net::SocketAddr,
@@ -44,6 +47,8 @@ struct Args {
     seconds: f64,
     rounds: usize,
     handshakes: usize,
+    plain_pid: Option<u32>,
+    tls_pid: Option<u32>,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -56,6 +61,8 @@ fn args() -> anyhow::Result<Args> {
         seconds: 5.0,
         rounds: 3,
         handshakes: 1000,
+        plain_pid: None,
+        tls_pid: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -72,6 +79,8 @@ fn args() -> anyhow::Result<Args> {
             "--seconds" => a.seconds = value()?.parse()?,
             "--rounds" => a.rounds = value()?.parse()?,
             "--handshakes" => a.handshakes = value()?.parse()?,
+            "--plain-pid" => a.plain_pid = Some(value()?.parse()?),
+            "--tls-pid" => a.tls_pid = Some(value()?.parse()?),
             other => anyhow::bail!("unknown flag {other}"),
         }
     }
@@ -186,6 +195,23 @@ async fn throughput(dial: &Dial, connections: usize, seconds: f64) -> anyhow::Re
     Ok(done.load(Ordering::Relaxed) as f64 / elapsed)
 }
 
+/// A process's CPU time (user + system) in seconds, from `/proc/PID/stat`.
+fn cpu_seconds(pid: Option<u32>) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{}/stat", pid?)).ok()?;
+    // Fields after the command name (which may hold spaces, in parentheses).
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0) // USER_HZ
+}
+
+/// " (server CPU x µs each)" for `n` operations between two readings.
+fn cpu_each(before: Option<f64>, after: Option<f64>, n: f64) -> String {
+    match (before, after) {
+        (Some(b), Some(a)) => format!(", server CPU {:.0} µs each", (a - b) * 1e6 / n),
+        _ => String::new(),
+    }
+}
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let a = args()?;
@@ -223,10 +249,14 @@ async fn main() -> anyhow::Result<()> {
     );
     let (mut plain_sum, mut tls_sum) = (0.0, 0.0);
     for round in 1..=a.rounds {
+        let before = cpu_seconds(a.plain_pid);
         let p = throughput(&plain, a.connections, a.seconds).await?;
+        let p_cpu = cpu_each(before, cpu_seconds(a.plain_pid), p * a.seconds);
+        let before = cpu_seconds(a.tls_pid);
         let t = throughput(&tls_resumed, a.connections, a.seconds).await?;
+        let t_cpu = cpu_each(before, cpu_seconds(a.tls_pid), t * a.seconds);
         println!(
-            "  round {round}: plaintext {p:.0} req/s, TLS {t:.0} req/s ({:.1} %)",
+            "  round {round}: plaintext {p:.0} req/s{p_cpu}; TLS {t:.0} req/s{t_cpu} ({:.1} %)",
             100.0 * t / p
         );
         plain_sum += p;

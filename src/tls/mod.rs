@@ -445,19 +445,35 @@ impl Files {
     fn load(&self, contents: &Contents) -> Result<Loaded, String> {
         let provider = provider();
         let chain = cert_chain(&contents.cert, &self.cert, CERT)?;
-        let not_after = x509::not_after_unix(&chain[0]);
-        let key = private_key(&contents.key, &self.key, KEY)?;
-        let certified = CertifiedKey::from_der(chain, key, &provider).map_err(|e| match e {
-            rustls::Error::InconsistentKeys(_) => format!(
-                "{KEY}: the key in {} does not match the certificate in {}",
-                self.key.display(),
+        let not_after = x509::not_after_unix(&chain[0]).ok_or_else(|| {
+            format!(
+                "{CERT}: {}: the first certificate is not an X.509 certificate",
                 self.cert.display()
-            ),
-            other => format!(
-                "{KEY}: {}: unusable private key ({other})",
-                self.key.display()
-            ),
+            )
         })?;
+        let key = private_key(&contents.key, &self.key, KEY)?;
+        let signing_key = provider
+            .key_provider
+            .load_private_key(key)
+            .map_err(|e| format!("{KEY}: {}: unusable private key ({e})", self.key.display()))?;
+        let certified = CertifiedKey::new(chain, signing_key);
+        match certified.keys_match() {
+            Ok(()) | Err(rustls::Error::InconsistentKeys(rustls::InconsistentKeys::Unknown)) => {}
+            Err(rustls::Error::InconsistentKeys(_)) => {
+                return Err(format!(
+                    "{KEY}: the key in {} does not match the certificate in {}",
+                    self.key.display(),
+                    self.cert.display()
+                ));
+            }
+            Err(e) => {
+                return Err(format!(
+                    "{CERT}: {}: unusable certificate ({e})",
+                    self.cert.display()
+                ));
+            }
+        }
+        let not_after = Some(not_after);
         let resolver = Arc::new(SingleCertAndKey::from(certified));
         let verifier: Option<Arc<dyn ClientCertVerifier>> =
             match (&self.client_ca, &contents.client_ca) {

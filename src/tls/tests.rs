@@ -90,6 +90,19 @@ fn bad_files_refuse_to_load_naming_option_and_file() {
         "{e}"
     );
 
+    // PEM around bytes that are no certificate.
+    s.tls_cert = Some(dir.write(
+        "bogus.pem",
+        "-----BEGIN CERTIFICATE-----\nbroken\n-----END CERTIFICATE-----\n",
+    ));
+    let e = load_error(&s);
+    assert!(
+        e.starts_with("--tls-cert (FUSION_TLS_CERT)")
+            && e.contains("bogus.pem")
+            && e.contains("not an X.509 certificate"),
+        "{e}"
+    );
+
     // The key file holds a certificate, not a key; the message quotes nothing of it.
     s.tls_cert = Some(dir.write("cert.pem", &cert));
     s.tls_key = Some(dir.write("notakey.pem", &cert));
