@@ -231,14 +231,16 @@ async fn main() -> anyhow::Result<()> {
     // Warm both servers and the session cache first.
     new_connections(&plain, 20).await?;
     new_connections(&tls_resumed, 20).await?;
-    for (label, dial) in [
-        ("plaintext", &plain),
-        ("TLS full handshake", &tls_full),
-        ("TLS resumed", &tls_resumed),
+    for (label, dial, pid) in [
+        ("plaintext", &plain, a.plain_pid),
+        ("TLS full handshake", &tls_full, a.tls_pid),
+        ("TLS resumed", &tls_resumed, a.tls_pid),
     ] {
+        let before = cpu_seconds(pid);
         let (ms, resumed) = new_connections(dial, a.handshakes).await?;
+        let cpu = cpu_each(before, cpu_seconds(pid), a.handshakes as f64);
         println!(
-            "  {label:<20} {ms:.3} ms ({:.0} connections/s; {resumed} resumed)",
+            "  {label:<20} {ms:.3} ms ({:.0} connections/s; {resumed} resumed{cpu})",
             1e3 / ms
         );
     }

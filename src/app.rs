@@ -133,6 +133,8 @@ impl Application {
         let asterix_udp =
             crate::asterix_udp::spawn(&state, crate::http::sessions::plot_fusion_spec_from_json)
                 .await?;
+        // Reloads (and the SIGHUP handler) from before readiness.
+        let tls_watcher = tls.as_ref().map(Tls::spawn_watcher);
         set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
@@ -148,7 +150,6 @@ impl Application {
         };
         let limits = state.settings().connection_limits();
         let access_log = state.settings().access_log;
-        let tls_watcher = tls.as_ref().map(Tls::spawn_watcher);
         let http_server = tokio::spawn(serve::serve(
             http_listener,
             rest,

@@ -239,19 +239,20 @@ impl Tls {
     }
 
     /// Reloads every `FUSION_TLS_RELOAD_S` and on SIGHUP, until aborted.
+    /// The SIGHUP handler is in place when this returns (from then on the
+    /// signal no longer ends the process).
     pub fn spawn_watcher(self: &Arc<Self>) -> tokio::task::JoinHandle<()> {
         let tls = self.clone();
+        #[cfg(unix)]
+        let mut hangup = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())
+        {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot listen for SIGHUP: TLS files reload by polling only");
+                None
+            }
+        };
         tokio::spawn(async move {
-            #[cfg(unix)]
-            let mut hangup = match tokio::signal::unix::signal(
-                tokio::signal::unix::SignalKind::hangup(),
-            ) {
-                Ok(s) => Some(s),
-                Err(e) => {
-                    tracing::warn!(error = %e, "cannot listen for SIGHUP: TLS files reload by polling only");
-                    None
-                }
-            };
             loop {
                 let every = tls.reload_every;
                 let poll = async move {
