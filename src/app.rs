@@ -1,7 +1,8 @@
-//! Start-up: binds both listeners, builds the shared state and the routers,
-//! serves until a shutdown signal, then drains in-flight requests.
+//! Start-up: loads the TLS files (when configured), binds both listeners,
+//! builds the shared state and the routers, serves until a shutdown signal,
+//! then drains in-flight requests.
 
-use std::{future::Future, net::SocketAddr, time::Duration};
+use std::{future::Future, net::SocketAddr, sync::Arc, time::Duration};
 
 use anyhow::Context;
 use tokio::{net::TcpListener, sync::watch};
@@ -13,6 +14,7 @@ use crate::{
     grpc, http, serve,
     state::{AppState, Readiness, StoreHealth},
     telemetry,
+    tls::{Port, Tls, TlsPort},
 };
 use store::SessionStore;
 
@@ -28,6 +30,7 @@ pub struct Application {
     rest: axum::Router,
     grpc: axum::Router,
     health: HealthReporter,
+    tls: Option<Arc<Tls>>,
 }
 
 impl Application {
@@ -43,6 +46,12 @@ impl Application {
                 tenants = api_keys.tenant_count(),
                 "API keys configured: requests must authenticate"
             );
+        }
+        // Before binding: a bad certificate or key refuses to start, naming the file.
+        let tls = Tls::from_settings(&settings).map_err(anyhow::Error::msg)?;
+        match &tls {
+            Some(tls) => tracing::info!("{}", tls.describe()),
+            None => tracing::info!("TLS off: both ports speak plaintext"),
         }
         let http_listener = TcpListener::bind(settings.http_addr)
             .await
@@ -67,6 +76,7 @@ impl Application {
             rest,
             grpc,
             health,
+            tls,
         })
     }
 
@@ -86,6 +96,11 @@ impl Application {
         self.state.clone()
     }
 
+    /// The TLS configuration of both ports, when TLS is on.
+    pub fn tls(&self) -> Option<Arc<Tls>> {
+        self.tls.clone()
+    }
+
     /// Serves both ports until `shutdown` completes, then stops accepting,
     /// reports not ready, and waits (at most the grace period) for the
     /// requests in flight to finish.
@@ -100,6 +115,7 @@ impl Application {
             rest,
             grpc,
             health,
+            tls,
         } = self;
         // The first health status is set before readiness is reported, so a
         // probe that sees ready also sees the matching gRPC status.
@@ -117,6 +133,8 @@ impl Application {
         let asterix_udp =
             crate::asterix_udp::spawn(&state, crate::http::sessions::plot_fusion_spec_from_json)
                 .await?;
+        // Reloads (and the SIGHUP handler) from before readiness.
+        let tls_watcher = tls.as_ref().map(Tls::spawn_watcher);
         set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));
@@ -137,6 +155,7 @@ impl Application {
             rest,
             limits,
             "http",
+            tls.clone().map(|t| TlsPort::new(t, Port::Http)),
             stopped(stop_rx.clone()),
         ));
         let grpc_server = tokio::spawn(serve::serve(
@@ -144,6 +163,7 @@ impl Application {
             telemetry::with_request_tracing(grpc, access_log),
             limits,
             "grpc",
+            tls.map(|t| TlsPort::new(t, Port::Grpc)),
             stopped(stop_rx),
         ));
 
@@ -154,6 +174,9 @@ impl Application {
         let _ = monitor.await;
         if let Some(listener) = asterix_udp {
             listener.abort();
+        }
+        if let Some(watcher) = tls_watcher {
+            watcher.abort();
         }
         set_health(&health, false, false).await;
         let _ = stop_tx.send(true);

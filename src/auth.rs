@@ -5,6 +5,12 @@
 //! no key configured the service is open and every request acts as tenant
 //! [`DEFAULT_TENANT`]. The adapters put the `Tenant` into the request
 //! extensions; keys themselves are never logged nor echoed in errors.
+//!
+//! Over mutual TLS a verified client certificate may stand for a tenant
+//! (`FUSION_TLS_CLIENT_TENANTS`): the accept loop puts a [`CertTenant`] into
+//! every request of that connection, and [`ApiKeys::authenticate_request`]
+//! decides between it and a key (the precedence is documented there and in
+//! docs/operations.md, "TLS").
 
 use std::fmt;
 
@@ -37,6 +43,12 @@ impl fmt::Display for Tenant {
     }
 }
 
+/// The tenant a connection's verified client certificate stands for: put
+/// into the extensions of every request on that connection by `serve`
+/// (mutual TLS with `FUSION_TLS_CLIENT_TENANTS`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CertTenant(pub Tenant);
+
 /// Why a request was not authenticated (the messages name no key).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum AuthError {
@@ -46,6 +58,10 @@ pub enum AuthError {
     Malformed,
     #[error("the API key is not valid")]
     UnknownKey,
+    /// A valid key of another tenant than the client certificate's
+    /// (403 / PERMISSION_DENIED, not 401: both credentials are genuine).
+    #[error("the API key belongs to another tenant than the client certificate")]
+    TenantMismatch,
 }
 
 /// The configured API keys, each mapped to its tenant. Empty means open.
@@ -131,6 +147,41 @@ impl ApiKeys {
         self.authenticate_key(Some(key.trim()))
     }
 
+    /// The tenant of a request from its credentials: the connection's
+    /// client certificate (`cert`, when it maps to a tenant), the
+    /// `Authorization` header and, for gRPC, the `x-api-key` metadata (used
+    /// only when there is no `authorization`). Precedence:
+    ///
+    /// - no certificate tenant: the key alone, as [`Self::authenticate`];
+    /// - a certificate tenant and no key: that tenant (the certificate
+    ///   stands for a key);
+    /// - both: the key must be valid (else 401 as without a certificate) and
+    ///   belong to the certificate's tenant (else [`AuthError::TenantMismatch`]);
+    ///   in open mode (no keys configured) a key is ignored.
+    pub fn authenticate_request(
+        &self,
+        cert: Option<&CertTenant>,
+        authorization: Option<&str>,
+        api_key: Option<&str>,
+    ) -> Result<Tenant, AuthError> {
+        let by_key = || match (authorization, api_key) {
+            (None, Some(key)) => self.authenticate_key(Some(key.trim())),
+            (authorization, _) => self.authenticate(authorization),
+        };
+        let Some(CertTenant(cert_tenant)) = cert else {
+            return by_key();
+        };
+        if self.is_open() || (authorization.is_none() && api_key.is_none()) {
+            return Ok(cert_tenant.clone());
+        }
+        let key_tenant = by_key()?;
+        if key_tenant == *cert_tenant {
+            Ok(key_tenant)
+        } else {
+            Err(AuthError::TenantMismatch)
+        }
+    }
+
     /// The tenant of a bare key (the gRPC `x-api-key` metadata).
     pub fn authenticate_key(&self, key: Option<&str>) -> Result<Tenant, AuthError> {
         if self.is_open() {
@@ -178,6 +229,14 @@ impl ApiKeys {
 
 fn default_tenant() -> Tenant {
     Tenant(DEFAULT_TENANT.to_string())
+}
+
+/// Whether `name` is a valid tenant name: `[A-Za-z0-9_-]{1,64}`.
+pub(crate) fn valid_tenant(name: &str) -> bool {
+    (1..=MAX_TENANT_LEN).contains(&name.len())
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
 }
 
 /// Equality of two byte strings whose running time depends on their lengths
@@ -235,11 +294,7 @@ fn parse_entry(item: &str, origin: String) -> Result<Entry, String> {
             "{origin}: the key must be printable ASCII without spaces"
         ));
     }
-    let tenant_ok = (1..=MAX_TENANT_LEN).contains(&tenant.len())
-        && tenant
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
-    if !tenant_ok {
+    if !valid_tenant(tenant) {
         return Err(format!(
             "{origin}: the tenant must match [A-Za-z0-9_-]{{1,{MAX_TENANT_LEN}}}"
         ));
@@ -323,6 +378,63 @@ mod tests {
             Err(AuthError::UnknownKey)
         );
         assert_eq!(k.authenticate_key(None), Err(AuthError::Missing));
+    }
+
+    #[test]
+    fn a_certificate_tenant_stands_for_a_key_and_must_agree_with_one() {
+        let k = keys("k1secret=acme,k2secret=globex");
+        let acme = CertTenant(Tenant("acme".into()));
+        let auth = |cert, authorization, key| k.authenticate_request(cert, authorization, key);
+        // The certificate alone.
+        assert_eq!(auth(Some(&acme), None, None), Ok(Tenant("acme".into())));
+        // With its own tenant's key, by either header.
+        assert_eq!(
+            auth(Some(&acme), Some("Bearer k1secret"), None),
+            Ok(Tenant("acme".into()))
+        );
+        assert_eq!(
+            auth(Some(&acme), None, Some("k1secret")),
+            Ok(Tenant("acme".into()))
+        );
+        // Another tenant's key: refused, whichever header carries it.
+        assert_eq!(
+            auth(Some(&acme), Some("Bearer k2secret"), None),
+            Err(AuthError::TenantMismatch)
+        );
+        assert_eq!(
+            auth(Some(&acme), None, Some("k2secret")),
+            Err(AuthError::TenantMismatch)
+        );
+        // A bad key is a bad key, certificate or not.
+        assert_eq!(
+            auth(Some(&acme), Some("Bearer nope-nope"), None),
+            Err(AuthError::UnknownKey)
+        );
+        assert_eq!(
+            auth(Some(&acme), Some("k1secret"), None),
+            Err(AuthError::Malformed)
+        );
+        // Without a certificate tenant: the key rules as before.
+        assert_eq!(
+            auth(None, Some("Bearer k2secret"), None),
+            Ok(Tenant("globex".into()))
+        );
+        assert_eq!(
+            auth(None, None, Some("k2secret")),
+            Ok(Tenant("globex".into()))
+        );
+        assert_eq!(auth(None, None, None), Err(AuthError::Missing));
+        // Open mode: the certificate's tenant, any key ignored; no
+        // certificate: `default`.
+        let open = ApiKeys::default();
+        assert_eq!(
+            open.authenticate_request(Some(&acme), Some("Bearer x"), None),
+            Ok(Tenant("acme".into()))
+        );
+        assert_eq!(
+            open.authenticate_request(None, None, None),
+            Ok(Tenant("default".into()))
+        );
     }
 
     #[test]

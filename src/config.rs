@@ -37,6 +37,8 @@ pub enum Command {
         /// Address of the REST server to probe.
         #[arg(long, default_value = "127.0.0.1:8080")]
         addr: SocketAddr,
+        #[command(flatten)]
+        tls: HealthcheckTls,
     },
     /// Moved: the experiments are the `radar-fusion-eval` binary of the
     /// `eval` crate; this prints where and exits with status 2.
@@ -46,6 +48,39 @@ pub enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+}
+
+/// TLS of the `healthcheck` probe: with `--tls-ca` it speaks TLS to a
+/// server started with `FUSION_TLS_CERT`.
+#[derive(Debug, Clone, Args)]
+pub struct HealthcheckTls {
+    /// Probe over TLS, trusting the CA certificates of this PEM file.
+    #[arg(long = "tls-ca", env = "FUSION_HEALTHCHECK_TLS_CA")]
+    pub ca: Option<PathBuf>,
+    /// The name the server's certificate must hold (a DNS name or an IP
+    /// address).
+    #[arg(
+        long = "tls-server-name",
+        env = "FUSION_HEALTHCHECK_TLS_SERVER_NAME",
+        default_value = "localhost",
+        requires = "ca"
+    )]
+    pub server_name: String,
+    /// A client certificate (PEM) for a server that requires one
+    /// (`FUSION_TLS_CLIENT_AUTH=required`); needs `--tls-client-key`.
+    #[arg(
+        long = "tls-client-cert",
+        env = "FUSION_HEALTHCHECK_TLS_CLIENT_CERT",
+        requires_all = ["ca", "client_key"]
+    )]
+    pub client_cert: Option<PathBuf>,
+    /// The private key (PEM) of `--tls-client-cert`.
+    #[arg(
+        long = "tls-client-key",
+        env = "FUSION_HEALTHCHECK_TLS_CLIENT_KEY",
+        requires = "client_cert"
+    )]
+    pub client_key: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -193,6 +228,41 @@ pub struct Settings {
     /// the system's choice).
     #[arg(long, env = "FUSION_ASTERIX_INTERFACE", default_value = "0.0.0.0")]
     pub asterix_interface: std::net::Ipv4Addr,
+    /// Serve TLS on both ports with this PEM certificate chain (the server's
+    /// certificate first); needs `--tls-key`. Without both: plaintext.
+    #[arg(long, env = "FUSION_TLS_CERT")]
+    pub tls_cert: Option<PathBuf>,
+    /// The PEM private key (PKCS#8, PKCS#1 or SEC1) of `--tls-cert`.
+    #[arg(long, env = "FUSION_TLS_KEY")]
+    pub tls_key: Option<PathBuf>,
+    /// A PEM bundle of the CAs whose client certificates are accepted:
+    /// turns on client-certificate verification (mutual TLS).
+    #[arg(long, env = "FUSION_TLS_CLIENT_CA")]
+    pub tls_client_ca: Option<PathBuf>,
+    /// With `--tls-client-ca`: `required` (the default: a connection without
+    /// a trusted certificate is refused) or `optional` (a client may connect
+    /// without one and authenticate with an API key).
+    #[arg(long, env = "FUSION_TLS_CLIENT_AUTH", value_enum)]
+    pub tls_client_auth: Option<ClientAuth>,
+    /// A file mapping client-certificate names to tenants, one
+    /// `uri:NAME=tenant`, `dns:NAME=tenant` or `cn:NAME=tenant` per line
+    /// (needs `--tls-client-ca`); a certificate that maps stands for its
+    /// tenant's API key.
+    #[arg(long, env = "FUSION_TLS_CLIENT_TENANTS")]
+    pub tls_client_tenants: Option<PathBuf>,
+    /// How often the TLS files are read again, in seconds; a change is
+    /// loaded for new connections (SIGHUP reloads at once). 0: on SIGHUP only.
+    #[arg(long, env = "FUSION_TLS_RELOAD_S", default_value_t = 10.0)]
+    pub tls_reload_s: f64,
+}
+
+/// Whether mutual TLS requires a client certificate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ClientAuth {
+    /// A connection without a trusted client certificate is refused.
+    Required,
+    /// A client may connect without a certificate; one it sends must be trusted.
+    Optional,
 }
 
 /// A setting that must not appear in logs: `Debug` prints `***`.
@@ -324,6 +394,7 @@ impl Settings {
                     .into(),
             );
         }
+        self.validate_tls()?;
         let id = &self.asterix_session_id;
         if !(id.len() == 32 && id.bytes().all(|b| b.is_ascii_hexdigit())) {
             return Err(format!(
@@ -331,6 +402,49 @@ impl Settings {
             ));
         }
         Ok(())
+    }
+}
+
+impl Settings {
+    /// The TLS options go together: a certificate and its key, or neither;
+    /// client verification and its options only with TLS.
+    fn validate_tls(&self) -> Result<(), String> {
+        match (&self.tls_cert, &self.tls_key) {
+            (Some(_), None) => {
+                return Err("--tls-cert (FUSION_TLS_CERT) needs --tls-key (FUSION_TLS_KEY)".into());
+            }
+            (None, Some(_)) => {
+                return Err("--tls-key (FUSION_TLS_KEY) needs --tls-cert (FUSION_TLS_CERT)".into());
+            }
+            _ => {}
+        }
+        let tls = self.tls_cert.is_some();
+        if self.tls_client_ca.is_some() && !tls {
+            return Err(
+                "--tls-client-ca (FUSION_TLS_CLIENT_CA) needs --tls-cert and --tls-key".into(),
+            );
+        }
+        if self.tls_client_auth.is_some() && self.tls_client_ca.is_none() {
+            return Err(
+                "--tls-client-auth (FUSION_TLS_CLIENT_AUTH) needs --tls-client-ca (FUSION_TLS_CLIENT_CA)"
+                    .into(),
+            );
+        }
+        if self.tls_client_tenants.is_some() && self.tls_client_ca.is_none() {
+            return Err(
+                "--tls-client-tenants (FUSION_TLS_CLIENT_TENANTS) needs --tls-client-ca (FUSION_TLS_CLIENT_CA)"
+                    .into(),
+            );
+        }
+        if !(self.tls_reload_s.is_finite() && (0.0..1e9).contains(&self.tls_reload_s)) {
+            return Err("--tls-reload-s must be a number of seconds, 0 or more".into());
+        }
+        Ok(())
+    }
+
+    /// Whether both ports serve TLS.
+    pub fn tls_enabled(&self) -> bool {
+        self.tls_cert.is_some()
     }
 }
 
@@ -369,6 +483,66 @@ mod tests {
         assert_eq!(with(&[]).access_log, AccessLog::Debug);
         assert_eq!(with(&["--access-log", "info"]).access_log, AccessLog::Info);
         assert_eq!(with(&["--access-log", "off"]).access_log, AccessLog::Off);
+    }
+
+    #[test]
+    fn tls_options_go_together() {
+        assert_eq!(with(&[]).validate(), Ok(()));
+        assert!(!with(&[]).tls_enabled());
+        let ok = with(&[
+            "--tls-cert",
+            "c.pem",
+            "--tls-key",
+            "k.pem",
+            "--tls-client-ca",
+            "ca.pem",
+        ]);
+        assert_eq!(ok.validate(), Ok(()));
+        assert!(ok.tls_enabled());
+        assert_eq!(
+            ok.tls_client_auth, None,
+            "required is the default, decided by tls"
+        );
+        for (args, named) in [
+            (
+                &["--tls-cert", "c.pem"][..],
+                "--tls-cert (FUSION_TLS_CERT) needs --tls-key",
+            ),
+            (
+                &["--tls-key", "k.pem"],
+                "--tls-key (FUSION_TLS_KEY) needs --tls-cert",
+            ),
+            (
+                &["--tls-client-ca", "ca.pem"],
+                "--tls-client-ca (FUSION_TLS_CLIENT_CA) needs",
+            ),
+            (
+                &[
+                    "--tls-cert",
+                    "c",
+                    "--tls-key",
+                    "k",
+                    "--tls-client-auth",
+                    "optional",
+                ],
+                "--tls-client-auth (FUSION_TLS_CLIENT_AUTH) needs --tls-client-ca",
+            ),
+            (
+                &[
+                    "--tls-cert",
+                    "c",
+                    "--tls-key",
+                    "k",
+                    "--tls-client-tenants",
+                    "t",
+                ],
+                "--tls-client-tenants (FUSION_TLS_CLIENT_TENANTS) needs --tls-client-ca",
+            ),
+            (&["--tls-reload-s=-1"], "--tls-reload-s"),
+        ] {
+            let err = with(args).validate().unwrap_err();
+            assert!(err.starts_with(named), "{args:?}: {err}");
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! `http` (axum) and `grpc` (tonic) are sibling adapters over the `service`
 //! crate; `asterix_udp` feeds a session from radar datagrams; `app` wires
 //! them, the `store` and the `telemetry` into one process, `serve` is the
-//! accept loop, `config` the settings. The numerical core (`algo`) is not a
+//! accept loop (with `tls`), `config` the settings. The numerical core (`algo`) is not a
 //! dependency of this crate: the adapters see only service types. See
 //! ARCHITECTURE.md.
 
@@ -18,3 +18,4 @@ pub mod proto;
 pub mod serve;
 pub mod state;
 pub mod telemetry;
+pub mod tls;

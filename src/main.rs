@@ -4,7 +4,7 @@
 use clap::Parser;
 use radar_fusion::{
     app::{Application, shutdown_signal},
-    config::{Cli, Command},
+    config::{Cli, Command, HealthcheckTls},
     http, telemetry,
 };
 
@@ -23,7 +23,7 @@ async fn main() -> anyhow::Result<()> {
         .unwrap_or_else(|| Command::Serve(Box::new(cli.settings)))
     {
         Command::Openapi => print_ignoring_closed_pipe(&http::openapi_json()),
-        Command::Healthcheck { addr } => healthcheck(addr).await,
+        Command::Healthcheck { addr, tls } => healthcheck(addr, &tls).await,
         Command::Eval { .. } => eval_moved(),
         Command::Serve(settings) => {
             telemetry::init_logging(&settings.log, settings.log_format);
@@ -53,27 +53,49 @@ fn print_ignoring_closed_pipe(text: &str) -> anyhow::Result<()> {
     }
 }
 
-/// GET /healthz over a plain HTTP/1.0 connection; fails unless the status
-/// is 200. Every error names the address probed.
-async fn healthcheck(addr: std::net::SocketAddr) -> anyhow::Result<()> {
+/// GET /healthz over an HTTP/1.0 connection (TLS with `--tls-ca`); fails
+/// unless the status is 200. Every error names the address probed.
+async fn healthcheck(addr: std::net::SocketAddr, tls: &HealthcheckTls) -> anyhow::Result<()> {
     use anyhow::Context;
-    healthcheck_once(addr)
+    let scheme = if tls.ca.is_some() { "https" } else { "http" };
+    healthcheck_once(addr, tls)
         .await
-        .with_context(|| format!("healthcheck of http://{addr}/healthz"))
+        .with_context(|| format!("healthcheck of {scheme}://{addr}/healthz"))
 }
 
-async fn healthcheck_once(addr: std::net::SocketAddr) -> anyhow::Result<()> {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let probe = async {
-        let mut stream = tokio::net::TcpStream::connect(addr).await?;
+async fn healthcheck_once(addr: std::net::SocketAddr, tls: &HealthcheckTls) -> anyhow::Result<()> {
+    use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+    async fn probe<S: AsyncRead + AsyncWrite + Unpin>(mut stream: S) -> anyhow::Result<String> {
         stream
             .write_all(b"GET /healthz HTTP/1.0\r\nHost: localhost\r\n\r\n")
             .await?;
         let mut head = vec![0u8; 64];
         let n = stream.read(&mut head).await?;
-        anyhow::Ok(String::from_utf8_lossy(&head[..n]).into_owned())
+        Ok(String::from_utf8_lossy(&head[..n]).into_owned())
+    }
+    // The TLS files are read before the clock starts.
+    let connector = match &tls.ca {
+        None => None,
+        Some(ca) => {
+            let client = tls.client_cert.as_deref().zip(tls.client_key.as_deref());
+            let config = radar_fusion::tls::client_config(ca, client, &[b"http/1.1"])
+                .map_err(anyhow::Error::msg)?;
+            let name =
+                radar_fusion::tls::server_name(&tls.server_name).map_err(anyhow::Error::msg)?;
+            Some((
+                tokio_rustls::TlsConnector::from(std::sync::Arc::new(config)),
+                name,
+            ))
+        }
     };
-    let head = tokio::time::timeout(std::time::Duration::from_secs(3), probe)
+    let exchange = async {
+        let tcp = tokio::net::TcpStream::connect(addr).await?;
+        match connector {
+            None => probe(tcp).await,
+            Some((connector, name)) => probe(connector.connect(name, tcp).await?).await,
+        }
+    };
+    let head = tokio::time::timeout(std::time::Duration::from_secs(3), exchange)
         .await
         .map_err(|_| anyhow::anyhow!("no answer within 3 s"))??;
     anyhow::ensure!(

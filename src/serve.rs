@@ -16,6 +16,16 @@
 //!   that does not answer within it is closed, so idle gRPC streams of
 //!   vanished clients do not hold connections.
 //!
+//! - **TLS** (`FUSION_TLS_CERT`, [`crate::tls`]). The handshake shares the
+//!   header-read deadline: it and the first request's beginning must both
+//!   be done within `header_read_timeout` of the accept, so a client that
+//!   handshakes slowly is cut like one that sends headers slowly. A first
+//!   byte that is not a TLS handshake record (plaintext to a TLS port) closes
+//!   the connection at once. Each accept reads the current configuration, so
+//!   a reloaded certificate serves new connections while open ones keep
+//!   theirs. A verified client certificate that maps to a tenant is put into
+//!   every request of its connection (`auth::CertTenant`).
+//!
 //! Bodies are bounded elsewhere: the REST router reads a body within its own
 //! timeout before a request takes an in-flight slot (`http::admit`), and so
 //! does the gRPC router for unary calls (`grpc::admit`).
@@ -27,8 +37,10 @@
 use std::{
     collections::HashMap,
     future::Future,
-    net::IpAddr,
+    net::{IpAddr, SocketAddr},
+    pin::Pin,
     sync::{Arc, Mutex},
+    task::{Context, Poll},
     time::Duration,
 };
 
@@ -40,13 +52,21 @@ use hyper_util::{
     service::TowerToHyperService,
 };
 use tokio::{
+    io::{AsyncRead, AsyncReadExt, AsyncWrite, ReadBuf},
     net::{TcpListener, TcpStream},
     sync::{Semaphore, watch},
+    time::Instant,
 };
+use tokio_rustls::server::TlsStream;
 use tower::ServiceExt as _;
+
+use crate::{auth::CertTenant, tls::TlsPort};
 
 /// The first bytes of every HTTP/2 connection (RFC 9113 §3.4).
 const H2_PREFACE: &[u8; 24] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n";
+
+/// The first byte of a TLS connection: a handshake record (RFC 8446 §5.1).
+const TLS_HANDSHAKE_RECORD: u8 = 0x16;
 
 /// The limits of one server's connections.
 #[derive(Debug, Clone, Copy)]
@@ -63,12 +83,14 @@ pub struct ConnectionLimits {
 
 /// Serves `router` on `listener` under `limits` until `shutdown` completes,
 /// then drains (see the module documentation). `server` names the server
-/// in metrics and logs (`http`, `grpc`).
+/// in metrics and logs (`http`, `grpc`). With `tls`, every connection is a
+/// TLS one (see the module documentation).
 pub async fn serve<F>(
     listener: TcpListener,
     router: Router,
     limits: ConnectionLimits,
     server: &'static str,
+    tls: Option<TlsPort>,
     shutdown: F,
 ) where
     F: Future<Output = ()> + Send,
@@ -108,9 +130,8 @@ pub async fn serve<F>(
             // (Nagle): without it a gRPC stream update took 40 ms more.
             tracing::warn!(error = %e, "TCP_NODELAY could not be set");
         }
-        let service = router
-            .clone()
-            .map_request(|req: Request<Incoming>| req.map(Body::new));
+        let router = router.clone();
+        let tls = tls.clone();
         let mut stop_rx = stop_rx.clone();
         let closed_rx = closed_rx.clone();
         tokio::spawn(async move {
@@ -119,46 +140,39 @@ pub async fn serve<F>(
             let _closed = closed_rx;
             metrics::gauge!("connections_open", "server" => server).increment(1.0);
             let _open = OpenGauge(server);
-            tokio::select! {
-                begun = request_begins(&tcp, limits.header_read_timeout) => if !begun {
-                    metrics::counter!("connections_timed_out_total", "server" => server, "phase" => "first_request")
-                        .increment(1);
-                    return;
-                },
-                // Stopping: a connection that has sent nothing is just closed.
-                _ = stop_rx.changed() => return,
-            }
-            let mut builder = Builder::new(TokioExecutor::new());
-            builder
-                .http1()
-                .timer(TokioTimer::new())
-                .header_read_timeout(limits.header_read_timeout);
-            builder
-                .http2()
-                .timer(TokioTimer::new())
-                .keep_alive_interval(limits.h2_keepalive)
-                .keep_alive_timeout(limits.h2_keepalive)
-                .enable_connect_protocol();
-            let conn = builder.serve_connection_with_upgrades(
-                TokioIo::new(tcp),
-                TowerToHyperService::new(service),
-            );
-            let mut conn = std::pin::pin!(conn);
-            let mut stopping = false;
-            loop {
+            // The handshake and the first request's beginning share one
+            // deadline from the accept.
+            let deadline = Instant::now() + limits.header_read_timeout;
+            let Some(tls) = tls else {
                 tokio::select! {
-                    result = conn.as_mut() => {
-                        if let Err(e) = result {
-                            tracing::trace!(error = %e, server, "connection ended with an error");
-                        }
-                        break;
-                    }
-                    _ = stop_rx.changed(), if !stopping => {
-                        stopping = true;
-                        conn.as_mut().graceful_shutdown();
-                    }
+                    begun = request_begins(&tcp, deadline) => if !begun {
+                        first_request_timed_out(server);
+                        return;
+                    },
+                    // Stopping: a connection that has sent nothing is just closed.
+                    _ = stop_rx.changed() => return,
                 }
-            }
+                serve_connection(tcp, router, None, limits, server, stop_rx).await;
+                return;
+            };
+            let (stream, cert_tenant) = tokio::select! {
+                accepted = handshake(tcp, &tls, deadline, server, peer) => match accepted {
+                    Some(accepted) => accepted,
+                    None => return,
+                },
+                _ = stop_rx.changed() => return,
+            };
+            let stream = tokio::select! {
+                begun = tls_request_begins(stream, deadline) => match begun {
+                    Some(stream) => stream,
+                    None => {
+                        first_request_timed_out(server);
+                        return;
+                    }
+                },
+                _ = stop_rx.changed() => return,
+            };
+            serve_connection(stream, router, cert_tenant, limits, server, stop_rx).await;
         });
     }
     drop(listener);
@@ -167,12 +181,67 @@ pub async fn serve<F>(
     closed_tx.closed().await;
 }
 
+/// Serves one connection whose request has begun: hyper's HTTP/1 and
+/// HTTP/2 over `router`, each request carrying the connection's
+/// certificate tenant, until it ends or (after `stop_rx` fires) drains.
+async fn serve_connection<I>(
+    io: I,
+    router: Router,
+    cert_tenant: Option<CertTenant>,
+    limits: ConnectionLimits,
+    server: &'static str,
+    mut stop_rx: watch::Receiver<()>,
+) where
+    I: AsyncRead + AsyncWrite + Unpin + Send + 'static,
+{
+    let service = router.map_request(move |req: Request<Incoming>| {
+        let mut req = req.map(Body::new);
+        if let Some(tenant) = &cert_tenant {
+            req.extensions_mut().insert(tenant.clone());
+        }
+        req
+    });
+    let mut builder = Builder::new(TokioExecutor::new());
+    builder
+        .http1()
+        .timer(TokioTimer::new())
+        .header_read_timeout(limits.header_read_timeout);
+    builder
+        .http2()
+        .timer(TokioTimer::new())
+        .keep_alive_interval(limits.h2_keepalive)
+        .keep_alive_timeout(limits.h2_keepalive)
+        .enable_connect_protocol();
+    let conn =
+        builder.serve_connection_with_upgrades(TokioIo::new(io), TowerToHyperService::new(service));
+    let mut conn = std::pin::pin!(conn);
+    let mut stopping = false;
+    loop {
+        tokio::select! {
+            result = conn.as_mut() => {
+                if let Err(e) = result {
+                    tracing::trace!(error = %e, server, "connection ended with an error");
+                }
+                break;
+            }
+            _ = stop_rx.changed(), if !stopping => {
+                stopping = true;
+                conn.as_mut().graceful_shutdown();
+            }
+        }
+    }
+}
+
+fn first_request_timed_out(server: &'static str) {
+    metrics::counter!("connections_timed_out_total", "server" => server, "phase" => "first_request")
+        .increment(1);
+}
+
 /// Waits until the connection has sent enough to tell HTTP/1 from HTTP/2
 /// (hyper then starts at once): a byte that differs from the HTTP/2
 /// preface, or the whole preface. False when the peer closes first or the
-/// timeout passes; the connection is then dropped.
-async fn request_begins(tcp: &TcpStream, timeout: Duration) -> bool {
-    let deadline = tokio::time::Instant::now() + timeout;
+/// deadline passes; the connection is then dropped.
+async fn request_begins(tcp: &TcpStream, deadline: Instant) -> bool {
     let mut buf = [0u8; H2_PREFACE.len()];
     loop {
         let Ok(Ok(n)) = tokio::time::timeout_at(deadline, tcp.peek(&mut buf)).await else {
@@ -181,16 +250,155 @@ async fn request_begins(tcp: &TcpStream, timeout: Duration) -> bool {
         if n == 0 {
             return false;
         }
-        if n == H2_PREFACE.len() || buf[..n] != H2_PREFACE[..n] {
+        if begins(&buf[..n]) {
             return true;
         }
         // A part of the preface: `peek` would return the same bytes at
         // once (so its timeout never fires), so wait a little before looking
         // again, until the deadline.
-        if tokio::time::Instant::now() >= deadline {
+        if Instant::now() >= deadline {
             return false;
         }
         tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
+/// Whether `start` tells HTTP/1 from HTTP/2: it differs from the preface
+/// or is all of it.
+fn begins(start: &[u8]) -> bool {
+    start.len() >= H2_PREFACE.len() || start != &H2_PREFACE[..start.len()]
+}
+
+/// The TLS handshake of one connection, within `deadline`: a first byte that
+/// is not a TLS handshake record (plaintext sent to a TLS port) closes the
+/// connection at once. Counts the outcome; `None` when it failed. The
+/// certificate tenant is that of a verified client certificate mapped by
+/// `FUSION_TLS_CLIENT_TENANTS`.
+async fn handshake(
+    tcp: TcpStream,
+    tls: &TlsPort,
+    deadline: Instant,
+    server: &'static str,
+    peer: SocketAddr,
+) -> Option<(TlsStream<TcpStream>, Option<CertTenant>)> {
+    let failed = |reason: &'static str| {
+        metrics::counter!("tls_handshake_failures_total", "server" => server, "reason" => reason)
+            .increment(1);
+        tracing::debug!(%peer, server, reason, "TLS handshake failed");
+    };
+    let mut first = [0u8; 1];
+    match tokio::time::timeout_at(deadline, tcp.peek(&mut first)).await {
+        Err(_) => {
+            failed("timeout");
+            return None;
+        }
+        Ok(Ok(0) | Err(_)) => {
+            failed("closed");
+            return None;
+        }
+        Ok(Ok(_)) if first[0] != TLS_HANDSHAKE_RECORD => {
+            failed("not_tls");
+            return None;
+        }
+        Ok(Ok(_)) => {}
+    }
+    let acceptor = tls.acceptor();
+    let stream = match tokio::time::timeout_at(deadline, acceptor.tls.accept(tcp)).await {
+        Err(_) => {
+            failed("timeout");
+            return None;
+        }
+        Ok(Err(e)) => {
+            let reason = crate::tls::failure_reason(&e);
+            failed(reason);
+            tracing::trace!(%peer, server, error = %e, "TLS handshake error");
+            return None;
+        }
+        Ok(Ok(stream)) => stream,
+    };
+    let conn = stream.get_ref().1;
+    let kind = match conn.handshake_kind() {
+        Some(rustls::HandshakeKind::Resumed) => "resumed",
+        _ => "full",
+    };
+    metrics::counter!("tls_handshakes_total", "server" => server, "kind" => kind).increment(1);
+    let tenant = crate::tls::cert_tenant(&acceptor.tenants, conn);
+    Some((stream, tenant))
+}
+
+/// [`request_begins`] for a TLS stream, which cannot be peeked: reads the
+/// first bytes of the request (within `deadline`) and hands them back in
+/// front of the stream.
+async fn tls_request_begins<S>(mut stream: S, deadline: Instant) -> Option<Prefixed<S>>
+where
+    S: AsyncRead + Unpin,
+{
+    let mut start = [0u8; H2_PREFACE.len()];
+    let mut n = 0;
+    while !begins(&start[..n]) {
+        match tokio::time::timeout_at(deadline, stream.read(&mut start[n..])).await {
+            Ok(Ok(0) | Err(_)) | Err(_) => return None,
+            Ok(Ok(read)) => n += read,
+        }
+    }
+    Some(Prefixed {
+        prefix: start[..n].to_vec(),
+        at: 0,
+        inner: stream,
+    })
+}
+
+/// A stream whose first bytes were read already: they are read again first.
+struct Prefixed<S> {
+    prefix: Vec<u8>,
+    at: usize,
+    inner: S,
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for Prefixed<S> {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        if self.at < self.prefix.len() {
+            let n = (self.prefix.len() - self.at).min(buf.remaining());
+            let at = self.at;
+            buf.put_slice(&self.prefix[at..at + n]);
+            self.at += n;
+            return Poll::Ready(Ok(()));
+        }
+        Pin::new(&mut self.inner).poll_read(cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for Prefixed<S> {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.inner).poll_write(cx, buf)
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
+
+    fn poll_write_vectored(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.inner).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
     }
 }
 

@@ -22,7 +22,7 @@ use tonic::{Code, Status, codec::CompressionEncoding, service::Routes};
 use tonic_health::server::HealthReporter;
 
 use crate::{
-    auth::AuthError,
+    auth::{AuthError, CertTenant},
     proto::{
         ais_radar_service_server::AisRadarServiceServer,
         correlation_service_server::CorrelationServiceServer,
@@ -303,7 +303,9 @@ fn is_health_or_reflection(path: &str) -> bool {
 
 /// Answers UNAUTHENTICATED to a call without a valid key (when keys are
 /// configured) in the metadata `authorization: Bearer <key>` or, failing that,
-/// `x-api-key: <key>`; otherwise puts its `Tenant` into the request extensions,
+/// `x-api-key: <key>`, and without a client certificate that stands for a
+/// tenant; PERMISSION_DENIED to a key of another tenant than the
+/// certificate's; otherwise puts its `Tenant` into the request extensions,
 /// which tonic hands to the service (`request.extensions().get::<Tenant>()`).
 /// Health checks and reflection need no key.
 async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
@@ -314,10 +316,8 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
     let headers = req.headers();
     // A value that is not visible ASCII is malformed, as an empty one is.
     let text = |name: &str| headers.get(name).map(|v| v.to_str().unwrap_or(""));
-    let authenticated = match (text("authorization"), text("x-api-key")) {
-        (None, Some(key)) => keys.authenticate_key(Some(key.trim())),
-        (authorization, _) => keys.authenticate(authorization),
-    };
+    let cert = req.extensions().get::<CertTenant>();
+    let authenticated = keys.authenticate_request(cert, text("authorization"), text("x-api-key"));
     match authenticated {
         Ok(tenant) => {
             req.extensions_mut().insert(tenant);
@@ -335,6 +335,12 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
                      or `x-api-key: <key>`"
                 }
                 AuthError::UnknownKey => "the API key is not valid",
+                AuthError::TenantMismatch => {
+                    return Status::permission_denied(
+                        "the API key belongs to another tenant than the client certificate",
+                    )
+                    .into_http();
+                }
             };
             Status::unauthenticated(message).into_http()
         }

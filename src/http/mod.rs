@@ -30,7 +30,10 @@ use tower_http::{
 use utoipa::{OpenApi, ToSchema};
 use utoipa_swagger_ui::SwaggerUi;
 
-use crate::state::{AppState, BodyReadError};
+use crate::{
+    auth::{AuthError, CertTenant},
+    state::{AppState, BodyReadError},
+};
 use problem::Problem;
 
 /// Where the time of a request went.
@@ -319,15 +322,20 @@ pub fn router(state: AppState, grpc: Router) -> Router {
 }
 
 /// Answers 401 to an API request without a valid `Authorization: Bearer <key>`
-/// (when keys are configured), before it takes an in-flight slot; otherwise
-/// puts its `Tenant` into the request extensions (`Extension<Tenant>`).
+/// (when keys are configured) and no client certificate that stands for a
+/// tenant, 403 to a key of another tenant than the certificate's, before it
+/// takes an in-flight slot; otherwise puts its `Tenant` into the request
+/// extensions (`Extension<Tenant>`).
 async fn authenticate(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
     // A value that is not visible ASCII is malformed, as an empty one is.
     let authorization = req
         .headers()
         .get(header::AUTHORIZATION)
         .map(|v| v.to_str().unwrap_or(""));
-    let authenticated = state.api_keys().authenticate(authorization);
+    let cert = req.extensions().get::<CertTenant>();
+    let authenticated = state
+        .api_keys()
+        .authenticate_request(cert, authorization, None);
     match authenticated {
         Ok(tenant) => {
             req.extensions_mut().insert(tenant);
@@ -337,7 +345,12 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
             metrics::counter!("auth_failures_total", "transport" => "http").increment(1);
             // The body is not read: say that the connection closes, so a
             // keep-alive client opens a new one instead of meeting a reset.
-            let mut response = problem::unauthenticated(error);
+            let mut response = match error {
+                AuthError::TenantMismatch => problem::forbidden(error),
+                AuthError::Missing | AuthError::Malformed | AuthError::UnknownKey => {
+                    problem::unauthenticated(error)
+                }
+            };
             response.headers_mut().insert(
                 header::CONNECTION,
                 header::HeaderValue::from_static("close"),

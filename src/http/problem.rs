@@ -107,6 +107,19 @@ impl Problem {
     }
 }
 
+/// The 403 answer to a request whose credentials are valid but disagree
+/// (an API key of another tenant than the client certificate's): a problem
+/// of type `forbidden`.
+pub fn forbidden(error: AuthError) -> Response {
+    Problem::new(
+        StatusCode::FORBIDDEN,
+        "forbidden",
+        "Forbidden",
+        error.to_string(),
+    )
+    .into_response()
+}
+
 /// The 401 answer to a request without valid credentials: a problem of type
 /// `unauthenticated` and a `WWW-Authenticate: Bearer` challenge (RFC 6750 §3).
 pub fn unauthenticated(error: AuthError) -> Response {
@@ -114,6 +127,8 @@ pub fn unauthenticated(error: AuthError) -> Response {
         AuthError::Missing => r#"Bearer realm="radar-fusion""#,
         AuthError::Malformed => r#"Bearer realm="radar-fusion", error="invalid_request""#,
         AuthError::UnknownKey => r#"Bearer realm="radar-fusion", error="invalid_token""#,
+        // Answered by `forbidden`; should it come here, still a challenge.
+        AuthError::TenantMismatch => r#"Bearer realm="radar-fusion", error="invalid_token""#,
     };
     let problem = Problem::new(
         StatusCode::UNAUTHORIZED,

@@ -18,3 +18,4 @@ mod ops;
 mod plot_fusion;
 mod rules;
 mod sessions;
+mod tls;
