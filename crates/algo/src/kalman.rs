@@ -32,6 +32,9 @@ pub struct Update {
     pub gain: DMatrix<f64>,
     /// Normalised innovation squared ν' S⁻¹ ν (χ² with dim z degrees of freedom).
     pub nis: f64,
+    /// ln det S, from the Cholesky factor of S (for the likelihood
+    /// ln N(ν; 0, S) = −½ (ln det S + m ln 2π + `nis`)).
+    pub ln_det_s: f64,
 }
 
 /// Where the position components live in a state vector.
@@ -299,6 +302,7 @@ fn update_with_innovation(
     finite_slice("updated state", x_new.as_slice())?;
     check_covariance("updated covariance", &p_new)?;
     let nis = mahalanobis_sq_chol(&innovation, &chol)?;
+    let ln_det_s = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
     Ok(Update {
         x: x_new,
         p: p_new,
@@ -306,6 +310,7 @@ fn update_with_innovation(
         s,
         gain,
         nis,
+        ln_det_s,
     })
 }
 

@@ -30,7 +30,6 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
-use crate::kalman;
 use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
 use crate::tracking::config::{Imm, MotionModel, NoiseModel};
 
@@ -99,7 +98,18 @@ pub fn predict_model(
     let axes = x.len() / 2;
     let f = transition(model, axes, dt)?;
     let q = process_noise(axes, dt, &model.sigma_a(), noise)?;
-    kalman::predict(x, p, &f, &q)
+    // F P F′ + Q of a positive definite P and positive semi-definite Q is
+    // positive definite: no Cholesky check here (this runs per model, per
+    // track and frame); the updates check what they produce.
+    let x1 = &f * x;
+    let mut p1 = &f * p * f.transpose() + q;
+    crate::gaussian::symmetrize(&mut p1);
+    if x1.iter().chain(p1.iter()).any(|v| !v.is_finite()) {
+        return Err(AlgoError::NonFinite {
+            what: "predicted state",
+        });
+    }
+    Ok((x1, p1))
 }
 
 /// π(Δt) = exp(G |Δt|), row i = from, column j = to: the transition matrix

@@ -94,13 +94,7 @@ impl Measurements<'_> {
             }
         };
         let k = u.s.nrows() as f64;
-        let ln_det =
-            u.s.clone()
-                .cholesky()
-                .map(|c| c.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum::<f64>())
-                .ok_or(AlgoError::NotPositiveDefinite {
-                    what: "innovation covariance",
-                })?;
+        let ln_det = u.ln_det_s;
         Ok(Updated {
             x: u.x,
             p: u.p,
