@@ -185,9 +185,10 @@ pub struct TrackerOptions {
     /// with `sigma_a_mps2`).
     #[schema(example = "imm")]
     pub motion: Option<String>,
-    /// The IMM's models (2 to 8). Default: `cv` √q 0.5 (mean sojourn 60 s,
-    /// initial probability 0.8), `ct` +3 °/s and −3 °/s √q 1.5 (20 s, 0.1
-    /// each): straight legs and standard-rate turns of aircraft.
+    /// The IMM's models (2 to 8). Default, chosen on the seed-001 Monte
+    /// Carlo: `cv` √q 0.5 (mean sojourn 60 s, initial probability 0.7),
+    /// `ct` +3 °/s and −3 °/s √q 3 (20 s, 0.1 each: standard-rate turns),
+    /// `cv` √q 5 (20 s, 0.1: other manoeuvres).
     pub imm_models: Option<Vec<ImmModel>>,
 }
 
@@ -200,7 +201,7 @@ pub struct ImmModel {
     #[schema(example = "ct")]
     pub model: String,
     /// Noise per horizontal axis, as `sigma_a_mps2` (default 0.5 for cv,
-    /// 1.5 for ct).
+    /// 3 for ct).
     pub sigma_a_mps2: Option<f64>,
     /// Vertical noise (default the horizontal one).
     pub sigma_a_vertical_mps2: Option<f64>,

@@ -127,7 +127,7 @@ pub struct TrackerInput {
 pub struct ImmModelInput {
     /// `cv` (constant velocity) or `ct` (coordinated turn).
     pub model: Option<String>,
-    /// Noise per horizontal axis (√q for CWNA); default 0.5 (cv), 1.5 (ct).
+    /// Noise per horizontal axis (√q for CWNA); default 0.5 (cv), 3 (ct).
     pub sigma_a_mps2: Option<f64>,
     /// Vertical noise; default `sigma_a_mps2`.
     pub sigma_a_vertical_mps2: Option<f64>,

@@ -586,7 +586,7 @@ fn motion(
             None,
             &[("cv", false), ("ct", true)],
         );
-        let default_sigma = if turn == Some(true) { 1.5 } else { 0.5 };
+        let default_sigma = if turn == Some(true) { 3.0 } else { 0.5 };
         let sigma = v.number_or(
             f("sigma_a_mps2"),
             m.sigma_a_mps2,
