@@ -151,6 +151,31 @@ pub fn update_polar(
     site: [f64; 3],
 ) -> Result<Update, AlgoError> {
     let n = x.len();
+    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site)?;
+    let (h_pred, j) = polar_measurement_model(rel, with_elevation)?;
+    let m = h_pred.len();
+    let mut h = DMatrix::zeros(m, n);
+    let cols = [Some(layout.x), Some(layout.y), layout.z];
+    for (k, col) in cols.iter().enumerate() {
+        if let Some(c) = col {
+            h.set_column(*c, &j.column(k));
+        }
+    }
+    let mut innovation = meas.vector() - h_pred;
+    innovation[1] = wrap_angle(innovation[1]);
+    update_with_innovation(x, p, innovation, &h, &meas.noise_covariance())
+}
+
+/// The checks of a polar update's inputs, and the target's position
+/// relative to the site with whether the plot has an elevation.
+fn polar_inputs(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    meas: &PolarMeasurement,
+    layout: PositionLayout,
+    site: [f64; 3],
+) -> Result<([f64; 3], bool), AlgoError> {
+    let n = x.len();
     check_vector("state", x, n)?;
     check_matrix("covariance", p, n, n)?;
     check_covariance("covariance", p)?;
@@ -170,18 +195,7 @@ pub fn update_polar(
         x[layout.y] - site[1],
         layout.z.map_or(0.0, |k| x[k] - site[2]),
     ];
-    let (h_pred, j) = polar_measurement_model(rel, with_elevation)?;
-    let m = h_pred.len();
-    let mut h = DMatrix::zeros(m, n);
-    let cols = [Some(layout.x), Some(layout.y), layout.z];
-    for (k, col) in cols.iter().enumerate() {
-        if let Some(c) = col {
-            h.set_column(*c, &j.column(k));
-        }
-    }
-    let mut innovation = meas.vector() - h_pred;
-    innovation[1] = wrap_angle(innovation[1]);
-    update_with_innovation(x, p, innovation, &h, &meas.noise_covariance())
+    Ok((rel, with_elevation))
 }
 
 /// [`update_polar`] with the plot's range rate as a further measurement
@@ -201,12 +215,7 @@ pub fn update_polar_doppler(
     site: [f64; 3],
 ) -> Result<Update, AlgoError> {
     let n = x.len();
-    check_vector("state", x, n)?;
-    check_matrix("covariance", p, n, n)?;
-    check_covariance("covariance", p)?;
-    layout.validate(n)?;
-    meas.validate()?;
-    finite_slice("site", &site)?;
+    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site)?;
     if !range_rate.is_finite() {
         return Err(AlgoError::NonFinite { what: "range rate" });
     }
@@ -223,19 +232,6 @@ pub fn update_polar_doppler(
             reason: "each position needs its velocity after it".to_owned(),
         });
     }
-    let with_elevation = meas.elevation.is_some();
-    if with_elevation && layout.z.is_none() {
-        return Err(AlgoError::InvalidParameter {
-            what: "layout",
-            reason: "a measurement with elevation needs a state with a height (layout.z)"
-                .to_owned(),
-        });
-    }
-    let rel = [
-        x[layout.x] - site[0],
-        x[layout.y] - site[1],
-        layout.z.map_or(0.0, |k| x[k] - site[2]),
-    ];
     let vel = [
         x[layout.x + 1],
         x[layout.y + 1],

@@ -98,6 +98,23 @@ struct Variant {
     imm: Option<fn() -> Imm>,
 }
 
+impl Variant {
+    /// The defaults in `mode`, named `name`; change fields with `..`.
+    const fn of(name: &'static str, mode: Mode) -> Self {
+        Self {
+            name,
+            mode,
+            single: false,
+            noise: None,
+            sigma_t: None,
+            max_misses: None,
+            duplicate: None,
+            method: Method::Exact,
+            imm: None,
+        }
+    }
+}
+
 /// Candidate IMMs for the default (the table's variants compare them).
 fn imm_cv_cv() -> Imm {
     Imm {
@@ -198,180 +215,80 @@ const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
 const VARIANTS: [Variant; 27] = [
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_d),
+        ..Variant::of("serial IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5", Mode::Serial)
     },
     Variant {
-        name: "serial IMM cv 0.5 + ct ±3°/s 3 + cv 5",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_e),
+        ..Variant::of("serial IMM cv 0.5 + ct ±3°/s 3 + cv 5", Mode::Serial)
     },
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5 and ±3°/s 2",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_g),
+        ..Variant::of("serial IMM cv 0.5 + ct ±1.5 and ±3°/s 2", Mode::Serial)
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_d),
+        ..Variant::of(
+            "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
+            Mode::Parallel,
+        )
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±3°/s 3 + cv 5",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_e),
+        ..Variant::of("parallel IMM cv 0.5 + ct ±3°/s 3 + cv 5", Mode::Parallel)
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 2",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_g),
+        ..Variant::of("parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 2", Mode::Parallel)
     },
     Variant {
-        name: "serial IMM cv 0.5 + cv 5",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_cv_cv),
+        ..Variant::of("serial IMM cv 0.5 + cv 5", Mode::Serial)
     },
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5°/s 2",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_ct_1_5),
+        ..Variant::of("serial IMM cv 0.5 + ct ±1.5°/s 2", Mode::Serial)
     },
     Variant {
-        name: "serial IMM cv 1 + ct ±3°/s 3",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_ct_3_noisy),
+        ..Variant::of("serial IMM cv 1 + ct ±3°/s 3", Mode::Serial)
     },
     Variant {
-        name: "serial IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_cv_ct_cv),
+        ..Variant::of("serial IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5", Mode::Serial)
     },
     Variant {
-        name: "parallel IMM cv 0.5 + cv 5",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_cv_cv),
+        ..Variant::of("parallel IMM cv 0.5 + cv 5", Mode::Parallel)
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5°/s 2",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_ct_1_5),
+        ..Variant::of("parallel IMM cv 0.5 + ct ±1.5°/s 2", Mode::Parallel)
     },
     Variant {
-        name: "parallel IMM cv 1 + ct ±3°/s 3",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_ct_3_noisy),
+        ..Variant::of("parallel IMM cv 1 + ct ±3°/s 3", Mode::Parallel)
     },
     Variant {
-        name: "parallel IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
         imm: Some(imm_cv_ct_cv),
+        ..Variant::of(
+            "parallel IMM cv 0.5 + ct ±1.5°/s 1.5 + cv 5",
+            Mode::Parallel,
+        )
     },
     Variant {
-        name: "parallel CV √q = 3 (the default before the IMM)",
-        mode: Mode::Parallel,
-        single: false,
         noise: Some((NoiseModel::Cwna, 3.0)),
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of(
+            "parallel CV √q = 3 (the default before the IMM)",
+            Mode::Parallel,
+        )
     },
     Variant {
-        name: "serial CV √q = 3 (the default before the IMM)",
-        mode: Mode::Serial,
-        single: false,
         noise: Some((NoiseModel::Cwna, 3.0)),
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of(
+            "serial CV √q = 3 (the default before the IMM)",
+            Mode::Serial,
+        )
     },
     Variant {
         name: "parallel former defaults",
