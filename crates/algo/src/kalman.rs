@@ -125,7 +125,7 @@ pub fn update_linear(
     check_matrix("measurement covariance", r, m, m)?;
     check_covariance("measurement covariance", r)?;
     let innovation = z - h * x;
-    update_with_innovation(x, p, innovation, h, r)
+    update_with_innovation(x, p, innovation, h, r, true)
 }
 
 /// Extended Kalman update with a radar plot in polar coordinates from a
@@ -150,8 +150,38 @@ pub fn update_polar(
     layout: PositionLayout,
     site: [f64; 3],
 ) -> Result<Update, AlgoError> {
+    polar(x, p, meas, layout, site, true)
+}
+
+/// [`update_polar`] or, with `range_rate` = (ṙ, σ_ṙ),
+/// [`update_polar_doppler`], for a filter whose own covariances are
+/// symmetric positive definite by construction (a tracker's states): the
+/// Cholesky checks of P and of the Joseph-form P⁺ are skipped (every other
+/// check stays, and a non-positive-definite S is still an error).
+pub fn update_polar_trusted(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    meas: &PolarMeasurement,
+    range_rate: Option<(f64, f64)>,
+    layout: PositionLayout,
+    site: [f64; 3],
+) -> Result<Update, AlgoError> {
+    match range_rate {
+        Some((v, sigma)) => polar_doppler(x, p, meas, v, sigma, layout, site, false),
+        None => polar(x, p, meas, layout, site, false),
+    }
+}
+
+fn polar(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    meas: &PolarMeasurement,
+    layout: PositionLayout,
+    site: [f64; 3],
+    checked: bool,
+) -> Result<Update, AlgoError> {
     let n = x.len();
-    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site)?;
+    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site, checked)?;
     let (h_pred, j) = polar_measurement_model(rel, with_elevation)?;
     let m = h_pred.len();
     let mut h = DMatrix::zeros(m, n);
@@ -163,7 +193,7 @@ pub fn update_polar(
     }
     let mut innovation = meas.vector() - h_pred;
     innovation[1] = wrap_angle(innovation[1]);
-    update_with_innovation(x, p, innovation, &h, &meas.noise_covariance())
+    update_with_innovation(x, p, innovation, &h, &meas.noise_covariance(), checked)
 }
 
 /// The checks of a polar update's inputs, and the target's position
@@ -174,11 +204,14 @@ fn polar_inputs(
     meas: &PolarMeasurement,
     layout: PositionLayout,
     site: [f64; 3],
+    checked: bool,
 ) -> Result<([f64; 3], bool), AlgoError> {
     let n = x.len();
     check_vector("state", x, n)?;
     check_matrix("covariance", p, n, n)?;
-    check_covariance("covariance", p)?;
+    if checked {
+        check_covariance("covariance", p)?;
+    }
     layout.validate(n)?;
     meas.validate()?;
     finite_slice("site", &site)?;
@@ -214,8 +247,22 @@ pub fn update_polar_doppler(
     layout: PositionLayout,
     site: [f64; 3],
 ) -> Result<Update, AlgoError> {
+    polar_doppler(x, p, meas, range_rate, sigma_range_rate, layout, site, true)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn polar_doppler(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    meas: &PolarMeasurement,
+    range_rate: f64,
+    sigma_range_rate: f64,
+    layout: PositionLayout,
+    site: [f64; 3],
+    checked: bool,
+) -> Result<Update, AlgoError> {
     let n = x.len();
-    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site)?;
+    let (rel, with_elevation) = polar_inputs(x, p, meas, layout, site, checked)?;
     if !range_rate.is_finite() {
         return Err(AlgoError::NonFinite { what: "range rate" });
     }
@@ -265,13 +312,8 @@ pub fn update_polar_doppler(
         noise[k] = rp[(k, k)];
     }
     noise[m] = sigma_range_rate * sigma_range_rate;
-    update_with_innovation(
-        x,
-        p,
-        innovation,
-        &h,
-        &DMatrix::from_diagonal(&DVector::from_vec(noise)),
-    )
+    let r = DMatrix::from_diagonal(&DVector::from_vec(noise));
+    update_with_innovation(x, p, innovation, &h, &r, checked)
 }
 
 /// The shared update once ν, H (or its Jacobian) and R are known and valid.
@@ -281,6 +323,7 @@ fn update_with_innovation(
     innovation: DVector<f64>,
     h: &DMatrix<f64>,
     r: &DMatrix<f64>,
+    checked: bool,
 ) -> Result<Update, AlgoError> {
     finite_slice("innovation", innovation.as_slice())?;
     let n = x.len();
@@ -296,7 +339,11 @@ fn update_with_innovation(
     let mut p_new = &i_kh * p * i_kh.transpose() + &gain * r * gain.transpose();
     symmetrize(&mut p_new);
     finite_slice("updated state", x_new.as_slice())?;
-    check_covariance("updated covariance", &p_new)?;
+    if checked {
+        check_covariance("updated covariance", &p_new)?;
+    } else {
+        finite_slice("updated covariance", p_new.as_slice())?;
+    }
     let nis = mahalanobis_sq_chol(&innovation, &chol)?;
     let ln_det_s = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
     Ok(Update {
@@ -386,6 +433,25 @@ mod tests {
         let u2 =
             update_polar_doppler(&x2, &p2, &m2, want, 1.0, PositionLayout::CV_2D, site).unwrap();
         assert!(u2.innovation[2].abs() < 1e-9);
+        // The trusted path skips only the Cholesky checks of P and P⁺: the
+        // same bits on valid inputs.
+        let t2 = update_polar_trusted(
+            &x2,
+            &p2,
+            &m2,
+            Some((want, 1.0)),
+            PositionLayout::CV_2D,
+            site,
+        )
+        .unwrap();
+        assert_eq!((t2.x, t2.p), (u2.x, u2.p));
+        let plain = update_polar(&x, &p, &meas, PositionLayout::CV_3D, site).unwrap();
+        let trusted =
+            update_polar_trusted(&x, &p, &meas, None, PositionLayout::CV_3D, site).unwrap();
+        assert_eq!(
+            (trusted.x, trusted.p, trusted.ln_det_s),
+            (plain.x, plain.p, plain.ln_det_s)
+        );
     }
 
     #[test]

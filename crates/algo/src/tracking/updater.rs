@@ -80,12 +80,14 @@ impl Measurements<'_> {
             } => {
                 let plot = &plots[j];
                 let meas = polar_measurement(radar, plot);
-                match (plot.radial_velocity, radar.sigma_radial_velocity) {
-                    (Some(v), Some(sigma)) if *range_rate => {
-                        kalman::update_polar_doppler(x, p, &meas, v, sigma, *layout, radar.site)?
-                    }
-                    _ => kalman::update_polar(x, p, &meas, *layout, radar.site)?,
-                }
+                let range_rate = match (plot.radial_velocity, radar.sigma_radial_velocity) {
+                    (Some(v), Some(sigma)) if *range_rate => Some((v, sigma)),
+                    _ => None,
+                };
+                // The IMM's model states are positive definite by
+                // construction (predicted from updated ones): no Cholesky
+                // checks of P and P⁺ per model and plot.
+                kalman::update_polar_trusted(x, p, &meas, range_rate, *layout, radar.site)?
             }
             Measurements::Cartesian { plots } => {
                 let plot = &plots[j];
