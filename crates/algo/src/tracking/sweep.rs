@@ -5,17 +5,18 @@
 //! other track would miss at every plot of every radar (tracks deleted
 //! after a few plots, tentative tracks never confirmed).
 //!
-//! A radar's beam is taken to rotate clockwise at one turn per
-//! `scan_period`. A frame at time t whose last plot has azimuth θ, after
-//! the radar's previous frame at (t₀, θ₀), swept the clockwise sector from
-//! θ₀ to θ. A track is *judged* by the frame when its predicted azimuth
-//! lies in that sector moved back by a margin (3 σ_θ + 0.5°), so that its
-//! own plot, wherever the noise put it, has arrived before; it then gets a
-//! miss only if no plot updated it in the last half scan of the radar.
-//! A plot that updates a track is a hit in whatever frame it comes.
-//! Frames that swept a whole turn (t − t₀ ≥ 0.95 period, or a radar's
-//! first frame) judge every track, as do sweeps that do not fit a clockwise
-//! rotation (wider than 1.5 × the expected angle + 0.2 rad).
+//! A radar's beam is taken to rotate at one turn per `scan_period`. A frame
+//! at time t whose last plot has azimuth θ, after the radar's previous
+//! frame at (t₀, θ₀), swept the sector from θ₀ to θ: clockwise when that
+//! angle fits the time (at most 1.5 × the expected 2π (t − t₀)/period +
+//! 0.2 rad), else anticlockwise when that fits. A track is *judged* by the
+//! frame when its predicted azimuth lies in that sector moved back (against
+//! the rotation) by a margin (3 σ_θ + 0.5°), so that its own plot,
+//! wherever the noise put it, has arrived before; it then gets a miss only
+//! if no plot updated it in the last half scan of the radar. A plot that
+//! updates a track is a hit in whatever frame it comes. Frames that swept
+//! a whole turn (t − t₀ ≥ 0.95 period, or a radar's first frame) judge
+//! every track, as do sweeps that fit neither way.
 
 use std::f64::consts::TAU;
 
@@ -56,14 +57,22 @@ impl View {
         if !(dt >= 0.0 && dt < 0.95 * period) {
             return View::All;
         }
-        let width = (azimuth - az0).rem_euclid(TAU);
-        if width > 1.5 * TAU * dt / period + 0.2 {
-            return View::All;
-        }
+        let fits = |w: f64| w <= 1.5 * TAU * dt / period + 0.2;
         let margin = 3.0 * radar.sigma_azimuth + 0.5_f64.to_radians();
+        let clockwise = (azimuth - az0).rem_euclid(TAU);
+        let anticlockwise = (az0 - azimuth).rem_euclid(TAU);
+        // The judged sector lags the beam by the margin, whichever way it
+        // turns.
+        let (start, width) = if fits(clockwise) {
+            (az0 - margin, clockwise)
+        } else if fits(anticlockwise) {
+            (azimuth + margin, anticlockwise)
+        } else {
+            return View::All;
+        };
         View::Sector {
             site: radar.site,
-            start: az0 - margin,
+            start,
             width,
             quiet_since: t - 0.5 * period,
         }
@@ -136,7 +145,14 @@ mod tests {
         );
         assert!(v.misses(&at(5.0), -10.0) && v.misses(&at(355.0), -10.0));
         assert!(!v.misses(&at(100.0), -10.0));
-        // A whole turn, a first frame, and a sweep too wide for the time.
+        // An anticlockwise beam from 55° to 10° in 0.5 s: judged
+        // [10.8°, 55.8°].
+        let v = View::of_frame(&r, Some((0.0, 55f64.to_radians())), 0.5, 10f64.to_radians());
+        for (deg, judged) in [(10.5, false), (11.0, true), (55.5, true), (56.0, false)] {
+            assert_eq!(v.misses(&at(deg), -10.0), judged, "anticlockwise {deg}°");
+        }
+        // A whole turn, a first frame, and a sweep too wide for the time
+        // either way.
         assert_eq!(View::of_frame(&r, Some((0.0, 0.0)), 4.0, 0.1), View::All);
         assert_eq!(View::of_frame(&r, None, 4.0, 0.1), View::All);
         assert_eq!(View::of_frame(&r, Some((0.0, 0.0)), 0.1, 3.0), View::All);

@@ -692,6 +692,7 @@ fn zz_compare_imm_sets() {
 /// a frame only counts a miss for the tracks its beam swept (`sweep`).
 /// Before, every plot was a miss for every other track: tracks were
 /// deleted after 2 × radars plots and the real-traffic check held none.
+/// Beams turning either way.
 #[test]
 fn beam_timed_plots_are_tracked_like_whole_scans() {
     let mut cfg = fig5_config(false);
@@ -717,50 +718,53 @@ fn beam_timed_plots_are_tracked_like_whole_scans() {
             v: [0.0, 60.0, 0.0],
         },
     ];
-    let mut rng = Lcg(11);
-    let mut plots = Vec::new();
-    for (i, r) in cfg.radars.iter().enumerate() {
-        let mut start = 0.3 * i as f64;
-        while start < 200.0 {
-            for g in &targets {
-                // The beam crosses azimuth θ at start + period · θ/2π.
-                let p0 = g.at(start);
-                let az0 = (p0[0] - r.site[0]).atan2(p0[1] - r.site[1]).rem_euclid(TAU);
-                let t = start + r.scan_period * az0 / TAU;
-                let p = g.at(t);
-                let rel = [p[0] - r.site[0], p[1] - r.site[1]];
-                plots.push(Plot {
-                    radar: i,
-                    t,
-                    range: rel[0].hypot(rel[1]) + r.sigma_range * rng.normal(),
-                    azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
-                    elevation: None,
-                    radial_velocity: None,
-                });
+    for anticlockwise in [false, true] {
+        let mut rng = Lcg(11);
+        let mut plots = Vec::new();
+        for (i, r) in cfg.radars.iter().enumerate() {
+            let mut start = 0.3 * i as f64;
+            while start < 200.0 {
+                for g in &targets {
+                    // The beam crosses azimuth θ at start + period · θ/2π.
+                    let p0 = g.at(start);
+                    let az0 = (p0[0] - r.site[0]).atan2(p0[1] - r.site[1]).rem_euclid(TAU);
+                    let turned = if anticlockwise { TAU - az0 } else { az0 };
+                    let t = start + r.scan_period * turned / TAU;
+                    let p = g.at(t);
+                    let rel = [p[0] - r.site[0], p[1] - r.site[1]];
+                    plots.push(Plot {
+                        radar: i,
+                        t,
+                        range: rel[0].hypot(rel[1]) + r.sigma_range * rng.normal(),
+                        azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
+                        elevation: None,
+                        radial_velocity: None,
+                    });
+                }
+                start += r.scan_period;
             }
-            start += r.scan_period;
         }
-    }
-    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
-    let mut tracker = Tracker::new(cfg).unwrap();
-    let report = tracker.process(&plots).unwrap();
-    assert!(
-        report.deleted.is_empty(),
-        "{} deleted",
-        report.deleted.len()
-    );
-    let c = tracker.counters();
-    assert!(
-        c.frames as usize > plots.len() / 2,
-        "beam-timed frames: {c:?}"
-    );
-    assert_eq!(tracker.confirmed_tracks().len(), targets.len(), "{c:?}");
-    assert_eq!((c.deleted, c.merged), (0, 0), "{c:?}");
-    for g in &targets {
-        let held = tracker.confirmed_tracks().iter().any(|tr| {
-            let p = g.at(tr.t);
-            (tr.state[0] - p[0]).hypot(tr.state[2] - p[1]) < 300.0
-        });
-        assert!(held);
+        plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let mut tracker = Tracker::new(cfg.clone()).unwrap();
+        let report = tracker.process(&plots).unwrap();
+        assert!(
+            report.deleted.is_empty(),
+            "{} deleted",
+            report.deleted.len()
+        );
+        let c = tracker.counters();
+        assert!(
+            c.frames as usize > plots.len() / 2,
+            "beam-timed frames: {c:?}"
+        );
+        assert_eq!(tracker.confirmed_tracks().len(), targets.len(), "{c:?}");
+        assert_eq!((c.deleted, c.merged), (0, 0), "{c:?}");
+        for g in &targets {
+            let held = tracker.confirmed_tracks().iter().any(|tr| {
+                let p = g.at(tr.t);
+                (tr.state[0] - p[0]).hypot(tr.state[2] - p[1]) < 300.0
+            });
+            assert!(held);
+        }
     }
 }
