@@ -69,6 +69,26 @@ pub fn check_symmetric(what: &'static str, p: &DMatrix<f64>) -> Result<(), AlgoE
     }
 }
 
+/// The moment-matched Gaussian of a mixture with weights w summing to 1:
+/// x̄ = Σ w x, P̄ = Σ w (P + d d′), d = x − x̄ (symmetrised).
+pub fn moment_match<'a>(
+    parts: impl Iterator<Item = (f64, &'a DVector<f64>, &'a DMatrix<f64>)> + Clone,
+) -> (DVector<f64>, DMatrix<f64>) {
+    let (_, x0, p0) = parts.clone().next().expect("a mixture has a component");
+    let mut x = DVector::zeros(x0.len());
+    for (w, xi, _) in parts.clone() {
+        x.axpy(w, xi, 1.0);
+    }
+    let mut p = DMatrix::zeros(p0.nrows(), p0.ncols());
+    for (w, xi, pi) in parts {
+        let d = xi - &x;
+        p += pi * w;
+        p.ger(w, &d, &d, 1.0);
+    }
+    symmetrize(&mut p);
+    (x, p)
+}
+
 /// Replaces a square `p` by `(p + p') / 2`. Non-square matrices are left unchanged.
 pub fn symmetrize(p: &mut DMatrix<f64>) {
     if !p.is_square() {

@@ -29,7 +29,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::assignment;
 use crate::error::AlgoError;
 use crate::gating::SortedByFirst;
-use crate::gaussian::{check_covariance, cholesky, symmetrize};
+use crate::gaussian::{check_covariance, cholesky, moment_match, symmetrize};
 use crate::jpda::{
     self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
     amsjpda_marginals, exact_marginals,
@@ -64,12 +64,7 @@ pub fn associate_polar(
     config: &Config,
 ) -> Result<Outcome, AlgoError> {
     let layout = polar_layout(radar, axes);
-    // The range rate joins the measurement when the radar gives it and
-    // every plot of the scan group has one (so it also decides β: two
-    // crossing targets of different radial speeds are told apart).
-    let range_rate = radar
-        .sigma_radial_velocity
-        .filter(|_| plots.iter().all(|p| p.radial_velocity.is_some()));
+    let range_rate = range_rate_sigma(radar, plots);
     let model = SensorModel::Polar {
         site: radar.site,
         layout,
@@ -114,6 +109,16 @@ pub fn associate_polar(
         used,
         associations: report.associations,
     })
+}
+
+/// σ_ṙ when the range rate joins a scan group's measurement: the radar
+/// gives it and every plot of the group has one (so it also decides β: two
+/// crossing targets of different radial speeds are told apart). The
+/// updater of IMM tracks follows the same decision.
+pub fn range_rate_sigma(radar: &RadarSpec, plots: &[Plot]) -> Option<f64> {
+    radar
+        .sigma_radial_velocity
+        .filter(|_| plots.iter().all(|p| p.radial_velocity.is_some()))
 }
 
 /// Where a radar's polar plots see the state: with the height for a 3D
@@ -381,18 +386,7 @@ fn reduce(
     comps: &[(f64, DVector<f64>, DMatrix<f64>)],
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let total: f64 = comps.iter().map(|c| c.0).sum();
-    let n = comps[0].1.len();
-    let mut x = DVector::zeros(n);
-    for (w, xi, _) in comps {
-        x.axpy(*w / total, xi, 1.0);
-    }
-    let mut p = DMatrix::zeros(n, n);
-    for (w, xi, pi) in comps {
-        let d = xi - &x;
-        p += pi * (*w / total);
-        p.ger(*w / total, &d, &d, 1.0);
-    }
-    symmetrize(&mut p);
+    let (x, p) = moment_match(comps.iter().map(|(w, x, p)| (w / total, x, p)));
     if x.iter().any(|v| !v.is_finite()) {
         return Err(AlgoError::NonFinite {
             what: "updated state",

@@ -59,7 +59,10 @@ pub use track::{Track, TrackOutput, TrackStatus};
 
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
-use associator::{Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout};
+use associator::{
+    Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout,
+    range_rate_sigma,
+};
 use conversion::{extrapolate, register};
 use initiator::Initiator;
 use plot_association::associate_and_fuse;
@@ -400,8 +403,9 @@ impl Tracker {
         report: &mut StepReport,
     ) -> Result<(), AlgoError> {
         let cfg = &self.config;
+        let mut step = None;
         for track in &mut self.tracks {
-            track.predict_with(t, cfg)?;
+            track.predict_with(t, cfg, &mut step)?;
         }
         let mut estimates: Vec<TrackEstimate> = self
             .tracks
@@ -430,9 +434,7 @@ impl Tracker {
                     &cfg.association,
                 )?;
                 let layout = polar_layout(radar, cfg.axes);
-                // As the associator decided (`associate_polar`).
-                let range_rate = radar.sigma_radial_velocity.is_some()
-                    && raw.iter().all(|p| p.radial_velocity.is_some());
+                let range_rate = range_rate_sigma(radar, raw);
                 (
                     outcome,
                     Measurements::Polar {

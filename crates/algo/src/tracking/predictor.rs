@@ -30,6 +30,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
+use crate::gaussian::moment_match;
 use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
 use crate::tracking::config::{Imm, MotionModel, NoiseModel};
 
@@ -87,22 +88,18 @@ pub fn transition(model: &MotionModel, axes: usize, dt: f64) -> Result<DMatrix<f
     Ok(f)
 }
 
-/// Kalman prediction of (x, P) over `dt` with `model`.
-pub fn predict_model(
-    model: &MotionModel,
-    noise: NoiseModel,
+/// x⁺ = F x, P⁺ = F P F′ + Q. F P F′ + Q of a positive definite P and a
+/// positive semi-definite Q is positive definite: no Cholesky check here
+/// (this runs per model, per track and frame); the updates check what
+/// they produce.
+fn predict_with(
+    f: &DMatrix<f64>,
+    q: &DMatrix<f64>,
     x: &DVector<f64>,
     p: &DMatrix<f64>,
-    dt: f64,
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    let axes = x.len() / 2;
-    let f = transition(model, axes, dt)?;
-    let q = process_noise(axes, dt, &model.sigma_a(), noise)?;
-    // F P F′ + Q of a positive definite P and positive semi-definite Q is
-    // positive definite: no Cholesky check here (this runs per model, per
-    // track and frame); the updates check what they produce.
-    let x1 = &f * x;
-    let mut p1 = &f * p * f.transpose() + q;
+    let x1 = f * x;
+    let mut p1 = f * p * f.transpose() + q;
     crate::gaussian::symmetrize(&mut p1);
     if x1.iter().chain(p1.iter()).any(|v| !v.is_finite()) {
         return Err(AlgoError::NonFinite {
@@ -110,6 +107,45 @@ pub fn predict_model(
         });
     }
     Ok((x1, p1))
+}
+
+/// What an IMM step of length Δt needs whatever the track: the switching
+/// matrix π(Δt) and each model's F and Q. Every confirmed track of a
+/// frame is predicted over the same Δt (from the previous frame), so the
+/// tracker builds one step per frame instead of one per track.
+#[derive(Debug, Clone)]
+pub struct ImmStep {
+    dt: f64,
+    axes: usize,
+    pi: DMatrix<f64>,
+    models: Vec<(DMatrix<f64>, DMatrix<f64>)>,
+}
+
+impl ImmStep {
+    /// The step of `imm` over `dt` for states of `axes` axes.
+    pub fn new(imm: &Imm, noise: NoiseModel, axes: usize, dt: f64) -> Result<Self, AlgoError> {
+        let models = imm
+            .models
+            .iter()
+            .map(|m| {
+                Ok((
+                    transition(m, axes, dt)?,
+                    process_noise(axes, dt, &m.sigma_a(), noise)?,
+                ))
+            })
+            .collect::<Result<_, AlgoError>>()?;
+        Ok(Self {
+            dt,
+            axes,
+            pi: switching(&imm.mean_sojourn, dt),
+            models,
+        })
+    }
+
+    /// Whether this step is the one over `dt` for `axes` axes (bit for bit).
+    pub fn is_for(&self, axes: usize, dt: f64) -> bool {
+        self.axes == axes && self.dt.to_bits() == dt.to_bits()
+    }
 }
 
 /// π(Δt) = exp(G |Δt|), row i = from, column j = to: the transition matrix
@@ -158,25 +194,6 @@ pub fn switching(mean_sojourn: &[f64], dt: f64) -> DMatrix<f64> {
     sum
 }
 
-/// The moment-matched Gaussian of a mixture: x̄ = Σ w x, P̄ = Σ w (P + d d′).
-pub fn combine<'a>(
-    parts: impl Iterator<Item = (f64, &'a DVector<f64>, &'a DMatrix<f64>)> + Clone,
-) -> (DVector<f64>, DMatrix<f64>) {
-    let (_, x0, p0) = parts.clone().next().expect("a mixture has a component");
-    let mut x = DVector::zeros(x0.len());
-    for (w, xi, _) in parts.clone() {
-        x.axpy(w, xi, 1.0);
-    }
-    let mut p = DMatrix::zeros(p0.nrows(), p0.ncols());
-    for (w, xi, pi) in parts {
-        let d = xi - &x;
-        p += pi * w;
-        p.ger(w, &d, &d, 1.0);
-    }
-    crate::gaussian::symmetrize(&mut p);
-    (x, p)
-}
-
 /// IMM prediction of `modes` over `dt` (module documentation); returns the
 /// combined prediction. The modes hold the predicted states and the
 /// predicted probabilities c_j afterwards.
@@ -186,8 +203,17 @@ pub fn predict_imm(
     modes: &mut [ModeState],
     dt: f64,
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    let axes = modes.first().map_or(0, |m| m.x.len() / 2);
+    predict_imm_step(&ImmStep::new(imm, noise, axes, dt)?, modes)
+}
+
+/// [`predict_imm`] with the step's matrices built already.
+pub fn predict_imm_step(
+    step: &ImmStep,
+    modes: &mut [ModeState],
+) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let r = modes.len();
-    let pi = switching(&imm.mean_sojourn, dt);
+    let pi = &step.pi;
     let c: Vec<f64> = (0..r)
         .map(|j| (0..r).map(|i| pi[(i, j)] * modes[i].probability).sum())
         .collect();
@@ -196,16 +222,19 @@ pub fn predict_imm(
         let weights: Vec<f64> = (0..r)
             .map(|i| pi[(i, j)] * modes[i].probability / c[j])
             .collect();
-        let (x0, p0) = combine(modes.iter().zip(&weights).map(|(m, &w)| (w, &m.x, &m.p)));
+        let (x0, p0) = moment_match(modes.iter().zip(&weights).map(|(m, &w)| (w, &m.x, &m.p)));
         mixed.push((x0, p0));
     }
     for (j, ((x0, p0), mode)) in mixed.into_iter().zip(modes.iter_mut()).enumerate() {
-        let (x, p) = predict_model(&imm.models[j], noise, &x0, &p0, dt)?;
+        let (f, q) = &step.models[j];
+        let (x, p) = predict_with(f, q, &x0, &p0)?;
         mode.x = x;
         mode.p = p;
         mode.probability = c[j];
     }
-    Ok(combine(modes.iter().map(|m| (m.probability, &m.x, &m.p))))
+    Ok(moment_match(
+        modes.iter().map(|m| (m.probability, &m.x, &m.p)),
+    ))
 }
 
 #[cfg(test)]

@@ -632,60 +632,6 @@ fn serial_mode_uses_the_range_rate() {
     );
 }
 
-#[test]
-#[ignore]
-fn zz_compare_imm_sets() {
-    fn set(cv: f64, rates: &[(f64, f64)], extra_cv: Option<f64>) -> Imm {
-        let mut models = vec![MotionModel::ConstantVelocity { sigma_a: [cv; 3] }];
-        let mut soj = vec![60.0];
-        for &(r, s) in rates {
-            for sign in [1.0, -1.0] {
-                models.push(MotionModel::CoordinatedTurn {
-                    turn_rate: sign * r.to_radians(),
-                    sigma_a: [s; 3],
-                });
-                soj.push(20.0);
-            }
-        }
-        if let Some(e) = extra_cv {
-            models.push(MotionModel::ConstantVelocity { sigma_a: [e; 3] });
-            soj.push(20.0);
-        }
-        let n = models.len();
-        let mut init = vec![0.3 / (n - 1) as f64; n];
-        init[0] = 0.7;
-        Imm {
-            models,
-            mean_sojourn: soj,
-            initial_probabilities: init,
-        }
-    }
-    let sets = [
-        ("A cv.5 ct1.5/1.5 cv5", set(0.5, &[(1.5, 1.5)], Some(5.0))),
-        ("B cv.5 ct3/1.5", set(0.5, &[(3.0, 1.5)], None)),
-        ("C cv1 ct3/3", set(1.0, &[(3.0, 3.0)], None)),
-        (
-            "D cv.5 ct1.5/1.5 ct3/1.5",
-            set(0.5, &[(1.5, 1.5), (3.0, 1.5)], None),
-        ),
-        ("E cv.5 ct3/3 cv5", set(0.5, &[(3.0, 3.0)], Some(5.0))),
-        ("F cv.5 ct2/2 cv8", set(0.5, &[(2.0, 2.0)], Some(8.0))),
-        (
-            "G cv.5 ct1.5/2 ct3/2",
-            set(0.5, &[(1.5, 2.0), (3.0, 2.0)], None),
-        ),
-    ];
-    for (name, imm) in sets {
-        let mut e = [0.0; 2];
-        for seed in 1..=5 {
-            let (x, _) = run_turn(Motion::Imm(imm.clone()), seed);
-            e[0] += x[0] / 5.0;
-            e[1] += x[1] / 5.0;
-        }
-        eprintln!("SET {name}: straight {:.1} turn {:.1}", e[0], e[1]);
-    }
-}
-
 /// Plots timed when a clockwise beam crosses each target (a real radar's
 /// scan: each plot its own frame with `time_tolerance` 0) are tracked like
 /// whole scans: every target confirmed and held, no track deleted, because

@@ -10,7 +10,7 @@ use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
 use crate::tracking::config::{Imm, Motion, NoiseModel, TrackerConfig};
-use crate::tracking::predictor::{ModeState, predict_imm, process_noise};
+use crate::tracking::predictor::{ImmStep, ModeState, predict_imm_step, process_noise};
 
 /// Where a track stands in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -153,11 +153,22 @@ impl Track {
     }
 
     /// Predicts the track to time `t` with the tracker's predictor: one
-    /// constant-velocity model, or the IMM of its modes.
-    pub(crate) fn predict_with(&mut self, t: f64, cfg: &TrackerConfig) -> Result<(), AlgoError> {
+    /// constant-velocity model, or the IMM of its modes with the frame's
+    /// `step` (built here when it is missing or of another Δt).
+    pub(crate) fn predict_with(
+        &mut self,
+        t: f64,
+        cfg: &TrackerConfig,
+        step: &mut Option<ImmStep>,
+    ) -> Result<(), AlgoError> {
         match (&cfg.motion, self.modes.is_empty()) {
             (Motion::Imm(imm), false) => {
-                let (x, p) = predict_imm(imm, cfg.noise, &mut self.modes, t - self.t)?;
+                let dt = t - self.t;
+                let step = match step {
+                    Some(s) if s.is_for(cfg.axes, dt) => s,
+                    _ => step.insert(ImmStep::new(imm, cfg.noise, cfg.axes, dt)?),
+                };
+                let (x, p) = predict_imm_step(step, &mut self.modes)?;
                 self.x = x;
                 self.p = p;
                 self.t = t;

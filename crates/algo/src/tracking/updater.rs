@@ -20,11 +20,12 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
+use crate::gaussian::moment_match;
 use crate::jpda::Association;
 use crate::kalman::{self, PositionLayout};
 use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::conversion::{CartesianPlot, polar_measurement};
-use crate::tracking::predictor::{MIN_PROBABILITY, ModeState, combine};
+use crate::tracking::predictor::{MIN_PROBABILITY, ModeState};
 use crate::tracking::track::position_selector;
 
 /// The measurements of one frame as the updater sees them.
@@ -41,9 +42,10 @@ pub enum Measurements<'a> {
         layout: PositionLayout,
         /// The plots, indexed as in the association.
         plots: &'a [Plot],
-        /// Whether the range rate is measured (the radar gives it and every
-        /// plot has one, as the association decided).
-        range_rate: bool,
+        /// σ_ṙ when the range rate is measured
+        /// ([`crate::tracking::associator::range_rate_sigma`], as the
+        /// association decided).
+        range_rate: Option<f64>,
     },
     /// Fused Cartesian plots with their own covariance.
     Cartesian {
@@ -80,10 +82,7 @@ impl Measurements<'_> {
             } => {
                 let plot = &plots[j];
                 let meas = polar_measurement(radar, plot);
-                let range_rate = match (plot.radial_velocity, radar.sigma_radial_velocity) {
-                    (Some(v), Some(sigma)) if *range_rate => Some((v, sigma)),
-                    _ => None,
-                };
+                let range_rate = plot.radial_velocity.zip(*range_rate);
                 // The IMM's model states are positive definite by
                 // construction (predicted from updated ones): no Cholesky
                 // checks of P and P⁺ per model and plot.
@@ -161,7 +160,7 @@ pub fn update_imm(
                     .zip(&w[j])
                     .map(|(u, &wm)| (wm / scale, &u.x, &u.p)),
             );
-            let (x, p) = combine(parts);
+            let (x, p) = moment_match(parts);
             mode.x = x;
             mode.p = p;
         }
@@ -175,5 +174,7 @@ pub fn update_imm(
             what: "updated state",
         });
     }
-    Ok(combine(modes.iter().map(|m| (m.probability, &m.x, &m.p))))
+    Ok(moment_match(
+        modes.iter().map(|m| (m.probability, &m.x, &m.p)),
+    ))
 }

@@ -115,68 +115,37 @@ impl Variant {
     }
 }
 
-/// Candidate IMMs for the default (the table's variants compare them).
-fn imm_cv_cv() -> Imm {
-    Imm {
-        models: vec![
-            MotionModel::ConstantVelocity { sigma_a: [0.5; 3] },
-            MotionModel::ConstantVelocity { sigma_a: [5.0; 3] },
-        ],
-        mean_sojourn: vec![60.0, 20.0],
-        initial_probabilities: vec![0.8, 0.2],
-    }
-}
-
-fn imm_ct(rate_dps: f64, sigma_cv: f64, sigma_ct: f64) -> Imm {
-    let rate = rate_dps.to_radians();
-    Imm {
-        models: vec![
-            MotionModel::ConstantVelocity {
-                sigma_a: [sigma_cv; 3],
-            },
-            MotionModel::CoordinatedTurn {
-                turn_rate: rate,
-                sigma_a: [sigma_ct; 3],
-            },
-            MotionModel::CoordinatedTurn {
-                turn_rate: -rate,
-                sigma_a: [sigma_ct; 3],
-            },
-        ],
-        mean_sojourn: vec![60.0, 20.0, 20.0],
-        initial_probabilities: vec![0.8, 0.1, 0.1],
-    }
-}
-
-fn imm_ct_1_5() -> Imm {
-    imm_ct(1.5, 0.5, 2.0)
-}
-
-fn imm_ct_3_noisy() -> Imm {
-    imm_ct(3.0, 1.0, 3.0)
-}
-
-/// Constant velocity √q = 0.5 with turns at every `rates` (°/s, both
-/// sides, noise `sigma_ct`) and optionally a manoeuvre CV model.
-fn imm_set(rates: &[f64], sigma_ct: f64, manoeuvre: Option<f64>) -> Imm {
-    let mut models = vec![MotionModel::ConstantVelocity { sigma_a: [0.5; 3] }];
-    let mut mean_sojourn = vec![60.0];
+/// A candidate IMM for the default (the table's variants compare them):
+/// constant velocity with √q `sigma_cv` (mean sojourn 60 s, initial
+/// probability `initial[0]`), coordinated turns at ± each of `rates` (°/s)
+/// with √q `sigma_ct`, and optionally a manoeuvre CV model of √q
+/// `manoeuvre`; the others 20 s and `initial[1]` each.
+fn imm_set(
+    sigma_cv: f64,
+    rates: &[f64],
+    sigma_ct: f64,
+    manoeuvre: Option<f64>,
+    initial: [f64; 2],
+) -> Imm {
+    let mut models = vec![MotionModel::ConstantVelocity {
+        sigma_a: [sigma_cv; 3],
+    }];
     for &r in rates {
         for sign in [1.0, -1.0] {
             models.push(MotionModel::CoordinatedTurn {
                 turn_rate: sign * r.to_radians(),
                 sigma_a: [sigma_ct; 3],
             });
-            mean_sojourn.push(20.0);
         }
     }
     if let Some(s) = manoeuvre {
         models.push(MotionModel::ConstantVelocity { sigma_a: [s; 3] });
-        mean_sojourn.push(20.0);
     }
     let n = models.len();
-    let mut initial_probabilities = vec![0.3 / (n - 1) as f64; n];
-    initial_probabilities[0] = 0.7;
+    let mut mean_sojourn = vec![20.0; n];
+    mean_sojourn[0] = 60.0;
+    let mut initial_probabilities = vec![initial[1]; n];
+    initial_probabilities[0] = initial[0];
     Imm {
         models,
         mean_sojourn,
@@ -184,25 +153,28 @@ fn imm_set(rates: &[f64], sigma_ct: f64, manoeuvre: Option<f64>) -> Imm {
     }
 }
 
-fn imm_d() -> Imm {
-    imm_set(&[1.5, 3.0], 1.5, None)
+fn imm_cv_cv() -> Imm {
+    imm_set(0.5, &[], 0.0, Some(5.0), [0.8, 0.2])
 }
 
-fn imm_e() -> Imm {
-    imm_set(&[3.0], 3.0, Some(5.0))
+fn imm_ct_1_5() -> Imm {
+    imm_set(0.5, &[1.5], 2.0, None, [0.8, 0.1])
 }
 
-fn imm_g() -> Imm {
-    imm_set(&[1.5, 3.0], 2.0, None)
+fn imm_ct_3_noisy() -> Imm {
+    imm_set(1.0, &[3.0], 3.0, None, [0.8, 0.1])
 }
 
 fn imm_cv_ct_cv() -> Imm {
-    let mut imm = imm_ct(1.5, 0.5, 1.5);
-    imm.models
-        .push(MotionModel::ConstantVelocity { sigma_a: [5.0; 3] });
-    imm.mean_sojourn.push(20.0);
-    imm.initial_probabilities = vec![0.7, 0.1, 0.1, 0.1];
-    imm
+    imm_set(0.5, &[1.5], 1.5, Some(5.0), [0.7, 0.1])
+}
+
+fn imm_d() -> Imm {
+    imm_set(0.5, &[1.5, 3.0], 1.5, None, [0.7, 0.075])
+}
+
+fn imm_g() -> Imm {
+    imm_set(0.5, &[1.5, 3.0], 2.0, None, [0.7, 0.075])
 }
 
 /// The defaults before commits 4fc2c52, 114755c and 5f66756: DWNA
@@ -213,14 +185,10 @@ const FORMER_SIGMA_T: Option<f64> = Some(100.0);
 const FORMER_MISSES: Option<u32> = Some(3);
 const FORMER_DUPLICATE: Option<f64> = Some(0.0);
 
-const VARIANTS: [Variant; 27] = [
+const VARIANTS: [Variant; 25] = [
     Variant {
         imm: Some(imm_d),
         ..Variant::of("serial IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5", Mode::Serial)
-    },
-    Variant {
-        imm: Some(imm_e),
-        ..Variant::of("serial IMM cv 0.5 + ct ±3°/s 3 + cv 5", Mode::Serial)
     },
     Variant {
         imm: Some(imm_g),
@@ -232,10 +200,6 @@ const VARIANTS: [Variant; 27] = [
             "parallel IMM cv 0.5 + ct ±1.5 and ±3°/s 1.5",
             Mode::Parallel,
         )
-    },
-    Variant {
-        imm: Some(imm_e),
-        ..Variant::of("parallel IMM cv 0.5 + ct ±3°/s 3 + cv 5", Mode::Parallel)
     },
     Variant {
         imm: Some(imm_g),
@@ -291,125 +255,58 @@ const VARIANTS: [Variant; 27] = [
         )
     },
     Variant {
-        name: "parallel former defaults",
-        mode: Mode::Parallel,
-        single: false,
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("parallel former defaults", Mode::Parallel)
     },
     Variant {
-        name: "serial former defaults",
-        mode: Mode::Serial,
-        single: false,
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("serial former defaults", Mode::Serial)
     },
     Variant {
-        name: "best single radar former defaults",
-        mode: Mode::Serial,
         single: true,
         noise: FORMER_NOISE,
         sigma_t: FORMER_SIGMA_T,
         max_misses: FORMER_MISSES,
         duplicate: FORMER_DUPLICATE,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("best single radar former defaults", Mode::Serial)
     },
     Variant {
-        name: "parallel σ_t = 100 m/s",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
         sigma_t: FORMER_SIGMA_T,
-        max_misses: None,
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("parallel σ_t = 100 m/s", Mode::Parallel)
     },
     Variant {
-        name: "parallel 3 × radars misses delete",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
         max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("parallel 3 × radars misses delete", Mode::Parallel)
     },
     Variant {
-        name: "serial 3 × radars misses delete",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
         max_misses: Some(3 * DIAGNOSTIC_RADARS as u32),
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("serial 3 × radars misses delete", Mode::Serial)
     },
     Variant {
-        name: "serial 3 misses delete",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
         max_misses: FORMER_MISSES,
-        duplicate: None,
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("serial 3 misses delete", Mode::Serial)
     },
     Variant {
-        name: "serial without duplicate deletion",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
         duplicate: Some(0.0),
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("serial without duplicate deletion", Mode::Serial)
     },
     Variant {
-        name: "parallel without duplicate deletion",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
         duplicate: Some(0.0),
-        method: Method::Exact,
-        imm: None,
+        ..Variant::of("parallel without duplicate deletion", Mode::Parallel)
     },
     Variant {
-        name: "serial GNN",
-        mode: Mode::Serial,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
         method: Method::GlobalNearestNeighbour,
-        imm: None,
+        ..Variant::of("serial GNN", Mode::Serial)
     },
     Variant {
-        name: "parallel GNN",
-        mode: Mode::Parallel,
-        single: false,
-        noise: None,
-        sigma_t: None,
-        max_misses: None,
-        duplicate: None,
         method: Method::GlobalNearestNeighbour,
-        imm: None,
+        ..Variant::of("parallel GNN", Mode::Parallel)
     },
 ];
 
