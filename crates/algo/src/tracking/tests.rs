@@ -544,8 +544,8 @@ fn run_turn(motion: Motion, seed: u64) -> ([f64; 2], f64) {
 /// filter cannot, with its left-turn model taking over, and loses little
 /// on the straight leg (the reason it is the default; seed-001 Monte
 /// Carlo and the real-traffic check measure it properly). Seeds 1–5 gave
-/// a turn RMSE of 66 m (IMM) against 350 m (CV √q = 0.5) and 40 m against
-/// 35 m on the straight leg.
+/// a turn RMSE of 68 m (default IMM) against 350 m (CV √q = 0.5) and 40 m
+/// against 35 m on the straight leg.
 #[test]
 fn the_imm_follows_a_turn_that_low_noise_cv_cannot() {
     let (mut cv, mut imm) = ([0.0; 2], [0.0; 2]);
