@@ -415,6 +415,7 @@ mod tests {
             z: dvector![x, y],
             r: DMatrix::from_diagonal(&dvector![var, var]),
             radars: vec![0],
+            measured: None,
         }
     }
 

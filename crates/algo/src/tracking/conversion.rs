@@ -44,6 +44,10 @@ pub struct CartesianPlot {
     pub r: DMatrix<f64>,
     /// The radars whose plots make it up, ascending.
     pub radars: Vec<usize>,
+    /// The radar plot it was converted from, when it is one radar's plot
+    /// (`None` for a fused plot): what a track updated by it reports as
+    /// its last measurement (ASTERIX I062/340).
+    pub measured: Option<Plot>,
 }
 
 /// The Doppler measurement re-expressed about the fusion centre (step 1).
@@ -76,7 +80,9 @@ pub fn register(
     radar_index: usize,
     plot: &Plot,
 ) -> Result<CartesianPlot, AlgoError> {
-    to_cartesian(radar, radar_index, plot.t, &polar_measurement(radar, plot))
+    let mut out = to_cartesian(radar, radar_index, plot.t, &polar_measurement(radar, plot))?;
+    out.measured = Some(*plot);
+    Ok(out)
 }
 
 /// Steps 1 and 3: the plot moved to time `t` along its radar's line of
@@ -108,6 +114,7 @@ pub fn extrapolate(
     }
     polar.sigma_range = polar.sigma_range.hypot(dt * sigma_v);
     let mut out = to_cartesian(radar, radar_index, t, &polar)?;
+    out.measured = Some(*plot);
     // The unseen motion across the line of sight: (σ_t Δt)² (I − u u').
     let cross = (dt * sigma_tangential_speed).powi(2);
     if cross > 0.0 {
@@ -168,6 +175,7 @@ fn to_cartesian(
         z,
         r,
         radars: vec![radar_index],
+        measured: None,
     })
 }
 

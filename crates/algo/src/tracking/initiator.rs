@@ -107,6 +107,7 @@ impl Initiator {
                     track.x = u.x;
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
+                    track.last_plot = plot.measured;
                 }
                 None if view.misses(&track.x, track.last_update) => track.record(None),
                 None => {}
@@ -309,6 +310,8 @@ fn new_tentative(
         radars,
         last_update: t,
         modes: Vec::new(),
+        started: Some(root.t),
+        last_plot: plot.measured,
     }
 }
 
@@ -347,6 +350,7 @@ mod tests {
             z: dvector![x, y],
             r: DMatrix::from_diagonal(&dvector![1.0, 1.0]),
             radars: vec![0],
+            measured: None,
         }
     }
 

@@ -476,7 +476,10 @@ impl Tracker {
                 track.p = p;
             }
             match hit {
-                Some(j) => track.record(Some(plots[*j].radars.clone())),
+                Some(j) => {
+                    track.record(Some(plots[*j].radars.clone()));
+                    track.last_plot = plots[*j].measured;
+                }
                 None if view.misses(&track.x, track.last_update) => track.record(None),
                 None => {}
             }

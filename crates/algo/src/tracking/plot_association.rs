@@ -122,6 +122,7 @@ pub fn fuse(a: &CartesianPlot, b: &CartesianPlot) -> Result<CartesianPlot, AlgoE
         z,
         r,
         radars,
+        measured: None,
     })
 }
 
@@ -136,6 +137,7 @@ mod tests {
             z: dvector![x, y],
             r: DMatrix::from_diagonal(&dvector![var[0], var[1]]),
             radars: vec![radar],
+            measured: None,
         }
     }
 
@@ -219,6 +221,7 @@ mod tests {
             z: dvector![0.0, 0.0, 1000.0],
             r: DMatrix::from_diagonal(&dvector![100.0, 100.0, 100.0]),
             radars: vec![0],
+            measured: None,
         };
         let b = p2(1, 10.0, 0.0, [100.0, 100.0]);
         let f = fuse(&a, &b).unwrap();

@@ -183,6 +183,12 @@ impl Tracker {
             check_covariance("track covariance", &t.p)?;
             radars(&t.radars)?;
             check_modes(t, c)?;
+            if t.started.is_some_and(|s| !s.is_finite()) {
+                return Err(bad(format!("track {} start time is not finite", t.id)));
+            }
+            if let Some(p) = &t.last_plot {
+                c.validate_plot(p)?;
+            }
             if t.id >= parts.next_id {
                 return Err(bad(format!(
                     "track id {} not below the next id {}",
@@ -203,6 +209,9 @@ impl Tracker {
             }
             check_covariance("plot covariance", &r.r)?;
             radars(&r.radars)?;
+            if let Some(p) = &r.measured {
+                c.validate_plot(p)?;
+            }
         }
         for p in &parts.pending {
             c.validate_plot(p)?;

@@ -236,6 +236,51 @@ fn fig5_serial_jpda_confirms_two_tracks_without_swaps() {
 }
 
 #[test]
+fn tracks_carry_their_start_time_and_last_measured_plot() {
+    // Serial frames: each update is one radar's plot, which the track
+    // keeps verbatim (one of the scene's plots, of a radar it names, at
+    // its last update time); parallel frames fuse plots, so none is kept.
+    let cfg = fig5_config(false);
+    let mut tracker = Tracker::new(cfg.clone()).unwrap();
+    let plots = scene(
+        &cfg.radars,
+        &[0.0, 0.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(1),
+    );
+    tracker.process(&plots).unwrap();
+    let tracks = tracker.confirmed_tracks();
+    assert_eq!(tracks.len(), 2);
+    for t in &tracks {
+        let p = t.last_plot.expect("serial update keeps its plot");
+        assert!(plots.contains(&p), "{p:?} is not one of the scene's plots");
+        assert_eq!(t.radars, vec![p.radar]);
+        assert_eq!(p.t, t.last_update);
+        // Both targets' first plots come from radar 1's scan at t = 0.
+        assert_eq!(t.started, Some(0.0));
+    }
+    let mut cfg = fig5_config(true);
+    cfg.set_mode(Mode::Parallel);
+    let mut tracker = Tracker::new(cfg.clone()).unwrap();
+    let plots = scene(
+        &cfg.radars,
+        &[0.0, 0.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(1),
+    );
+    tracker.process(&plots).unwrap();
+    let fused: Vec<_> = tracker
+        .confirmed_tracks()
+        .into_iter()
+        .filter(|t| t.radars.len() > 1)
+        .collect();
+    assert!(!fused.is_empty());
+    assert!(fused.iter().all(|t| t.last_plot.is_none()));
+}
+
+#[test]
 fn fig5_every_association_method_keeps_the_two_targets() {
     for method in [
         jpda::Method::Amsjpda,

@@ -9,7 +9,7 @@ use crate::error::AlgoError;
 use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
-use crate::tracking::config::{Imm, Motion, NoiseModel, TrackerConfig};
+use crate::tracking::config::{Imm, Motion, NoiseModel, Plot, TrackerConfig};
 use crate::tracking::predictor::{ImmStep, ModeState, predict_imm_step, process_noise};
 
 /// Where a track stands in its life.
@@ -53,6 +53,14 @@ pub struct TrackOutput {
     /// Mode probabilities of an IMM track, in the order of the
     /// configuration's models (empty for a single-model track).
     pub modes: Vec<f64>,
+    /// Time of the track's first plot (s); `None` for a track stored by a
+    /// release that did not keep it.
+    pub started: Option<f64>,
+    /// The radar plot of the track's last update, when that update was
+    /// one radar's plot (serial frames; `None` after a fused plot of
+    /// parallel mode, or for a track stored by a release that did not keep
+    /// it).
+    pub last_plot: Option<Plot>,
 }
 
 /// A track inside the tracker (tentative or confirmed), with what its life
@@ -87,6 +95,13 @@ pub struct Track {
     /// mode probability and state; `x`, `p` are then their combination.
     /// Empty for a single constant-velocity Gaussian.
     pub modes: Vec<ModeState>,
+    /// Time of the track's first plot (s); `None` when not known (a track
+    /// stored by an earlier release).
+    pub started: Option<f64>,
+    /// The radar plot most likely associated at the last update, when it
+    /// was one radar's plot (not a fused one); provenance only, the filter
+    /// does not read it.
+    pub last_plot: Option<Plot>,
 }
 
 impl Track {
@@ -105,6 +120,8 @@ impl Track {
             consecutive_misses: 0,
             radars: vec![],
             last_update: 0.0,
+            started: Some(0.0),
+            last_plot: None,
             modes: Vec::new(),
         }
     }
@@ -206,6 +223,8 @@ impl Track {
             consecutive_misses: self.consecutive_misses,
             age: self.age,
             last_update: self.last_update,
+            started: self.started,
+            last_plot: self.last_plot,
         }
     }
 }

@@ -310,6 +310,7 @@ fn noisy_plot(
         z: DVector::from_vec(vec![truth[0] + sigma * g(), truth[1] + sigma * g()]),
         r: DMatrix::identity(2, 2) * sigma * sigma,
         radars: vec![radar],
+        measured: None,
     }
 }
 

@@ -3,14 +3,17 @@
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
-//! Layout: magic `RFTK`, format version (u32, currently 2), the
+//! Layout: magic `RFTK`, format version (u32, currently 3), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
 //! Format 2 adds the predictor (`motion`) after the configuration, each
 //! track's IMM modes after the track and, at the end, each radar's last
 //! beam position (serial frames' sweeps); format 1 (trackers stored before the
 //! IMM) is read as one constant-velocity model without modes, so such a
-//! tracker continues exactly as it would have.
+//! tracker continues exactly as it would have. Format 3 adds each
+//! track's start time and last measured plot, and each root's radar plot
+//! (provenance only, for ASTERIX I062/290 and I062/340); formats 1 and 2
+//! read them as unknown.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -28,7 +31,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
@@ -119,7 +122,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let roots = (0..n)
-        .map(|_| read_cartesian(&mut r))
+        .map(|_| read_cartesian(&mut r, version))
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let tentatives = (0..n)
@@ -409,6 +412,8 @@ fn track(w: &mut Writer, t: &Track) {
         w.f64_run(m.x.as_slice());
         w.f64_run(m.p.as_slice());
     }
+    w.opt(t.started, Writer::f64);
+    w.opt(t.last_plot.as_ref(), plot);
 }
 
 /// A track as stored; its dimension, covariance and radar indices are
@@ -421,7 +426,7 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
     if p.len() != n * n {
         return Err(corrupt("track dimension"));
     }
-    Ok(Track {
+    let mut track = Track {
         id,
         x: DVector::from_vec(x),
         p: DMatrix::from_vec(n, n, p),
@@ -451,7 +456,14 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
         } else {
             Vec::new()
         },
-    })
+        started: None,
+        last_plot: None,
+    };
+    if version >= 3 {
+        track.started = r.opt(Reader::f64)?;
+        track.last_plot = r.opt(read_plot)?;
+    }
+    Ok(track)
 }
 
 fn cartesian(w: &mut Writer, p: &CartesianPlot) {
@@ -459,9 +471,10 @@ fn cartesian(w: &mut Writer, p: &CartesianPlot) {
     w.f64s(p.z.as_slice());
     w.f64s(p.r.as_slice());
     radars(w, &p.radars);
+    w.opt(p.measured.as_ref(), plot);
 }
 
-fn read_cartesian(r: &mut Reader<'_>) -> Result<CartesianPlot, FormatError> {
+fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, FormatError> {
     let t = r.f64()?;
     let z = r.f64s()?;
     let cov = r.f64s()?;
@@ -474,6 +487,11 @@ fn read_cartesian(r: &mut Reader<'_>) -> Result<CartesianPlot, FormatError> {
         z: DVector::from_vec(z),
         r: DMatrix::from_vec(k, k, cov),
         radars: read_radars(r)?,
+        measured: if version >= 3 {
+            r.opt(read_plot)?
+        } else {
+            None
+        },
     })
 }
 
@@ -626,15 +644,24 @@ mod tests {
         let mut t = mid;
         t.process(&plots[24..]).unwrap();
         t.flush().unwrap();
-        // Equal but for the beam positions the continued tracker now
-        // holds (format 1 has none; every frame here is a whole scan).
+        // Equal but for the beam positions and the provenance (start
+        // times, measured plots) the continued tracker now holds (format 1
+        // has none; every frame here is a whole scan; the filter reads no
+        // provenance).
         let mut parts = t.state().to_parts();
         parts.beams = vec![None; 2];
+        for tr in parts.tracks.iter_mut().chain(&mut parts.tentatives) {
+            tr.started = None;
+            tr.last_plot = None;
+        }
+        for root in &mut parts.roots {
+            root.measured = None;
+        }
         assert_eq!(parts, end.state().to_parts());
         assert_eq!(t.counters().confirmed, 2);
-        // Written again it is format 2 and reads back the same.
+        // Written again it is format 3 and reads back the same.
         let bytes = encode_tracker(&t);
-        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
+        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 3);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
     }
 
@@ -701,9 +728,9 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v3 = bytes.clone();
-        v3[4] = 3;
-        assert!(matches!(decode_tracker(&v3), Err(FormatError::Corrupt(_))));
+        let mut v4 = bytes.clone();
+        v4[4] = 4;
+        assert!(matches!(decode_tracker(&v4), Err(FormatError::Corrupt(_))));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {
