@@ -74,6 +74,7 @@ fn parse_args() -> anyhow::Result<Args> {
 
 fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
     pb::PlotFusionConfig {
+        cat062: None,
         origin: spec.origin.as_ref().map(|o| pb::GeoPoint {
             lat_deg: o.lat_deg,
             lon_deg: o.lon_deg,

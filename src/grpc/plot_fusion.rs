@@ -19,7 +19,7 @@ impl PlotFusionService for PlotFusionGrpc {
     ) -> Result<Response<pb::PlotFusionResponse>, Status> {
         let req = request.into_inner();
         let input = svc::TrackInput {
-            spec: spec_in(req.origin, req.radars, req.tracker),
+            spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
             plots: plots_in(req.plots),
             asterix: req.asterix.map(asterix_in),
             history: req.history,
@@ -43,6 +43,7 @@ impl PlotFusionService for PlotFusionGrpc {
                 .collect(),
             counters: Some(counters_out(out.counters)),
             asterix: out.asterix.map(asterix_out),
+            cat062: out.cat062.map(|c| c.data),
             timing: Some(pb::Timing {
                 compute_us: out.compute_us,
             }),
@@ -63,10 +64,18 @@ pub(crate) fn spec_in(
     origin: Option<pb::GeoPoint>,
     radars: Vec<pb::PlotRadar>,
     tracker: Option<pb::TrackerOptions>,
+    cat062: Option<pb::Cat062Options>,
 ) -> svc::SpecInput {
     let t = tracker.unwrap_or_default();
     let nonempty = |v: Vec<f64>| (!v.is_empty()).then_some(v);
     svc::SpecInput {
+        cat062: cat062.map(|c| svc::cat062::Cat062Input {
+            sac: Some(c.sac),
+            sic: Some(c.sic),
+            service_id: c.service_id,
+            day_start_t: c.day_start_t,
+            max_block_bytes: c.max_block_bytes,
+        }),
         origin: origin.map(geo_in),
         radars: radars
             .into_iter()
@@ -225,6 +234,15 @@ pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
             })
             .collect(),
         turn_rate_dps: t.turn_rate_dps,
+        start_t: t.start_t,
+        last_plot: t.last_plot.map(|p| pb::LastPlot {
+            radar: p.radar,
+            t: p.t,
+            range_m: p.range_m,
+            azimuth_deg: p.azimuth_deg,
+            elevation_deg: p.elevation_deg,
+            radial_velocity_mps: p.radial_velocity_mps,
+        }),
     }
 }
 

@@ -79,7 +79,7 @@ fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
             };
             Ok(KindSpec::PlotFusion(Spec {
                 idle_expiry_s: req.idle_expiry_s,
-                body: plot_spec_in(c.origin, c.radars, c.tracker),
+                body: plot_spec_in(c.origin, c.radars, c.tracker, c.cat062),
             }))
         }
     }
@@ -175,6 +175,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             dropped: b.dropped,
             counters: Some(counters_out(b.counters)),
             asterix: b.asterix.map(asterix_out),
+            cat062: b.cat062.map(|c| c.data),
         }),
         warnings: u.warnings,
         ..Default::default()

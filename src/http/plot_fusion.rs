@@ -347,9 +347,65 @@ pub struct PlotFusionRequest {
     /// Raw ASTERIX beside (or instead of) `plots`.
     pub asterix: Option<AsterixIn>,
     pub tracker: Option<TrackerOptions>,
+    /// Also answer `tracks` as ASTERIX CAT062 records (`cat062`).
+    pub cat062: Option<Cat062Options>,
     /// Also return the confirmed tracks after every processing instant.
     #[serde(default)]
     pub history: bool,
+}
+
+/// ASTERIX CAT062 (edition 1.20) out: the tracks as system track messages
+/// of this fusion centre. Needs WGS-84 positions (`origin`, or a radar in
+/// `geodetic`).
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Cat062Options {
+    /// I062/010 System Area Code of the fusion centre, 0 to 255.
+    #[schema(example = 25, maximum = 255)]
+    pub sac: u32,
+    /// I062/010 System Identification Code, 0 to 255.
+    #[schema(example = 100, maximum = 255)]
+    pub sic: u32,
+    /// I062/015 Service Identification, 0 to 255; absent: not sent.
+    #[schema(maximum = 255)]
+    pub service_id: Option<u32>,
+    /// Midnight UTC in the plots' time scale (s), for I062/070's time of
+    /// day; default 0: plot times are Unix seconds.
+    pub day_start_t: Option<f64>,
+    /// Largest data block (bytes, 64 to 65,535; default 1,024): blocks
+    /// split at record boundaries.
+    #[schema(minimum = 64, maximum = 65535)]
+    pub max_block_bytes: Option<u32>,
+}
+
+pub(crate) fn cat062_in(c: Option<Cat062Options>) -> Option<svc::cat062::Cat062Input> {
+    c.map(|c| svc::cat062::Cat062Input {
+        sac: Some(c.sac),
+        sic: Some(c.sic),
+        service_id: c.service_id,
+        day_start_t: c.day_start_t,
+        max_block_bytes: c.max_block_bytes,
+    })
+}
+
+/// CAT062 data blocks as base64, or absent.
+pub(crate) fn cat062_out(c: Option<svc::cat062::Cat062Data>) -> Option<String> {
+    use base64::Engine as _;
+    c.map(|c| base64::engine::general_purpose::STANDARD.encode(c.data))
+}
+
+/// The radar plot of a track's last update.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct LastPlot {
+    pub radar: String,
+    pub t: f64,
+    pub range_m: f64,
+    /// Clockwise from north, [0, 360).
+    pub azimuth_deg: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub elevation_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radial_velocity_mps: Option<f64>,
 }
 
 /// A track at the end of the data (or when deleted).
@@ -387,6 +443,13 @@ pub struct FusedTrack {
     /// left), when the models include a turn.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub turn_rate_dps: Option<f64>,
+    /// Time of the track's first plot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub start_t: Option<f64>,
+    /// The plot of the track's last update, when it was one radar's plot
+    /// (serial mode; absent after a fused plot of parallel mode).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_plot: Option<LastPlot>,
 }
 
 /// One model's probability in an IMM track.
@@ -439,6 +502,10 @@ pub struct PlotFusionResponse {
     /// Present when the request had `asterix`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub asterix: Option<AsterixSummary>,
+    /// With the `cat062` option: base64 of CAT062 data blocks, one record
+    /// per entry of `tracks` in the same order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cat062: Option<String>,
     pub timing: Timing,
     pub warnings: Vec<String>,
 }
@@ -447,9 +514,11 @@ pub(crate) fn spec_in(
     origin: Option<GeoPoint>,
     radars: Vec<PlotRadar>,
     tracker: Option<TrackerOptions>,
+    cat062: Option<Cat062Options>,
 ) -> svc::SpecInput {
     let t = tracker.unwrap_or_default();
     svc::SpecInput {
+        cat062: cat062_in(cat062),
         origin: origin.map(geo_in),
         radars: radars
             .into_iter()
@@ -576,6 +645,15 @@ pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
             })
             .collect(),
         turn_rate_dps: t.turn_rate_dps,
+        start_t: t.start_t,
+        last_plot: t.last_plot.map(|p| LastPlot {
+            radar: p.radar,
+            t: p.t,
+            range_m: p.range_m,
+            azimuth_deg: p.azimuth_deg,
+            elevation_deg: p.elevation_deg,
+            radial_velocity_mps: p.radial_velocity_mps,
+        }),
     }
 }
 
@@ -617,7 +695,7 @@ pub async fn track(
 
 fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> {
     let input = svc::TrackInput {
-        spec: spec_in(req.origin, req.radars, req.tracker),
+        spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
         plots: plots_in(req.plots),
         asterix: asterix_in(req.asterix)?,
         history: req.history,
@@ -638,6 +716,7 @@ fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> 
         }),
         counters: counters_out(out.counters),
         asterix: out.asterix.map(asterix_out),
+        cat062: cat062_out(out.cat062),
         timing: Timing {
             compute_us: out.compute_us,
         },

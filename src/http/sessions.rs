@@ -17,8 +17,9 @@ use super::{
         config_in, finite, pair_result, sample_in, system_track, track_ref,
     },
     plot_fusion::{
-        AsterixIn, AsterixSummary, FusedTrack, GeoPoint, PlotIn, PlotRadar, TrackerCounters,
-        TrackerOptions, asterix_in, asterix_out, counters_out, plots_in, spec_in, track_out,
+        AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, PlotIn, PlotRadar,
+        TrackerCounters, TrackerOptions, asterix_in, asterix_out, cat062_out, counters_out,
+        plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -77,6 +78,9 @@ pub struct CreateSessionRequest {
     pub radars: Option<Vec<PlotRadar>>,
     /// Plot-fusion sessions: the tracker's options.
     pub tracker: Option<TrackerOptions>,
+    /// Plot-fusion sessions: each update also carries its tracks as CAT062
+    /// records (see the batch endpoint's `cat062`).
+    pub cat062: Option<Cat062Options>,
 }
 
 /// One batch of track reports.
@@ -194,6 +198,11 @@ pub struct PlotFusionBatchUpdate {
     /// What the batch's ASTERIX gave, when it had some.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub asterix: Option<AsterixSummary>,
+    /// A session created with `cat062`: base64 of CAT062 data blocks, one
+    /// record per entry of `tracks` in order (the first of a track flagged
+    /// TSB), then a track-end record (TSE) per entry of `deleted`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cat062: Option<String>,
 }
 
 /// The tracker of a plot-fusion session.
@@ -301,6 +310,7 @@ fn only_fields_of(kind: KindName, req: &CreateSessionRequest) -> Result<(), Serv
             ("origin", req.origin.is_some(), P),
             ("radars", req.radars.is_some(), P),
             ("tracker", req.tracker.is_some(), P),
+            ("cat062", req.cat062.is_some(), P),
         ],
     )
 }
@@ -308,7 +318,12 @@ fn only_fields_of(kind: KindName, req: &CreateSessionRequest) -> Result<(), Serv
 fn plot_fusion_spec_in(req: CreateSessionRequest) -> Spec<service::plot_fusion::SpecInput> {
     Spec {
         idle_expiry_s: req.idle_expiry_s,
-        body: spec_in(req.origin, req.radars.unwrap_or_default(), req.tracker),
+        body: spec_in(
+            req.origin,
+            req.radars.unwrap_or_default(),
+            req.tracker,
+            req.cat062,
+        ),
     }
 }
 
@@ -459,6 +474,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             dropped: b.dropped,
             counters: counters_out(b.counters),
             asterix: b.asterix.map(asterix_out),
+            cat062: cat062_out(b.cat062),
         }),
         warnings: u.warnings,
     }

@@ -190,6 +190,16 @@ async fn client(app: &TestApp) -> PlotFusionServiceClient<tonic::transport::Chan
 fn proto_request(req: &Value) -> pb::PlotFusionRequest {
     let o = |v: &Value| v.as_f64();
     pb::PlotFusionRequest {
+        cat062: req.get("cat062").map(|c| {
+            let u = |k: &str| c[k].as_u64().map(|x| x as u32);
+            pb::Cat062Options {
+                sac: u("sac").unwrap(),
+                sic: u("sic").unwrap(),
+                service_id: u("service_id"),
+                day_start_t: c["day_start_t"].as_f64(),
+                max_block_bytes: u("max_block_bytes"),
+            }
+        }),
         origin: Some(pb::GeoPoint {
             lat_deg: o(&req["origin"]["lat_deg"]),
             lon_deg: o(&req["origin"]["lon_deg"]),
@@ -710,6 +720,7 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     let open = pb::CreateSessionRequest {
         kind: "plot_fusion".into(),
         plot_fusion: Some(pb::PlotFusionConfig {
+            cat062: p.cat062.clone(),
             origin: p.origin,
             radars: p.radars.clone(),
             tracker: p.tracker.clone(),

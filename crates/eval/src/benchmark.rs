@@ -523,6 +523,7 @@ pub fn plot_fusion_scene(
             })
             .collect(),
         tracker: Default::default(),
+        cat062: None,
     };
     (spec, plots)
 }

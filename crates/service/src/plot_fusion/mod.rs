@@ -11,6 +11,7 @@
 //! (`service::session::plot_fusion`) uses the same pieces.
 
 pub mod asterix;
+pub mod cat062;
 pub mod network;
 pub mod output;
 
@@ -22,7 +23,7 @@ use algo::{
     tracking::{Counters, Mode, Plot, Tracker, TrackerConfig},
 };
 pub use network::Network;
-pub use output::{HistoryEntry, ModeView, TrackView, TrackerCounters, model_names};
+pub use output::{HistoryEntry, LastPlotView, ModeView, TrackView, TrackerCounters, model_names};
 
 /// Most radars in a network.
 pub const MAX_RADARS: usize = 64;
@@ -147,6 +148,8 @@ pub struct SpecInput {
     pub origin: Option<GeoInput>,
     pub radars: Vec<RadarInput>,
     pub tracker: TrackerInput,
+    /// ASTERIX CAT062 out: the tracks also as system track messages.
+    pub cat062: Option<cat062::Cat062Input>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -184,6 +187,8 @@ pub struct TrackOutput {
     pub counters: TrackerCounters,
     /// What the ASTERIX input gave, when there was one.
     pub asterix: Option<asterix::AsterixSummary>,
+    /// `tracks` as CAT062 records, in the same order, when asked for.
+    pub cat062: Option<cat062::Cat062Data>,
     pub compute_us: f64,
     pub warnings: Vec<String>,
 }
@@ -200,6 +205,10 @@ pub fn mode_name(m: Mode) -> &'static str {
 /// Tracks every plot of the request from scratch and closes the last frame.
 pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     let (network, config, mut warnings) = network::validate(&input.spec)?;
+    let cat062_options = match &input.spec.cat062 {
+        Some(c) => Some(cat062::validate(c, &network, "cat062")?),
+        None => None,
+    };
     let asterix_bound = input
         .asterix
         .as_ref()
@@ -273,13 +282,21 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &tracks,
     ));
     let motion = &tracker.config().motion;
+    let tracks: Vec<TrackView> = tracks
+        .iter()
+        .map(|t| network.track_view(motion, t))
+        .collect();
+    let cat062 = cat062_options.map(|o| {
+        let items: Vec<_> = tracks
+            .iter()
+            .map(|t| (t, cat062::Life::Continuing))
+            .collect();
+        cat062::encode(&o, &network, &items, &mut warnings)
+    });
     Ok(TrackOutput {
         mode: mode_name(tracker.mode()),
         state_layout: output::layout(tracker.config().axes),
-        tracks: tracks
-            .iter()
-            .map(|t| network.track_view(motion, t))
-            .collect(),
+        tracks,
         deleted: report
             .deleted
             .iter()
@@ -298,6 +315,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         }),
         counters: counters.into(),
         asterix: summary,
+        cat062,
         compute_us,
         warnings,
     })

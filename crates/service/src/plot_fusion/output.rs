@@ -44,6 +44,25 @@ pub struct TrackView {
     /// An IMM track's turn rate Σ μ_j ω_j (°/s, positive to the left),
     /// when its models include a turn.
     pub turn_rate_dps: Option<f64>,
+    /// Time of the track's first plot; absent for a track kept by a
+    /// release that did not record it.
+    pub start_t: Option<f64>,
+    /// The radar plot of the track's last update, when that update was
+    /// one radar's plot (serial mode); absent after a fused plot (parallel
+    /// mode).
+    pub last_plot: Option<LastPlotView>,
+}
+
+/// The plot that last updated a track, as the radar measured it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LastPlotView {
+    pub radar: String,
+    pub t: f64,
+    pub range_m: f64,
+    /// Clockwise from north, in [0, 360).
+    pub azimuth_deg: f64,
+    pub elevation_deg: Option<f64>,
+    pub radial_velocity_mps: Option<f64>,
 }
 
 /// One model's probability in an IMM track.
@@ -171,6 +190,15 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
             }
             _ => None,
         },
+        start_t: t.started,
+        last_plot: t.last_plot.map(|p| LastPlotView {
+            radar: network.radar_ids[p.radar].clone(),
+            t: p.t,
+            range_m: p.range,
+            azimuth_deg: p.azimuth.to_degrees().rem_euclid(360.0),
+            elevation_deg: p.elevation.map(f64::to_degrees),
+            radial_velocity_mps: p.radial_velocity,
+        }),
     }
 }
 

@@ -22,6 +22,12 @@
 //! frame was processed (each frame predicts every track), with what
 //! happened to it (`initiated`, `confirmed`, `updated`), the tracks
 //! deleted, and the ids of tentative tracks dropped.
+//!
+//! A session created with `cat062` also carries, in each update, those
+//! tracks as CAT062 records (`crate::plot_fusion::cat062`): one per listed
+//! track, in order, the first record of a track flagged TSB (`initiated`),
+//! then one track-end record (TSE) per deleted track. A dropped tentative
+//! track gets no end record (its id is in `dropped`).
 
 use std::collections::HashSet;
 
@@ -29,8 +35,9 @@ use super::{Fnv, Limits, SessionKind};
 use crate::{
     ServiceError,
     plot_fusion::{
-        ModeView, Network, PlotInput, SpecInput, TrackView, TrackerCounters,
+        LastPlotView, ModeView, Network, PlotInput, SpecInput, TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
+        cat062::{self, Cat062Data, Cat062Options, Life},
         computation_error, mode_name, network, output,
     },
 };
@@ -41,9 +48,10 @@ use formats::{
 };
 
 /// Format of the kind's payload: 2 = format 1 (the network and the
-/// tracker) plus the radars' ASTERIX SAC/SIC; format 1 is read as radars
-/// without SAC/SIC.
-pub const FORMAT_VERSION: u8 = 2;
+/// tracker) plus the radars' ASTERIX SAC/SIC; 3 adds the `cat062` option.
+/// Format 1 is read as radars without SAC/SIC, formats 1 and 2 as sessions
+/// without CAT062 out.
+pub const FORMAT_VERSION: u8 = 3;
 
 /// Bit 31 of an encoded update's `frames` flags the ASTERIX summary after
 /// its counters (a batch never processes 2³¹ frames), so kept updates of
@@ -53,6 +61,13 @@ const ASTERIX_FLAG: u32 = 1 << 31;
 /// modes and turn rate (every update this release writes; updates kept by
 /// earlier releases have none).
 const MODES_FLAG: u32 = 1 << 30;
+/// Set in the frame count of a kept update whose tracks carry their start
+/// time and last plot.
+const PROVENANCE_FLAG: u32 = 1 << 29;
+/// Set in the frame count of a kept update that carries CAT062 data (after
+/// the ASTERIX summary).
+const CAT062_FLAG: u32 = 1 << 28;
+const FLAGS: u32 = ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -113,6 +128,9 @@ pub struct BatchUpdate {
     pub counters: TrackerCounters,
     /// What the batch's ASTERIX gave, when it had some.
     pub asterix: Option<AsterixSummary>,
+    /// The listed tracks as CAT062 records, for a session created with
+    /// `cat062`.
+    pub cat062: Option<Cat062Data>,
 }
 
 /// The session as a client reads it.
@@ -133,6 +151,7 @@ pub struct SessionView {
 pub struct PlotFusionSession {
     network: Network,
     tracker: Tracker,
+    cat062: Option<Cat062Options>,
 }
 
 fn status_code(s: &str) -> u8 {
@@ -178,9 +197,25 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
         w.f64(m.probability);
     }
     w.opt(t.turn_rate_dps, Writer::f64);
+    w.opt(t.start_t, Writer::f64);
+    w.opt(t.last_plot.as_ref(), |w, p| {
+        w.str(&p.radar);
+        w.f64(p.t);
+        w.f64(p.range_m);
+        w.f64(p.azimuth_deg);
+        w.opt(p.elevation_deg, Writer::f64);
+        w.opt(p.radial_velocity_mps, Writer::f64);
+    });
 }
 
-fn decode_track(r: &mut Reader<'_>, with_modes: bool) -> Result<TrackView, FormatError> {
+/// What a kept update's tracks carry, by the release that kept it.
+#[derive(Clone, Copy)]
+struct TrackFields {
+    modes: bool,
+    provenance: bool,
+}
+
+fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, FormatError> {
     let id = r.u64()?;
     let status = status_of(r.u8()?)?;
     let t = r.f64()?;
@@ -204,7 +239,7 @@ fn decode_track(r: &mut Reader<'_>, with_modes: bool) -> Result<TrackView, Forma
     let radars = (0..k).map(|_| r.str()).collect::<Result<_, _>>()?;
     let (hits, misses, consecutive_misses, age) = (r.u32()?, r.u32()?, r.u32()?, r.u32()?);
     let last_update_t = r.f64()?;
-    let (modes, turn_rate_dps) = if with_modes {
+    let (modes, turn_rate_dps) = if fields.modes {
         let k = r.len(16)?;
         let modes = (0..k)
             .map(|_| {
@@ -217,6 +252,22 @@ fn decode_track(r: &mut Reader<'_>, with_modes: bool) -> Result<TrackView, Forma
         (modes, r.opt(Reader::f64)?)
     } else {
         (Vec::new(), None)
+    };
+    let (start_t, last_plot) = if fields.provenance {
+        let start_t = r.opt(Reader::f64)?;
+        let last_plot = r.opt(|r| {
+            Ok(LastPlotView {
+                radar: r.str()?,
+                t: r.f64()?,
+                range_m: r.f64()?,
+                azimuth_deg: r.f64()?,
+                elevation_deg: r.opt(Reader::f64)?,
+                radial_velocity_mps: r.opt(Reader::f64)?,
+            })
+        })?;
+        (start_t, last_plot)
+    } else {
+        (None, None)
     };
     Ok(TrackView {
         id,
@@ -235,6 +286,8 @@ fn decode_track(r: &mut Reader<'_>, with_modes: bool) -> Result<TrackView, Forma
         last_update_t,
         modes,
         turn_rate_dps,
+        start_t,
+        last_plot,
     })
 }
 
@@ -255,8 +308,16 @@ impl SessionKind for PlotFusionSession {
     fn create(spec: SpecInput, warnings: &mut Vec<String>) -> Result<Self, ServiceError> {
         let (network, config, decided) = network::validate(&spec)?;
         warnings.extend(decided);
+        let cat062 = match &spec.cat062 {
+            Some(c) => Some(cat062::validate(c, &network, "cat062")?),
+            None => None,
+        };
         let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
-        Ok(Self { network, tracker })
+        Ok(Self {
+            network,
+            tracker,
+            cat062,
+        })
     }
 
     fn check_size(batch: &BatchInput, limits: &Limits) -> Result<(), ServiceError> {
@@ -351,7 +412,7 @@ impl SessionKind for PlotFusionSession {
             .copied()
             .collect();
         dropped.sort_unstable();
-        let tracks = if report.frames == 0 {
+        let tracks: Vec<ChangedTrack> = if report.frames == 0 {
             Vec::new()
         } else {
             live.iter()
@@ -367,6 +428,26 @@ impl SessionKind for PlotFusionSession {
                 })
                 .collect()
         };
+        let deleted: Vec<TrackView> = report
+            .deleted
+            .iter()
+            .map(|t| self.network.track_view(&self.tracker.config().motion, t))
+            .collect();
+        let cat062 = self.cat062.as_ref().map(|o| {
+            let items: Vec<(&TrackView, Life)> = tracks
+                .iter()
+                .map(|c| {
+                    let life = if c.change == TrackChange::Initiated {
+                        Life::First
+                    } else {
+                        Life::Continuing
+                    };
+                    (&c.track, life)
+                })
+                .chain(deleted.iter().map(|t| (t, Life::End)))
+                .collect();
+            cat062::encode(o, &self.network, &items, warnings)
+        });
         Ok(BatchUpdate {
             frames: report.frames as u32,
             pending_plots: report.pending as u32,
@@ -375,14 +456,11 @@ impl SessionKind for PlotFusionSession {
                 .map(|i| i as u32)
                 .collect(),
             tracks,
-            deleted: report
-                .deleted
-                .iter()
-                .map(|t| self.network.track_view(&self.tracker.config().motion, t))
-                .collect(),
+            deleted,
             dropped,
             counters: self.tracker.counters().into(),
             asterix: summary,
+            cat062,
         })
     }
 
@@ -396,6 +474,7 @@ impl SessionKind for PlotFusionSession {
             dropped: Vec::new(),
             counters: self.tracker.counters().into(),
             asterix: None,
+            cat062: self.cat062.map(|_| Cat062Data::default()),
         }
     }
 
@@ -448,6 +527,7 @@ impl SessionKind for PlotFusionSession {
         self.network.encode(w);
         w.bytes(&encode_tracker(&self.tracker));
         self.network.encode_sources(w);
+        w.opt(self.cat062.as_ref(), cat062::encode_options);
     }
 
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
@@ -468,11 +548,22 @@ impl SessionKind for PlotFusionSession {
         if tracker.config().radars.len() != network.radar_ids.len() {
             return Err(stored(corrupt("radar count")));
         }
-        Ok(Self { network, tracker })
+        let cat062 = if format >= 3 {
+            r.opt(cat062::decode_options).map_err(stored)?
+        } else {
+            None
+        };
+        Ok(Self {
+            network,
+            tracker,
+            cat062,
+        })
     }
 
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
-        w.u32(u.frames | MODES_FLAG | if u.asterix.is_some() { ASTERIX_FLAG } else { 0 });
+        let optional = if u.asterix.is_some() { ASTERIX_FLAG } else { 0 }
+            | if u.cat062.is_some() { CAT062_FLAG } else { 0 };
+        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | optional);
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -498,13 +589,23 @@ impl SessionKind for PlotFusionSession {
         if let Some(a) = &u.asterix {
             encode_summary(w, a);
         }
+        if let Some(c) = &u.cat062 {
+            w.bytes(&c.data);
+            for n in [c.blocks, c.records, c.skipped, c.saturated] {
+                w.usize(n);
+            }
+        }
     }
 
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
         let frames = r.u32()?;
         let has_asterix = frames & ASTERIX_FLAG != 0;
-        let with_modes = frames & MODES_FLAG != 0;
-        let frames = frames & !(ASTERIX_FLAG | MODES_FLAG);
+        let has_cat062 = frames & CAT062_FLAG != 0;
+        let fields = TrackFields {
+            modes: frames & MODES_FLAG != 0,
+            provenance: frames & PROVENANCE_FLAG != 0,
+        };
+        let frames = frames & !FLAGS;
         let pending_plots = r.u32()?;
         let n = r.len(4)?;
         let late_plots = (0..n).map(|_| r.u32()).collect::<Result<_, _>>()?;
@@ -516,12 +617,12 @@ impl SessionKind for PlotFusionSession {
                 .ok_or_else(|| corrupt("track change"))?;
             tracks.push(ChangedTrack {
                 change,
-                track: decode_track(r, with_modes)?,
+                track: decode_track(r, fields)?,
             });
         }
         let n = r.len(8)?;
         let deleted = (0..n)
-            .map(|_| decode_track(r, with_modes))
+            .map(|_| decode_track(r, fields))
             .collect::<Result<_, _>>()?;
         let n = r.len(8)?;
         let dropped = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
@@ -535,6 +636,22 @@ impl SessionKind for PlotFusionSession {
             counters: decode_counters(r)?.into(),
             asterix: if has_asterix {
                 Some(decode_summary(r)?)
+            } else {
+                None
+            },
+            cat062: if has_cat062 {
+                let data = r.bytes()?;
+                let mut n = [0usize; 4];
+                for x in &mut n {
+                    *x = r.usize()?;
+                }
+                Some(Cat062Data {
+                    data,
+                    blocks: n[0],
+                    records: n[1],
+                    skipped: n[2],
+                    saturated: n[3],
+                })
             } else {
                 None
             },
@@ -636,6 +753,7 @@ mod tests {
                 })
                 .collect(),
             tracker: Default::default(),
+            cat062: None,
         }
     }
 
@@ -787,13 +905,25 @@ mod tests {
         let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
         assert_eq!(back.network.radar_of_source((25, 1)), None);
         assert_eq!(back.network.radar_ids, session.network.radar_ids);
+        // Format 2, as the release before CAT062 out wrote it: no option.
+        let mut v2 = Writer::default();
+        v2.u8(2);
+        session.network.encode(&mut v2);
+        v2.bytes(&encode_tracker(&session.tracker));
+        session.network.encode_sources(&mut v2);
+        let back = PlotFusionSession::decode(&mut Reader::new(&v2.buf)).unwrap();
+        assert_eq!(back.network.radar_of_source((25, 1)), Some(0));
+        assert_eq!(back.cat062, None);
         // An update with an ASTERIX summary round-trips; one without has
         // bit 31 of frames clear (bit 30 says its tracks carry modes).
         let mut update = session.acknowledgement();
         update.frames = 3;
         let mut plain = Writer::default();
         PlotFusionSession::encode_update(&update, &mut plain);
-        assert_eq!(plain.buf[..4], (3u32 | MODES_FLAG).to_le_bytes());
+        assert_eq!(
+            plain.buf[..4],
+            (3u32 | MODES_FLAG | PROVENANCE_FLAG).to_le_bytes()
+        );
         // An update kept by the release before the IMM (no bit 30, tracks
         // without modes) still reads.
         let mut before = plain.buf.clone();

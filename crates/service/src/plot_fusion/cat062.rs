@@ -1,0 +1,375 @@
+//! CAT062 out: the service's tracks as ASTERIX system track messages
+//! (`formats::cat062`, edition 1.20), for the batch call (`cat062`), the
+//! `plot_fusion` session's updates and the ASTERIX UDP output.
+//!
+//! What each item holds, from a [`TrackView`] and the [`Network`]:
+//! - I062/010 the request's `cat062.sac`/`sic`; I062/015 its `service_id`.
+//! - I062/040 track number: the track id modulo 2¹⁶, stable for the
+//!   track's life; numbers are reused only after 65,536 later tracks.
+//! - I062/070 time of track information: `(t − day_start_t) mod 86,400 s`,
+//!   where `t` is the track's time (its last frame) and `day_start_t`
+//!   (default 0) the midnight UTC of the plots' time scale: plot times in
+//!   Unix seconds need no option.
+//! - I062/105 WGS-84 latitude/longitude as the JSON's `lat_deg`/`lon_deg`;
+//!   I062/100 x, y and I062/185 vx, vy in the fusion frame (ENU about the
+//!   origin: x east, y north), the JSON's state.
+//! - I062/130 geometric altitude: the 3D track's `height_m` (WGS-84
+//!   ellipsoidal, not barometric; 2D tracks send none), with I062/080 SRC
+//!   "3D radar"; I062/220 the rate of change of that height, dh/dt = ∇h·v
+//!   (the local vertical, not the fusion frame's `vz`, which differs by the
+//!   angle d/R at distance d from the origin).
+//! - I062/080: CNF for a tentative track, TSB on a session's first record
+//!   of a track, TSE on its last (deletion), CST when the track missed its
+//!   last frame (`consecutive_misses > 0`), MON when the network has a
+//!   single radar. PSR/SSR/MDS age flags are not set.
+//! - I062/290: TRK = t − `start_t`, PSR = t − `last_update_t` (the radars
+//!   are treated as primary surveillance radars: plots carry no SSR or
+//!   Mode S code).
+//! - I062/500 from the covariance P: APC √P_xx, √P_yy; COV P_xy; ATV √P_vxvx,
+//!   √P_vyvy; APW and AGA by first-order propagation J P Jᵀ through the
+//!   Jacobian J of (lat, lon, h) by (e, n, u) at the track's position
+//!   (central differences over ±1 m); ARC likewise for dh/dt (3D only).
+//! - I062/340: SID (the radar's `sac`/`sic`, when declared) and POS (the
+//!   plot's range and azimuth) of `last_plot`, when the last update was one
+//!   radar's plot. HEIGHT is not written.
+//!
+//! A value outside its item's range is left out and counted (the encoder's
+//! `skipped`); the warnings say how many, with the first reason.
+
+use formats::cat062::{
+    self, Accuracy, AltitudeSource, Cat062Config, Encoded, LastMeasurement, SystemTrack,
+    TrackStatusFlags, UpdateAges,
+};
+use formats::wire::{FormatError, Reader, Writer};
+
+use super::{Network, TrackView};
+use crate::{ServiceError, validate::Violations};
+
+/// Smallest `max_block_bytes`: a block header and a small record.
+pub const MIN_BLOCK_BYTES: u32 = 64;
+/// Default `max_block_bytes`: [`cat062::DEFAULT_MAX_BLOCK`], which fits a
+/// UDP datagram on any Ethernet path.
+pub const DEFAULT_BLOCK_BYTES: u32 = cat062::DEFAULT_MAX_BLOCK as u32;
+
+/// The `cat062` option as given.
+#[derive(Debug, Clone, Default)]
+pub struct Cat062Input {
+    pub sac: Option<u32>,
+    pub sic: Option<u32>,
+    pub service_id: Option<u32>,
+    /// Midnight UTC in the plots' time scale (s); default 0 (Unix time).
+    pub day_start_t: Option<f64>,
+    /// Largest data block (bytes); default 1,024.
+    pub max_block_bytes: Option<u32>,
+}
+
+/// The `cat062` option, checked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cat062Options {
+    pub config: Cat062Config,
+    pub day_start_t: f64,
+    pub max_block_bytes: usize,
+}
+
+/// What a record says of its track's life (I062/080 TSB, TSE).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Life {
+    /// Neither the first nor the last message.
+    Continuing,
+    /// The first record of the track sent to this receiver.
+    First,
+    /// The last record: the track is deleted.
+    End,
+}
+
+/// Encoded records: the data blocks concatenated (each is self-delimiting
+/// by its LEN), and what the encoder could not write as given.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Cat062Data {
+    pub data: Vec<u8>,
+    pub blocks: usize,
+    pub records: usize,
+    /// Values left out (out of range or not finite).
+    pub skipped: usize,
+    /// Values written as their subfield's maximum ("or above").
+    pub saturated: usize,
+}
+
+/// Checks the option (`field` is its path, `cat062`): SAC and SIC
+/// required, each 0 to 255; service id 0 to 255; `day_start_t` finite;
+/// `max_block_bytes` 64 to 65,535; and the network must have a WGS-84
+/// frame (I062/105).
+pub fn validate(
+    input: &Cat062Input,
+    network: &Network,
+    field: &str,
+) -> Result<Cat062Options, ServiceError> {
+    let mut v = Violations::new();
+    let mut byte = |name: &str, x: Option<u32>, required: bool| -> Option<u8> {
+        let path = format!("{field}.{name}");
+        match x {
+            None if required => {
+                v.add(path, "is required (0 to 255)");
+                None
+            }
+            None => None,
+            Some(x) => match u8::try_from(x) {
+                Ok(b) => Some(b),
+                Err(_) => {
+                    v.add(path, format!("must be 0 to 255, got {x}"));
+                    None
+                }
+            },
+        }
+    };
+    let sac = byte("sac", input.sac, true);
+    let sic = byte("sic", input.sic, true);
+    let service_id = byte("service_id", input.service_id, false);
+    let day_start_t = input.day_start_t.unwrap_or(0.0);
+    if !day_start_t.is_finite() {
+        v.add(format!("{field}.day_start_t"), "must be finite");
+    }
+    let max_block = input.max_block_bytes.unwrap_or(DEFAULT_BLOCK_BYTES);
+    if !(MIN_BLOCK_BYTES..=cat062::MAX_BLOCK_LEN as u32).contains(&max_block) {
+        v.add(
+            format!("{field}.max_block_bytes"),
+            format!(
+                "must be {MIN_BLOCK_BYTES} to {} (a data block's LEN), got {max_block}",
+                cat062::MAX_BLOCK_LEN
+            ),
+        );
+    }
+    if network.frame.is_none() {
+        v.add(
+            field,
+            "CAT062 needs WGS-84 positions (I062/105): give `origin`, or a radar site in \
+             `geodetic`",
+        );
+    }
+    v.finish()?;
+    let (Some(sac), Some(sic)) = (sac, sic) else {
+        return Err(ServiceError::Internal(
+            "cat062 checked without SAC/SIC".into(),
+        ));
+    };
+    Ok(Cat062Options {
+        config: Cat062Config {
+            sac,
+            sic,
+            service_id,
+        },
+        day_start_t,
+        max_block_bytes: max_block as usize,
+    })
+}
+
+/// Encodes one record per track, in order, into blocks of at most
+/// `max_block_bytes`; the warnings say what was left out or saturated.
+pub fn encode(
+    options: &Cat062Options,
+    network: &Network,
+    tracks: &[(&TrackView, Life)],
+    warnings: &mut Vec<String>,
+) -> Cat062Data {
+    let records: Vec<SystemTrack> = tracks
+        .iter()
+        .map(|(t, life)| system_track(options, network, t, *life))
+        .collect();
+    let encoded = cat062::encode_records(&options.config, &records, options.max_block_bytes);
+    let out = summarise(&encoded, tracks, warnings);
+    Cat062Data {
+        data: encoded.blocks.concat(),
+        blocks: encoded.blocks.len(),
+        ..out
+    }
+}
+
+fn summarise(e: &Encoded, tracks: &[(&TrackView, Life)], warnings: &mut Vec<String>) -> Cat062Data {
+    let dropped: std::collections::BTreeSet<usize> = e
+        .skipped
+        .iter()
+        .filter(|s| s.record_dropped)
+        .map(|s| s.track_index)
+        .collect();
+    let first_of = |list: &[cat062::Skip]| {
+        list.first().map(|s| {
+            let id = tracks.get(s.track_index).map_or(0, |(t, _)| t.id);
+            format!("track {id}: {}", s.reason)
+        })
+    };
+    if let Some(first) = first_of(&e.skipped) {
+        warnings.push(format!(
+            "cat062: {} value(s) outside their item's range left out, {} track(s) without a \
+             record; first: {first}",
+            e.skipped.len(),
+            dropped.len()
+        ));
+    }
+    if let Some(first) = first_of(&e.saturated) {
+        warnings.push(format!(
+            "cat062: {} value(s) above their subfield's maximum written as the maximum; first: \
+             {first}",
+            e.saturated.len()
+        ));
+    }
+    Cat062Data {
+        data: Vec::new(),
+        blocks: 0,
+        records: tracks.len() - dropped.len(),
+        skipped: e.skipped.len(),
+        saturated: e.saturated.len(),
+    }
+}
+
+/// The CAT062 record of one track (see the module header for each item).
+pub fn system_track(
+    options: &Cat062Options,
+    network: &Network,
+    t: &TrackView,
+    life: Life,
+) -> SystemTrack {
+    let three_d = t.state.len() == 6;
+    let position = [
+        t.state[0],
+        t.state[2],
+        if three_d { t.state[4] } else { 0.0 },
+    ];
+    let velocity = [
+        t.state[1],
+        t.state[3],
+        if three_d { t.state[5] } else { 0.0 },
+    ];
+    let cov = |i: usize, j: usize| t.covariance[i][j];
+    // Indices of e, n, u and their velocities in the state.
+    let pos_ix: &[usize] = if three_d { &[0, 2, 4] } else { &[0, 2] };
+    let vel_ix: &[usize] = if three_d { &[1, 3, 5] } else { &[1, 3] };
+    let jac = network
+        .frame
+        .as_ref()
+        .and_then(|f| geodetic_jacobian(f, position));
+    // σ of a row g of J over the covariance block `ix`: √(g P gᵀ).
+    let spread = |g: &[f64; 3], ix: &[usize]| -> f64 {
+        let mut s = 0.0;
+        for (a, &i) in ix.iter().enumerate() {
+            for (b, &j) in ix.iter().enumerate() {
+                s += g[a] * cov(i, j) * g[b];
+            }
+        }
+        s.max(0.0).sqrt()
+    };
+    let vertical_rate = jac
+        .filter(|_| three_d)
+        .map(|j| (0..3).map(|k| j[2][k] * velocity[k]).sum::<f64>());
+    let height = t.height_m.filter(|_| three_d);
+    let accuracy = Accuracy {
+        xy: Some((cov(0, 0).max(0.0).sqrt(), cov(2, 2).max(0.0).sqrt())),
+        xy_covariance_m2: Some(cov(0, 2)),
+        wgs84: jac.map(|j| (spread(&j[0], pos_ix), spread(&j[1], pos_ix))),
+        geometric_altitude: jac
+            .filter(|_| height.is_some())
+            .map(|j| spread(&j[2], pos_ix)),
+        velocity: Some((cov(1, 1).max(0.0).sqrt(), cov(3, 3).max(0.0).sqrt())),
+        acceleration: None,
+        vertical_rate: jac
+            .filter(|_| vertical_rate.is_some())
+            .map(|j| spread(&j[2], vel_ix)),
+    };
+    let last_measurement = t.last_plot.as_ref().map(|p| LastMeasurement {
+        sensor: network
+            .radar_ids
+            .iter()
+            .position(|id| *id == p.radar)
+            .and_then(|i| network.sources[i]),
+        polar: Some((p.range_m, p.azimuth_deg)),
+        height: None,
+    });
+    SystemTrack {
+        track_number: (t.id % 65_536) as u16,
+        time_of_day: cat062::time_of_day(t.t - options.day_start_t),
+        wgs84: t.lat_deg.zip(t.lon_deg),
+        xy: (t.state[0], t.state[2]),
+        velocity: (t.state[1], t.state[3]),
+        status: TrackStatusFlags {
+            monosensor: network.radar_ids.len() == 1,
+            altitude_source: if height.is_some() {
+                AltitudeSource::Radar3d
+            } else {
+                AltitudeSource::NoSource
+            },
+            tentative: t.status == "tentative",
+            first_message: life == Life::First,
+            last_message: life == Life::End,
+            coasting: t.consecutive_misses > 0,
+            ..TrackStatusFlags::default()
+        },
+        ages: UpdateAges {
+            track: t.start_t.map(|s| t.t - s),
+            psr: Some(t.t - t.last_update_t),
+            ssr: None,
+            mode_s: None,
+        },
+        accuracy: Some(accuracy),
+        height,
+        vertical_rate,
+        last_measurement,
+    }
+}
+
+/// ∂(lat °, lon °, h m)/∂(e, n, u) at `enu`, by central differences of
+/// ±1 m (the second derivatives are of order 1/R ≈ 1.6·10⁻⁷ per metre, so
+/// the truncation error is far below the quantisation of I062/500).
+fn geodetic_jacobian(frame: &algo::geo::LocalFrame, enu: [f64; 3]) -> Option<[[f64; 3]; 3]> {
+    const STEP: f64 = 1.0;
+    let mut j = [[0.0; 3]; 3];
+    for k in 0..3 {
+        let mut plus = enu;
+        let mut minus = enu;
+        plus[k] += STEP;
+        minus[k] -= STEP;
+        let a = frame.enu_to_geodetic(plus).ok()?;
+        let b = frame.enu_to_geodetic(minus).ok()?;
+        let mut dlon = a.1 - b.1;
+        // Across the antimeridian.
+        if dlon > std::f64::consts::PI {
+            dlon -= std::f64::consts::TAU;
+        } else if dlon < -std::f64::consts::PI {
+            dlon += std::f64::consts::TAU;
+        }
+        j[0][k] = (a.0 - b.0).to_degrees() / (2.0 * STEP);
+        j[1][k] = dlon.to_degrees() / (2.0 * STEP);
+        j[2][k] = (a.2 - b.2) / (2.0 * STEP);
+    }
+    Some(j)
+}
+
+/// Stores the checked option (a session's state).
+pub fn encode_options(w: &mut Writer, o: &Cat062Options) {
+    w.u8(o.config.sac);
+    w.u8(o.config.sic);
+    w.opt(o.config.service_id, Writer::u8);
+    w.f64(o.day_start_t);
+    w.u32(o.max_block_bytes as u32);
+}
+
+/// Reads what [`encode_options`] wrote.
+pub fn decode_options(r: &mut Reader<'_>) -> Result<Cat062Options, FormatError> {
+    let sac = r.u8()?;
+    let sic = r.u8()?;
+    let service_id = r.opt(Reader::u8)?;
+    let day_start_t = r.f64()?;
+    let max_block_bytes = r.u32()? as usize;
+    if !day_start_t.is_finite()
+        || !(MIN_BLOCK_BYTES as usize..=cat062::MAX_BLOCK_LEN).contains(&max_block_bytes)
+    {
+        return Err(formats::wire::corrupt("cat062 options"));
+    }
+    Ok(Cat062Options {
+        config: Cat062Config {
+            sac,
+            sic,
+            service_id,
+        },
+        day_start_t,
+        max_block_bytes,
+    })
+}
