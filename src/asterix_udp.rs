@@ -14,10 +14,21 @@
 //! session that has processed none. A frame closes when a later plot
 //! arrives (no flush): the tracks lag one scan group.
 //!
+//! CAT062 out (`--asterix-out-udp ADDR`, off by default): each update of
+//! the session, as its `cat062` field holds it (the spec must carry
+//! `cat062`), is sent as datagrams of whole data blocks, each datagram at
+//! most `--asterix-out-max-datagram` bytes (the spec's
+//! `cat062.max_block_bytes` must not be larger, checked at start). To a
+//! multicast group, with `--asterix-out-ttl` and from
+//! `--asterix-out-interface`. A batch whose push failed sends nothing.
+//!
 //! Counters in `/metrics`: `fusion_asterix_datagrams_total`,
 //! `fusion_asterix_records_total`, `fusion_asterix_plots_total`,
 //! `fusion_asterix_decode_errors_total`, `fusion_asterix_late_plots_total`,
-//! `fusion_asterix_push_failures_total`.
+//! `fusion_asterix_push_failures_total`; out: `fusion_cat062_datagrams_total`,
+//! `fusion_cat062_records_total`, `fusion_cat062_skipped_total` (values
+//! left out of a record, out of their item's range),
+//! `fusion_cat062_send_failures_total`.
 
 use std::{
     net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket as StdUdpSocket},
@@ -67,6 +78,10 @@ pub async fn spawn(
     let spec = parse_spec(&json)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--asterix-session-spec {}", path.display()))?;
+    let out = match settings.asterix_out_udp {
+        Some(to) => Some(Out::open(&settings, &spec, to)?),
+        None => None,
+    };
     let socket = bind(addr, settings.asterix_interface)
         .with_context(|| format!("binding the ASTERIX UDP address {addr}"))?;
     let listener = Listener {
@@ -74,6 +89,7 @@ pub async fn spawn(
         tenant: settings.asterix_tenant.clone(),
         id: settings.asterix_session_id.clone(),
         spec,
+        out,
     };
     listener.ensure_session().await;
     tracing::info!(
@@ -110,6 +126,105 @@ struct Listener {
     tenant: String,
     id: String,
     spec: Spec<SpecInput>,
+    out: Option<Out>,
+}
+
+/// Where CAT062 goes.
+struct Out {
+    socket: UdpSocket,
+    to: SocketAddr,
+    max_datagram: usize,
+}
+
+impl Out {
+    fn open(
+        settings: &crate::config::Settings,
+        spec: &Spec<SpecInput>,
+        to: SocketAddr,
+    ) -> anyhow::Result<Self> {
+        let Some(cat062) = &spec.body.cat062 else {
+            anyhow::bail!(
+                "--asterix-out-udp needs `cat062` (sac, sic) in --asterix-session-spec: the \
+                 fusion centre's SAC/SIC for I062/010"
+            );
+        };
+        let block = cat062
+            .max_block_bytes
+            .unwrap_or(service::plot_fusion::cat062::DEFAULT_BLOCK_BYTES)
+            as usize;
+        let max_datagram = settings.asterix_out_max_datagram;
+        if block > max_datagram {
+            anyhow::bail!(
+                "cat062.max_block_bytes ({block}) of --asterix-session-spec is larger than \
+                 --asterix-out-max-datagram ({max_datagram}): a block would not fit a datagram"
+            );
+        }
+        let local: SocketAddr = match to {
+            SocketAddr::V4(_) => (Ipv4Addr::UNSPECIFIED, 0).into(),
+            SocketAddr::V6(_) => (Ipv6Addr::UNSPECIFIED, 0).into(),
+        };
+        let s = StdUdpSocket::bind(local)
+            .with_context(|| format!("binding a socket to send CAT062 to {to}"))?;
+        match to.ip() {
+            IpAddr::V4(group) if group.is_multicast() => {
+                s.set_multicast_ttl_v4(settings.asterix_out_ttl)
+                    .context("--asterix-out-ttl")?;
+                socket2::SockRef::from(&s)
+                    .set_multicast_if_v4(&settings.asterix_out_interface)
+                    .context("--asterix-out-interface")?;
+            }
+            IpAddr::V6(group) if group.is_multicast() => {
+                // The hop limit of IPv6 multicast is the system's default.
+            }
+            _ => {
+                s.set_ttl(settings.asterix_out_ttl.max(1))
+                    .context("--asterix-out-ttl")?;
+            }
+        }
+        s.set_nonblocking(true)?;
+        tracing::info!(%to, max_datagram, "sending CAT062 datagrams");
+        Ok(Self {
+            socket: UdpSocket::from_std(s)?,
+            to,
+            max_datagram,
+        })
+    }
+
+    /// Sends the update's CAT062 blocks, packed into datagrams.
+    async fn send(&self, c: &service::plot_fusion::cat062::Cat062Data) {
+        metrics::counter!("fusion_cat062_records_total").increment(c.records as u64);
+        metrics::counter!("fusion_cat062_skipped_total").increment(c.skipped as u64);
+        for datagram in datagrams(&c.data, self.max_datagram) {
+            match self.socket.send_to(datagram, self.to).await {
+                Ok(_) => metrics::counter!("fusion_cat062_datagrams_total").increment(1),
+                Err(e) => {
+                    metrics::counter!("fusion_cat062_send_failures_total").increment(1);
+                    tracing::warn!(error = %e, to = %self.to, "CAT062 datagram not sent");
+                }
+            }
+        }
+    }
+}
+
+/// Consecutive whole data blocks (each `CAT | LEN | …`, LEN big-endian
+/// and counting the whole block) grouped into slices of at most `max`
+/// bytes; a block larger than `max` alone in its slice.
+pub fn datagrams(data: &[u8], max: usize) -> Vec<&[u8]> {
+    let mut out = Vec::new();
+    let (mut start, mut at) = (0, 0);
+    while at + 3 <= data.len() {
+        let len = usize::from(u16::from_be_bytes([data[at + 1], data[at + 2]])).max(3);
+        let end = (at + len).min(data.len());
+        if end - start > max && at > start {
+            out.push(&data[start..at]);
+            start = at;
+        }
+        at = end;
+    }
+    if at > start {
+        out.push(&data[start..at]);
+    }
+    out
 }
 
 impl Listener {
@@ -186,6 +301,9 @@ impl Listener {
         }
         match result {
             Ok(update) => {
+                if let (Some(out), Some(c)) = (&self.out, &update.body.cat062) {
+                    out.send(c).await;
+                }
                 if let Some(a) = update.body.asterix {
                     metrics::counter!("fusion_asterix_records_total").increment(a.records as u64);
                     metrics::counter!("fusion_asterix_plots_total").increment(a.plots as u64);

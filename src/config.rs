@@ -228,6 +228,23 @@ pub struct Settings {
     /// the system's choice).
     #[arg(long, env = "FUSION_ASTERIX_INTERFACE", default_value = "0.0.0.0")]
     pub asterix_interface: std::net::Ipv4Addr,
+    /// Send the ASTERIX session's updates as CAT062 datagrams to this
+    /// address (unicast or a multicast group); needs `--asterix-udp` and a
+    /// session spec with `cat062`. Off by default.
+    #[arg(long, env = "FUSION_ASTERIX_OUT_UDP")]
+    pub asterix_out_udp: Option<SocketAddr>,
+    /// Largest CAT062 datagram (bytes): whole data blocks are packed into
+    /// datagrams up to this size; the spec's `cat062.max_block_bytes` must
+    /// not exceed it. 1,472 is the UDP payload of a 1,500-byte Ethernet MTU.
+    #[arg(long, env = "FUSION_ASTERIX_OUT_MAX_DATAGRAM", default_value_t = 1472)]
+    pub asterix_out_max_datagram: usize,
+    /// Multicast TTL (hops) of the CAT062 datagrams.
+    #[arg(long, env = "FUSION_ASTERIX_OUT_TTL", default_value_t = 1)]
+    pub asterix_out_ttl: u32,
+    /// IPv4 interface address that sends to an IPv4 multicast group
+    /// (0.0.0.0: the system's choice).
+    #[arg(long, env = "FUSION_ASTERIX_OUT_INTERFACE", default_value = "0.0.0.0")]
+    pub asterix_out_interface: std::net::Ipv4Addr,
     /// Serve TLS on both ports with this PEM certificate chain (the server's
     /// certificate first); needs `--tls-key`. Without both: plaintext.
     #[arg(long, env = "FUSION_TLS_CERT")]
@@ -393,6 +410,25 @@ impl Settings {
                 "--asterix-udp needs --asterix-session-spec (the plot_fusion session to feed)"
                     .into(),
             );
+        }
+        if self.asterix_out_udp.is_some() && self.asterix_udp.is_none() {
+            return Err(
+                "--asterix-out-udp needs --asterix-udp (it sends that listener's session's \
+                 tracks)"
+                    .into(),
+            );
+        }
+        if !(64..=65_507).contains(&self.asterix_out_max_datagram) {
+            return Err(format!(
+                "--asterix-out-max-datagram must be 64 to 65507 bytes (a UDP payload), not {}",
+                self.asterix_out_max_datagram
+            ));
+        }
+        if self.asterix_out_ttl > 255 {
+            return Err(format!(
+                "--asterix-out-ttl must be 0 to 255, not {}",
+                self.asterix_out_ttl
+            ));
         }
         self.validate_tls()?;
         let id = &self.asterix_session_id;

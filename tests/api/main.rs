@@ -4,6 +4,7 @@
 mod ais_radar;
 mod asterix;
 mod auth;
+mod cat062;
 mod compression;
 mod connections;
 mod correlation;

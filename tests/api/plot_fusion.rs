@@ -187,7 +187,7 @@ async fn client(app: &TestApp) -> PlotFusionServiceClient<tonic::transport::Chan
 }
 
 /// The JSON request as its protobuf twin.
-fn proto_request(req: &Value) -> pb::PlotFusionRequest {
+pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
     let o = |v: &Value| v.as_f64();
     pb::PlotFusionRequest {
         cat062: req.get("cat062").map(|c| {

@@ -1,0 +1,443 @@
+//! CAT062 out through the real servers: the batch call's `cat062`, gRPC's
+//! bytes, a session's updates, bad options. The records are read by
+//! [`decode`], a reader written here from the CAT062 1.20 specification
+//! (UAP, item sizes, compound and extended items), not from the encoder;
+//! libasterix is the full oracle (`checks/cat062_service_oracle.sh`).
+
+use base64::Engine as _;
+use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
+use serde_json::{Value, json};
+
+#[path = "../common/plot_scene.rs"]
+mod plot_scene;
+
+use crate::helpers::{assert_problem, problem_fields, spawn_app};
+
+/// What the tests read of one record.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub(crate) struct Record {
+    pub sac_sic: Option<(u8, u8)>,
+    pub service_id: Option<u8>,
+    /// I062/070, seconds.
+    pub time_of_day: Option<f64>,
+    /// I062/105, degrees.
+    pub lat_lon: Option<(f64, f64)>,
+    /// I062/100, metres.
+    pub xy: Option<(f64, f64)>,
+    /// I062/185, m/s.
+    pub velocity: Option<(f64, f64)>,
+    pub track_number: Option<u16>,
+    /// I062/080 octets.
+    pub status: Vec<u8>,
+    /// I062/290 PSR age, s.
+    pub psr_age: Option<f64>,
+    /// I062/290 TRK age, s.
+    pub track_age: Option<f64>,
+    /// I062/130, ft.
+    pub altitude_ft: Option<f64>,
+    /// I062/500 APC (x, y), m.
+    pub apc: Option<(f64, f64)>,
+    /// I062/340 SID.
+    pub sensor: Option<(u8, u8)>,
+    /// I062/340 POS (NM, °).
+    pub polar: Option<(f64, f64)>,
+}
+
+impl Record {
+    /// I062/080 CNF (bit 2 of the first octet): tentative.
+    pub(crate) fn tentative(&self) -> bool {
+        self.status.first().is_some_and(|o| o & 0x02 != 0)
+    }
+    /// TSE (bit 7 of the first extension): the last message.
+    pub(crate) fn last_message(&self) -> bool {
+        self.status.get(1).is_some_and(|o| o & 0x40 != 0)
+    }
+    /// TSB (bit 6 of the first extension): the first message.
+    pub(crate) fn first_message(&self) -> bool {
+        self.status.get(1).is_some_and(|o| o & 0x20 != 0)
+    }
+}
+
+fn i24(b: &[u8]) -> i64 {
+    let v = (i64::from(b[0]) << 16) | (i64::from(b[1]) << 8) | i64::from(b[2]);
+    if v & 0x80_0000 != 0 {
+        v - 0x100_0000
+    } else {
+        v
+    }
+}
+fn i16be(b: &[u8]) -> f64 {
+    f64::from(i16::from_be_bytes([b[0], b[1]]))
+}
+fn i32be(b: &[u8]) -> f64 {
+    f64::from(i32::from_be_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+/// An FSPEC-like field: octets while bit 1 (FX) is set; the bits present,
+/// numbered from 1 (bit 8 of the first octet).
+fn presence(data: &[u8], at: &mut usize) -> Vec<bool> {
+    let mut bits = Vec::new();
+    loop {
+        let o = data[*at];
+        *at += 1;
+        for b in (1..8).rev() {
+            bits.push(o & (1 << b) != 0);
+        }
+        if o & 1 == 0 {
+            return bits;
+        }
+    }
+}
+
+/// A compound item: its primary subfield, then the subfields present, of
+/// the sizes given (in order).
+fn compound<'a>(data: &'a [u8], at: &mut usize, sizes: &[usize]) -> Vec<Option<&'a [u8]>> {
+    let present = presence(data, at);
+    let mut out = Vec::new();
+    for (i, &size) in sizes.iter().enumerate() {
+        if present.get(i).copied().unwrap_or(false) {
+            out.push(Some(&data[*at..*at + size]));
+            *at += size;
+        } else {
+            out.push(None);
+        }
+    }
+    out
+}
+
+/// Every record of every CAT062 data block in `data`. Panics on anything
+/// the service must not write (another category, a LEN that does not
+/// match, an item this reader does not know).
+pub(crate) fn decode(data: &[u8]) -> Vec<Record> {
+    let mut records = Vec::new();
+    let mut block = 0;
+    while block < data.len() {
+        assert_eq!(data[block], 62, "category at {block}");
+        let len = usize::from(u16::from_be_bytes([data[block + 1], data[block + 2]]));
+        assert!(len > 3 && block + len <= data.len(), "LEN {len} at {block}");
+        let end = block + len;
+        let mut at = block + 3;
+        while at < end {
+            records.push(record(data, &mut at));
+        }
+        assert_eq!(at, end, "records fill the block at {block}");
+        block = end;
+    }
+    records
+}
+
+fn record(data: &[u8], at: &mut usize) -> Record {
+    let fspec = presence(data, at);
+    let mut r = Record::default();
+    for (i, present) in fspec.iter().enumerate() {
+        if !present {
+            continue;
+        }
+        let frn = i + 1;
+        let take = |at: &mut usize, n: usize| {
+            let s = &data[*at..*at + n];
+            *at += n;
+            s
+        };
+        match frn {
+            1 => {
+                let b = take(at, 2);
+                r.sac_sic = Some((b[0], b[1]));
+            }
+            3 => r.service_id = Some(take(at, 1)[0]),
+            4 => {
+                let b = take(at, 3);
+                let v = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+                r.time_of_day = Some(f64::from(v) / 128.0);
+            }
+            5 => {
+                let b = take(at, 8);
+                let lsb = 180.0 / f64::from(1u32 << 25);
+                r.lat_lon = Some((i32be(&b[0..4]) * lsb, i32be(&b[4..8]) * lsb));
+            }
+            6 => {
+                let b = take(at, 6);
+                r.xy = Some((i24(&b[0..3]) as f64 * 0.5, i24(&b[3..6]) as f64 * 0.5));
+            }
+            7 => {
+                let b = take(at, 4);
+                r.velocity = Some((i16be(&b[0..2]) * 0.25, i16be(&b[2..4]) * 0.25));
+            }
+            12 => {
+                let b = take(at, 2);
+                r.track_number = Some(u16::from_be_bytes([b[0], b[1]]));
+            }
+            13 => loop {
+                let o = take(at, 1)[0];
+                r.status.push(o);
+                if o & 1 == 0 {
+                    break;
+                }
+            },
+            14 => {
+                // TRK PSR SSR MDS ADS(2) ES VDL | UAT LOP MLT, LSB 1/4 s.
+                let s = compound(data, at, &[1, 1, 1, 1, 2, 1, 1, 1, 1, 1]);
+                r.track_age = s[0].map(|b| f64::from(b[0]) / 4.0);
+                r.psr_age = s[1].map(|b| f64::from(b[0]) / 4.0);
+            }
+            18 => r.altitude_ft = Some(i16be(take(at, 2)) * 6.25),
+            20 => {
+                take(at, 2);
+            }
+            27 => {
+                // APC(4) COV(2) APW(4) AGA ABA ATV(2) AA(2) | ARC.
+                let s = compound(data, at, &[4, 2, 4, 1, 1, 2, 2, 1]);
+                r.apc = s[0].map(|b| {
+                    let u = |x: &[u8]| f64::from(u16::from_be_bytes([x[0], x[1]])) * 0.5;
+                    (u(&b[0..2]), u(&b[2..4]))
+                });
+            }
+            28 => {
+                // SID(2) POS(4) HEIGHT(2) MDC(2) MDA(2) TYP(1).
+                let s = compound(data, at, &[2, 4, 2, 2, 2, 1]);
+                r.sensor = s[0].map(|b| (b[0], b[1]));
+                r.polar = s[1].map(|b| {
+                    let rho = f64::from(u16::from_be_bytes([b[0], b[1]])) / 256.0;
+                    let theta = f64::from(u16::from_be_bytes([b[2], b[3]])) * 360.0 / 65_536.0;
+                    (rho, theta)
+                });
+            }
+            other => panic!("FRN {other}: an item the service does not write"),
+        }
+    }
+    r
+}
+
+pub(crate) fn b64_decode(s: &str) -> Vec<u8> {
+    base64::engine::general_purpose::STANDARD
+        .decode(s)
+        .expect("base64")
+}
+
+/// Half an LSB plus rounding noise.
+fn near(a: f64, b: f64, lsb: f64) -> bool {
+    (a - b).abs() <= lsb / 2.0 + 1e-9
+}
+
+/// Checks one record against its JSON track (the specification's LSBs).
+pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
+    let f = |k: &str| track[k].as_f64().unwrap();
+    let id = track["id"].as_u64().unwrap();
+    assert_eq!(rec.sac_sic, Some(sac_sic));
+    assert_eq!(rec.track_number, Some((id % 65_536) as u16), "{track}");
+    let tod = f("t").rem_euclid(86_400.0);
+    let dt = (rec.time_of_day.unwrap() - tod).abs();
+    assert!(
+        dt <= 1.0 / 256.0 + 1e-9 || (86_400.0 - dt) <= 1.0 / 256.0,
+        "{dt}"
+    );
+    let deg = 180.0 / f64::from(1u32 << 25);
+    let (lat, lon) = rec.lat_lon.expect("I062/105");
+    assert!(near(lat, f("lat_deg"), deg), "{lat} vs {}", f("lat_deg"));
+    assert!(near(lon, f("lon_deg"), deg), "{lon} vs {}", f("lon_deg"));
+    let s = |i: usize| track["state"][i].as_f64().unwrap();
+    let (x, y) = rec.xy.expect("I062/100");
+    assert!(
+        near(x, s(0), 0.5) && near(y, s(2), 0.5),
+        "{x} {y} vs {track}"
+    );
+    let (vx, vy) = rec.velocity.expect("I062/185");
+    assert!(near(vx, s(1), 0.25) && near(vy, s(3), 0.25));
+    assert_eq!(rec.tentative(), track["status"] == "tentative");
+    let psr = (f("t") - f("last_update_t")).min(63.75);
+    assert!(near(rec.psr_age.unwrap(), psr, 0.25), "{rec:?}");
+    if let Some(start) = track["start_t"].as_f64() {
+        let trk = (f("t") - start).min(63.75);
+        assert!(near(rec.track_age.unwrap(), trk, 0.25), "{rec:?}");
+    }
+    let p = |i: usize| {
+        track["covariance"][i][i]
+            .as_f64()
+            .unwrap()
+            .sqrt()
+            .min(32_767.5)
+    };
+    let (ax, ay) = rec.apc.expect("I062/500 APC");
+    assert!(near(ax, p(0), 0.5) && near(ay, p(2), 0.5));
+    match track["height_m"].as_f64() {
+        Some(h) => assert!(near(rec.altitude_ft.unwrap(), h / 0.3048, 6.25)),
+        None => assert_eq!(rec.altitude_ft, None),
+    }
+    match track.get("last_plot") {
+        Some(lp) => {
+            let (rho, theta) = rec.polar.expect("I062/340 POS");
+            assert!(near(
+                rho,
+                lp["range_m"].as_f64().unwrap() / 1852.0,
+                1.0 / 256.0
+            ));
+            let az = lp["azimuth_deg"].as_f64().unwrap();
+            let d = (theta - az).abs();
+            assert!(
+                d.min(360.0 - d) <= 360.0 / 65_536.0 / 2.0 + 1e-9,
+                "{theta} vs {az}"
+            );
+        }
+        None => assert_eq!(rec.polar, None),
+    }
+}
+
+fn request_with_cat062() -> Value {
+    let mut req = plot_scene::request(false, 1);
+    req["cat062"] = json!({"sac": 25, "sic": 100, "service_id": 3});
+    req
+}
+
+#[tokio::test]
+async fn the_batch_call_answers_each_track_as_a_cat062_record() {
+    let app = spawn_app().await;
+    let req = request_with_cat062();
+    let out = app.post_ok("/v1/plot-fusion/track", &req).await;
+    let tracks = out["tracks"].as_array().unwrap();
+    assert!(tracks.len() >= 2, "{out}");
+    let records = decode(&b64_decode(out["cat062"].as_str().unwrap()));
+    assert_eq!(records.len(), tracks.len());
+    for (rec, track) in records.iter().zip(tracks) {
+        assert_matches(rec, track, (25, 100));
+        assert_eq!(rec.service_id, Some(3));
+        assert!(!rec.first_message() && !rec.last_message());
+    }
+    // Serial mode (the default): every confirmed track names its last plot.
+    assert!(
+        tracks
+            .iter()
+            .filter(|t| t["status"] == "confirmed")
+            .all(|t| t.get("last_plot").is_some())
+    );
+    // Without the option nothing changes but the field.
+    let mut plain = req.clone();
+    plain.as_object_mut().unwrap().remove("cat062");
+    let without = app.post_ok("/v1/plot-fusion/track", &plain).await;
+    assert!(without.get("cat062").is_none());
+    assert_eq!(without["tracks"], out["tracks"]);
+    // gRPC answers the same bytes.
+    let mut grpc = PlotFusionServiceClient::new(app.channel().await);
+    let p = crate::plot_fusion::proto_request(&req);
+    let answer = grpc.track(p).await.unwrap().into_inner();
+    assert_eq!(
+        answer.cat062.as_deref(),
+        Some(&b64_decode(out["cat062"].as_str().unwrap())[..])
+    );
+}
+
+#[tokio::test]
+async fn blocks_split_at_record_boundaries_under_the_size_asked() {
+    let app = spawn_app().await;
+    let mut req = request_with_cat062();
+    req["cat062"]["max_block_bytes"] = json!(64);
+    let out = app.post_ok("/v1/plot-fusion/track", &req).await;
+    let data = b64_decode(out["cat062"].as_str().unwrap());
+    let mut at = 0;
+    let mut blocks = 0;
+    while at < data.len() {
+        let len = usize::from(u16::from_be_bytes([data[at + 1], data[at + 2]]));
+        // A record (about 60 bytes) alone may pass 64; two never share one.
+        assert_eq!(decode(&data[at..at + len]).len(), 1);
+        at += len;
+        blocks += 1;
+    }
+    assert_eq!(blocks, out["tracks"].as_array().unwrap().len());
+}
+
+#[tokio::test]
+async fn bad_cat062_options_are_named() {
+    let app = spawn_app().await;
+    for (cat062, field) in [
+        (json!({"sac": 256, "sic": 1}), "cat062.sac"),
+        (json!({"sac": 1, "sic": 1000}), "cat062.sic"),
+        (
+            json!({"sac": 1, "sic": 1, "service_id": 256}),
+            "cat062.service_id",
+        ),
+        (
+            json!({"sac": 1, "sic": 1, "max_block_bytes": 10}),
+            "cat062.max_block_bytes",
+        ),
+        (
+            json!({"sac": 1, "sic": 1, "max_block_bytes": 70000}),
+            "cat062.max_block_bytes",
+        ),
+    ] {
+        let mut req = request_with_cat062();
+        req["cat062"] = cat062;
+        let problem = assert_problem(app.post_json("/v1/plot-fusion/track", &req).await, 422).await;
+        assert_eq!(
+            problem_fields(&problem),
+            vec![field.to_string()],
+            "{problem}"
+        );
+    }
+    // Without an origin and with local sites there is no WGS-84 position.
+    let local = json!({
+        "radars": [{"id": "a", "kind": "2d", "site": {"position_m": [0.0, 0.0]},
+                    "sigma_range_m": 50.0, "sigma_azimuth_deg": 0.1,
+                    "scan_period_s": 4.0}],
+        "cat062": {"sac": 1, "sic": 1}
+    });
+    let problem = assert_problem(app.post_json("/v1/plot-fusion/track", &local).await, 422).await;
+    assert_eq!(problem_fields(&problem), vec!["cat062".to_string()]);
+    // A session refuses the same, and holds nothing.
+    let mut create = json!({"kind": "plot_fusion", "cat062": {"sac": 300, "sic": 1}});
+    create["radars"] = request_with_cat062()["radars"].clone();
+    create["origin"] = json!({"lat_deg": 47.0, "lon_deg": 8.0});
+    let problem = assert_problem(app.post_json("/v1/sessions", &create).await, 422).await;
+    assert_eq!(problem_fields(&problem), vec!["cat062.sac".to_string()]);
+    let list = app.get_ok("/v1/sessions").await;
+    assert_eq!(list["sessions"].as_array().map_or(0, Vec::len), 0, "{list}");
+}
+
+#[tokio::test]
+async fn a_session_sends_changed_tracks_first_and_last_messages() {
+    let app = spawn_app().await;
+    let req = request_with_cat062();
+    let mut create = json!({"kind": "plot_fusion"});
+    for k in ["origin", "radars", "cat062"] {
+        create[k] = req[k].clone();
+    }
+    let created = app.post_json("/v1/sessions", &create).await;
+    assert_eq!(created.status(), 201);
+    let created: Value = created.json().await.unwrap();
+    let id = created["id"].as_str().unwrap().to_string();
+    let mut plots: Vec<Value> = req["plots"].as_array().unwrap().clone();
+    plots.sort_by(|a, b| {
+        a["t"]
+            .as_f64()
+            .unwrap()
+            .total_cmp(&b["t"].as_f64().unwrap())
+    });
+    let mut seen = std::collections::HashSet::new();
+    let mut firsts = 0;
+    let chunks: Vec<&[Value]> = plots.chunks(plots.len() / 5 + 1).collect();
+    for (k, chunk) in chunks.iter().enumerate() {
+        let body = json!({"sequence": k + 1, "plots": chunk, "flush": k + 1 == chunks.len()});
+        let u = app
+            .post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+        let u = &u["plot_fusion"];
+        let records = decode(&b64_decode(u["cat062"].as_str().unwrap()));
+        let tracks = u["tracks"].as_array().unwrap();
+        let deleted = u["deleted"].as_array().unwrap();
+        assert_eq!(records.len(), tracks.len() + deleted.len());
+        for (rec, c) in records.iter().zip(tracks) {
+            assert_matches(rec, &c["track"], (25, 100));
+            let initiated = c["change"] == "initiated";
+            assert_eq!(rec.first_message(), initiated, "{c}");
+            // TSB once per track, on its first record.
+            if rec.first_message() {
+                firsts += 1;
+                assert!(seen.insert(rec.track_number), "TSB twice");
+            }
+            assert!(!rec.last_message());
+        }
+        for (rec, t) in records[tracks.len()..].iter().zip(deleted) {
+            assert_matches(rec, t, (25, 100));
+            assert!(rec.last_message(), "TSE for deleted {t}");
+        }
+    }
+    assert!(firsts >= 2);
+}
