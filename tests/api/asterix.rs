@@ -591,3 +591,113 @@ fn confirmed_in(view: &Value) -> usize {
         .filter(|t| t["status"] == "confirmed")
         .count()
 }
+
+#[tokio::test]
+async fn asterix_in_gives_cat062_datagrams_out_on_loopback() {
+    let dir = std::env::temp_dir().join(format!("asterix-out-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec_path = dir.join("session.json");
+    // The radars' local sites about an origin (for I062/105), the fusion
+    // centre's SAC/SIC, blocks of at most 200 bytes in datagrams of 400.
+    std::fs::write(
+        &spec_path,
+        json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker(),
+               "origin": {"lat_deg": 47.45, "lon_deg": 8.56, "height_m": 0.0},
+               "cat062": {"sac": 25, "sic": 200, "max_block_bytes": 200}})
+        .to_string(),
+    )
+    .unwrap();
+    let receiver = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let out = receiver.local_addr().unwrap();
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr: std::net::SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let app = spawn_app_with(|s| {
+        s.asterix_udp = Some(addr);
+        s.asterix_session_spec = Some(spec_path.clone());
+        s.asterix_out_udp = Some(out);
+        s.asterix_out_max_datagram = 400;
+    })
+    .await;
+    let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    for b in blocks() {
+        sender.send_to(b, addr).unwrap();
+    }
+    // Read datagrams until the last record of each confirmed track of the
+    // session's view has the view's state (bounded wait).
+    let id = "00000000000000000000000000000048";
+    let mut last: std::collections::HashMap<u16, crate::cat062::Record> = Default::default();
+    let mut datagrams = 0u64;
+    let mut records = 0usize;
+    let mut buf = vec![0u8; 65_536];
+    let mut done = false;
+    for _ in 0..400 {
+        while let Ok(Ok(n)) = tokio::time::timeout(
+            std::time::Duration::from_millis(20),
+            receiver.recv(&mut buf),
+        )
+        .await
+        {
+            assert!(n <= 400, "datagram of {n} bytes");
+            datagrams += 1;
+            for r in crate::cat062::decode(&buf[..n]) {
+                assert_eq!(r.sac_sic, Some((25, 200)));
+                records += 1;
+                last.insert(r.track_number.unwrap(), r);
+            }
+        }
+        let view = app.get_ok(&format!("/v1/sessions/{id}")).await;
+        let tracks = view["plot_fusion"]["tracks"].as_array().unwrap().clone();
+        let confirmed: Vec<&Value> = tracks
+            .iter()
+            .filter(|t| t["status"] == "confirmed")
+            .collect();
+        let plots = view["plot_fusion"]["counters"]["plots"].as_u64().unwrap();
+        if plots as usize >= json_plots().len()
+            && confirmed.len() == 3
+            && confirmed.iter().all(|t| {
+                last.get(&((t["id"].as_u64().unwrap() % 65_536) as u16))
+                    .is_some_and(|r| {
+                        r.xy.unwrap().0 == (t["state"][0].as_f64().unwrap() * 2.0).round() / 2.0
+                    })
+            })
+        {
+            for t in &confirmed {
+                let r = &last[&((t["id"].as_u64().unwrap() % 65_536) as u16)];
+                crate::cat062::assert_matches(r, t, (25, 200));
+            }
+            done = true;
+            break;
+        }
+    }
+    assert!(
+        done,
+        "the session's confirmed tracks did not all arrive as CAT062"
+    );
+    // Every datagram sent has arrived once the socket stays quiet (no
+    // input is left to push).
+    while let Ok(Ok(n)) = tokio::time::timeout(
+        std::time::Duration::from_millis(300),
+        receiver.recv(&mut buf),
+    )
+    .await
+    {
+        datagrams += 1;
+        records += crate::cat062::decode(&buf[..n]).len();
+    }
+    let metrics = app.metrics_text().await;
+    let value = |name: &str| -> u64 {
+        metrics
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.rsplit(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{name} in {metrics}"))
+    };
+    assert_eq!(value("fusion_cat062_datagrams_total"), datagrams);
+    assert_eq!(value("fusion_cat062_records_total") as usize, records);
+    std::fs::remove_dir_all(&dir).ok();
+}
