@@ -14,6 +14,15 @@ maximum.
     python checks/cat062_oracle.py decode tests/fixtures/cat062/sample.bin
     python checks/cat062_oracle.py compare tests/fixtures/cat062/sample_input.json \
         tests/fixtures/cat062/sample_decoded.json
+    python checks/cat062_oracle.py service tests/fixtures/cat062/service_seed001.json \
+        tests/fixtures/cat062/service_seed001_decoded.json
+
+`service FIXTURE OUT` decodes a service answer's `cat062` (the fixture holds
+the request and the answer, written by `cargo test --test api
+regenerate_the_service_cat062_fixtures -- --ignored`), writes the decoding
+to OUT and compares each record with the JSON track it stands for, from the
+JSON alone (its own WGS-84 geometry for I062/220 and the APW/AGA/ARC
+accuracies).
 
 `decode FILE` writes the JSON to stdout: per data block its offset,
 category and LEN, per record its offset, length, FSPEC (hex) and items;
@@ -315,7 +324,158 @@ def compare(inp, dec):
     return c
 
 
+# --- service: a service answer's cat062 against the answer's JSON --------
+
+A_WGS, F_WGS = 6378137.0, 1 / 298.257223563
+E2 = F_WGS * (2 - F_WGS)
+
+
+def geodetic_to_ecef(lat, lon, h):
+    n = A_WGS / math.sqrt(1 - E2 * math.sin(lat) ** 2)
+    return ((n + h) * math.cos(lat) * math.cos(lon), (n + h) * math.cos(lat) * math.sin(lon),
+            (n * (1 - E2) + h) * math.sin(lat))
+
+
+def ecef_to_geodetic(x, y, z):
+    """Iterative (Heiskanen-Moritz); converges to < 1e-12 rad in a few steps."""
+    lon = math.atan2(y, x)
+    p = math.hypot(x, y)
+    lat = math.atan2(z, p * (1 - E2))
+    for _ in range(10):
+        n = A_WGS / math.sqrt(1 - E2 * math.sin(lat) ** 2)
+        h = p / math.cos(lat) - n
+        lat = math.atan2(z, p * (1 - E2 * n / (n + h)))
+    n = A_WGS / math.sqrt(1 - E2 * math.sin(lat) ** 2)
+    return lat, lon, p / math.cos(lat) - n
+
+
+class Frame:
+    """ENU about a WGS-84 origin (degrees, metres)."""
+
+    def __init__(self, lat_deg, lon_deg, h):
+        self.lat, self.lon = math.radians(lat_deg), math.radians(lon_deg)
+        self.o = geodetic_to_ecef(self.lat, self.lon, h)
+        sl, cl = math.sin(self.lat), math.cos(self.lat)
+        so, co = math.sin(self.lon), math.cos(self.lon)
+        # Rows: east, north, up in ECEF.
+        self.r = [(-so, co, 0.0), (-sl * co, -sl * so, cl), (cl * co, cl * so, sl)]
+
+    def geodetic(self, enu):
+        x = [self.o[k] + sum(self.r[i][k] * enu[i] for i in range(3)) for k in range(3)]
+        lat, lon, h = ecef_to_geodetic(*x)
+        return math.degrees(lat), math.degrees(lon), h
+
+    def jacobian(self, enu):
+        """d(lat deg, lon deg, h m)/d(e, n, u), central differences of 1 m."""
+        j = [[0.0] * 3 for _ in range(3)]
+        for k in range(3):
+            a, b = list(enu), list(enu)
+            a[k] += 1.0
+            b[k] -= 1.0
+            ga, gb = self.geodetic(a), self.geodetic(b)
+            for i in range(3):
+                j[i][k] = (ga[i] - gb[i]) / 2.0
+        return j
+
+
+def service_compare(fixture, dec):
+    """Checks each record against the JSON track it stands for (the
+    fixture's `answer.tracks`, in order), by the rules of
+    docs/plot-fusion.md ("CAT062 out"), from the JSON only."""
+    c = Compare()
+    req, ans = fixture["request"], fixture["answer"]
+    cfg = req["cat062"]
+    day = cfg.get("day_start_t", 0.0)
+    o = req.get("origin")
+    frame = Frame(o["lat_deg"], o["lon_deg"], o.get("height_m", 0.0))
+    sources = {r["id"]: (r.get("sac"), r.get("sic")) for r in req["radars"]}
+    records = [r for b in dec["blocks"] for r in b["records"]]
+    tracks = ans["tracks"]
+    if len(records) != len(tracks):
+        c.fail("-", "records", f"{len(records)} records for {len(tracks)} tracks")
+    wgs = 180.0 / 2 ** 25
+    for t, r in zip(tracks, records):
+        i, it = t["id"], r["items"]
+        s, p = t["state"], t["covariance"]
+        three_d = len(s) == 6
+        c.raw(i, it, ["010", "SAC"], cfg["sac"])
+        c.raw(i, it, ["010", "SIC"], cfg["sic"])
+        c.raw(i, it, ["015"], cfg.get("service_id"))
+        c.raw(i, it, ["040"], t["id"] % 65536)
+        c.value(i, it, ["070"], (t["t"] - day) % 86400.0, 1 / 256, circular=86400.0)
+        c.value(i, it, ["105", "LAT"], t["lat_deg"], wgs / 2)
+        c.value(i, it, ["105", "LON"], t["lon_deg"], wgs / 2)
+        c.value(i, it, ["100", "X"], s[0], 0.25)
+        c.value(i, it, ["100", "Y"], s[2], 0.25)
+        c.value(i, it, ["185", "VX"], s[1], 0.125)
+        c.value(i, it, ["185", "VY"], s[3], 0.125)
+        enu = [s[0], s[2], s[4] if three_d else 0.0]
+        j = frame.jacobian(enu)
+        pos = [0, 2, 4] if three_d else [0, 2]
+        vel = [1, 3, 5] if three_d else [1, 3]
+
+        def spread(row, ix):
+            return math.sqrt(max(0.0, sum(row[a] * p[u][v] * row[b]
+                                          for a, u in enumerate(ix) for b, v in enumerate(ix))))
+
+        if three_d:
+            c.value(i, it, ["130"], t["height_m"] / FT, 3.125)
+            rate = sum(j[2][k] * s[vel[k]] for k in range(3))
+            c.value(i, it, ["220"], rate / FT * 60.0, 3.125)
+        else:
+            c.value(i, it, ["130"], None, 0)
+            c.value(i, it, ["220"], None, 0)
+        c.raw(i, it, ["080", "CNF"], int(t["status"] == "tentative"))
+        c.raw(i, it, ["080", "MON"], int(len(req["radars"]) == 1))
+        c.raw(i, it, ["080", "MRH"], int(three_d))
+        c.raw(i, it, ["080", "SRC"], 2 if three_d else 0)
+        coasting = t["consecutive_misses"] > 0
+        c.raw(i, it, ["080", "CST"], 1 if coasting else None)
+        c.raw(i, it, ["080", "TSE"], None if not coasting else 0)
+        start = t.get("start_t")
+        c.value(i, it, ["290", "TRK"], None if start is None else
+                capped(t["t"] - start, 0.25, 255), 0.125)
+        c.value(i, it, ["290", "PSR"], capped(t["t"] - t["last_update_t"], 0.25, 255), 0.125)
+        c.value(i, it, ["500", "APC", "X"], capped(math.sqrt(p[0][0]), 0.5, 65535), 0.25)
+        c.value(i, it, ["500", "APC", "Y"], capped(math.sqrt(p[2][2]), 0.5, 65535), 0.25)
+        comp = math.copysign(math.sqrt(abs(p[0][2])), p[0][2])
+        c.value(i, it, ["500", "COV"], math.copysign(min(abs(comp), 16383.5), comp), 0.25)
+        c.value(i, it, ["500", "APW", "LAT"], capped(spread(j[0], pos), wgs, 65535), wgs / 2)
+        c.value(i, it, ["500", "APW", "LON"], capped(spread(j[1], pos), wgs, 65535), wgs / 2)
+        c.value(i, it, ["500", "ATV", "X"], capped(math.sqrt(p[1][1]), 0.25, 255), 0.125)
+        c.value(i, it, ["500", "ATV", "Y"], capped(math.sqrt(p[3][3]), 0.25, 255), 0.125)
+        if three_d:
+            c.value(i, it, ["500", "AGA"], capped(spread(j[2], pos) / FT, 6.25, 255), 3.125)
+            c.value(i, it, ["500", "ARC"],
+                    capped(spread(j[2], vel) / FT * 60.0, 6.25, 255), 3.125)
+        lp = t.get("last_plot")
+        sid = sources.get(lp["radar"]) if lp else None
+        sid = sid if sid and sid[0] is not None else None
+        c.raw(i, it, ["340", "SID", "SAC"], None if sid is None else sid[0])
+        c.raw(i, it, ["340", "SID", "SIC"], None if sid is None else sid[1])
+        c.value(i, it, ["340", "POS", "RHO"], None if lp is None else lp["range_m"] / NM,
+                1 / 512)
+        c.value(i, it, ["340", "POS", "THETA"], None if lp is None else lp["azimuth_deg"],
+                360 / 2 ** 17, circular=360.0)
+    return c
+
+
 def main(argv):
+    if len(argv) == 3 and argv[0] == "service":
+        import base64
+        with open(argv[1]) as f:
+            fixture = json.load(f)
+        dec = decode(base64.b64decode(fixture["answer"]["cat062"]))
+        with open(argv[2], "w") as f:
+            json.dump(dec, f, indent=1, ensure_ascii=False)
+            f.write("\n")
+        c = service_compare(fixture, dec)
+        n = sum(len(b["records"]) for b in dec["blocks"])
+        print(f"{argv[1]}: {len(dec['blocks'])} blocks, {n} records, {c.fields} fields "
+              f"compared with the JSON answer, {len(c.mismatches)} mismatches")
+        for m in c.mismatches:
+            print("MISMATCH", m)
+        return 1 if c.mismatches else 0
     if len(argv) == 2 and argv[0] == "decode":
         with open(argv[1], "rb") as f:
             json.dump(decode(f.read()), sys.stdout, indent=1, ensure_ascii=False)

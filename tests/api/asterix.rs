@@ -165,6 +165,15 @@ fn b64(data: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(data)
 }
 
+/// The ASTERIX fixture scene as a batch request for CAT062 out (an origin
+/// for WGS-84 positions, the fusion centre's SAC/SIC).
+pub(crate) fn cat062_request() -> Value {
+    json!({"radars": radars(), "tracker": tracker(),
+           "origin": {"lat_deg": 47.45, "lon_deg": 8.56, "height_m": 0.0},
+           "asterix": {"data": b64(SCENE_BIN), "date": DATE},
+           "cat062": {"sac": 25, "sic": 200, "service_id": 7}})
+}
+
 #[tokio::test]
 async fn the_scene_as_asterix_gives_the_tracks_of_the_scene_as_json_plots() {
     let app = spawn_app().await;

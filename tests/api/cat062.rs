@@ -441,3 +441,97 @@ async fn a_session_sends_changed_tracks_first_and_last_messages() {
     }
     assert!(firsts >= 2);
 }
+
+/// The requests of the libasterix fixtures: the seed-001 scene of the
+/// plot-fusion tests and the ASTERIX fixture scene.
+fn fixture_requests() -> [(&'static str, Value); 2] {
+    [
+        ("service_seed001", request_with_cat062()),
+        ("service_asterix", crate::asterix::cat062_request()),
+    ]
+}
+
+fn fixture_path(name: &str, suffix: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/cat062")
+        .join(format!("{name}{suffix}.json"))
+}
+
+/// Writes each fixture request with the service's answer (tracks and
+/// cat062); then `bash checks/cat062_service_oracle.sh` decodes them with
+/// libasterix, compares and writes `*_decoded.json`.
+#[tokio::test]
+#[ignore = "writes tests/fixtures/cat062/service_*.json"]
+async fn regenerate_the_service_cat062_fixtures() {
+    let app = spawn_app().await;
+    for (name, req) in fixture_requests() {
+        let out = app.post_ok("/v1/plot-fusion/track", &req).await;
+        let fixture = json!({
+            "request": req,
+            "answer": {"tracks": out["tracks"], "cat062": out["cat062"]},
+        });
+        std::fs::write(fixture_path(name, ""), format!("{fixture:#}\n")).unwrap();
+    }
+}
+
+/// libasterix's decoding of the service's CAT062 (committed by
+/// `checks/cat062_service_oracle.sh`, which also compared every field with
+/// the JSON): the service still answers those bytes for those requests,
+/// and libasterix's values are the JSON's (track number, time, position,
+/// velocity, status), within half an LSB.
+#[tokio::test]
+async fn libasterix_reads_what_the_json_answer_says() {
+    let app = spawn_app().await;
+    for (name, req) in fixture_requests() {
+        let read = |suffix: &str| -> Value {
+            let path = fixture_path(name, suffix);
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap())
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        };
+        let fixture = read("");
+        let decoded = read("_decoded");
+        assert_eq!(fixture["request"], req, "{name}: the fixture's request");
+        let out = app.post_ok("/v1/plot-fusion/track", &req).await;
+        assert!(
+            out["cat062"] == fixture["answer"]["cat062"]
+                && out["tracks"] == fixture["answer"]["tracks"],
+            "{name}: the answer changed; regenerate with `cargo test --test api \
+             regenerate_the_service_cat062_fixtures -- --ignored` and `bash \
+             checks/cat062_service_oracle.sh`, and read its verdict"
+        );
+        let records: Vec<&Value> = decoded["blocks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|b| b["records"].as_array().unwrap())
+            .collect();
+        let tracks = out["tracks"].as_array().unwrap();
+        assert_eq!(records.len(), tracks.len(), "{name}");
+        assert!(tracks.len() >= 2, "{name}");
+        let deg = 180.0 / f64::from(1u32 << 25);
+        for (r, t) in records.iter().zip(tracks) {
+            let it = &r["items"];
+            let v = |path: &[&str]| -> f64 {
+                let mut x = it;
+                for k in path {
+                    x = &x[*k];
+                }
+                x["value"].as_f64().or(x["raw"].as_f64()).unwrap()
+            };
+            let f = |k: &str| t[k].as_f64().unwrap();
+            let s = |i: usize| t["state"][i].as_f64().unwrap();
+            assert_eq!(v(&["040"]), (t["id"].as_u64().unwrap() % 65_536) as f64);
+            assert_eq!(v(&["010", "SAC"]), req["cat062"]["sac"].as_f64().unwrap());
+            let tod = f("t").rem_euclid(86_400.0);
+            assert!(
+                (v(&["070"]) - tod).abs() <= 1.0 / 256.0 + 1e-9,
+                "{name} {t}"
+            );
+            assert!(near(v(&["105", "LAT"]), f("lat_deg"), deg));
+            assert!(near(v(&["105", "LON"]), f("lon_deg"), deg));
+            assert!(near(v(&["100", "X"]), s(0), 0.5) && near(v(&["100", "Y"]), s(2), 0.5));
+            assert!(near(v(&["185", "VX"]), s(1), 0.25) && near(v(&["185", "VY"]), s(3), 0.25));
+            assert_eq!(v(&["080", "CNF"]) == 1.0, t["status"] == "tentative");
+        }
+    }
+}
