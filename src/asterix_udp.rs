@@ -79,7 +79,7 @@ pub async fn spawn(
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--asterix-session-spec {}", path.display()))?;
     let out = match settings.asterix_out_udp {
-        Some(to) => Some(Out::open(&settings, &spec, to)?),
+        Some(to) => Some(Out::open(settings, &spec, to)?),
         None => None,
     };
     let socket = bind(addr, settings.asterix_interface)

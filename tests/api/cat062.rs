@@ -8,10 +8,8 @@ use base64::Engine as _;
 use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
 use serde_json::{Value, json};
 
-#[path = "../common/plot_scene.rs"]
-mod plot_scene;
-
 use crate::helpers::{assert_problem, problem_fields, spawn_app};
+use crate::plot_fusion::plot_scene;
 
 /// What the tests read of one record.
 #[derive(Debug, Default, Clone, PartialEq)]

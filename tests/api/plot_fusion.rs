@@ -9,7 +9,7 @@ use serde_json::{Value, json};
 use tonic::Code;
 
 #[path = "../common/plot_scene.rs"]
-mod plot_scene;
+pub(crate) mod plot_scene;
 
 use crate::helpers::{
     TestApp, assert_problem, grpc_fields, problem_fields, spawn_app, spawn_app_with,
@@ -720,7 +720,7 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     let open = pb::CreateSessionRequest {
         kind: "plot_fusion".into(),
         plot_fusion: Some(pb::PlotFusionConfig {
-            cat062: p.cat062.clone(),
+            cat062: p.cat062,
             origin: p.origin,
             radars: p.radars.clone(),
             tracker: p.tracker.clone(),
