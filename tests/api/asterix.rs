@@ -532,6 +532,7 @@ async fn a_rest_session_batch_takes_asterix_and_reports_it() {
 
 #[tokio::test]
 async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
+    let _one_at_a_time = UDP_TESTS.lock().await;
     let dir = std::env::temp_dir().join(format!("asterix-udp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let spec_path = dir.join("session.json");
@@ -552,6 +553,7 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
         s.asterix_session_spec = Some(spec_path.clone());
     })
     .await;
+    let before = app.metrics_text().await;
     let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let id = "00000000000000000000000000000048";
     // One data block per datagram, as a radar sends them; the listener
@@ -576,19 +578,26 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
     let confirmed = confirmed_in(&view);
     assert_eq!(confirmed, 3, "{view}");
     let metrics = app.metrics_text().await;
-    let value = |name: &str| -> u64 {
-        metrics
-            .lines()
-            .find(|l| l.starts_with(name))
-            .and_then(|l| l.rsplit(' ').next())
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("{name} in {metrics}"))
-    };
+    let value = |name: &str| counter(&metrics, name) - counter(&before, name);
     assert_eq!(value("fusion_asterix_datagrams_total") as usize, all.len());
     let records = expected()["records"].as_array().unwrap().len();
     assert_eq!(value("fusion_asterix_records_total") as usize, records);
     assert_eq!(value("fusion_asterix_decode_errors_total"), 0);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The UDP listener tests run one at a time: the metrics recorder is one
+/// per process, so each counts its own datagrams as a difference.
+static UDP_TESTS: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// A counter's value in a `/metrics` text (0 before its first increment).
+fn counter(metrics: &str, name: &str) -> u64 {
+    metrics
+        .lines()
+        .find(|l| l.starts_with(name))
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0)
 }
 
 /// Confirmed tracks in a plot_fusion session's view.
@@ -603,6 +612,7 @@ fn confirmed_in(view: &Value) -> usize {
 
 #[tokio::test]
 async fn asterix_in_gives_cat062_datagrams_out_on_loopback() {
+    let _one_at_a_time = UDP_TESTS.lock().await;
     let dir = std::env::temp_dir().join(format!("asterix-out-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let spec_path = dir.join("session.json");
@@ -631,6 +641,7 @@ async fn asterix_in_gives_cat062_datagrams_out_on_loopback() {
         s.asterix_out_max_datagram = 400;
     })
     .await;
+    let before = app.metrics_text().await;
     let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     for b in blocks() {
         sender.send_to(b, addr).unwrap();
@@ -698,14 +709,7 @@ async fn asterix_in_gives_cat062_datagrams_out_on_loopback() {
         records += crate::cat062::decode(&buf[..n]).len();
     }
     let metrics = app.metrics_text().await;
-    let value = |name: &str| -> u64 {
-        metrics
-            .lines()
-            .find(|l| l.starts_with(name))
-            .and_then(|l| l.rsplit(' ').next())
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("{name} in {metrics}"))
-    };
+    let value = |name: &str| counter(&metrics, name) - counter(&before, name);
     assert_eq!(value("fusion_cat062_datagrams_total"), datagrams);
     assert_eq!(value("fusion_cat062_records_total") as usize, records);
     std::fs::remove_dir_all(&dir).ok();
