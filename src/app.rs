@@ -179,6 +179,9 @@ impl Application {
             watcher.abort();
         }
         set_health(&health, false, false).await;
+        // Watches end with an `end` event of reason `shutdown` instead of
+        // holding their connections open through the drain.
+        state.sessions().events().close();
         let _ = stop_tx.send(true);
 
         let grace = state.settings().shutdown_grace();

@@ -185,6 +185,21 @@ pub struct Settings {
     /// compare-and-set on the version still guards every write.
     #[arg(long, env = "FUSION_SESSION_CACHE_BYTES", default_value_t = 256 * 1024 * 1024)]
     pub session_cache_bytes: usize,
+    /// Most watchers (`GET /v1/sessions/{id}/events`, gRPC `Watch`) of one
+    /// session on one replica; 429 beyond.
+    #[arg(long, env = "FUSION_WATCHERS_PER_SESSION", default_value_t = 32)]
+    pub watchers_per_session: usize,
+    /// Most watchers of one tenant's sessions on one replica; 429 beyond.
+    #[arg(long, env = "FUSION_WATCHERS_PER_TENANT", default_value_t = 128)]
+    pub watchers_per_tenant: usize,
+    /// Events a watcher may fall behind before it is dropped (an `end` of
+    /// reason `slow`).
+    #[arg(long, env = "FUSION_WATCH_BUFFER", default_value_t = 256)]
+    pub watch_buffer: usize,
+    /// Seconds of quiet after which a watcher gets a heartbeat (and the
+    /// session is checked to be alive).
+    #[arg(long, env = "FUSION_WATCH_HEARTBEAT_S", default_value_t = 15.0)]
+    pub watch_heartbeat_s: f64,
     /// Longest time one session-store (Redis) command may take before it fails.
     #[arg(long, env = "FUSION_STORE_TIMEOUT_S", default_value_t = 1.0)]
     pub store_timeout_s: f64,
@@ -329,6 +344,16 @@ impl Settings {
         }
     }
 
+    pub fn watch_limits(&self) -> service::session::events::WatchLimits {
+        service::session::events::WatchLimits {
+            per_session: self.watchers_per_session,
+            per_tenant: self.watchers_per_tenant,
+            buffer: self.watch_buffer,
+            history: 64,
+            heartbeat: Duration::from_secs_f64(self.watch_heartbeat_s),
+        }
+    }
+
     pub fn request_timeout(&self) -> Duration {
         Duration::from_secs_f64(self.request_timeout_s)
     }
@@ -404,6 +429,21 @@ impl Settings {
         }
         if self.max_sessions_per_tenant == 0 {
             return Err("--max-sessions-per-tenant must be at least 1".into());
+        }
+        if self.watchers_per_session == 0 || self.watchers_per_tenant == 0 || self.watch_buffer == 0
+        {
+            return Err(
+                "--watchers-per-session, --watchers-per-tenant and --watch-buffer                  (FUSION_WATCHERS_PER_SESSION, FUSION_WATCHERS_PER_TENANT, FUSION_WATCH_BUFFER)                  must be at least 1"
+                    .into(),
+            );
+        }
+        if !(self.watch_heartbeat_s.is_finite()
+            && (0.05..=3600.0).contains(&self.watch_heartbeat_s))
+        {
+            return Err(format!(
+                "--watch-heartbeat-s (FUSION_WATCH_HEARTBEAT_S) must be in [0.05, 3600], not {}",
+                self.watch_heartbeat_s
+            ));
         }
         if self.asterix_udp.is_some() && self.asterix_session_spec.is_none() {
             return Err(

@@ -35,7 +35,11 @@ impl AppState {
         metrics: PrometheusHandle,
         store: SessionStore,
     ) -> Self {
-        let sessions = Sessions::new(store, settings.session_cache_bytes);
+        let sessions = Sessions::with_watch_limits(
+            store,
+            settings.session_cache_bytes,
+            settings.watch_limits(),
+        );
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {

@@ -970,3 +970,82 @@ async fn a_stream_batch_past_the_request_timeout_answers_deadline_exceeded_and_t
         (Some(3), Some(4))
     );
 }
+
+/// Reads the next SSE event (name, id, data) of a streaming response,
+/// heartbeat comments skipped.
+async fn next_sse(response: &mut reqwest::Response, buf: &mut String) -> (String, u64, Value) {
+    loop {
+        if let Some(i) = buf.find("\n\n") {
+            let block: String = buf.drain(..i + 2).collect();
+            let (mut event, mut id, mut data) = (String::new(), 0, String::new());
+            for line in block.lines() {
+                if let Some(v) = line.strip_prefix("event:") {
+                    event = v.trim().into();
+                } else if let Some(v) = line.strip_prefix("id:") {
+                    id = v.trim().parse().unwrap();
+                } else if let Some(v) = line.strip_prefix("data:") {
+                    data.push_str(v.trim_start());
+                }
+            }
+            if !data.is_empty() {
+                return (event, id, serde_json::from_str(&data).unwrap());
+            }
+            continue;
+        }
+        let chunk = tokio::time::timeout(Duration::from_secs(20), response.chunk())
+            .await
+            .expect("an event within 20 s")
+            .unwrap()
+            .expect("the stream is open");
+        buf.push_str(&String::from_utf8_lossy(&chunk).replace("\r\n", "\n"));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_watcher_on_one_instance_sees_every_update_pushed_on_either_in_order() {
+    if !redis_is_up() {
+        return;
+    }
+    let (a, b) = two_instances(&redis_url(), |_| {}).await;
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let mut watch = b
+        .client
+        .get(b.url(&format!("/v1/sessions/{id}/events")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(watch.status(), 200);
+    let mut buf = String::new();
+    let (event, version, _) = next_sse(&mut watch, &mut buf).await;
+    assert_eq!((event.as_str(), version), ("snapshot", 1));
+    let bodies = batch_bodies(&reports);
+    let mut answers = Vec::new();
+    for (i, body) in bodies.iter().enumerate() {
+        let to = if i % 2 == 0 { &a } else { &b };
+        answers.push(to.push(&id, body).await);
+    }
+    // Every update, as its push answered it, in version order; a gap is
+    // filled by a snapshot (pub/sub may lose a message), never skipped.
+    let last = bodies.len() as u64 + 1;
+    let mut seen = 1;
+    while seen < last {
+        let (event, version, data) = next_sse(&mut watch, &mut buf).await;
+        assert!(version > seen, "{event} {version} after {seen}");
+        match event.as_str() {
+            "update" => {
+                assert_eq!(version, seen + 1, "updates in version order");
+                assert_eq!(data, answers[(version - 2) as usize]);
+            }
+            "snapshot" => assert_eq!(data["version"], version),
+            other => panic!("unexpected {other} event: {data}"),
+        }
+        seen = version;
+    }
+    a.delete(&id).await;
+    let (event, _, data) = next_sse(&mut watch, &mut buf).await;
+    assert_eq!(
+        (event.as_str(), &data["reason"]),
+        ("end", &json!("deleted"))
+    );
+}

@@ -25,6 +25,7 @@ use service::{
     session::{
         Batch, KindName, Spec, Update, View,
         correlation::{self as domain, CorrelationSession, change_name},
+        events::{EventBody, WatchItem},
         persist::AnyView,
         plot_fusion::{self as pf, PlotFusionSession, track_change_name},
         refuse_foreign_fields,
@@ -176,6 +177,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             counters: Some(counters_out(b.counters)),
             asterix: b.asterix.map(asterix_out),
             cat062: b.cat062.map(|c| c.data),
+            plots: Vec::new(),
         }),
         warnings: u.warnings,
         ..Default::default()
@@ -231,11 +233,29 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
         plot_fusion: Some(pb::PlotFusionSessionState {
             mode: b.mode.into(),
             state_layout: b.state_layout.iter().map(|s| s.to_string()).collect(),
-            radars: b.radars,
+            radars: b.radars.clone(),
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,
             counters: Some(counters_out(b.counters)),
             tracks: b.tracks.into_iter().map(track_out).collect(),
+            origin: b.origin.map(|[lat, lon, h]| pb::GeoPoint {
+                lat_deg: Some(lat),
+                lon_deg: Some(lon),
+                height_m: Some(h),
+            }),
+            sites: b
+                .radars
+                .iter()
+                .zip(b.sites)
+                .map(|(id, s)| pb::RadarSiteState {
+                    id: id.clone(),
+                    kind: if s.three_d { "3d" } else { "2d" }.into(),
+                    doppler: s.doppler,
+                    position_m: s.position.to_vec(),
+                    lat_deg: s.lat_lon_deg.map(|l| l[0]),
+                    lon_deg: s.lat_lon_deg.map(|l| l[1]),
+                })
+                .collect(),
         }),
         ..Default::default()
     }
@@ -358,6 +378,57 @@ async fn push(
 }
 
 type UpdateStream = Pin<Box<dyn Stream<Item = Result<pb::BatchUpdate, Status>> + Send>>;
+type WatchStream = Pin<Box<dyn Stream<Item = Result<pb::WatchEvent, Status>> + Send>>;
+
+/// The gRPC form of one watch item (`None`: nothing to send).
+fn watch_event_out(
+    item: WatchItem,
+    heartbeat: std::time::Duration,
+    version: u64,
+) -> Option<pb::WatchEvent> {
+    use pb::watch_event::Event;
+    let (version, event) = match item {
+        WatchItem::Snapshot(view) => {
+            let v = view_out(*view);
+            (v.version, Event::Snapshot(v))
+        }
+        WatchItem::Update(e) => {
+            let update = match &e.body {
+                EventBody::Correlation(u) => update_out(u.clone()),
+                EventBody::PlotFusion { update, plots } => {
+                    let mut out = plot_update_out(update.clone());
+                    if let Some(pf) = out.plot_fusion.as_mut() {
+                        pf.plots = plots
+                            .iter()
+                            .map(|p| pb::PlotPosition {
+                                radar: p.radar,
+                                t: p.t,
+                                east_m: p.position[0],
+                                north_m: p.position[1],
+                                up_m: p.position[2],
+                            })
+                            .collect();
+                    }
+                    out
+                }
+                EventBody::Deleted => return None,
+            };
+            (e.version, Event::Update(update))
+        }
+        WatchItem::Heartbeat => (version, Event::Heartbeat(true)),
+        WatchItem::End { reason, version } => (
+            version,
+            Event::End(pb::WatchEnd {
+                reason: reason.name().into(),
+                message: reason.message(heartbeat),
+            }),
+        ),
+    };
+    Some(pb::WatchEvent {
+        version,
+        event: Some(event),
+    })
+}
 
 #[tonic::async_trait]
 impl SessionService for SessionGrpc {
@@ -471,6 +542,41 @@ impl SessionService for SessionGrpc {
         });
         let out = tokio_stream::wrappers::ReceiverStream::new(rx);
         Ok(Response::new(Box::pin(out) as UpdateStream))
+    }
+
+    type WatchStream = WatchStream;
+
+    async fn watch(
+        &self,
+        request: Request<pb::WatchRequest>,
+    ) -> Result<Response<Self::WatchStream>, Status> {
+        let tenant = tenant(&request);
+        let req = request.into_inner();
+        let mut watch = self
+            .state
+            .sessions()
+            .watch(&tenant, &req.session_id, req.after_version)
+            .await
+            .map_err(to_status)?;
+        let heartbeat = watch.heartbeat();
+        let (tx, rx) = tokio::sync::mpsc::channel::<Result<pb::WatchEvent, Status>>(1);
+        tokio::spawn(async move {
+            loop {
+                let item = tokio::select! {
+                    () = tx.closed() => return,
+                    item = watch.next() => item,
+                };
+                let Some(item) = item else { return };
+                let Some(event) = watch_event_out(item, heartbeat, watch.version()) else {
+                    continue;
+                };
+                if tx.send(Ok(event)).await.is_err() {
+                    return;
+                }
+            }
+        });
+        let out = tokio_stream::wrappers::ReceiverStream::new(rx);
+        Ok(Response::new(Box::pin(out) as WatchStream))
     }
 }
 

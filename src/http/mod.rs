@@ -5,12 +5,14 @@
 pub mod ais_radar;
 pub mod correlation;
 pub mod dimension;
+pub mod events;
 pub mod jpda;
 pub mod ops;
 pub mod plot_fusion;
 pub mod problem;
 pub mod rules;
 pub mod sessions;
+pub mod view;
 
 use std::time::Instant;
 
@@ -53,8 +55,8 @@ pub struct Timing {
             problem details naming the offending field. The same operations are served \
             over gRPC (package radar.fusion.v1)."
     ),
-    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, jpda::update, plot_fusion::track, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::store_health, ops::readyz, ops::metrics),
-    components(schemas(Problem, problem::ProblemField)),
+    paths(correlation::correlate, sessions::create, sessions::list, sessions::get, sessions::delete, sessions::push, events::events, jpda::update, plot_fusion::track, dimension::fuse, ais_radar::associate, rules::evaluate, rules::recommend, ops::healthz, ops::store_health, ops::readyz, ops::metrics),
+    components(schemas(Problem, problem::ProblemField, events::WatchEnd)),
     modifiers(&BearerAuth),
     tags(
         (name = "correlation", description = "Track-to-track correlation (seed 000)"),
@@ -304,8 +306,18 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .layer(RequestDecompressionLayer::new())
         .layer(middleware::from_fn_with_state(state.clone(), authenticate));
 
+    // Long-lived streams: authenticated, but outside the in-flight limit
+    // and the request timeout (a watch holds no compute slot; its own
+    // bounds are the watcher caps).
+    let streams = Router::new()
+        .route("/v1/sessions/{id}/events", get(events::events))
+        .layer(middleware::from_fn_with_state(state.clone(), authenticate));
+
     let router = Router::new()
         .merge(api)
+        .merge(streams)
+        .route("/view/", get(view::page))
+        .route("/view", get(view::redirect))
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))
         .route("/healthz/store", get(ops::store_health))

@@ -203,6 +203,46 @@ pub struct PlotFusionBatchUpdate {
     /// TSB), then a track-end record (TSE) per entry of `deleted`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cat062: Option<String>,
+    /// Events only (`GET /v1/sessions/{id}/events`): where the batch's
+    /// plots are (late plots left out), for display.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plots: Option<Vec<PlotPosition>>,
+}
+
+/// A plot of a batch, placed for display.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PlotPosition {
+    /// Index of its radar in the session's `radars`.
+    pub radar: u32,
+    pub t: f64,
+    /// In the fusion ENU frame (m); a 2D plot at its slant range on the
+    /// horizontal plane.
+    #[schema(example = json!([1200.0, 35000.0, 9000.0]))]
+    pub position_m: [f64; 3],
+}
+
+/// A radar of a plot-fusion session.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct RadarSiteState {
+    pub id: String,
+    /// `2d` or `3d`.
+    pub kind: &'static str,
+    /// Whether it measures radial velocity.
+    pub doppler: bool,
+    /// In the fusion ENU frame (m).
+    pub position_m: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lat_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lon_deg: Option<f64>,
+}
+
+/// The fusion frame's origin.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct OriginState {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    pub height_m: f64,
 }
 
 /// The tracker of a plot-fusion session.
@@ -212,6 +252,11 @@ pub struct PlotFusionSessionState {
     pub mode: &'static str,
     pub state_layout: Vec<&'static str>,
     pub radars: Vec<String>,
+    /// The fusion frame's origin, when it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub origin: Option<OriginState>,
+    /// The radars' sites, in the order of `radars`.
+    pub sites: Vec<RadarSiteState>,
     /// Time of the last processed frame.
     pub last_frame_t: Option<f64>,
     pub pending_plots: u32,
@@ -418,7 +463,7 @@ fn batch_in(req: PushBatchRequest) -> Batch<domain::BatchInput> {
     }
 }
 
-fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
+pub(super) fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
     let b = u.body;
     BatchUpdate {
         session_id: u.session_id,
@@ -445,7 +490,7 @@ fn update_out(u: Update<domain::BatchUpdate>) -> BatchUpdate {
     }
 }
 
-fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
+pub(super) fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
     let b = u.body;
     BatchUpdate {
         session_id: u.session_id,
@@ -475,12 +520,13 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             counters: counters_out(b.counters),
             asterix: b.asterix.map(asterix_out),
             cat062: cat062_out(b.cat062),
+            plots: None,
         }),
         warnings: u.warnings,
     }
 }
 
-fn view_out(v: AnyView) -> SessionState {
+pub(super) fn view_out(v: AnyView) -> SessionState {
     match v {
         AnyView::Correlation(v) => correlation_view_out(v),
         AnyView::PlotFusion(v) => plot_view_out(v),
@@ -513,6 +559,24 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
         plot_fusion: Some(PlotFusionSessionState {
             mode: b.mode,
             state_layout: b.state_layout.to_vec(),
+            origin: b.origin.map(|[lat_deg, lon_deg, height_m]| OriginState {
+                lat_deg,
+                lon_deg,
+                height_m,
+            }),
+            sites: b
+                .radars
+                .iter()
+                .zip(b.sites)
+                .map(|(id, s)| RadarSiteState {
+                    id: id.clone(),
+                    kind: if s.three_d { "3d" } else { "2d" },
+                    doppler: s.doppler,
+                    position_m: s.position,
+                    lat_deg: s.lat_lon_deg.map(|l| l[0]),
+                    lon_deg: s.lat_lon_deg.map(|l| l[1]),
+                })
+                .collect(),
             radars: b.radars,
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,

@@ -280,7 +280,7 @@ pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
     }
 }
 
-fn request_with_cat062() -> Value {
+pub(crate) fn request_with_cat062() -> Value {
     let mut req = plot_scene::request(false, 1);
     req["cat062"] = json!({"sac": 25, "sic": 100, "service_id": 3});
     req

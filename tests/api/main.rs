@@ -11,6 +11,7 @@ mod correlation;
 mod dimension;
 mod docs_examples;
 mod errors;
+mod events;
 mod fuzz;
 mod grpc;
 mod helpers;

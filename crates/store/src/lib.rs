@@ -5,12 +5,15 @@
 //! keeps tenants apart. Two backends behind one enum: `memory` (one process)
 //! and `redis` (shared by replicas, survives restarts of the service).
 
+pub mod events;
 pub mod memory;
 pub mod redis;
 
 use std::time::Duration;
 
 /// A session store; every method is the same for both backends.
+// One store per process, behind an `Arc`: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 pub enum SessionStore {
     Memory(memory::MemoryStore),
     Redis(redis::RedisStore),
@@ -160,6 +163,52 @@ impl SessionStore {
         match self {
             Self::Memory(s) => Ok(s.list(tenant)),
             Self::Redis(s) => s.list(tenant).await,
+        }
+    }
+
+    /// The version of the live session `id` of `tenant`, without its data
+    /// (`None`: unknown, expired, or another tenant's).
+    pub async fn version(&self, tenant: &str, id: &str) -> Result<Option<u64>, StoreError> {
+        match self {
+            Self::Memory(s) => Ok(s.version(tenant, id)),
+            Self::Redis(s) => s.version(tenant, id).await,
+        }
+    }
+
+    /// Publishes a session event to every replica's listener (Redis); the
+    /// memory store has one process and no listener: `Ok(false)`, the caller
+    /// delivers it itself.
+    pub async fn publish(
+        &self,
+        tenant: &str,
+        id: &str,
+        payload: &[u8],
+    ) -> Result<bool, StoreError> {
+        match self {
+            Self::Memory(_) => Ok(false),
+            Self::Redis(s) => s.publish(tenant, id, payload).await.map(|()| true),
+        }
+    }
+
+    /// The Redis store's event listener and its feed (`None` for memory).
+    pub fn listen(
+        &self,
+        capacity: usize,
+    ) -> Option<(
+        events::EventListener,
+        tokio::sync::mpsc::Receiver<events::Feed>,
+    )> {
+        match self {
+            Self::Memory(_) => None,
+            Self::Redis(s) => Some(s.listen(capacity)),
+        }
+    }
+
+    /// The pub/sub channel of a session's events (Redis; for subscribing).
+    pub fn channel(&self, tenant: &str, id: &str) -> Option<String> {
+        match self {
+            Self::Memory(_) => None,
+            Self::Redis(s) => Some(s.channel(tenant, id)),
         }
     }
 

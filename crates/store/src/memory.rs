@@ -86,6 +86,13 @@ impl MemoryStore {
         Ok(1)
     }
 
+    pub fn version(&self, tenant: &str, id: &str) -> Option<u64> {
+        let now = Instant::now();
+        let inner = self.lock();
+        let e = inner.tenants.get(tenant)?.get(id)?;
+        (e.expires_at > now).then_some(e.version)
+    }
+
     pub fn get(&self, tenant: &str, id: &str) -> Option<Stored> {
         let now = Instant::now();
         let mut inner = self.lock();

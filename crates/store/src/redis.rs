@@ -26,6 +26,8 @@ use redis::{
 use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
 
 pub struct RedisStore {
+    /// For the event listener's own pub/sub connection.
+    client: Client,
     conn: ConnectionManager,
     prefix: String,
     max_sessions_per_tenant: usize,
@@ -111,8 +113,10 @@ impl RedisStore {
             .set_number_of_retries(1)
             .set_min_delay(Duration::from_millis(50))
             .set_max_delay(Duration::from_millis(200));
-        let conn = ConnectionManager::new_lazy_with_config(client, config).map_err(unavailable)?;
+        let conn =
+            ConnectionManager::new_lazy_with_config(client.clone(), config).map_err(unavailable)?;
         Ok(Self {
+            client,
             conn,
             prefix: settings.key_prefix.clone(),
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
@@ -232,6 +236,49 @@ impl RedisStore {
             .collect::<Result<Vec<_>, StoreError>>()?;
         sessions.sort_by(|a, b| a.id.cmp(&b.id));
         Ok(sessions)
+    }
+
+    pub async fn version(&self, tenant: &str, id: &str) -> Result<Option<u64>, StoreError> {
+        let mut conn = self.conn.clone();
+        let v: Option<String> = self
+            .bounded(
+                redis::cmd("HGET")
+                    .arg(self.session_key(tenant, id))
+                    .arg("v")
+                    .query_async(&mut conn),
+            )
+            .await?;
+        v.map(|v| parse_version(&v)).transpose()
+    }
+
+    /// `PUBLISH` on the session's event channel.
+    pub async fn publish(&self, tenant: &str, id: &str, payload: &[u8]) -> Result<(), StoreError> {
+        let mut conn = self.conn.clone();
+        let _: i64 = self
+            .bounded(
+                redis::cmd("PUBLISH")
+                    .arg(self.channel(tenant, id))
+                    .arg(payload)
+                    .query_async(&mut conn),
+            )
+            .await?;
+        Ok(())
+    }
+
+    /// Starts this replica's event listener (see [`crate::events`]).
+    pub fn listen(
+        &self,
+        capacity: usize,
+    ) -> (
+        crate::events::EventListener,
+        tokio::sync::mpsc::Receiver<crate::events::Feed>,
+    ) {
+        crate::events::listen(self.client.clone(), self.timeout, capacity)
+    }
+
+    /// `{prefix}:ev:{tenant}:{id}`, escaped as the keys are.
+    pub fn channel(&self, tenant: &str, id: &str) -> String {
+        format!("{}:ev:{}:{}", self.prefix, escape(tenant), escape(id))
     }
 
     pub async fn ping(&self) -> Result<(), StoreError> {

@@ -23,6 +23,7 @@
 
 pub mod cache;
 pub mod correlation;
+pub mod events;
 pub mod persist;
 pub mod plot_fusion;
 
@@ -115,6 +116,11 @@ pub trait SessionKind: Sized + Send + 'static {
         None
     }
     fn view(&self) -> Result<Self::View, ServiceError>;
+    /// What watchers are shown of the last applied batch besides its update
+    /// (plot fusion: where its plots are), taken once; none by default.
+    fn take_marks(&mut self) -> Vec<events::PlotMark> {
+        Vec::new()
+    }
     /// Appends the kind's state; it writes its own format byte first.
     fn encode(&self, w: &mut Writer);
     /// Reads what [`SessionKind::encode`] wrote (any format this release knows).

@@ -9,13 +9,22 @@
 //! is only borrowed, never copied, however many attempts it takes.
 
 use std::{
+    collections::{BTreeMap, VecDeque},
     sync::Arc,
-    time::{Duration, SystemTime, UNIX_EPOCH},
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
 };
+
+use tokio::sync::{broadcast, watch};
 
 use super::{
     Admission, Batch, DecodeError, Envelope, KindName, Limits, SessionKind, Spec, Update, View,
-    cache::SessionCache, correlation::CorrelationSession, plot_fusion::PlotFusionSession,
+    cache::SessionCache,
+    correlation::CorrelationSession,
+    events::{
+        self, EndReason, EventBody, EventHub, GAP_WAIT, Guard, HubItem, SessionEvent, WatchItem,
+        WatchLimits,
+    },
+    plot_fusion::PlotFusionSession,
     stored_kind, tag_name,
 };
 use crate::{ServiceError, offload};
@@ -26,8 +35,9 @@ const MAX_ATTEMPTS: usize = 32;
 
 /// The session store and the cache of decoded sessions in front of it.
 pub struct Sessions {
-    store: SessionStore,
+    store: Arc<SessionStore>,
     cache: SessionCache,
+    events: Arc<EventHub>,
 }
 
 /// A session of any kind this release serves, as a client reads it.
@@ -101,10 +111,23 @@ impl Sessions {
     /// Sessions over `store`, caching decoded sessions of up to
     /// `cache_bytes` encoded bytes in total (0: no cache).
     pub fn new(store: SessionStore, cache_bytes: usize) -> Self {
+        Self::with_watch_limits(store, cache_bytes, WatchLimits::default())
+    }
+
+    /// As [`Sessions::new`], with the bounds on watchers. With the Redis
+    /// store this starts the event listener: call it inside the runtime.
+    pub fn with_watch_limits(store: SessionStore, cache_bytes: usize, limits: WatchLimits) -> Self {
+        let events = EventHub::new(&store, limits);
         Self {
-            store,
+            store: Arc::new(store),
             cache: SessionCache::new(cache_bytes),
+            events,
         }
+    }
+
+    /// This replica's watchers' side of session events.
+    pub fn events(&self) -> &EventHub {
+        &self.events
     }
 
     pub fn store(&self) -> &SessionStore {
@@ -159,27 +182,7 @@ impl Sessions {
     /// A session of any kind.
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
         let stored = self.read(tenant, id).await?;
-        let id = id.to_string();
-        offload(move || {
-            let tag = stored_kind(&stored.data)?;
-            match KindName::from_tag(tag) {
-                Some(KindName::Correlation) => {
-                    Ok(AnyView::Correlation(view_of::<CorrelationSession>(
-                        &id,
-                        &stored.data,
-                        stored.version,
-                    )?))
-                }
-                Some(KindName::PlotFusion) => Ok(AnyView::PlotFusion(
-                    view_of::<PlotFusionSession>(&id, &stored.data, stored.version)?,
-                )),
-                None => Err(ServiceError::Internal(format!(
-                    "stored session: {} is not served by this release",
-                    tag_name(tag)
-                ))),
-            }
-        })
-        .await
+        any_view(id, stored).await
     }
 
     /// A session known to be of kind `K`; another kind is an error naming it.
@@ -223,6 +226,10 @@ impl Sessions {
         check_id(id)?;
         self.cache.forget(tenant, id);
         if self.store.delete(tenant, id).await? {
+            if self.announces(tenant, id) {
+                self.publish(tenant, id, events::encode_deleted(tenant, id))
+                    .await;
+            }
             Ok(())
         } else {
             Err(not_found(id))
@@ -271,13 +278,14 @@ impl Sessions {
                     Admission::Duplicate(ack) => Ok(Err(ack)),
                     Admission::Apply => {
                         let update = session.apply(&id2, &batch2, &limits)?;
+                        let marks = session.state.take_marks();
                         let data = session.encode();
-                        Ok(Ok((update, data, session)))
+                        Ok(Ok((update, data, session, marks)))
                     }
                 }
             })
             .await;
-            let (mut update, data, session) = match worked {
+            let (mut update, data, session, marks) = match worked {
                 // A cached copy may be behind the store: only a successful
                 // compare-and-set proves it current, so anything else it
                 // says (a duplicate, a gap, an error) is asked again of a
@@ -315,6 +323,10 @@ impl Sessions {
                 CasOutcome::Stored { version } => {
                     update.version = version;
                     self.cache.put(tenant, id, version, bytes, session);
+                    if self.announces(tenant, id) {
+                        let event = events::encode_update::<K>(tenant, &update, &marks);
+                        self.publish(tenant, id, event).await;
+                    }
                     return Ok(update);
                 }
                 CasOutcome::Missing => return Err(not_found(id)),
@@ -336,6 +348,247 @@ impl Sessions {
             "session '{id}' is being changed by too many writers at once; retry shortly"
         )))
     }
+
+    /// Whether a committed change of the session is announced: always over
+    /// Redis (watchers may be on any replica), with the memory store only
+    /// when this process has a watcher of it.
+    fn announces(&self, tenant: &str, id: &str) -> bool {
+        !matches!(*self.store, SessionStore::Memory(_)) || self.events.watched(tenant, id)
+    }
+
+    /// Announces a committed change. A failed publication loses nothing:
+    /// the change is stored, and watchers find it at their next heartbeat.
+    async fn publish(&self, tenant: &str, id: &str, event: Vec<u8>) {
+        match self.store.publish(tenant, id, &event).await {
+            Ok(true) => {}
+            Ok(false) => match events::decode(&event) {
+                Ok(e) => self.events.deliver(e),
+                Err(e) => tracing::error!(error = %e, "a session event did not decode"),
+            },
+            Err(e) => {
+                metrics::counter!("fusion_session_events_total", "outcome" => "unpublished")
+                    .increment(1);
+                tracing::warn!(session = id, error = %e, "a session event was not published");
+            }
+        }
+    }
+
+    /// Watches the session: first a snapshot of it (or, with `after`, the
+    /// events after that version when this replica still holds them all),
+    /// then every committed update in version order. `QuotaExceeded` when
+    /// a watcher cap is reached, `NotFound` for no such session.
+    pub async fn watch(
+        &self,
+        tenant: &str,
+        id: &str,
+        after: Option<u64>,
+    ) -> Result<Watch, ServiceError> {
+        check_id(id)?;
+        let joined = self
+            .events
+            .join(tenant, id, self.store.channel(tenant, id))
+            .map_err(ServiceError::QuotaExceeded)?;
+        // Read after joining: an update committed in between is in the
+        // channel, and one before is in this read.
+        let stored = self.read(tenant, id).await?;
+        let version = stored.version;
+        let resumed = after.filter(|&l| {
+            l <= version && (l + 1..=version).all(|v| joined.history.iter().any(|e| e.version == v))
+        });
+        let mut queue = VecDeque::new();
+        match resumed {
+            Some(l) => queue.extend(
+                joined
+                    .history
+                    .iter()
+                    .filter(|e| e.version > l && e.version <= version)
+                    .cloned()
+                    .map(WatchItem::Update),
+            ),
+            None => queue.push_back(WatchItem::Snapshot(Box::new(any_view(id, stored).await?))),
+        }
+        metrics::counter!("fusion_session_watches_total", "start" => if resumed.is_some() { "resumed" } else { "snapshot" })
+            .increment(1);
+        Ok(Watch {
+            store: Arc::clone(&self.store),
+            tenant: tenant.to_string(),
+            id: id.to_string(),
+            rx: joined.rx,
+            shutdown: joined.shutdown,
+            _guard: joined.guard,
+            heartbeat: self.events.limits().heartbeat,
+            last: version,
+            queue,
+            pending: BTreeMap::new(),
+            gap_since: None,
+            done: false,
+        })
+    }
+}
+
+/// One watcher of one session (see [`events`]): [`Watch::next`] gives its
+/// items in order, an `End` last.
+pub struct Watch {
+    store: Arc<SessionStore>,
+    tenant: String,
+    id: String,
+    rx: broadcast::Receiver<HubItem>,
+    shutdown: watch::Receiver<bool>,
+    _guard: Guard,
+    heartbeat: Duration,
+    /// The version of the last item given.
+    last: u64,
+    queue: VecDeque<WatchItem>,
+    /// Events that skip a version, waiting for the missing one.
+    pending: BTreeMap<u64, Arc<SessionEvent>>,
+    gap_since: Option<Instant>,
+    done: bool,
+}
+
+impl Watch {
+    /// The version of the last item given.
+    pub fn version(&self) -> u64 {
+        self.last
+    }
+
+    pub fn heartbeat(&self) -> Duration {
+        self.heartbeat
+    }
+
+    /// The next item; `None` after the `End`.
+    pub async fn next(&mut self) -> Option<WatchItem> {
+        if self.done {
+            return None;
+        }
+        loop {
+            if let Some(item) = self.queue.pop_front() {
+                if matches!(item, WatchItem::End { .. }) {
+                    self.done = true;
+                    self.queue.clear();
+                }
+                return Some(item);
+            }
+            if *self.shutdown.borrow() {
+                self.end(EndReason::Shutdown);
+                continue;
+            }
+            let gap = self
+                .gap_since
+                .map(|t| tokio::time::Instant::from_std(t + GAP_WAIT));
+            tokio::select! {
+                biased;
+                _ = self.shutdown.changed() => self.end(EndReason::Shutdown),
+                item = self.rx.recv() => match item {
+                    Ok(HubItem::Event(e)) => self.take(e),
+                    Ok(HubItem::Resync) => self.resnapshot().await,
+                    Err(broadcast::error::RecvError::Lagged(n)) => {
+                        metrics::counter!("fusion_session_watchers_dropped_total").increment(1);
+                        self.end(EndReason::Slow(n));
+                    }
+                    Err(broadcast::error::RecvError::Closed) => self.end(EndReason::Shutdown),
+                },
+                _ = tokio::time::sleep_until(gap.unwrap_or_else(tokio::time::Instant::now)), if gap.is_some() => {
+                    metrics::counter!("fusion_session_event_gaps_total").increment(1);
+                    self.resnapshot().await;
+                }
+                _ = tokio::time::sleep(self.heartbeat) => self.beat().await,
+            }
+        }
+    }
+
+    fn end(&mut self, reason: EndReason) {
+        self.queue.push_back(WatchItem::End {
+            reason,
+            version: self.last,
+        });
+    }
+
+    fn take(&mut self, e: Arc<SessionEvent>) {
+        if matches!(e.body, EventBody::Deleted) {
+            self.end(EndReason::Deleted);
+        } else if e.version == self.last + 1 {
+            self.last = e.version;
+            self.queue.push_back(WatchItem::Update(e));
+            self.drain();
+        } else if e.version > self.last {
+            self.pending.insert(e.version, e);
+            self.gap_since.get_or_insert_with(Instant::now);
+        }
+    }
+
+    /// Gives the held events that now follow in order.
+    fn drain(&mut self) {
+        while let Some(e) = self.pending.remove(&(self.last + 1)) {
+            self.last = e.version;
+            self.queue.push_back(WatchItem::Update(e));
+        }
+        self.pending.retain(|&v, _| v > self.last);
+        self.gap_since = if self.pending.is_empty() {
+            None
+        } else {
+            Some(Instant::now())
+        };
+    }
+
+    /// Reads the stored session; a version past the last item is given as a
+    /// snapshot (it holds every update in between).
+    async fn resnapshot(&mut self) {
+        self.gap_since = None;
+        match self.store.get(&self.tenant, &self.id).await {
+            Ok(None) => self.end(EndReason::Expired),
+            Ok(Some(stored)) if stored.version > self.last => {
+                let version = stored.version;
+                match any_view(&self.id, stored).await {
+                    Ok(view) => {
+                        self.last = version;
+                        self.queue.push_back(WatchItem::Snapshot(Box::new(view)));
+                        self.drain();
+                    }
+                    Err(e) => {
+                        tracing::error!(session = %self.id, error = %e, "a watched session did not decode")
+                    }
+                }
+            }
+            Ok(Some(_)) => self.drain(),
+            // The store is down: the next heartbeat looks again.
+            Err(_) => {}
+        }
+    }
+
+    /// A quiet interval: the session still lives (else the watch ends), and
+    /// a version stored past the last item (an event lost) is fetched.
+    async fn beat(&mut self) {
+        match self.store.version(&self.tenant, &self.id).await {
+            Ok(None) => self.end(EndReason::Expired),
+            Ok(Some(v)) if v > self.last => self.resnapshot().await,
+            _ => self.queue.push_back(WatchItem::Heartbeat),
+        }
+    }
+}
+
+/// The view of stored bytes of any kind, decoded off the async workers.
+async fn any_view(id: &str, stored: Stored) -> Result<AnyView, ServiceError> {
+    let id = id.to_string();
+    offload(move || {
+        let tag = stored_kind(&stored.data)?;
+        match KindName::from_tag(tag) {
+            Some(KindName::Correlation) => Ok(AnyView::Correlation(view_of::<CorrelationSession>(
+                &id,
+                &stored.data,
+                stored.version,
+            )?)),
+            Some(KindName::PlotFusion) => Ok(AnyView::PlotFusion(view_of::<PlotFusionSession>(
+                &id,
+                &stored.data,
+                stored.version,
+            )?)),
+            None => Err(ServiceError::Internal(format!(
+                "stored session: {} is not served by this release",
+                tag_name(tag)
+            ))),
+        }
+    })
+    .await
 }
 
 fn view_of<K: SessionKind>(

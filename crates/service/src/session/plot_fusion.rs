@@ -31,7 +31,7 @@
 
 use std::collections::HashSet;
 
-use super::{Fnv, Limits, SessionKind};
+use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
@@ -139,6 +139,11 @@ pub struct SessionView {
     pub mode: &'static str,
     pub state_layout: &'static [&'static str],
     pub radars: Vec<String>,
+    /// The fusion frame's origin (latitude °, longitude °, height m), when
+    /// it has one.
+    pub origin: Option<[f64; 3]>,
+    /// Per radar, in the order of `radars`: its site.
+    pub sites: Vec<SiteView>,
     /// Time of the last processed frame.
     pub last_frame_t: Option<f64>,
     pub pending_plots: u32,
@@ -147,8 +152,40 @@ pub struct SessionView {
     pub tracks: Vec<TrackView>,
 }
 
+/// Where a plot is, for display: its ENU position from its radar's site; a
+/// 2D plot at its slant range on the horizontal plane, at the 2D target
+/// height.
+fn plot_mark(p: &algo::tracking::Plot, site: [f64; 3], target_height: f64) -> PlotMark {
+    let (ground, up) = match p.elevation {
+        Some(el) => (p.range * el.cos(), site[2] + p.range * el.sin()),
+        None => (p.range, target_height),
+    };
+    PlotMark {
+        radar: p.radar as u32,
+        t: p.t,
+        position: [
+            site[0] + ground * p.azimuth.sin(),
+            site[1] + ground * p.azimuth.cos(),
+            up,
+        ],
+    }
+}
+
+/// A radar's site as a client sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SiteView {
+    /// In the fusion ENU frame (m).
+    pub position: [f64; 3],
+    /// Latitude and longitude (°), when the frame has an origin.
+    pub lat_lon_deg: Option<[f64; 2]>,
+    pub three_d: bool,
+    pub doppler: bool,
+}
+
 /// The state: the network (ids, frame, rotations) and the tracker.
 pub struct PlotFusionSession {
+    /// Where the last applied batch's plots are, for watchers (not stored).
+    marks: Vec<PlotMark>,
     network: Network,
     tracker: Tracker,
     cat062: Option<Cat062Options>,
@@ -314,6 +351,7 @@ impl SessionKind for PlotFusionSession {
         };
         let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
         Ok(Self {
+            marks: Vec::new(),
             network,
             tracker,
             cat062,
@@ -376,6 +414,20 @@ impl SessionKind for PlotFusionSession {
                 .collect();
             s.late = s.late_offsets.len();
         }
+        let late: HashSet<usize> = report.late.iter().copied().collect();
+        let sites: Vec<[f64; 3]> = self
+            .tracker
+            .config()
+            .radars
+            .iter()
+            .map(|r| r.site)
+            .collect();
+        self.marks = plots
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !late.contains(i))
+            .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
+            .collect();
         let live = self.tracker.tracks();
         if live.len() > limits.max_tracks {
             return Err(ServiceError::QuotaExceeded(format!(
@@ -464,6 +516,10 @@ impl SessionKind for PlotFusionSession {
         })
     }
 
+    fn take_marks(&mut self) -> Vec<PlotMark> {
+        std::mem::take(&mut self.marks)
+    }
+
     fn acknowledgement(&self) -> BatchUpdate {
         BatchUpdate {
             frames: 0,
@@ -510,6 +566,26 @@ impl SessionKind for PlotFusionSession {
             mode: mode_name(self.tracker.mode()),
             state_layout: output::layout(self.tracker.config().axes),
             radars: self.network.radar_ids.clone(),
+            origin: self.network.frame.as_ref().map(|f| {
+                let (lat, lon, h) = f.origin_geodetic();
+                [lat.to_degrees(), lon.to_degrees(), h]
+            }),
+            sites: self
+                .tracker
+                .config()
+                .radars
+                .iter()
+                .map(|r| SiteView {
+                    position: r.site,
+                    lat_lon_deg: self.network.frame.as_ref().and_then(|f| {
+                        f.enu_to_geodetic(r.site)
+                            .ok()
+                            .map(|(lat, lon, _)| [lat.to_degrees(), lon.to_degrees()])
+                    }),
+                    three_d: r.sigma_elevation.is_some(),
+                    doppler: r.sigma_radial_velocity.is_some(),
+                })
+                .collect(),
             last_frame_t: self.tracker.last_time(),
             pending_plots: self.tracker.pending() as u32,
             counters: self.tracker.counters().into(),
@@ -554,6 +630,7 @@ impl SessionKind for PlotFusionSession {
             None
         };
         Ok(Self {
+            marks: Vec::new(),
             network,
             tracker,
             cat062,

@@ -1,0 +1,519 @@
+//! Watching a session: every committed batch update, in version order, to
+//! any number of watchers on any replica.
+//!
+//! - A push publishes its update after the store confirmed the write (so a
+//!   watcher never sees an update that was not committed), a delete a
+//!   `deleted` event. With the Redis store the event goes through Redis
+//!   pub/sub ([`store::events`]) and reaches every replica whose watchers
+//!   follow the session; with the memory store it is handed to this
+//!   process's watchers directly.
+//! - Each replica keeps, per watched session, a broadcast channel (bounded:
+//!   a watcher that falls [`WatchLimits::buffer`] events behind is dropped
+//!   with an `end` of reason `slow`, so memory never grows with a slow
+//!   reader) and the last [`WatchLimits::history`] events, from which a
+//!   watcher resumes after a reconnect (`Last-Event-ID`).
+//! - A watcher delivers versions in order. Pub/sub delivers at most once and
+//!   two replicas' publications of consecutive versions may cross, so a
+//!   watcher holds an event that skips ahead for up to [`GAP_WAIT`]; a gap
+//!   still open then, a lost subscription (a Redis reconnect) or a stored
+//!   version ahead of the last event seen at a heartbeat is filled with a
+//!   fresh `snapshot` of the stored session: the store is the truth, the
+//!   events say when to look.
+//! - Expiry is found at the heartbeat: the stored session is gone, an `end`
+//!   of reason `expired` (or `deleted`, when the delete event arrived).
+
+use std::{
+    collections::{BTreeMap, HashMap},
+    sync::{Arc, Mutex, MutexGuard},
+    time::{Duration, Instant},
+};
+
+use formats::wire::{FormatError, Reader, Writer};
+use tokio::sync::{broadcast, watch};
+
+use super::{
+    KindName, SessionKind, Update, correlation::CorrelationSession, persist::AnyView,
+    plot_fusion::PlotFusionSession,
+};
+
+/// First byte of an event's encoding.
+const EVENT_FORMAT: u8 = 1;
+/// Kind tag of a delete event (no kind uses 0).
+const DELETED_TAG: u8 = 0;
+/// How long a watcher holds an event that skips a version, waiting for the
+/// missing one, before it reads a snapshot instead.
+pub const GAP_WAIT: Duration = Duration::from_millis(500);
+/// How long a replica keeps a session's channel and history after its last
+/// watcher left, so that a reconnecting watcher can resume from it.
+pub const HISTORY_GRACE: Duration = Duration::from_secs(60);
+
+/// Bounds on watching, from the service settings.
+#[derive(Debug, Clone, Copy)]
+pub struct WatchLimits {
+    /// Most watchers of one session on one replica.
+    pub per_session: usize,
+    /// Most watchers of one tenant on one replica.
+    pub per_tenant: usize,
+    /// Events a watcher may fall behind before it is dropped.
+    pub buffer: usize,
+    /// Events kept per watched session for resuming.
+    pub history: usize,
+    /// Interval of heartbeats (and of the check that the session lives).
+    pub heartbeat: Duration,
+}
+
+impl Default for WatchLimits {
+    fn default() -> Self {
+        Self {
+            per_session: 32,
+            per_tenant: 128,
+            buffer: 256,
+            history: 64,
+            heartbeat: Duration::from_secs(15),
+        }
+    }
+}
+
+/// A plot of a batch, where it is, for display: the fusion frame's ENU
+/// position (m), its radar (index into the session's radars) and time. 2D
+/// plots are placed at their slant range on the horizontal plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlotMark {
+    pub radar: u32,
+    pub t: f64,
+    pub position: [f64; 3],
+}
+
+/// What an event says.
+// Always held once, behind the `Arc` every watcher shares.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, PartialEq)]
+pub enum EventBody {
+    Correlation(Update<<CorrelationSession as SessionKind>::Update>),
+    PlotFusion {
+        update: Update<<PlotFusionSession as SessionKind>::Update>,
+        plots: Vec<PlotMark>,
+    },
+    /// The session was deleted.
+    Deleted,
+}
+
+/// One event of one session.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionEvent {
+    pub tenant: String,
+    pub id: String,
+    /// The session's version after the update (0 for `Deleted`).
+    pub version: u64,
+    pub body: EventBody,
+}
+
+/// Encodes the event of an update of kind `K` (its version set).
+pub fn encode_update<K: SessionKind>(
+    tenant: &str,
+    update: &Update<K::Update>,
+    plots: &[PlotMark],
+) -> Vec<u8> {
+    let mut w = head(tenant, &update.session_id, update.version, K::TAG);
+    w.opt(update.sequence, Writer::u64);
+    w.usize(update.warnings.len());
+    update.warnings.iter().for_each(|s| w.str(s));
+    K::encode_update(&update.body, &mut w);
+    w.usize(plots.len());
+    for p in plots {
+        w.u32(p.radar);
+        w.f64(p.t);
+        p.position.iter().for_each(|&x| w.f64(x));
+    }
+    w.buf
+}
+
+/// Encodes the delete event of a session.
+pub fn encode_deleted(tenant: &str, id: &str) -> Vec<u8> {
+    head(tenant, id, 0, DELETED_TAG).buf
+}
+
+fn head(tenant: &str, id: &str, version: u64, tag: u8) -> Writer {
+    let mut w = Writer::default();
+    w.u8(EVENT_FORMAT);
+    w.str(tenant);
+    w.str(id);
+    w.u64(version);
+    w.u8(tag);
+    w
+}
+
+/// Reads what [`encode_update`] or [`encode_deleted`] wrote.
+pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
+    let mut r = Reader::new(buf);
+    let format = r.u8()?;
+    if format != EVENT_FORMAT {
+        return Err(formats::wire::corrupt(&format!(
+            "session event format {format}"
+        )));
+    }
+    let tenant = r.str()?;
+    let id = r.str()?;
+    let version = r.u64()?;
+    let tag = r.u8()?;
+    let body = if tag == DELETED_TAG {
+        EventBody::Deleted
+    } else {
+        let sequence = r.opt(Reader::u64)?;
+        let n = r.len(8)?;
+        let warnings = (0..n).map(|_| r.str()).collect::<Result<Vec<_>, _>>()?;
+        fn update<U>(
+            id: &str,
+            sequence: Option<u64>,
+            version: u64,
+            warnings: Vec<String>,
+            body: U,
+        ) -> Update<U> {
+            Update {
+                session_id: id.to_string(),
+                sequence,
+                version,
+                duplicate: false,
+                body,
+                warnings,
+            }
+        }
+        match KindName::from_tag(tag) {
+            Some(KindName::Correlation) => EventBody::Correlation(update(
+                &id,
+                sequence,
+                version,
+                warnings,
+                CorrelationSession::decode_update(&mut r)?,
+            )),
+            Some(KindName::PlotFusion) => {
+                let body = PlotFusionSession::decode_update(&mut r)?;
+                let n = r.len(36)?;
+                let plots = (0..n)
+                    .map(|_| {
+                        Ok(PlotMark {
+                            radar: r.u32()?,
+                            t: r.f64()?,
+                            position: [r.f64()?, r.f64()?, r.f64()?],
+                        })
+                    })
+                    .collect::<Result<Vec<_>, FormatError>>()?;
+                EventBody::PlotFusion {
+                    update: update(&id, sequence, version, warnings, body),
+                    plots,
+                }
+            }
+            None => {
+                return Err(formats::wire::corrupt(&format!(
+                    "session event of unknown kind {tag}"
+                )));
+            }
+        }
+    };
+    if !r.is_empty() {
+        return Err(formats::wire::corrupt("trailing bytes in a session event"));
+    }
+    Ok(SessionEvent {
+        tenant,
+        id,
+        version,
+        body,
+    })
+}
+
+/// What a replica's channel of one session carries.
+#[derive(Debug, Clone)]
+pub(super) enum HubItem {
+    Event(Arc<SessionEvent>),
+    /// Events may have been lost (the Redis subscription was re-made).
+    Resync,
+}
+
+struct Channel {
+    tx: broadcast::Sender<HubItem>,
+    /// The last events, by version (updates only).
+    history: BTreeMap<u64, Arc<SessionEvent>>,
+    watchers: usize,
+    /// When the last watcher left (for [`HISTORY_GRACE`]).
+    idle_since: Option<Instant>,
+    /// Its Redis channel, when subscribed.
+    subscribed: Option<String>,
+}
+
+type Key = (String, String);
+
+struct HubState {
+    channels: HashMap<Key, Channel>,
+    tenants: HashMap<String, usize>,
+}
+
+/// This replica's side of session events: channels per watched session and
+/// the Redis listener (for the Redis store).
+pub struct EventHub {
+    state: Mutex<HubState>,
+    limits: WatchLimits,
+    listener: Option<store::events::EventListener>,
+    /// Ends every watch (the service is shutting down).
+    shutdown: watch::Sender<bool>,
+}
+
+/// Why a watch ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndReason {
+    Deleted,
+    Expired,
+    /// The watcher fell this many events behind.
+    Slow(u64),
+    Shutdown,
+}
+
+impl EndReason {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Deleted => "deleted",
+            Self::Expired => "expired",
+            Self::Slow(_) => "slow",
+            Self::Shutdown => "shutdown",
+        }
+    }
+
+    pub fn message(self, heartbeat: Duration) -> String {
+        match self {
+            Self::Deleted => "the session was deleted".into(),
+            Self::Expired => "the session expired (or was deleted) and is gone".into(),
+            Self::Slow(n) => format!(
+                "this watcher fell {n} events behind and was dropped; reconnect with \
+                 Last-Event-ID to resume (or read a fresh snapshot)"
+            ),
+            Self::Shutdown => format!(
+                "this replica is shutting down; reconnect (another replica serves the same \
+                 session; heartbeats every {} s)",
+                heartbeat.as_secs_f64()
+            ),
+        }
+    }
+}
+
+/// What a watcher is shown next.
+#[derive(Debug, Clone)]
+pub enum WatchItem {
+    /// The whole session at its version (first, or to fill a gap).
+    Snapshot(Box<AnyView>),
+    /// One batch update, the next version after the last item.
+    Update(Arc<SessionEvent>),
+    /// Nothing happened for a heartbeat interval; the session lives.
+    Heartbeat,
+    /// The last item: the watch is over.
+    End { reason: EndReason, version: u64 },
+}
+
+impl EventHub {
+    /// A hub over `store`: with Redis, starts its listener task (so this is
+    /// called inside the runtime) and the task that hands the feed on.
+    pub fn new(store: &store::SessionStore, limits: WatchLimits) -> Arc<Self> {
+        let (shutdown, _) = watch::channel(false);
+        let listened = if tokio::runtime::Handle::try_current().is_ok() {
+            store.listen(limits.buffer.max(64) * 4)
+        } else {
+            // Built outside a runtime (a unit test): no listener, so only
+            // this process's events reach its watchers.
+            None
+        };
+        let (listener, feed) = match listened {
+            Some((l, f)) => (Some(l), Some(f)),
+            None => (None, None),
+        };
+        let hub = Arc::new(Self {
+            state: Mutex::new(HubState {
+                channels: HashMap::new(),
+                tenants: HashMap::new(),
+            }),
+            limits,
+            listener,
+            shutdown,
+        });
+        if let Some(mut feed) = feed {
+            let weak = Arc::downgrade(&hub);
+            tokio::spawn(async move {
+                while let Some(item) = feed.recv().await {
+                    let Some(hub) = weak.upgrade() else { return };
+                    match item {
+                        store::events::Feed::Message(bytes) => match decode(&bytes) {
+                            Ok(event) => hub.deliver(event),
+                            Err(e) => {
+                                metrics::counter!("fusion_session_events_total", "outcome" => "undecodable")
+                                    .increment(1);
+                                tracing::warn!(error = %e, "a session event did not decode");
+                            }
+                        },
+                        store::events::Feed::Resync => {
+                            metrics::counter!("fusion_session_event_resyncs_total").increment(1);
+                            hub.resync();
+                        }
+                    }
+                }
+            });
+        }
+        hub
+    }
+
+    pub fn limits(&self) -> WatchLimits {
+        self.limits
+    }
+
+    fn lock(&self) -> MutexGuard<'_, HubState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Whether this replica has a channel of the session (a watcher now or
+    /// within [`HISTORY_GRACE`]).
+    pub fn watched(&self, tenant: &str, id: &str) -> bool {
+        self.lock()
+            .channels
+            .contains_key(&(tenant.to_string(), id.to_string()))
+    }
+
+    /// Hands an event to the session's channel on this replica (if any).
+    pub fn deliver(&self, event: SessionEvent) {
+        let event = Arc::new(event);
+        let mut state = self.lock();
+        let key = (event.tenant.clone(), event.id.clone());
+        let Some(channel) = state.channels.get_mut(&key) else {
+            return;
+        };
+        metrics::counter!("fusion_session_events_total", "outcome" => "delivered").increment(1);
+        if !matches!(event.body, EventBody::Deleted) {
+            channel.history.insert(event.version, Arc::clone(&event));
+            while channel.history.len() > self.limits.history {
+                channel.history.pop_first();
+            }
+        }
+        let _ = channel.tx.send(HubItem::Event(event));
+    }
+
+    fn resync(&self) {
+        for channel in self.lock().channels.values_mut() {
+            channel.history.clear();
+            let _ = channel.tx.send(HubItem::Resync);
+        }
+    }
+
+    /// Ends every watch on this replica (shutdown).
+    pub fn close(&self) {
+        let _ = self.shutdown.send(true);
+    }
+
+    /// Registers a watcher of the session: `Err` names the cap reached.
+    /// `channel`: the session's Redis channel (the Redis store).
+    pub(super) fn join(
+        self: &Arc<Self>,
+        tenant: &str,
+        id: &str,
+        channel: Option<String>,
+    ) -> Result<Joined, String> {
+        let mut state = self.lock();
+        let now = Instant::now();
+        // Channels idle past the grace period go, with their subscription.
+        let stale: Vec<Key> = state
+            .channels
+            .iter()
+            .filter(|(_, c)| {
+                c.watchers == 0 && c.idle_since.is_some_and(|t| now - t > HISTORY_GRACE)
+            })
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in stale {
+            if let Some(c) = state.channels.remove(&k)
+                && let (Some(l), Some(name)) = (&self.listener, c.subscribed)
+            {
+                l.unsubscribe(name);
+            }
+        }
+        let of_tenant = state.tenants.get(tenant).copied().unwrap_or(0);
+        if of_tenant >= self.limits.per_tenant {
+            return Err(format!(
+                "the tenant has {of_tenant} watchers on this replica, the most allowed \
+                 (watch.max_per_tenant): close one"
+            ));
+        }
+        let key = (tenant.to_string(), id.to_string());
+        let subscribe = match (&self.listener, channel) {
+            (Some(_), Some(c)) if !state.channels.contains_key(&key) => Some(c),
+            _ => None,
+        };
+        let channel = state
+            .channels
+            .entry(key.clone())
+            .or_insert_with(|| Channel {
+                tx: broadcast::channel(self.limits.buffer.max(1)).0,
+                history: BTreeMap::new(),
+                watchers: 0,
+                idle_since: None,
+                subscribed: subscribe.clone(),
+            });
+        if channel.watchers >= self.limits.per_session {
+            return Err(format!(
+                "the session has {} watchers on this replica, the most allowed \
+                 (watch.max_per_session): close one",
+                channel.watchers
+            ));
+        }
+        channel.watchers += 1;
+        channel.idle_since = None;
+        let rx = channel.tx.subscribe();
+        let history: Vec<Arc<SessionEvent>> = channel.history.values().cloned().collect();
+        *state.tenants.entry(tenant.to_string()).or_default() += 1;
+        drop(state);
+        if let (Some(l), Some(c)) = (&self.listener, subscribe) {
+            l.subscribe(c);
+        }
+        metrics::gauge!("fusion_session_watchers").increment(1.0);
+        Ok(Joined {
+            rx,
+            history,
+            shutdown: self.shutdown.subscribe(),
+            guard: Guard {
+                hub: Arc::clone(self),
+                key,
+            },
+        })
+    }
+
+    fn leave(&self, key: &Key) {
+        let mut state = self.lock();
+        if let Some(c) = state.channels.get_mut(key) {
+            c.watchers = c.watchers.saturating_sub(1);
+            if c.watchers == 0 {
+                c.idle_since = Some(Instant::now());
+            }
+        }
+        if let Some(n) = state.tenants.get_mut(&key.0) {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                state.tenants.remove(&key.0);
+            }
+        }
+        metrics::gauge!("fusion_session_watchers").decrement(1.0);
+    }
+}
+
+/// Decrements the watcher counts when a watch ends, however it ends.
+pub(super) struct Guard {
+    hub: Arc<EventHub>,
+    key: Key,
+}
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        self.hub.leave(&self.key);
+    }
+}
+
+pub(super) struct Joined {
+    pub rx: broadcast::Receiver<HubItem>,
+    /// The events held for resuming, by version.
+    pub history: Vec<Arc<SessionEvent>>,
+    pub shutdown: watch::Receiver<bool>,
+    /// Keeps the watcher counted until dropped.
+    pub guard: Guard,
+}

@@ -1,0 +1,167 @@
+//! `GET /v1/sessions/{id}/events`: a session's updates as Server-Sent Events.
+//!
+//! Events (`event:` names; `id:` is the session's version after it):
+//! - `snapshot`: the whole session, as `GET /v1/sessions/{id}` answers. The
+//!   first event, unless `Last-Event-ID` resumed the stream; again whenever a
+//!   gap in the versions had to be filled from the store.
+//! - `update`: one batch update, as the push answered it (plot-fusion updates
+//!   also carry `plots`, where the batch's plots are), in version order.
+//! - `end`: the last event, `{"reason", "message", "version"}`: `deleted`,
+//!   `expired`, `slow` (the watcher fell behind) or `shutdown`.
+//!
+//! A comment line (`: heartbeat`) is sent after each quiet interval.
+
+use std::convert::Infallible;
+
+use axum::{
+    Extension,
+    extract::{Path, State},
+    http::{HeaderMap, HeaderValue},
+    response::{
+        IntoResponse, Response,
+        sse::{Event, Sse},
+    },
+};
+use serde::Serialize;
+use tokio::sync::mpsc;
+use tokio_stream::wrappers::ReceiverStream;
+use utoipa::ToSchema;
+
+use super::{
+    problem::Problem,
+    sessions::{BatchUpdate, plot_update_out, update_out, view_out},
+};
+use crate::{auth::Tenant, state::AppState};
+use service::{
+    Violations,
+    session::events::{EventBody, SessionEvent, WatchItem},
+};
+
+/// The data of an `end` event.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct WatchEnd {
+    /// `deleted`, `expired`, `slow` or `shutdown`.
+    #[schema(example = "deleted")]
+    pub reason: &'static str,
+    pub message: String,
+    /// The version of the last event before it.
+    pub version: u64,
+}
+
+/// The REST form of an update event.
+pub fn update_dto(e: &SessionEvent) -> Option<BatchUpdate> {
+    match &e.body {
+        EventBody::Correlation(u) => Some(update_out(u.clone())),
+        EventBody::PlotFusion { update, plots } => {
+            let mut out = plot_update_out(update.clone());
+            if let Some(pf) = out.plot_fusion.as_mut() {
+                pf.plots = Some(
+                    plots
+                        .iter()
+                        .map(|p| super::sessions::PlotPosition {
+                            radar: p.radar,
+                            t: p.t,
+                            position_m: p.position,
+                        })
+                        .collect(),
+                );
+            }
+            Some(out)
+        }
+        EventBody::Deleted => None,
+    }
+}
+
+fn json_event(name: &str, id: u64, data: &impl Serialize) -> Event {
+    match Event::default()
+        .event(name)
+        .id(id.to_string())
+        .json_data(data)
+    {
+        Ok(e) => e,
+        // Serialising our own DTOs does not fail; say so if it ever does.
+        Err(e) => Event::default().comment(format!("event not serialised: {e}")),
+    }
+}
+
+/// The version `Last-Event-ID` names; a value that is not one is a 422
+/// naming the header.
+fn last_event_id(headers: &HeaderMap) -> Result<Option<u64>, Problem> {
+    let Some(value) = headers.get("last-event-id") else {
+        return Ok(None);
+    };
+    let text = value.to_str().unwrap_or("").trim();
+    if text.is_empty() {
+        return Ok(None);
+    }
+    text.parse::<u64>().map(Some).map_err(|_| {
+        Violations::single(
+            "Last-Event-ID",
+            format!("must be a session version (an event's id), got {text:?}"),
+        )
+        .into()
+    })
+}
+
+/// Follows a session: its updates as Server-Sent Events.
+#[utoipa::path(get, path = "/v1/sessions/{id}/events", tag = "sessions",
+    params(
+        ("id" = String, Path, description = "Session id"),
+        ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this version: the events after it when this replica still holds them, else a fresh snapshot"),
+    ),
+    responses(
+        (status = 200, description = "`text/event-stream`: `snapshot` (a SessionState), `update` (a BatchUpdate, version order) and a last `end` (a WatchEnd) events, `id` the session's version; `: heartbeat` comments on a quiet session", content_type = "text/event-stream", body = String),
+        (status = 404, description = "No such session for this tenant", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Last-Event-ID is not a version", body = Problem, content_type = "application/problem+json"),
+        (status = 429, description = "Too many watchers of the session or of the tenant on this replica", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Session store unreachable", body = Problem, content_type = "application/problem+json"),
+    ))]
+pub async fn events(
+    State(state): State<AppState>,
+    Extension(tenant): Extension<Tenant>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, Problem> {
+    let after = last_event_id(&headers)?;
+    let mut watch = state.sessions().watch(&tenant.0, &id, after).await?;
+    let heartbeat = watch.heartbeat();
+    let (tx, rx) = mpsc::channel::<Result<Event, Infallible>>(1);
+    tokio::spawn(async move {
+        loop {
+            let item = tokio::select! {
+                () = tx.closed() => return,
+                item = watch.next() => item,
+            };
+            let Some(item) = item else { return };
+            let event = match item {
+                WatchItem::Snapshot(view) => {
+                    let dto = view_out(*view);
+                    json_event("snapshot", dto.version, &dto)
+                }
+                WatchItem::Update(e) => match update_dto(&e) {
+                    Some(dto) => json_event("update", e.version, &dto),
+                    None => continue,
+                },
+                WatchItem::Heartbeat => Event::default().comment("heartbeat"),
+                WatchItem::End { reason, version } => json_event(
+                    "end",
+                    version,
+                    &WatchEnd {
+                        reason: reason.name(),
+                        message: reason.message(heartbeat),
+                        version,
+                    },
+                ),
+            };
+            if tx.send(Ok(event)).await.is_err() {
+                return;
+            }
+        }
+    });
+    let mut response = Sse::new(ReceiverStream::new(rx)).into_response();
+    // Proxies (nginx) must not buffer the stream.
+    response
+        .headers_mut()
+        .insert("x-accel-buffering", HeaderValue::from_static("no"));
+    Ok(response)
+}
