@@ -7,6 +7,7 @@
 
 pub mod memory;
 pub mod redis;
+pub mod sentinel;
 
 use std::time::Duration;
 

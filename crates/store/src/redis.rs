@@ -26,7 +26,9 @@ use redis::{
 use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
 
 pub struct RedisStore {
-    conn: ConnectionManager,
+    conn: Option<ConnectionManager>,
+    /// Set for a `redis+sentinel://` URL: the primary is found through it.
+    sentinel: Option<super::sentinel::Sentinel>,
     prefix: String,
     max_sessions_per_tenant: usize,
     timeout: Duration,
@@ -100,6 +102,14 @@ impl RedisStore {
     /// A store over a lazily connected, self-reconnecting connection: this
     /// fails only when the URL is not a Redis URL, never because Redis is down.
     pub fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+        if super::sentinel::is_sentinel_url(&settings.url) {
+            let url = super::sentinel::parse(&settings.url)?;
+            return Ok(Self::with_conn(
+                settings,
+                None,
+                Some(super::sentinel::Sentinel::new(url, settings.timeout)),
+            ));
+        }
         let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
             reason: format!("invalid Redis URL: {e}"),
         })?;
@@ -112,8 +122,17 @@ impl RedisStore {
             .set_min_delay(Duration::from_millis(50))
             .set_max_delay(Duration::from_millis(200));
         let conn = ConnectionManager::new_lazy_with_config(client, config).map_err(unavailable)?;
-        Ok(Self {
+        Ok(Self::with_conn(settings, Some(conn), None))
+    }
+
+    fn with_conn(
+        settings: &StoreSettings,
+        conn: Option<ConnectionManager>,
+        sentinel: Option<super::sentinel::Sentinel>,
+    ) -> Self {
+        Self {
             conn,
+            sentinel,
             prefix: settings.key_prefix.clone(),
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
@@ -121,7 +140,33 @@ impl RedisStore {
             cas: Script::new(&format!("{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}")),
             delete: Script::new(DELETE),
             list: Script::new(&format!("{NOW_MS}{LIST}")),
-        })
+        }
+    }
+
+    /// The connection to use: the single server's, or the primary's that
+    /// the sentinels name.
+    async fn connection(&self) -> Result<ConnectionManager, StoreError> {
+        match (&self.conn, &self.sentinel) {
+            (Some(c), _) => Ok(c.clone()),
+            (None, Some(s)) => s.conn().await,
+            (None, None) => Err(StoreError::Unavailable {
+                reason: "no Redis connection configured".into(),
+            }),
+        }
+    }
+
+    /// With Sentinel: the primary in use (`host:port`), if one is known.
+    pub fn sentinel_primary(&self) -> Option<String> {
+        self.sentinel
+            .as_ref()
+            .and_then(super::sentinel::Sentinel::primary)
+    }
+
+    /// With Sentinel: (primary changes followed, rediscoveries after a failure).
+    pub fn sentinel_counts(&self) -> Option<(u64, u64)> {
+        self.sentinel
+            .as_ref()
+            .map(|s| (s.failovers(), s.rediscoveries()))
     }
 
     pub async fn create(
@@ -132,7 +177,7 @@ impl RedisStore {
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<u64, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.create.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant))
             .arg(escape(id))
@@ -151,7 +196,7 @@ impl RedisStore {
     }
 
     pub async fn get(&self, tenant: &str, id: &str) -> Result<Option<Stored>, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let key = self.session_key(tenant, id);
         let (version, data): (Option<String>, Option<Vec<u8>>) = self
             .bounded(
@@ -183,7 +228,7 @@ impl RedisStore {
         let Some(new_version) = expected_version.checked_add(1) else {
             return Err(corrupt("version overflow".into()));
         };
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.cas.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant))
             .arg(escape(id))
@@ -205,7 +250,7 @@ impl RedisStore {
     }
 
     pub async fn delete(&self, tenant: &str, id: &str) -> Result<bool, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.delete.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant)).arg(escape(id));
         let deleted: i64 = self.bounded(call.invoke_async(&mut conn)).await?;
@@ -213,7 +258,7 @@ impl RedisStore {
     }
 
     pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.list.key(self.index_key(tenant));
         call.arg(self.session_key(tenant, ""));
         let rows: Vec<(String, String, i64, i64, String)> =
@@ -235,7 +280,7 @@ impl RedisStore {
     }
 
     pub async fn ping(&self) -> Result<(), StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let _: String = self
             .bounded(redis::cmd("PING").query_async(&mut conn))
             .await?;
@@ -253,6 +298,21 @@ impl RedisStore {
     /// Runs one command within the timeout; errors and timeouts are `Unavailable`
     /// except a key of the wrong type, which is `Corrupt`.
     async fn bounded<T>(
+        &self,
+        command: impl Future<Output = Result<T, RedisError>>,
+    ) -> Result<T, StoreError> {
+        let result = self.bounded_inner(command).await;
+        if matches!(result, Err(StoreError::Unavailable { .. }))
+            && let Some(s) = &self.sentinel
+        {
+            // A connection error, a time-out or READONLY: ask the sentinels
+            // again before the next command.
+            s.invalidate();
+        }
+        result
+    }
+
+    async fn bounded_inner<T>(
         &self,
         command: impl Future<Output = Result<T, RedisError>>,
     ) -> Result<T, StoreError> {
