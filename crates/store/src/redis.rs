@@ -28,7 +28,7 @@ use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
 pub struct RedisStore {
     conn: Option<ConnectionManager>,
     /// Set for a `redis+sentinel://` URL: the primary is found through it.
-    sentinel: Option<super::sentinel::Sentinel>,
+    sentinel: Option<Box<super::sentinel::Sentinel>>,
     prefix: String,
     max_sessions_per_tenant: usize,
     timeout: Duration,
@@ -107,7 +107,10 @@ impl RedisStore {
             return Ok(Self::with_conn(
                 settings,
                 None,
-                Some(super::sentinel::Sentinel::new(url, settings.timeout)),
+                Some(Box::new(super::sentinel::Sentinel::new(
+                    url,
+                    settings.timeout,
+                ))),
             ));
         }
         let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
@@ -128,7 +131,7 @@ impl RedisStore {
     fn with_conn(
         settings: &StoreSettings,
         conn: Option<ConnectionManager>,
-        sentinel: Option<super::sentinel::Sentinel>,
+        sentinel: Option<Box<super::sentinel::Sentinel>>,
     ) -> Self {
         Self {
             conn,
@@ -157,9 +160,7 @@ impl RedisStore {
 
     /// With Sentinel: the primary in use (`host:port`), if one is known.
     pub fn sentinel_primary(&self) -> Option<String> {
-        self.sentinel
-            .as_ref()
-            .and_then(super::sentinel::Sentinel::primary)
+        self.sentinel.as_ref().and_then(|s| s.primary())
     }
 
     /// With Sentinel: (primary changes followed, rediscoveries after a failure).
