@@ -64,13 +64,22 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
     }
     let dir = std::env::temp_dir().join(format!("fusion-sentinel-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
+    // Each server in its own directory: a replica's full sync writes dump.rdb there.
+    let (d0, d1) = (dir.join("primary"), dir.join("replica"));
+    std::fs::create_dir_all(&d0).unwrap();
+    std::fs::create_dir_all(&d1).unwrap();
     let common = ["--bind", "127.0.0.1", "--save", "", "--appendonly", "no"];
     let mut primary = Some(redis_server(
-        &[&["--port", "6450"][..], &common[..]].concat(),
+        &[
+            &["--port", "6450", "--dir", d0.to_str().unwrap()][..],
+            &common[..],
+        ]
+        .concat(),
     ));
     let _replica = redis_server(
         &[
-            &["--port", "6451", "--replicaof", "127.0.0.1", "6450"][..],
+            &["--port", "6451", "--dir", d1.to_str().unwrap()][..],
+            &["--replicaof", "127.0.0.1", "6450"][..],
             &common[..],
         ]
         .concat(),
@@ -110,7 +119,7 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
             .create("t", "s", "correlation", b"0".to_vec(), ttl)
             .await;
     }
-    assert_eq!(created, Ok(1));
+    assert_eq!(created, Ok(1), "a fresh primary takes the session");
     let (mut unavailable, mut killed_at, mut recovered) = (0u32, None, None);
     let total = 40u64;
     for v in 1..=total {
