@@ -418,10 +418,14 @@ impl Settings {
             return Err("--max-batch-reports must be at least 1".into());
         }
         let store = self.session_store.as_str();
-        if store != "memory" && !store.starts_with("redis://") && !store.starts_with("rediss://") {
+        if store != "memory"
+            && !store.starts_with("redis://")
+            && !store.starts_with("rediss://")
+            && !store.starts_with("redis+sentinel://")
+        {
             return Err(format!(
                 "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
-                 starting with redis:// or rediss://, not {store:?}"
+                 starting with redis://, rediss:// or redis+sentinel://, not {store:?}"
             ));
         }
         if self.session_key_prefix.is_empty() {

@@ -8,6 +8,7 @@
 pub mod events;
 pub mod memory;
 pub mod redis;
+pub mod sentinel;
 
 use std::time::Duration;
 
@@ -200,7 +201,7 @@ impl SessionStore {
     )> {
         match self {
             Self::Memory(_) => None,
-            Self::Redis(s) => Some(s.listen(capacity)),
+            Self::Redis(s) => s.listen(capacity),
         }
     }
 

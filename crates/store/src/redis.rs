@@ -26,9 +26,11 @@ use redis::{
 use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
 
 pub struct RedisStore {
-    /// For the event listener's own pub/sub connection.
-    client: Client,
-    conn: ConnectionManager,
+    /// For the event listener's own pub/sub connection (a single server).
+    client: Option<Client>,
+    conn: Option<ConnectionManager>,
+    /// Set for a `redis+sentinel://` URL: the primary is found through it.
+    sentinel: Option<Box<super::sentinel::Sentinel>>,
     prefix: String,
     max_sessions_per_tenant: usize,
     timeout: Duration,
@@ -102,6 +104,17 @@ impl RedisStore {
     /// A store over a lazily connected, self-reconnecting connection: this
     /// fails only when the URL is not a Redis URL, never because Redis is down.
     pub fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+        if super::sentinel::is_sentinel_url(&settings.url) {
+            let url = super::sentinel::parse(&settings.url)?;
+            return Ok(Self::with_conn(
+                settings,
+                None,
+                Some(Box::new(super::sentinel::Sentinel::new(
+                    url,
+                    settings.timeout,
+                ))),
+            ));
+        }
         let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
             reason: format!("invalid Redis URL: {e}"),
         })?;
@@ -115,9 +128,20 @@ impl RedisStore {
             .set_max_delay(Duration::from_millis(200));
         let conn =
             ConnectionManager::new_lazy_with_config(client.clone(), config).map_err(unavailable)?;
-        Ok(Self {
-            client,
+        let mut store = Self::with_conn(settings, Some(conn), None);
+        store.client = Some(client);
+        Ok(store)
+    }
+
+    fn with_conn(
+        settings: &StoreSettings,
+        conn: Option<ConnectionManager>,
+        sentinel: Option<Box<super::sentinel::Sentinel>>,
+    ) -> Self {
+        Self {
+            client: None,
             conn,
+            sentinel,
             prefix: settings.key_prefix.clone(),
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
@@ -125,7 +149,31 @@ impl RedisStore {
             cas: Script::new(&format!("{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}")),
             delete: Script::new(DELETE),
             list: Script::new(&format!("{NOW_MS}{LIST}")),
-        })
+        }
+    }
+
+    /// The connection to use: the single server's, or the primary's that
+    /// the sentinels name.
+    async fn connection(&self) -> Result<ConnectionManager, StoreError> {
+        match (&self.conn, &self.sentinel) {
+            (Some(c), _) => Ok(c.clone()),
+            (None, Some(s)) => s.conn().await,
+            (None, None) => Err(StoreError::Unavailable {
+                reason: "no Redis connection configured".into(),
+            }),
+        }
+    }
+
+    /// With Sentinel: the primary in use (`host:port`), if one is known.
+    pub fn sentinel_primary(&self) -> Option<String> {
+        self.sentinel.as_ref().and_then(|s| s.primary())
+    }
+
+    /// With Sentinel: (primary changes followed, rediscoveries after a failure).
+    pub fn sentinel_counts(&self) -> Option<(u64, u64)> {
+        self.sentinel
+            .as_ref()
+            .map(|s| (s.failovers(), s.rediscoveries()))
     }
 
     pub async fn create(
@@ -136,7 +184,7 @@ impl RedisStore {
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<u64, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.create.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant))
             .arg(escape(id))
@@ -155,7 +203,7 @@ impl RedisStore {
     }
 
     pub async fn get(&self, tenant: &str, id: &str) -> Result<Option<Stored>, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let key = self.session_key(tenant, id);
         let (version, data): (Option<String>, Option<Vec<u8>>) = self
             .bounded(
@@ -187,7 +235,7 @@ impl RedisStore {
         let Some(new_version) = expected_version.checked_add(1) else {
             return Err(corrupt("version overflow".into()));
         };
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.cas.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant))
             .arg(escape(id))
@@ -209,7 +257,7 @@ impl RedisStore {
     }
 
     pub async fn delete(&self, tenant: &str, id: &str) -> Result<bool, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.delete.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant)).arg(escape(id));
         let deleted: i64 = self.bounded(call.invoke_async(&mut conn)).await?;
@@ -217,7 +265,7 @@ impl RedisStore {
     }
 
     pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let mut call = self.list.key(self.index_key(tenant));
         call.arg(self.session_key(tenant, ""));
         let rows: Vec<(String, String, i64, i64, String)> =
@@ -239,7 +287,7 @@ impl RedisStore {
     }
 
     pub async fn version(&self, tenant: &str, id: &str) -> Result<Option<u64>, StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let v: Option<String> = self
             .bounded(
                 redis::cmd("HGET")
@@ -253,7 +301,7 @@ impl RedisStore {
 
     /// `PUBLISH` on the session's event channel.
     pub async fn publish(&self, tenant: &str, id: &str, payload: &[u8]) -> Result<(), StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let _: i64 = self
             .bounded(
                 redis::cmd("PUBLISH")
@@ -265,15 +313,18 @@ impl RedisStore {
         Ok(())
     }
 
-    /// Starts this replica's event listener (see [`crate::events`]).
+    /// Starts this replica's event listener (see [`crate::events`]); `None`
+    /// behind Sentinel, where watchers of another replica's pushes see them
+    /// at their heartbeats (the listener does not follow a failover yet).
     pub fn listen(
         &self,
         capacity: usize,
-    ) -> (
+    ) -> Option<(
         crate::events::EventListener,
         tokio::sync::mpsc::Receiver<crate::events::Feed>,
-    ) {
-        crate::events::listen(self.client.clone(), self.timeout, capacity)
+    )> {
+        let client = self.client.clone()?;
+        Some(crate::events::listen(client, self.timeout, capacity))
     }
 
     /// `{prefix}:ev:{tenant}:{id}`, escaped as the keys are.
@@ -282,7 +333,7 @@ impl RedisStore {
     }
 
     pub async fn ping(&self) -> Result<(), StoreError> {
-        let mut conn = self.conn.clone();
+        let mut conn = self.connection().await?;
         let _: String = self
             .bounded(redis::cmd("PING").query_async(&mut conn))
             .await?;
@@ -300,6 +351,21 @@ impl RedisStore {
     /// Runs one command within the timeout; errors and timeouts are `Unavailable`
     /// except a key of the wrong type, which is `Corrupt`.
     async fn bounded<T>(
+        &self,
+        command: impl Future<Output = Result<T, RedisError>>,
+    ) -> Result<T, StoreError> {
+        let result = self.bounded_inner(command).await;
+        if matches!(result, Err(StoreError::Unavailable { .. }))
+            && let Some(s) = &self.sentinel
+        {
+            // A connection error, a time-out or READONLY: ask the sentinels
+            // again before the next command.
+            s.invalidate();
+        }
+        result
+    }
+
+    async fn bounded_inner<T>(
         &self,
         command: impl Future<Output = Result<T, RedisError>>,
     ) -> Result<T, StoreError> {
