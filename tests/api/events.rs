@@ -6,6 +6,11 @@ use std::time::Duration;
 use radar_fusion::proto::{self as pb, session_service_client::SessionServiceClient};
 use serde_json::{Value, json};
 
+#[path = "../common/sessions.rs"]
+#[allow(dead_code)] // the Redis suite's session helpers; this uses open_stream
+mod data;
+use data::open_stream;
+
 use crate::{
     cat062::request_with_cat062,
     helpers::{TestApp, assert_problem, spawn_app, spawn_app_with},
@@ -308,16 +313,27 @@ async fn grpc_watch_streams_the_same_updates() {
                 radial_velocity_mps: p["radial_velocity_mps"].as_f64(),
             })
             .collect();
-        let answer = client
-            .push_batch(pb::PushBatchRequest {
-                session_id: id.clone(),
-                sequence: Some(k as u64 + 1),
-                plots,
-                ..Default::default()
+        // Odd batches over the unary call, even ones over the batch stream.
+        let request = pb::PushBatchRequest {
+            session_id: id.clone(),
+            sequence: Some(k as u64 + 1),
+            plots,
+            ..Default::default()
+        };
+        let answer = if k % 2 == 0 {
+            client.push_batch(request).await.unwrap().into_inner()
+        } else {
+            let (tx, mut answers) =
+                open_stream(&mut client, pb::stream_request::Kind::Attach(id.clone())).await;
+            let opened = answers.message().await.unwrap().unwrap();
+            assert_eq!(opened.session_id, id);
+            tx.send(pb::StreamRequest {
+                kind: Some(pb::stream_request::Kind::Batch(request)),
             })
             .await
-            .unwrap()
-            .into_inner();
+            .unwrap();
+            answers.message().await.unwrap().unwrap()
+        };
         let e = stream.message().await.unwrap().unwrap();
         assert_eq!(e.version, k as u64 + 2);
         let Some(pb::watch_event::Event::Update(mut u)) = e.event else {
