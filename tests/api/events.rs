@@ -6,14 +6,10 @@ use std::time::Duration;
 use radar_fusion::proto::{self as pb, session_service_client::SessionServiceClient};
 use serde_json::{Value, json};
 
-#[path = "../common/sessions.rs"]
-#[allow(dead_code)] // the Redis suite's session helpers; this uses open_stream
-mod data;
-use data::open_stream;
-
 use crate::{
     cat062::request_with_cat062,
     helpers::{TestApp, assert_problem, spawn_app, spawn_app_with},
+    sessions::data::open_stream,
 };
 
 /// One parsed Server-Sent Event.
