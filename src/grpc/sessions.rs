@@ -552,7 +552,7 @@ impl SessionService for SessionGrpc {
     ) -> Result<Response<Self::WatchStream>, Status> {
         let tenant = tenant(&request);
         let req = request.into_inner();
-        let mut watch = self
+        let watch = self
             .state
             .sessions()
             .watch(&tenant, &req.session_id, req.after_version)
@@ -560,21 +560,9 @@ impl SessionService for SessionGrpc {
             .map_err(to_status)?;
         let heartbeat = watch.heartbeat();
         let (tx, rx) = tokio::sync::mpsc::channel::<Result<pb::WatchEvent, Status>>(1);
-        tokio::spawn(async move {
-            loop {
-                let item = tokio::select! {
-                    () = tx.closed() => return,
-                    item = watch.next() => item,
-                };
-                let Some(item) = item else { return };
-                let Some(event) = watch_event_out(item, heartbeat, watch.version()) else {
-                    continue;
-                };
-                if tx.send(Ok(event)).await.is_err() {
-                    return;
-                }
-            }
-        });
+        tokio::spawn(watch.forward(tx, move |item, version| {
+            watch_event_out(item, heartbeat, version).map(Ok)
+        }));
         let out = tokio_stream::wrappers::ReceiverStream::new(rx);
         Ok(Response::new(Box::pin(out) as WatchStream))
     }

@@ -123,41 +123,31 @@ pub async fn events(
     headers: HeaderMap,
 ) -> Result<Response, Problem> {
     let after = last_event_id(&headers)?;
-    let mut watch = state.sessions().watch(&tenant.0, &id, after).await?;
+    let watch = state.sessions().watch(&tenant.0, &id, after).await?;
     let heartbeat = watch.heartbeat();
     let (tx, rx) = mpsc::channel::<Result<Event, Infallible>>(1);
-    tokio::spawn(async move {
-        loop {
-            let item = tokio::select! {
-                () = tx.closed() => return,
-                item = watch.next() => item,
-            };
-            let Some(item) = item else { return };
-            let event = match item {
-                WatchItem::Snapshot(view) => {
-                    let dto = view_out(*view);
-                    json_event("snapshot", dto.version, &dto)
-                }
-                WatchItem::Update(e) => match update_dto(&e) {
-                    Some(dto) => json_event("update", e.version, &dto),
-                    None => continue,
-                },
-                WatchItem::Heartbeat => Event::default().comment("heartbeat"),
-                WatchItem::End { reason, version } => json_event(
-                    "end",
-                    version,
-                    &WatchEnd {
-                        reason: reason.name(),
-                        message: reason.message(heartbeat),
-                        version,
-                    },
-                ),
-            };
-            if tx.send(Ok(event)).await.is_err() {
-                return;
+    tokio::spawn(watch.forward(tx, move |item, _| {
+        Some(Ok(match item {
+            WatchItem::Snapshot(view) => {
+                let dto = view_out(*view);
+                json_event("snapshot", dto.version, &dto)
             }
-        }
-    });
+            WatchItem::Update(e) => {
+                let dto = update_dto(&e)?;
+                json_event("update", e.version, &dto)
+            }
+            WatchItem::Heartbeat => Event::default().comment("heartbeat"),
+            WatchItem::End { reason, version } => json_event(
+                "end",
+                version,
+                &WatchEnd {
+                    reason: reason.name(),
+                    message: reason.message(heartbeat),
+                    version,
+                },
+            ),
+        }))
+    }));
     let mut response = Sse::new(ReceiverStream::new(rx)).into_response();
     // Proxies (nginx) must not buffer the stream.
     response

@@ -446,13 +446,32 @@ pub struct Watch {
 }
 
 impl Watch {
-    /// The version of the last item given.
-    pub fn version(&self) -> u64 {
-        self.last
-    }
-
     pub fn heartbeat(&self) -> Duration {
         self.heartbeat
+    }
+
+    /// Sends every item, as `out` makes it (`None`: nothing to send; it
+    /// gets the version of the last item given), into `tx` until the `End`
+    /// or until the receiver is gone: the adapters spawn this for each
+    /// stream, so a client that disconnects frees its watcher at once.
+    pub async fn forward<T>(
+        mut self,
+        tx: tokio::sync::mpsc::Sender<T>,
+        mut out: impl FnMut(WatchItem, u64) -> Option<T>,
+    ) {
+        loop {
+            let item = tokio::select! {
+                () = tx.closed() => return,
+                item = self.next() => item,
+            };
+            let Some(item) = item else { return };
+            let Some(message) = out(item, self.last) else {
+                continue;
+            };
+            if tx.send(message).await.is_err() {
+                return;
+            }
+        }
     }
 
     /// The next item; `None` after the `End`.
