@@ -857,14 +857,20 @@ def gospa(d: np.ndarray, c: float = GOSPA_C_M, p: int = GOSPA_P) -> float:
     return (loc + c ** p / 2.0 * (n - k) + c ** p / 2.0 * (m - k)) ** (1.0 / p)
 
 
+# A truth climbing or descending faster than this (m/s) is "climbing" in
+# the split of the 3D error by segment.
+CLIMB_MPS = 2.0
+
+
 def score(scene: Scene, res: Result, cutoff_m: float) -> dict:
     times = np.unique(np.concatenate([res.times, res.t]))
     # The truths at every instant: fusion ENU position, local up, coverage.
-    truth_pos, truth_up, covered = [], [], []
+    truth_pos, truth_up, truth_vz, covered = [], [], [], []
     for truth in scene.truths:
         cov = scene.covered(truth, times)
         pos = np.full((len(times), 3), np.nan)
         up = np.full((len(times), 3), np.nan)
+        vz = np.full(len(times), np.nan)
         if cov.any():
             ecef = truth.ecef(times[cov])
             pos[cov] = scene.origin_frame.enu(ecef)
@@ -873,18 +879,21 @@ def score(scene: Scene, res: Result, cutoff_m: float) -> dict:
             normal = np.column_stack([np.cos(la) * np.cos(lo), np.cos(la) * np.sin(lo),
                                       np.sin(la)])
             up[cov] = scene.origin_frame.enu_velocity(normal)
+            vz[cov] = np.sum(truth.ecef_velocity(times[cov]) * normal, axis=1)
         truth_pos.append(pos)
         truth_up.append(up)
+        truth_vz.append(vz)
         covered.append(cov)
     truth_pos = np.stack(truth_pos, axis=1) if scene.truths else np.empty((len(times), 0, 3))
     truth_up = np.stack(truth_up, axis=1) if scene.truths else np.empty((len(times), 0, 3))
     covered = np.stack(covered, axis=1) if scene.truths else np.empty((len(times), 0), bool)
+    truth_vz = np.stack(truth_vz, axis=1) if scene.truths else np.empty((len(times), 0))
 
     index = np.searchsorted(times, res.t)
     order = np.argsort(index, kind="stable")
     bounds = np.searchsorted(index[order], np.arange(len(times) + 1))
     assigned_truth = np.full(len(res.t), -1)
-    err_h, err_3d, nees, upd = [], [], [], []
+    err_h, err_3d, err_v, climbing, nees, upd = [], [], [], [], [], []
     gospas = []
     held = np.zeros(len(scene.truths), int)
     for k in range(len(times)):
@@ -908,12 +917,15 @@ def score(scene: Scene, res: Result, cutoff_m: float) -> dict:
             u = truth_up[k, j]
             err_3d.append(float(np.linalg.norm(e)))
             err_h.append(float(np.linalg.norm(e - (e @ u) * u)))
+            err_v.append(abs(float(e @ u)))
+            climbing.append(abs(float(truth_vz[k, j])) > CLIMB_MPS)
             upd.append(bool(res.updated[s]))
             try:
                 nees.append(float(e @ np.linalg.solve(res.cov[s], e)))
             except np.linalg.LinAlgError:
                 nees.append(float("inf"))
-    err_h, err_3d, nees, upd = map(np.asarray, (err_h, err_3d, nees, upd))
+    err_h, err_3d, err_v, climbing, nees, upd = map(
+        np.asarray, (err_h, err_3d, err_v, climbing, nees, upd))
 
     # Tracks: false when assigned in under half of their states.
     track_ids = list(dict.fromkeys(res.ids.tolist()))
@@ -945,6 +957,10 @@ def score(scene: Scene, res: Result, cutoff_m: float) -> dict:
         "median_h_m": pct(err_h, 50), "p90_h_m": pct(err_h, 90),
         "median_3d_m": pct(err_3d, 50), "p90_3d_m": pct(err_3d, 90),
         "median_3d_updated_m": pct(err_3d[upd], 50) if len(upd) else float("nan"),
+        "median_v_m": pct(err_v, 50),
+        "median_3d_level_m": pct(err_3d[~climbing], 50) if len(climbing) else float("nan"),
+        "median_3d_climbing_m": pct(err_3d[climbing], 50) if len(climbing) else float("nan"),
+        "climbing_fraction": float(np.mean(climbing)) if len(climbing) else float("nan"),
         "assigned_states": int(len(err_3d)), "states": int(len(res.t)),
         "instants": int(len(times)),
         "confirmed_tracks": len(track_ids), "false_tracks": len(false_tracks),
