@@ -2,7 +2,7 @@
 //!
 //! A target is a [`TargetPlan`]: a birth time, an initial state, a list of
 //! manoeuvre [`Leg`]s (constant velocity, coordinated turn at a g-load, speed
-//! change) followed by constant velocity, and optional random manoeuvres by
+//! change, vertical acceleration) followed by constant velocity, and optional random manoeuvres by
 //! the process noise of seed 000 eq. 26. [`simulate`] samples it every `dt`
 //! seconds into a [`Trajectory`]. [`InitialConditions`] draws random starts
 //! as the papers do; [`crossing`], [`parallel`] and [`splitting`] build the
@@ -40,6 +40,13 @@ pub enum Manoeuvre {
     /// negative to slow down. The horizontal speed never drops below 1 m/s.
     SpeedChange {
         /// Tangential acceleration (m/s²).
+        acceleration: f64,
+    },
+    /// Change of vertical speed at constant horizontal velocity: vertical
+    /// acceleration (m/s², positive up). A climb is one leg of it, constant
+    /// velocity (climbing), and one leg of the opposite sign (levelling off).
+    VerticalAcceleration {
+        /// Vertical acceleration (m/s²).
         acceleration: f64,
     },
 }
@@ -390,6 +397,14 @@ fn manoeuvre_step(s: &State, m: Manoeuvre, tau: f64) -> State {
                 s[5],
             ]
         }
+        Manoeuvre::VerticalAcceleration { acceleration } => [
+            s[0] + s[1] * tau,
+            s[1],
+            s[2] + s[3] * tau,
+            s[3],
+            s[4] + s[5] * tau + 0.5 * acceleration * tau * tau,
+            s[5] + acceleration * tau,
+        ],
         Manoeuvre::SpeedChange { acceleration } => {
             let speed = s[1].hypot(s[3]);
             if speed < 1e-9 {
@@ -575,6 +590,45 @@ mod tests {
         }
         // A coordinated turn keeps the speed.
         assert!((a[1].hypot(a[3]) - 200.0f64.hypot(100.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_climb_ramps_holds_and_levels_off() {
+        // 1 m/s² up for 10 s: vz 10 m/s, z = ½·1·10² = 50 m; 20 s climbing at
+        // 10 m/s: z = 250 m; −1 m/s² for 10 s: vz 0, z = 250 + 100 − 50 = 300 m.
+        // The horizontal motion is untouched: x = 150 m/s × 40 s = 6000 m.
+        let up = Manoeuvre::VerticalAcceleration { acceleration: 1.0 };
+        let down = Manoeuvre::VerticalAcceleration { acceleration: -1.0 };
+        let plan = TargetPlan {
+            birth: 0.0,
+            initial: [0.0, 150.0, 0.0, 0.0, 3000.0, 0.0],
+            legs: vec![
+                Leg {
+                    duration: 10.0,
+                    manoeuvre: up,
+                },
+                Leg {
+                    duration: 20.0,
+                    manoeuvre: Manoeuvre::ConstantVelocity,
+                },
+                Leg {
+                    duration: 10.0,
+                    manoeuvre: down,
+                },
+            ],
+            noise_factor: 0.0,
+        };
+        let mut rng = run_rng(0, 0);
+        let tr = simulate(&plan, 0.25, 40.0, &mut rng).unwrap();
+        let at = |t: f64| tr.state_at(t).unwrap();
+        assert!((at(10.0)[5] - 10.0).abs() < 1e-9 && (at(10.0)[4] - 3050.0).abs() < 1e-6);
+        assert!((at(30.0)[4] - 3250.0).abs() < 1e-6);
+        let end = at(40.0);
+        assert!(
+            end[5].abs() < 1e-9 && (end[4] - 3300.0).abs() < 1e-6,
+            "{end:?}"
+        );
+        assert!((end[0] - 6000.0).abs() < 1e-6 && end[1] == 150.0 && end[2] == 0.0);
     }
 
     #[test]

@@ -18,6 +18,7 @@ pub mod seed001_serial_jpda;
 pub mod seed002_jpda;
 pub mod seed003_dimension;
 pub mod seed004_ais_bias;
+pub mod tracker_manoeuvres;
 
 use std::path::{Path, PathBuf};
 
@@ -131,6 +132,11 @@ pub const REGISTRY: &[Experiment] = &[
         name: "seed003-dimension",
         summary: "seed 003 table 1: association probability, fusion error and time of mapping, dimension lifting and splitting, two 3D and two 2D radars",
         run: seed003_dimension::run,
+    },
+    Experiment {
+        name: "tracker-manoeuvres",
+        summary: "plot-fusion tracker per kind of segment (level, turning, speed change, climb) on 3D Doppler radars: default IMM vs CV, with and without range rate, serial vs parallel; RMSE and 3-dof NEES",
+        run: tracker_manoeuvres::run,
     },
 ];
 

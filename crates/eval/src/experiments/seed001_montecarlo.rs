@@ -20,10 +20,11 @@
 //! - duration D = 300 s (`--scans` × 5 s).
 //!
 //! Trackers, all with `TrackerConfig::new`'s defaults unless stated: exact
-//! JPDA, the IMM of `Imm::aircraft` (CV √q = 0.5 and ±3 °/s turns √q =
-//! 1.5) for confirmed tracks, CWNA √q = 3 per axis for tentative ones (the
-//! "CV" variants: one constant-velocity model for both, the default before
-//! the IMM), 3-of-4 initiation with a
+//! JPDA, the IMM of `Imm::aircraft` (CV √q = 0.5, coordinated turns at
+//! ±3 °/s with √q = 3 and a manoeuvre CV √q = 5; mean sojourns 60/20/20/20 s,
+//! a new track 0.7/0.1/0.1/0.1) for confirmed tracks, CWNA √q = 3 per axis
+//! for tentative ones (the "CV" variants: one constant-velocity model for
+//! both, the default before the IMM), 3-of-4 initiation with a
 //! [0, 600] m/s speed gate, deletion by `TrackerConfig::default_deletion`
 //! (2 × radars, at least 3, consecutive missed frames in serial mode, 3 in parallel
 //! mode), 99 % gates, σ_t = 300 m/s for the unseen cross-range motion of
