@@ -45,6 +45,7 @@ mod state;
 mod sweep;
 mod track;
 pub mod updater;
+pub mod window;
 
 #[cfg(test)]
 mod tests;
@@ -56,6 +57,7 @@ pub use config::{
 pub use conversion::{CartesianPlot, Doppler};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
+pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
 
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;

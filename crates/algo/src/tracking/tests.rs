@@ -759,3 +759,127 @@ fn beam_timed_plots_are_tracked_like_whole_scans() {
         }
     }
 }
+
+/// The fig. 5 scene's plots with an arrival time each: t plus a delay in
+/// [0, 4] s, and `held` of them held up 5–10 s more; sorted by arrival.
+fn delayed(plots: &[Plot], held: f64, rng: &mut Lcg) -> Vec<(f64, Plot)> {
+    let mut arrivals: Vec<(f64, Plot)> = plots
+        .iter()
+        .map(|p| {
+            let mut d = 4.0 * rng.uniform();
+            if rng.uniform() < held {
+                d += 5.0 + 5.0 * rng.uniform();
+            }
+            (p.t + d, *p)
+        })
+        .collect();
+    arrivals.sort_by(|a, b| a.0.total_cmp(&b.0));
+    arrivals
+}
+
+/// One tracker given `plots` in that order, flushed.
+fn batch_picture(cfg: &TrackerConfig, plots: &[Plot]) -> Tracker {
+    let mut t = Tracker::new(cfg.clone()).unwrap();
+    t.process(plots).unwrap();
+    t.flush().unwrap();
+    t
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+
+    /// Plots up to 14 s late, pushed in 1-s batches of arrival: after every
+    /// batch the picture is bit for bit one tracker's given every plot
+    /// received so far (in arrival order) and flushed, in serial and in
+    /// parallel mode, also with the window rebuilt from its stored parts
+    /// (no snapshots) between batches.
+    #[test]
+    fn arrival_order_within_the_lag_does_not_matter(seed in 0u64..1_000_000, rebuild in 0u64..3) {
+        for doppler in [false, true] {
+            let mut cfg = fig5_config(doppler);
+            if doppler {
+                cfg.set_mode(Mode::Parallel);
+            }
+            let mut rng = Lcg(seed);
+            let plots = scene(&cfg.radars, &[0.0, 3.0], &fig5_targets(), 100.0, &mut rng);
+            let arrivals = delayed(&plots, 0.1, &mut rng);
+            let mut window =
+                LagWindow::new(Tracker::new(cfg.clone()).unwrap(), window::DEFAULT_MAX_LAG_S)
+                    .unwrap();
+            let mut received: Vec<Plot> = Vec::new();
+            let mut k = 0;
+            let mut second = 1.0;
+            let mut corrected = 0;
+            while k < arrivals.len() {
+                let batch: Vec<Plot> = arrivals[k..]
+                    .iter()
+                    .take_while(|(a, _)| *a < second)
+                    .map(|(_, p)| *p)
+                    .collect();
+                k += batch.len();
+                second += 1.0;
+                let push = window.push(&batch).unwrap();
+                proptest::prop_assert!(push.late.is_empty());
+                corrected += usize::from(push.within_lag > 0);
+                received.extend(batch);
+                proptest::prop_assert_eq!(window.picture(), &batch_picture(&cfg, &received));
+                if rebuild > 0 && k % (rebuild as usize + 1) == 0 {
+                    window = LagWindow::from_parts(window.to_parts()).unwrap();
+                }
+            }
+            proptest::prop_assert!(corrected > 0, "no batch carried a late plot");
+            proptest::prop_assert_eq!(window.counters().plots as usize, plots.len());
+            proptest::prop_assert!(window.counters().confirmed >= 2);
+        }
+    }
+}
+
+#[test]
+fn a_plot_older_than_the_lag_is_late_and_changes_nothing() {
+    let cfg = fig5_config(false);
+    let plots = scene(&cfg.radars, &[0.0, 0.0], &fig5_targets(), 60.0, &mut Lcg(3));
+    let mut window = LagWindow::new(Tracker::new(cfg.clone()).unwrap(), 10.0).unwrap();
+    let (early, rest): (Vec<Plot>, Vec<Plot>) = plots.iter().partition(|p| p.t < 20.0);
+    window.push(&rest).unwrap();
+    // The newest plot is at 60 s (radar 0 scans every 10 s): the horizon
+    // is 50 s, and every plot before 20 s is late beyond the lag.
+    assert_eq!(window.horizon(), Some(60.0 - 10.0));
+    let before = window.picture().clone();
+    let push = window.push(&early).unwrap();
+    assert_eq!(push.late, (0..early.len()).collect::<Vec<_>>());
+    assert_eq!(window.counters().late as usize, early.len());
+    assert_eq!(window.picture(), &before);
+    assert_eq!(push.frames, 0);
+}
+
+#[test]
+fn the_window_holds_the_lag_not_the_history() {
+    let cfg = fig5_config(false);
+    let plots = scene(
+        &cfg.radars,
+        &[0.0, 0.0],
+        &fig5_targets(),
+        400.0,
+        &mut Lcg(4),
+    );
+    let mut window = LagWindow::new(Tracker::new(cfg.clone()).unwrap(), 15.0).unwrap();
+    for chunk in plots.chunks(3) {
+        window.push(chunk).unwrap();
+        let newest = chunk[chunk.len() - 1].t;
+        let oldest = window.state().window[0].t;
+        // Snapshots are adopted as base as soon as they are older than the
+        // horizon: the window spans the lag plus one push (here ≤ 10 s).
+        assert!(newest - oldest <= 15.0 + 10.0, "{oldest} .. {newest}");
+    }
+    assert_eq!(window.picture(), &batch_picture(&cfg, &plots));
+}
+
+#[test]
+fn a_lag_must_be_finite_and_at_most_the_limit() {
+    for bad in [-1.0, f64::NAN, f64::INFINITY, window::MAX_LAG_LIMIT_S + 1.0] {
+        let t = Tracker::new(fig5_config(false)).unwrap();
+        let e = LagWindow::new(t, bad).unwrap_err();
+        assert!(e.to_string().contains("max_lag_s"), "{e}");
+    }
+    assert!(LagWindow::new(Tracker::new(fig5_config(false)).unwrap(), 0.0).is_ok());
+}

@@ -1,0 +1,380 @@
+//! Late plots within a lag: exact reprocessing.
+//!
+//! A [`LagWindow`] wraps a [`Tracker`] for a stream whose plots arrive late
+//! and out of order. It keeps
+//! - `base`: the tracker after every plot older than the window,
+//! - `window`: the accepted plots since, sorted by time (stably: at equal
+//!   times in arrival order),
+//! - `head`: `base` fed the window (a frame still open is buffered),
+//! - the **picture**: `head` flushed, the tracks as they stand with every
+//!   plot received so far (what a client is shown).
+//!
+//! A push whose plots are all at or after the window's newest continues
+//! `head` (the tracker's streaming rule: feeding plots in time order in
+//! chunks equals one call). A push with an older plot (late, but within the
+//! lag) merges it into the window and replays from the newest kept
+//! snapshot of `head` taken before it (snapshots are taken after each push,
+//! in memory only), or from `base`. So the picture after any sequence of
+//! pushes is bit for bit the picture of one [`Tracker`] call given every
+//! accepted plot in arrival order and flushed: arrival order within the lag
+//! does not matter (only the order of plots with equal times, which keep
+//! their arrival order as in one call).
+//!
+//! The lag is measured in data time: the **horizon** is the newest plot
+//! time received minus `max_lag` (never moving back). A plot older than the
+//! horizon is late beyond the lag: dropped and counted, nothing else
+//! changes. Plots older than the horizon move from the window into `base`
+//! (by adopting a snapshot that holds exactly them, or, when none does and
+//! the window reaches back more than two lags, by feeding them to `base`),
+//! so memory grows with the lag, not with the stream's history.
+//!
+//! Why exact reprocessing rather than retrodiction (an out-of-sequence
+//! update of the affected tracks): it is exact for association,
+//! initiation and deletion as well as for the states (a late plot may start
+//! a track or keep one alive), needs no approximation of the cross
+//! covariance between the late plot and later updates, and its cost is the
+//! replay of the plots after the late one, bounded by the lag.
+
+use super::{Counters, Plot, Tracker};
+use crate::error::AlgoError;
+
+/// The default lag (s): ordinary radar network delays (processing and
+/// links, a few seconds) and a hiccup of about two scans.
+pub const DEFAULT_MAX_LAG_S: f64 = 15.0;
+/// The largest lag accepted (s): memory and replay cost grow with it.
+pub const MAX_LAG_LIMIT_S: f64 = 120.0;
+/// Snapshots of `head` kept in memory at most; beyond it the one whose
+/// neighbours are closest in time goes.
+const MAX_SNAPSHOTS: usize = 16;
+
+/// A tracker that takes plots in any order within a lag; see the module
+/// header.
+#[derive(Debug, Clone)]
+pub struct LagWindow {
+    max_lag: f64,
+    base: Tracker,
+    window: Vec<Plot>,
+    head: Tracker,
+    picture: Tracker,
+    /// Plots older than this are late beyond the lag.
+    horizon: Option<f64>,
+    /// Newest plot time accepted.
+    newest: Option<f64>,
+    /// Plots dropped as late beyond the lag.
+    late: u64,
+    /// `(n, head after window[..n])`, ascending n; not stored.
+    snapshots: Vec<(usize, Tracker)>,
+}
+
+/// What one [`LagWindow::push`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Push {
+    /// Indices (into the call's plots) of the plots late beyond the lag,
+    /// dropped.
+    /// Plots dropped as late beyond the lag.
+    pub late: Vec<usize>,
+    /// Accepted plots older than the newest plot already received: late,
+    /// but within the lag (the picture was corrected for them).
+    pub within_lag: usize,
+    /// Time of the earliest of them.
+    pub earliest_within_lag: Option<f64>,
+    /// Plots received earlier that were processed again because a late
+    /// plot came before them.
+    pub replayed: usize,
+    /// Frames processed by the call (replayed ones included, and the open
+    /// frame of the picture).
+    pub frames: usize,
+}
+
+/// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LagWindowParts {
+    /// The lag (s).
+    pub max_lag: f64,
+    /// The tracker after every plot older than the window.
+    pub base: Tracker,
+    /// The accepted plots since `base`, sorted by time.
+    pub window: Vec<Plot>,
+    /// `base` fed the window, not flushed.
+    pub head: Tracker,
+    /// Plots older than this are late beyond the lag.
+    pub horizon: Option<f64>,
+    /// Newest plot time accepted.
+    pub newest: Option<f64>,
+    /// Plots dropped as late beyond the lag.
+    pub late: u64,
+}
+
+/// What a [`LagWindow`] stores, borrowed.
+#[derive(Debug, Clone, Copy)]
+pub struct LagWindowState<'a> {
+    /// The lag (s).
+    pub max_lag: f64,
+    /// The tracker after every plot older than the window.
+    pub base: &'a Tracker,
+    /// The accepted plots since `base`, sorted by time.
+    pub window: &'a [Plot],
+    /// `base` fed the window, not flushed.
+    pub head: &'a Tracker,
+    /// Plots older than this are late beyond the lag.
+    pub horizon: Option<f64>,
+    /// Newest plot time accepted.
+    pub newest: Option<f64>,
+    /// Plots dropped as late beyond the lag.
+    pub late: u64,
+}
+
+/// Checks a lag (s): finite, in [0, [`MAX_LAG_LIMIT_S`]].
+pub fn validate_lag(max_lag: f64) -> Result<(), AlgoError> {
+    if max_lag.is_finite() && (0.0..=MAX_LAG_LIMIT_S).contains(&max_lag) {
+        Ok(())
+    } else {
+        Err(AlgoError::InvalidParameter {
+            what: "max_lag_s",
+            reason: format!("must be finite and in [0, {MAX_LAG_LIMIT_S}] s, got {max_lag}"),
+        })
+    }
+}
+
+impl LagWindow {
+    /// A window over `tracker` (usually new) with lag `max_lag` (s). A
+    /// tracker that has processed frames keeps its own rule for what is
+    /// late before them: the horizon starts at its last frame.
+    pub fn new(tracker: Tracker, max_lag: f64) -> Result<Self, AlgoError> {
+        validate_lag(max_lag)?;
+        let mut picture = tracker.clone();
+        picture.flush()?;
+        Ok(Self {
+            max_lag,
+            horizon: tracker.last_time(),
+            newest: tracker.last_time(),
+            base: tracker.clone(),
+            head: tracker,
+            picture,
+            window: Vec::new(),
+            late: 0,
+            snapshots: Vec::new(),
+        })
+    }
+
+    /// Rebuilds a window from its parts, checking them: the window's plots
+    /// valid for the configuration and sorted, and `head` and `base` of the
+    /// same configuration. (The window may reach back before the horizon:
+    /// `base` moves in steps.)
+    pub fn from_parts(parts: LagWindowParts) -> Result<Self, AlgoError> {
+        validate_lag(parts.max_lag)?;
+        let bad = |reason: &str| AlgoError::InvalidParameter {
+            what: "lag window",
+            reason: reason.into(),
+        };
+        if parts.base.config() != parts.head.config() {
+            return Err(bad("base and head differ in configuration"));
+        }
+        for p in &parts.window {
+            parts.head.config().validate_plot(p)?;
+        }
+        if !parts.window.windows(2).all(|w| w[0].t <= w[1].t) {
+            return Err(bad("window plots out of time order"));
+        }
+        let mut picture = parts.head.clone();
+        picture.flush()?;
+        Ok(Self {
+            max_lag: parts.max_lag,
+            base: parts.base,
+            window: parts.window,
+            head: parts.head,
+            picture,
+            horizon: parts.horizon,
+            newest: parts.newest,
+            late: parts.late,
+            snapshots: Vec::new(),
+        })
+    }
+
+    /// The stored parts (without the snapshots).
+    pub fn to_parts(&self) -> LagWindowParts {
+        LagWindowParts {
+            max_lag: self.max_lag,
+            base: self.base.clone(),
+            window: self.window.clone(),
+            head: self.head.clone(),
+            horizon: self.horizon,
+            newest: self.newest,
+            late: self.late,
+        }
+    }
+
+    /// The stored parts, borrowed (for an encoder).
+    pub fn state(&self) -> LagWindowState<'_> {
+        LagWindowState {
+            max_lag: self.max_lag,
+            base: &self.base,
+            window: &self.window,
+            head: &self.head,
+            horizon: self.horizon,
+            newest: self.newest,
+            late: self.late,
+        }
+    }
+
+    /// The tracks with every plot received so far (`head` flushed).
+    pub fn picture(&self) -> &Tracker {
+        &self.picture
+    }
+
+    /// The lag (s).
+    pub fn max_lag(&self) -> f64 {
+        self.max_lag
+    }
+
+    /// Plots older than this time are late beyond the lag.
+    pub fn horizon(&self) -> Option<f64> {
+        self.horizon
+    }
+
+    /// Plots held in the window (received within the lag).
+    pub fn window_len(&self) -> usize {
+        self.window.len()
+    }
+
+    /// The picture's counters, with the plots late beyond the lag in
+    /// `late`.
+    pub fn counters(&self) -> Counters {
+        let mut c = self.picture.counters();
+        c.late += self.late;
+        c
+    }
+
+    /// Takes plots in any order: those older than the horizon are dropped
+    /// as late; the others join the window and the picture is brought up to
+    /// date (see the module header). Plots are validated before anything
+    /// changes; a numerical error later leaves the window part-way, so a
+    /// caller that must stay consistent keeps its stored copy.
+    pub fn push(&mut self, plots: &[Plot]) -> Result<Push, AlgoError> {
+        for p in plots {
+            self.head.config().validate_plot(p)?;
+        }
+        let mut out = Push::default();
+        let mut accepted = Vec::with_capacity(plots.len());
+        for (i, p) in plots.iter().enumerate() {
+            if self.horizon.is_some_and(|h| p.t < h) {
+                out.late.push(i);
+                self.late += 1;
+            } else {
+                accepted.push(*p);
+            }
+        }
+        if accepted.is_empty() {
+            return Ok(out);
+        }
+        accepted.sort_by(|a, b| a.t.total_cmp(&b.t));
+        if let Some(newest) = self.newest {
+            let older: Vec<f64> = accepted
+                .iter()
+                .map(|p| p.t)
+                .filter(|&t| t < newest)
+                .collect();
+            out.within_lag = older.len();
+            out.earliest_within_lag = older.first().copied();
+        }
+        let at = self.window.partition_point(|p| p.t <= accepted[0].t);
+        if at == self.window.len() {
+            out.frames += self.head.process(&accepted)?.frames;
+            self.window.extend_from_slice(&accepted);
+        } else {
+            let tail = merge(&self.window[at..], &accepted);
+            self.window.truncate(at);
+            self.window.extend(tail);
+            self.snapshots.retain(|(n, _)| *n <= at);
+            let (start, from) = match self.snapshots.last() {
+                Some((n, tr)) => (*n, tr.clone()),
+                None => (0, self.base.clone()),
+            };
+            self.head = from;
+            out.frames += self.head.process(&self.window[start..])?.frames;
+            out.replayed = self.window.len() - start - accepted.len();
+        }
+        let last = accepted[accepted.len() - 1].t;
+        let newest = self.newest.map_or(last, |n| n.max(last));
+        self.newest = Some(newest);
+        let horizon = newest - self.max_lag;
+        self.horizon = Some(self.horizon.map_or(horizon, |h| h.max(horizon)));
+        self.snapshots.push((self.window.len(), self.head.clone()));
+        self.commit()?;
+        self.thin();
+        let mut picture = self.head.clone();
+        out.frames += picture.flush()?.frames;
+        self.picture = picture;
+        Ok(out)
+    }
+
+    /// Moves the plots older than the horizon from the window into `base`.
+    fn commit(&mut self) -> Result<(), AlgoError> {
+        let Some(h) = self.horizon else {
+            return Ok(());
+        };
+        let window = &self.window;
+        let adoptable = self
+            .snapshots
+            .iter()
+            .rposition(|(n, _)| *n > 0 && window[*n - 1].t < h);
+        if let Some(i) = adoptable {
+            let mut kept = self.snapshots.split_off(i);
+            let (n, tracker) = kept.remove(0);
+            self.base = tracker;
+            self.window.drain(..n);
+            self.snapshots = kept.into_iter().map(|(m, t)| (m - n, t)).collect();
+        }
+        if self.window.first().is_some_and(|p| p.t < h - self.max_lag) {
+            let n = self.window.partition_point(|p| p.t < h);
+            self.base.process(&self.window[..n])?;
+            self.window.drain(..n);
+            self.snapshots = std::mem::take(&mut self.snapshots)
+                .into_iter()
+                .filter(|(m, _)| *m >= n)
+                .map(|(m, t)| (m - n, t))
+                .collect();
+        }
+        Ok(())
+    }
+
+    /// Keeps at most [`MAX_SNAPSHOTS`]: drops the inner snapshot whose
+    /// neighbours are closest in time, until few enough.
+    fn thin(&mut self) {
+        while self.snapshots.len() > MAX_SNAPSHOTS {
+            let time = |k: usize| {
+                let n = self.snapshots[k].0;
+                if n == 0 {
+                    f64::NEG_INFINITY
+                } else {
+                    self.window[n - 1].t
+                }
+            };
+            let drop = (1..self.snapshots.len() - 1)
+                .min_by(|&a, &b| {
+                    let gap = |k: usize| time(k + 1) - time(k - 1);
+                    gap(a).total_cmp(&gap(b))
+                })
+                .unwrap_or(0);
+            self.snapshots.remove(drop);
+        }
+    }
+}
+
+/// Stable merge of two time-sorted runs: at equal times `earlier` first.
+fn merge(earlier: &[Plot], later: &[Plot]) -> Vec<Plot> {
+    let mut out = Vec::with_capacity(earlier.len() + later.len());
+    let (mut i, mut j) = (0, 0);
+    while i < earlier.len() && j < later.len() {
+        if earlier[i].t <= later[j].t {
+            out.push(earlier[i]);
+            i += 1;
+        } else {
+            out.push(later[j]);
+            j += 1;
+        }
+    }
+    out.extend_from_slice(&earlier[i..]);
+    out.extend_from_slice(&later[j..]);
+    out
+}
