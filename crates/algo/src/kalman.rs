@@ -128,6 +128,28 @@ pub fn update_linear(
     update_with_innovation(x, p, innovation, h, r, true)
 }
 
+/// Kalman update with a linearised measurement given by its innovation
+/// ν = z − h(x) and Jacobian H (an EKF step): S = H P H′ + R, K = P H′ S⁻¹,
+/// x⁺ = x + K ν, P⁺ in Joseph form; every input and output checked as in
+/// [`update_linear`].
+pub fn update_linearised(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    innovation: DVector<f64>,
+    h: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+) -> Result<Update, AlgoError> {
+    let n = x.len();
+    let m = innovation.len();
+    check_vector("state", x, n)?;
+    check_matrix("covariance", p, n, n)?;
+    check_covariance("covariance", p)?;
+    check_matrix("measurement matrix", h, m, n)?;
+    check_matrix("measurement covariance", r, m, m)?;
+    check_covariance("measurement covariance", r)?;
+    update_with_innovation(x, p, innovation, h, r, true)
+}
+
 /// Extended Kalman update with a radar plot in polar coordinates from a
 /// radar at local ENU position `site` (m).
 ///

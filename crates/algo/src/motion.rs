@@ -134,6 +134,23 @@ pub fn cv_transition(axes: usize, dt: f64) -> Result<DMatrix<f64>, AlgoError> {
     Ok(per_axis(axes, [[1.0, dt], [0.0, 1.0]]))
 }
 
+/// [`cv_transition`] at a size known at compile time: `N / 2` interleaved
+/// `[position, velocity]` components (the α-β filter's fixed-size path).
+pub fn cv_transition_fixed<const N: usize>(dt: f64) -> nalgebra::SMatrix<f64, N, N> {
+    let mut f = nalgebra::SMatrix::identity();
+    for i in 0..N / 2 {
+        f[(2 * i, 2 * i + 1)] = dt;
+    }
+    f
+}
+
+/// The per-axis factor of the discrete white-noise acceleration over `dt`:
+/// `[dt⁴/4, dt³/2, dt²]`, the entries of `Γ Γ'` with `Γ = [dt²/2, dt]'`
+/// (the noise of one axis is σ_a² times it, [`dwna_process_noise`]).
+pub fn dwna_factor(dt: f64) -> [f64; 3] {
+    [dt.powi(4) / 4.0, dt.powi(3) / 2.0, dt * dt]
+}
+
 /// Discrete white-noise acceleration: per axis `Γ σ_a² Γ'` with
 /// `Γ = [dt²/2, dt]'`, i.e. `σ_a² [[dt⁴/4, dt³/2], [dt³/2, dt²]]`
 /// (Bar-Shalom, Li & Kirubarajan 2001, ch. 6). Positive semi-definite
@@ -142,11 +159,8 @@ pub fn dwna_process_noise(axes: usize, dt: f64, sigma_a: f64) -> Result<DMatrix<
     check_axes(axes)?;
     finite("dt", dt)?;
     let s2 = non_negative("sigma_a", sigma_a)?.powi(2);
-    let (g0, g1) = (dt * dt / 2.0, dt);
-    Ok(per_axis(
-        axes,
-        [[s2 * g0 * g0, s2 * g0 * g1], [s2 * g1 * g0, s2 * g1 * g1]],
-    ))
+    let [c11, c12, c22] = dwna_factor(dt);
+    Ok(per_axis(axes, [[s2 * c11, s2 * c12], [s2 * c12, s2 * c22]]))
 }
 
 /// Continuous white-noise acceleration with spectral density `q`: per axis

@@ -10,6 +10,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, SMatrix, SVector, Vector6};
 
 use super::kernels;
+use crate::motion::{cv_transition_fixed, dwna_factor};
 use crate::{AlgoError, polar::wrap_angle};
 
 /// Tracking index used until the residual window is full.
@@ -106,9 +107,10 @@ pub struct Estimate {
 
 /// The discrete white-noise acceleration factor: the process noise of one
 /// step of `t` seconds is `A ⊗ [[t⁴/4, t³/2], [t³/2, t²]]` for an
-/// acceleration covariance A.
+/// acceleration covariance A (the motion model's [`dwna_factor`], shared
+/// with the tracker and the simulator).
 pub fn white_acceleration(t: f64) -> [f64; 3] {
-    [t.powi(4) / 4.0, t.powi(3) / 2.0, t * t]
+    dwna_factor(t)
 }
 
 /// The α-β filter's process-noise model (Kalata): the tracking index
@@ -155,15 +157,6 @@ pub fn alpha_beta_gain<const N: usize, const M: usize>(
             beta / t
         }
     })
-}
-
-/// The constant-velocity transition of `N / 2` interleaved components.
-fn transition_fixed<const N: usize>(t: f64) -> SMatrix<f64, N, N> {
-    let mut f = SMatrix::identity();
-    for i in 0..N / 2 {
-        f[(2 * i, 2 * i + 1)] = t;
-    }
-    f
 }
 
 /// The interleaved covariance `A ⊗ [[c₁₁, c₁₂], [c₁₂, c₂₂]]`.
@@ -313,7 +306,7 @@ pub fn filter_fixed<const M: usize, const N: usize>(
     let mut window: Vec<f64> = Vec::new();
     for k in 2..times.len() {
         let t = times[k] - times[k - 1];
-        let f = transition_fixed::<N>(t);
+        let f = cv_transition_fixed::<N>(t);
         let rk = rf(k);
         let xp = f * x;
         let zp = V::<M>::from_fn(|i, _| xp[2 * i]);
@@ -422,7 +415,7 @@ mod tests {
             // σ_w = λ σ_v / T²: Q₂₂ = σ_w² T².
             let sw = lambda * sigma_v / (t * t);
             assert!((q[(1, 1)] - sw * sw * t * t).abs() < 1e-9 * q[(1, 1)]);
-            let f = transition_fixed::<2>(t);
+            let f = cv_transition_fixed::<2>(t);
             let mut p = SMatrix::<f64, 2, 2>::identity() * 1e8;
             for _ in 0..500 {
                 p = joseph(&(f * p * f.transpose() + q), &k, &r);
@@ -451,7 +444,7 @@ mod tests {
         let (alpha, beta, t) = (0.5, 0.2, 5.0);
         let r = SMatrix::<f64, 1, 1>::new(1.0);
         let k = alpha_beta_gain::<2, 1>(alpha, beta, t);
-        let f = transition_fixed::<2>(t);
+        let f = cv_transition_fixed::<2>(t);
         let mut p = SMatrix::<f64, 2, 2>::identity() * 100.0;
         for _ in 0..2000 {
             p = joseph(&(f * p * f.transpose()), &k, &r);

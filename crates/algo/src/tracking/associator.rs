@@ -29,15 +29,15 @@ use nalgebra::{DMatrix, DVector};
 use crate::assignment;
 use crate::error::AlgoError;
 use crate::gating::SortedByFirst;
+use crate::gating::chi2_threshold;
 use crate::gaussian::{check_covariance, cholesky, moment_match, symmetrize};
 use crate::jpda::{
     self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
     amsjpda_marginals, exact_marginals,
 };
-use crate::kalman::{self, PositionLayout};
+use crate::kalman::PositionLayout;
 use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::conversion::CartesianPlot;
-use crate::tracking::track::{chi2_gates, position_selector};
 
 /// What the association of one frame decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -142,37 +142,49 @@ pub fn associate_cartesian(
     gate_probability: f64,
     config: &Config,
 ) -> Result<Outcome, AlgoError> {
-    let gates = chi2_gates(gate_probability)?;
+    // γ per measurement dimension (a position of 2 or 3 components, then
+    // one per range rate of a moved plot).
+    let max_dim = plots
+        .iter()
+        .map(|p| p.z.len() + p.range_rates.len())
+        .max()
+        .unwrap_or(2)
+        .max(3);
+    let gates = (0..=max_dim)
+        .map(|k| {
+            if k == 0 {
+                Ok(0.0)
+            } else {
+                chi2_threshold(k, 1.0 - gate_probability)
+            }
+        })
+        .collect::<Result<Vec<f64>, AlgoError>>()?;
     // Hypothesise: every gated (track, plot) pair with its Kalman update.
     // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 with S_00 = P_00 + R_00, so only
     // plots whose first component (east) lies within √(γ S_00) of the
     // track's can pass; found by binary search in the plots sorted by it.
     let by_first = SortedByFirst::new(plots.iter().map(|p| p.z[0]));
     let max_r00 = plots.iter().map(|p| p.r[(0, 0)]).fold(0.0, f64::max);
-    let gate_max = gates[0].max(gates[1]);
+    let gate_max = gates.iter().copied().fold(0.0, f64::max);
     let mut candidates: Vec<usize> = Vec::new();
     let mut hyps: Vec<Vec<Hypothesis>> = Vec::with_capacity(tracks.len());
     for track in tracks.iter() {
-        let axes = track.x.len() / 2;
         let mut row = Vec::new();
         let reach = (gate_max * (track.p[(0, 0)] + max_r00)).sqrt() * (1.0 + 1e-9);
         by_first.within(track.x[0], reach, &mut candidates);
         for &j in &candidates {
-            let plot = &plots[j];
-            let k = plot.z.len();
-            let h = position_selector(k, axes);
-            let nu = &plot.z - &h * &track.x;
-            let mut s = &h * &track.p * h.transpose() + &plot.r;
+            let lin = plots[j].linearise(&track.x);
+            let k = lin.innovation.len();
+            let mut s = &lin.h * &track.p * lin.h.transpose() + &lin.r;
             symmetrize(&mut s);
             let chol = cholesky("innovation covariance", &s)?;
-            let w = chol
-                .l()
-                .solve_lower_triangular(&nu)
-                .ok_or(AlgoError::NotPositiveDefinite {
+            let w = chol.l().solve_lower_triangular(&lin.innovation).ok_or(
+                AlgoError::NotPositiveDefinite {
                     what: "innovation covariance",
-                })?;
+                },
+            )?;
             let d2 = w.norm_squared();
-            if d2 <= gates[k - 2] {
+            if d2 <= gates[k] {
                 let ln_det: f64 = chol.l().diagonal().iter().map(|v| 2.0 * v.ln()).sum();
                 let ln_norm = -0.5 * (ln_det + k as f64 * (2.0 * std::f64::consts::PI).ln());
                 row.push(Hypothesis {
@@ -197,7 +209,7 @@ pub fn associate_cartesian(
                 .enumerate()
                 .flat_map(|(t, row)| row.iter().map(move |h| (t, h.measurement, h.d2)))
                 .collect();
-            let unassigned = gates[1] * (1.0 + 1e-12) + 1e-12;
+            let unassigned = gate_max * (1.0 + 1e-12) + 1e-12;
             hard(&hyps, assignment::solve(&edges, unassigned))
         }
         Method::Exact | Method::Amsjpda => soft(
@@ -228,16 +240,13 @@ pub fn associate_cartesian(
         if b[0] >= 1.0 {
             continue;
         }
-        let axes = track.x.len() / 2;
         let mut comps: Vec<(f64, DVector<f64>, DMatrix<f64>)> = Vec::new();
         if b[0] > 0.0 {
             comps.push((b[0], track.x.clone(), track.p.clone()));
         }
         for (h, &bj) in row.iter().zip(&b[1..]) {
             if bj > 0.0 {
-                let plot = &plots[h.measurement];
-                let hm = position_selector(plot.z.len(), axes);
-                let u = kalman::update_linear(&track.x, &track.p, &plot.z, &hm, &plot.r)?;
+                let u = plots[h.measurement].update(&track.x, &track.p)?;
                 comps.push((bj, u.x, u.p));
             }
         }
@@ -416,6 +425,7 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![var, var]),
             radars: vec![0],
             measured: None,
+            range_rates: Vec::new(),
         }
     }
 

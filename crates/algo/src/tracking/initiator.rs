@@ -351,6 +351,7 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![1.0, 1.0]),
             radars: vec![0],
             measured: None,
+            range_rates: Vec::new(),
         }
     }
 

@@ -54,7 +54,7 @@ pub use config::{
     Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec,
     TrackerConfig, VelocityGate,
 };
-pub use conversion::{CartesianPlot, Doppler};
+pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
@@ -503,10 +503,16 @@ impl Tracker {
         }
         self.tracks = kept;
 
+        // The initiator keeps positions only (what the stored state holds).
         let leftovers = plots
             .into_iter()
             .zip(used)
-            .filter_map(|(p, used)| (!used).then_some(p))
+            .filter_map(|(p, used)| {
+                (!used).then_some(CartesianPlot {
+                    range_rates: Vec::new(),
+                    ..p
+                })
+            })
             .collect();
         let initiated = self
             .initiator

@@ -26,7 +26,7 @@ use crate::assignment;
 use crate::error::AlgoError;
 use crate::gating::SortedByFirst;
 use crate::gaussian::{cholesky, mahalanobis_sq, symmetrize};
-use crate::tracking::conversion::CartesianPlot;
+use crate::tracking::conversion::{CartesianPlot, RangeRate};
 use crate::tracking::track::chi2_gates;
 
 /// Associates the plots of one fusion instant across radars and fuses the
@@ -98,6 +98,8 @@ pub fn fuse(a: &CartesianPlot, b: &CartesianPlot) -> Result<CartesianPlot, AlgoE
     let n = a.z.len().max(b.z.len());
     let mut info = DMatrix::zeros(n, n);
     let mut vec = DVector::zeros(n);
+    // Per input range rate: R_i⁻¹ Cov(z_i, ṙ), padded to n.
+    let mut weighted_cross = Vec::new();
     for p in [a, b] {
         let k = p.z.len();
         let inv = cholesky("plot covariance", &p.r)?.inverse();
@@ -108,11 +110,26 @@ pub fn fuse(a: &CartesianPlot, b: &CartesianPlot) -> Result<CartesianPlot, AlgoE
                 info[(i, j)] += inv[(i, j)];
             }
         }
+        for rr in &p.range_rates {
+            let ic = &inv * &rr.cross;
+            weighted_cross.push((
+                rr,
+                DVector::from_fn(n, |i, _| if i < k { ic[i] } else { 0.0 }),
+            ));
+        }
     }
     symmetrize(&mut info);
     let mut r = cholesky("fused information", &info)?.inverse();
     symmetrize(&mut r);
     let z = &r * vec;
+    // z_f = R_f Σ R_i⁻¹ z_i, so Cov(z_f, ṙ) = R_f R_i⁻¹ Cov(z_i, ṙ).
+    let range_rates = weighted_cross
+        .into_iter()
+        .map(|(rr, wc)| RangeRate {
+            cross: &r * wc,
+            ..rr.clone()
+        })
+        .collect();
     let mut radars = a.radars.clone();
     radars.extend(&b.radars);
     radars.sort_unstable();
@@ -123,6 +140,7 @@ pub fn fuse(a: &CartesianPlot, b: &CartesianPlot) -> Result<CartesianPlot, AlgoE
         r,
         radars,
         measured: None,
+        range_rates,
     })
 }
 
@@ -138,6 +156,7 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![var[0], var[1]]),
             radars: vec![radar],
             measured: None,
+            range_rates: Vec::new(),
         }
     }
 
@@ -222,10 +241,35 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![100.0, 100.0, 100.0]),
             radars: vec![0],
             measured: None,
+            range_rates: Vec::new(),
         };
         let b = p2(1, 10.0, 0.0, [100.0, 100.0]);
         let f = fuse(&a, &b).unwrap();
         assert!((f.z - dvector![5.0, 0.0, 1000.0]).amax() < 1e-9);
         assert!((f.r - DMatrix::from_diagonal(&dvector![50.0, 50.0, 100.0])).amax() < 1e-9);
+    }
+
+    #[test]
+    fn fusion_carries_each_range_rate_with_its_weighted_correlation() {
+        // Two plots with the same covariance R: z_f = (z_a + z_b)/2, so
+        // Cov(z_f, ṙ_a) = Cov(z_a, ṙ_a)/2 = R_f R_a⁻¹ c_a with R_f = R/2.
+        let rr = |site: f64, c: [f64; 2]| RangeRate {
+            site: [site, 0.0, 0.0],
+            value: site,
+            sigma: 1.0,
+            dt: 1.0,
+            horizontal: true,
+            cross: dvector![c[0], c[1]],
+        };
+        let mut a = p2(0, 0.0, 0.0, [4.0, 9.0]);
+        a.range_rates.push(rr(1.0, [2.0, 0.0]));
+        let mut b = p2(1, 1.0, 1.0, [4.0, 9.0]);
+        b.range_rates.push(rr(2.0, [0.0, 3.0]));
+        let f = fuse(&a, &b).unwrap();
+        assert_eq!(f.range_rates.len(), 2);
+        assert!((f.range_rates[0].cross[0] - 1.0).abs() < 1e-12);
+        assert!(f.range_rates[0].cross[1].abs() < 1e-12);
+        assert!((f.range_rates[1].cross[1] - 1.5).abs() < 1e-12);
+        assert_eq!(f.range_rates[1].value, 2.0);
     }
 }

@@ -26,7 +26,6 @@ use crate::kalman::{self, PositionLayout};
 use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::conversion::{CartesianPlot, polar_measurement};
 use crate::tracking::predictor::{MIN_PROBABILITY, ModeState};
-use crate::tracking::track::position_selector;
 
 /// The measurements of one frame as the updater sees them.
 #[derive(Debug, Clone, Copy)]
@@ -47,7 +46,8 @@ pub enum Measurements<'a> {
         /// association decided).
         range_rate: Option<f64>,
     },
-    /// Fused Cartesian plots with their own covariance.
+    /// Fused Cartesian plots with their own covariance (and the range rates
+    /// of the plots moved to the instant, [`CartesianPlot::linearise`]).
     Cartesian {
         /// The plots, indexed as in the association.
         plots: &'a [CartesianPlot],
@@ -88,11 +88,7 @@ impl Measurements<'_> {
                 // checks of P and P⁺ per model and plot.
                 kalman::update_polar_trusted(x, p, &meas, range_rate, *layout, radar.site)?
             }
-            Measurements::Cartesian { plots } => {
-                let plot = &plots[j];
-                let h = position_selector(plot.z.len(), x.len() / 2);
-                kalman::update_linear(x, p, &plot.z, &h, &plot.r)?
-            }
+            Measurements::Cartesian { plots } => plots[j].update(x, p)?,
         };
         let k = u.s.nrows() as f64;
         let ln_det = u.ln_det_s;

@@ -492,6 +492,9 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
         } else {
             None
         },
+        // The initiator keeps positions only (range rates are the
+        // updater's, dropped before initiation).
+        range_rates: Vec::new(),
     })
 }
 
