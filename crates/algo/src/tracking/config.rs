@@ -186,6 +186,26 @@ pub enum MotionModel {
     },
 }
 
+impl TrackerConfig {
+    /// The largest horizontal process noise of the motion models, as a
+    /// spectral density q = σ² (m²/s³; for DWNA σ² per s): how fast the
+    /// most agile model lets a velocity drift.
+    pub fn largest_process_noise(&self) -> f64 {
+        let horizontal = |s: &[f64; 3]| s[0].max(s[1]).powi(2);
+        match &self.motion {
+            Motion::ConstantVelocity => horizontal(&self.sigma_a),
+            Motion::Imm(imm) => imm
+                .models
+                .iter()
+                .map(|m| match m {
+                    MotionModel::ConstantVelocity { sigma_a }
+                    | MotionModel::CoordinatedTurn { sigma_a, .. } => horizontal(sigma_a),
+                })
+                .fold(0.0, f64::max),
+        }
+    }
+}
+
 impl MotionModel {
     /// The model's turn rate (0 for constant velocity).
     pub fn turn_rate(&self) -> f64 {

@@ -68,7 +68,8 @@ pub struct RangeRate {
     pub site: [f64; 3],
     /// The measured range rate ṙ (m/s).
     pub value: f64,
-    /// Its σ (m/s).
+    /// Its σ (m/s): the radar's σ_ṙ and the change of ṙ the motion model
+    /// allows over Δt, √(σ_ṙ² + q|Δt|) (see [`extrapolate`]).
     pub sigma: f64,
     /// Δt = t − τ from the plot's time to the position's time (s).
     pub dt: f64,
@@ -212,12 +213,19 @@ pub fn register(
 /// for a 2D plot its horizontal direction). The patent omits this term
 /// (σ_t = 0), which makes plots moved by seconds overconfident by hundreds
 /// of metres across the beam.
+///
+/// The plot carries its range rate ([`RangeRate`]) for the update. Its
+/// model assumes constant velocity between τ and t; an acceleration
+/// changes ṙ by up to |a|Δt, so its σ grows to √(σ_ṙ² + q|Δt|) with q
+/// (m²/s³) the largest spectral density of the tracker's motion models
+/// (the velocity variance a CWNA model accrues over |Δt|).
 pub fn extrapolate(
     radar: &RadarSpec,
     radar_index: usize,
     plot: &Plot,
     t: f64,
     sigma_tangential_speed: f64,
+    manoeuvre_q: f64,
 ) -> Result<CartesianPlot, AlgoError> {
     let (Some(v), Some(sigma_v)) = (plot.radial_velocity, radar.sigma_radial_velocity) else {
         return Err(AlgoError::InvalidParameter {
@@ -242,7 +250,7 @@ pub fn extrapolate(
     out.range_rates.push(RangeRate {
         site: radar.site,
         value: v,
-        sigma: sigma_v,
+        sigma: (sigma_v * sigma_v + manoeuvre_q * dt.abs()).sqrt(),
         dt,
         horizontal: plot.elevation.is_none(),
         cross: DVector::from_fn(n, |i, _| c * u[i]),
@@ -372,16 +380,16 @@ mod tests {
         // ρ' = 1000 + 20 = 1020, position [1220, 0];
         // σ_ρ'² = 10² + 2²·1² = 104 along x (east); cross-range 1020²·1e-6.
         let r = radar_2d([200.0, 0.0, 0.0]);
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0, 0.0).unwrap();
         assert_eq!(c.t, 2.0);
         assert!((c.z[0] - 1220.0).abs() < 1e-9 && c.z[1].abs() < 1e-9);
         assert!((c.r[(0, 0)] - 104.0).abs() < 1e-9);
         assert!((c.r[(1, 1)] - 1020.0f64.powi(2) * 1e-6).abs() < 1e-9);
         // Backwards in time as well: ρ' = 1000 − 10 = 990 at t = −1.
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), -1.0, 0.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), -1.0, 0.0, 0.0).unwrap();
         assert!((c.z[0] - 1190.0).abs() < 1e-9);
         assert!((c.r[(0, 0)] - 101.0).abs() < 1e-9);
-        assert!(extrapolate(&r, 0, &plot(1000.0, 0.0, None), 1.0, 0.0).is_err());
+        assert!(extrapolate(&r, 0, &plot(1000.0, 0.0, None), 1.0, 0.0, 0.0).is_err());
     }
 
     #[test]
@@ -390,7 +398,7 @@ mod tests {
         // σ_t = 50 m/s over Δt = 2 s adds (50·2)² = 10⁴ m² to P_yy only:
         // P_yy = 1020²·1e-6 + 10⁴, P_xx = 104 as without it.
         let r = radar_2d([200.0, 0.0, 0.0]);
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 50.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 50.0, 0.0).unwrap();
         assert!((c.r[(0, 0)] - 104.0).abs() < 1e-9);
         assert!((c.r[(1, 1)] - (1020.0f64.powi(2) * 1e-6 + 1e4)).abs() < 1e-6);
         assert!(c.r[(0, 1)].abs() < 1e-9);
@@ -415,7 +423,7 @@ mod tests {
         // Radar at [200, 0], θ = 90°, ṙ = 10, σ_ṙ = 1, moved by Δt = 2 s:
         // ρ′ = ρ + 2ṙ so Cov(ρ′, ṙ) = 2·1² = 2, along u = [1, 0].
         let r = radar_2d([200.0, 0.0, 0.0]);
-        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0).unwrap();
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0, 0.0).unwrap();
         assert_eq!(c.range_rates.len(), 1);
         let rr = &c.range_rates[0];
         assert_eq!(
@@ -423,6 +431,11 @@ mod tests {
             (10.0, 1.0, 2.0, true)
         );
         assert!((rr.cross[0] - 2.0).abs() < 1e-12 && rr.cross[1].abs() < 1e-12);
+        // With q = 4 m²/s³: σ = √(1 + 4·2) = 3; the correlation keeps the
+        // radar's σ_ṙ (the manoeuvre term is not in ρ′).
+        let c = extrapolate(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)), 2.0, 0.0, 4.0).unwrap();
+        assert!((c.range_rates[0].sigma - 3.0).abs() < 1e-12);
+        assert!((c.range_rates[0].cross[0] - 2.0).abs() < 1e-12);
         // A plotted position that is not a moved one carries none.
         assert!(
             register(&r, 0, &plot(1000.0, FRAC_PI_2, Some(10.0)))
@@ -502,7 +515,7 @@ mod tests {
                 elevation: None,
                 radial_velocity: Some(-100.0 + 2.0 * gauss()),
             };
-            let c = extrapolate(&r, 0, &p, 3.0, 0.0).unwrap();
+            let c = extrapolate(&r, 0, &p, 3.0, 0.0, 0.0).unwrap();
             let v = p.radial_velocity.unwrap();
             for i in 0..2 {
                 sz[i] += c.z[i];
@@ -523,6 +536,7 @@ mod tests {
                 radial_velocity: Some(-100.0),
             },
             3.0,
+            0.0,
             0.0,
         )
         .unwrap();

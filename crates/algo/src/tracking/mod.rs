@@ -362,6 +362,7 @@ impl Tracker {
         report: &mut StepReport,
     ) -> Result<(), AlgoError> {
         let t = self.instant_time(k);
+        let manoeuvre_q = self.config.largest_process_noise();
         let registered = frame
             .iter()
             .map(|p| {
@@ -371,6 +372,7 @@ impl Tracker {
                     p,
                     t,
                     self.config.sigma_tangential_speed,
+                    manoeuvre_q,
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
