@@ -4,7 +4,8 @@
 //! ```text
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
-//!     [--batch-s 1] [--doppler] [--skip-compute] [--motion imm|cv]
+//!     [--batch-s 1] [--doppler] [--skip-compute] [--motion imm|cv] \
+//!     [--late none|held|radars] [--store memory|redis://…]
 //! ```
 //!
 //! - compute: `service::plot_fusion::track` on every plot at once, in
@@ -12,7 +13,11 @@
 //! - end to end: a `plot_fusion` session over the gRPC `Stream` of an
 //!   in-process server (memory store), one batch per `--batch-s` seconds of
 //!   data, each batch sent when the previous one was answered; plots/s
-//!   over the whole stream and the per-batch latency p50/p99.
+//!   over the whole stream and the per-batch latency p50/p99. Batches are
+//!   cut by arrival time: `--late none` (default) every plot arrives at its
+//!   time; `held` 3 % of the plots (every 33rd) arrive 5 s late; `radars`
+//!   radar k's plots arrive 2k/(R − 1) s late (0 to 2 s), so the radars'
+//!   plots interleave out of order. `--store` picks the session store.
 
 use std::time::{Duration, Instant};
 
@@ -37,6 +42,8 @@ struct Args {
     skip_compute: bool,
     /// `tracker.motion`: absent = the service's default.
     motion: Option<String>,
+    late: String,
+    store: String,
 }
 
 fn parse_args() -> anyhow::Result<Args> {
@@ -49,6 +56,8 @@ fn parse_args() -> anyhow::Result<Args> {
         doppler: false,
         skip_compute: false,
         motion: None,
+        late: "none".into(),
+        store: "memory".into(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -64,6 +73,8 @@ fn parse_args() -> anyhow::Result<Args> {
                     "--clutter" => args.clutter = value.parse()?,
                     "--batch-s" => args.batch_s = value.parse()?,
                     "--motion" => args.motion = Some(value),
+                    "--late" => args.late = value,
+                    "--store" => args.store = value,
                     other => anyhow::bail!("unknown flag {other}"),
                 }
             }
@@ -119,13 +130,49 @@ fn pb_plot(p: &svc::PlotInput) -> pb::RadarPlot {
     }
 }
 
-/// Batches of `batch_s` seconds of data, the last one flushing.
-fn batches(plots: &[svc::PlotInput], batch_s: f64) -> Vec<pb::PushBatchRequest> {
+/// The plots with their arrival times (see the module header), sorted by
+/// arrival.
+fn arrivals(
+    plots: &[svc::PlotInput],
+    late: &str,
+    radars: usize,
+) -> anyhow::Result<Vec<(f64, svc::PlotInput)>> {
+    let radar_index = |p: &svc::PlotInput| -> usize {
+        p.radar_id
+            .as_deref()
+            .and_then(|id| {
+                id.trim_start_matches(|c: char| !c.is_ascii_digit())
+                    .parse()
+                    .ok()
+            })
+            .unwrap_or(0)
+    };
+    let mut out = plots
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let t = p.t.unwrap_or(0.0);
+            let delay = match late {
+                "none" => 0.0,
+                "held" if i % 33 == 16 => 5.0,
+                "held" => 0.0,
+                "radars" => 2.0 * (radar_index(p) % radars) as f64 / (radars.max(2) - 1) as f64,
+                other => anyhow::bail!("--late: none, held or radars, not {other}"),
+            };
+            Ok((t + delay, p.clone()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(out)
+}
+
+/// Batches of `batch_s` seconds of arrival, the last one flushing.
+fn batches(plots: &[(f64, svc::PlotInput)], batch_s: f64) -> Vec<pb::PushBatchRequest> {
     let mut out: Vec<pb::PushBatchRequest> = Vec::new();
     let mut current = Vec::new();
     let mut edge = batch_s;
-    for p in plots {
-        let t = p.t.unwrap_or(0.0);
+    for (t, p) in plots {
+        let t = *t;
         while t >= edge {
             if !current.is_empty() {
                 out.push(pb::PushBatchRequest {
@@ -197,6 +244,7 @@ async fn main() -> anyhow::Result<()> {
     }
 
     let mut settings = Settings::for_tests();
+    settings.session_store = args.store.clone();
     settings.max_batch_reports = n.max(1);
     settings.max_tracks_per_session = 1_000_000;
     settings.max_body_bytes = 1 << 30;
@@ -220,7 +268,7 @@ async fn main() -> anyhow::Result<()> {
     let mut client = SessionServiceClient::new(channel)
         .max_decoding_message_size(usize::MAX)
         .max_encoding_message_size(usize::MAX);
-    let batches = batches(&plots, args.batch_s);
+    let batches = batches(&arrivals(&plots, &args.late, args.radars)?, args.batch_s);
     let (tx, rx) = tokio::sync::mpsc::channel(4);
     tx.send(pb::StreamRequest {
         kind: Some(pb::stream_request::Kind::Open(pb::CreateSessionRequest {
@@ -263,11 +311,13 @@ async fn main() -> anyhow::Result<()> {
         .await?
         .into_inner();
     println!(
-        "end to end (gRPC stream, {} batches of {} s): {:.0} plots/s, {:.1} batches/s; \
-         per-batch latency p50 {:.2} ms, p99 {:.2} ms; final counters {:?}; stored session {} \
-         bytes",
+        "end to end (gRPC stream, {} batches of {} s, late {}, store {}): {:.0} plots/s, {:.1} \
+         batches/s; per-batch latency p50 {:.2} ms, p99 {:.2} ms; final counters {:?}; stored \
+         session {} bytes",
         batches.len(),
         args.batch_s,
+        args.late,
+        args.store,
         n as f64 / total,
         batches.len() as f64 / total,
         pct(0.5),

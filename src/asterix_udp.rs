@@ -10,9 +10,10 @@
 //! again if it expires. Datagrams waiting together are pushed as one batch
 //! (at most [`MAX_DATAGRAMS_PER_BATCH`]; data blocks are self-delimiting,
 //! so their concatenation is valid ASTERIX). Times of day are taken
-//! nearest to the session's last frame, or to the time of reception for a
-//! session that has processed none. A frame closes when a later plot
-//! arrives (no flush): the tracks lag one scan group.
+//! nearest to the session's newest plot, or to the time of reception for a
+//! session that has processed none. The session takes plots in any order
+//! within its `tracker.max_lag_s`, and each update holds every plot
+//! received (the open scan group included): the tracks do not lag a scan.
 //!
 //! CAT062 out (`--asterix-out-udp ADDR`, off by default): each update of
 //! the session, as its `cat062` field holds it (the spec must carry

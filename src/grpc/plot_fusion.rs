@@ -151,6 +151,7 @@ pub(crate) fn spec_in(
                     })
                     .collect()
             }),
+            max_lag_s: t.max_lag_s,
         },
     }
 }

@@ -164,6 +164,8 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             frames: b.frames,
             pending_plots: b.pending_plots,
             late_plots: b.late_plots,
+            late_within_lag: b.late_within_lag,
+            corrected_from_t: b.corrected_from_t,
             tracks: b
                 .tracks
                 .into_iter()
@@ -236,6 +238,8 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             radars: b.radars.clone(),
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,
+            max_lag_s: b.max_lag_s,
+            late_before_t: b.late_before_t,
             counters: Some(counters_out(b.counters)),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             origin: b.origin.map(|[lat, lon, h]| pb::GeoPoint {

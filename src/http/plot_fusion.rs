@@ -190,6 +190,14 @@ pub struct TrackerOptions {
     /// `ct` +3 °/s and −3 °/s √q 3 (20 s, 0.1 each: standard-rate turns),
     /// `cv` √q 5 (20 s, 0.1: other manoeuvres).
     pub imm_models: Option<Vec<ImmModel>>,
+    /// Sessions: plots are taken in any order within this lag (s) of the
+    /// newest plot received, and the tracks always equal the batch call's
+    /// over every plot received, sorted by time; older plots are late
+    /// (dropped, counted, warned). Default 15 s (link and processing
+    /// delays of a few seconds plus a hiccup of about two scans), at most
+    /// 120. The batch call sorts its plots and only checks the value.
+    #[schema(minimum = 0.0, maximum = 120.0, example = 15.0)]
+    pub max_lag_s: Option<f64>,
 }
 
 /// One model of the IMM.
@@ -594,6 +602,7 @@ pub(crate) fn spec_in(
                     })
                     .collect()
             }),
+            max_lag_s: t.max_lag_s,
         },
     }
 }

@@ -173,7 +173,9 @@ pub struct BatchUpdate {
 /// A track a plot-fusion batch touched.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ChangedTrack {
-    /// `initiated`, `confirmed` or `updated`.
+    /// `initiated`, `confirmed`, `updated` or `corrected` (recomputed
+    /// because the batch held late plots from before the track's last
+    /// update; see `corrected_from_t`).
     pub change: &'static str,
     pub track: FusedTrack,
 }
@@ -183,11 +185,18 @@ pub struct ChangedTrack {
 pub struct PlotFusionBatchUpdate {
     /// Frames (scan groups or fusion instants) processed by this batch.
     pub frames: u32,
-    /// Plots buffered for a frame not yet complete.
+    /// Plots of the open frame (in the tracks already; processed again
+    /// when more of the frame arrives).
     pub pending_plots: u32,
-    /// Indices of the batch's late plots (older than the last processed
-    /// frame), dropped.
+    /// Indices of the batch's plots late beyond the lag (older than the
+    /// newest plot received minus `tracker.max_lag_s`), dropped.
     pub late_plots: Vec<u32>,
+    /// Plots of the batch older than the newest plot received before it
+    /// but within the lag: used, the tracks corrected for them.
+    pub late_within_lag: u32,
+    /// The earliest time of those plots: the tracks were recomputed from
+    /// it (`change: corrected`).
+    pub corrected_from_t: Option<f64>,
     /// Every live track, when a frame was processed.
     pub tracks: Vec<ChangedTrack>,
     /// Confirmed tracks deleted, as they were when deleted.
@@ -259,7 +268,13 @@ pub struct PlotFusionSessionState {
     pub sites: Vec<RadarSiteState>,
     /// Time of the last processed frame.
     pub last_frame_t: Option<f64>,
+    /// Plots of the open frame (in the tracks already).
     pub pending_plots: u32,
+    /// The lag (s): plots are taken in any order within it.
+    pub max_lag_s: f64,
+    /// Plots older than this are late beyond the lag (dropped); null
+    /// before the first plot.
+    pub late_before_t: Option<f64>,
     pub counters: TrackerCounters,
     /// Confirmed then tentative tracks.
     pub tracks: Vec<FusedTrack>,
@@ -507,6 +522,8 @@ pub(super) fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             frames: b.frames,
             pending_plots: b.pending_plots,
             late_plots: b.late_plots,
+            late_within_lag: b.late_within_lag,
+            corrected_from_t: b.corrected_from_t,
             tracks: b
                 .tracks
                 .into_iter()
@@ -580,6 +597,8 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             radars: b.radars,
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,
+            max_lag_s: b.max_lag_s,
+            late_before_t: b.late_before_t,
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),
         }),

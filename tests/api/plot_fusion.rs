@@ -602,7 +602,8 @@ async fn a_session_fed_in_batches_ends_with_the_batch_endpoints_tracks() {
     let n = chunks.len();
     let mut initiated = 0;
     for (i, plots) in chunks.into_iter().enumerate() {
-        let body = json!({"sequence": i + 1, "plots": plots, "flush": i + 1 == n});
+        // No flush: the tracks always hold every plot received.
+        let body = json!({"sequence": i + 1, "plots": plots});
         let u = app.post_ok(&path, &body).await;
         assert_eq!(u["duplicate"], false);
         assert_eq!(u["warnings"], json!([]));
@@ -613,9 +614,8 @@ async fn a_session_fed_in_batches_ends_with_the_batch_endpoints_tracks() {
                 initiated += 1;
             }
         }
-        if i + 1 == n {
-            assert_eq!(pf["pending_plots"], 0);
-        }
+        assert_eq!(pf["late_within_lag"], 0);
+        assert_eq!(pf["corrected_from_t"], Value::Null);
     }
     assert!(initiated >= 3);
     let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
@@ -626,6 +626,121 @@ async fn a_session_fed_in_batches_ends_with_the_batch_endpoints_tracks() {
     // A retry of the last batch is a duplicate with the same update.
     let list = app.get_ok("/v1/sessions").await;
     assert_eq!(list["sessions"][0]["kind"], "plot_fusion");
+}
+
+/// The plots with an arrival time each: t plus a delay of 0–6 s spread
+/// over the plots, every 9th held up 8 s more (at most 14 s late, within
+/// the default lag of 15 s); in 1-s batches of arrival.
+fn arrivals(req: &Value) -> Vec<Vec<Value>> {
+    let mut plots: Vec<(f64, Value)> = req["plots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut delay = ((i * 7919) % 1000) as f64 / 1000.0 * 6.0;
+            if i % 9 == 4 {
+                delay += 8.0;
+            }
+            (f(&p["t"]) + delay, p.clone())
+        })
+        .collect();
+    plots.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out: Vec<Vec<Value>> = Vec::new();
+    let mut second = f64::NEG_INFINITY;
+    for (arrival, p) in plots {
+        if arrival >= second + 1.0 || out.is_empty() {
+            second = arrival.floor();
+            out.push(Vec::new());
+        }
+        out.last_mut().unwrap().push(p);
+    }
+    out
+}
+
+#[tokio::test]
+async fn late_and_reordered_plots_within_the_lag_end_with_the_batch_calls_tracks() {
+    let app = spawn_app().await;
+    let req = with_height(request(false, 7));
+    let created = create_session(&app, &session_create(&req)).await;
+    assert_eq!(created["plot_fusion"]["max_lag_s"], 15.0);
+    assert_eq!(created["plot_fusion"]["late_before_t"], Value::Null);
+    let id = created["id"].as_str().unwrap().to_string();
+    let path = format!("/v1/sessions/{id}/batches");
+    let chunks = arrivals(&req);
+    let (mut within, mut corrected, mut received) = (0, 0, Vec::new());
+    let n = chunks.len();
+    for (i, plots) in chunks.into_iter().enumerate() {
+        let newest = received
+            .iter()
+            .map(|p: &Value| f(&p["t"]))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let older = plots.iter().filter(|p| f(&p["t"]) < newest).count();
+        let earliest = plots
+            .iter()
+            .map(|p| f(&p["t"]))
+            .filter(|&t| t < newest)
+            .fold(f64::INFINITY, f64::min);
+        received.extend(plots.iter().cloned());
+        let u = app
+            .post_ok(&path, &json!({"sequence": i + 1, "plots": plots}))
+            .await;
+        assert_eq!(u["warnings"], json!([]), "batch {i}");
+        let pf = &u["plot_fusion"];
+        assert_eq!(pf["late_plots"], json!([]));
+        assert_eq!(pf["late_within_lag"], older);
+        within += older;
+        if older > 0 {
+            assert_eq!(f(&pf["corrected_from_t"]), earliest);
+        }
+        corrected += pf["tracks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["change"] == "corrected")
+            .count();
+        // Half-way and at the end: the batch call over every plot received.
+        if i == n / 2 || i + 1 == n {
+            let mut so_far = req.clone();
+            so_far["plots"] = json!(received);
+            let whole = app.post_ok(PATH, &so_far).await;
+            let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+            assert_eq!(
+                state["plot_fusion"]["tracks"], whole["tracks"],
+                "after batch {i}"
+            );
+            assert_eq!(state["plot_fusion"]["counters"], whole["counters"]);
+            assert!(f(&state["plot_fusion"]["late_before_t"]) <= newest);
+        }
+    }
+    assert!(within > 20, "{within} plots arrived after later ones");
+    assert!(corrected > 0);
+    assert_eq!(received.len(), req["plots"].as_array().unwrap().len());
+}
+
+#[tokio::test]
+async fn a_lag_out_of_range_is_refused_naming_the_field() {
+    let app = spawn_app().await;
+    let req = with_height(request(false, 7));
+    for bad in [json!(-1.0), json!(121.0), json!("x")] {
+        let mut create = session_create(&req);
+        create["tracker"]["max_lag_s"] = bad.clone();
+        let response = app.post_json("/v1/sessions", &create).await;
+        assert!(response.status().is_client_error(), "{bad}");
+        let body: Value = response.json().await.unwrap();
+        assert!(body.to_string().contains("max_lag_s"), "{bad}: {body}");
+    }
+    let mut create = session_create(&req);
+    create["tracker"]["max_lag_s"] = json!(0.0);
+    let created = create_session(&app, &create).await;
+    assert_eq!(created["plot_fusion"]["max_lag_s"], 0.0);
+    assert!(
+        app.get_ok("/v1/sessions").await["sessions"]
+            .as_array()
+            .unwrap()
+            .len()
+            == 1
+    );
 }
 
 #[tokio::test]
@@ -682,7 +797,8 @@ async fn a_failed_batch_changes_nothing_and_late_plots_are_counted() {
     let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
     assert_eq!(state["version"].as_u64().unwrap(), version);
 
-    // A plot older than the flushed frame is late: dropped, counted, named.
+    // A plot older than the newest minus the lag (15 s) is late: dropped,
+    // counted, named.
     let mut plots = chunks[1].clone();
     let mut late = chunks[0][0].clone();
     late["t"] = json!(0.0);
@@ -693,7 +809,11 @@ async fn a_failed_batch_changes_nothing_and_late_plots_are_counted() {
     let last = (plots.len() - 1) as u64;
     assert_eq!(u["plot_fusion"]["late_plots"], json!([last]));
     assert_eq!(u["plot_fusion"]["counters"]["late"], 1);
-    assert!(u["warnings"][0].as_str().unwrap().contains("late"));
+    let warning = u["warnings"][0].as_str().unwrap();
+    assert!(
+        warning.contains("late") && warning.contains("tracker.max_lag_s"),
+        "{warning}"
+    );
 
     // Fields of the other kind are refused at creation, each named.
     let mut create = session_create(&req);

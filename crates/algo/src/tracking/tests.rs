@@ -761,13 +761,17 @@ fn beam_timed_plots_are_tracked_like_whole_scans() {
 }
 
 /// The fig. 5 scene's plots with an arrival time each: t plus a delay in
-/// [0, 4] s, and `held` of them held up 5–10 s more; sorted by arrival.
+/// [0, 4] s, and `held` of them held up 5–10 s more (always the middle
+/// plot, so that every draw has a plot arriving after later ones); sorted
+/// by arrival.
 fn delayed(plots: &[Plot], held: f64, rng: &mut Lcg) -> Vec<(f64, Plot)> {
+    let middle = plots.len() / 2;
     let mut arrivals: Vec<(f64, Plot)> = plots
         .iter()
-        .map(|p| {
+        .enumerate()
+        .map(|(i, p)| {
             let mut d = 4.0 * rng.uniform();
-            if rng.uniform() < held {
+            if rng.uniform() < held || i == middle {
                 d += 5.0 + 5.0 * rng.uniform();
             }
             (p.t + d, *p)

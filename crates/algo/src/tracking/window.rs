@@ -35,7 +35,7 @@
 //! covariance between the late plot and later updates, and its cost is the
 //! replay of the plots after the late one, bounded by the lag.
 
-use super::{Counters, Plot, Tracker};
+use super::{Counters, Plot, TrackOutput, Tracker};
 use crate::error::AlgoError;
 
 /// The default lag (s): ordinary radar network delays (processing and
@@ -84,6 +84,10 @@ pub struct Push {
     /// Frames processed by the call (replayed ones included, and the open
     /// frame of the picture).
     pub frames: usize,
+    /// Tracks deleted by the frames the call processed (replayed ones
+    /// included, so a deletion already reported may come again), as they
+    /// were when deleted.
+    pub deleted: Vec<TrackOutput>,
 }
 
 /// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
@@ -232,6 +236,16 @@ impl LagWindow {
         self.horizon
     }
 
+    /// Newest plot time accepted.
+    pub fn newest(&self) -> Option<f64> {
+        self.newest
+    }
+
+    /// Plots of the open frame (buffered in `head`; in the picture).
+    pub fn pending(&self) -> usize {
+        self.head.pending()
+    }
+
     /// Plots held in the window (received within the lag).
     pub fn window_len(&self) -> usize {
         self.window.len()
@@ -279,7 +293,9 @@ impl LagWindow {
         }
         let at = self.window.partition_point(|p| p.t <= accepted[0].t);
         if at == self.window.len() {
-            out.frames += self.head.process(&accepted)?.frames;
+            let report = self.head.process(&accepted)?;
+            out.frames += report.frames;
+            out.deleted.extend(report.deleted);
             self.window.extend_from_slice(&accepted);
         } else {
             let tail = merge(&self.window[at..], &accepted);
@@ -291,7 +307,9 @@ impl LagWindow {
                 None => (0, self.base.clone()),
             };
             self.head = from;
-            out.frames += self.head.process(&self.window[start..])?.frames;
+            let report = self.head.process(&self.window[start..])?;
+            out.frames += report.frames;
+            out.deleted.extend(report.deleted);
             out.replayed = self.window.len() - start - accepted.len();
         }
         let last = accepted[accepted.len() - 1].t;
@@ -303,7 +321,9 @@ impl LagWindow {
         self.commit()?;
         self.thin();
         let mut picture = self.head.clone();
-        out.frames += picture.flush()?.frames;
+        let report = picture.flush()?;
+        out.frames += report.frames;
+        out.deleted.extend(report.deleted);
         self.picture = picture;
         Ok(out)
     }

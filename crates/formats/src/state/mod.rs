@@ -7,7 +7,10 @@
 //! - [`tracker`]: a plot-fusion `Tracker`, configuration included.
 //! - [`scene`]: a correlation session's window of aligned local tracks.
 //! - [`correlator`]: a pair correlator's candidate pairs and decisions.
+//! - [`window`]: a tracker that takes late plots within a lag (two
+//!   trackers and the plots between them).
 
 pub mod correlator;
 pub mod scene;
 pub mod tracker;
+pub mod window;

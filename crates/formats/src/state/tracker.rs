@@ -498,7 +498,7 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
     })
 }
 
-fn plot(w: &mut Writer, p: &Plot) {
+pub(crate) fn plot(w: &mut Writer, p: &Plot) {
     w.usize(p.radar);
     w.f64(p.t);
     w.f64(p.range);
@@ -507,7 +507,7 @@ fn plot(w: &mut Writer, p: &Plot) {
     w.opt(p.radial_velocity, Writer::f64);
 }
 
-fn read_plot(r: &mut Reader<'_>) -> Result<Plot, FormatError> {
+pub(crate) fn read_plot(r: &mut Reader<'_>) -> Result<Plot, FormatError> {
     Ok(Plot {
         radar: r.usize()?,
         t: r.f64()?,

@@ -121,6 +121,10 @@ pub struct TrackerInput {
     pub motion: Option<String>,
     /// The IMM's models; absent: `algo::tracking::Imm::aircraft`.
     pub imm_models: Option<Vec<ImmModelInput>>,
+    /// Sessions: plots are taken in any order within this lag (s) of the
+    /// newest plot received; default 15, at most 120. The batch call
+    /// sorts its plots and only checks it.
+    pub max_lag_s: Option<f64>,
 }
 
 /// One model of the IMM.

@@ -122,9 +122,22 @@ fn wire_name(what: &str) -> &'static str {
         "default_height_sigma" => "tracker.default_height_sigma_m",
         "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
         "duplicate_probability" => "tracker.duplicate_gate_probability",
+        "max_lag_s" => "tracker.max_lag_s",
         "models" | "turn_rate" | "mean_sojourn" | "initial_probabilities" => "tracker.imm_models",
         _ => "tracker",
     }
+}
+
+/// The session's lag (`tracker.max_lag_s`, default
+/// [`algo::tracking::window::DEFAULT_MAX_LAG_S`]), checked: finite, in
+/// [0, [`algo::tracking::window::MAX_LAG_LIMIT_S`]].
+pub fn max_lag(spec: &SpecInput) -> Result<f64, ServiceError> {
+    let lag = spec
+        .tracker
+        .max_lag_s
+        .unwrap_or(algo::tracking::window::DEFAULT_MAX_LAG_S);
+    algo::tracking::window::validate_lag(lag).map_err(|e| config_error(&e))?;
+    Ok(lag)
 }
 
 /// A configuration error of the core, named by its wire field.
@@ -147,6 +160,7 @@ enum Site {
 /// Validates a network and the tracker's options; the warnings say what
 /// was decided for the caller (the mode, a missing origin).
 pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
+    max_lag(spec)?;
     let mut v = Violations::new();
     let mut warnings = Vec::new();
     if !v.count_within("radars", spec.radars.len(), MAX_RADARS, "radar") && !spec.radars.is_empty()

@@ -1,16 +1,23 @@
 //! The plot-fusion kind of session (seed 001 as a stream): the tracker of
 //! `algo::tracking` kept between batches of radar plots.
 //!
-//! A batch is plots as they arrive, in any order within the batch. The
-//! tracker buffers them and processes a frame (a radar's scan group in
-//! serial mode, a fusion instant in parallel mode) once a plot of a later
-//! frame has arrived, or when the batch asks for a `flush` (the end of the
-//! data, or a quiet radar network). So plots pushed in time order over N
-//! batches, the last with `flush`, give exactly the tracks of the batch
-//! endpoint over the same plots (tested).
+//! A batch is plots as they arrive, in any order, late ones included: the
+//! tracker is an `algo::tracking::LagWindow`, which takes plots in any
+//! order within `tracker.max_lag_s` (default 15 s) of the newest plot
+//! received. After every batch the session's tracks are those of the batch
+//! endpoint over every plot received so far, sorted by time: a frame is
+//! processed as soon as its plots arrive (no `flush` needed, no scan of
+//! delay), and a plot that arrives late (within the lag) is processed in
+//! its place by replaying the plots after it from a snapshot (exact
+//! reprocessing, tested against the batch endpoint with shuffled
+//! arrival). Tracks whose history the replay recomputed are listed with
+//! `change: corrected`; a track the replay removed (a late plot can merge
+//! or end one) is listed in `deleted`.
 //!
-//! A plot older than the last processed frame is *late*: it is dropped
-//! (no retrodiction), counted, and named in the update and a warning.
+//! A plot older than the newest plot received minus the lag is *late
+//! beyond the lag*: it is dropped, counted, and named in the update and a
+//! warning. `flush` is accepted and changes nothing (the tracks always
+//! include the open frame).
 //!
 //! A batch may carry raw ASTERIX beside its plots (`asterix`,
 //! `service::plot_fusion::asterix`): its plots follow the JSON plots, its
@@ -41,17 +48,22 @@ use crate::{
         computation_error, mode_name, network, output,
     },
 };
-use algo::tracking::Tracker;
+use algo::tracking::{LagWindow, TrackOutput, TrackStatus, Tracker};
 use formats::{
-    state::tracker::{decode_counters, decode_tracker, encode_counters, encode_tracker},
+    state::{
+        tracker::{decode_counters, decode_tracker, encode_counters},
+        window::{decode_lag_window, encode_lag_window},
+    },
     wire::{FormatError, Reader, Writer, corrupt},
 };
 
 /// Format of the kind's payload: 2 = format 1 (the network and the
-/// tracker) plus the radars' ASTERIX SAC/SIC; 3 adds the `cat062` option.
-/// Format 1 is read as radars without SAC/SIC, formats 1 and 2 as sessions
-/// without CAT062 out.
-pub const FORMAT_VERSION: u8 = 3;
+/// tracker) plus the radars' ASTERIX SAC/SIC; 3 adds the `cat062` option;
+/// 4 stores a lag window (two trackers and the plots between them) in
+/// place of the tracker. Format 1 is read as radars without SAC/SIC,
+/// formats 1 and 2 as sessions without CAT062 out, formats 1 to 3 as a
+/// window over the stored tracker with the default lag.
+pub const FORMAT_VERSION: u8 = 4;
 
 /// Bit 31 of an encoded update's `frames` flags the ASTERIX summary after
 /// its counters (a batch never processes 2³¹ frames), so kept updates of
@@ -67,7 +79,10 @@ const PROVENANCE_FLAG: u32 = 1 << 29;
 /// Set in the frame count of a kept update that carries CAT062 data (after
 /// the ASTERIX summary).
 const CAT062_FLAG: u32 = 1 << 28;
-const FLAGS: u32 = ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG;
+/// Set in the frame count of a kept update that carries what late plots
+/// within the lag did (after the CAT062 data).
+const LATE_FLAG: u32 = 1 << 27;
+const FLAGS: u32 = ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG | LATE_FLAG;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -75,8 +90,8 @@ pub struct BatchInput {
     pub plots: Vec<PlotInput>,
     /// Raw ASTERIX; its plots follow `plots`.
     pub asterix: Option<AsterixInput>,
-    /// Close the open frame now: process every buffered plot. Plots that
-    /// arrive later for that frame are late.
+    /// Accepted for clients of earlier releases; changes nothing (the
+    /// tracks always include the open frame).
     pub flush: bool,
 }
 
@@ -89,12 +104,18 @@ pub enum TrackChange {
     Confirmed,
     /// Predicted and, if a plot was associated, updated.
     Updated,
+    /// Recomputed because of late plots: the batch held plots older than
+    /// the newest received (within the lag), and the track had been
+    /// updated at or after the earliest of them, so its history from
+    /// there was processed again with them.
+    Corrected,
 }
 
-pub const TRACK_CHANGES: [TrackChange; 3] = [
+pub const TRACK_CHANGES: [TrackChange; 4] = [
     TrackChange::Initiated,
     TrackChange::Confirmed,
     TrackChange::Updated,
+    TrackChange::Corrected,
 ];
 
 pub fn track_change_name(c: TrackChange) -> &'static str {
@@ -102,6 +123,7 @@ pub fn track_change_name(c: TrackChange) -> &'static str {
         TrackChange::Initiated => "initiated",
         TrackChange::Confirmed => "confirmed",
         TrackChange::Updated => "updated",
+        TrackChange::Corrected => "corrected",
     }
 }
 
@@ -116,10 +138,17 @@ pub struct ChangedTrack {
 pub struct BatchUpdate {
     /// Frames processed by this batch.
     pub frames: u32,
-    /// Plots buffered for a frame not yet complete.
+    /// Plots of the open frame (in the tracks; processed again when more
+    /// of the frame arrives).
     pub pending_plots: u32,
-    /// Indices (into the batch's plots) of the late plots, dropped.
+    /// Indices (into the batch's plots) of the plots late beyond the lag,
+    /// dropped.
     pub late_plots: Vec<u32>,
+    /// Plots of the batch older than the newest plot received before it,
+    /// but within the lag: used (the tracks were corrected for them).
+    pub late_within_lag: u32,
+    /// Time of the earliest of them: the tracks were recomputed from it.
+    pub corrected_from_t: Option<f64>,
     pub tracks: Vec<ChangedTrack>,
     /// Confirmed tracks deleted, as they were when deleted.
     pub deleted: Vec<TrackView>,
@@ -147,6 +176,11 @@ pub struct SessionView {
     /// Time of the last processed frame.
     pub last_frame_t: Option<f64>,
     pub pending_plots: u32,
+    /// The lag (s): plots older than the newest received minus it are late.
+    pub max_lag_s: f64,
+    /// Plots older than this are late beyond the lag (dropped); none
+    /// before the first plot.
+    pub late_before_t: Option<f64>,
     pub counters: TrackerCounters,
     /// Confirmed then tentative tracks.
     pub tracks: Vec<TrackView>,
@@ -182,13 +216,21 @@ pub struct SiteView {
     pub doppler: bool,
 }
 
-/// The state: the network (ids, frame, rotations) and the tracker.
+/// The state: the network (ids, frame, rotations) and the tracker in its
+/// lag window.
 pub struct PlotFusionSession {
     /// Where the last applied batch's plots are, for watchers (not stored).
     marks: Vec<PlotMark>,
     network: Network,
-    tracker: Tracker,
+    window: LagWindow,
     cat062: Option<Cat062Options>,
+}
+
+impl PlotFusionSession {
+    /// The tracks with every plot received so far.
+    fn tracker(&self) -> &Tracker {
+        self.window.picture()
+    }
 }
 
 fn status_code(s: &str) -> u8 {
@@ -350,10 +392,12 @@ impl SessionKind for PlotFusionSession {
             None => None,
         };
         let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+        let window = LagWindow::new(tracker, network::max_lag(&spec)?)
+            .map_err(|e| network::config_error(&e))?;
         Ok(Self {
             marks: Vec::new(),
             network,
-            tracker,
+            window,
             cat062,
         })
     }
@@ -379,34 +423,31 @@ impl SessionKind for PlotFusionSession {
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<BatchUpdate, ServiceError> {
-        let mut plots = self
-            .network
-            .plots(&batch.plots, self.tracker.config(), "plots")?;
+        let config = self.tracker().config().clone();
+        let mut plots = self.network.plots(&batch.plots, &config, "plots")?;
         let json_plots = plots.len();
         let mut summary = None;
         let mut offsets = Vec::new();
         if let Some(a) = &batch.asterix {
-            let reference = self.tracker.last_time().or(a.reference_t);
+            let reference = self.window.newest().or(a.reference_t);
             let clock = asterix::clock(a, "asterix", reference)?;
-            let from = asterix::plots(&self.network, self.tracker.config(), &a.data, clock);
+            let from = asterix::plots(&self.network, &config, &a.data, clock);
             plots.extend(from.plots);
             offsets = from.offsets;
             warnings.extend(from.warnings);
             summary = Some(from.summary);
         }
-        let before: HashSet<u64> = self.tracker.track_ids().collect();
-        let mut report = self
-            .tracker
-            .process_with(&plots, batch.flush, &mut |_| {})
-            .map_err(computation_error)?;
-        let late_json: Vec<usize> = report
+        let before: Vec<TrackOutput> = self.tracker().tracks();
+        let horizon = self.window.horizon();
+        let push = self.window.push(&plots).map_err(computation_error)?;
+        let late_json: Vec<usize> = push
             .late
             .iter()
             .copied()
             .filter(|&i| i < json_plots)
             .collect();
         if let Some(s) = summary.as_mut() {
-            s.late_offsets = report
+            s.late_offsets = push
                 .late
                 .iter()
                 .filter(|&&i| i >= json_plots)
@@ -414,21 +455,15 @@ impl SessionKind for PlotFusionSession {
                 .collect();
             s.late = s.late_offsets.len();
         }
-        let late: HashSet<usize> = report.late.iter().copied().collect();
-        let sites: Vec<[f64; 3]> = self
-            .tracker
-            .config()
-            .radars
-            .iter()
-            .map(|r| r.site)
-            .collect();
+        let late: HashSet<usize> = push.late.iter().copied().collect();
+        let sites: Vec<[f64; 3]> = config.radars.iter().map(|r| r.site).collect();
         self.marks = plots
             .iter()
             .enumerate()
             .filter(|(i, _)| !late.contains(i))
             .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
             .collect();
-        let live = self.tracker.tracks();
+        let live = self.tracker().tracks();
         if live.len() > limits.max_tracks {
             return Err(ServiceError::QuotaExceeded(format!(
                 "the session would hold {} tracks (confirmed and tentative); the limit is {} \
@@ -438,7 +473,7 @@ impl SessionKind for PlotFusionSession {
                 limits.max_tracks
             )));
         }
-        if !report.late.is_empty() {
+        if !push.late.is_empty() {
             let first = match (late_json.first(), &summary) {
                 (Some(i), _) => format!("plots[{i}]"),
                 (None, Some(s)) => format!(
@@ -448,43 +483,29 @@ impl SessionKind for PlotFusionSession {
                 (None, None) => "plots".into(),
             };
             warnings.push(format!(
-                "{} late plot(s) dropped (older than the last processed frame at t = {}; \
-                 first {first}): send plots in time order, or flush less often",
-                report.late.len(),
-                self.tracker.last_time().unwrap_or(f64::NAN),
+                "{} late plot(s) dropped: older than t = {} (the newest plot received minus \
+                 tracker.max_lag_s = {} s; first {first}): a larger tracker.max_lag_s (at \
+                 most {} s) keeps plots that arrive later",
+                push.late.len(),
+                horizon.unwrap_or(f64::NAN),
+                self.window.max_lag(),
+                algo::tracking::window::MAX_LAG_LIMIT_S,
             ));
         }
-        report.late = late_json;
-        let confirmed: HashSet<u64> = report.confirmed.iter().copied().collect();
-        let deleted_ids: HashSet<u64> = report.deleted.iter().map(|t| t.id).collect();
-        let live_ids: HashSet<u64> = live.iter().map(|t| t.id).collect();
-        let mut dropped: Vec<u64> = before
-            .iter()
-            .filter(|id| !live_ids.contains(id) && !deleted_ids.contains(id))
-            .copied()
-            .collect();
-        dropped.sort_unstable();
-        let tracks: Vec<ChangedTrack> = if report.frames == 0 {
+        let changes = diff(&before, &live, &push);
+        let view = |t: &TrackOutput| self.network.track_view(&config.motion, t);
+        let tracks: Vec<ChangedTrack> = if push.frames == 0 {
             Vec::new()
         } else {
             live.iter()
-                .map(|t| ChangedTrack {
-                    change: if confirmed.contains(&t.id) {
-                        TrackChange::Confirmed
-                    } else if !before.contains(&t.id) {
-                        TrackChange::Initiated
-                    } else {
-                        TrackChange::Updated
-                    },
-                    track: self.network.track_view(&self.tracker.config().motion, t),
+                .zip(&changes.live)
+                .map(|(t, &change)| ChangedTrack {
+                    change,
+                    track: view(t),
                 })
                 .collect()
         };
-        let deleted: Vec<TrackView> = report
-            .deleted
-            .iter()
-            .map(|t| self.network.track_view(&self.tracker.config().motion, t))
-            .collect();
+        let deleted: Vec<TrackView> = changes.deleted.iter().map(view).collect();
         let cat062 = self.cat062.as_ref().map(|o| {
             let items: Vec<(&TrackView, Life)> = tracks
                 .iter()
@@ -501,16 +522,15 @@ impl SessionKind for PlotFusionSession {
             cat062::encode(o, &self.network, &items, warnings)
         });
         Ok(BatchUpdate {
-            frames: report.frames as u32,
-            pending_plots: report.pending as u32,
-            late_plots: std::mem::take(&mut report.late)
-                .into_iter()
-                .map(|i| i as u32)
-                .collect(),
+            frames: push.frames as u32,
+            pending_plots: self.window.pending() as u32,
+            late_plots: late_json.into_iter().map(|i| i as u32).collect(),
+            late_within_lag: push.within_lag as u32,
+            corrected_from_t: push.earliest_within_lag,
             tracks,
             deleted,
-            dropped,
-            counters: self.tracker.counters().into(),
+            dropped: changes.dropped,
+            counters: self.window.counters().into(),
             asterix: summary,
             cat062,
         })
@@ -523,12 +543,14 @@ impl SessionKind for PlotFusionSession {
     fn acknowledgement(&self) -> BatchUpdate {
         BatchUpdate {
             frames: 0,
-            pending_plots: self.tracker.pending() as u32,
+            pending_plots: self.window.pending() as u32,
             late_plots: Vec::new(),
+            late_within_lag: 0,
+            corrected_from_t: None,
             tracks: Vec::new(),
             deleted: Vec::new(),
             dropped: Vec::new(),
-            counters: self.tracker.counters().into(),
+            counters: self.window.counters().into(),
             asterix: None,
             cat062: self.cat062.map(|_| Cat062Data::default()),
         }
@@ -562,16 +584,16 @@ impl SessionKind for PlotFusionSession {
     }
 
     fn view(&self) -> Result<SessionView, ServiceError> {
+        let tracker = self.tracker();
         Ok(SessionView {
-            mode: mode_name(self.tracker.mode()),
-            state_layout: output::layout(self.tracker.config().axes),
+            mode: mode_name(tracker.mode()),
+            state_layout: output::layout(tracker.config().axes),
             radars: self.network.radar_ids.clone(),
             origin: self.network.frame.as_ref().map(|f| {
                 let (lat, lon, h) = f.origin_geodetic();
                 [lat.to_degrees(), lon.to_degrees(), h]
             }),
-            sites: self
-                .tracker
+            sites: tracker
                 .config()
                 .radars
                 .iter()
@@ -586,14 +608,15 @@ impl SessionKind for PlotFusionSession {
                     doppler: r.sigma_radial_velocity.is_some(),
                 })
                 .collect(),
-            last_frame_t: self.tracker.last_time(),
-            pending_plots: self.tracker.pending() as u32,
-            counters: self.tracker.counters().into(),
-            tracks: self
-                .tracker
+            last_frame_t: tracker.last_time(),
+            pending_plots: self.window.pending() as u32,
+            max_lag_s: self.window.max_lag(),
+            late_before_t: self.window.horizon(),
+            counters: self.window.counters().into(),
+            tracks: tracker
                 .tracks()
                 .iter()
-                .map(|t| self.network.track_view(&self.tracker.config().motion, t))
+                .map(|t| self.network.track_view(&tracker.config().motion, t))
                 .collect(),
         })
     }
@@ -601,7 +624,7 @@ impl SessionKind for PlotFusionSession {
     fn encode(&self, w: &mut Writer) {
         w.u8(FORMAT_VERSION);
         self.network.encode(w);
-        w.bytes(&encode_tracker(&self.tracker));
+        w.bytes(&encode_lag_window(&self.window));
         self.network.encode_sources(w);
         w.opt(self.cat062.as_ref(), cat062::encode_options);
     }
@@ -615,13 +638,20 @@ impl SessionKind for PlotFusionSession {
             )));
         }
         let network = Network::decode(r).map_err(stored)?;
-        let tracker = decode_tracker(&r.bytes().map_err(stored)?).map_err(stored)?;
+        let bytes = r.bytes().map_err(stored)?;
+        let window = if format >= 4 {
+            decode_lag_window(&bytes).map_err(stored)?
+        } else {
+            let tracker = decode_tracker(&bytes).map_err(stored)?;
+            LagWindow::new(tracker, algo::tracking::window::DEFAULT_MAX_LAG_S)
+                .map_err(|e| stored(e.into()))?
+        };
         let network = if format >= 2 {
             network.decode_sources(r).map_err(stored)?
         } else {
             network
         };
-        if tracker.config().radars.len() != network.radar_ids.len() {
+        if window.picture().config().radars.len() != network.radar_ids.len() {
             return Err(stored(corrupt("radar count")));
         }
         let cat062 = if format >= 3 {
@@ -632,7 +662,7 @@ impl SessionKind for PlotFusionSession {
         Ok(Self {
             marks: Vec::new(),
             network,
-            tracker,
+            window,
             cat062,
         })
     }
@@ -640,7 +670,7 @@ impl SessionKind for PlotFusionSession {
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
         let optional = if u.asterix.is_some() { ASTERIX_FLAG } else { 0 }
             | if u.cat062.is_some() { CAT062_FLAG } else { 0 };
-        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | optional);
+        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | optional);
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -672,12 +702,15 @@ impl SessionKind for PlotFusionSession {
                 w.usize(n);
             }
         }
+        w.u32(u.late_within_lag);
+        w.opt(u.corrected_from_t, Writer::f64);
     }
 
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
         let frames = r.u32()?;
         let has_asterix = frames & ASTERIX_FLAG != 0;
         let has_cat062 = frames & CAT062_FLAG != 0;
+        let has_late = frames & LATE_FLAG != 0;
         let fields = TrackFields {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
@@ -703,36 +736,98 @@ impl SessionKind for PlotFusionSession {
             .collect::<Result<_, _>>()?;
         let n = r.len(8)?;
         let dropped = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
+        let counters = decode_counters(r)?.into();
+        let asterix = if has_asterix {
+            Some(decode_summary(r)?)
+        } else {
+            None
+        };
+        let cat062 = if has_cat062 {
+            let data = r.bytes()?;
+            let mut n = [0usize; 4];
+            for x in &mut n {
+                *x = r.usize()?;
+            }
+            Some(Cat062Data {
+                data,
+                blocks: n[0],
+                records: n[1],
+                skipped: n[2],
+                saturated: n[3],
+            })
+        } else {
+            None
+        };
+        let (late_within_lag, corrected_from_t) = if has_late {
+            (r.u32()?, r.opt(Reader::f64)?)
+        } else {
+            (0, None)
+        };
         Ok(BatchUpdate {
             frames,
             pending_plots,
             late_plots,
+            late_within_lag,
+            corrected_from_t,
             tracks,
             deleted,
             dropped,
-            counters: decode_counters(r)?.into(),
-            asterix: if has_asterix {
-                Some(decode_summary(r)?)
-            } else {
-                None
-            },
-            cat062: if has_cat062 {
-                let data = r.bytes()?;
-                let mut n = [0usize; 4];
-                for x in &mut n {
-                    *x = r.usize()?;
-                }
-                Some(Cat062Data {
-                    data,
-                    blocks: n[0],
-                    records: n[1],
-                    skipped: n[2],
-                    saturated: n[3],
-                })
-            } else {
-                None
-            },
+            counters,
+            asterix,
+            cat062,
         })
+    }
+}
+
+/// What changed between the picture before a batch and after it.
+struct Changes {
+    /// Per live track after the batch, in order.
+    live: Vec<TrackChange>,
+    /// Confirmed tracks gone: deleted by the batch's frames (as they were
+    /// when deleted), or removed by a correction (as they were before it).
+    deleted: Vec<TrackOutput>,
+    /// Tentative tracks gone, ids ascending.
+    dropped: Vec<u64>,
+}
+
+/// The changes from the tracks `before` a batch to the tracks `after` it,
+/// given what the push did (see [`TrackChange::Corrected`]).
+fn diff(before: &[TrackOutput], after: &[TrackOutput], push: &algo::tracking::Push) -> Changes {
+    use std::collections::HashMap;
+    let old: HashMap<u64, &TrackOutput> = before.iter().map(|t| (t.id, t)).collect();
+    let now: HashSet<u64> = after.iter().map(|t| t.id).collect();
+    let live = after
+        .iter()
+        .map(|t| match old.get(&t.id) {
+            None if t.status == TrackStatus::Confirmed => TrackChange::Confirmed,
+            None => TrackChange::Initiated,
+            Some(o) if o.status != TrackStatus::Confirmed && t.status == TrackStatus::Confirmed => {
+                TrackChange::Confirmed
+            }
+            Some(o) if push.earliest_within_lag.is_some_and(|e| o.last_update >= e) => {
+                TrackChange::Corrected
+            }
+            Some(_) => TrackChange::Updated,
+        })
+        .collect();
+    // The last report of each deleted track (a replay reports again).
+    let reported: HashMap<u64, &TrackOutput> = push.deleted.iter().map(|t| (t.id, t)).collect();
+    let mut deleted = Vec::new();
+    let mut dropped = Vec::new();
+    for t in before.iter().filter(|t| !now.contains(&t.id)) {
+        if t.status == TrackStatus::Confirmed {
+            let mut gone = (*reported.get(&t.id).unwrap_or(&t)).clone();
+            gone.status = TrackStatus::Deleted;
+            deleted.push(gone);
+        } else {
+            dropped.push(t.id);
+        }
+    }
+    dropped.sort_unstable();
+    Changes {
+        live,
+        deleted,
+        dropped,
     }
 }
 
@@ -810,6 +905,7 @@ fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, FormatError> {
 mod tests {
     use super::*;
     use crate::plot_fusion::{self as pf, RadarInput, SiteInput, TrackInput};
+    use formats::state::tracker::encode_tracker;
 
     fn spec() -> SpecInput {
         SpecInput {
@@ -905,7 +1001,7 @@ mod tests {
         let view = session.view().unwrap();
         assert_eq!(view.tracks, whole.tracks);
         assert_eq!(view.counters, whole.counters);
-        assert_eq!(view.pending_plots, 0);
+        assert_eq!(view.max_lag_s, 15.0);
         assert_eq!(whole.tracks.len(), 2);
     }
 
@@ -916,7 +1012,10 @@ mod tests {
             max_batch_reports: 1000,
         };
         let all = plots();
-        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
+        // A lag of 2 s: the plot at t = 0 is late beyond it.
+        let mut short = spec();
+        short.tracker.max_lag_s = Some(2.0);
+        let mut session = PlotFusionSession::create(short, &mut Vec::new()).unwrap();
         let mut warnings = Vec::new();
         session
             .apply(
@@ -978,7 +1077,7 @@ mod tests {
         let mut old = Writer::default();
         old.u8(1);
         session.network.encode(&mut old);
-        old.bytes(&encode_tracker(&session.tracker));
+        old.bytes(&encode_tracker(session.tracker()));
         let back = PlotFusionSession::decode(&mut Reader::new(&old.buf)).unwrap();
         assert_eq!(back.network.radar_of_source((25, 1)), None);
         assert_eq!(back.network.radar_ids, session.network.radar_ids);
@@ -986,7 +1085,7 @@ mod tests {
         let mut v2 = Writer::default();
         v2.u8(2);
         session.network.encode(&mut v2);
-        v2.bytes(&encode_tracker(&session.tracker));
+        v2.bytes(&encode_tracker(session.tracker()));
         session.network.encode_sources(&mut v2);
         let back = PlotFusionSession::decode(&mut Reader::new(&v2.buf)).unwrap();
         assert_eq!(back.network.radar_of_source((25, 1)), Some(0));
@@ -999,7 +1098,7 @@ mod tests {
         PlotFusionSession::encode_update(&update, &mut plain);
         assert_eq!(
             plain.buf[..4],
-            (3u32 | MODES_FLAG | PROVENANCE_FLAG).to_le_bytes()
+            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG).to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
         // without modes) still reads.

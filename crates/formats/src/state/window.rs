@@ -1,0 +1,171 @@
+//! The stored form of a [`LagWindow`]: a tracker that takes late plots
+//! within a lag (`algo::tracking::window`).
+//!
+//! Layout (after the magic `RFLW` and a `u32` format version, 1):
+//! the lag (f64), the base tracker and the head tracker (each as
+//! [`super::tracker::encode_tracker`] bytes), the window's plots, the
+//! horizon and the newest plot time (optional f64), and the count of plots
+//! dropped as late beyond the lag (u64). The in-memory snapshots are not
+//! stored: a window decoded elsewhere replays a late plot from its base.
+//! So the bytes grow with the lag (two trackers and the plots of the
+//! window), not with the stream's history.
+
+use algo::tracking::{LagWindow, LagWindowParts};
+
+use super::tracker::{decode_tracker, encode_tracker, plot, read_plot};
+use crate::wire::{FormatError, Reader, Writer, corrupt};
+
+const MAGIC: &[u8; 4] = b"RFLW";
+/// The format this release writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// The bytes of `window` (see the module header).
+pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
+    let s = window.state();
+    let mut w = Writer::default();
+    w.buf.extend_from_slice(MAGIC);
+    w.u32(FORMAT_VERSION);
+    w.f64(s.max_lag);
+    w.bytes(&encode_tracker(s.base));
+    w.bytes(&encode_tracker(s.head));
+    w.usize(s.window.len());
+    for p in s.window {
+        plot(&mut w, p);
+    }
+    w.opt(s.horizon, Writer::f64);
+    w.opt(s.newest, Writer::f64);
+    w.u64(s.late);
+    w.buf
+}
+
+/// A window from [`encode_lag_window`]'s bytes: bytes that are not such an
+/// encoding are [`FormatError::Corrupt`], parts the window rejects
+/// [`FormatError::Invalid`].
+pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
+    if bytes.len() < 4 || &bytes[..4] != MAGIC {
+        return Err(corrupt("not an encoded lag window"));
+    }
+    let mut r = Reader::new(&bytes[4..]);
+    let version = r.u32()?;
+    if version != FORMAT_VERSION {
+        return Err(corrupt(&format!("unknown lag window format {version}")));
+    }
+    let max_lag = r.f64()?;
+    let base = decode_tracker(&r.bytes()?)?;
+    let head = decode_tracker(&r.bytes()?)?;
+    let n = r.len(16)?;
+    let window = (0..n)
+        .map(|_| read_plot(&mut r))
+        .collect::<Result<Vec<_>, _>>()?;
+    let horizon = r.opt(Reader::f64)?;
+    let newest = r.opt(Reader::f64)?;
+    let late = r.u64()?;
+    if !r.is_empty() {
+        return Err(corrupt("trailing bytes"));
+    }
+    Ok(LagWindow::from_parts(LagWindowParts {
+        max_lag,
+        base,
+        window,
+        head,
+        horizon,
+        newest,
+        late,
+    })?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use algo::tracking::{Plot, RadarSpec, Tracker, TrackerConfig};
+
+    fn radar(site: [f64; 3]) -> RadarSpec {
+        RadarSpec {
+            site,
+            sigma_range: 50.0,
+            sigma_azimuth: 0.2f64.to_radians(),
+            sigma_elevation: None,
+            sigma_radial_velocity: None,
+            scan_period: 4.0,
+            detection_probability: 1.0,
+            clutter_density: 1e-9,
+        }
+    }
+
+    /// Two radars seeing three targets on straight lines, 40 s.
+    fn plots() -> Vec<Plot> {
+        let sites = [[0.0, 0.0, 0.0], [30_000.0, 0.0, 0.0]];
+        let mut out = Vec::new();
+        for (i, site) in sites.iter().enumerate() {
+            let mut t = 0.7 * i as f64;
+            while t < 40.0 {
+                for k in 0..3 {
+                    let x = 5_000.0 + 4_000.0 * k as f64 + 150.0 * t;
+                    let y = 20_000.0 - 100.0 * t + 3_000.0 * k as f64;
+                    let (e, n) = (x - site[0], y - site[1]);
+                    out.push(Plot {
+                        radar: i,
+                        t,
+                        range: e.hypot(n),
+                        azimuth: e.atan2(n),
+                        elevation: None,
+                        radial_velocity: None,
+                    });
+                }
+                t += 4.0;
+            }
+        }
+        out.sort_by(|a, b| a.t.total_cmp(&b.t));
+        out
+    }
+
+    fn window() -> LagWindow {
+        let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        LagWindow::new(Tracker::new(config).unwrap(), 10.0).unwrap()
+    }
+
+    #[test]
+    fn a_window_round_trips_and_continues_as_the_original() {
+        let all = plots();
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = window();
+        a.push(first).unwrap();
+        // A late plot within the lag and one beyond it.
+        let mut late = first[first.len() - 4];
+        late.t -= 0.1;
+        let mut too_late = first[0];
+        too_late.t = first[first.len() - 1].t - 30.0;
+        a.push(&[late, too_late]).unwrap();
+        let bytes = encode_lag_window(&a);
+        let mut b = decode_lag_window(&bytes).unwrap();
+        assert_eq!(a.to_parts(), b.to_parts());
+        assert_eq!(a.picture(), b.picture());
+        a.push(rest).unwrap();
+        b.push(rest).unwrap();
+        // The same tracks; where the window starts may differ (the
+        // original could adopt an in-memory snapshot as its base).
+        assert_eq!(a.picture(), b.picture());
+        assert_eq!(a.counters(), b.counters());
+    }
+
+    #[test]
+    fn corrupt_bytes_are_errors_never_panics() {
+        let mut a = window();
+        a.push(&plots()[..20]).unwrap();
+        let bytes = encode_lag_window(&a);
+        for n in 0..bytes.len() {
+            assert!(
+                matches!(decode_lag_window(&bytes[..n]), Err(FormatError::Corrupt(_))),
+                "truncated at {n}"
+            );
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(decode_lag_window(&longer).is_err());
+        for i in (0..bytes.len()).step_by(7) {
+            let mut flipped = bytes.clone();
+            flipped[i] ^= 0x5a;
+            let _ = decode_lag_window(&flipped);
+        }
+    }
+}
