@@ -244,6 +244,22 @@ impl Tracker {
         Ok(report)
     }
 
+    /// Whether `plot`, at or after every buffered plot, would close the
+    /// buffered frame without joining it (a later scan group or another
+    /// radar in serial mode, a later fusion instant in parallel mode): then
+    /// processing it gives the same tracker as [`Tracker::flush`] first.
+    /// `false` when nothing is buffered.
+    pub fn closes_pending(&self, plot: &Plot) -> Result<bool, AlgoError> {
+        let Some(first) = self.pending.first() else {
+            return Ok(false);
+        };
+        Ok(if self.parallel {
+            self.instant_of(plot.t)? != self.instant_of(first.t)?
+        } else {
+            !(plot.radar == first.radar && plot.t - first.t <= self.config.time_tolerance)
+        })
+    }
+
     /// Processes every buffered plot, closing the last frame. Plots that
     /// arrive later for that frame will be late.
     pub fn flush(&mut self) -> Result<StepReport, AlgoError> {

@@ -293,6 +293,14 @@ impl LagWindow {
         }
         let at = self.window.partition_point(|p| p.t <= accepted[0].t);
         if at == self.window.len() {
+            // The picture is the head with its open frame closed; when the
+            // new plots close that frame without joining it, the head
+            // continues from the picture instead of processing the frame
+            // again (the same tracker, bit for bit: see
+            // `Tracker::closes_pending`).
+            if self.head.closes_pending(&accepted[0])? {
+                std::mem::swap(&mut self.head, &mut self.picture);
+            }
             let report = self.head.process(&accepted)?;
             out.frames += report.frames;
             out.deleted.extend(report.deleted);
