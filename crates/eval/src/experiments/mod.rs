@@ -7,6 +7,7 @@
 //! [`REGISTRY`].
 
 pub mod correlation;
+pub mod late_plots;
 pub mod seed000_async_network;
 pub mod seed000_correlation;
 pub mod seed000_local_tracking;
@@ -132,6 +133,11 @@ pub const REGISTRY: &[Experiment] = &[
         name: "seed003-dimension",
         summary: "seed 003 table 1: association probability, fusion error and time of mapping, dimension lifting and splitting, two 3D and two 2D radars",
         run: seed003_dimension::run,
+    },
+    Experiment {
+        name: "late-plots",
+        summary: "a stream of late and reordered plots (seed-001 scene, 3 radars, per-radar delays and 3 % hiccups): the session before and after the lag window against the batch call; dropped plots, exactness, RMSE, GOSPA, latency",
+        run: late_plots::run,
     },
     Experiment {
         name: "tracker-manoeuvres",

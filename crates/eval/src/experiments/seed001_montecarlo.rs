@@ -63,14 +63,14 @@ use algo::jpda::Method;
 use algo::tracking::{Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, TrackerConfig};
 
 const RADAR_COUNTS: [usize; 3] = [2, 3, 4];
-const DEFAULT_TARGETS: usize = 50;
-const SCAN_UNIT_S: f64 = 5.0;
-const DEFAULT_SCANS: usize = 60;
+pub(crate) const DEFAULT_TARGETS: usize = 50;
+pub(crate) const SCAN_UNIT_S: f64 = 5.0;
+pub(crate) const DEFAULT_SCANS: usize = 60;
 const SITE_RADIUS_M: f64 = 20_000.0;
 const MAX_RANGE_M: f64 = 200_000.0;
 const FALSE_PLOTS_PER_SCAN: f64 = 3.0;
 const BOX_HALF_M: f64 = 60_000.0;
-const CUTOFF_M: f64 = 1000.0;
+pub(crate) const CUTOFF_M: f64 = 1000.0;
 const TRUTH_DT_S: f64 = 0.25;
 /// The methods of the table, in order.
 const METHODS: [&str; 3] = ["parallel", "serial", "best single radar"];
@@ -657,7 +657,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
 }
 
 /// The radars of a run.
-fn radars(n: usize, rng: &mut SimRng) -> Vec<Radar> {
+pub(crate) fn radars(n: usize, rng: &mut SimRng) -> Vec<Radar> {
     let rotation = rng.random_range(0.0..TAU);
     (0..n)
         .map(|i| {
@@ -681,7 +681,11 @@ fn radars(n: usize, rng: &mut SimRng) -> Vec<Radar> {
 }
 
 /// The targets of a run, each with `true` when it turns.
-fn targets(n: usize, duration: f64, rng: &mut SimRng) -> Result<Vec<(Trajectory, bool)>, SimError> {
+pub(crate) fn targets(
+    n: usize,
+    duration: f64,
+    rng: &mut SimRng,
+) -> Result<Vec<(Trajectory, bool)>, SimError> {
     (0..n)
         .map(|_| {
             let birth = rng.random_range(0.0..duration / 3.0);
