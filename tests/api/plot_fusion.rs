@@ -837,13 +837,15 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
         .into_inner();
     let p = proto_request(&req);
     let mut sessions = SessionServiceClient::new(app.channel().await);
+    let mut tracker = p.tracker.clone().unwrap_or_default();
+    tracker.max_lag_s = Some(60.0);
     let open = pb::CreateSessionRequest {
         kind: "plot_fusion".into(),
         plot_fusion: Some(pb::PlotFusionConfig {
             cat062: p.cat062,
             origin: p.origin,
             radars: p.radars.clone(),
-            tracker: p.tracker.clone(),
+            tracker: Some(tracker),
         }),
         ..Default::default()
     };
@@ -853,14 +855,19 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     let opened = updates.message().await.unwrap().unwrap();
     let id = opened.session_id.clone();
     assert!(opened.plot_fusion.is_some());
-    let chunks: Vec<&[pb::RadarPlot]> = p.plots.chunks(25).collect();
+    // Chunks of 25 plots, each pair sent in reverse order: the second
+    // chunk of a pair arrives late (within the 60-s lag set above).
+    let mut chunks: Vec<&[pb::RadarPlot]> = p.plots.chunks(25).collect();
+    for pair in chunks.chunks_mut(2) {
+        pair.reverse();
+    }
     let n = chunks.len();
+    let (mut within, mut corrected) = (0, 0);
     for (i, chunk) in chunks.into_iter().enumerate() {
         tx.send(pb::StreamRequest {
             kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
                 sequence: Some(i as u64 + 1),
                 plots: chunk.to_vec(),
-                flush: i + 1 == n,
                 ..Default::default()
             })),
         })
@@ -869,7 +876,18 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
         let u = updates.message().await.unwrap().unwrap();
         assert!(u.error.is_none(), "{:?}", u.error);
         assert_eq!(u.sequence, Some(i as u64 + 1));
+        let pf = u.plot_fusion.expect("a plot_fusion update");
+        assert!(pf.late_plots.is_empty());
+        within += pf.late_within_lag;
+        if pf.late_within_lag > 0 {
+            assert!(pf.corrected_from_t.is_some());
+        }
+        corrected += pf.tracks.iter().filter(|t| t.change == "corrected").count();
     }
+    assert!(
+        within >= 25 && corrected > 0,
+        "{within} late plots, {corrected} corrections"
+    );
     // A bad batch is answered in the stream, which goes on.
     let mut bad = p.plots[0].clone();
     bad.radar_id = "zz".into();
@@ -894,6 +912,7 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
         .into_inner();
     let pf = state.plot_fusion.expect("a plot_fusion state");
     assert_eq!(pf.mode, "serial");
+    assert_eq!(pf.max_lag_s, 60.0);
     assert_eq!(pf.tracks, whole.tracks);
     assert_eq!(pf.counters, whole.counters);
 }
