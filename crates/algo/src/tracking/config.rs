@@ -340,6 +340,9 @@ pub struct TrackerConfig {
     /// at this probability are one target; the younger is deleted. In
     /// [0, 1); 0 disables the rule.
     pub duplicate_probability: f64,
+    /// Radar registration: online bias estimation and compensation
+    /// ([`crate::tracking::registration`]); on with two radars or more.
+    pub registration: crate::tracking::registration::RegistrationConfig,
 }
 
 impl TrackerConfig {
@@ -355,6 +358,7 @@ impl TrackerConfig {
     /// its plots overconfident for 100–300 m/s targets); duplicates deleted
     /// inside the 99 % χ² gate.
     pub fn new(axes: usize, radars: Vec<RadarSpec>) -> Self {
+        let radars_len = radars.len();
         let misses = default_misses(Mode::Auto, &radars);
         let min_period = radars
             .iter()
@@ -398,6 +402,9 @@ impl TrackerConfig {
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
             duplicate_probability: 0.99,
+            registration: crate::tracking::registration::RegistrationConfig::for_radars(
+                radars_len,
+            ),
         }
     }
 
@@ -468,6 +475,7 @@ impl TrackerConfig {
         if let Motion::Imm(imm) = &self.motion {
             validate_imm(imm)?;
         }
+        self.registration.validate(self.radars.len())?;
         finite("default_height", self.default_height)?;
         positive("default_height_sigma", self.default_height_sigma)?;
         non_negative("sigma_tangential_speed", self.sigma_tangential_speed)?;

@@ -45,6 +45,7 @@ mod state;
 mod sweep;
 mod track;
 pub mod updater;
+pub mod registration;
 pub mod window;
 
 #[cfg(test)]
@@ -68,6 +69,7 @@ use associator::{
 use conversion::{extrapolate, register};
 use initiator::Initiator;
 use plot_association::associate_and_fuse;
+use registration::{RadarBias, RegistrationState};
 use sweep::View;
 use updater::{Measurements, update_imm};
 
@@ -129,12 +131,20 @@ pub struct Tracker {
     /// Serial mode, per radar: time and azimuth of the last plot of its
     /// last frame (where its beam was; [`sweep`]).
     beams: Vec<Option<(f64, f64)>>,
+    /// The registration estimator's data ([`registration`]).
+    registration: RegistrationState,
+    /// Each radar's bias as applied now (from `registration`; not stored).
+    biases: Vec<RadarBias>,
 }
 
 /// A frame's plots as the associator needs them.
 enum Source {
-    /// Serial mode: one radar's raw plots (polar EKF).
-    Radar { index: usize, plots: Vec<Plot> },
+    /// Serial mode: one radar's plots, corrected for its bias, with the
+    /// radar as the update sees it (variances grown by the bias's).
+    Radar {
+        spec: RadarSpec,
+        plots: Vec<Plot>,
+    },
     /// Parallel mode: fused Cartesian plots with their clutter densities.
     Fused {
         clutter: Vec<f64>,
@@ -147,7 +157,16 @@ impl Tracker {
     pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
         config.validate()?;
         let beams = vec![None; config.radars.len()];
+        let registration = RegistrationState::new(&config.radars);
+        let biases = registration::applied(
+            &config.registration,
+            &config.radars,
+            &registration,
+            &registration::solve(&config.registration, &config.radars, &registration)?,
+        );
         Ok(Self {
+            registration,
+            biases,
             parallel: config.is_parallel(),
             config,
             tracks: Vec::new(),
@@ -183,6 +202,12 @@ impl Tracker {
     /// Time of the last processed frame.
     pub fn last_time(&self) -> Option<f64> {
         self.last_time
+    }
+
+    /// Each radar's bias as the tracker applies it now (estimate and σ
+    /// once converged, else the prior).
+    pub fn biases(&self) -> &[RadarBias] {
+        &self.biases
     }
 
     /// Number of buffered plots.
@@ -354,20 +379,96 @@ impl Tracker {
     /// Step 6: one radar's scan group at the time of its last plot.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
-        let last = frame[frame.len() - 1];
+        let bias = self.biases[index];
+        let spec = registration::inflated(&self.config.radars[index], &bias);
+        let corrected: Vec<Plot> = frame.iter().map(|p| registration::correct(p, &bias)).collect();
+        let last = corrected[corrected.len() - 1];
         let t = last.t;
-        let radar = &self.config.radars[index];
-        let view = View::of_frame(radar, self.beams[index], t, last.azimuth);
+        let view = View::of_frame(&spec, self.beams[index], t, last.azimuth);
         self.beams[index] = Some((t, last.azimuth));
-        let plots = frame
+        // The measured plot a track reports (and registration pairs) is
+        // the raw one.
+        let plots = corrected
             .iter()
-            .map(|p| register(radar, index, p))
+            .zip(&frame)
+            .map(|(p, raw)| {
+                register(&spec, index, p).map(|mut c| {
+                    c.measured = Some(*raw);
+                    c
+                })
+            })
             .collect::<Result<Vec<_>, _>>()?;
-        let source = Source::Radar {
-            index,
-            plots: frame,
+        let learn = self.config.registration.enabled && self.config.radars.len() >= 2;
+        let previous: Vec<(u64, Option<Plot>)> = if learn {
+            self.tracks.iter().map(|tr| (tr.id, tr.last_plot)).collect()
+        } else {
+            Vec::new()
         };
-        self.run_frame(t, source, plots, view, report)
+        let source = Source::Radar {
+            spec,
+            plots: corrected,
+        };
+        self.run_frame(t, source, plots, view, report)?;
+        if learn {
+            self.learn_biases(index, &frame, &previous)?;
+        }
+        Ok(())
+    }
+
+    /// Registration: the pairs of this frame (a confirmed track updated by
+    /// a plot of radar `index` whose previous update was another radar's
+    /// plot), then the estimate solved again.
+    fn learn_biases(
+        &mut self,
+        index: usize,
+        frame: &[Plot],
+        previous: &[(u64, Option<Plot>)],
+    ) -> Result<(), AlgoError> {
+        let cfg = &self.config;
+        let mut solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
+        let q = cfg.largest_process_noise();
+        let mut added = false;
+        for tr in &self.tracks {
+            let Some(newer) = tr.last_plot.filter(|p| {
+                p.radar == index && frame.iter().any(|f| f.t == p.t && f.range == p.range)
+            }) else {
+                continue;
+            };
+            let Some(older) = previous
+                .iter()
+                .find(|(id, _)| *id == tr.id)
+                .and_then(|(_, p)| *p)
+                .filter(|p| p.radar != index)
+            else {
+                continue;
+            };
+            let axes = cfg.axes;
+            let velocity: Vec<f64> = (0..axes).map(|i| tr.x[2 * i + 1]).collect();
+            let velocity_cov =
+                nalgebra::DMatrix::from_fn(axes, axes, |i, k| tr.p[(2 * i + 1, 2 * k + 1)]);
+            let pair = registration::Pair {
+                newer: &newer,
+                older: &older,
+                velocity: &velocity,
+                velocity_cov: &velocity_cov,
+                q,
+            };
+            if registration::add_pair(
+                &cfg.registration,
+                &cfg.radars,
+                &mut self.registration,
+                &solved,
+                &pair,
+            )? {
+                added = true;
+            }
+        }
+        if added {
+            solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
+            self.biases =
+                registration::applied(&cfg.registration, &cfg.radars, &self.registration, &solved);
+        }
+        Ok(())
     }
 
     /// Steps 3–5: the plots of fusion instant k.
@@ -382,10 +483,11 @@ impl Tracker {
         let registered = frame
             .iter()
             .map(|p| {
+                let bias = &self.biases[p.radar];
                 extrapolate(
-                    &self.config.radars[p.radar],
+                    &registration::inflated(&self.config.radars[p.radar], bias),
                     p.radar,
-                    p,
+                    &registration::correct(p, bias),
                     t,
                     self.config.sigma_tangential_speed,
                     manoeuvre_q,
@@ -443,8 +545,11 @@ impl Tracker {
             },
             measurements,
         ) = match &source {
-            Source::Radar { index, plots: raw } => {
-                let radar = &cfg.radars[*index];
+            Source::Radar {
+                spec,
+                plots: raw,
+            } => {
+                let radar = spec;
                 let outcome = associate_polar(
                     &mut estimates,
                     radar,

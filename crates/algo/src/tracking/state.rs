@@ -7,6 +7,7 @@
 //! that parts read from corrupt bytes give an error here, never a panic in
 //! a later call.
 
+use super::registration::{self, RegistrationState};
 use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
@@ -36,6 +37,8 @@ pub struct TrackerState<'a> {
     /// Serial mode, per radar: time and azimuth of the last plot of its
     /// last frame (`None` before its first).
     pub beams: &'a [Option<(f64, f64)>],
+    /// The registration estimator's data.
+    pub registration: &'a RegistrationState,
 }
 
 /// Everything a tracker carries between calls, owned: what
@@ -62,6 +65,8 @@ pub struct TrackerParts {
     pub counters: Counters,
     /// Per radar, where its beam was at its last frame (empty: none yet).
     pub beams: Vec<Option<(f64, f64)>>,
+    /// The registration estimator's data (`None`: none yet).
+    pub registration: Option<RegistrationState>,
 }
 
 impl TrackerState<'_> {
@@ -78,6 +83,7 @@ impl TrackerState<'_> {
             last_instant: self.last_instant,
             counters: self.counters,
             beams: self.beams.to_vec(),
+            registration: Some(self.registration.clone()),
         }
     }
 }
@@ -145,6 +151,7 @@ impl Tracker {
             last_instant: self.last_instant,
             counters: self.counters,
             beams: &self.beams,
+            registration: &self.registration,
         }
     }
 
@@ -249,6 +256,13 @@ impl Tracker {
                 return Err(bad("a beam position is not finite"));
             }
             tr.beams = parts.beams;
+        }
+        if let Some(state) = parts.registration {
+            state.check(&tr.config.radars)?;
+            let c = &tr.config;
+            let solved = registration::solve(&c.registration, &c.radars, &state)?;
+            tr.biases = registration::applied(&c.registration, &c.radars, &state, &solved);
+            tr.registration = state;
         }
         Ok(tr)
     }

@@ -13,7 +13,12 @@
 //! tracker continues exactly as it would have. Format 3 adds each
 //! track's start time and last measured plot, and each root's radar plot
 //! (provenance only, for ASTERIX I062/290 and I062/340); formats 1 and 2
-//! read them as unknown.
+//! read them as unknown. Format 4 adds, at the end, the registration's
+//! configuration (on or off, per-radar priors, reference radars, minimum
+//! pairs, longest pair interval, time constant) and its estimator's data
+//! (information matrix and vector, pair counts, last pair time); formats
+//! 1 to 3 read as registration by default (on with two radars or more)
+//! from no data.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -24,6 +29,7 @@ use algo::tracking::{
     CartesianPlot, Counters, Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel,
     Plot, RadarSpec, Track, Tracker, TrackerConfig, TrackerParts, VelocityGate,
     predictor::ModeState,
+    registration::{BiasPrior, RegistrationConfig, RegistrationState},
 };
 use nalgebra::{DMatrix, DVector};
 
@@ -31,7 +37,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
@@ -67,7 +73,85 @@ pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
             w.f64(az);
         });
     }
+    registration(&mut w, &s.config.registration, s.registration);
     w.buf
+}
+
+fn registration(w: &mut Writer, c: &RegistrationConfig, s: &RegistrationState) {
+    w.u8(u8::from(c.enabled));
+    w.usize(c.priors.len());
+    for p in &c.priors {
+        w.f64_run(&[
+            p.range,
+            p.azimuth,
+            p.elevation,
+            p.sigma_range,
+            p.sigma_azimuth,
+            p.sigma_elevation,
+        ]);
+    }
+    w.usize(c.reference.len());
+    for &r in &c.reference {
+        w.usize(r);
+    }
+    w.u32(c.min_pairs);
+    w.f64(c.max_pair_dt);
+    w.f64(c.time_constant);
+    w.usize(s.vector.len());
+    w.f64_run(s.information.as_slice());
+    w.f64_run(s.vector.as_slice());
+    w.f64_run(&s.pairs);
+    w.opt(s.last_t, Writer::f64);
+}
+
+fn read_registration(
+    r: &mut Reader<'_>,
+    radars: usize,
+) -> Result<(RegistrationConfig, RegistrationState), FormatError> {
+    let enabled = r.u8()? != 0;
+    let n = r.len(48)?;
+    let mut priors = Vec::with_capacity(n);
+    for _ in 0..n {
+        let mut v = [0.0; 6];
+        for x in &mut v {
+            *x = r.f64()?;
+        }
+        priors.push(BiasPrior {
+            range: v[0],
+            azimuth: v[1],
+            elevation: v[2],
+            sigma_range: v[3],
+            sigma_azimuth: v[4],
+            sigma_elevation: v[5],
+        });
+    }
+    let n = r.len(8)?;
+    let reference = (0..n).map(|_| r.usize()).collect::<Result<_, _>>()?;
+    let config = RegistrationConfig {
+        enabled,
+        priors,
+        reference,
+        min_pairs: r.u32()?,
+        max_pair_dt: r.f64()?,
+        time_constant: r.f64()?,
+    };
+    let n = r.len(8)?;
+    let read = |r: &mut Reader<'_>, k: usize| -> Result<Vec<f64>, FormatError> {
+        (0..k).map(|_| r.f64()).collect()
+    };
+    let information = DMatrix::from_vec(n, n, read(r, n * n)?);
+    let vector = DVector::from_vec(read(r, n)?);
+    let pairs = read(r, radars)?;
+    let last_t = r.opt(Reader::f64)?;
+    Ok((
+        config,
+        RegistrationState {
+            information,
+            vector,
+            pairs,
+            last_t,
+        },
+    ))
 }
 
 /// The counters, nine u64 in declaration order.
@@ -144,11 +228,20 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     } else {
         Vec::new()
     };
+    let mut config = config;
+    let registration = if version >= 4 {
+        let (c, state) = read_registration(&mut r, config.radars.len())?;
+        config.registration = c;
+        Some(state)
+    } else {
+        None
+    };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
     Ok(Tracker::from_parts(TrackerParts {
         config,
+        registration,
         tracks,
         roots,
         tentatives,
@@ -288,6 +381,7 @@ fn read_motion(r: &mut Reader<'_>) -> Result<Motion, FormatError> {
 fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, FormatError> {
     let axes = r.usize()?;
     let n = r.len(8)?;
+    let radars_len = n;
     let mut radars = Vec::with_capacity(n);
     for _ in 0..n {
         radars.push(RadarSpec {
@@ -391,6 +485,8 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
         default_height_sigma,
         sigma_tangential_speed,
         duplicate_probability,
+        // Formats 1 to 3: the default; format 4 reads its own at the end.
+        registration: RegistrationConfig::for_radars(radars_len),
     })
 }
 
@@ -660,11 +756,47 @@ mod tests {
         for root in &mut parts.roots {
             root.measured = None;
         }
-        assert_eq!(parts, end.state().to_parts());
+        // Registration (format 4) is on for the decoded tracker, as for any
+        // tracker of two radars: it learned from this half's pairs. With it
+        // off the continuation is the stored end exactly; with it on the
+        // tracks stay within 5 m of it (the scene's radars are unbiased).
+        let on = parts.clone();
+        parts.config.registration.enabled = false;
+        parts.registration = None;
+        let mut off = end.state().to_parts();
+        off.config.registration.enabled = false;
+        off.registration = None;
+        // Replay with registration off from the decoded mid-run tracker.
+        let mut mid_off = decode_tracker(include_bytes!(
+            "../../../../tests/fixtures/tracker_v1_mid.bin"
+        ))
+        .unwrap()
+        .state()
+        .to_parts();
+        mid_off.config.registration.enabled = false;
+        let mut t_off = Tracker::from_parts(mid_off).unwrap();
+        t_off.process(&plots[24..]).unwrap();
+        t_off.flush().unwrap();
+        let mut replayed = t_off.state().to_parts();
+        replayed.beams = vec![None; 2];
+        for tr in replayed.tracks.iter_mut().chain(&mut replayed.tentatives) {
+            tr.started = None;
+            tr.last_plot = None;
+        }
+        for root in &mut replayed.roots {
+            root.measured = None;
+        }
+        replayed.registration = None;
+        assert_eq!(replayed, off);
+        assert_eq!(on.tracks.len(), off.tracks.len());
+        for (a, b) in on.tracks.iter().zip(&off.tracks) {
+            let d = (a.x[0] - b.x[0]).hypot(a.x[2] - b.x[2]);
+            assert!(d < 5.0, "track {}: {d} m", a.id);
+        }
         assert_eq!(t.counters().confirmed, 2);
-        // Written again it is format 3 and reads back the same.
+        // Written again it is format 4 and reads back the same.
         let bytes = encode_tracker(&t);
-        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 3);
+        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 4);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
     }
 
@@ -678,6 +810,14 @@ mod tests {
         let fresh = Tracker::new(cfg).unwrap();
         assert_eq!(fresh.mode(), Mode::Serial);
         let mut bytes = encode_tracker(&fresh);
+        // Format 4's registration block goes first.
+        let mut block = Writer::default();
+        registration(
+            &mut block,
+            &fresh.config().registration,
+            fresh.state().registration,
+        );
+        bytes.truncate(bytes.len() - block.buf.len());
         // Format 1: no beams at the end (a count and two absent options:
         // 8 + 2 bytes) and no motion byte. A fresh tracker ends with four
         // empty lists (4 × 8 bytes), next id (8), two absent options (2)
@@ -731,9 +871,9 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v4 = bytes.clone();
-        v4[4] = 4;
-        assert!(matches!(decode_tracker(&v4), Err(FormatError::Corrupt(_))));
+        let mut v5 = bytes.clone();
+        v5[4] = 5;
+        assert!(matches!(decode_tracker(&v5), Err(FormatError::Corrupt(_))));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {
