@@ -402,9 +402,7 @@ impl TrackerConfig {
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
             duplicate_probability: 0.99,
-            registration: crate::tracking::registration::RegistrationConfig::for_radars(
-                radars_len,
-            ),
+            registration: crate::tracking::registration::RegistrationConfig::for_radars(radars_len),
         }
     }
 

@@ -41,11 +41,11 @@ mod deleter;
 pub mod initiator;
 pub mod plot_association;
 pub mod predictor;
+pub mod registration;
 mod state;
 mod sweep;
 mod track;
 pub mod updater;
-pub mod registration;
 pub mod window;
 
 #[cfg(test)]
@@ -141,10 +141,7 @@ pub struct Tracker {
 enum Source {
     /// Serial mode: one radar's plots, corrected for its bias, with the
     /// radar as the update sees it (variances grown by the bias's).
-    Radar {
-        spec: RadarSpec,
-        plots: Vec<Plot>,
-    },
+    Radar { spec: RadarSpec, plots: Vec<Plot> },
     /// Parallel mode: fused Cartesian plots with their clutter densities.
     Fused {
         clutter: Vec<f64>,
@@ -381,7 +378,10 @@ impl Tracker {
         let index = frame[0].radar;
         let bias = self.biases[index];
         let spec = registration::inflated(&self.config.radars[index], &bias);
-        let corrected: Vec<Plot> = frame.iter().map(|p| registration::correct(p, &bias)).collect();
+        let corrected: Vec<Plot> = frame
+            .iter()
+            .map(|p| registration::correct(p, &bias))
+            .collect();
         let last = corrected[corrected.len() - 1];
         let t = last.t;
         let view = View::of_frame(&spec, self.beams[index], t, last.azimuth);
@@ -545,10 +545,7 @@ impl Tracker {
             },
             measurements,
         ) = match &source {
-            Source::Radar {
-                spec,
-                plots: raw,
-            } => {
+            Source::Radar { spec, plots: raw } => {
                 let radar = spec;
                 let outcome = associate_polar(
                     &mut estimates,

@@ -130,7 +130,10 @@ impl RegistrationConfig {
         if !self.priors.is_empty() && self.priors.len() != radars {
             return Err(bad(
                 "registration_priors",
-                format!("one per radar ({radars}) or none, got {}", self.priors.len()),
+                format!(
+                    "one per radar ({radars}) or none, got {}",
+                    self.priors.len()
+                ),
             ));
         }
         for p in &self.priors {
@@ -224,7 +227,11 @@ impl RegistrationState {
         let ok = self.information.shape() == (n, n)
             && self.vector.len() == n
             && self.pairs.len() == radars.len()
-            && self.information.iter().chain(self.vector.iter()).all(|v| v.is_finite())
+            && self
+                .information
+                .iter()
+                .chain(self.vector.iter())
+                .all(|v| v.is_finite())
             && self.pairs.iter().all(|p| p.is_finite() && *p >= 0.0);
         if ok {
             Ok(())
@@ -331,9 +338,7 @@ pub fn applied(
         .map(|(r, radar)| {
             let p = cfg.prior(r);
             let reference = cfg.reference.contains(&r);
-            let converged = cfg.enabled
-                && !reference
-                && state.pairs[r] >= f64::from(cfg.min_pairs);
+            let converged = cfg.enabled && !reference && state.pairs[r] >= f64::from(cfg.min_pairs);
             // Before convergence a prior the caller gave is applied (a
             // known bias, its σ added to the plots'); the default prior is
             // only the estimator's regularisation: nothing is applied.
@@ -343,7 +348,7 @@ pub fn applied(
             } else {
                 [0.0; 3]
             };
-            let mut sigma = if reference || !given {
+            let mut sigma = if reference || !cfg.enabled && !given {
                 [0.0; 3]
             } else {
                 [p.sigma_range, p.sigma_azimuth, p.sigma_elevation]
@@ -486,7 +491,8 @@ pub fn add_pair(
         d[i] -= pair.velocity[i] * dt;
     }
     let mut h = DMatrix::zeros(rows, n);
-    h.view_mut((0, offsets[a]), (rows, ja.ncols())).copy_from(&ja);
+    h.view_mut((0, offsets[a]), (rows, ja.ncols()))
+        .copy_from(&ja);
     let mut minus = h.view_mut((0, offsets[b]), (rows, jb.ncols()));
     minus -= &jb;
     let mut s = &ja * polar_r(ra) * ja.transpose() + &jb * polar_r(rb) * jb.transpose();
@@ -643,13 +649,21 @@ mod tests {
         assert_eq!(out[0].bias, [0.0; 3]);
         let b = out[1];
         // 60 pairs 10 s apart, decayed with τ = 1800 s: Σ e^{−10k/1800} ≈ 51.
-    assert!(b.converged && (b.pairs - 51.0).abs() < 1.0, "{}", b.pairs);
+        assert!(b.converged && (b.pairs - 51.0).abs() < 1.0, "{}", b.pairs);
         // The linearisation is about the biased plot; its second-order
         // terms at 50 km: ρΔθ²/2 ≈ 0.7 m along, Δρ·Δθ ≈ 1.6 m across the
         // line of sight, i.e. 3·10⁻⁵ rad (0.002°) of azimuth.
         assert!((b.bias[0] - 300.0).abs() < 2.0, "{:?}", b.bias);
-        assert!((b.bias[1] - 0.3f64.to_radians()).abs() < 5e-5, "{:?}", b.bias);
-        assert!(b.sigma[0] < 20.0 && b.sigma[1] < 0.05f64.to_radians(), "{:?}", b.sigma);
+        assert!(
+            (b.bias[1] - 0.3f64.to_radians()).abs() < 5e-5,
+            "{:?}",
+            b.bias
+        );
+        assert!(
+            b.sigma[0] < 20.0 && b.sigma[1] < 0.05f64.to_radians(),
+            "{:?}",
+            b.sigma
+        );
     }
 
     #[test]
@@ -683,15 +697,33 @@ mod tests {
     fn bad_options_are_named() {
         let mut c = RegistrationConfig::for_radars(2);
         c.reference = vec![2];
-        assert!(c.validate(2).unwrap_err().to_string().contains("registration_reference"));
+        assert!(
+            c.validate(2)
+                .unwrap_err()
+                .to_string()
+                .contains("registration_reference")
+        );
         c.reference = vec![0, 1];
-        assert!(c.validate(2).unwrap_err().to_string().contains("every radar"));
+        assert!(
+            c.validate(2)
+                .unwrap_err()
+                .to_string()
+                .contains("every radar")
+        );
         c.reference = vec![];
-        c.priors = vec![BiasPrior {
-            sigma_range: -1.0,
-            ..BiasPrior::default()
-        }; 2];
-        assert!(c.validate(2).unwrap_err().to_string().contains("registration_priors"));
+        c.priors = vec![
+            BiasPrior {
+                sigma_range: -1.0,
+                ..BiasPrior::default()
+            };
+            2
+        ];
+        assert!(
+            c.validate(2)
+                .unwrap_err()
+                .to_string()
+                .contains("registration_priors")
+        );
         c.priors = vec![BiasPrior::default()];
         assert!(c.validate(2).is_err());
         c.priors = vec![];

@@ -8,6 +8,7 @@
 
 pub mod correlation;
 pub mod late_plots;
+pub mod registration;
 pub mod seed000_async_network;
 pub mod seed000_correlation;
 pub mod seed000_local_tracking;
@@ -138,6 +139,11 @@ pub const REGISTRY: &[Experiment] = &[
         name: "late-plots",
         summary: "a stream of late and reordered plots (seed-001 scene, 3 radars, per-radar delays and 3 % hiccups): the session before and after the lag window against the batch call; dropped plots, exactness, RMSE, GOSPA, latency",
         run: late_plots::run,
+    },
+    Experiment {
+        name: "registration",
+        summary: "radar registration in the tracker: the seed-001 scene with every radar biased (±500 m, ±0.5°), unbiased vs unregistered vs registered; RMSE, NEES, false and duplicate tracks, bias errors against their σ",
+        run: registration::run,
     },
     Experiment {
         name: "tracker-manoeuvres",
