@@ -110,6 +110,7 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
                 clutter_density: r.clutter_density,
                 sac: None,
                 sic: None,
+                bias: None,
             })
             .collect(),
         tracker: Some(pb::TrackerOptions {

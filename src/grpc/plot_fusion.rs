@@ -44,11 +44,27 @@ impl PlotFusionService for PlotFusionGrpc {
             counters: Some(counters_out(out.counters)),
             asterix: out.asterix.map(asterix_out),
             cat062: out.cat062.map(|c| c.data),
+            registration: out.registration.into_iter().map(bias_out).collect(),
             timing: Some(pb::Timing {
                 compute_us: out.compute_us,
             }),
             warnings: out.warnings,
         }))
+    }
+}
+
+pub(crate) fn bias_out(b: svc::RadarBiasView) -> pb::RadarBiasState {
+    pb::RadarBiasState {
+        radar: b.radar,
+        range_m: b.range_m,
+        azimuth_deg: b.azimuth_deg,
+        elevation_deg: b.elevation_deg,
+        sigma_range_m: b.sigma_range_m,
+        sigma_azimuth_deg: b.sigma_azimuth_deg,
+        sigma_elevation_deg: b.sigma_elevation_deg,
+        pairs: b.pairs,
+        converged: b.converged,
+        reference: b.reference,
     }
 }
 
@@ -101,6 +117,14 @@ pub(crate) fn spec_in(
                 clutter_density: r.clutter_density,
                 sac: r.sac,
                 sic: r.sic,
+                bias: r.bias.map(|b| svc::BiasInput {
+                    range_m: b.range_m,
+                    azimuth_deg: b.azimuth_deg,
+                    elevation_deg: b.elevation_deg,
+                    sigma_range_m: b.sigma_range_m,
+                    sigma_azimuth_deg: b.sigma_azimuth_deg,
+                    sigma_elevation_deg: b.sigma_elevation_deg,
+                }),
             })
             .collect(),
         tracker: svc::TrackerInput {
@@ -152,6 +176,15 @@ pub(crate) fn spec_in(
                     .collect()
             }),
             max_lag_s: t.max_lag_s,
+            registration: t.registration.map(|r| {
+                Box::new(svc::RegistrationInput {
+                    enabled: r.enabled,
+                    reference: (!r.reference.is_empty()).then_some(r.reference),
+                    min_pairs: r.min_pairs,
+                    max_pair_dt_s: r.max_pair_dt_s,
+                    time_constant_s: r.time_constant_s,
+                })
+            }),
         },
     }
 }

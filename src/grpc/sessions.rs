@@ -12,7 +12,8 @@ use super::{
     correlation::{correlate_input, finite, pair_result, sample_in, system_track, track_ref},
     error::to_status,
     plot_fusion::{
-        asterix_in, asterix_out, counters_out, plots_in, spec_in as plot_spec_in, track_out,
+        asterix_in, asterix_out, bias_out, counters_out, plots_in, spec_in as plot_spec_in,
+        track_out,
     },
 };
 use crate::{
@@ -166,6 +167,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             late_plots: b.late_plots,
             late_within_lag: b.late_within_lag,
             corrected_from_t: b.corrected_from_t,
+            registration: b.registration.into_iter().map(bias_out).collect(),
             tracks: b
                 .tracks
                 .into_iter()
@@ -240,6 +242,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             pending_plots: b.pending_plots,
             max_lag_s: b.max_lag_s,
             late_before_t: b.late_before_t,
+            registration: b.registration.into_iter().map(bias_out).collect(),
             counters: Some(counters_out(b.counters)),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             origin: b.origin.map(|[lat, lon, h]| pb::GeoPoint {

@@ -67,6 +67,78 @@ pub struct PlotRadar {
     /// ASTERIX System Identification Code; with `sac`.
     #[schema(maximum = 255, example = 1)]
     pub sic: Option<u32>,
+    /// A known bias of the radar (a survey, or `/v1/ais-radar/associate`'s
+    /// estimate): the registration's prior, applied from the start.
+    pub bias: Option<RadarBiasIn>,
+}
+
+/// A radar's known bias: what it adds to each measurement. Every field
+/// optional: bias 0, σ 150 m, 0.15°, 0.1°.
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RadarBiasIn {
+    #[schema(example = 120.0)]
+    pub range_m: Option<f64>,
+    #[schema(example = 0.2)]
+    pub azimuth_deg: Option<f64>,
+    pub elevation_deg: Option<f64>,
+    #[schema(example = 20.0)]
+    pub sigma_range_m: Option<f64>,
+    #[schema(example = 0.02)]
+    pub sigma_azimuth_deg: Option<f64>,
+    pub sigma_elevation_deg: Option<f64>,
+}
+
+/// `tracker.registration`: each radar's range, azimuth (and elevation)
+/// bias estimated from common targets and corrected (docs/plot-fusion.md).
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RegistrationOptions {
+    /// Default: on with two radars or more.
+    pub enabled: Option<bool>,
+    /// Radar ids whose bias is held at its prior (surveyed radars).
+    pub reference: Option<Vec<String>>,
+    /// Pairs a radar needs before its estimate is applied (default 20).
+    pub min_pairs: Option<u32>,
+    /// Longest time between the two plots of a pair (s, default 10).
+    pub max_pair_dt_s: Option<f64>,
+    /// Time constant of the estimate's memory (s, default 1800).
+    pub time_constant_s: Option<f64>,
+}
+
+/// A radar's bias as the tracker applies it (subtracted from its plots).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct RadarBiasOut {
+    pub radar: String,
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub elevation_deg: Option<f64>,
+    pub sigma_range_m: f64,
+    pub sigma_azimuth_deg: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma_elevation_deg: Option<f64>,
+    /// Common-target plot pairs behind the estimate (decayed count).
+    pub pairs: f64,
+    /// The estimate is applied; before, the radar's known bias (or none).
+    pub converged: bool,
+    /// Held at its prior (`tracker.registration.reference`).
+    pub reference: bool,
+}
+
+pub(crate) fn bias_out(b: svc::RadarBiasView) -> RadarBiasOut {
+    RadarBiasOut {
+        radar: b.radar,
+        range_m: b.range_m,
+        azimuth_deg: b.azimuth_deg,
+        elevation_deg: b.elevation_deg,
+        sigma_range_m: b.sigma_range_m,
+        sigma_azimuth_deg: b.sigma_azimuth_deg,
+        sigma_elevation_deg: b.sigma_elevation_deg,
+        pairs: b.pairs,
+        converged: b.converged,
+        reference: b.reference,
+    }
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -198,6 +270,8 @@ pub struct TrackerOptions {
     /// 120. The batch call sorts its plots and only checks the value.
     #[schema(minimum = 0.0, maximum = 120.0, example = 15.0)]
     pub max_lag_s: Option<f64>,
+    /// Radar registration: on by default with two radars or more.
+    pub registration: Option<RegistrationOptions>,
 }
 
 /// One model of the IMM.
@@ -514,6 +588,9 @@ pub struct PlotFusionResponse {
     /// per entry of `tracks` in the same order.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cat062: Option<String>,
+    /// Each radar's bias as applied at the end of the data (estimated by
+    /// registration, or the radar's known bias).
+    pub registration: Vec<RadarBiasOut>,
     pub timing: Timing,
     pub warnings: Vec<String>,
 }
@@ -552,6 +629,14 @@ pub(crate) fn spec_in(
                 clutter_density: r.clutter_density,
                 sac: r.sac,
                 sic: r.sic,
+                bias: r.bias.map(|b| svc::BiasInput {
+                    range_m: b.range_m,
+                    azimuth_deg: b.azimuth_deg,
+                    elevation_deg: b.elevation_deg,
+                    sigma_range_m: b.sigma_range_m,
+                    sigma_azimuth_deg: b.sigma_azimuth_deg,
+                    sigma_elevation_deg: b.sigma_elevation_deg,
+                }),
             })
             .collect(),
         tracker: svc::TrackerInput {
@@ -603,6 +688,15 @@ pub(crate) fn spec_in(
                     .collect()
             }),
             max_lag_s: t.max_lag_s,
+            registration: t.registration.map(|r| {
+                Box::new(svc::RegistrationInput {
+                    enabled: r.enabled,
+                    reference: r.reference,
+                    min_pairs: r.min_pairs,
+                    max_pair_dt_s: r.max_pair_dt_s,
+                    time_constant_s: r.time_constant_s,
+                })
+            }),
         },
     }
 }
@@ -726,6 +820,7 @@ fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> 
         counters: counters_out(out.counters),
         asterix: out.asterix.map(asterix_out),
         cat062: cat062_out(out.cat062),
+        registration: out.registration.into_iter().map(bias_out).collect(),
         timing: Timing {
             compute_us: out.compute_us,
         },

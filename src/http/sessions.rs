@@ -18,8 +18,8 @@ use super::{
     },
     plot_fusion::{
         AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, PlotIn, PlotRadar,
-        TrackerCounters, TrackerOptions, asterix_in, asterix_out, cat062_out, counters_out,
-        plots_in, spec_in, track_out,
+        RadarBiasOut, TrackerCounters, TrackerOptions, asterix_in, asterix_out, bias_out,
+        cat062_out, counters_out, plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -212,6 +212,8 @@ pub struct PlotFusionBatchUpdate {
     /// TSB), then a track-end record (TSE) per entry of `deleted`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cat062: Option<String>,
+    /// Each radar's bias as applied after the batch.
+    pub registration: Vec<RadarBiasOut>,
     /// Events only (`GET /v1/sessions/{id}/events`): where the batch's
     /// plots are (late plots left out), for display.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -278,6 +280,8 @@ pub struct PlotFusionSessionState {
     pub counters: TrackerCounters,
     /// Confirmed then tentative tracks.
     pub tracks: Vec<FusedTrack>,
+    /// Each radar's bias as applied now.
+    pub registration: Vec<RadarBiasOut>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -537,6 +541,7 @@ pub(super) fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             counters: counters_out(b.counters),
             asterix: b.asterix.map(asterix_out),
             cat062: cat062_out(b.cat062),
+            registration: b.registration.into_iter().map(bias_out).collect(),
             plots: None,
         }),
         warnings: u.warnings,
@@ -601,6 +606,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             late_before_t: b.late_before_t,
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),
+            registration: b.registration.into_iter().map(bias_out).collect(),
         }),
     }
 }

@@ -246,6 +246,7 @@ async fn grpc_takes_asterix_bytes_and_gives_the_rest_answer() {
         scan_period_s: Some(period),
         sac: Some(25),
         sic: Some(sic),
+        bias: None,
         ..Default::default()
     };
     let out = client

@@ -423,8 +423,11 @@ async fn a_session_sends_changed_tracks_first_and_last_messages() {
         assert_eq!(records.len(), tracks.len() + deleted.len());
         for (rec, c) in records.iter().zip(tracks) {
             assert_matches(rec, &c["track"], (25, 100));
-            let initiated = c["change"] == "initiated";
-            assert_eq!(rec.first_message(), initiated, "{c}");
+            // The first record of a new track (initiated, or confirmed in
+            // the batch that started it) is flagged TSB.
+            let new = c["change"] == "initiated"
+                || (c["change"] == "confirmed" && !seen.contains(&rec.track_number));
+            assert_eq!(rec.first_message(), new, "{c}");
             // TSB once per track, on its first record.
             if rec.first_message() {
                 firsts += 1;

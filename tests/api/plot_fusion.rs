@@ -230,6 +230,7 @@ pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
                 clutter_density: o(&r["clutter_density"]),
                 sac: None,
                 sic: None,
+                bias: None,
             })
             .collect(),
         plots: req["plots"]
@@ -1026,4 +1027,204 @@ async fn a_request_without_plots_says_so() {
             .any(|w| w.as_str().unwrap().contains("no plot to track")),
         "{warnings:?}"
     );
+}
+
+/// The default scene with radar 2's plots biased by +300 m and +0.3°.
+fn biased_request() -> Value {
+    let mut req = with_height(request(false, 7));
+    let id = req["radars"][1]["id"].clone();
+    for p in req["plots"].as_array_mut().unwrap() {
+        if p["radar_id"] == id {
+            p["range_m"] = json!(f(&p["range_m"]) + 300.0);
+            p["azimuth_deg"] = json!(f(&p["azimuth_deg"]) + 0.3);
+        }
+    }
+    req
+}
+
+#[tokio::test]
+async fn a_biased_radar_is_registered_and_tracks_do_not_split() {
+    let app = spawn_app().await;
+    // Radar 1 declared the reference: radar 2's bias is estimated against it.
+    let mut req = biased_request();
+    let reference = req["radars"][0]["id"].clone();
+    req["tracker"]["registration"] = json!({"reference": [reference]});
+    let out = app.post_ok(PATH, &req).await;
+    let reg = out["registration"].as_array().unwrap();
+    assert_eq!(reg.len(), 2);
+    assert_eq!(reg[0]["reference"], true);
+    assert_eq!(
+        (f(&reg[0]["range_m"]), f(&reg[0]["sigma_range_m"])),
+        (0.0, 0.0)
+    );
+    let b = &reg[1];
+    assert_eq!(b["converged"], true, "{b}");
+    assert!(f(&b["pairs"]) >= 20.0, "{b}");
+    // Within 3σ (plus the first-order model's few metres) of the truth.
+    let (r, sr) = (f(&b["range_m"]), f(&b["sigma_range_m"]));
+    let (a, sa) = (f(&b["azimuth_deg"]), f(&b["sigma_azimuth_deg"]));
+    assert!((r - 300.0).abs() < 3.0 * sr + 10.0, "{b}");
+    assert!((a - 0.3).abs() < 3.0 * sa + 0.01, "{b}");
+    // One track per target, each on its target.
+    check_tracks(&out, 300.0);
+
+    // Without registration the same plots give a worse picture: the
+    // tracks lie farther from the targets.
+    let mut off = biased_request();
+    off["tracker"]["registration"] = json!({"enabled": false});
+    let unregistered = app.post_ok(PATH, &off).await;
+    assert!(
+        unregistered["registration"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|b| b["converged"] == false && f(&b["range_m"]) == 0.0)
+    );
+    let spread = |out: &Value| -> f64 {
+        let end = 150.0;
+        let live: Vec<_> = targets()
+            .into_iter()
+            .filter(|g| g.start <= end && end <= g.end)
+            .collect();
+        out["tracks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["status"] == "confirmed")
+            .map(|t| {
+                live.iter()
+                    .map(|g| {
+                        let p = g.at(f(&t["t"]));
+                        (f(&t["state"][0]) - p[0]).hypot(f(&t["state"][2]) - p[1])
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max)
+    };
+    assert!(
+        spread(&out) < spread(&unregistered),
+        "{} {}",
+        spread(&out),
+        spread(&unregistered)
+    );
+
+    // The defaults (no reference) also converge and hold one track per
+    // target.
+    let out = app.post_ok(PATH, &biased_request()).await;
+    assert!(
+        out["registration"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|b| b["converged"] == true && b["reference"] == false)
+    );
+    check_tracks(&out, 300.0);
+}
+
+#[tokio::test]
+async fn bad_registration_options_are_named_and_a_session_keeps_its_estimates() {
+    let app = spawn_app().await;
+    let cases = [
+        (
+            json!({"registration": {"reference": ["nowhere"]}}),
+            None,
+            "tracker.registration.reference[0]",
+        ),
+        (
+            json!({"registration": {"max_pair_dt_s": -1.0}}),
+            None,
+            "tracker.registration.max_pair_dt_s",
+        ),
+        (
+            json!({"registration": {"time_constant_s": 0.0}}),
+            None,
+            "tracker.registration.time_constant_s",
+        ),
+        (
+            json!({"registration": {"min_pairs": 0}}),
+            None,
+            "tracker.registration.min_pairs",
+        ),
+        (
+            json!({}),
+            Some(json!({"sigma_range_m": -5.0})),
+            "radars[0].bias.sigma_range_m",
+        ),
+        (
+            json!({}),
+            Some(json!({"azimuth_deg": 30.0})),
+            "radars[0].bias.azimuth_deg",
+        ),
+    ];
+    for (tracker, bias, field) in cases {
+        let mut req = biased_request();
+        req["tracker"] = tracker;
+        if let Some(b) = bias {
+            req["radars"][0]["bias"] = b;
+        }
+        let response = app.post_json(PATH, &req).await;
+        assert_eq!(response.status(), 422, "{field}");
+        let p = assert_problem(response, 422).await;
+        assert_eq!(problem_fields(&p), vec![field.to_string()], "{p}");
+        let p = assert_problem(
+            app.post_json("/v1/sessions", &session_create(&req)).await,
+            422,
+        )
+        .await;
+        assert_eq!(problem_fields(&p), vec![field.to_string()], "{p}");
+    }
+    // Every radar a reference while estimating: refused.
+    let mut req = biased_request();
+    let ids: Vec<Value> = req["radars"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["id"].clone())
+        .collect();
+    req["tracker"]["registration"] = json!({"reference": ids});
+    let p = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(
+        problem_fields(&p),
+        vec!["tracker.registration.reference".to_string()]
+    );
+    assert!(
+        app.get_ok("/v1/sessions").await["sessions"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+
+    // A known bias is applied from the start, with its σ.
+    let mut req = biased_request();
+    req["radars"][1]["bias"] = json!({"range_m": 300.0, "azimuth_deg": 0.3, "sigma_range_m": 10.0});
+    req["tracker"]["registration"] = json!({"enabled": false});
+    let out = app.post_ok(PATH, &req).await;
+    let b = &out["registration"][1];
+    assert_eq!((f(&b["range_m"]), f(&b["sigma_range_m"])), (300.0, 10.0));
+    assert!((f(&b["azimuth_deg"]) - 0.3).abs() < 1e-12);
+    check_tracks(&out, 300.0);
+
+    // A session: the estimates are in its updates and its state, kept
+    // (stored) across batches, and equal to the batch call's at the end.
+    let req = biased_request();
+    let whole = app.post_ok(PATH, &req).await;
+    let created = create_session(&app, &session_create(&req)).await;
+    assert_eq!(
+        created["plot_fusion"]["registration"][1]["converged"],
+        false
+    );
+    let id = created["id"].as_str().unwrap().to_string();
+    let path = format!("/v1/sessions/{id}/batches");
+    for (i, chunk) in batches(&req, 40).into_iter().enumerate() {
+        let u = app
+            .post_ok(&path, &json!({"sequence": i + 1, "plots": chunk}))
+            .await;
+        assert_eq!(
+            u["plot_fusion"]["registration"].as_array().unwrap().len(),
+            2
+        );
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(state["plot_fusion"]["registration"], whole["registration"]);
+    assert_eq!(state["plot_fusion"]["tracks"], whole["tracks"]);
 }

@@ -375,13 +375,22 @@ pub fn applied(
         .collect()
 }
 
-/// The plot corrected by its radar's bias.
+/// The plot corrected by its radar's bias. A plot nearer its radar than
+/// the range bias (a target overhead) keeps its range, and an elevation
+/// that the correction would take past the vertical keeps its own: their
+/// conversion would be degenerate.
 pub fn correct(plot: &Plot, bias: &RadarBias) -> Plot {
     let mut p = *plot;
-    p.range = (p.range - bias.bias[0]).max(0.0);
+    let range = p.range - bias.bias[0];
+    if range >= 1.0 {
+        p.range = range;
+    }
     p.azimuth -= bias.bias[1];
     if let Some(el) = p.elevation.as_mut() {
-        *el = (*el - bias.bias[2]).clamp(-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
+        let corrected = *el - bias.bias[2];
+        if corrected.abs() < std::f64::consts::FRAC_PI_2 - 1e-6 {
+            *el = corrected;
+        }
     }
     p
 }

@@ -67,6 +67,52 @@ pub struct RadarInput {
     /// the radar's records in ASTERIX input. Both or neither, 0 to 255.
     pub sac: Option<u32>,
     pub sic: Option<u32>,
+    /// A known bias (a survey, the AIS–radar endpoint): the registration's
+    /// prior for this radar.
+    pub bias: Option<BiasInput>,
+}
+
+/// A radar's known bias and its σ (each field optional: 0 bias, the
+/// default σ of `algo::tracking::registration::BiasPrior`).
+#[derive(Debug, Clone, Default)]
+pub struct BiasInput {
+    pub range_m: Option<f64>,
+    pub azimuth_deg: Option<f64>,
+    pub elevation_deg: Option<f64>,
+    pub sigma_range_m: Option<f64>,
+    pub sigma_azimuth_deg: Option<f64>,
+    pub sigma_elevation_deg: Option<f64>,
+}
+
+/// `tracker.registration`.
+#[derive(Debug, Clone, Default)]
+pub struct RegistrationInput {
+    /// Default: on with two radars or more.
+    pub enabled: Option<bool>,
+    /// Radar ids whose bias is held at its prior.
+    pub reference: Option<Vec<String>>,
+    pub min_pairs: Option<u32>,
+    pub max_pair_dt_s: Option<f64>,
+    pub time_constant_s: Option<f64>,
+}
+
+/// A radar's bias as the tracker applies it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RadarBiasView {
+    pub radar: String,
+    pub range_m: f64,
+    pub azimuth_deg: f64,
+    /// 3D radars.
+    pub elevation_deg: Option<f64>,
+    pub sigma_range_m: f64,
+    pub sigma_azimuth_deg: f64,
+    pub sigma_elevation_deg: Option<f64>,
+    /// Common-target plot pairs behind the estimate (decayed count).
+    pub pairs: f64,
+    /// The estimate is applied (enough pairs); else the prior is.
+    pub converged: bool,
+    /// Held at its prior.
+    pub reference: bool,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -125,6 +171,8 @@ pub struct TrackerInput {
     /// newest plot received; default 15, at most 120. The batch call
     /// sorts its plots and only checks it.
     pub max_lag_s: Option<f64>,
+    /// Radar registration (bias estimation); default on with two radars.
+    pub registration: Option<Box<RegistrationInput>>,
 }
 
 /// One model of the IMM.
@@ -193,6 +241,8 @@ pub struct TrackOutput {
     pub asterix: Option<asterix::AsterixSummary>,
     /// `tracks` as CAT062 records, in the same order, when asked for.
     pub cat062: Option<cat062::Cat062Data>,
+    /// Each radar's bias as applied at the end of the data.
+    pub registration: Vec<RadarBiasView>,
     pub compute_us: f64,
     pub warnings: Vec<String>,
 }
@@ -278,6 +328,11 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     }
     let tracks = tracker.tracks();
     let counters = tracker.counters();
+    let registration = network.bias_views(&tracker);
+    warnings.extend(network::registration_warnings(
+        tracker.config(),
+        &registration,
+    ));
     warnings.extend(outcome_warnings(
         &network,
         tracker.config(),
@@ -320,6 +375,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         counters: counters.into(),
         asterix: summary,
         cat062,
+        registration,
         compute_us,
         warnings,
     })

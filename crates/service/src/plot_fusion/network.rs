@@ -33,8 +33,8 @@ use std::collections::HashMap;
 use nalgebra::Matrix3;
 
 use super::{
-    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, SpecInput,
-    TrackView,
+    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, RadarBiasView,
+    SpecInput, TrackView,
 };
 use crate::{FieldViolation, Ids, Interval, ServiceError, Violations};
 use algo::{
@@ -43,8 +43,9 @@ use algo::{
     jpda::Method,
     polar::{enu_to_polar_3d, polar_to_enu_3d},
     tracking::{
-        Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, TrackerConfig,
-        VelocityGate,
+        Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Tracker,
+        TrackerConfig, VelocityGate,
+        registration::{BiasPrior, RegistrationConfig},
     },
 };
 use formats::wire::{FormatError, Reader, Writer};
@@ -123,6 +124,10 @@ fn wire_name(what: &str) -> &'static str {
         "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
         "duplicate_probability" => "tracker.duplicate_gate_probability",
         "max_lag_s" => "tracker.max_lag_s",
+        "registration_priors" => "radars[].bias",
+        "registration_reference" => "tracker.registration.reference",
+        "registration_max_pair_dt" => "tracker.registration.max_pair_dt_s",
+        "registration_time_constant" => "tracker.registration.time_constant_s",
         "models" | "turn_rate" | "mean_sojourn" | "initial_probabilities" => "tracker.imm_models",
         _ => "tracker",
     }
@@ -515,6 +520,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         config.deletion = rule;
     }
     config.motion = motion(tracker, &mut warnings)?;
+    config.registration = registration(spec, &ids, &config)?;
     config.validate().map_err(|e| config_error(&e))?;
 
     if config.is_parallel() {
@@ -534,6 +540,153 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         config,
         warnings,
     ))
+}
+
+/// `tracker.registration` and each radar's `bias`, checked and named.
+fn registration(
+    spec: &SpecInput,
+    ids: &[String],
+    config: &TrackerConfig,
+) -> Result<RegistrationConfig, ServiceError> {
+    let mut out = RegistrationConfig::for_radars(config.radars.len());
+    let mut v = Violations::new();
+    if spec.radars.iter().any(|r| r.bias.is_some()) {
+        let d = BiasPrior::default();
+        out.priors = spec
+            .radars
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let Some(b) = &r.bias else {
+                    return d;
+                };
+                let f = format!("radars[{i}].bias");
+                let mut num = |name: &str, x: Option<f64>, default: f64, range: Interval| {
+                    v.number_or(format!("{f}.{name}"), x, default, range)
+                        .unwrap_or(default)
+                };
+                // Bounds in the wire units: a bias of more than 10 km or
+                // 10° (5° in elevation) is a wrong site or configuration,
+                // not a bias to register.
+                BiasPrior {
+                    range: num("range_m", b.range_m, 0.0, Interval::closed(-1e4, 1e4)),
+                    azimuth: num(
+                        "azimuth_deg",
+                        b.azimuth_deg,
+                        0.0,
+                        Interval::closed(-10.0, 10.0),
+                    )
+                    .to_radians(),
+                    elevation: num(
+                        "elevation_deg",
+                        b.elevation_deg,
+                        0.0,
+                        Interval::closed(-5.0, 5.0),
+                    )
+                    .to_radians(),
+                    sigma_range: num(
+                        "sigma_range_m",
+                        b.sigma_range_m,
+                        d.sigma_range,
+                        Interval::closed(0.0, 1e4),
+                    ),
+                    sigma_azimuth: num(
+                        "sigma_azimuth_deg",
+                        b.sigma_azimuth_deg,
+                        d.sigma_azimuth.to_degrees(),
+                        Interval::closed(0.0, 10.0),
+                    )
+                    .to_radians(),
+                    sigma_elevation: num(
+                        "sigma_elevation_deg",
+                        b.sigma_elevation_deg,
+                        d.sigma_elevation.to_degrees(),
+                        Interval::closed(0.0, 5.0),
+                    )
+                    .to_radians(),
+                }
+            })
+            .collect();
+    }
+    if let Some(r) = &spec.tracker.registration {
+        if let Some(e) = r.enabled {
+            out.enabled = e;
+        }
+        if let Some(refs) = &r.reference {
+            for (k, id) in refs.iter().enumerate() {
+                match ids.iter().position(|x| x == id) {
+                    Some(i) => out.reference.push(i),
+                    None => v.add(
+                        format!("tracker.registration.reference[{k}]"),
+                        format!("no radar has the id {id:?}"),
+                    ),
+                }
+            }
+        }
+        if let Some(n) = r.min_pairs {
+            if n == 0 || n > 100_000 {
+                v.add("tracker.registration.min_pairs", "must be in 1..=100000");
+            }
+            out.min_pairs = n;
+        }
+        if let Some(t) = r.max_pair_dt_s {
+            if let Some(t) = v.within(
+                "tracker.registration.max_pair_dt_s",
+                t,
+                Interval::open_closed(0.0, 600.0),
+            ) {
+                out.max_pair_dt = t;
+            }
+        }
+        if let Some(t) = r.time_constant_s {
+            if let Some(t) = v.within(
+                "tracker.registration.time_constant_s",
+                t,
+                Interval::open_closed(0.0, 1e7),
+            ) {
+                out.time_constant = t;
+            }
+        }
+    }
+    v.finish_with(Some(out))
+}
+
+/// Warnings about the registration's estimates: a bias beyond what a radar
+/// usually has (1 km, 1°: its configuration or alignment is wrong), and a
+/// converged bias the geometry leaves unobservable (its σ still above half
+/// its prior's).
+pub fn registration_warnings(config: &TrackerConfig, views: &[RadarBiasView]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (r, b) in views.iter().enumerate() {
+        if b.range_m.abs() > 1000.0 || b.azimuth_deg.abs() > 1.0 {
+            out.push(format!(
+                "radar {}'s estimated bias is {:.0} m in range and {:.2}° in azimuth (beyond 1 km                  or 1°): check its site, its north alignment and its range calibration",
+                b.radar, b.range_m, b.azimuth_deg
+            ));
+        }
+        let prior = config.registration.prior(r);
+        if b.converged
+            && (b.sigma_range_m > 0.5 * prior.sigma_range
+                || b.sigma_azimuth_deg.to_radians() > 0.5 * prior.sigma_azimuth)
+        {
+            out.push(format!(
+                "radar {}'s bias is poorly observable (σ {:.0} m, {:.3}° after {:.0} pairs, prior                  σ {:.0} m, {:.3}°): the common targets' geometry does not fix it; declare a                  surveyed radar in tracker.registration.reference or give radars[].bias",
+                b.radar,
+                b.sigma_range_m,
+                b.sigma_azimuth_deg,
+                b.pairs,
+                prior.sigma_range,
+                prior.sigma_azimuth.to_degrees()
+            ));
+        }
+    }
+    if config.registration.enabled && config.is_parallel() {
+        out.push(
+            "parallel mode applies the radars' known biases (radars[].bias) but estimates none:              use the serial mode (tracker.mode = auto) for registration"
+                .into(),
+        );
+    }
+    out
 }
 
 /// The predictor: `tracker.motion` and `tracker.imm_models`.
@@ -915,6 +1068,28 @@ impl Network {
     }
 
     /// A core track as a wire track (ids, and lat/lon from the frame).
+    /// Each radar's bias as `tracker` applies it, by radar id.
+    pub fn bias_views(&self, tracker: &Tracker) -> Vec<RadarBiasView> {
+        tracker
+            .biases()
+            .iter()
+            .zip(&self.radar_ids)
+            .zip(&tracker.config().radars)
+            .map(|((b, id), r)| RadarBiasView {
+                radar: id.clone(),
+                range_m: b.bias[0],
+                azimuth_deg: b.bias[1].to_degrees(),
+                elevation_deg: r.is_3d().then(|| b.bias[2].to_degrees()),
+                sigma_range_m: b.sigma[0],
+                sigma_azimuth_deg: b.sigma[1].to_degrees(),
+                sigma_elevation_deg: r.is_3d().then(|| b.sigma[2].to_degrees()),
+                pairs: b.pairs,
+                converged: b.converged,
+                reference: b.reference,
+            })
+            .collect()
+    }
+
     pub fn track_view(
         &self,
         motion: &algo::tracking::Motion,

@@ -42,7 +42,8 @@ use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
-        LastPlotView, ModeView, Network, PlotInput, SpecInput, TrackView, TrackerCounters,
+        LastPlotView, ModeView, Network, PlotInput, RadarBiasView, SpecInput, TrackView,
+        TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
         computation_error, mode_name, network, output,
@@ -82,7 +83,11 @@ const CAT062_FLAG: u32 = 1 << 28;
 /// Set in the frame count of a kept update that carries what late plots
 /// within the lag did (after the CAT062 data).
 const LATE_FLAG: u32 = 1 << 27;
-const FLAGS: u32 = ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG | LATE_FLAG;
+/// Set in the frame count of a kept update that carries the radars'
+/// biases (after the late fields).
+const REGISTRATION_FLAG: u32 = 1 << 26;
+const FLAGS: u32 =
+    ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG | LATE_FLAG | REGISTRATION_FLAG;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -160,6 +165,8 @@ pub struct BatchUpdate {
     /// The listed tracks as CAT062 records, for a session created with
     /// `cat062`.
     pub cat062: Option<Cat062Data>,
+    /// Each radar's bias as applied after the batch.
+    pub registration: Vec<RadarBiasView>,
 }
 
 /// The session as a client reads it.
@@ -184,6 +191,8 @@ pub struct SessionView {
     pub counters: TrackerCounters,
     /// Confirmed then tentative tracks.
     pub tracks: Vec<TrackView>,
+    /// Each radar's bias as applied now.
+    pub registration: Vec<RadarBiasView>,
 }
 
 /// Where a plot is, for display: its ENU position from its radar's site; a
@@ -438,6 +447,7 @@ impl SessionKind for PlotFusionSession {
             summary = Some(from.summary);
         }
         let before: Vec<TrackOutput> = self.tracker().tracks();
+        let biases_before = self.network.bias_views(self.tracker());
         let horizon = self.window.horizon();
         let push = self.window.push(&plots).map_err(computation_error)?;
         let late_json: Vec<usize> = push
@@ -492,6 +502,9 @@ impl SessionKind for PlotFusionSession {
                 algo::tracking::window::MAX_LAG_LIMIT_S,
             ));
         }
+        let registration = self.network.bias_views(self.tracker());
+        warnings.extend(network::registration_warnings(&config, &registration));
+        warnings.extend(realigned(&biases_before, &registration));
         let changes = diff(&before, &live, &push);
         let view = |t: &TrackOutput| self.network.track_view(&config.motion, t);
         let tracks: Vec<ChangedTrack> = if push.frames == 0 {
@@ -506,14 +519,18 @@ impl SessionKind for PlotFusionSession {
                 .collect()
         };
         let deleted: Vec<TrackView> = changes.deleted.iter().map(view).collect();
+        let known: HashSet<u64> = before.iter().map(|t| t.id).collect();
         let cat062 = self.cat062.as_ref().map(|o| {
             let items: Vec<(&TrackView, Life)> = tracks
                 .iter()
                 .map(|c| {
-                    let life = if c.change == TrackChange::Initiated {
-                        Life::First
-                    } else {
+                    // A track's first record (TSB) is the first one sent:
+                    // a new track, even one confirmed in the batch that
+                    // started it.
+                    let life = if known.contains(&c.track.id) {
                         Life::Continuing
+                    } else {
+                        Life::First
                     };
                     (&c.track, life)
                 })
@@ -533,6 +550,7 @@ impl SessionKind for PlotFusionSession {
             counters: self.window.counters().into(),
             asterix: summary,
             cat062,
+            registration,
         })
     }
 
@@ -553,6 +571,7 @@ impl SessionKind for PlotFusionSession {
             counters: self.window.counters().into(),
             asterix: None,
             cat062: self.cat062.map(|_| Cat062Data::default()),
+            registration: self.network.bias_views(self.tracker()),
         }
     }
 
@@ -618,6 +637,7 @@ impl SessionKind for PlotFusionSession {
                 .iter()
                 .map(|t| self.network.track_view(&tracker.config().motion, t))
                 .collect(),
+            registration: self.network.bias_views(tracker),
         })
     }
 
@@ -670,7 +690,7 @@ impl SessionKind for PlotFusionSession {
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
         let optional = if u.asterix.is_some() { ASTERIX_FLAG } else { 0 }
             | if u.cat062.is_some() { CAT062_FLAG } else { 0 };
-        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | optional);
+        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG | optional);
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -704,6 +724,20 @@ impl SessionKind for PlotFusionSession {
         }
         w.u32(u.late_within_lag);
         w.opt(u.corrected_from_t, Writer::f64);
+        w.usize(u.registration.len());
+        for b in &u.registration {
+            w.str(&b.radar);
+            w.f64_run(&[
+                b.range_m,
+                b.azimuth_deg,
+                b.sigma_range_m,
+                b.sigma_azimuth_deg,
+                b.pairs,
+            ]);
+            w.opt(b.elevation_deg, Writer::f64);
+            w.opt(b.sigma_elevation_deg, Writer::f64);
+            w.u8(u8::from(b.converged) | u8::from(b.reference) << 1);
+        }
     }
 
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
@@ -711,6 +745,7 @@ impl SessionKind for PlotFusionSession {
         let has_asterix = frames & ASTERIX_FLAG != 0;
         let has_cat062 = frames & CAT062_FLAG != 0;
         let has_late = frames & LATE_FLAG != 0;
+        let has_registration = frames & REGISTRATION_FLAG != 0;
         let fields = TrackFields {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
@@ -763,6 +798,35 @@ impl SessionKind for PlotFusionSession {
         } else {
             (0, None)
         };
+        let registration = if has_registration {
+            let n = r.len(8)?;
+            (0..n)
+                .map(|_| {
+                    let radar = r.str()?;
+                    let mut v = [0.0; 5];
+                    for x in &mut v {
+                        *x = r.f64()?;
+                    }
+                    let elevation_deg = r.opt(Reader::f64)?;
+                    let sigma_elevation_deg = r.opt(Reader::f64)?;
+                    let flags = r.u8()?;
+                    Ok(RadarBiasView {
+                        radar,
+                        range_m: v[0],
+                        azimuth_deg: v[1],
+                        elevation_deg,
+                        sigma_range_m: v[2],
+                        sigma_azimuth_deg: v[3],
+                        sigma_elevation_deg,
+                        pairs: v[4],
+                        converged: flags & 1 != 0,
+                        reference: flags & 2 != 0,
+                    })
+                })
+                .collect::<Result<_, FormatError>>()?
+        } else {
+            Vec::new()
+        };
         Ok(BatchUpdate {
             frames,
             pending_plots,
@@ -775,8 +839,30 @@ impl SessionKind for PlotFusionSession {
             counters,
             asterix,
             cat062,
+            registration,
         })
     }
+}
+
+/// A warning for each radar whose applied bias moved by more than 3σ
+/// (of the estimate before) in one batch: the radar was realigned, or a
+/// prior was wrong.
+fn realigned(before: &[RadarBiasView], after: &[RadarBiasView]) -> Vec<String> {
+    before
+        .iter()
+        .zip(after)
+        .filter(|(b, a)| {
+            b.converged
+                && ((a.range_m - b.range_m).abs() > 3.0 * b.sigma_range_m.max(1.0)
+                    || (a.azimuth_deg - b.azimuth_deg).abs() > 3.0 * b.sigma_azimuth_deg.max(1e-3))
+        })
+        .map(|(b, a)| {
+            format!(
+                "radar {}'s bias changed from {:.0} m, {:.3}° to {:.0} m, {:.3}° in this batch                  (beyond 3σ): was the radar realigned?",
+                b.radar, b.range_m, b.azimuth_deg, a.range_m, a.azimuth_deg
+            )
+        })
+        .collect()
 }
 
 /// What changed between the picture before a batch and after it.
