@@ -437,7 +437,7 @@ impl Settings {
         if self.watchers_per_session == 0 || self.watchers_per_tenant == 0 || self.watch_buffer == 0
         {
             return Err(
-                "--watchers-per-session, --watchers-per-tenant and --watch-buffer                  (FUSION_WATCHERS_PER_SESSION, FUSION_WATCHERS_PER_TENANT, FUSION_WATCH_BUFFER)                  must be at least 1"
+                "--watchers-per-session, --watchers-per-tenant and --watch-buffer (FUSION_WATCHERS_PER_SESSION, FUSION_WATCHERS_PER_TENANT, FUSION_WATCH_BUFFER) must be at least 1"
                     .into(),
             );
         }

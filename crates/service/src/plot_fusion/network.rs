@@ -660,17 +660,20 @@ pub fn registration_warnings(config: &TrackerConfig, views: &[RadarBiasView]) ->
     for (r, b) in views.iter().enumerate() {
         if b.range_m.abs() > 1000.0 || b.azimuth_deg.abs() > 1.0 {
             out.push(format!(
-                "radar {}'s estimated bias is {:.0} m in range and {:.2}° in azimuth (beyond 1 km                  or 1°): check its site, its north alignment and its range calibration",
+                "radar {}'s estimated bias is {:.0} m in range and {:.2}° in azimuth (beyond 1 km or 1°): check its site, its north alignment and its range calibration",
                 b.radar, b.range_m, b.azimuth_deg
             ));
         }
         let prior = config.registration.prior(r);
+        // After five times the pairs convergence needs, a σ still above
+        // half the prior's means the geometry does not fix the bias.
         if b.converged
+            && b.pairs >= 5.0 * f64::from(config.registration.min_pairs)
             && (b.sigma_range_m > 0.5 * prior.sigma_range
                 || b.sigma_azimuth_deg.to_radians() > 0.5 * prior.sigma_azimuth)
         {
             out.push(format!(
-                "radar {}'s bias is poorly observable (σ {:.0} m, {:.3}° after {:.0} pairs, prior                  σ {:.0} m, {:.3}°): the common targets' geometry does not fix it; declare a                  surveyed radar in tracker.registration.reference or give radars[].bias",
+                "radar {}'s bias is poorly observable (σ {:.0} m, {:.3}° after {:.0} pairs, prior σ {:.0} m, {:.3}°): the common targets' geometry does not fix it; declare a surveyed radar in tracker.registration.reference or give radars[].bias",
                 b.radar,
                 b.sigma_range_m,
                 b.sigma_azimuth_deg,
@@ -682,7 +685,7 @@ pub fn registration_warnings(config: &TrackerConfig, views: &[RadarBiasView]) ->
     }
     if config.registration.enabled && config.is_parallel() {
         out.push(
-            "parallel mode applies the radars' known biases (radars[].bias) but estimates none:              use the serial mode (tracker.mode = auto) for registration"
+            "parallel mode applies the radars' known biases (radars[].bias) but estimates none: use the serial mode (tracker.mode = auto) for registration"
                 .into(),
         );
     }

@@ -858,7 +858,7 @@ fn realigned(before: &[RadarBiasView], after: &[RadarBiasView]) -> Vec<String> {
         })
         .map(|(b, a)| {
             format!(
-                "radar {}'s bias changed from {:.0} m, {:.3}° to {:.0} m, {:.3}° in this batch                  (beyond 3σ): was the radar realigned?",
+                "radar {}'s bias changed from {:.0} m, {:.3}° to {:.0} m, {:.3}° in this batch (beyond 3σ): was the radar realigned?",
                 b.radar, b.range_m, b.azimuth_deg, a.range_m, a.azimuth_deg
             )
         })
@@ -1184,7 +1184,7 @@ mod tests {
         PlotFusionSession::encode_update(&update, &mut plain);
         assert_eq!(
             plain.buf[..4],
-            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG).to_le_bytes()
+            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG).to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
         // without modes) still reads.
