@@ -163,9 +163,31 @@ pub struct Settings {
     #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,
     /// Where streaming sessions keep their state: `memory` (this process only)
-    /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas).
-    #[arg(long, env = "FUSION_SESSION_STORE", default_value = "memory")]
+    /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas;
+    /// `rediss://` for TLS, `redis+sentinel://` / `rediss+sentinel://` for
+    /// Sentinel).
+    #[arg(
+        long,
+        env = "FUSION_SESSION_STORE",
+        default_value = "memory",
+        hide_env_values = true
+    )]
     pub session_store: String,
+    /// PEM file of the CA that signed Redis's certificate (`rediss://`;
+    /// without it, the system's roots).
+    #[arg(long, env = "FUSION_REDIS_CA")]
+    pub redis_ca: Option<PathBuf>,
+    /// PEM client certificate for Redis (`tls-auth-clients yes`); with
+    /// `--redis-key`.
+    #[arg(long, env = "FUSION_REDIS_CERT")]
+    pub redis_cert: Option<PathBuf>,
+    /// PEM private key of `--redis-cert`.
+    #[arg(long, env = "FUSION_REDIS_KEY")]
+    pub redis_key: Option<PathBuf>,
+    /// Redis password (overrides the URL's); prefer the environment
+    /// variable, since a flag shows in the process list.
+    #[arg(long, env = "FUSION_REDIS_PASSWORD", hide_env_values = true)]
+    pub redis_password: Option<Secret>,
     /// Prefix of every Redis key of the session store.
     #[arg(
         long,
@@ -380,6 +402,12 @@ impl Settings {
     pub fn store_settings(&self) -> StoreSettings {
         StoreSettings {
             url: self.session_store.clone(),
+            redis: store::access::RedisAccessSettings {
+                ca: self.redis_ca.clone(),
+                cert: self.redis_cert.clone(),
+                key: self.redis_key.clone(),
+                password: self.redis_password.as_ref().map(|p| p.expose().to_string()),
+            },
             key_prefix: self.session_key_prefix.clone(),
             max_sessions_per_tenant: self.max_sessions_per_tenant,
             max_memory_bytes: self.session_memory_bytes,
@@ -419,13 +447,21 @@ impl Settings {
         }
         let store = self.session_store.as_str();
         if store != "memory"
-            && !store.starts_with("redis://")
-            && !store.starts_with("rediss://")
-            && !store.starts_with("redis+sentinel://")
+            && ![
+                "redis://",
+                "rediss://",
+                "redis+sentinel://",
+                "rediss+sentinel://",
+            ]
+            .iter()
+            .any(|scheme| store.starts_with(scheme))
         {
+            // Only the scheme: the URL may hold a password.
+            let scheme = store.split_once("://").map_or("", |(s, _)| s);
             return Err(format!(
                 "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
-                 starting with redis://, rediss:// or redis+sentinel://, not {store:?}"
+                 starting with redis://, rediss://, redis+sentinel:// or rediss+sentinel://, \
+                 not one of scheme {scheme:?}"
             ));
         }
         if self.session_key_prefix.is_empty() {
@@ -631,6 +667,27 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.contains("--session-store"), "{err}");
+        let err = with(&["--session-store", "redi://app:hunter2@h:1/0"])
+            .validate()
+            .unwrap_err();
+        assert!(err.contains("--session-store"), "{err}");
+        assert!(
+            !err.contains("hunter2"),
+            "the error shows the password: {err}"
+        );
+        let s = with(&[
+            "--session-store",
+            "rediss+sentinel://h:1/m",
+            "--redis-ca",
+            "/etc/redis/ca.pem",
+            "--redis-password",
+            "hunter2",
+        ]);
+        s.validate().unwrap();
+        let store = s.store_settings();
+        assert_eq!(store.redis.password.as_deref(), Some("hunter2"));
+        assert!(!format!("{store:?}").contains("hunter2"));
+        assert!(!format!("{s:?}").contains("hunter2"));
         let err = with(&["--store-timeout-s", "0"]).validate().unwrap_err();
         assert!(err.contains("--store-timeout-s"), "{err}");
         let err = with(&["--max-sessions-per-tenant", "0"])

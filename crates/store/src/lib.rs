@@ -5,6 +5,7 @@
 //! keeps tenants apart. Two backends behind one enum: `memory` (one process)
 //! and `redis` (shared by replicas, survives restarts of the service).
 
+pub mod access;
 pub mod events;
 pub mod memory;
 pub mod redis;
@@ -23,8 +24,11 @@ pub enum SessionStore {
 /// How to build a [`SessionStore`] (from `config::Settings::store_settings`).
 #[derive(Debug, Clone)]
 pub struct StoreSettings {
-    /// `memory`, or `redis://host:port/db` (`rediss://` for TLS).
+    /// `memory`, `redis://host:port/db` (`rediss://` for TLS), or
+    /// `redis+sentinel://…` (`rediss+sentinel://`).
     pub url: String,
+    /// Redis: TLS files and the password (see [`access`]).
+    pub redis: access::RedisAccessSettings,
     /// Prefix of every Redis key (`{prefix}:{tenant}:…`).
     pub key_prefix: String,
     /// Most live sessions one tenant may hold.
@@ -79,6 +83,12 @@ pub enum StoreError {
     /// `create` of an id that is live already.
     #[error("a session with this id exists already")]
     AlreadyExists,
+    /// A setting is wrong (refuse to start): named, never with a secret.
+    #[error("{setting}: {reason}")]
+    Config {
+        setting: &'static str,
+        reason: String,
+    },
     /// The backend holds something that is not a session as this store writes it.
     #[error("corrupt session record: {reason}")]
     Corrupt { reason: String },
@@ -87,12 +97,15 @@ pub enum StoreError {
 impl SessionStore {
     /// Builds the store `settings.url` names. Redis is connected lazily, so
     /// this succeeds while Redis is down; calls then fail with `Unavailable`
-    /// until it is back, and the connection recovers by itself.
+    /// until it is back, and the connection recovers by itself. A Redis that
+    /// answers is checked once: a failed TLS handshake or rejected
+    /// credentials are `Config` errors (refuse to start), as are bad URLs
+    /// and TLS files.
     pub async fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
         if settings.url == "memory" {
             Ok(Self::Memory(memory::MemoryStore::new(settings)))
         } else {
-            redis::RedisStore::connect(settings).map(Self::Redis)
+            redis::RedisStore::connect(settings).await.map(Self::Redis)
         }
     }
 

@@ -23,7 +23,7 @@ use redis::{
     aio::{ConnectionManager, ConnectionManagerConfig},
 };
 
-use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
+use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, access, ttl_ms};
 
 pub struct RedisStore {
     /// For the event listener's own pub/sub connection (a single server).
@@ -102,22 +102,25 @@ return out
 
 impl RedisStore {
     /// A store over a lazily connected, self-reconnecting connection: this
-    /// fails only when the URL is not a Redis URL, never because Redis is down.
-    pub fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+    /// fails when a setting is wrong (the URL, TLS files, or a TLS handshake
+    /// or credentials that a Redis answering at start rejects), never
+    /// because Redis is down.
+    pub async fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
         if super::sentinel::is_sentinel_url(&settings.url) {
-            let url = super::sentinel::parse(&settings.url)?;
-            return Ok(Self::with_conn(
-                settings,
-                None,
-                Some(Box::new(super::sentinel::Sentinel::new(
-                    url,
-                    settings.timeout,
-                ))),
-            ));
+            let (url, access) = super::sentinel::parse(&settings.url, &settings.redis)?;
+            let sentinel = super::sentinel::Sentinel::new(url, access, settings.timeout);
+            sentinel.check().await?;
+            return Ok(Self::with_conn(settings, None, Some(Box::new(sentinel))));
         }
-        let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
-            reason: format!("invalid Redis URL: {e}"),
-        })?;
+        let url = access::parse_server_url(&settings.url)?;
+        let access = access::Access::new(&settings.redis, url.tls, url.user, url.password)?;
+        let client = access.client(&url.host, url.port, url.db)?;
+        access::probe(
+            &client,
+            settings.timeout,
+            &format!("Redis {}:{}", url.host, url.port),
+        )
+        .await?;
         // One quick retry, then fail: the next command starts a new attempt, so
         // a Redis that comes back is found again within one command or two.
         let config = ConnectionManagerConfig::new()

@@ -105,6 +105,7 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
         url: "redis+sentinel://127.0.0.1:26450,127.0.0.1:26451,127.0.0.1:26452/fusion/0".into(),
         key_prefix: "sentinel-test".into(),
         max_sessions_per_tenant: 10,
+        redis: Default::default(),
         max_memory_bytes: 1 << 20,
         timeout: Duration::from_millis(500),
     };
