@@ -39,6 +39,23 @@ pub struct StoreSettings {
     pub timeout: Duration,
 }
 
+/// Where a Redis store sends its commands, for health and metrics.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Topology {
+    /// The server in use, `host:port` (never credentials); `None` behind
+    /// Sentinel while no primary is known (before the first answer, or
+    /// after one was dropped and before the sentinels name the next).
+    pub primary: Option<String>,
+    /// Sentinel: the primary was dropped after a failed command and no
+    /// command has succeeded since.
+    pub failing_over: bool,
+    /// Sentinel: changes of primary followed.
+    pub failovers: u64,
+    /// Sentinel: times the primary was dropped after a failure and the
+    /// sentinels asked again.
+    pub redirections: u64,
+}
+
 /// A session's state as stored.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Stored {
@@ -223,6 +240,14 @@ impl SessionStore {
         match self {
             Self::Memory(_) => None,
             Self::Redis(s) => Some(s.channel(tenant, id)),
+        }
+    }
+
+    /// The Redis store's server and failover state (`None` for memory).
+    pub fn topology(&self) -> Option<Topology> {
+        match self {
+            Self::Memory(_) => None,
+            Self::Redis(s) => Some(s.topology()),
         }
     }
 

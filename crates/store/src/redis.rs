@@ -16,7 +16,7 @@
 //! configured timeout and fails with `Unavailable`; the `ConnectionManager`
 //! reconnects by itself when Redis comes back.
 
-use std::{future::Future, time::Duration};
+use std::{future::Future, sync::Arc, time::Duration};
 
 use redis::{
     Client, RedisError, Script,
@@ -30,7 +30,9 @@ pub struct RedisStore {
     client: Option<Client>,
     conn: Option<ConnectionManager>,
     /// Set for a `redis+sentinel://` URL: the primary is found through it.
-    sentinel: Option<Box<super::sentinel::Sentinel>>,
+    sentinel: Option<Arc<super::sentinel::Sentinel>>,
+    /// A single server's `host:port` (no credentials), for health.
+    server: String,
     prefix: String,
     max_sessions_per_tenant: usize,
     timeout: Duration,
@@ -110,7 +112,7 @@ impl RedisStore {
             let (url, access) = super::sentinel::parse(&settings.url, &settings.redis)?;
             let sentinel = super::sentinel::Sentinel::new(url, access, settings.timeout);
             sentinel.check().await?;
-            return Ok(Self::with_conn(settings, None, Some(Box::new(sentinel))));
+            return Ok(Self::with_conn(settings, None, Some(Arc::new(sentinel))));
         }
         let url = access::parse_server_url(&settings.url)?;
         let access = access::Access::new(&settings.redis, url.tls, url.user, url.password)?;
@@ -133,18 +135,20 @@ impl RedisStore {
             ConnectionManager::new_lazy_with_config(client.clone(), config).map_err(unavailable)?;
         let mut store = Self::with_conn(settings, Some(conn), None);
         store.client = Some(client);
+        store.server = format!("{}:{}", url.host, url.port);
         Ok(store)
     }
 
     fn with_conn(
         settings: &StoreSettings,
         conn: Option<ConnectionManager>,
-        sentinel: Option<Box<super::sentinel::Sentinel>>,
+        sentinel: Option<Arc<super::sentinel::Sentinel>>,
     ) -> Self {
         Self {
             client: None,
             conn,
             sentinel,
+            server: String::new(),
             prefix: settings.key_prefix.clone(),
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
@@ -167,16 +171,22 @@ impl RedisStore {
         }
     }
 
-    /// With Sentinel: the primary in use (`host:port`), if one is known.
-    pub fn sentinel_primary(&self) -> Option<String> {
-        self.sentinel.as_ref().and_then(|s| s.primary())
-    }
-
-    /// With Sentinel: (primary changes followed, rediscoveries after a failure).
-    pub fn sentinel_counts(&self) -> Option<(u64, u64)> {
-        self.sentinel
-            .as_ref()
-            .map(|s| (s.failovers(), s.rediscoveries()))
+    /// The server in use and, behind Sentinel, the failover state.
+    pub fn topology(&self) -> crate::Topology {
+        match &self.sentinel {
+            Some(s) => crate::Topology {
+                primary: s.primary(),
+                failing_over: s.failing_over(),
+                failovers: s.failovers(),
+                redirections: s.rediscoveries(),
+            },
+            None => crate::Topology {
+                primary: Some(self.server.clone()),
+                failing_over: false,
+                failovers: 0,
+                redirections: 0,
+            },
+        }
     }
 
     pub async fn create(
@@ -316,9 +326,8 @@ impl RedisStore {
         Ok(())
     }
 
-    /// Starts this replica's event listener (see [`crate::events`]); `None`
-    /// behind Sentinel, where watchers of another replica's pushes see them
-    /// at their heartbeats (the listener does not follow a failover yet).
+    /// Starts this replica's event listener (see [`crate::events`]); behind
+    /// Sentinel it follows the primary.
     pub fn listen(
         &self,
         capacity: usize,
@@ -326,8 +335,12 @@ impl RedisStore {
         crate::events::EventListener,
         tokio::sync::mpsc::Receiver<crate::events::Feed>,
     )> {
-        let client = self.client.clone()?;
-        Some(crate::events::listen(client, self.timeout, capacity))
+        let source = match (&self.client, &self.sentinel) {
+            (Some(c), _) => crate::events::Source::Server(c.clone()),
+            (None, Some(s)) => crate::events::Source::Sentinel(s.clone()),
+            (None, None) => return None,
+        };
+        Some(crate::events::listen(source, self.timeout, capacity))
     }
 
     /// `{prefix}:ev:{tenant}:{id}`, escaped as the keys are.
@@ -358,12 +371,14 @@ impl RedisStore {
         command: impl Future<Output = Result<T, RedisError>>,
     ) -> Result<T, StoreError> {
         let result = self.bounded_inner(command).await;
-        if matches!(result, Err(StoreError::Unavailable { .. }))
-            && let Some(s) = &self.sentinel
-        {
-            // A connection error, a time-out or READONLY: ask the sentinels
-            // again before the next command.
-            s.invalidate();
+        if let Some(s) = &self.sentinel {
+            match &result {
+                // A connection error, a time-out or READONLY: ask the
+                // sentinels again before the next command.
+                Err(StoreError::Unavailable { .. }) => s.invalidate(),
+                Err(_) => {}
+                Ok(_) => s.confirm(),
+            }
         }
         result
     }

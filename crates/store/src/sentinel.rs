@@ -17,7 +17,7 @@
 use std::{
     sync::{
         Mutex,
-        atomic::{AtomicU64, Ordering},
+        atomic::{AtomicBool, AtomicU64, Ordering},
     },
     time::Duration,
 };
@@ -152,6 +152,9 @@ pub struct Sentinel {
     last_primary: Mutex<Option<String>>,
     failovers: AtomicU64,
     rediscoveries: AtomicU64,
+    /// Set when the primary is dropped after a failure, cleared by the next
+    /// command that succeeds.
+    failing_over: AtomicBool,
 }
 
 impl Sentinel {
@@ -164,6 +167,7 @@ impl Sentinel {
             last_primary: Mutex::new(None),
             failovers: AtomicU64::new(0),
             rediscoveries: AtomicU64::new(0),
+            failing_over: AtomicBool::new(false),
         }
     }
 
@@ -192,11 +196,29 @@ impl Sentinel {
         Ok(conn)
     }
 
+    /// A client of the primary the sentinels name now (asked afresh), for a
+    /// connection of its own such as the event listener's.
+    pub(crate) async fn primary_client(&self) -> Result<Client, StoreError> {
+        let (host, port) = self.discover().await?;
+        self.access.client(&host, port, i64::from(self.url.db))
+    }
+
     /// Forgets the primary: the next command asks the sentinels again.
     pub fn invalidate(&self) {
         if lock(&self.current).take().is_some() {
             self.rediscoveries.fetch_add(1, Ordering::Relaxed);
+            self.failing_over.store(true, Ordering::Relaxed);
         }
+    }
+
+    /// A command succeeded on the primary: any failover is over.
+    pub fn confirm(&self) {
+        self.failing_over.store(false, Ordering::Relaxed);
+    }
+
+    /// Whether the primary was lost and no command has succeeded since.
+    pub fn failing_over(&self) -> bool {
+        self.failing_over.load(Ordering::Relaxed)
     }
 
     /// The primary in use (`host:port`), if any.

@@ -313,6 +313,10 @@ async fn the_store_talks_tls_with_the_ca_a_client_certificate_and_the_password()
     .await
     .expect("the store starts with the URL's password");
     assert_eq!(from_url.version("t", "s").await, Ok(Some(2)));
+    // Health names the server, never the credentials.
+    let topology = from_url.topology().unwrap();
+    assert_eq!(topology.primary, Some(format!("127.0.0.1:{port}")));
+    assert!(!format!("{topology:?}").contains(PASSWORD));
 
     // Redis gone: errors say unavailable and never show the password.
     drop(server);
@@ -410,10 +414,8 @@ async fn rediss_sentinel_finds_the_primary_over_tls() {
         Ok(1)
     );
     assert_eq!(store.version("t", "s").await, Ok(Some(1)));
-    let SessionStore::Redis(redis) = &store else {
-        panic!("a Redis store");
-    };
-    assert_eq!(redis.sentinel_primary(), Some(format!("127.0.0.1:{port}")));
+    let topology = store.topology().unwrap();
+    assert_eq!(topology.primary, Some(format!("127.0.0.1:{port}")));
     // A wrong CA is refused at start, naming the setting, through the
     // sentinels as well.
     assert_config(

@@ -10,7 +10,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use store::{CasOutcome, SessionStore, StoreError, StoreSettings};
+use store::{CasOutcome, SessionStore, StoreError, StoreSettings, events::Feed};
 
 struct Proc(Child);
 impl Drop for Proc {
@@ -121,6 +121,23 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
             .await;
     }
     assert_eq!(created, Ok(1), "a fresh primary takes the session");
+    // The event listener, subscribed on the first primary, must follow the
+    // failover to the second.
+    let (listener, mut feed) = store.listen(16).expect("a listener behind Sentinel");
+    let channel = store.channel("t", "s").unwrap();
+    listener.subscribe(channel);
+    let mut heard = false;
+    for _ in 0..50 {
+        store.publish("t", "s", b"before").await.unwrap();
+        if let Ok(Some(Feed::Message(m))) =
+            tokio::time::timeout(Duration::from_millis(100), feed.recv()).await
+        {
+            assert_eq!(m, b"before");
+            heard = true;
+            break;
+        }
+    }
+    assert!(heard, "the listener hears the first primary");
     let (mut unavailable, mut killed_at, mut recovered) = (0u32, None, None);
     let total = 40u64;
     for v in 1..=total {
@@ -155,6 +172,7 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
                 Ok(other) => panic!("push {v}: {other:?}"),
                 Err(StoreError::Unavailable { .. }) => {
                     unavailable += 1;
+                    assert!(store.topology().unwrap().failing_over, "failing over");
                     assert!(Instant::now() < deadline, "no primary again within 45 s");
                     tokio::time::sleep(Duration::from_millis(100)).await;
                     // Did it apply after all? Then it must not be applied twice.
@@ -175,11 +193,32 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
     let s = store.get("t", "s").await.unwrap().unwrap();
     assert_eq!(s.version, total + 1);
     assert_eq!(s.data, format!("{total}").into_bytes());
-    if let SessionStore::Redis(r) = &store {
-        assert_eq!(r.sentinel_primary().as_deref(), Some("127.0.0.1:6451"));
-        let (failovers, _) = r.sentinel_counts().unwrap();
-        assert_eq!(failovers, 1);
+    // After the failover: a Resync (the subscription was lost), then the
+    // new primary's messages.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let (mut resynced, mut heard) = (false, false);
+    while !heard {
+        assert!(
+            Instant::now() < deadline,
+            "the listener did not follow the failover"
+        );
+        store.publish("t", "s", b"after").await.unwrap();
+        while let Ok(Some(item)) =
+            tokio::time::timeout(Duration::from_millis(200), feed.recv()).await
+        {
+            match item {
+                Feed::Resync => resynced = true,
+                Feed::Message(m) if m == b"after" => heard = true,
+                Feed::Message(_) => {}
+            }
+        }
     }
+    assert!(resynced, "a Resync says messages may have been missed");
+    let topology = store.topology().unwrap();
+    assert_eq!(topology.primary.as_deref(), Some("127.0.0.1:6451"));
+    assert_eq!(topology.failovers, 1);
+    assert!(topology.redirections >= 1, "{topology:?}");
+    assert!(!topology.failing_over, "{topology:?}");
     eprintln!(
         "sentinel failover: kill -> first accepted push {:?}, {unavailable} Unavailable answers",
         recovered.unwrap()
