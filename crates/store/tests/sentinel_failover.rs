@@ -1,108 +1,24 @@
 //! Sentinel failover against real processes on loopback: a primary, a
-//! replica and three sentinels (`redis-server --sentinel`) on ports
-//! 6450–6451 and 26450–26452. A session is pushed version after version
+//! replica and three sentinels (`redis-server --sentinel`) on free ports
+//! (`common/sentinel.rs`). A session is pushed version after version
 //! while the primary is SIGKILLed; every push is applied exactly once
 //! (an `Unavailable` push is checked by reading, and retried with the same
 //! expected version only when it did not apply).
 
-use std::{
-    process::{Child, Command, Stdio},
-    time::{Duration, Instant},
-};
+use std::time::{Duration, Instant};
 
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings, events::Feed};
 
-struct Proc(Child);
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn redis_server(args: &[&str]) -> Proc {
-    Proc(
-        Command::new("redis-server")
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("redis-server starts"),
-    )
-}
-
-fn wait_port(port: u16) {
-    for _ in 0..100 {
-        if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    panic!("nothing listens on {port}");
-}
-
-fn skip() -> bool {
-    if std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1") {
-        eprintln!("SKIPPED: sentinel failover (FUSION_SKIP_REDIS_TESTS=1)");
-        return true;
-    }
-    if Command::new("redis-server")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        eprintln!("SKIPPED: sentinel failover: redis-server is not on PATH");
-        return true;
-    }
-    false
-}
+#[path = "common/sentinel.rs"]
+mod sentinel;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pushes_survive_a_primary_kill_exactly_once() {
-    if skip() {
+    let Some(mut topology) = sentinel::Topology::start("sentinel failover") else {
         return;
-    }
-    let dir = std::env::temp_dir().join(format!("fusion-sentinel-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    // Each server in its own directory: a replica's full sync writes dump.rdb there.
-    let (d0, d1) = (dir.join("primary"), dir.join("replica"));
-    std::fs::create_dir_all(&d0).unwrap();
-    std::fs::create_dir_all(&d1).unwrap();
-    let common = ["--bind", "127.0.0.1", "--save", "", "--appendonly", "no"];
-    let mut primary = Some(redis_server(
-        &[
-            &["--port", "6450", "--dir", d0.to_str().unwrap()][..],
-            &common[..],
-        ]
-        .concat(),
-    ));
-    let _replica = redis_server(
-        &[
-            &["--port", "6451", "--dir", d1.to_str().unwrap()][..],
-            &["--replicaof", "127.0.0.1", "6450"][..],
-            &common[..],
-        ]
-        .concat(),
-    );
-    wait_port(6450);
-    wait_port(6451);
-    let mut sentinels = Vec::new();
-    for port in [26450u16, 26451, 26452] {
-        let conf = dir.join(format!("sentinel-{port}.conf"));
-        std::fs::write(
-            &conf,
-            format!(
-                "port {port}\nbind 127.0.0.1\nsentinel monitor fusion 127.0.0.1 6450 2\n\
-                 sentinel down-after-milliseconds fusion 1000\n\
-                 sentinel failover-timeout fusion 5000\n"
-            ),
-        )
-        .unwrap();
-        sentinels.push(redis_server(&[conf.to_str().unwrap(), "--sentinel"]));
-        wait_port(port);
-    }
+    };
     let settings = StoreSettings {
-        url: "redis+sentinel://127.0.0.1:26450,127.0.0.1:26451,127.0.0.1:26452/fusion/0".into(),
+        url: topology.url(),
         key_prefix: "sentinel-test".into(),
         max_sessions_per_tenant: 10,
         redis: Default::default(),
@@ -143,26 +59,12 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
     for v in 1..=total {
         if v == 15 {
             // Let the replica catch up (as `WAIT 1` would), then kill the primary.
-            let c = redis::Client::open("redis://127.0.0.1:6450/").unwrap();
-            let mut c = c.get_multiplexed_async_connection().await.unwrap();
-            let mut acked = 0i64;
-            for _ in 0..100 {
-                acked = redis::cmd("WAIT")
-                    .arg(1)
-                    .arg(200)
-                    .query_async(&mut c)
-                    .await
-                    .unwrap();
-                if acked == 1 {
-                    break;
-                }
-            }
-            assert_eq!(acked, 1, "the replica acknowledged");
-            drop(primary.take());
+            topology.sync_replica();
+            topology.kill_primary();
             killed_at = Some(Instant::now());
         }
         let data = format!("{v}").into_bytes();
-        let deadline = Instant::now() + Duration::from_secs(45);
+        let deadline = Instant::now() + Duration::from_secs(90);
         loop {
             match store.compare_and_set("t", "s", v, data.clone(), ttl).await {
                 Ok(CasOutcome::Stored { version }) => {
@@ -173,7 +75,10 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
                 Err(StoreError::Unavailable { .. }) => {
                     unavailable += 1;
                     assert!(store.topology().unwrap().failing_over, "failing over");
-                    assert!(Instant::now() < deadline, "no primary again within 45 s");
+                    assert!(
+                        Instant::now() < deadline,
+                        "no primary again within 90 s (a sentinel in TILT mode waits 30 s)"
+                    );
                     tokio::time::sleep(Duration::from_millis(100)).await;
                     // Did it apply after all? Then it must not be applied twice.
                     if let Ok(Some(s)) = store.get("t", "s").await
@@ -214,15 +119,16 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
         }
     }
     assert!(resynced, "a Resync says messages may have been missed");
-    let topology = store.topology().unwrap();
-    assert_eq!(topology.primary.as_deref(), Some("127.0.0.1:6451"));
-    assert_eq!(topology.failovers, 1);
-    assert!(topology.redirections >= 1, "{topology:?}");
-    assert!(!topology.failing_over, "{topology:?}");
+    let seen = store.topology().unwrap();
+    assert_eq!(
+        seen.primary,
+        Some(format!("127.0.0.1:{}", topology.replica_port))
+    );
+    assert_eq!(seen.failovers, 1);
+    assert!(seen.redirections >= 1, "{seen:?}");
+    assert!(!seen.failing_over, "{seen:?}");
     eprintln!(
         "sentinel failover: kill -> first accepted push {:?}, {unavailable} Unavailable answers",
         recovered.unwrap()
     );
-    drop(sentinels);
-    let _ = std::fs::remove_dir_all(&dir);
 }
