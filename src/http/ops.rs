@@ -126,8 +126,9 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<HealthSt
     }
 }
 
-/// Prometheus metrics: request counts and latency histograms per route and
-/// per gRPC method, and the Redis store's failovers and redirections.
+/// Prometheus metrics: request counts and latency histograms per route and per gRPC method.
+///
+/// With Redis behind Sentinel, also the store's failovers and redirections.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain")))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {

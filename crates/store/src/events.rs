@@ -61,7 +61,7 @@ const RETRY_MAX: Duration = Duration::from_secs(2);
 #[derive(Clone)]
 pub(crate) enum Source {
     /// One server.
-    Server(Client),
+    Server(Box<Client>),
     /// The primary the sentinels name, asked at each connection.
     Sentinel(Arc<crate::sentinel::Sentinel>),
 }
@@ -69,7 +69,7 @@ pub(crate) enum Source {
 impl Source {
     async fn client(&self) -> Option<Client> {
         match self {
-            Self::Server(c) => Some(c.clone()),
+            Self::Server(c) => Some(Client::clone(c)),
             Self::Sentinel(s) => s.primary_client().await.ok(),
         }
     }

@@ -336,7 +336,7 @@ impl RedisStore {
         tokio::sync::mpsc::Receiver<crate::events::Feed>,
     )> {
         let source = match (&self.client, &self.sentinel) {
-            (Some(c), _) => crate::events::Source::Server(c.clone()),
+            (Some(c), _) => crate::events::Source::Server(Box::new(c.clone())),
             (None, Some(s)) => crate::events::Source::Sentinel(s.clone()),
             (None, None) => return None,
         };
