@@ -165,7 +165,7 @@ pub struct Settings {
     /// Where streaming sessions keep their state: `memory` (this process only)
     /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas;
     /// `rediss://` for TLS, `redis+sentinel://` / `rediss+sentinel://` for
-    /// Sentinel).
+    /// Sentinel, `redis+cluster://` / `rediss+cluster://` for Redis Cluster).
     #[arg(
         long,
         env = "FUSION_SESSION_STORE",
@@ -452,6 +452,8 @@ impl Settings {
                 "rediss://",
                 "redis+sentinel://",
                 "rediss+sentinel://",
+                "redis+cluster://",
+                "rediss+cluster://",
             ]
             .iter()
             .any(|scheme| store.starts_with(scheme))
@@ -460,8 +462,8 @@ impl Settings {
             let scheme = store.split_once("://").map_or("", |(s, _)| s);
             return Err(format!(
                 "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
-                 starting with redis://, rediss://, redis+sentinel:// or rediss+sentinel://, \
-                 not one of scheme {scheme:?}"
+                 starting with redis://, rediss://, redis+sentinel://, rediss+sentinel://, \
+                 redis+cluster:// or rediss+cluster://, not one of scheme {scheme:?}"
             ));
         }
         if self.session_key_prefix.is_empty() {

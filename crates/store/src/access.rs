@@ -19,6 +19,7 @@ use std::{error::Error as _, path::PathBuf, time::Duration};
 use redis::{
     AsyncConnectionConfig, Client, ClientTlsConfig, ConnectionAddr, ConnectionInfo, ErrorKind,
     IntoConnectionInfo, RedisError, TlsCertificates,
+    cluster::{ClusterClient, ClusterClientBuilder},
 };
 use rustls::pki_types::{CertificateDer, PrivateKeyDer, pem::PemObject};
 
@@ -118,6 +119,35 @@ impl Access {
         self.build(self.info(host, port)?.set_redis_settings(redis))
     }
 
+    /// A client of a Redis Cluster seeded with `nodes`: TLS when
+    /// configured, the credentials, every command bounded by `timeout`.
+    pub(crate) fn cluster_client(
+        &self,
+        nodes: &[(String, u16)],
+        timeout: Duration,
+    ) -> Result<ClusterClient, StoreError> {
+        let infos = nodes
+            .iter()
+            .map(|(h, p)| self.info(h, *p))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut builder = ClusterClientBuilder::new(infos)
+            .connection_timeout(timeout)
+            .response_timeout(timeout)
+            .retries(1);
+        if let Some(certs) = &self.tls {
+            builder = builder.certs(certs.clone());
+        }
+        if let Some(u) = &self.username {
+            builder = builder.username(u);
+        }
+        if let Some(p) = &self.password {
+            builder = builder.password(p);
+        }
+        builder
+            .build()
+            .map_err(|e| config(STORE, format!("cluster settings refused: {e}")))
+    }
+
     /// A client of a sentinel: TLS when configured, no credentials (they
     /// are the data servers').
     pub(crate) fn sentinel_client(&self, host: &str, port: u16) -> Result<Client, StoreError> {
@@ -190,6 +220,64 @@ pub(crate) fn parse_server_url(url: &str) -> Result<ServerUrl, StoreError> {
         user: r.username().map(str::to_string),
         password: r.password().map(str::to_string),
     })
+}
+
+/// `[USER:PASSWORD@]HOST:PORT[,HOST:PORT…]` of a Sentinel or Cluster URL:
+/// (user, password, addresses); `what` names one address in errors, which
+/// `bad` words (never echoing the user information).
+pub(crate) type HostList = (Option<String>, Option<String>, Vec<(String, u16)>);
+
+pub(crate) fn parse_hosts(
+    s: &str,
+    what: &str,
+    bad: fn(&str) -> StoreError,
+) -> Result<HostList, StoreError> {
+    let (userinfo, hosts) = match s.rsplit_once('@') {
+        Some((u, h)) => (Some(u), h),
+        None => (None, s),
+    };
+    let (user, password) = match userinfo {
+        None => (None, None),
+        Some(u) => {
+            let (user, password) = u.split_once(':').unwrap_or((u, ""));
+            (
+                Some(percent_decode(user).ok_or_else(|| bad("the user is not percent-encoded"))?),
+                Some(
+                    percent_decode(password)
+                        .ok_or_else(|| bad("the password is not percent-encoded"))?,
+                ),
+            )
+        }
+    };
+    let mut addresses = Vec::new();
+    for h in hosts.split(',') {
+        let (host, port) = h
+            .rsplit_once(':')
+            .ok_or_else(|| bad(&format!("{what} {h:?} is not HOST:PORT")))?;
+        let port: u16 = port
+            .parse()
+            .map_err(|_| bad(&format!("{what} {h:?} has no valid port")))?;
+        if host.is_empty() || port == 0 {
+            return Err(bad(&format!("{what} {h:?} is not HOST:PORT")));
+        }
+        addresses.push((host.to_string(), port));
+    }
+    Ok((user, password, addresses))
+}
+
+/// `%XX` decoding of a URL's user information; `None` for a bad escape.
+fn percent_decode(s: &str) -> Option<String> {
+    let mut out = Vec::with_capacity(s.len());
+    let mut bytes = s.bytes();
+    while let Some(b) = bytes.next() {
+        if b == b'%' {
+            let hex = [bytes.next()?, bytes.next()?];
+            out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
+        } else {
+            out.push(b);
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 /// One Redis server's address and what its URL says.
@@ -341,6 +429,12 @@ pub(crate) fn config(setting: &'static str, reason: String) -> StoreError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn user_information_is_percent_decoded() {
+        assert_eq!(percent_decode("p%40ss%3a").as_deref(), Some("p@ss:"));
+        assert_eq!(percent_decode("%4"), None);
+    }
 
     #[test]
     fn secrets_do_not_print() {

@@ -6,6 +6,7 @@
 //! and `redis` (shared by replicas, survives restarts of the service).
 
 pub mod access;
+pub mod cluster;
 pub mod events;
 pub mod memory;
 pub mod redis;

@@ -9,18 +9,22 @@
 //!   by their expiry time in Unix milliseconds (Redis's clock), for counting
 //!   and listing live sessions; expired members are removed before use.
 //!
+//! On a Redis Cluster (`redis+cluster://`) the tenant is a hash tag:
+//! `{prefix}:{{tenant}}:s:{id}` and `{prefix}:{{tenant}}:idx`, so a tenant's
+//! keys share one slot and tenants spread over the primaries.
+//!
 //! `create`, `compare_and_set`, `delete` and `list` are Lua scripts, so each
 //! is atomic. The list script reads the session keys it finds in the index,
-//! which a Redis Cluster would not allow across slots: this store targets a
-//! single Redis (or a primary with replicas). Every command is bounded by the
+//! which are in the index's slot (the tenant's hash tag) on a Cluster. Every command is bounded by the
 //! configured timeout and fails with `Unavailable`; the `ConnectionManager`
 //! reconnects by itself when Redis comes back.
 
 use std::{future::Future, sync::Arc, time::Duration};
 
 use redis::{
-    Client, RedisError, Script,
-    aio::{ConnectionManager, ConnectionManagerConfig},
+    Client, Cmd, Pipeline, RedisError, RedisFuture, Script, Value,
+    aio::{ConnectionLike, ConnectionManager, ConnectionManagerConfig},
+    cluster_async::ClusterConnection,
 };
 
 use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, access, ttl_ms};
@@ -33,6 +37,9 @@ pub struct RedisStore {
     sentinel: Option<Arc<super::sentinel::Sentinel>>,
     /// A single server's `host:port` (no credentials), for health.
     server: String,
+    /// Set for a `redis+cluster://` URL; keys then carry the tenant as a
+    /// hash tag.
+    cluster: Option<Arc<super::cluster::Cluster>>,
     prefix: String,
     max_sessions_per_tenant: usize,
     timeout: Duration,
@@ -114,6 +121,14 @@ impl RedisStore {
             sentinel.check().await?;
             return Ok(Self::with_conn(settings, None, Some(Arc::new(sentinel))));
         }
+        if super::cluster::is_cluster_url(&settings.url) {
+            let cluster =
+                super::cluster::Cluster::connect(&settings.url, &settings.redis, settings.timeout)
+                    .await?;
+            let mut store = Self::with_conn(settings, None, None);
+            store.cluster = Some(Arc::new(cluster));
+            return Ok(store);
+        }
         let url = access::parse_server_url(&settings.url)?;
         let access = access::Access::new(&settings.redis, url.tls, url.user, url.password)?;
         let client = access.client(&url.host, url.port, url.db)?;
@@ -149,6 +164,7 @@ impl RedisStore {
             conn,
             sentinel,
             server: String::new(),
+            cluster: None,
             prefix: settings.key_prefix.clone(),
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
@@ -161,18 +177,28 @@ impl RedisStore {
 
     /// The connection to use: the single server's, or the primary's that
     /// the sentinels name.
-    async fn connection(&self) -> Result<ConnectionManager, StoreError> {
-        match (&self.conn, &self.sentinel) {
-            (Some(c), _) => Ok(c.clone()),
-            (None, Some(s)) => s.conn().await,
-            (None, None) => Err(StoreError::Unavailable {
+    async fn connection(&self) -> Result<Conn, StoreError> {
+        match (&self.conn, &self.sentinel, &self.cluster) {
+            (Some(c), _, _) => Ok(Conn::Single(c.clone())),
+            (None, Some(s), _) => s.conn().await.map(Conn::Single),
+            (None, None, Some(c)) => c.conn().await.map(Conn::Cluster),
+            (None, None, None) => Err(StoreError::Unavailable {
                 reason: "no Redis connection configured".into(),
             }),
         }
     }
 
     /// The server in use and, behind Sentinel, the failover state.
+    /// On a Cluster, `primary` is its seed nodes.
     pub fn topology(&self) -> crate::Topology {
+        if let Some(c) = &self.cluster {
+            return crate::Topology {
+                primary: Some(c.seeds.clone()),
+                failing_over: false,
+                failovers: 0,
+                redirections: 0,
+            };
+        }
         match &self.sentinel {
             Some(s) => crate::Topology {
                 primary: s.primary(),
@@ -335,10 +361,15 @@ impl RedisStore {
         crate::events::EventListener,
         tokio::sync::mpsc::Receiver<crate::events::Feed>,
     )> {
-        let source = match (&self.client, &self.sentinel) {
-            (Some(c), _) => crate::events::Source::Server(Box::new(c.clone())),
-            (None, Some(s)) => crate::events::Source::Sentinel(s.clone()),
-            (None, None) => return None,
+        let source = match (&self.client, &self.sentinel, &self.cluster) {
+            (Some(c), _, _) => crate::events::Source::Server(Box::new(c.clone())),
+            (None, Some(s), _) => crate::events::Source::Sentinel(s.clone()),
+            // PUBLISH on a Cluster reaches every node: listen on the first seed.
+            (None, None, Some(c)) => {
+                let (host, port) = &c.first;
+                crate::events::Source::Server(Box::new(c.access.client(host, *port, 0).ok()?))
+            }
+            (None, None, None) => return None,
         };
         Some(crate::events::listen(source, self.timeout, capacity))
     }
@@ -357,11 +388,22 @@ impl RedisStore {
     }
 
     fn session_key(&self, tenant: &str, id: &str) -> String {
-        format!("{}:{}:s:{}", self.prefix, escape(tenant), escape(id))
+        format!("{}:s:{}", self.tenant_part(tenant), escape(id))
     }
 
     fn index_key(&self, tenant: &str) -> String {
-        format!("{}:{}:idx", self.prefix, escape(tenant))
+        format!("{}:idx", self.tenant_part(tenant))
+    }
+
+    /// `{prefix}:{tenant}`, or on a Cluster `{prefix}:{{tenant}}` (the hash
+    /// tag: the first `{…}` of every key of the tenant is the same, since it
+    /// lies in this common beginning).
+    fn tenant_part(&self, tenant: &str) -> String {
+        if self.cluster.is_some() {
+            format!("{}:{{{}}}", self.prefix, escape(tenant))
+        } else {
+            format!("{}:{}", self.prefix, escape(tenant))
+        }
     }
 
     /// Runs one command within the timeout; errors and timeouts are `Unavailable`
@@ -397,6 +439,41 @@ impl RedisStore {
                     self.timeout.as_millis()
                 ),
             }),
+        }
+    }
+}
+
+/// The connection of a single server (or Sentinel's primary) or of a Cluster.
+#[derive(Clone)]
+enum Conn {
+    Single(ConnectionManager),
+    Cluster(ClusterConnection),
+}
+
+impl ConnectionLike for Conn {
+    fn req_packed_command<'a>(&'a mut self, cmd: &'a Cmd) -> RedisFuture<'a, Value> {
+        match self {
+            Self::Single(c) => c.req_packed_command(cmd),
+            Self::Cluster(c) => c.req_packed_command(cmd),
+        }
+    }
+
+    fn req_packed_commands<'a>(
+        &'a mut self,
+        pipeline: &'a Pipeline,
+        offset: usize,
+        count: usize,
+    ) -> RedisFuture<'a, Vec<Value>> {
+        match self {
+            Self::Single(c) => c.req_packed_commands(pipeline, offset, count),
+            Self::Cluster(c) => c.req_packed_commands(pipeline, offset, count),
+        }
+    }
+
+    fn get_db(&self) -> i64 {
+        match self {
+            Self::Single(c) => c.get_db(),
+            Self::Cluster(c) => c.get_db(),
         }
     }
 }

@@ -73,36 +73,7 @@ pub(crate) fn parse(
     let (hosts, path) = rest
         .split_once('/')
         .ok_or_else(|| bad("no /MASTER_NAME after the sentinels"))?;
-    let (userinfo, hosts) = match hosts.rsplit_once('@') {
-        Some((u, h)) => (Some(u), h),
-        None => (None, hosts),
-    };
-    let (user, password) = match userinfo {
-        None => (None, None),
-        Some(u) => {
-            let (user, password) = u.split_once(':').unwrap_or((u, ""));
-            (
-                Some(percent_decode(user).ok_or_else(|| bad("the user is not percent-encoded"))?),
-                Some(
-                    percent_decode(password)
-                        .ok_or_else(|| bad("the password is not percent-encoded"))?,
-                ),
-            )
-        }
-    };
-    let mut sentinels = Vec::new();
-    for h in hosts.split(',') {
-        let (host, port) = h
-            .rsplit_once(':')
-            .ok_or_else(|| bad(&format!("sentinel {h:?} is not HOST:PORT")))?;
-        let port: u16 = port
-            .parse()
-            .map_err(|_| bad(&format!("sentinel {h:?} has no valid port")))?;
-        if host.is_empty() || port == 0 {
-            return Err(bad(&format!("sentinel {h:?} is not HOST:PORT")));
-        }
-        sentinels.push((host.to_string(), port));
-    }
+    let (user, password, sentinels) = access::parse_hosts(hosts, "sentinel", bad)?;
     let mut parts = path.split('/');
     let master = parts.next().unwrap_or_default();
     if master.is_empty() {
@@ -126,21 +97,6 @@ pub(crate) fn parse(
         },
         access,
     ))
-}
-
-/// `%XX` decoding of a URL's user information; `None` for a bad escape.
-fn percent_decode(s: &str) -> Option<String> {
-    let mut out = Vec::with_capacity(s.len());
-    let mut bytes = s.bytes();
-    while let Some(b) = bytes.next() {
-        if b == b'%' {
-            let hex = [bytes.next()?, bytes.next()?];
-            out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
-        } else {
-            out.push(b);
-        }
-    }
-    String::from_utf8(out).ok()
 }
 
 /// The primary found through the sentinels, rediscovered after any failure.
@@ -364,8 +320,6 @@ mod tests {
         let u = parse("redis+sentinel://app:p%40ss@h:1,g:2/m").unwrap();
         assert_eq!(u.sentinels.len(), 2);
         assert!(parse("rediss+sentinel://h:1/m").is_ok());
-        assert_eq!(percent_decode("p%40ss%3a").as_deref(), Some("p@ss:"));
-        assert_eq!(percent_decode("%4"), None);
     }
 
     #[test]
