@@ -40,6 +40,11 @@ pub enum Command {
         #[command(flatten)]
         tls: HealthcheckTls,
     },
+    /// Copy every session from the Redis store `--from` (one Redis or
+    /// Sentinel) into the session store of the settings
+    /// (`FUSION_SESSION_STORE`, such as a Redis Cluster), keeping versions,
+    /// kinds and TTLs; sessions the target holds already are left alone.
+    CopySessions(Box<CopySessions>),
     /// Moved: the experiments are the `radar-fusion-eval` binary of the
     /// `eval` crate; this prints where and exits with status 2.
     #[command(hide = true)]
@@ -48,6 +53,18 @@ pub enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+}
+
+/// `copy-sessions`: where from, and the settings of the target store (its
+/// TLS files and password serve both).
+#[derive(Debug, Args)]
+pub struct CopySessions {
+    /// The store to copy from: `redis://…`, `rediss://…` or a Sentinel URL,
+    /// under the same `--session-key-prefix`.
+    #[arg(long, env = "FUSION_COPY_SESSIONS_FROM", hide_env_values = true)]
+    pub from: String,
+    #[command(flatten)]
+    pub settings: Settings,
 }
 
 /// TLS of the `healthcheck` probe: with `--tls-ca` it speaks TLS to a

@@ -7,6 +7,7 @@
 
 pub mod access;
 pub mod cluster;
+pub mod copy;
 pub mod events;
 pub mod memory;
 pub mod redis;
@@ -249,6 +250,18 @@ impl SessionStore {
         match self {
             Self::Memory(_) => None,
             Self::Redis(s) => Some(s.topology()),
+        }
+    }
+
+    /// Copies every session of this Redis store into `to` (a single Redis or
+    /// Sentinel into a Cluster, or back; see [`copy`]).
+    pub async fn copy_sessions_to(&self, to: &SessionStore) -> Result<copy::Copied, StoreError> {
+        match (self, to) {
+            (Self::Redis(from), Self::Redis(to)) => copy::copy(from, to).await,
+            _ => Err(access::config(
+                access::STORE,
+                "a copy of sessions is from one Redis store to another".into(),
+            )),
         }
     }
 

@@ -50,13 +50,13 @@ pub struct RedisStore {
 }
 
 /// Redis's clock in Unix milliseconds, as a Lua expression's prelude.
-const NOW_MS: &str = r"
+pub(crate) const NOW_MS: &str = r"
 local t = redis.call('TIME')
 local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)
 ";
 
 /// Keeps the index alive at least as long as the session just written.
-const EXTEND_INDEX: &str = r"
+pub(crate) const EXTEND_INDEX: &str = r"
 if redis.call('PTTL', KEYS[2]) < tonumber(ARGV[3]) then
   redis.call('PEXPIRE', KEYS[2], ARGV[3])
 end
@@ -393,6 +393,104 @@ impl RedisStore {
 
     fn index_key(&self, tenant: &str) -> String {
         format!("{}:idx", self.tenant_part(tenant))
+    }
+
+    pub(crate) fn is_cluster(&self) -> bool {
+        self.cluster.is_some()
+    }
+
+    /// Every tenant's index key (`SCAN`; one server, not a Cluster).
+    pub(crate) async fn index_keys(&self) -> Result<Vec<String>, StoreError> {
+        let mut conn = self.connection().await?;
+        let pattern = format!("{}:*:idx", self.prefix);
+        let (mut cursor, mut keys) = (0u64, Vec::new());
+        loop {
+            let (next, batch): (u64, Vec<String>) = self
+                .bounded(
+                    redis::cmd("SCAN")
+                        .arg(cursor)
+                        .arg("MATCH")
+                        .arg(&pattern)
+                        .arg("COUNT")
+                        .arg(1000)
+                        .query_async(&mut conn),
+                )
+                .await?;
+            keys.extend(batch);
+            if next == 0 {
+                return Ok(keys);
+            }
+            cursor = next;
+        }
+    }
+
+    /// The tenant an index key of this store's layout belongs to.
+    pub(crate) fn tenant_of_index(&self, index: &str) -> Option<String> {
+        let escaped = index
+            .strip_prefix(&format!("{}:", self.prefix))?
+            .strip_suffix(":idx")?;
+        let escaped = if self.is_cluster() {
+            escaped.strip_prefix('{')?.strip_suffix('}')?
+        } else {
+            escaped
+        };
+        unescape(escaped)
+    }
+
+    /// The live sessions in one index: (escaped id, version, data, kind,
+    /// remaining TTL in ms).
+    pub(crate) async fn raw_sessions(
+        &self,
+        index: &str,
+        tenant: &str,
+    ) -> Result<Vec<(String, String, Vec<u8>, String, i64)>, StoreError> {
+        let mut conn = self.connection().await?;
+        let ids: Vec<String> = self
+            .bounded(
+                redis::cmd("ZRANGE")
+                    .arg(index)
+                    .arg(0)
+                    .arg(-1)
+                    .query_async(&mut conn),
+            )
+            .await?;
+        let mut out = Vec::new();
+        for id in ids {
+            let key = format!("{}:s:{id}", self.tenant_part(tenant));
+            let ((v, d, k), pttl): ((Option<String>, Option<Vec<u8>>, Option<String>), i64) = self
+                .bounded(
+                    redis::pipe()
+                        .cmd("HMGET")
+                        .arg(&key)
+                        .arg("v")
+                        .arg("d")
+                        .arg("k")
+                        .cmd("PTTL")
+                        .arg(&key)
+                        .query_async(&mut conn),
+                )
+                .await?;
+            if let (Some(v), Some(d), true) = (v, d, pttl > 0) {
+                out.push((id, v, d, k.unwrap_or_else(|| "correlation".into()), pttl));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Runs a script on a session's key and its tenant's index, with the
+    /// arguments `args` adds; its integer answer.
+    pub(crate) async fn run_script(
+        &self,
+        script: &Script,
+        tenant: &str,
+        id: &str,
+        args: impl FnOnce(&mut redis::ScriptInvocation<'_>),
+    ) -> Result<i64, StoreError> {
+        let mut conn = self.connection().await?;
+        let mut call = script.key(self.session_key(tenant, id));
+        call.key(self.index_key(tenant));
+        args(&mut call);
+        self.bounded(call.invoke_async(&mut conn)).await
     }
 
     /// `{prefix}:{tenant}`, or on a Cluster `{prefix}:{{tenant}}` (the hash

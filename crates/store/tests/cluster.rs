@@ -405,3 +405,80 @@ async fn a_tenants_slot_migrated_during_pushes_loses_and_doubles_nothing() {
          Unavailable (retried once checked)"
     ));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_of_a_single_redis_are_copied_to_the_cluster_layout() {
+    let Some(cluster) = Cluster::start() else {
+        return;
+    };
+    // A single Redis with sessions in the layout without braces.
+    let port = cluster_port();
+    let dir = cluster.dir.join("single");
+    std::fs::create_dir_all(&dir).unwrap();
+    let _single = Proc(
+        Command::new("redis-server")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+            .args([
+                "--save",
+                "",
+                "--appendonly",
+                "no",
+                "--dir",
+                dir.to_str().unwrap(),
+            ])
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("redis-server starts"),
+    );
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let single = SessionStore::connect(&StoreSettings {
+        url: format!("redis://127.0.0.1:{port}/0"),
+        redis: Default::default(),
+        key_prefix: PREFIX.into(),
+        max_sessions_per_tenant: 10,
+        max_memory_bytes: 1 << 20,
+        timeout: Duration::from_secs(1),
+    })
+    .await
+    .unwrap();
+    let ttl = Duration::from_secs(60);
+    let tenants = ["acme", "glob:ex", "100%"];
+    for (i, t) in tenants.iter().enumerate() {
+        for j in 0..=i {
+            let id = format!("s{j}");
+            single
+                .create(t, &id, "plot_fusion", vec![j as u8], ttl)
+                .await
+                .unwrap();
+            for v in 1..=j as u64 {
+                single
+                    .compare_and_set(t, &id, v, vec![j as u8, v as u8], ttl)
+                    .await
+                    .unwrap();
+            }
+        }
+    }
+    let target = store(&cluster).await;
+    let copied = single.copy_sessions_to(&target).await.unwrap();
+    assert_eq!((copied.sessions, copied.skipped), (6, 0));
+    for (i, t) in tenants.iter().enumerate() {
+        let listed = target.list(t).await.unwrap();
+        assert_eq!(listed.len(), i + 1, "{t}");
+        for (j, meta) in listed.iter().enumerate() {
+            assert_eq!(
+                (meta.id.as_str(), meta.kind.as_str()),
+                (format!("s{j}").as_str(), "plot_fusion")
+            );
+            assert!(meta.ttl_remaining > Duration::from_secs(50), "{meta:?}");
+            let s = target.get(t, &meta.id).await.unwrap().unwrap();
+            assert_eq!(s, single.get(t, &meta.id).await.unwrap().unwrap());
+        }
+    }
+    // Again: nothing new; the cluster cannot be a source.
+    let again = single.copy_sessions_to(&target).await.unwrap();
+    assert_eq!((again.sessions, again.skipped), (0, 6));
+    let e = target.copy_sessions_to(&single).await.unwrap_err();
+    assert!(e.to_string().contains("--from"), "{e}");
+}
