@@ -273,6 +273,21 @@ async fn tenants_shard_over_the_primaries_and_every_operation_works() {
     tokio::time::sleep(Duration::from_millis(400)).await;
     assert_eq!(store.get("tenant-0", "short").await, Ok(None));
     assert_eq!(store.list("tenant-0").await.unwrap().len(), 1);
+    // Session events: published on the cluster, heard by the listener.
+    let (listener, mut feed) = store.listen(16).expect("a listener on the cluster");
+    listener.subscribe(store.channel("tenant-3", "a").unwrap());
+    let mut heard = false;
+    for _ in 0..50 {
+        store.publish("tenant-3", "a", b"event").await.unwrap();
+        if let Ok(Some(store::events::Feed::Message(m))) =
+            tokio::time::timeout(Duration::from_millis(100), feed.recv()).await
+        {
+            assert_eq!(m, b"event");
+            heard = true;
+            break;
+        }
+    }
+    assert!(heard, "the listener hears the cluster's events");
     // Health names the seeds.
     assert_eq!(
         store.topology().unwrap().primary,
