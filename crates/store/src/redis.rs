@@ -119,7 +119,9 @@ impl RedisStore {
             let (url, access) = super::sentinel::parse(&settings.url, &settings.redis)?;
             let sentinel = super::sentinel::Sentinel::new(url, access, settings.timeout);
             sentinel.check().await?;
-            return Ok(Self::with_conn(settings, None, Some(Arc::new(sentinel))));
+            let sentinel = Arc::new(sentinel);
+            sentinel.follow_switches();
+            return Ok(Self::with_conn(settings, None, Some(sentinel)));
         }
         if super::cluster::is_cluster_url(&settings.url) {
             let cluster =

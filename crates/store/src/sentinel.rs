@@ -9,6 +9,12 @@
 //! reported `Unavailable` (the service answers 503/504 "retry with the same
 //! sequence"), never as not executed, since it may have run.
 //!
+//! The store also listens to the sentinels' `+switch-master` (one sentinel
+//! at a time, the next one when it goes away): a primary change announced
+//! there drops the current primary at once, so the next command goes to the
+//! new one without first failing on the old (a manual `SENTINEL FAILOVER`,
+//! or a primary that is demoted but still answers reads).
+//!
 //! `rediss+sentinel://` talks TLS to the sentinels and the primary alike
 //! (one CA and client certificate, [`crate::access`]). Credentials
 //! (`redis+sentinel://USER:PASSWORD@…` or `FUSION_REDIS_PASSWORD`) are the
@@ -16,7 +22,7 @@
 
 use std::{
     sync::{
-        Mutex,
+        Arc, Mutex, Weak,
         atomic::{AtomicBool, AtomicU64, Ordering},
     },
     time::Duration,
@@ -26,6 +32,8 @@ use redis::{
     Client, Value,
     aio::{ConnectionManager, ConnectionManagerConfig, MultiplexedConnection},
 };
+
+use tokio_stream::StreamExt;
 
 use super::{StoreError, access};
 
@@ -111,6 +119,7 @@ pub struct Sentinel {
     /// Set when the primary is dropped after a failure, cleared by the next
     /// command that succeeds.
     failing_over: AtomicBool,
+    switches: AtomicU64,
 }
 
 impl Sentinel {
@@ -124,6 +133,7 @@ impl Sentinel {
             failovers: AtomicU64::new(0),
             rediscoveries: AtomicU64::new(0),
             failing_over: AtomicBool::new(false),
+            switches: AtomicU64::new(0),
         }
     }
 
@@ -157,6 +167,29 @@ impl Sentinel {
     pub(crate) async fn primary_client(&self) -> Result<Client, StoreError> {
         let (host, port) = self.discover().await?;
         self.access.client(&host, port, i64::from(self.url.db))
+    }
+
+    /// Starts following the sentinels' `+switch-master` announcements; the
+    /// task ends when the store is dropped.
+    pub(crate) fn follow_switches(self: &Arc<Self>) {
+        tokio::spawn(follow_switches(Arc::downgrade(self)));
+    }
+
+    /// A `+switch-master` announcement: `MASTER OLD_IP OLD_PORT NEW_IP NEW_PORT`.
+    fn switched(&self, announcement: &str) {
+        let parts: Vec<&str> = announcement.split_whitespace().collect();
+        if let [master, _, _, ip, port] = parts[..]
+            && master == self.url.master
+            && self.primary().is_some_and(|p| p != format!("{ip}:{port}"))
+        {
+            self.switches.fetch_add(1, Ordering::Relaxed);
+            self.invalidate();
+        }
+    }
+
+    /// `+switch-master` announcements that dropped the primary in use.
+    pub fn switches(&self) -> u64 {
+        self.switches.load(Ordering::Relaxed)
     }
 
     /// Forgets the primary: the next command asks the sentinels again.
@@ -288,6 +321,48 @@ enum Asked {
 impl From<StoreError> for Asked {
     fn from(e: StoreError) -> Self {
         Self::Config(e)
+    }
+}
+
+/// How long a quiet `+switch-master` subscription waits before checking
+/// that the store still exists; the pause before the next sentinel.
+const SWITCH_IDLE: Duration = Duration::from_secs(5);
+const SWITCH_RETRY: Duration = Duration::from_millis(500);
+
+/// Subscribes to `+switch-master` on each sentinel in turn while the store
+/// lives.
+async fn follow_switches(sentinel: Weak<Sentinel>) {
+    for turn in 0usize.. {
+        let Some(s) = sentinel.upgrade() else { return };
+        let (host, port) = s.url.sentinels[turn % s.url.sentinels.len()].clone();
+        let (client, timeout) = (s.access.sentinel_client(&host, port), s.timeout);
+        drop(s);
+        let subscribed = match client {
+            Ok(client) => tokio::time::timeout(timeout, async {
+                let mut pubsub = client.get_async_pubsub().await?;
+                pubsub.subscribe("+switch-master").await?;
+                Ok::<_, redis::RedisError>(pubsub)
+            })
+            .await
+            .ok()
+            .and_then(Result::ok),
+            Err(_) => None,
+        };
+        if let Some(mut pubsub) = subscribed {
+            let mut messages = pubsub.on_message();
+            loop {
+                match tokio::time::timeout(SWITCH_IDLE, messages.next()).await {
+                    Ok(Some(m)) => match sentinel.upgrade() {
+                        Some(s) => s.switched(&String::from_utf8_lossy(m.get_payload_bytes())),
+                        None => return,
+                    },
+                    Ok(None) => break,
+                    Err(_) if sentinel.strong_count() == 0 => return,
+                    Err(_) => {}
+                }
+            }
+        }
+        tokio::time::sleep(SWITCH_RETRY).await;
     }
 }
 

@@ -132,3 +132,63 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
         recovered.unwrap()
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_switch_master_announcement_moves_the_store_before_any_command_fails() {
+    let Some(topology) = sentinel::Topology::start("sentinel +switch-master") else {
+        return;
+    };
+    let store = SessionStore::connect(&StoreSettings {
+        url: topology.url(),
+        redis: Default::default(),
+        key_prefix: "switch-test".into(),
+        max_sessions_per_tenant: 10,
+        max_memory_bytes: 1 << 20,
+        timeout: Duration::from_millis(500),
+    })
+    .await
+    .unwrap();
+    let ttl = Duration::from_secs(600);
+    let mut created = store
+        .create("t", "s", "correlation", b"0".to_vec(), ttl)
+        .await;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Err(StoreError::Unavailable { .. }) = created {
+        assert!(Instant::now() < deadline, "no primary at start");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        created = store
+            .create("t", "s", "correlation", b"0".to_vec(), ttl)
+            .await;
+    }
+    assert_eq!(created, Ok(1));
+    let first = format!("127.0.0.1:{}", topology.primary_port);
+    assert_eq!(store.topology().unwrap().primary, Some(first));
+    topology.sync_replica();
+    // A manual failover: the old primary lives on as a replica, so nothing
+    // fails; only the sentinels' announcement tells the store.
+    let out = std::process::Command::new("redis-cli")
+        .args(["-p", &topology.sentinel_ports[0].to_string()])
+        .args(["SENTINEL", "FAILOVER", sentinel::MASTER])
+        .output()
+        .expect("redis-cli runs");
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "OK");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while store.topology().unwrap().primary.is_some() {
+        assert!(
+            Instant::now() < deadline,
+            "+switch-master did not drop the primary"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // The next command goes to the new primary at once.
+    assert_eq!(
+        store.compare_and_set("t", "s", 1, b"1".to_vec(), ttl).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    let seen = store.topology().unwrap();
+    assert_eq!(
+        seen.primary,
+        Some(format!("127.0.0.1:{}", topology.replica_port))
+    );
+    assert_eq!((seen.failovers, seen.failing_over), (1, false));
+}
