@@ -50,17 +50,17 @@ pub async fn copy(from: &RedisStore, to: &RedisStore) -> Result<Copied, StoreErr
         let Some(tenant) = from.tenant_of_index(&index) else {
             continue;
         };
-        for (escaped_id, version, data, kind, pttl) in from.raw_sessions(&index, &tenant).await? {
-            let id = unescape(&escaped_id).ok_or_else(|| StoreError::Corrupt {
-                reason: format!("bad index member {escaped_id:?}"),
+        for raw in from.raw_sessions(&index, &tenant).await? {
+            let id = unescape(&raw.escaped_id).ok_or_else(|| StoreError::Corrupt {
+                reason: format!("bad index member {:?}", raw.escaped_id),
             })?;
             let written = to
                 .run_script(&restore, &tenant, &id, |call| {
-                    call.arg(&escaped_id)
-                        .arg(&version)
-                        .arg(pttl)
-                        .arg(data.clone())
-                        .arg(kind.as_str());
+                    call.arg(&raw.escaped_id)
+                        .arg(&raw.version)
+                        .arg(raw.ttl_ms)
+                        .arg(raw.data.as_slice())
+                        .arg(raw.kind.as_str());
                 })
                 .await?;
             if written == 1 {

@@ -439,13 +439,12 @@ impl RedisStore {
         unescape(escaped)
     }
 
-    /// The live sessions in one index: (escaped id, version, data, kind,
-    /// remaining TTL in ms).
+    /// The live sessions in one index, as stored.
     pub(crate) async fn raw_sessions(
         &self,
         index: &str,
         tenant: &str,
-    ) -> Result<Vec<(String, String, Vec<u8>, String, i64)>, StoreError> {
+    ) -> Result<Vec<RawSession>, StoreError> {
         let mut conn = self.connection().await?;
         let ids: Vec<String> = self
             .bounded(
@@ -459,7 +458,8 @@ impl RedisStore {
         let mut out = Vec::new();
         for id in ids {
             let key = format!("{}:s:{id}", self.tenant_part(tenant));
-            let ((v, d, k), pttl): ((Option<String>, Option<Vec<u8>>, Option<String>), i64) = self
+            type Fields = (Option<String>, Option<Vec<u8>>, Option<String>);
+            let ((v, d, k), pttl): (Fields, i64) = self
                 .bounded(
                     redis::pipe()
                         .cmd("HMGET")
@@ -472,8 +472,14 @@ impl RedisStore {
                         .query_async(&mut conn),
                 )
                 .await?;
-            if let (Some(v), Some(d), true) = (v, d, pttl > 0) {
-                out.push((id, v, d, k.unwrap_or_else(|| "correlation".into()), pttl));
+            if let (Some(version), Some(data), true) = (v, d, pttl > 0) {
+                out.push(RawSession {
+                    escaped_id: id,
+                    version,
+                    data,
+                    kind: k.unwrap_or_else(|| "correlation".into()),
+                    ttl_ms: pttl,
+                });
             }
         }
         Ok(out)
@@ -541,6 +547,15 @@ impl RedisStore {
             }),
         }
     }
+}
+
+/// A session's fields as stored (for a copy between key layouts).
+pub(crate) struct RawSession {
+    pub(crate) escaped_id: String,
+    pub(crate) version: String,
+    pub(crate) data: Vec<u8>,
+    pub(crate) kind: String,
+    pub(crate) ttl_ms: i64,
 }
 
 /// The connection of a single server (or Sentinel's primary) or of a Cluster.
