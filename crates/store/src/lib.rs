@@ -26,8 +26,9 @@ pub enum SessionStore {
 /// How to build a [`SessionStore`] (from `config::Settings::store_settings`).
 #[derive(Debug, Clone)]
 pub struct StoreSettings {
-    /// `memory`, `redis://host:port/db` (`rediss://` for TLS), or
-    /// `redis+sentinel://…` (`rediss+sentinel://`).
+    /// `memory`, `redis://host:port/db` (`rediss://` for TLS),
+    /// `redis+sentinel://…` (`rediss+sentinel://`) or `redis+cluster://…`
+    /// (`rediss+cluster://`).
     pub url: String,
     /// Redis: TLS files and the password (see [`access`]).
     pub redis: access::RedisAccessSettings,
@@ -44,9 +45,10 @@ pub struct StoreSettings {
 /// Where a Redis store sends its commands, for health and metrics.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Topology {
-    /// The server in use, `host:port` (never credentials); `None` behind
-    /// Sentinel while no primary is known (before the first answer, or
-    /// after one was dropped and before the sentinels name the next).
+    /// The server in use, `host:port` (never credentials); a Cluster's seed
+    /// nodes; `None` behind Sentinel while no primary is known (before the
+    /// first answer, or after one was dropped and before the sentinels name
+    /// the next).
     pub primary: Option<String>,
     /// Sentinel: the primary was dropped after a failed command and no
     /// command has succeeded since.

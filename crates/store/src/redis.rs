@@ -15,9 +15,10 @@
 //!
 //! `create`, `compare_and_set`, `delete` and `list` are Lua scripts, so each
 //! is atomic. The list script reads the session keys it finds in the index,
-//! which are in the index's slot (the tenant's hash tag) on a Cluster. Every command is bounded by the
-//! configured timeout and fails with `Unavailable`; the `ConnectionManager`
-//! reconnects by itself when Redis comes back.
+//! which are in the index's slot (the tenant's hash tag) on a Cluster.
+//! Every command is bounded by the configured timeout and fails with
+//! `Unavailable`; the connections reconnect by themselves when Redis comes
+//! back.
 
 use std::{future::Future, sync::Arc, time::Duration};
 

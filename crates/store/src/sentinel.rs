@@ -119,7 +119,6 @@ pub struct Sentinel {
     /// Set when the primary is dropped after a failure, cleared by the next
     /// command that succeeds.
     failing_over: AtomicBool,
-    switches: AtomicU64,
 }
 
 impl Sentinel {
@@ -133,7 +132,6 @@ impl Sentinel {
             failovers: AtomicU64::new(0),
             rediscoveries: AtomicU64::new(0),
             failing_over: AtomicBool::new(false),
-            switches: AtomicU64::new(0),
         }
     }
 
@@ -182,14 +180,8 @@ impl Sentinel {
             && master == self.url.master
             && self.primary().is_some_and(|p| p != format!("{ip}:{port}"))
         {
-            self.switches.fetch_add(1, Ordering::Relaxed);
             self.invalidate();
         }
-    }
-
-    /// `+switch-master` announcements that dropped the primary in use.
-    pub fn switches(&self) -> u64 {
-        self.switches.load(Ordering::Relaxed)
     }
 
     /// Forgets the primary: the next command asks the sentinels again.
