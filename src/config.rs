@@ -205,6 +205,11 @@ pub struct Settings {
     /// variable, since a flag shows in the process list.
     #[arg(long, env = "FUSION_REDIS_PASSWORD", hide_env_values = true)]
     pub redis_password: Option<Secret>,
+    /// Replicas that must acknowledge every session write (Redis `WAIT`)
+    /// before it is answered; fewer within half the store timeout answers
+    /// 503 "retry with the same sequence". 0: asynchronous replication.
+    #[arg(long, env = "FUSION_REDIS_WAIT_REPLICAS", default_value_t = 0)]
+    pub redis_wait_replicas: usize,
     /// Prefix of every Redis key of the session store.
     #[arg(
         long,
@@ -425,6 +430,7 @@ impl Settings {
                 key: self.redis_key.clone(),
                 password: self.redis_password.as_ref().map(|p| p.expose().to_string()),
             },
+            wait_replicas: self.redis_wait_replicas,
             key_prefix: self.session_key_prefix.clone(),
             max_sessions_per_tenant: self.max_sessions_per_tenant,
             max_memory_bytes: self.session_memory_bytes,

@@ -32,6 +32,10 @@ pub struct StoreSettings {
     pub url: String,
     /// Redis: TLS files and the password (see [`access`]).
     pub redis: access::RedisAccessSettings,
+    /// Redis (one server or Sentinel): replicas that must acknowledge each
+    /// write (`WAIT`) before it is reported done; 0: none (asynchronous
+    /// replication, a write acknowledged just before a failover can be lost).
+    pub wait_replicas: usize,
     /// Prefix of every Redis key (`{prefix}:{tenant}:…`).
     pub key_prefix: String,
     /// Most live sessions one tenant may hold.

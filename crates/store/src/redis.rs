@@ -42,6 +42,8 @@ pub struct RedisStore {
     /// hash tag.
     cluster: Option<Arc<super::cluster::Cluster>>,
     prefix: String,
+    /// Replicas that must acknowledge each write (`WAIT`), 0 for none.
+    wait_replicas: usize,
     max_sessions_per_tenant: usize,
     timeout: Duration,
     create: Script,
@@ -125,6 +127,12 @@ impl RedisStore {
             return Ok(Self::with_conn(settings, None, Some(sentinel)));
         }
         if super::cluster::is_cluster_url(&settings.url) {
+            if settings.wait_replicas > 0 {
+                return Err(access::config(
+                    "FUSION_REDIS_WAIT_REPLICAS",
+                    "is for one Redis or Sentinel; a Cluster's writes are not waited for".into(),
+                ));
+            }
             let cluster =
                 super::cluster::Cluster::connect(&settings.url, &settings.redis, settings.timeout)
                     .await?;
@@ -169,6 +177,7 @@ impl RedisStore {
             server: String::new(),
             cluster: None,
             prefix: settings.key_prefix.clone(),
+            wait_replicas: settings.wait_replicas,
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
             create: Script::new(&format!("{NOW_MS}{CREATE}{EXTEND_INDEX}return 1")),
@@ -235,7 +244,7 @@ impl RedisStore {
             .arg(self.max_sessions_per_tenant)
             .arg(kind);
         match self.bounded(call.invoke_async::<i64>(&mut conn)).await? {
-            1 => Ok(1),
+            1 => self.replicated(&mut conn).await.map(|()| 1),
             -1 => Err(StoreError::AlreadyExists),
             -2 => Err(StoreError::TooManySessions {
                 limit: self.max_sessions_per_tenant,
@@ -288,9 +297,12 @@ impl RedisStore {
         let (status, version): (i64, String) = self.bounded(call.invoke_async(&mut conn)).await?;
         match status {
             0 => Ok(CasOutcome::Missing),
-            1 => Ok(CasOutcome::Stored {
-                version: parse_version(&version)?,
-            }),
+            1 => {
+                self.replicated(&mut conn).await?;
+                Ok(CasOutcome::Stored {
+                    version: parse_version(&version)?,
+                })
+            }
             2 => Ok(CasOutcome::Conflict {
                 current: parse_version(&version)?,
             }),
@@ -303,6 +315,7 @@ impl RedisStore {
         let mut call = self.delete.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant)).arg(escape(id));
         let deleted: i64 = self.bounded(call.invoke_async(&mut conn)).await?;
+        self.replicated(&mut conn).await?;
         Ok(deleted > 0)
     }
 
@@ -339,6 +352,36 @@ impl RedisStore {
             )
             .await?;
         v.map(|v| parse_version(&v)).transpose()
+    }
+
+    /// With `wait_replicas`, waits until that many replicas hold the
+    /// writes made so far on `conn` (`WAIT`, for half the timeout); fewer
+    /// is `Unavailable`: the write is done on the primary but could be lost
+    /// with it, so the caller answers "may or may not have been applied;
+    /// retry with the same sequence", which is right either way.
+    async fn replicated(&self, conn: &mut Conn) -> Result<(), StoreError> {
+        if self.wait_replicas == 0 {
+            return Ok(());
+        }
+        let wait_ms = (self.timeout.as_millis() / 2).max(1) as u64;
+        let acked: usize = self
+            .bounded(
+                redis::cmd("WAIT")
+                    .arg(self.wait_replicas)
+                    .arg(wait_ms)
+                    .query_async(conn),
+            )
+            .await?;
+        if acked >= self.wait_replicas {
+            Ok(())
+        } else {
+            Err(StoreError::Unavailable {
+                reason: format!(
+                    "the write reached {acked} of the {} replicas it waits for within {wait_ms} ms",
+                    self.wait_replicas
+                ),
+            })
+        }
     }
 
     /// `PUBLISH` on the session's event channel.

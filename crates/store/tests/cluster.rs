@@ -196,6 +196,7 @@ async fn store(cluster: &Cluster) -> SessionStore {
     SessionStore::connect(&StoreSettings {
         url: cluster.url(),
         redis: Default::default(),
+        wait_replicas: 0,
         key_prefix: PREFIX.into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
@@ -451,6 +452,7 @@ async fn sessions_of_a_single_redis_are_copied_to_the_cluster_layout() {
     let single = SessionStore::connect(&StoreSettings {
         url: format!("redis://127.0.0.1:{port}/0"),
         redis: Default::default(),
+        wait_replicas: 0,
         key_prefix: PREFIX.into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,

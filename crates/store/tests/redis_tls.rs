@@ -247,6 +247,7 @@ fn settings(url: String, redis: RedisAccessSettings) -> StoreSettings {
     StoreSettings {
         url,
         redis,
+        wait_replicas: 0,
         key_prefix: "tls-test".into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,

@@ -1,4 +1,4 @@
-//! A Sentinel deployment on loopback for tests: a primary, a replica and
+//! A Sentinel deployment on loopback for tests: a primary, two replicas and
 //! three sentinels (`redis-server --sentinel`, quorum 2, down after 1 s) on
 //! free ports, each server in a scratch directory of its own. Included by
 //! path from `crates/store/tests/sentinel_failover.rs` and the server's
@@ -32,11 +32,13 @@ impl Drop for Proc {
 pub struct Topology {
     dir: PathBuf,
     primary: Option<Proc>,
-    _replica: Proc,
+    _replicas: Vec<Proc>,
     _sentinels: Vec<Proc>,
-    /// Ports of the first primary and of its replica.
+    /// Ports of the first primary and of its replicas (one of which the
+    /// sentinels promote when it dies; the other then replicates it, so a
+    /// write that waits for one replica still can).
     pub primary_port: u16,
-    pub replica_port: u16,
+    pub replica_ports: Vec<u16>,
     pub sentinel_ports: Vec<u16>,
 }
 
@@ -76,6 +78,30 @@ fn redis_server(args: &[&str]) -> Proc {
     )
 }
 
+/// One data server in its own directory (a replica's full sync writes
+/// dump.rdb there), logging to `redis.log` in it.
+fn start_server(dir: &std::path::Path, port: u16, extra: &[&str]) -> Proc {
+    let d = dir.join(port.to_string());
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("redis.log");
+    let port = port.to_string();
+    let mut args = vec!["--port", &port, "--dir", d.to_str().unwrap()];
+    args.extend(["--logfile", log.to_str().unwrap()]);
+    args.extend(["--bind", "127.0.0.1", "--save", "", "--appendonly", "no"]);
+    args.extend(extra);
+    redis_server(&args)
+}
+
+/// `redis-cli -p PORT ARGS…`, its standard output trimmed.
+fn cli(port: u16, args: &[&str]) -> String {
+    let out = Command::new("redis-cli")
+        .args(["-p", &port.to_string()])
+        .args(args)
+        .output()
+        .expect("redis-cli runs");
+    String::from_utf8_lossy(&out.stdout).trim().to_string()
+}
+
 impl Topology {
     /// Starts the deployment, or `None` after a loud SKIPPED line naming
     /// `what` when redis-server is not on PATH or `FUSION_SKIP_REDIS_TESTS=1`.
@@ -94,31 +120,34 @@ impl Topology {
             ));
             return None;
         }
-        let (primary_port, replica_port) = (free_port(), free_port());
+        let primary_port = free_port();
+        let replica_ports = vec![free_port(), free_port()];
         let dir = std::env::temp_dir().join(format!(
             "fusion-sentinel-{}-{primary_port}",
             std::process::id()
         ));
-        // Each server in its own directory: a replica's full sync writes
-        // dump.rdb there.
-        let server = |port: u16, extra: &[&str]| {
-            let d = dir.join(port.to_string());
-            std::fs::create_dir_all(&d).unwrap();
-            let port = port.to_string();
-            let log = d.join("redis.log");
-            let mut args = vec!["--port", &port, "--dir", d.to_str().unwrap()];
-            args.extend(["--logfile", log.to_str().unwrap()]);
-            args.extend(["--bind", "127.0.0.1", "--save", "", "--appendonly", "no"]);
-            args.extend(extra);
-            redis_server(&args)
-        };
-        let primary = server(primary_port, &[]);
-        let replica = server(
-            replica_port,
-            &["--replicaof", "127.0.0.1", &primary_port.to_string()],
-        );
+        let primary = start_server(&dir, primary_port, &[]);
+        let replicas: Vec<Proc> = replica_ports
+            .iter()
+            .map(|port| {
+                start_server(
+                    &dir,
+                    *port,
+                    &["--replicaof", "127.0.0.1", &primary_port.to_string()],
+                )
+            })
+            .collect();
         wait_port(primary_port);
-        wait_port(replica_port);
+        for port in &replica_ports {
+            wait_port(*port);
+            // A replica that has not finished its first sync has nothing to
+            // take over, and writes that wait for it would fail.
+            let deadline = Instant::now() + Duration::from_secs(20);
+            while !cli(*port, &["INFO", "replication"]).contains("master_link_status:up") {
+                assert!(Instant::now() < deadline, "replica :{port} never synced");
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
         let mut sentinels = Vec::new();
         let mut sentinel_ports = Vec::new();
         for _ in 0..3 {
@@ -143,10 +172,10 @@ impl Topology {
         Some(Self {
             dir,
             primary: Some(primary),
-            _replica: replica,
+            _replicas: replicas,
             _sentinels: sentinels,
             primary_port,
-            replica_port,
+            replica_ports,
             sentinel_ports,
         })
     }
@@ -161,30 +190,43 @@ impl Topology {
         format!("redis+sentinel://{}/{MASTER}/0", hosts.join(","))
     }
 
-    /// Waits until the replica has every write of the primary (`WAIT 1`,
-    /// through redis-cli).
-    pub fn sync_replica(&self) {
+    /// Waits until both replicas have every write of the primary: a write
+    /// and `WAIT 2` on one connection (WAIT waits for its own connection's
+    /// writes only, so alone on a fresh connection it returns at once).
+    pub fn sync_replicas(&self) {
         for _ in 0..100 {
-            let out = Command::new("redis-cli")
-                .args(["-p", &self.primary_port.to_string(), "WAIT", "1", "200"])
-                .output()
+            let mut child = Command::new("redis-cli")
+                .args(["-p", &self.primary_port.to_string()])
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .spawn()
                 .expect("redis-cli runs");
-            if String::from_utf8_lossy(&out.stdout).trim() == "1" {
+            child
+                .stdin
+                .take()
+                .unwrap()
+                .write_all(b"SET fusion-test:sync 1\nWAIT 2 200\n")
+                .unwrap();
+            let out = child.wait_with_output().unwrap();
+            if String::from_utf8_lossy(&out.stdout).lines().nth(1) == Some("2") {
                 return;
             }
         }
-        panic!("the replica did not acknowledge");
+        panic!("the replicas did not acknowledge");
     }
 
     /// SIGKILLs the first primary.
     pub fn kill_primary(&mut self) {
-        drop(self.take_primary());
+        drop(self.primary.take());
     }
 
-    /// The first primary's process, SIGKILLed when dropped (from another
-    /// thread, to kill it while a test pushes).
-    pub fn take_primary(&mut self) -> Option<Proc> {
-        self.primary.take()
+    /// The primary the first sentinel names, `host:port`.
+    pub fn current_primary(&self) -> String {
+        cli(
+            self.sentinel_ports[0],
+            &["SENTINEL", "get-master-addr-by-name", MASTER],
+        )
+        .replace('\n', ":")
     }
 }
 
