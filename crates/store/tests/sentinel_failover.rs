@@ -206,3 +206,44 @@ async fn a_switch_master_announcement_moves_the_store_before_any_command_fails()
     );
     assert_eq!((seen.failovers, seen.failing_over), (1, false));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_write_fewer_replicas_hold_than_waited_for_is_unavailable_not_lost() {
+    let Some(topology) = sentinel::Topology::start("sentinel WAIT") else {
+        return;
+    };
+    let settings = |wait_replicas| StoreSettings {
+        url: topology.url(),
+        redis: Default::default(),
+        wait_replicas,
+        key_prefix: "wait-test".into(),
+        max_sessions_per_tenant: 10,
+        max_memory_bytes: 1 << 20,
+        timeout: Duration::from_millis(500),
+    };
+    let ttl = Duration::from_secs(600);
+    // Two replicas hold it: done.
+    let two = SessionStore::connect(&settings(2)).await.unwrap();
+    let mut created = two
+        .create("t", "a", "correlation", b"0".to_vec(), ttl)
+        .await;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while let Err(StoreError::Unavailable { .. }) = created {
+        assert!(Instant::now() < deadline, "no primary at start");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        created = two
+            .create("t", "a", "correlation", b"0".to_vec(), ttl)
+            .await;
+    }
+    assert_eq!(created, Ok(1));
+    // Three are waited for, two exist: "unavailable", though the primary
+    // has it (a retry with the same expected version then sees it applied).
+    let three = SessionStore::connect(&settings(3)).await.unwrap();
+    match three.compare_and_set("t", "a", 1, b"1".to_vec(), ttl).await {
+        Err(StoreError::Unavailable { reason }) => {
+            assert!(reason.contains("reached 2 of the 3 replicas"), "{reason}")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(three.version("t", "a").await, Ok(Some(2)));
+}
