@@ -1,12 +1,13 @@
-//! How the store reaches a Redis server: TLS for `rediss://` and
-//! `rediss+sentinel://` (rustls with the `ring` provider) with the CA of
+//! How the store reaches a Redis server: TLS for `rediss://`,
+//! `rediss+sentinel://` and `rediss+cluster://` (rustls with the `ring`
+//! provider) with the CA of
 //! `FUSION_REDIS_CA` and the optional client certificate of
 //! `FUSION_REDIS_CERT` / `FUSION_REDIS_KEY`, and credentials from the URL's
 //! user information or `FUSION_REDIS_PASSWORD`.
 //!
 //! Secrets never leave this module in text: `Debug` of the settings prints
-//! `***` for the password, errors name the setting and never its value, and a URL with
-//! a password is never echoed. A bad setting refuses to start
+//! `***` for the password, errors name the setting and never its value, and
+//! a URL with a password is never echoed. A bad setting refuses to start
 //! ([`StoreError::Config`]): an unreadable or empty PEM file, a certificate
 //! without its key, a CA for a URL without TLS, and (checked by
 //! [`probe`] against the server, when it answers at start) a TLS handshake
@@ -86,8 +87,8 @@ impl Access {
                 if path.is_some() {
                     return Err(config(
                         setting,
-                        "is set but FUSION_SESSION_STORE does not use TLS (use rediss:// or \
-                         rediss+sentinel://)"
+                        "is set but FUSION_SESSION_STORE does not use TLS (use rediss://, \
+                         rediss+sentinel:// or rediss+cluster://)"
                             .into(),
                     ));
                 }
@@ -107,16 +108,15 @@ impl Access {
     /// A client of the data server `host:port` (database `db`), with TLS
     /// when configured and the credentials.
     pub(crate) fn client(&self, host: &str, port: u16, db: i64) -> Result<Client, StoreError> {
-        let mut redis = ConnectionInfo::redis_settings(&self.info(host, port)?)
-            .clone()
-            .set_db(db);
+        let info = self.info(host, port)?;
+        let mut redis = info.redis_settings().clone().set_db(db);
         if let Some(u) = &self.username {
             redis = redis.set_username(u);
         }
         if let Some(p) = &self.password {
             redis = redis.set_password(p);
         }
-        self.build(self.info(host, port)?.set_redis_settings(redis))
+        self.build(info.set_redis_settings(redis))
     }
 
     /// A client of a Redis Cluster seeded with `nodes`: TLS when
@@ -222,11 +222,11 @@ pub(crate) fn parse_server_url(url: &str) -> Result<ServerUrl, StoreError> {
     })
 }
 
-/// `[USER:PASSWORD@]HOST:PORT[,HOST:PORT…]` of a Sentinel or Cluster URL:
-/// (user, password, addresses); `what` names one address in errors, which
-/// `bad` words (never echoing the user information).
+/// A Sentinel or Cluster URL's (user, password, addresses).
 pub(crate) type HostList = (Option<String>, Option<String>, Vec<(String, u16)>);
 
+/// Parses `[USER:PASSWORD@]HOST:PORT[,HOST:PORT…]`; `what` names one address
+/// in errors, which `bad` words (never echoing the user information).
 pub(crate) fn parse_hosts(
     s: &str,
     what: &str,

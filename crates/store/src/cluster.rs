@@ -35,6 +35,30 @@ fn bad(why: &str) -> StoreError {
     )
 }
 
+/// Parses `redis[s]+cluster://[USER:PASSWORD@]HOST:PORT[,HOST:PORT…][/]`
+/// and reads the TLS files and credentials it needs.
+fn parse(
+    url: &str,
+    settings: &access::RedisAccessSettings,
+) -> Result<(Vec<(String, u16)>, access::Access), StoreError> {
+    let (rest, tls) = match (url.strip_prefix(SCHEME), url.strip_prefix(TLS_SCHEME)) {
+        (Some(rest), _) => (rest, false),
+        (None, Some(rest)) => (rest, true),
+        (None, None) => {
+            return Err(bad(
+                "it must start with redis+cluster:// or rediss+cluster://",
+            ));
+        }
+    };
+    let hosts = rest.strip_suffix('/').unwrap_or(rest);
+    if hosts.contains('/') {
+        return Err(bad("a cluster has no database number (only database 0)"));
+    }
+    let (user, password, nodes) = access::parse_hosts(hosts, "node", bad)?;
+    let access = access::Access::new(settings, tls, user, password)?;
+    Ok((nodes, access))
+}
+
 /// A Redis Cluster, connected at the first command.
 pub(crate) struct Cluster {
     client: ClusterClient,
@@ -55,21 +79,7 @@ impl Cluster {
         settings: &access::RedisAccessSettings,
         timeout: Duration,
     ) -> Result<Self, StoreError> {
-        let (rest, tls) = match (url.strip_prefix(SCHEME), url.strip_prefix(TLS_SCHEME)) {
-            (Some(rest), _) => (rest, false),
-            (None, Some(rest)) => (rest, true),
-            (None, None) => {
-                return Err(bad(
-                    "it must start with redis+cluster:// or rediss+cluster://",
-                ));
-            }
-        };
-        let hosts = rest.strip_suffix('/').unwrap_or(rest);
-        if hosts.contains('/') {
-            return Err(bad("a cluster has no database number (only database 0)"));
-        }
-        let (user, password, nodes) = access::parse_hosts(hosts, "node", bad)?;
-        let access = access::Access::new(settings, tls, user, password)?;
+        let (nodes, access) = parse(url, settings)?;
         let client = access.cluster_client(&nodes, timeout)?;
         let cluster = Self {
             client,
@@ -140,6 +150,35 @@ impl Cluster {
                     self.seeds
                 ),
             ))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cluster_urls_parse_and_bad_ones_name_the_setting() {
+        let settings = access::RedisAccessSettings::default();
+        let (nodes, _) = parse(
+            "redis+cluster://app:p%40ss@10.0.0.1:7000,h2:7001/",
+            &settings,
+        )
+        .unwrap();
+        assert_eq!(
+            nodes,
+            [("10.0.0.1".to_string(), 7000), ("h2".to_string(), 7001)]
+        );
+        for url in [
+            "redis+cluster://u:secret@h",
+            "redis+cluster://u:secret@h:1/0",
+            "redis+cluster://u:secret@h:x",
+            "redis+cluster://u:secret%zz@h:1",
+        ] {
+            let e = parse(url, &settings).err().expect(url).to_string();
+            assert!(e.contains("FUSION_SESSION_STORE"), "{url}: {e}");
+            assert!(!e.contains("secret"), "{url}: {e}");
         }
     }
 }
