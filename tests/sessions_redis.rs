@@ -39,8 +39,14 @@ mod data;
 use data::{open_stream, pb_report, scenario};
 use redis_harness::{RedisServer, redis_is_up, redis_server_available, redis_url, unique};
 
+#[path = "../crates/store/tests/common/procs.rs"]
+mod procs;
+
 #[path = "../crates/store/tests/common/sentinel.rs"]
 mod sentinel;
+
+#[path = "../crates/store/tests/common/cluster.rs"]
+mod cluster_nodes;
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
 
@@ -233,8 +239,31 @@ async fn batches_alternating_between_instances_give_the_single_instance_result()
     if !redis_is_up() {
         return;
     }
+    alternating_pushes_give_the_single_instance_result(&redis_url()).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_a_redis_cluster_too() {
+    let Some(cluster) = cluster_nodes::Cluster::start("the service on Redis Cluster") else {
+        return;
+    };
+    alternating_pushes_give_the_single_instance_result(&cluster.url()).await;
+    // Health names the seeds; the tenant's keys are on one primary.
+    let app = spawn_app(|s| s.session_store = cluster.url()).await;
+    let health: Value = app.get("/healthz/store").await.json().await.unwrap();
+    let seeds = cluster.url().replace("redis+cluster://", "");
+    assert_eq!(
+        (&health["status"], &health["primary"]),
+        (&json!("ok"), &json!(seeds))
+    );
+    app.stop().await.expect("server stops");
+}
+
+/// Two instances on the store at `url` push one session alternately: the
+/// single instance's outcome, and the session deleted at the end.
+async fn alternating_pushes_give_the_single_instance_result(url: &str) {
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(&redis_url(), |_| {}).await;
+    let (a, b) = two_instances(url, |_| {}).await;
     let (batch, reports) = scenario();
     let id = a.create(&session_config(&batch)).await;
     let bodies = batch_bodies(&reports);
@@ -1066,9 +1095,7 @@ async fn store_health(app: &App) -> (u16, Value, Value) {
 
 /// The value of an unlabelled sample in `/metrics`.
 async fn metric(app: &App, name: &str) -> Option<f64> {
-    let text = app.get("/metrics").await.text().await.unwrap();
-    text.lines()
-        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.parse().ok())
+    counter(&app.get("/metrics").await.text().await.unwrap(), name)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -1169,7 +1196,7 @@ async fn a_sentinel_failover_under_pushes_from_two_instances_applies_every_batch
         assert!(metric(app, "session_store_redirections_total").await >= Some(1.0));
         assert_eq!(metric(app, "session_store_failing_over").await, Some(0.0));
     }
-    sentinel::loud(&format!(
+    procs::loud(&format!(
         "sentinel failover (service): SIGKILL -> first accepted batch {:?}, {refused} answers \
          503/504, {duplicates} retried batches acknowledged as duplicates, {} batches",
         recovered,

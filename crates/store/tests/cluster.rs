@@ -8,10 +8,7 @@
 //! on PATH.
 
 use std::{
-    io::Write,
-    net::TcpListener,
-    path::PathBuf,
-    process::{Child, Command, Stdio},
+    process::{Command, Stdio},
     sync::Arc,
     time::{Duration, Instant},
 };
@@ -20,177 +17,14 @@ use store::{CasOutcome, SessionStore, StoreError, StoreSettings};
 
 const PREFIX: &str = "cluster-test";
 
-struct Proc(Child);
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+#[path = "common/procs.rs"]
+mod procs;
 
-struct Cluster {
-    _procs: Vec<Proc>,
-    ports: Vec<u16>,
-    dir: PathBuf,
-}
+#[path = "common/cluster.rs"]
+mod cluster_nodes;
 
-impl Drop for Cluster {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-fn loud(line: &str) {
-    let _ = writeln!(std::io::stderr(), "\n!!!!!!!! cluster: {line}\n");
-}
-
-/// A free port whose cluster bus port (port + 10000) is free too.
-fn cluster_port() -> u16 {
-    loop {
-        let l = TcpListener::bind("127.0.0.1:0").unwrap();
-        let port = l.local_addr().unwrap().port();
-        if port < 55000 && TcpListener::bind(("127.0.0.1", port + 10000)).is_ok() {
-            return port;
-        }
-    }
-}
-
-/// `redis-cli -p PORT ARGS…`, its standard output.
-fn cli(port: u16, args: &[&str]) -> String {
-    let out = Command::new("redis-cli")
-        .args(["-p", &port.to_string()])
-        .args(args)
-        .output()
-        .expect("redis-cli runs");
-    String::from_utf8_lossy(&out.stdout).trim().to_string()
-}
-
-impl Cluster {
-    fn start() -> Option<Self> {
-        if std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1") {
-            loud("SKIPPED: Redis Cluster tests (FUSION_SKIP_REDIS_TESTS=1)");
-            return None;
-        }
-        for tool in ["redis-server", "redis-cli"] {
-            if Command::new(tool).arg("--version").output().is_err() {
-                loud(&format!(
-                    "SKIPPED: Redis Cluster tests: {tool} is not on PATH (apt-get install redis-server)"
-                ));
-                return None;
-            }
-        }
-        let ports: Vec<u16> = (0..3).map(|_| cluster_port()).collect();
-        let dir = std::env::temp_dir().join(format!(
-            "fusion-cluster-{}-{}",
-            std::process::id(),
-            ports[0]
-        ));
-        let mut procs = Vec::new();
-        for port in &ports {
-            let d = dir.join(port.to_string());
-            std::fs::create_dir_all(&d).unwrap();
-            procs.push(Proc(
-                Command::new("redis-server")
-                    .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
-                    .args([
-                        "--cluster-enabled",
-                        "yes",
-                        "--cluster-config-file",
-                        "nodes.conf",
-                    ])
-                    .args([
-                        "--cluster-node-timeout",
-                        "5000",
-                        "--save",
-                        "",
-                        "--appendonly",
-                        "no",
-                    ])
-                    .args(["--dir", d.to_str().unwrap()])
-                    .args(["--logfile", d.join("redis.log").to_str().unwrap()])
-                    .stdout(Stdio::null())
-                    .spawn()
-                    .expect("redis-server starts"),
-            ));
-        }
-        for port in &ports {
-            let deadline = Instant::now() + Duration::from_secs(10);
-            while std::net::TcpStream::connect(("127.0.0.1", *port)).is_err() {
-                assert!(Instant::now() < deadline, "nothing listens on {port}");
-                std::thread::sleep(Duration::from_millis(50));
-            }
-        }
-        let nodes: Vec<String> = ports.iter().map(|p| format!("127.0.0.1:{p}")).collect();
-        let out = Command::new("redis-cli")
-            .arg("--cluster")
-            .arg("create")
-            .args(&nodes)
-            .args(["--cluster-replicas", "0", "--cluster-yes"])
-            .output()
-            .expect("redis-cli --cluster create runs");
-        assert!(
-            out.status.success(),
-            "cluster create: {}",
-            String::from_utf8_lossy(&out.stdout)
-        );
-        let cluster = Self {
-            _procs: procs,
-            ports,
-            dir,
-        };
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while !cluster
-            .ports
-            .iter()
-            .all(|p| cli(*p, &["cluster", "info"]).contains("cluster_state:ok"))
-        {
-            assert!(Instant::now() < deadline, "the cluster is not ok");
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        Some(cluster)
-    }
-
-    /// Two of the three nodes as seeds: the client learns the third.
-    fn url(&self) -> String {
-        format!(
-            "redis+cluster://127.0.0.1:{},127.0.0.1:{}",
-            self.ports[0], self.ports[1]
-        )
-    }
-
-    /// The store's keys each node holds.
-    fn keys_per_node(&self) -> Vec<usize> {
-        self.ports
-            .iter()
-            .map(|p| {
-                cli(*p, &["--scan", "--pattern", &format!("{PREFIX}:*")])
-                    .lines()
-                    .filter(|l| !l.is_empty())
-                    .count()
-            })
-            .collect()
-    }
-
-    /// The node (index) that serves `slot`.
-    fn owner(&self, slot: u16) -> usize {
-        let nodes = cli(self.ports[0], &["cluster", "nodes"]);
-        let id = nodes
-            .lines()
-            .find(|line| {
-                line.split_whitespace().skip(8).any(|range| {
-                    let (a, b) = range.split_once('-').unwrap_or((range, range));
-                    matches!((a.parse::<u16>(), b.parse::<u16>()), (Ok(a), Ok(b)) if a <= slot && slot <= b)
-                })
-            })
-            .and_then(|line| line.split_whitespace().next())
-            .expect("a node serves the slot")
-            .to_string();
-        self.ports
-            .iter()
-            .position(|p| cli(*p, &["cluster", "myid"]) == id)
-            .unwrap()
-    }
-}
+use cluster_nodes::{Cluster, cluster_port};
+use procs::{Proc, cli, loud};
 
 async fn store(cluster: &Cluster) -> SessionStore {
     SessionStore::connect(&StoreSettings {
@@ -208,7 +42,7 @@ async fn store(cluster: &Cluster) -> SessionStore {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tenants_shard_over_the_primaries_and_every_operation_works() {
-    let Some(cluster) = Cluster::start() else {
+    let Some(cluster) = Cluster::start("Redis Cluster tests") else {
         return;
     };
     let store = store(&cluster).await;
@@ -257,7 +91,7 @@ async fn tenants_shard_over_the_primaries_and_every_operation_works() {
     }
     // Every primary holds some tenants' keys (the tenant names fix their
     // slots, and `--cluster create` splits the slots in three).
-    let keys = cluster.keys_per_node();
+    let keys = cluster.keys_per_node(PREFIX);
     assert!(keys.iter().all(|k| *k > 0), "keys per primary: {keys:?}");
     assert_eq!(keys.iter().sum::<usize>(), 2 * tenants.len(), "{keys:?}");
     // Idle expiry: a session and its index entry go.
@@ -338,7 +172,7 @@ async fn push_exactly_once(store: &SessionStore, tenant: &str, from: u64, to: u6
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_tenants_slot_migrated_during_pushes_loses_and_doubles_nothing() {
-    let Some(cluster) = Cluster::start() else {
+    let Some(cluster) = Cluster::start("Redis Cluster tests") else {
         return;
     };
     let store = Arc::new(store(&cluster).await);
@@ -416,7 +250,7 @@ async fn a_tenants_slot_migrated_during_pushes_loses_and_doubles_nothing() {
     );
     assert_eq!((on_new.as_str(), on_old.as_str()), ("2", "0"));
     loud(&format!(
-        "slot {slot} of tenant {tenant:?} migrated from :{from_port} to :{to_port} during \
+        "cluster: slot {slot} of tenant {tenant:?} migrated from :{from_port} to :{to_port} during \
          {total} pushes (versions {before} to {after} meanwhile); {unavailable} answered \
          Unavailable (retried once checked)"
     ));
@@ -424,7 +258,7 @@ async fn a_tenants_slot_migrated_during_pushes_loses_and_doubles_nothing() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sessions_of_a_single_redis_are_copied_to_the_cluster_layout() {
-    let Some(cluster) = Cluster::start() else {
+    let Some(cluster) = Cluster::start("Redis Cluster tests") else {
         return;
     };
     // A single Redis with sessions in the layout without braces.

@@ -9,6 +9,9 @@ use std::time::{Duration, Instant};
 
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings, events::Feed};
 
+#[path = "common/procs.rs"]
+mod procs;
+
 #[path = "common/sentinel.rs"]
 mod sentinel;
 

@@ -10,24 +10,15 @@
 
 use std::{
     io::Write,
-    net::TcpListener,
     path::PathBuf,
-    process::{Child, Command, Stdio},
+    process::{Command, Stdio},
     time::{Duration, Instant},
 };
 
+use crate::procs::{Proc, cli, free_port, loud, redis_tools, wait_port};
+
 /// The master name the sentinels monitor.
 pub const MASTER: &str = "fusion";
-
-/// A process killed (SIGKILL) and reaped when dropped.
-pub struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 pub struct Topology {
     dir: PathBuf,
@@ -40,31 +31,6 @@ pub struct Topology {
     pub primary_port: u16,
     pub replica_ports: Vec<u16>,
     pub sentinel_ports: Vec<u16>,
-}
-
-/// One loud line on the real standard error (the harness captures
-/// `eprintln!` of passing tests, and a skip must be seen).
-pub fn loud(line: &str) {
-    let _ = writeln!(std::io::stderr(), "\n!!!!!!!! {line}\n");
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn wait_port(port: u16) {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while Instant::now() < deadline {
-        if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    panic!("nothing listens on {port}");
 }
 
 fn redis_server(args: &[&str]) -> Proc {
@@ -92,34 +58,11 @@ fn start_server(dir: &std::path::Path, port: u16, extra: &[&str]) -> Proc {
     redis_server(&args)
 }
 
-/// `redis-cli -p PORT ARGS…`, its standard output trimmed.
-fn cli(port: u16, args: &[&str]) -> String {
-    let out = Command::new("redis-cli")
-        .args(["-p", &port.to_string()])
-        .args(args)
-        .output()
-        .expect("redis-cli runs");
-    String::from_utf8_lossy(&out.stdout).trim().to_string()
-}
-
 impl Topology {
     /// Starts the deployment, or `None` after a loud SKIPPED line naming
     /// `what` when redis-server is not on PATH or `FUSION_SKIP_REDIS_TESTS=1`.
     pub fn start(what: &str) -> Option<Self> {
-        if std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1") {
-            loud(&format!("SKIPPED: {what} (FUSION_SKIP_REDIS_TESTS=1)"));
-            return None;
-        }
-        if Command::new("redis-server")
-            .arg("--version")
-            .output()
-            .is_err()
-        {
-            loud(&format!(
-                "SKIPPED: {what}: redis-server is not on PATH (apt-get install redis-server)"
-            ));
-            return None;
-        }
+        redis_tools(what, &["redis-server", "redis-cli"])?;
         let primary_port = free_port();
         let replica_ports = vec![free_port(), free_port()];
         let dir = std::env::temp_dir().join(format!(
