@@ -5,10 +5,8 @@
 //! on PATH or was built without TLS.
 
 use std::{
-    io::Write,
-    net::TcpListener,
     path::PathBuf,
-    process::{Child, Command, Stdio},
+    process::{Command, Stdio},
     sync::atomic::{AtomicU32, Ordering},
     time::{Duration, Instant},
 };
@@ -17,6 +15,10 @@ use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair,
     KeyUsagePurpose,
 };
+#[path = "common/procs.rs"]
+mod procs;
+
+use procs::{Proc, free_port, loud, redis_tools};
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings, access::RedisAccessSettings};
 
 const PASSWORD: &str = "s3cret-Pa55word-for-tls-test";
@@ -100,29 +102,9 @@ impl Drop for Pki {
     }
 }
 
-struct Server(Child);
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn loud(line: &str) {
-    let _ = writeln!(std::io::stderr(), "\n!!!!!!!! redis_tls: {line}\n");
-}
-
 /// `redis-server` with TLS only, mutual TLS and a password; `None` (after a
 /// loud SKIPPED line) when it is not installed or has no TLS.
-fn tls_redis(pki: &Pki) -> Option<(Server, u16)> {
+fn tls_redis(pki: &Pki) -> Option<(Proc, u16)> {
     let port = free_port();
     let data = pki.path(&format!("data-{port}"));
     std::fs::create_dir_all(&data).unwrap();
@@ -146,7 +128,7 @@ fn tls_redis(pki: &Pki) -> Option<(Server, u16)> {
 }
 
 /// A sentinel over TLS (to clients and to the primary) watching `primary`.
-fn tls_sentinel(pki: &Pki, primary: u16) -> Option<(Server, u16)> {
+fn tls_sentinel(pki: &Pki, primary: u16) -> Option<(Proc, u16)> {
     let port = free_port();
     let data = pki.path(&format!("sentinel-{port}"));
     std::fs::create_dir_all(&data).unwrap();
@@ -194,23 +176,10 @@ fn tls_args(pki: &Pki, port: u16) -> Vec<String> {
     .to_vec()
 }
 
-fn spawn(args: &[String], data: &std::path::Path, port: u16) -> Option<(Server, u16)> {
-    if std::env::var("FUSION_SKIP_REDIS_TESTS").is_ok_and(|v| v == "1") {
-        loud("SKIPPED: Redis TLS tests (FUSION_SKIP_REDIS_TESTS=1)");
-        return None;
-    }
-    if Command::new("redis-server")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        loud(
-            "SKIPPED: Redis TLS tests: redis-server is not on PATH (apt-get install redis-server)",
-        );
-        return None;
-    }
+fn spawn(args: &[String], data: &std::path::Path, port: u16) -> Option<(Proc, u16)> {
+    redis_tools("Redis TLS tests", &["redis-server"])?;
     let log = data.join("redis.log");
-    let mut server = Server(
+    let mut server = Proc(
         Command::new("redis-server")
             .args(args)
             .args(["--logfile", log.to_str().unwrap()])
@@ -231,7 +200,7 @@ fn spawn(args: &[String], data: &std::path::Path, port: u16) -> Option<(Server, 
             }
             if text.contains("TLS") || text.contains("tls") {
                 loud(&format!(
-                    "SKIPPED: Redis TLS tests: this redis-server has no TLS ({})",
+                    "SKIPPED: redis_tls: this redis-server has no TLS ({})",
                     text.trim()
                 ));
                 return None;
