@@ -40,6 +40,11 @@ pub enum Command {
         #[command(flatten)]
         tls: HealthcheckTls,
     },
+    /// Copy every session from the Redis store `--from` (one Redis or
+    /// Sentinel) into the session store of the settings
+    /// (`FUSION_SESSION_STORE`, such as a Redis Cluster), keeping versions,
+    /// kinds and TTLs; sessions the target holds already are left alone.
+    CopySessions(Box<CopySessions>),
     /// Moved: the experiments are the `radar-fusion-eval` binary of the
     /// `eval` crate; this prints where and exits with status 2.
     #[command(hide = true)]
@@ -48,6 +53,18 @@ pub enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+}
+
+/// `copy-sessions`: where from, and the settings of the target store (its
+/// TLS files and password serve both).
+#[derive(Debug, Args)]
+pub struct CopySessions {
+    /// The store to copy from: `redis://…`, `rediss://…` or a Sentinel URL,
+    /// under the same `--session-key-prefix`.
+    #[arg(long, env = "FUSION_COPY_SESSIONS_FROM", hide_env_values = true)]
+    pub from: String,
+    #[command(flatten)]
+    pub settings: Settings,
 }
 
 /// TLS of the `healthcheck` probe: with `--tls-ca` it speaks TLS to a
@@ -163,9 +180,36 @@ pub struct Settings {
     #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,
     /// Where streaming sessions keep their state: `memory` (this process only)
-    /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas).
-    #[arg(long, env = "FUSION_SESSION_STORE", default_value = "memory")]
+    /// or a Redis URL such as `redis://127.0.0.1:6379/0` (shared by replicas;
+    /// `rediss://` for TLS, `redis+sentinel://` / `rediss+sentinel://` for
+    /// Sentinel, `redis+cluster://` / `rediss+cluster://` for Redis Cluster).
+    #[arg(
+        long,
+        env = "FUSION_SESSION_STORE",
+        default_value = "memory",
+        hide_env_values = true
+    )]
     pub session_store: String,
+    /// PEM file of the CA that signed Redis's certificate (`rediss://`;
+    /// without it, the system's roots).
+    #[arg(long, env = "FUSION_REDIS_CA")]
+    pub redis_ca: Option<PathBuf>,
+    /// PEM client certificate for Redis (`tls-auth-clients yes`); with
+    /// `--redis-key`.
+    #[arg(long, env = "FUSION_REDIS_CERT")]
+    pub redis_cert: Option<PathBuf>,
+    /// PEM private key of `--redis-cert`.
+    #[arg(long, env = "FUSION_REDIS_KEY")]
+    pub redis_key: Option<PathBuf>,
+    /// Redis password (overrides the URL's); prefer the environment
+    /// variable, since a flag shows in the process list.
+    #[arg(long, env = "FUSION_REDIS_PASSWORD", hide_env_values = true)]
+    pub redis_password: Option<Secret>,
+    /// Replicas that must acknowledge every session write (Redis `WAIT`)
+    /// before it is answered; fewer within half the store timeout answers
+    /// 503 "retry with the same sequence". 0: asynchronous replication.
+    #[arg(long, env = "FUSION_REDIS_WAIT_REPLICAS", default_value_t = 0)]
+    pub redis_wait_replicas: usize,
     /// Prefix of every Redis key of the session store.
     #[arg(
         long,
@@ -380,6 +424,13 @@ impl Settings {
     pub fn store_settings(&self) -> StoreSettings {
         StoreSettings {
             url: self.session_store.clone(),
+            redis: store::access::RedisAccessSettings {
+                ca: self.redis_ca.clone(),
+                cert: self.redis_cert.clone(),
+                key: self.redis_key.clone(),
+                password: self.redis_password.as_ref().map(|p| p.expose().to_string()),
+            },
+            wait_replicas: self.redis_wait_replicas,
             key_prefix: self.session_key_prefix.clone(),
             max_sessions_per_tenant: self.max_sessions_per_tenant,
             max_memory_bytes: self.session_memory_bytes,
@@ -419,13 +470,23 @@ impl Settings {
         }
         let store = self.session_store.as_str();
         if store != "memory"
-            && !store.starts_with("redis://")
-            && !store.starts_with("rediss://")
-            && !store.starts_with("redis+sentinel://")
+            && ![
+                "redis://",
+                "rediss://",
+                "redis+sentinel://",
+                "rediss+sentinel://",
+                "redis+cluster://",
+                "rediss+cluster://",
+            ]
+            .iter()
+            .any(|scheme| store.starts_with(scheme))
         {
+            // Only the scheme: the URL may hold a password.
+            let scheme = store.split_once("://").map_or("", |(s, _)| s);
             return Err(format!(
                 "--session-store (FUSION_SESSION_STORE) must be `memory` or a Redis URL \
-                 starting with redis://, rediss:// or redis+sentinel://, not {store:?}"
+                 starting with redis://, rediss://, redis+sentinel://, rediss+sentinel://, \
+                 redis+cluster:// or rediss+cluster://, not one of scheme {scheme:?}"
             ));
         }
         if self.session_key_prefix.is_empty() {
@@ -631,6 +692,27 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.contains("--session-store"), "{err}");
+        let err = with(&["--session-store", "redi://app:hunter2@h:1/0"])
+            .validate()
+            .unwrap_err();
+        assert!(err.contains("--session-store"), "{err}");
+        assert!(
+            !err.contains("hunter2"),
+            "the error shows the password: {err}"
+        );
+        let s = with(&[
+            "--session-store",
+            "rediss+sentinel://h:1/m",
+            "--redis-ca",
+            "/etc/redis/ca.pem",
+            "--redis-password",
+            "hunter2",
+        ]);
+        s.validate().unwrap();
+        let store = s.store_settings();
+        assert_eq!(store.redis.password.as_deref(), Some("hunter2"));
+        assert!(!format!("{store:?}").contains("hunter2"));
+        assert!(!format!("{s:?}").contains("hunter2"));
         let err = with(&["--store-timeout-s", "0"]).validate().unwrap_err();
         assert!(err.contains("--store-timeout-s"), "{err}");
         let err = with(&["--max-sessions-per-tenant", "0"])

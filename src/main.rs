@@ -4,7 +4,7 @@
 use clap::Parser;
 use radar_fusion::{
     app::{Application, shutdown_signal},
-    config::{Cli, Command, HealthcheckTls},
+    config::{Cli, Command, CopySessions, HealthcheckTls},
     http, telemetry,
 };
 
@@ -25,12 +25,36 @@ async fn main() -> anyhow::Result<()> {
         Command::Openapi => print_ignoring_closed_pipe(&http::openapi_json()),
         Command::Healthcheck { addr, tls } => healthcheck(addr, &tls).await,
         Command::Eval { .. } => eval_moved(),
+        Command::CopySessions(copy) => copy_sessions(*copy).await,
         Command::Serve(settings) => {
             telemetry::init_logging(&settings.log, settings.log_format);
             let app = Application::build(*settings).await?;
             app.run_until(shutdown_signal()).await
         }
     }
+}
+
+/// `radar-fusion copy-sessions --from URL`: every session of `--from` into
+/// the settings' store (docs/operations.md, "Moving sessions to a Cluster").
+async fn copy_sessions(copy: CopySessions) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let to = copy.settings.store_settings();
+    let from = store::StoreSettings {
+        url: copy.from,
+        ..to.clone()
+    };
+    let from = store::SessionStore::connect(&from)
+        .await
+        .context("the store to copy from (--from)")?;
+    let to = store::SessionStore::connect(&to)
+        .await
+        .context("the store to copy into (FUSION_SESSION_STORE)")?;
+    let copied = from.copy_sessions_to(&to).await?;
+    println!(
+        "copied {} sessions; {} were in the target already",
+        copied.sessions, copied.skipped
+    );
+    Ok(())
 }
 
 /// `radar-fusion eval` moved to its own binary: say where, exit 2.

@@ -128,6 +128,8 @@ fn settings(url: &str, prefix: &str) -> StoreSettings {
         url: url.to_string(),
         key_prefix: prefix.to_string(),
         max_sessions_per_tenant: 100,
+        redis: Default::default(),
+        wait_replicas: 0,
         max_memory_bytes: 1 << 24,
         timeout: Duration::from_secs(1),
     }

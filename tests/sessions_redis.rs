@@ -1,8 +1,9 @@
 //! Streaming sessions shared by two real service instances on one Redis:
 //! alternating and concurrent pushes, a batch retried on the other instance,
 //! idle expiry, a Redis outage and recovery (on a redis-server of its own),
-//! tenant isolation over gRPC, and a gRPC stream dropped mid-way and continued
-//! over REST on the other instance. Every final state is compared with the
+//! tenant isolation over gRPC, a gRPC stream dropped mid-way and continued
+//! over REST on the other instance, and a Sentinel deployment whose primary
+//! is SIGKILLed while both instances push (its own processes on free ports). Every final state is compared with the
 //! same batches pushed to a single instance on the memory store (which equals
 //! the batch endpoint's decisions).
 //!
@@ -37,6 +38,15 @@ mod data;
 
 use data::{open_stream, pb_report, scenario};
 use redis_harness::{RedisServer, redis_is_up, redis_server_available, redis_url, unique};
+
+#[path = "../crates/store/tests/common/procs.rs"]
+mod procs;
+
+#[path = "../crates/store/tests/common/sentinel.rs"]
+mod sentinel;
+
+#[path = "../crates/store/tests/common/cluster.rs"]
+mod cluster_nodes;
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
 
@@ -229,8 +239,31 @@ async fn batches_alternating_between_instances_give_the_single_instance_result()
     if !redis_is_up() {
         return;
     }
+    alternating_pushes_give_the_single_instance_result(&redis_url()).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_a_redis_cluster_too() {
+    let Some(cluster) = cluster_nodes::Cluster::start("the service on Redis Cluster") else {
+        return;
+    };
+    alternating_pushes_give_the_single_instance_result(&cluster.url()).await;
+    // Health names the seeds; the tenant's keys are on one primary.
+    let app = spawn_app(|s| s.session_store = cluster.url()).await;
+    let health: Value = app.get("/healthz/store").await.json().await.unwrap();
+    let seeds = cluster.url().replace("redis+cluster://", "");
+    assert_eq!(
+        (&health["status"], &health["primary"]),
+        (&json!("ok"), &json!(seeds))
+    );
+    app.stop().await.expect("server stops");
+}
+
+/// Two instances on the store at `url` push one session alternately: the
+/// single instance's outcome, and the session deleted at the end.
+async fn alternating_pushes_give_the_single_instance_result(url: &str) {
     let reference = single_instance_outcome().await;
-    let (a, b) = two_instances(&redis_url(), |_| {}).await;
+    let (a, b) = two_instances(url, |_| {}).await;
     let (batch, reports) = scenario();
     let id = a.create(&session_config(&batch)).await;
     let bodies = batch_bodies(&reports);
@@ -1048,4 +1081,127 @@ async fn a_watcher_on_one_instance_sees_every_update_pushed_on_either_in_order()
         (event.as_str(), &data["reason"]),
         ("end", &json!("deleted"))
     );
+}
+
+// ---------------------------------------------------------------- Sentinel
+
+/// The store's part of `/healthz/store`: (status code, primary, failing over).
+async fn store_health(app: &App) -> (u16, Value, Value) {
+    let r = app.get("/healthz/store").await;
+    let code = r.status().as_u16();
+    let body: Value = r.json().await.unwrap();
+    (code, body["primary"].clone(), body["failing_over"].clone())
+}
+
+/// The value of an unlabelled sample in `/metrics`.
+async fn metric(app: &App, name: &str) -> Option<f64> {
+    counter(&app.get("/metrics").await.text().await.unwrap(), name)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sentinel_failover_under_pushes_from_two_instances_applies_every_batch_once() {
+    let Some(deployment) = sentinel::Topology::start("the service on Sentinel") else {
+        return;
+    };
+    let (url, primary_port) = (deployment.url(), deployment.primary_port);
+    let mut topology = Some(deployment);
+    let reference = single_instance_outcome().await;
+    // Every write waits for a replica (`WAIT 1`): without it, a batch
+    // acknowledged just before the kill can be lost with the primary. With
+    // two replicas, the promoted one has every acknowledged write (the
+    // sentinels promote the one furthest ahead) and the other replicates it.
+    let (a, b) = two_instances(&url, |s| {
+        s.store_timeout_s = 0.5;
+        s.redis_wait_replicas = 1;
+    })
+    .await;
+    let first = json!(format!("127.0.0.1:{primary_port}"));
+    for app in [&a, &b] {
+        wait_readyz(app, 200, Duration::from_secs(10)).await;
+        assert_eq!(store_health(app).await, (200, first.clone(), json!(false)));
+        let ready: Value = app.get("/readyz").await.json().await.unwrap();
+        assert_eq!((&ready["store"], &ready["primary"]), (&json!("ok"), &first));
+    }
+
+    let (batch, reports) = scenario();
+    let id = a.create(&session_config(&batch)).await;
+    let bodies = batch_bodies(&reports);
+    let k = 4;
+    assert!(
+        bodies.len() > k + 4,
+        "batches after the kill: {}",
+        bodies.len()
+    );
+    let (mut refused, mut duplicates) = (0u32, 0u32);
+    let (mut killed, mut recovered) = (None, None);
+    let (tx, rx) = std::sync::mpsc::channel();
+    let mut kill = None;
+    for (i, body) in bodies.iter().enumerate() {
+        if i == k {
+            // Pushes go on while the primary dies: it is SIGKILLed from
+            // another thread a moment after this batch is sent.
+            let (mut deployment, tx) = (topology.take().unwrap(), tx.clone());
+            kill = Some(std::thread::spawn(move || {
+                std::thread::sleep(Duration::from_millis(5));
+                deployment.kill_primary();
+                tx.send(Instant::now()).unwrap();
+                deployment
+            }));
+        }
+        let deadline = Instant::now() + Duration::from_secs(90);
+        let mut to = if i % 2 == 0 { &a } else { &b };
+        loop {
+            let r = to
+                .post_json(&format!("/v1/sessions/{id}/batches"), body)
+                .await;
+            killed = killed.or_else(|| rx.try_recv().ok());
+            match r.status().as_u16() {
+                200 => {
+                    let u: Value = r.json().await.unwrap();
+                    duplicates += u32::from(u["duplicate"] == true);
+                    if refused > 0 && recovered.is_none() {
+                        recovered = killed.map(|k: Instant| k.elapsed());
+                    }
+                    break;
+                }
+                503 | 504 => {
+                    refused += 1;
+                    assert!(
+                        Instant::now() < deadline,
+                        "no primary again within 90 s (a sentinel in TILT mode waits 30 s)"
+                    );
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                    // Retry unchanged, same sequence, on the other instance.
+                    to = if std::ptr::eq(to, &a) { &b } else { &a };
+                }
+                other => panic!("batch {i}: {other}: {}", r.text().await.unwrap()),
+            }
+        }
+    }
+    let topology = kill.expect("killed").join().unwrap();
+    assert!(refused > 0, "the kill was seen by the pushes");
+    assert_same_outcome(&a.state(&id).await, &reference);
+    assert_same_outcome(&b.state(&id).await, &reference);
+
+    let second = json!(topology.current_primary());
+    assert_ne!(second, first);
+    for app in [&a, &b] {
+        assert_eq!(store_health(app).await, (200, second.clone(), json!(false)));
+        let ready: Value = app.get("/readyz").await.json().await.unwrap();
+        assert_eq!(ready["primary"], second);
+        assert_eq!(
+            metric(app, "session_store_failovers_total").await,
+            Some(1.0)
+        );
+        assert!(metric(app, "session_store_redirections_total").await >= Some(1.0));
+        assert_eq!(metric(app, "session_store_failing_over").await, Some(0.0));
+    }
+    procs::loud(&format!(
+        "sentinel failover (service): SIGKILL -> first accepted batch {:?}, {refused} answers \
+         503/504, {duplicates} retried batches acknowledged as duplicates, {} batches",
+        recovered,
+        bodies.len()
+    ));
+    a.stop().await.expect("server stops");
+    b.stop().await.expect("server stops");
 }

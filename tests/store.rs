@@ -29,6 +29,8 @@ fn settings(url: &str) -> StoreSettings {
         url: url.to_string(),
         key_prefix: unique("radar-fusion-test:"),
         max_sessions_per_tenant: 100,
+        redis: Default::default(),
+        wait_replicas: 0,
         max_memory_bytes: 1 << 20,
         timeout: Duration::from_secs(1),
     }

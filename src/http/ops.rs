@@ -26,6 +26,43 @@ pub struct HealthStatus {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(example = "ok")]
     pub store: Option<&'static str>,
+    /// `/healthz/store` and `/readyz` with Redis: the server in use
+    /// (`host:port`, the primary the sentinels named behind Sentinel; absent
+    /// while none is known).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(example = "10.0.0.5:6379")]
+    pub primary: Option<String>,
+    /// `/healthz/store` and `/readyz` with Redis: whether the store lost its
+    /// primary and has not completed a command since (a Sentinel failover
+    /// being followed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failing_over: Option<bool>,
+}
+
+impl HealthStatus {
+    fn new(
+        status: &'static str,
+        reason: Option<&'static str>,
+        store: Option<&'static str>,
+    ) -> Self {
+        Self {
+            status,
+            reason,
+            store,
+            primary: None,
+            failing_over: None,
+        }
+    }
+
+    /// With the Redis store's server and failover state (read after the
+    /// check, so they describe its outcome).
+    fn with_topology(mut self, state: &AppState) -> Self {
+        if let Some(t) = state.store().topology() {
+            self.primary = t.primary;
+            self.failing_over = Some(t.failing_over);
+        }
+        self
+    }
 }
 
 const STORE_DOWN: &str = "session store unavailable";
@@ -41,11 +78,7 @@ fn store_word(h: StoreHealth) -> &'static str {
 #[utoipa::path(get, path = "/healthz", tag = "operations",
     responses((status = 200, description = "Alive", body = HealthStatus)))]
 pub async fn healthz() -> Json<HealthStatus> {
-    Json(HealthStatus {
-        status: "ok",
-        reason: None,
-        store: None,
-    })
+    Json(HealthStatus::new("ok", None, None))
 }
 
 /// The session store's health, for monitoring (not for rotation: every
@@ -55,24 +88,14 @@ pub async fn healthz() -> Json<HealthStatus> {
         (status = 200, description = "The session store answers", body = HealthStatus),
         (status = 503, description = "The session store is unreachable", body = HealthStatus)))]
 pub async fn store_health(State(state): State<AppState>) -> (StatusCode, Json<HealthStatus>) {
-    match state.check_store().await {
-        StoreHealth::Ok => (
-            StatusCode::OK,
-            Json(HealthStatus {
-                status: "ok",
-                reason: None,
-                store: None,
-            }),
-        ),
+    let (code, status) = match state.check_store().await {
+        StoreHealth::Ok => (StatusCode::OK, HealthStatus::new("ok", None, None)),
         StoreHealth::Degraded => (
             StatusCode::SERVICE_UNAVAILABLE,
-            Json(HealthStatus {
-                status: "degraded",
-                reason: Some(STORE_DOWN),
-                store: None,
-            }),
+            HealthStatus::new("degraded", Some(STORE_DOWN), None),
         ),
-    }
+    };
+    (code, Json(status.with_topology(&state)))
 }
 
 /// Readiness: the service accepts traffic (not while starting or draining).
@@ -87,27 +110,34 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<HealthSt
     match state.check_ready().await {
         Readiness::Ready { store } => (
             StatusCode::OK,
-            Json(HealthStatus {
-                status: "ready",
-                reason: (store == StoreHealth::Degraded).then_some(STORE_DOWN),
-                store: Some(store_word(store)),
-            }),
+            Json(
+                HealthStatus::new(
+                    "ready",
+                    (store == StoreHealth::Degraded).then_some(STORE_DOWN),
+                    Some(store_word(store)),
+                )
+                .with_topology(&state),
+            ),
         ),
         Readiness::NotReady(reason) => (
             StatusCode::SERVICE_UNAVAILABLE,
-            Json(HealthStatus {
-                status: "not_ready",
-                reason: Some(reason),
-                store: None,
-            }),
+            Json(HealthStatus::new("not_ready", Some(reason), None)),
         ),
     }
 }
 
 /// Prometheus metrics: request counts and latency histograms per route and per gRPC method.
+///
+/// With Redis behind Sentinel, also the store's failovers and redirections.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain")))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    if let Some(t) = state.store().topology() {
+        // The store counts; the exporter shows the counts as of this scrape.
+        metrics::counter!("session_store_failovers_total").absolute(t.failovers);
+        metrics::counter!("session_store_redirections_total").absolute(t.redirections);
+        metrics::gauge!("session_store_failing_over").set(if t.failing_over { 1.0 } else { 0.0 });
+    }
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
         state.metrics().render(),

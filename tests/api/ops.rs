@@ -281,7 +281,8 @@ async fn a_store_outage_degrades_sessions_only() {
     assert_eq!(r.status(), 200);
     assert_eq!(
         r.json::<serde_json::Value>().await.unwrap(),
-        json!({"status": "ready", "reason": "session store unavailable", "store": "degraded"})
+        json!({"status": "ready", "reason": "session store unavailable", "store": "degraded",
+               "primary": format!("127.0.0.1:{port}"), "failing_over": false})
     );
     let r = app
         .post_json(
@@ -300,7 +301,8 @@ async fn a_store_outage_degrades_sessions_only() {
     assert_eq!(r.status(), 503);
     assert_eq!(
         r.json::<serde_json::Value>().await.unwrap(),
-        json!({"status": "degraded", "reason": "session store unavailable"})
+        json!({"status": "degraded", "reason": "session store unavailable",
+               "primary": format!("127.0.0.1:{port}"), "failing_over": false})
     );
     // Liveness does not depend on the store.
     let r = app.client.get(app.url("/healthz")).send().await.unwrap();
@@ -401,4 +403,146 @@ fn eval_points_to_its_own_binary() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("radar-fusion-eval --list"), "{err}");
     assert!(out.stdout.is_empty());
+}
+
+/// Runs the server binary with these environment variables until its HTTP
+/// port opens, it exits, or `wait` passes (then it is killed): whether the
+/// port opened, and everything it printed.
+fn run_server(env: &[(&str, String)], http: u16, wait: std::time::Duration) -> (bool, String) {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_radar-fusion"))
+        .args([
+            "serve",
+            "--http-addr",
+            &format!("127.0.0.1:{http}"),
+            "--grpc-addr",
+            "127.0.0.1:0",
+        ])
+        .envs(env.iter().map(|(k, v)| (*k, v.as_str())))
+        .env("RUST_BACKTRACE", "0")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + wait;
+    let mut served = false;
+    while std::time::Instant::now() < deadline {
+        if let Ok(Some(_)) = child.try_wait() {
+            break;
+        }
+        if std::net::TcpStream::connect(("127.0.0.1", http)).is_ok() {
+            served = true;
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    let out = child.wait_with_output().unwrap();
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (served, text)
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[tokio::test]
+async fn bad_redis_settings_stop_the_start_naming_them_and_never_showing_the_password() {
+    let secret = "hunter2-Pa55";
+    let wait = std::time::Duration::from_secs(20);
+    let missing =
+        std::env::temp_dir().join(format!("fusion-missing-ca-{}.pem", std::process::id()));
+    // A CA file that does not exist, with a password in the URL.
+    let (served, out) = tokio::task::spawn_blocking(move || {
+        run_server(
+            &[
+                (
+                    "FUSION_SESSION_STORE",
+                    format!("rediss://app:{secret}@127.0.0.1:1/0"),
+                ),
+                ("FUSION_REDIS_CA", missing.display().to_string()),
+            ],
+            free_port(),
+            wait,
+        )
+    })
+    .await
+    .unwrap();
+    assert!(!served, "started with a missing CA: {out}");
+    assert!(out.contains("FUSION_REDIS_CA"), "{out}");
+    assert!(!out.contains(secret) && !out.contains("panicked"), "{out}");
+
+    // FUSION_REDIS_PASSWORD against a redis-server with --requirepass.
+    if std::process::Command::new("redis-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        let _ = std::io::Write::write_all(
+            &mut std::io::stderr(),
+            b"\n!!!!!!!! SKIPPED: FUSION_REDIS_PASSWORD against redis-server: not on PATH\n",
+        );
+        return;
+    }
+    let port = free_port();
+    let dir = std::env::temp_dir().join(format!("fusion-requirepass-{port}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut redis = std::process::Command::new("redis-server")
+        .args([
+            "--port",
+            &port.to_string(),
+            "--bind",
+            "127.0.0.1",
+            "--save",
+            "",
+            "--appendonly",
+            "no",
+        ])
+        .args(["--dir", dir.to_str().unwrap(), "--requirepass", secret])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let url = format!("redis://127.0.0.1:{port}/0");
+    let (wrong_url, right_url) = (url.clone(), url);
+    let (served, out) = tokio::task::spawn_blocking(move || {
+        run_server(
+            &[
+                ("FUSION_SESSION_STORE", wrong_url),
+                ("FUSION_REDIS_PASSWORD", "not-it-0".into()),
+            ],
+            free_port(),
+            wait,
+        )
+    })
+    .await
+    .unwrap();
+    assert!(!served, "started with a wrong password: {out}");
+    assert!(out.contains("FUSION_REDIS_PASSWORD"), "{out}");
+    assert!(!out.contains("not-it-0") && !out.contains(secret), "{out}");
+    let http = free_port();
+    let (served, out) = tokio::task::spawn_blocking(move || {
+        run_server(
+            &[
+                ("FUSION_SESSION_STORE", right_url),
+                ("FUSION_REDIS_PASSWORD", secret.into()),
+            ],
+            http,
+            wait,
+        )
+    })
+    .await
+    .unwrap();
+    assert!(served, "did not start with the right password: {out}");
+    assert!(!out.contains(secret), "{out}");
+    let _ = redis.kill();
+    let _ = redis.wait();
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -4,12 +4,16 @@
 //! a replica with watchers of a session subscribes to its channel. The
 //! payload is opaque here (the service encodes it).
 //!
+//! Behind Sentinel the listener subscribes on the primary the sentinels name
+//! at each (re)connection, so it follows a failover: the old primary's death
+//! closes the subscription, and the next connection asks the sentinels.
+//!
 //! Pub/sub delivers at most once: a message published while a subscriber's
 //! connection is down is lost to it. [`Feed::Resync`] says so after every
 //! reconnection, and the watchers above then read the stored session again
 //! (which is the truth; the events only say when to look).
 
-use std::{collections::HashSet, time::Duration};
+use std::{collections::HashSet, sync::Arc, time::Duration};
 
 use redis::Client;
 use tokio::sync::mpsc;
@@ -53,24 +57,42 @@ const PING_EVERY: Duration = Duration::from_secs(10);
 const RETRY_MIN: Duration = Duration::from_millis(100);
 const RETRY_MAX: Duration = Duration::from_secs(2);
 
-/// Starts the listener task on a dedicated pub/sub connection of `client`
+/// Where the listener connects.
+#[derive(Clone)]
+pub(crate) enum Source {
+    /// One server.
+    Server(Box<Client>),
+    /// The primary the sentinels name, asked at each connection.
+    Sentinel(Arc<crate::sentinel::Sentinel>),
+}
+
+impl Source {
+    async fn client(&self) -> Option<Client> {
+        match self {
+            Self::Server(c) => Some(Client::clone(c)),
+            Self::Sentinel(s) => s.primary_client().await.ok(),
+        }
+    }
+}
+
+/// Starts the listener task on a dedicated pub/sub connection to `source`
 /// (reconnecting by itself, every command bounded by `timeout`); its feed
 /// holds at most `capacity` undelivered messages (then the task waits, and
 /// Redis buffers, up to its `client-output-buffer-limit pubsub`, after which
 /// it drops the connection: a `Resync`).
-pub fn listen(
-    client: Client,
+pub(crate) fn listen(
+    source: Source,
     timeout: Duration,
     capacity: usize,
 ) -> (EventListener, mpsc::Receiver<Feed>) {
     let (commands, rx) = mpsc::unbounded_channel();
     let (feed, out) = mpsc::channel(capacity.max(1));
-    tokio::spawn(run(client, timeout, rx, feed));
+    tokio::spawn(run(source, timeout, rx, feed));
     (EventListener { commands }, out)
 }
 
 async fn run(
-    client: Client,
+    source: Source,
     timeout: Duration,
     mut commands: mpsc::UnboundedReceiver<Command>,
     feed: mpsc::Sender<Feed>,
@@ -79,7 +101,7 @@ async fn run(
     let mut connected_before = false;
     let mut delay = RETRY_MIN;
     loop {
-        match connected(&client, timeout, &channels).await {
+        match connected(&source, timeout, &channels).await {
             Ok((mut sink, mut stream)) => {
                 delay = RETRY_MIN;
                 if connected_before && feed.send(Feed::Resync).await.is_err() {
@@ -147,10 +169,11 @@ async fn run(
 }
 
 async fn connected(
-    client: &Client,
+    source: &Source,
     timeout: Duration,
     channels: &HashSet<String>,
 ) -> Result<(redis::aio::PubSubSink, redis::aio::PubSubStream), ()> {
+    let client = source.client().await.ok_or(())?;
     let pubsub = match tokio::time::timeout(timeout, client.get_async_pubsub()).await {
         Ok(Ok(p)) => p,
         _ => return Err(()),

@@ -5,6 +5,9 @@
 //! keeps tenants apart. Two backends behind one enum: `memory` (one process)
 //! and `redis` (shared by replicas, survives restarts of the service).
 
+pub mod access;
+pub mod cluster;
+pub mod copy;
 pub mod events;
 pub mod memory;
 pub mod redis;
@@ -23,8 +26,16 @@ pub enum SessionStore {
 /// How to build a [`SessionStore`] (from `config::Settings::store_settings`).
 #[derive(Debug, Clone)]
 pub struct StoreSettings {
-    /// `memory`, or `redis://host:port/db` (`rediss://` for TLS).
+    /// `memory`, `redis://host:port/db` (`rediss://` for TLS),
+    /// `redis+sentinel://…` (`rediss+sentinel://`) or `redis+cluster://…`
+    /// (`rediss+cluster://`).
     pub url: String,
+    /// Redis: TLS files and the password (see [`access`]).
+    pub redis: access::RedisAccessSettings,
+    /// Redis (one server or Sentinel): replicas that must acknowledge each
+    /// write (`WAIT`) before it is reported done; 0: none (asynchronous
+    /// replication, a write acknowledged just before a failover can be lost).
+    pub wait_replicas: usize,
     /// Prefix of every Redis key (`{prefix}:{tenant}:…`).
     pub key_prefix: String,
     /// Most live sessions one tenant may hold.
@@ -33,6 +44,24 @@ pub struct StoreSettings {
     pub max_memory_bytes: usize,
     /// Redis backend: longest time one command may take before `Unavailable`.
     pub timeout: Duration,
+}
+
+/// Where a Redis store sends its commands, for health and metrics.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Topology {
+    /// The server in use, `host:port` (never credentials); a Cluster's seed
+    /// nodes; `None` behind Sentinel while no primary is known (before the
+    /// first answer, or after one was dropped and before the sentinels name
+    /// the next).
+    pub primary: Option<String>,
+    /// Sentinel: the primary was dropped after a failed command and no
+    /// command has succeeded since.
+    pub failing_over: bool,
+    /// Sentinel: changes of primary followed.
+    pub failovers: u64,
+    /// Sentinel: times the primary was dropped after a failure and the
+    /// sentinels asked again.
+    pub redirections: u64,
 }
 
 /// A session's state as stored.
@@ -79,6 +108,12 @@ pub enum StoreError {
     /// `create` of an id that is live already.
     #[error("a session with this id exists already")]
     AlreadyExists,
+    /// A setting is wrong (refuse to start): named, never with a secret.
+    #[error("{setting}: {reason}")]
+    Config {
+        setting: &'static str,
+        reason: String,
+    },
     /// The backend holds something that is not a session as this store writes it.
     #[error("corrupt session record: {reason}")]
     Corrupt { reason: String },
@@ -87,12 +122,15 @@ pub enum StoreError {
 impl SessionStore {
     /// Builds the store `settings.url` names. Redis is connected lazily, so
     /// this succeeds while Redis is down; calls then fail with `Unavailable`
-    /// until it is back, and the connection recovers by itself.
+    /// until it is back, and the connection recovers by itself. A Redis that
+    /// answers is checked once: a failed TLS handshake or rejected
+    /// credentials are `Config` errors (refuse to start), as are bad URLs
+    /// and TLS files.
     pub async fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
         if settings.url == "memory" {
             Ok(Self::Memory(memory::MemoryStore::new(settings)))
         } else {
-            redis::RedisStore::connect(settings).map(Self::Redis)
+            redis::RedisStore::connect(settings).await.map(Self::Redis)
         }
     }
 
@@ -210,6 +248,26 @@ impl SessionStore {
         match self {
             Self::Memory(_) => None,
             Self::Redis(s) => Some(s.channel(tenant, id)),
+        }
+    }
+
+    /// The Redis store's server and failover state (`None` for memory).
+    pub fn topology(&self) -> Option<Topology> {
+        match self {
+            Self::Memory(_) => None,
+            Self::Redis(s) => Some(s.topology()),
+        }
+    }
+
+    /// Copies every session of this Redis store into `to` (a single Redis or
+    /// Sentinel into a Cluster, or back; see [`copy`]).
+    pub async fn copy_sessions_to(&self, to: &SessionStore) -> Result<copy::Copied, StoreError> {
+        match (self, to) {
+            (Self::Redis(from), Self::Redis(to)) => copy::copy(from, to).await,
+            _ => Err(access::config(
+                access::STORE,
+                "a copy of sessions is from one Redis store to another".into(),
+            )),
         }
     }
 

@@ -9,29 +9,41 @@
 //!   by their expiry time in Unix milliseconds (Redis's clock), for counting
 //!   and listing live sessions; expired members are removed before use.
 //!
+//! On a Redis Cluster (`redis+cluster://`) the tenant is a hash tag:
+//! `{prefix}:{{tenant}}:s:{id}` and `{prefix}:{{tenant}}:idx`, so a tenant's
+//! keys share one slot and tenants spread over the primaries.
+//!
 //! `create`, `compare_and_set`, `delete` and `list` are Lua scripts, so each
 //! is atomic. The list script reads the session keys it finds in the index,
-//! which a Redis Cluster would not allow across slots: this store targets a
-//! single Redis (or a primary with replicas). Every command is bounded by the
-//! configured timeout and fails with `Unavailable`; the `ConnectionManager`
-//! reconnects by itself when Redis comes back.
+//! which are in the index's slot (the tenant's hash tag) on a Cluster.
+//! Every command is bounded by the configured timeout and fails with
+//! `Unavailable`; the connections reconnect by themselves when Redis comes
+//! back.
 
-use std::{future::Future, time::Duration};
+use std::{future::Future, sync::Arc, time::Duration};
 
 use redis::{
-    Client, RedisError, Script,
-    aio::{ConnectionManager, ConnectionManagerConfig},
+    Client, Cmd, Pipeline, RedisError, RedisFuture, Script, Value,
+    aio::{ConnectionLike, ConnectionManager, ConnectionManagerConfig},
+    cluster_async::ClusterConnection,
 };
 
-use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, ttl_ms};
+use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, access, ttl_ms};
 
 pub struct RedisStore {
     /// For the event listener's own pub/sub connection (a single server).
     client: Option<Client>,
     conn: Option<ConnectionManager>,
     /// Set for a `redis+sentinel://` URL: the primary is found through it.
-    sentinel: Option<Box<super::sentinel::Sentinel>>,
+    sentinel: Option<Arc<super::sentinel::Sentinel>>,
+    /// A single server's `host:port` (no credentials), for health.
+    server: String,
+    /// Set for a `redis+cluster://` URL; keys then carry the tenant as a
+    /// hash tag.
+    cluster: Option<Arc<super::cluster::Cluster>>,
     prefix: String,
+    /// Replicas that must acknowledge each write (`WAIT`), 0 for none.
+    wait_replicas: usize,
     max_sessions_per_tenant: usize,
     timeout: Duration,
     create: Script,
@@ -41,13 +53,13 @@ pub struct RedisStore {
 }
 
 /// Redis's clock in Unix milliseconds, as a Lua expression's prelude.
-const NOW_MS: &str = r"
+pub(crate) const NOW_MS: &str = r"
 local t = redis.call('TIME')
 local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)
 ";
 
 /// Keeps the index alive at least as long as the session just written.
-const EXTEND_INDEX: &str = r"
+pub(crate) const EXTEND_INDEX: &str = r"
 if redis.call('PTTL', KEYS[2]) < tonumber(ARGV[3]) then
   redis.call('PEXPIRE', KEYS[2], ARGV[3])
 end
@@ -102,22 +114,41 @@ return out
 
 impl RedisStore {
     /// A store over a lazily connected, self-reconnecting connection: this
-    /// fails only when the URL is not a Redis URL, never because Redis is down.
-    pub fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
+    /// fails when a setting is wrong (the URL, TLS files, or a TLS handshake
+    /// or credentials that a Redis answering at start rejects), never
+    /// because Redis is down.
+    pub async fn connect(settings: &StoreSettings) -> Result<Self, StoreError> {
         if super::sentinel::is_sentinel_url(&settings.url) {
-            let url = super::sentinel::parse(&settings.url)?;
-            return Ok(Self::with_conn(
-                settings,
-                None,
-                Some(Box::new(super::sentinel::Sentinel::new(
-                    url,
-                    settings.timeout,
-                ))),
-            ));
+            let (url, access) = super::sentinel::parse(&settings.url, &settings.redis)?;
+            let sentinel = super::sentinel::Sentinel::new(url, access, settings.timeout);
+            sentinel.check().await?;
+            let sentinel = Arc::new(sentinel);
+            sentinel.follow_switches();
+            return Ok(Self::with_conn(settings, None, Some(sentinel)));
         }
-        let client = Client::open(settings.url.as_str()).map_err(|e| StoreError::Unavailable {
-            reason: format!("invalid Redis URL: {e}"),
-        })?;
+        if super::cluster::is_cluster_url(&settings.url) {
+            if settings.wait_replicas > 0 {
+                return Err(access::config(
+                    "FUSION_REDIS_WAIT_REPLICAS",
+                    "is for one Redis or Sentinel; a Cluster's writes are not waited for".into(),
+                ));
+            }
+            let cluster =
+                super::cluster::Cluster::connect(&settings.url, &settings.redis, settings.timeout)
+                    .await?;
+            let mut store = Self::with_conn(settings, None, None);
+            store.cluster = Some(Arc::new(cluster));
+            return Ok(store);
+        }
+        let url = access::parse_server_url(&settings.url)?;
+        let access = access::Access::new(&settings.redis, url.tls, url.user, url.password)?;
+        let client = access.client(&url.host, url.port, url.db)?;
+        access::probe(
+            &client,
+            settings.timeout,
+            &format!("Redis {}:{}", url.host, url.port),
+        )
+        .await?;
         // One quick retry, then fail: the next command starts a new attempt, so
         // a Redis that comes back is found again within one command or two.
         let config = ConnectionManagerConfig::new()
@@ -130,19 +161,23 @@ impl RedisStore {
             ConnectionManager::new_lazy_with_config(client.clone(), config).map_err(unavailable)?;
         let mut store = Self::with_conn(settings, Some(conn), None);
         store.client = Some(client);
+        store.server = format!("{}:{}", url.host, url.port);
         Ok(store)
     }
 
     fn with_conn(
         settings: &StoreSettings,
         conn: Option<ConnectionManager>,
-        sentinel: Option<Box<super::sentinel::Sentinel>>,
+        sentinel: Option<Arc<super::sentinel::Sentinel>>,
     ) -> Self {
         Self {
             client: None,
             conn,
             sentinel,
+            server: String::new(),
+            cluster: None,
             prefix: settings.key_prefix.clone(),
+            wait_replicas: settings.wait_replicas,
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
             create: Script::new(&format!("{NOW_MS}{CREATE}{EXTEND_INDEX}return 1")),
@@ -154,26 +189,42 @@ impl RedisStore {
 
     /// The connection to use: the single server's, or the primary's that
     /// the sentinels name.
-    async fn connection(&self) -> Result<ConnectionManager, StoreError> {
-        match (&self.conn, &self.sentinel) {
-            (Some(c), _) => Ok(c.clone()),
-            (None, Some(s)) => s.conn().await,
-            (None, None) => Err(StoreError::Unavailable {
+    async fn connection(&self) -> Result<Conn, StoreError> {
+        match (&self.conn, &self.sentinel, &self.cluster) {
+            (Some(c), _, _) => Ok(Conn::Single(c.clone())),
+            (None, Some(s), _) => s.conn().await.map(Conn::Single),
+            (None, None, Some(c)) => c.conn().await.map(Conn::Cluster),
+            (None, None, None) => Err(StoreError::Unavailable {
                 reason: "no Redis connection configured".into(),
             }),
         }
     }
 
-    /// With Sentinel: the primary in use (`host:port`), if one is known.
-    pub fn sentinel_primary(&self) -> Option<String> {
-        self.sentinel.as_ref().and_then(|s| s.primary())
-    }
-
-    /// With Sentinel: (primary changes followed, rediscoveries after a failure).
-    pub fn sentinel_counts(&self) -> Option<(u64, u64)> {
-        self.sentinel
-            .as_ref()
-            .map(|s| (s.failovers(), s.rediscoveries()))
+    /// The server in use and, behind Sentinel, the failover state.
+    /// On a Cluster, `primary` is its seed nodes.
+    pub fn topology(&self) -> crate::Topology {
+        if let Some(c) = &self.cluster {
+            return crate::Topology {
+                primary: Some(c.seeds.clone()),
+                failing_over: false,
+                failovers: 0,
+                redirections: 0,
+            };
+        }
+        match &self.sentinel {
+            Some(s) => crate::Topology {
+                primary: s.primary(),
+                failing_over: s.failing_over(),
+                failovers: s.failovers(),
+                redirections: s.rediscoveries(),
+            },
+            None => crate::Topology {
+                primary: Some(self.server.clone()),
+                failing_over: false,
+                failovers: 0,
+                redirections: 0,
+            },
+        }
     }
 
     pub async fn create(
@@ -193,7 +244,7 @@ impl RedisStore {
             .arg(self.max_sessions_per_tenant)
             .arg(kind);
         match self.bounded(call.invoke_async::<i64>(&mut conn)).await? {
-            1 => Ok(1),
+            1 => self.replicated(&mut conn).await.map(|()| 1),
             -1 => Err(StoreError::AlreadyExists),
             -2 => Err(StoreError::TooManySessions {
                 limit: self.max_sessions_per_tenant,
@@ -246,9 +297,12 @@ impl RedisStore {
         let (status, version): (i64, String) = self.bounded(call.invoke_async(&mut conn)).await?;
         match status {
             0 => Ok(CasOutcome::Missing),
-            1 => Ok(CasOutcome::Stored {
-                version: parse_version(&version)?,
-            }),
+            1 => {
+                self.replicated(&mut conn).await?;
+                Ok(CasOutcome::Stored {
+                    version: parse_version(&version)?,
+                })
+            }
             2 => Ok(CasOutcome::Conflict {
                 current: parse_version(&version)?,
             }),
@@ -261,6 +315,7 @@ impl RedisStore {
         let mut call = self.delete.key(self.session_key(tenant, id));
         call.key(self.index_key(tenant)).arg(escape(id));
         let deleted: i64 = self.bounded(call.invoke_async(&mut conn)).await?;
+        self.replicated(&mut conn).await?;
         Ok(deleted > 0)
     }
 
@@ -299,6 +354,36 @@ impl RedisStore {
         v.map(|v| parse_version(&v)).transpose()
     }
 
+    /// With `wait_replicas`, waits until that many replicas hold the
+    /// writes made so far on `conn` (`WAIT`, for half the timeout); fewer
+    /// is `Unavailable`: the write is done on the primary but could be lost
+    /// with it, so the caller answers "may or may not have been applied;
+    /// retry with the same sequence", which is right either way.
+    async fn replicated(&self, conn: &mut Conn) -> Result<(), StoreError> {
+        if self.wait_replicas == 0 {
+            return Ok(());
+        }
+        let wait_ms = (self.timeout.as_millis() / 2).max(1) as u64;
+        let acked: usize = self
+            .bounded(
+                redis::cmd("WAIT")
+                    .arg(self.wait_replicas)
+                    .arg(wait_ms)
+                    .query_async(conn),
+            )
+            .await?;
+        if acked >= self.wait_replicas {
+            Ok(())
+        } else {
+            Err(StoreError::Unavailable {
+                reason: format!(
+                    "the write reached {acked} of the {} replicas it waits for within {wait_ms} ms",
+                    self.wait_replicas
+                ),
+            })
+        }
+    }
+
     /// `PUBLISH` on the session's event channel.
     pub async fn publish(&self, tenant: &str, id: &str, payload: &[u8]) -> Result<(), StoreError> {
         let mut conn = self.connection().await?;
@@ -313,9 +398,8 @@ impl RedisStore {
         Ok(())
     }
 
-    /// Starts this replica's event listener (see [`crate::events`]); `None`
-    /// behind Sentinel, where watchers of another replica's pushes see them
-    /// at their heartbeats (the listener does not follow a failover yet).
+    /// Starts this replica's event listener (see [`crate::events`]); behind
+    /// Sentinel it follows the primary.
     pub fn listen(
         &self,
         capacity: usize,
@@ -323,8 +407,17 @@ impl RedisStore {
         crate::events::EventListener,
         tokio::sync::mpsc::Receiver<crate::events::Feed>,
     )> {
-        let client = self.client.clone()?;
-        Some(crate::events::listen(client, self.timeout, capacity))
+        let source = match (&self.client, &self.sentinel, &self.cluster) {
+            (Some(c), _, _) => crate::events::Source::Server(Box::new(c.clone())),
+            (None, Some(s), _) => crate::events::Source::Sentinel(s.clone()),
+            // PUBLISH on a Cluster reaches every node: listen on the first seed.
+            (None, None, Some(c)) => {
+                let (host, port) = &c.first;
+                crate::events::Source::Server(Box::new(c.access.client(host, *port, 0).ok()?))
+            }
+            (None, None, None) => return None,
+        };
+        Some(crate::events::listen(source, self.timeout, capacity))
     }
 
     /// `{prefix}:ev:{tenant}:{id}`, escaped as the keys are.
@@ -341,11 +434,126 @@ impl RedisStore {
     }
 
     fn session_key(&self, tenant: &str, id: &str) -> String {
-        format!("{}:{}:s:{}", self.prefix, escape(tenant), escape(id))
+        format!("{}:s:{}", self.tenant_part(tenant), escape(id))
     }
 
     fn index_key(&self, tenant: &str) -> String {
-        format!("{}:{}:idx", self.prefix, escape(tenant))
+        format!("{}:idx", self.tenant_part(tenant))
+    }
+
+    pub(crate) fn is_cluster(&self) -> bool {
+        self.cluster.is_some()
+    }
+
+    /// Every tenant's index key (`SCAN`; one server, not a Cluster).
+    pub(crate) async fn index_keys(&self) -> Result<Vec<String>, StoreError> {
+        let mut conn = self.connection().await?;
+        let pattern = format!("{}:*:idx", self.prefix);
+        let (mut cursor, mut keys) = (0u64, Vec::new());
+        loop {
+            let (next, batch): (u64, Vec<String>) = self
+                .bounded(
+                    redis::cmd("SCAN")
+                        .arg(cursor)
+                        .arg("MATCH")
+                        .arg(&pattern)
+                        .arg("COUNT")
+                        .arg(1000)
+                        .query_async(&mut conn),
+                )
+                .await?;
+            keys.extend(batch);
+            if next == 0 {
+                return Ok(keys);
+            }
+            cursor = next;
+        }
+    }
+
+    /// The tenant an index key of this store's layout belongs to.
+    pub(crate) fn tenant_of_index(&self, index: &str) -> Option<String> {
+        let escaped = index
+            .strip_prefix(&format!("{}:", self.prefix))?
+            .strip_suffix(":idx")?;
+        let escaped = if self.is_cluster() {
+            escaped.strip_prefix('{')?.strip_suffix('}')?
+        } else {
+            escaped
+        };
+        unescape(escaped)
+    }
+
+    /// The live sessions in one index, as stored.
+    pub(crate) async fn raw_sessions(
+        &self,
+        index: &str,
+        tenant: &str,
+    ) -> Result<Vec<RawSession>, StoreError> {
+        let mut conn = self.connection().await?;
+        let ids: Vec<String> = self
+            .bounded(
+                redis::cmd("ZRANGE")
+                    .arg(index)
+                    .arg(0)
+                    .arg(-1)
+                    .query_async(&mut conn),
+            )
+            .await?;
+        let mut out = Vec::new();
+        for id in ids {
+            let key = format!("{}:s:{id}", self.tenant_part(tenant));
+            type Fields = (Option<String>, Option<Vec<u8>>, Option<String>);
+            let ((v, d, k), pttl): (Fields, i64) = self
+                .bounded(
+                    redis::pipe()
+                        .cmd("HMGET")
+                        .arg(&key)
+                        .arg("v")
+                        .arg("d")
+                        .arg("k")
+                        .cmd("PTTL")
+                        .arg(&key)
+                        .query_async(&mut conn),
+                )
+                .await?;
+            if let (Some(version), Some(data), true) = (v, d, pttl > 0) {
+                out.push(RawSession {
+                    escaped_id: id,
+                    version,
+                    data,
+                    kind: k.unwrap_or_else(|| "correlation".into()),
+                    ttl_ms: pttl,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// Runs a script on a session's key and its tenant's index, with the
+    /// arguments `args` adds; its integer answer.
+    pub(crate) async fn run_script(
+        &self,
+        script: &Script,
+        tenant: &str,
+        id: &str,
+        args: impl FnOnce(&mut redis::ScriptInvocation<'_>),
+    ) -> Result<i64, StoreError> {
+        let mut conn = self.connection().await?;
+        let mut call = script.key(self.session_key(tenant, id));
+        call.key(self.index_key(tenant));
+        args(&mut call);
+        self.bounded(call.invoke_async(&mut conn)).await
+    }
+
+    /// `{prefix}:{tenant}`, or on a Cluster `{prefix}:{{tenant}}` (the hash
+    /// tag: the first `{…}` of every key of the tenant is the same, since it
+    /// lies in this common beginning).
+    fn tenant_part(&self, tenant: &str) -> String {
+        if self.cluster.is_some() {
+            format!("{}:{{{}}}", self.prefix, escape(tenant))
+        } else {
+            format!("{}:{}", self.prefix, escape(tenant))
+        }
     }
 
     /// Runs one command within the timeout; errors and timeouts are `Unavailable`
@@ -355,12 +563,14 @@ impl RedisStore {
         command: impl Future<Output = Result<T, RedisError>>,
     ) -> Result<T, StoreError> {
         let result = self.bounded_inner(command).await;
-        if matches!(result, Err(StoreError::Unavailable { .. }))
-            && let Some(s) = &self.sentinel
-        {
-            // A connection error, a time-out or READONLY: ask the sentinels
-            // again before the next command.
-            s.invalidate();
+        if let Some(s) = &self.sentinel {
+            match &result {
+                // A connection error, a time-out or READONLY: ask the
+                // sentinels again before the next command.
+                Err(StoreError::Unavailable { .. }) => s.invalidate(),
+                Err(_) => {}
+                Ok(_) => s.confirm(),
+            }
         }
         result
     }
@@ -379,6 +589,50 @@ impl RedisStore {
                     self.timeout.as_millis()
                 ),
             }),
+        }
+    }
+}
+
+/// A session's fields as stored (for a copy between key layouts).
+pub(crate) struct RawSession {
+    pub(crate) escaped_id: String,
+    pub(crate) version: String,
+    pub(crate) data: Vec<u8>,
+    pub(crate) kind: String,
+    pub(crate) ttl_ms: i64,
+}
+
+/// The connection of a single server (or Sentinel's primary) or of a Cluster.
+#[derive(Clone)]
+enum Conn {
+    Single(ConnectionManager),
+    Cluster(ClusterConnection),
+}
+
+impl ConnectionLike for Conn {
+    fn req_packed_command<'a>(&'a mut self, cmd: &'a Cmd) -> RedisFuture<'a, Value> {
+        match self {
+            Self::Single(c) => c.req_packed_command(cmd),
+            Self::Cluster(c) => c.req_packed_command(cmd),
+        }
+    }
+
+    fn req_packed_commands<'a>(
+        &'a mut self,
+        pipeline: &'a Pipeline,
+        offset: usize,
+        count: usize,
+    ) -> RedisFuture<'a, Vec<Value>> {
+        match self {
+            Self::Single(c) => c.req_packed_commands(pipeline, offset, count),
+            Self::Cluster(c) => c.req_packed_commands(pipeline, offset, count),
+        }
+    }
+
+    fn get_db(&self) -> i64 {
+        match self {
+            Self::Single(c) => c.get_db(),
+            Self::Cluster(c) => c.get_db(),
         }
     }
 }

@@ -65,6 +65,11 @@ impl From<StoreError> for ServiceError {
             StoreError::Corrupt { reason } => {
                 ServiceError::Internal(format!("stored session: {reason}"))
             }
+            // Refused at start; met later only if the server's certificate or
+            // credentials change under a running service.
+            StoreError::Config { setting, .. } => ServiceError::Unavailable(format!(
+                "the session store refuses this service's {setting}; retry shortly"
+            )),
         }
     }
 }
