@@ -33,7 +33,6 @@ use crate::report::{LinePlot, Report, Series, markdown_table};
 use crate::scenario001::{Frame, TrackPoint, radar_spec, scan_plots, score_frames, summarise};
 use crate::{SimError, SimRng};
 
-const RADAR_COUNTS: [usize; 3] = [2, 3, 4];
 const RANGE_BIAS_M: f64 = 500.0;
 const AZIMUTH_BIAS_DEG: f64 = 0.5;
 /// Frames from this time on are scored apart ("settled"): every run's
@@ -99,8 +98,26 @@ fn run_frames(
     Ok((frames, tracker))
 }
 
+/// The scenes: every radar biased at random, for 2, 3 and 4 radars; then
+/// two radars, the second biased by a fixed amount (range m, azimuth °).
+const SCENES: [(usize, Option<[f64; 2]>); 5] = [
+    (2, None),
+    (3, None),
+    (4, None),
+    (2, Some([300.0, 0.3])),
+    (2, Some([600.0, 0.6])),
+];
+
+fn scene_name(n: usize, fixed: Option<[f64; 2]>) -> String {
+    match fixed {
+        None => format!("{n}, all biased"),
+        Some([r, a]) => format!("{n}, one at +{r} m +{a}°"),
+    }
+}
+
 fn one_run(
     n: usize,
+    fixed: Option<[f64; 2]>,
     n_targets: usize,
     duration: f64,
     rng: &mut SimRng,
@@ -109,12 +126,14 @@ fn one_run(
     let (truth, _): (Vec<_>, Vec<bool>) = targets(n_targets, duration, rng)?.into_iter().unzip();
     let (plots, _) = scan_plots(&radars, &truth, duration, rng)?;
     let biases: Vec<[f64; 2]> = (0..n)
-        .map(|_| {
-            [
+        .map(|r| match fixed {
+            Some([range, az]) if r == 1 => [range, az.to_radians()],
+            Some(_) => [0.0, 0.0],
+            None => [
                 rng.random_range(-RANGE_BIAS_M..RANGE_BIAS_M),
                 rng.random_range(-AZIMUTH_BIAS_DEG..AZIMUTH_BIAS_DEG)
                     .to_radians(),
-            ]
+            ],
         })
         .collect();
     let biased: Vec<Plot> = plots
@@ -193,7 +212,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
     let scans = opts.scans.unwrap_or(DEFAULT_SCANS).max(2);
     let duration = SCAN_UNIT_S * scans as f64;
     let mut csv = String::from(
-        "radars,run,method,rmse_m,mean_nees,gospa_m,false_tracks_per_h,duplicates_per_frame,track_breaks_per_h\n",
+        "scene,run,method,rmse_m,mean_nees,gospa_m,false_tracks_per_h,duplicates_per_frame,track_breaks_per_h\n",
     );
     let mut rows = Vec::new();
     let mut bias_rows = Vec::new();
@@ -205,18 +224,17 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             dashed: false,
         })
         .collect();
-    for &n in &RADAR_COUNTS {
-        let per_run = run_batch(
-            &opts.runner,
-            &format!("registration {n} radars"),
-            |_, rng| one_run(n, targets, duration, rng),
-        );
+    for &(n, fixed) in &SCENES {
+        let scene = scene_name(n, fixed);
+        let per_run = run_batch(&opts.runner, &format!("registration {scene}"), |_, rng| {
+            one_run(n, fixed, targets, duration, rng)
+        });
         let per_run: Vec<RunOut> = per_run.into_iter().collect::<Result<_, _>>()?;
         for (r, run) in per_run.iter().enumerate() {
             for (m, f) in run.figures.iter().enumerate() {
                 let _ = writeln!(
                     csv,
-                    "{n},{r},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+                    "{scene},{r},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
                     METHODS[m],
                     f.rmse,
                     f.nees,
@@ -233,7 +251,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         };
         for m in 0..3 {
             rows.push(vec![
-                n.to_string(),
+                scene.clone(),
                 METHODS[m].into(),
                 pm(m, |f| f.rmse, 1),
                 pm(m, |f| f.rmse_settled, 1),
@@ -243,6 +261,9 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
                 pm(m, |f| f.duplicates, 2),
                 pm(m, |f| f.breaks_per_h, 1),
             ]);
+            if fixed.is_some() {
+                continue;
+            }
             series[m].points.push((
                 n as f64,
                 mean_se(
@@ -269,7 +290,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         };
         let converged: Vec<f64> = per_run.iter().filter_map(|r| r.converged_at).collect();
         bias_rows.push(vec![
-            n.to_string(),
+            scene.clone(),
             format!("{:.1} / {:.3}", rms(0), rms(1)),
             format!("{:.1} / {:.3}", rms(4), rms(5)),
             format!(
@@ -296,13 +317,14 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         md,
         "{targets} targets (half turning at 2–4 m/s²) over {duration} s, 2D Doppler radars 20 km \
          from the centre (periods 4–6 s, random phases, P_D 0.9, 3 false plots per scan), every \
-         radar biased at random (range in ±{RANGE_BIAS_M} m, azimuth in ±{AZIMUTH_BIAS_DEG}°); the \
-         tracker's defaults (IMM, serial). {} runs per radar count from seed {}.\n",
+         radar biased at random (range in ±{RANGE_BIAS_M} m, azimuth in ±{AZIMUTH_BIAS_DEG}°), or \
+         two radars of which the second is biased by a fixed amount; the tracker's defaults (IMM, \
+         serial). {} runs per scene from seed {}.\n",
         opts.runner.runs, opts.runner.seed
     );
     md.push_str(&markdown_table(
         &[
-            "radars",
+            "scene (radars)",
             "tracker",
             "position RMSE (m)",
             "RMSE after 100 s (m)",
@@ -321,7 +343,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
     );
     md.push_str(&markdown_table(
         &[
-            "radars",
+            "scene (radars)",
             "RMS error (relative)",
             "RMS error (absolute)",
             "mean reported σ",
