@@ -125,8 +125,15 @@ pub fn run_tracker(
 ) -> Result<(Vec<Frame>, Counters), SimError> {
     let mut tracker = Tracker::new(config)?;
     let mut frames = Vec::new();
-    tracker.process_with(plots, true, &mut |tr: &Tracker| {
-        let tracks = tr
+    tracker.process_with(plots, true, &mut |tr: &Tracker| frames.push(frame_of(tr)))?;
+    Ok((frames, tracker.counters()))
+}
+
+/// A tracker's confirmed tracks at its last frame, horizontally.
+pub fn frame_of(tr: &Tracker) -> Frame {
+    Frame {
+        t: tr.last_time().unwrap_or(f64::NAN),
+        tracks: tr
             .confirmed_tracks()
             .iter()
             .map(|o| TrackPoint {
@@ -137,13 +144,8 @@ pub fn run_tracker(
                     [o.covariance[(2, 0)], o.covariance[(2, 2)]],
                 ],
             })
-            .collect();
-        frames.push(Frame {
-            t: tr.last_time().unwrap_or(f64::NAN),
-            tracks,
-        });
-    })?;
-    Ok((frames, tracker.counters()))
+            .collect(),
+    }
 }
 
 /// One assigned (target, track) pair of a frame.

@@ -39,9 +39,7 @@ use super::{EvalOptions, mean_se};
 use crate::metrics::rmse;
 use crate::montecarlo::run_batch;
 use crate::report::{LinePlot, Report, Series, markdown_table};
-use crate::scenario001::{
-    Frame, TrackPoint, radar_spec, run_tracker, scan_plots, score_frames, summarise,
-};
+use crate::scenario001::{frame_of, radar_spec, run_tracker, scan_plots, score_frames, summarise};
 use crate::{SimError, SimRng};
 
 const RADARS: usize = 3;
@@ -68,24 +66,6 @@ const METHODS: [&str; 3] = [
     "before: tracker fed as plots arrive",
     "after: lag window (15 s)",
 ];
-
-fn confirmed_frame(tr: &Tracker) -> Frame {
-    Frame {
-        t: tr.last_time().unwrap_or(f64::NAN),
-        tracks: tr
-            .confirmed_tracks()
-            .iter()
-            .map(|o| TrackPoint {
-                id: o.id,
-                position: [o.state[0], o.state[2]],
-                covariance: [
-                    [o.covariance[(0, 0)], o.covariance[(0, 2)]],
-                    [o.covariance[(2, 0)], o.covariance[(2, 2)]],
-                ],
-            })
-            .collect(),
-    }
-}
 
 /// The p-quantile of sorted values.
 fn quantile(sorted: &[f64], p: f64) -> f64 {
@@ -178,7 +158,7 @@ fn one_run(n_targets: usize, duration: f64, rng: &mut SimRng) -> Result<[Figures
                 true
             }
         });
-        frames_before.push(confirmed_frame(&before));
+        frames_before.push(frame_of(&before));
 
         let started = Instant::now();
         let push = after.push(&plots)?;
@@ -191,7 +171,7 @@ fn one_run(n_targets: usize, duration: f64, rng: &mut SimRng) -> Result<[Figures
                 .filter(|(k, _)| !push.late.contains(k))
                 .map(|(_, (a, _))| end - a),
         );
-        frames_after.push(confirmed_frame(after.picture()));
+        frames_after.push(frame_of(after.picture()));
     }
     let n = plots.len().max(1) as f64;
     for (k, (frames, seconds, latency)) in [

@@ -30,7 +30,7 @@ use super::{EvalOptions, mean_se};
 use crate::metrics::rmse;
 use crate::montecarlo::run_batch;
 use crate::report::{LinePlot, Report, Series, markdown_table};
-use crate::scenario001::{Frame, TrackPoint, radar_spec, scan_plots, score_frames, summarise};
+use crate::scenario001::{Frame, frame_of, radar_spec, scan_plots, score_frames, summarise};
 use crate::{SimError, SimRng};
 
 const RANGE_BIAS_M: f64 = 500.0;
@@ -79,21 +79,7 @@ fn run_frames(
         if converged_at.is_none() && tr.biases().iter().all(|b| b.converged) {
             *converged_at = Some(t);
         }
-        frames.push(Frame {
-            t,
-            tracks: tr
-                .confirmed_tracks()
-                .iter()
-                .map(|o| TrackPoint {
-                    id: o.id,
-                    position: [o.state[0], o.state[2]],
-                    covariance: [
-                        [o.covariance[(0, 0)], o.covariance[(0, 2)]],
-                        [o.covariance[(2, 0)], o.covariance[(2, 2)]],
-                    ],
-                })
-                .collect(),
-        });
+        frames.push(frame_of(tr));
     })?;
     Ok((frames, tracker))
 }
