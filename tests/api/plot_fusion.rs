@@ -915,6 +915,9 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     assert_eq!(pf.mode, "serial");
     assert_eq!(pf.max_lag_s, 60.0);
     assert_eq!(pf.tracks, whole.tracks);
+    // The radars' biases, as the batch call's.
+    assert_eq!(pf.registration.len(), 2);
+    assert_eq!(pf.registration, whole.registration);
     assert_eq!(pf.counters, whole.counters);
 }
 
