@@ -132,15 +132,22 @@ enum Method {
     Cv3,
     Cv1,
     FormerVertical,
+    /// Every radar biased (range ±500 m, azimuth ±0.5°, elevation ±0.2°,
+    /// uniform), the defaults (registration on).
+    Biased,
+    /// The same biased plots, registration off.
+    BiasedUnregistered,
 }
 
-const METHODS: [Method; 6] = [
+const METHODS: [Method; 8] = [
     Method::Default,
     Method::FormerVertical,
     Method::NoRangeRate,
     Method::Parallel,
     Method::Cv3,
     Method::Cv1,
+    Method::Biased,
+    Method::BiasedUnregistered,
 ];
 
 impl Method {
@@ -152,6 +159,8 @@ impl Method {
             Method::Cv3 => "CV √q = 3 (the default before the IMM)",
             Method::Cv1 => "CV √q = 1",
             Method::FormerVertical => "default IMM with its CV model's vertical √q 0.5 (before)",
+            Method::Biased => "default, every radar biased (±500 m, ±0.5°, ±0.2° el.), registered",
+            Method::BiasedUnregistered => "the same biased plots, registration off",
         }
     }
 
@@ -164,7 +173,8 @@ impl Method {
         }
         let mut c = TrackerConfig::new(3, specs);
         match self {
-            Method::Default | Method::NoRangeRate => {}
+            Method::Default | Method::NoRangeRate | Method::Biased => {}
+            Method::BiasedUnregistered => c.registration.enabled = false,
             Method::Parallel => c.set_mode(Mode::Parallel),
             Method::FormerVertical => {
                 let mut imm = Imm::aircraft();
@@ -713,13 +723,36 @@ fn one_run(
             ..*p
         })
         .collect();
+    // Drawn after the plots, so the other methods' plots are those of the
+    // release before this variant.
+    let biases: Vec<[f64; 3]> = (0..radars.len())
+        .map(|_| {
+            [
+                rng.random_range(-500.0..500.0),
+                rng.random_range(-0.5f64..0.5).to_radians(),
+                rng.random_range(-0.2f64..0.2).to_radians(),
+            ]
+        })
+        .collect();
+    let biased: Vec<Plot> = plots
+        .iter()
+        .map(|p| {
+            let b = biases[p.radar];
+            Plot {
+                range: (p.range + b[0]).max(0.0),
+                azimuth: p.azimuth + b[1],
+                elevation: p.elevation.map(|e| e + b[2]),
+                ..*p
+            }
+        })
+        .collect();
     METHODS
         .iter()
         .map(|m| {
-            let p = if matches!(m, Method::NoRangeRate) {
-                &without_doppler
-            } else {
-                &plots
+            let p = match m {
+                Method::NoRangeRate => &without_doppler,
+                Method::Biased | Method::BiasedUnregistered => &biased,
+                _ => &plots,
             };
             track(m.config(&specs), p, &targets, chi2)
         })
