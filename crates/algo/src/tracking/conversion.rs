@@ -141,9 +141,7 @@ impl CartesianPlot {
         }
         Linearised { innovation, h, r }
     }
-}
 
-impl CartesianPlot {
     /// The (extended) Kalman update of (x, P) with the plot
     /// ([`CartesianPlot::linearise`]); the linear position update when it
     /// carries no range rate.

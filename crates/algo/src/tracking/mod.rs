@@ -60,6 +60,8 @@ pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
 
+use std::collections::HashMap;
+
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
 use associator::{
@@ -399,10 +401,19 @@ impl Tracker {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let learn = self.config.registration.enabled && self.config.radars.len() >= 2;
-        let previous: Vec<(u64, Option<Plot>)> = if learn {
-            self.tracks.iter().map(|tr| (tr.id, tr.last_plot)).collect()
+        // Tracks whose last update was another radar's plot: those hit by
+        // this frame give a pair.
+        let previous: HashMap<u64, Plot> = if learn {
+            self.tracks
+                .iter()
+                .filter_map(|tr| {
+                    tr.last_plot
+                        .filter(|p| p.radar != index)
+                        .map(|p| (tr.id, p))
+                })
+                .collect()
         } else {
-            Vec::new()
+            HashMap::new()
         };
         let source = Source::Radar {
             spec,
@@ -410,36 +421,30 @@ impl Tracker {
         };
         self.run_frame(t, source, plots, view, report)?;
         if learn {
-            self.learn_biases(index, &frame, &previous)?;
+            self.learn_biases(index, &previous)?;
         }
         Ok(())
     }
 
     /// Registration: the pairs of this frame (a confirmed track updated by
-    /// a plot of radar `index` whose previous update was another radar's
-    /// plot), then the estimate solved again.
+    /// a plot of radar `index` whose previous update, in `previous`, was
+    /// another radar's plot), then the estimate solved again.
     fn learn_biases(
         &mut self,
         index: usize,
-        frame: &[Plot],
-        previous: &[(u64, Option<Plot>)],
+        previous: &HashMap<u64, Plot>,
     ) -> Result<(), AlgoError> {
         let cfg = &self.config;
         let mut solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
         let q = cfg.largest_process_noise();
         let mut added = false;
         for tr in &self.tracks {
-            let Some(newer) = tr.last_plot.filter(|p| {
-                p.radar == index && frame.iter().any(|f| f.t == p.t && f.range == p.range)
-            }) else {
-                continue;
-            };
-            let Some(older) = previous
-                .iter()
-                .find(|(id, _)| *id == tr.id)
-                .and_then(|(_, p)| *p)
-                .filter(|p| p.radar != index)
-            else {
+            // A last plot of radar `index` where the frame began with
+            // another radar's: the track was hit by this frame.
+            let (Some(newer), Some(older)) = (
+                tr.last_plot.filter(|p| p.radar == index),
+                previous.get(&tr.id),
+            ) else {
                 continue;
             };
             let axes = cfg.axes;
@@ -448,7 +453,7 @@ impl Tracker {
                 nalgebra::DMatrix::from_fn(axes, axes, |i, k| tr.p[(2 * i + 1, 2 * k + 1)]);
             let pair = registration::Pair {
                 newer: &newer,
-                older: &older,
+                older,
                 velocity: &velocity,
                 velocity_cov: &velocity_cov,
                 q,
@@ -480,14 +485,20 @@ impl Tracker {
     ) -> Result<(), AlgoError> {
         let t = self.instant_time(k);
         let manoeuvre_q = self.config.largest_process_noise();
+        let specs: Vec<RadarSpec> = self
+            .config
+            .radars
+            .iter()
+            .zip(&self.biases)
+            .map(|(r, b)| registration::inflated(r, b))
+            .collect();
         let registered = frame
             .iter()
             .map(|p| {
-                let bias = &self.biases[p.radar];
                 extrapolate(
-                    &registration::inflated(&self.config.radars[p.radar], bias),
+                    &specs[p.radar],
                     p.radar,
-                    &registration::correct(p, bias),
+                    &registration::correct(p, &self.biases[p.radar]),
                     t,
                     self.config.sigma_tangential_speed,
                     manoeuvre_q,
