@@ -19,7 +19,10 @@ test target (TST = 1) and a report of an unknown SAC/SIC.
 
 Outputs (checked in): tests/fixtures/asterix/scene.bin (the bytes) and
 scene.json (per record: its byte offset, category and decoded values, in
-the specification's units and in SI: 1 NM = 1852 m, 1 ft = 0.3048 m).
+the specification's units and in SI: 1 NM = 1852 m, 1 ft = 0.3048 m); and
+scene_biased.bin, the same scene (same noise draws) with radar B's
+measured range longer by BIAS_B's 300 m and its azimuth by 0.3 deg, for the
+registration test of the UDP listener.
 """
 import json
 import math
@@ -49,6 +52,8 @@ TARGETS = [
     (0.0, 25000.0, 60.0, 150.0, 2950.0),
 ]
 END_TOD = 86400.0 + 70.0
+# Radar B's systematic error in scene_biased.bin: range (m), azimuth (deg).
+BIAS_B = (300.0, 0.3)
 
 
 def position(k, tod):
@@ -118,7 +123,7 @@ def target_report(rng, n, sac, sic, tod, rho_m, theta_deg, height_ft, doppler, k
     return Cat048.cv_record.create(items)
 
 
-def build():
+def build(bias_b=(0.0, 0.0)):
     rng = random.Random(19)
     blocks = []  # (tod, bytes)
     n = 0
@@ -138,6 +143,9 @@ def build():
                 rho = math.sqrt(de * de + dn * dn + h * h) + rng.gauss(0.0, 40.0)
                 theta = math.degrees(math.atan2(de, dn)) + rng.gauss(0.0, 0.05)
                 height_ft = h / FT + rng.gauss(0.0, 80.0) if is3d else None
+                if sic == 2:
+                    rho += bias_b[0]
+                    theta += bias_b[1]
                 dop = None
                 if is3d:
                     r3 = math.sqrt(de * de + dn * dn + h * h)
@@ -250,7 +258,11 @@ def main():
             "records": records,
         }, f, indent=1)
         f.write("\n")
-    print(f"{len(data)} bytes, {len(records)} records")
+    biased = build(BIAS_B)
+    assert len(decode(biased)) == len(records)
+    with open(os.path.join(OUT, "scene_biased.bin"), "wb") as f:
+        f.write(biased)
+    print(f"{len(data)} bytes, {len(records)} records; biased scene {len(biased)} bytes")
 
 
 if __name__ == "__main__":

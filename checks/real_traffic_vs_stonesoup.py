@@ -77,6 +77,17 @@ Scoring (``score``)
     covariance) mean and fraction inside the two-sided 95 % chi^2(3) band,
     and wall time.
 
+A biased radar (``--bias B:300:0.3[:EL]``)
+    Radar B's target plots measure the range longer by 300 m and the
+    azimuth (and elevation) larger by 0.3 deg, after the noise: a radar's
+    systematic error. Every tracker then gets the biased plots; our
+    service with its defaults (registration on with two radars or more)
+    and, as the floor, the same plots without the bias ("unbiased plots").
+    Stone Soup has no registration: its rows show what a tracker does
+    without one. ``--settle-s S`` adds every figure scored over the
+    instants from S s on only (after the estimates converge); our rows
+    print the registration the service reports.
+
 How to run
     bash checks/setup_traffic.sh               # once: checks/.venv
     /work/scratch/radar-fusion-debug --http-addr 127.0.0.1:18080 \\
@@ -475,6 +486,42 @@ def beam_times(radar: Radar, truth: Truth, t_lo: float, t_hi: float) -> np.ndarr
     return t[(t >= t_lo) & (t <= t_hi)]
 
 
+def parse_bias(text: str) -> tuple[str, float, float, float]:
+    """``ID:RANGE_M:AZIMUTH_DEG[:ELEVATION_DEG]``."""
+    parts = text.split(":")
+    if len(parts) not in (3, 4):
+        raise argparse.ArgumentTypeError(f"--bias {text!r}: ID:RANGE_M:AZIMUTH_DEG[:ELEVATION_DEG]")
+    try:
+        values = [float(x) for x in parts[1:]] + [0.0] * (4 - len(parts))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--bias {text!r}: {exc}") from exc
+    return parts[0], values[0], values[1], values[2]
+
+
+def biased(scene: Scene, bias: tuple[str, float, float, float]) -> Scene:
+    """The scene with one radar's target plots biased (clutter is uniform
+    over the coverage either way, so it is left as drawn)."""
+    radar, dr, da, de = bias
+    if radar not in {r.id for r in scene.radars}:
+        raise SystemExit(f"--bias: no radar {radar!r} in this scene "
+                         f"({', '.join(r.id for r in scene.radars)})")
+    plots = [Plot(p.radar, p.t, p.range_m + dr, (p.azimuth_deg + da) % 360.0,
+                  p.elevation_deg + de, p.radial_velocity_mps, p.truth)
+             if p.radar == radar and p.truth is not None else p for p in scene.plots]
+    info = {**scene.info, "bias": {"radar": radar, "range_m": dr, "azimuth_deg": da,
+                                   "elevation_deg": de}}
+    return Scene(scene.truths, scene.radars, scene.origin, scene.origin_frame, plots,
+                 scene.duration_s, scene.doppler, scene.clutter_mean, scene.max_range_m, info)
+
+
+def settled(res: Result, t0: float) -> Result:
+    """The tracker's output from t0 on."""
+    keep = res.t >= t0
+    return Result(f"{res.name} from {t0:g} s", res.times[res.times >= t0], res.t[keep],
+                  res.ids[keep], res.pos[keep], res.cov[keep], res.updated[keep], res.wall_s,
+                  res.compute_s, res.extra)
+
+
 def make_scene(args) -> Scene:
     spec = SCENES[args.collection]
     origin = spec["origin"]
@@ -834,6 +881,7 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
         raise RuntimeError("the response has no history: was \"history\": true ignored?")
     compute_us = (out.get("timing") or {}).get("compute_us")
     extra = {"mode": out.get("mode"), "counters": out.get("counters"), "warnings": warnings,
+             "registration": out.get("registration"),
              "tracks_total": len(ids), "tracker": tracker or {},
              "request_bytes": len(resp.request.body or b""),
              "response_bytes": len(resp.content)}
@@ -1043,6 +1091,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=900.0, help="HTTP timeout (s)")
     ap.add_argument("--stonesoup-only", action="store_true")
     ap.add_argument("--ours-only", action="store_true")
+    ap.add_argument("--bias", type=parse_bias, metavar="ID:RANGE_M:AZ_DEG[:EL_DEG]",
+                    help="one radar's systematic error on its target plots (e.g. B:300:0.3)")
+    ap.add_argument("--settle-s", type=float, default=None,
+                    help="also score every tracker from this time on (s)")
     ap.add_argument("--json-out", metavar="FILE")
     ap.add_argument("--truth-csv", metavar="FILE", help="write the 1-s truth table")
     args = ap.parse_args(argv)
@@ -1053,6 +1105,9 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     scene = make_scene(args)
+    unbiased = None
+    if args.bias:
+        unbiased, scene = scene, biased(scene, args.bias)
     truth_stats = describe_truths(scene)
     n_clutter = sum(p.truth is None for p in scene.plots)
     print(f"scene: {scene.info['collection']} from {scene.info['window_start_utc']}, "
@@ -1067,10 +1122,13 @@ def main(argv: list[str] | None = None) -> int:
     results: list[Result] = []
     geometry = None
     if not args.stonesoup_only:
-        runs = [(None, "ours (defaults)")] + [(t, f"ours {json.dumps(t)}") for t in trackers]
-        for tracker, name in runs:
+        runs = [(None, "ours (defaults)", scene)] + [
+            (t, f"ours {json.dumps(t)}", scene) for t in trackers]
+        if unbiased is not None:
+            runs.append((None, "ours (defaults, unbiased plots)", unbiased))
+        for tracker, name, plots in runs:
             try:
-                res = run_ours(scene, args.url, tracker, name, args.timeout, args.api_key)
+                res = run_ours(plots, args.url, tracker, name, args.timeout, args.api_key)
             except Exception as exc:  # noqa: BLE001 — report and fail clearly
                 print(f"our service failed ({name}): {exc}", file=sys.stderr)
                 return 2
@@ -1078,6 +1136,14 @@ def main(argv: list[str] | None = None) -> int:
                   f"counters {res.extra.get('counters')}", flush=True)
             for w in res.extra.get("warnings") or []:
                 print(f"  warning: {w}")
+            for b in res.extra.get("registration") or []:
+                el = ("" if b.get("elevation_deg") is None else
+                      f", elevation {b['elevation_deg']:+.3f} ± {b['sigma_elevation_deg']:.3f} deg")
+                print(f"  registration {b['radar']}: range {b['range_m']:+.1f} ± "
+                      f"{b['sigma_range_m']:.1f} m, azimuth {b['azimuth_deg']:+.4f} ± "
+                      f"{b['sigma_azimuth_deg']:.4f} deg{el}, {b['pairs']:.0f} pairs, "
+                      f"{'converged' if b['converged'] else 'not converged'}"
+                      f"{', reference' if b['reference'] else ''}")
             results.append(res)
     grid = [float(q) for q in args.q_grid.split(",") if q.strip()]
     if not args.ours_only:
@@ -1104,13 +1170,17 @@ def main(argv: list[str] | None = None) -> int:
                 results.append(res)
 
     figures = [score(scene, r, args.cutoff_m) for r in results]
+    if args.settle_s is not None:
+        figures += [score(scene, settled(r, args.settle_s), args.cutoff_m) for r in results]
     rows = [(f["name"], f) for f in figures if f["name"].startswith("ours")]
-    ss = [f for f in figures if not f["name"].startswith("ours")]
+    ss = [f for f in figures if not f["name"].startswith("ours") and " from " not in f["name"]]
+    ss_settled = [f for f in figures if not f["name"].startswith("ours") and " from " in f["name"]]
     for assoc in ("jpda", "gnn"):
         b = best(ss, assoc)
         if b:
             rows.append((f"**Stone Soup best {b['name'][len('Stone Soup '):]}**", b))
     rows += [(f["name"], f) for f in ss]
+    rows += [(f["name"], f) for f in ss_settled]
     print()
     print(f"Every confirmed state at its own time, assigned to the truths in coverage "
           f"(cutoff {args.cutoff_m:.0f} m); GOSPA 3D p={GOSPA_P} c={GOSPA_C_M:.0f} m "

@@ -129,6 +129,9 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<HealthSt
 /// Prometheus metrics: request counts and latency histograms per route and per gRPC method.
 ///
 /// With Redis behind Sentinel, also the store's failovers and redirections.
+/// Per plot-fusion session this replica pushed to in the last 15 minutes,
+/// each radar's registration: `fusion_session_radar_*` gauges labelled by
+/// tenant, session and radar.
 #[utoipa::path(get, path = "/metrics", tag = "operations",
     responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain")))]
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
@@ -138,8 +141,7 @@ pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
         metrics::counter!("session_store_redirections_total").absolute(t.redirections);
         metrics::gauge!("session_store_failing_over").set(if t.failing_over { 1.0 } else { 0.0 });
     }
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        state.metrics().render(),
-    )
+    let mut text = state.metrics().render();
+    text.push_str(&state.sessions().gauges().render());
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text)
 }

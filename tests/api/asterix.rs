@@ -17,6 +17,7 @@ use service::plot_fusion::{self as svc, asterix::AsterixInput};
 use crate::helpers::{assert_problem, problem_fields, spawn_app, spawn_app_with};
 
 const SCENE_BIN: &[u8] = include_bytes!("../fixtures/asterix/scene.bin");
+const SCENE_BIASED_BIN: &[u8] = include_bytes!("../fixtures/asterix/scene_biased.bin");
 const SCENE_JSON: &str = include_str!("../fixtures/asterix/scene.json");
 /// The fixture's first record is on 2026-12-01 (Unix day 20,788); its
 /// times of day run past midnight into 2026-12-02.
@@ -460,11 +461,15 @@ fn serde_json_radars() -> Vec<svc::RadarInput> {
 
 /// The data blocks of the scene (CAT, LEN), in order.
 fn blocks() -> Vec<&'static [u8]> {
+    blocks_of(SCENE_BIN)
+}
+
+fn blocks_of(data: &'static [u8]) -> Vec<&'static [u8]> {
     let mut out = Vec::new();
     let mut pos = 0;
-    while pos < SCENE_BIN.len() {
-        let len = u16::from_be_bytes([SCENE_BIN[pos + 1], SCENE_BIN[pos + 2]]) as usize;
-        out.push(&SCENE_BIN[pos..pos + len]);
+    while pos < data.len() {
+        let len = u16::from_be_bytes([data[pos + 1], data[pos + 2]]) as usize;
+        out.push(&data[pos..pos + len]);
         pos += len;
     }
     out
@@ -531,17 +536,21 @@ async fn a_rest_session_batch_takes_asterix_and_reports_it() {
     assert_eq!(problem_fields(&problem), vec!["asterix.date".to_string()]);
 }
 
-#[tokio::test]
-async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
-    let _one_at_a_time = UDP_TESTS.lock().await;
-    let dir = std::env::temp_dir().join(format!("asterix-udp-{}", std::process::id()));
+/// A server whose UDP listener feeds a session created from `spec`, the
+/// data blocks of `data` sent to it one per datagram, as a radar sends
+/// them; returns once the session counts `plots` plots (bounded wait, not
+/// a timed assertion), with the `/metrics` text from before the first
+/// datagram and the number of datagrams.
+async fn feed_the_listener(
+    spec: Value,
+    data: &'static [u8],
+    plots: usize,
+) -> (crate::helpers::TestApp, String, usize) {
+    let dir =
+        std::env::temp_dir().join(format!("asterix-udp-{}-{}", std::process::id(), data.len()));
     std::fs::create_dir_all(&dir).unwrap();
     let spec_path = dir.join("session.json");
-    std::fs::write(
-        &spec_path,
-        json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker()}).to_string(),
-    )
-    .unwrap();
+    std::fs::write(&spec_path, spec.to_string()).unwrap();
     // A free port: bound and released (the listener binds it next).
     let port = std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
@@ -554,37 +563,89 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
         s.asterix_session_spec = Some(spec_path.clone());
     })
     .await;
+    std::fs::remove_dir_all(&dir).ok();
     let before = app.metrics_text().await;
     let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let id = "00000000000000000000000000000048";
-    // One data block per datagram, as a radar sends them; the listener
-    // pushes what has arrived, so each send waits for the push before it
-    // (bounded wait, not a timed assertion).
-    let all = blocks();
+    let all = blocks_of(data);
     for b in &all {
         sender.send_to(b, addr).unwrap();
     }
-    let mut plots = 0;
+    let mut counted = 0;
     for _ in 0..500 {
-        let view = app.get_ok(&format!("/v1/sessions/{id}")).await;
+        let view = app
+            .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
+            .await;
         // Counted when accepted, buffered ones included.
-        plots = view["plot_fusion"]["counters"]["plots"].as_u64().unwrap();
-        if plots as usize >= json_plots().len() {
+        counted = view["plot_fusion"]["counters"]["plots"].as_u64().unwrap();
+        if counted as usize >= plots {
             break;
         }
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
-    assert_eq!(plots as usize, json_plots().len());
-    let view = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(counted as usize, plots);
+    (app, before, all.len())
+}
+
+/// The session the listener creates (its id is fixed by the listener).
+const LISTENER_SESSION: &str = "00000000000000000000000000000048";
+
+#[tokio::test]
+async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
+    let _one_at_a_time = UDP_TESTS.lock().await;
+    let spec = json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker()});
+    let (app, before, datagrams) = feed_the_listener(spec, SCENE_BIN, json_plots().len()).await;
+    let view = app
+        .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
+        .await;
     let confirmed = confirmed_in(&view);
     assert_eq!(confirmed, 3, "{view}");
     let metrics = app.metrics_text().await;
     let value = |name: &str| counter(&metrics, name) - counter(&before, name);
-    assert_eq!(value("fusion_asterix_datagrams_total") as usize, all.len());
+    assert_eq!(value("fusion_asterix_datagrams_total") as usize, datagrams);
     let records = expected()["records"].as_array().unwrap().len();
     assert_eq!(value("fusion_asterix_records_total") as usize, records);
     assert_eq!(value("fusion_asterix_decode_errors_total"), 0);
-    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Radar B of the scene biased by +300 m and +0.3° (`scene_biased.bin`,
+/// written by libasterix from the same draws): through the listener, with
+/// radar A the reference, B's bias is estimated within 3σ (plus a few
+/// metres of the first-order model: I048/110 gives a height, so the
+/// elevation the tracker derives from the biased range is itself off by
+/// up to 0.1°), the three aircraft stay three tracks, and `/metrics`
+/// shows the estimate.
+#[tokio::test]
+async fn the_udp_listener_registers_a_biased_radar() {
+    let _one_at_a_time = UDP_TESTS.lock().await;
+    let mut t = tracker();
+    t["registration"] = json!({"reference": ["a"]});
+    let spec = json!({"kind": "plot_fusion", "radars": radars(), "tracker": t});
+    let (app, _, _) = feed_the_listener(spec, SCENE_BIASED_BIN, json_plots().len()).await;
+    let view = app
+        .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
+        .await;
+    assert_eq!(confirmed_in(&view), 3, "{view}");
+    let reg = view["plot_fusion"]["registration"].as_array().unwrap();
+    assert_eq!(reg.len(), 2);
+    assert_eq!(reg[0]["reference"], true);
+    let b = &reg[1];
+    assert_eq!(b["converged"], true, "{b}");
+    let f = |v: &Value| v.as_f64().unwrap();
+    assert!(
+        (f(&b["range_m"]) - 300.0).abs() < 3.0 * f(&b["sigma_range_m"]) + 15.0,
+        "{b}"
+    );
+    assert!(
+        (f(&b["azimuth_deg"]) - 0.3).abs() < 3.0 * f(&b["sigma_azimuth_deg"]) + 0.01,
+        "{b}"
+    );
+    let metrics = app.metrics_text().await;
+    let labels = format!("session=\"{LISTENER_SESSION}\",radar=\"b\"}} ");
+    let shown: Option<f64> = metrics
+        .lines()
+        .find(|l| l.starts_with("fusion_session_radar_range_bias_metres{") && l.contains(&labels))
+        .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap());
+    assert_eq!(shown, Some(f(&b["range_m"])), "{metrics}");
 }
 
 /// The UDP listener tests run one at a time: the metrics recorder is one

@@ -1230,4 +1230,49 @@ async fn bad_registration_options_are_named_and_a_session_keeps_its_estimates() 
     let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
     assert_eq!(state["plot_fusion"]["registration"], whole["registration"]);
     assert_eq!(state["plot_fusion"]["tracks"], whole["tracks"]);
+
+    // `/metrics` shows each radar's estimate for the session, and forgets
+    // the session when it is deleted.
+    let sample = |text: &str, name: &str, radar: &str| -> Option<f64> {
+        let labels = format!("session=\"{id}\",radar=\"{radar}\"}} ");
+        text.lines()
+            .find(|l| l.starts_with(&format!("{name}{{")) && l.contains(&labels))
+            .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
+    };
+    let text = app.metrics_text().await;
+    let b = &whole["registration"][1];
+    let radar = b["radar"].as_str().unwrap();
+    assert_eq!(
+        sample(&text, "fusion_session_radar_range_bias_metres", radar),
+        Some(f(&b["range_m"])),
+        "{text}"
+    );
+    assert_eq!(
+        sample(
+            &text,
+            "fusion_session_radar_azimuth_bias_sigma_degrees",
+            radar
+        ),
+        Some(f(&b["sigma_azimuth_deg"]))
+    );
+    assert_eq!(
+        sample(&text, "fusion_session_radar_registration_pairs", radar),
+        Some(f(&b["pairs"]))
+    );
+    assert_eq!(
+        sample(&text, "fusion_session_radar_registration_converged", radar),
+        Some(1.0)
+    );
+    let del = app
+        .client
+        .delete(app.url(&format!("/v1/sessions/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(del.status(), 204);
+    let text = app.metrics_text().await;
+    assert_eq!(
+        sample(&text, "fusion_session_radar_range_bias_metres", radar),
+        None
+    );
 }

@@ -24,6 +24,7 @@
 pub mod cache;
 pub mod correlation;
 pub mod events;
+pub mod gauges;
 pub mod persist;
 pub mod plot_fusion;
 
@@ -120,6 +121,12 @@ pub trait SessionKind: Sized + Send + 'static {
     /// (plot fusion: where its plots are), taken once; none by default.
     fn take_marks(&mut self) -> Vec<events::PlotMark> {
         Vec::new()
+    }
+    /// The radars' registration after a batch, for `/metrics`
+    /// ([`gauges`]); none by default.
+    fn radar_biases(update: &Self::Update) -> &[crate::plot_fusion::RadarBiasView] {
+        let _ = update;
+        &[]
     }
     /// Appends the kind's state; it writes its own format byte first.
     fn encode(&self, w: &mut Writer);

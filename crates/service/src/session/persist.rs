@@ -24,6 +24,7 @@ use super::{
         self, EndReason, EventBody, EventHub, GAP_WAIT, Guard, HubItem, SessionEvent, WatchItem,
         WatchLimits,
     },
+    gauges::RadarGauges,
     plot_fusion::PlotFusionSession,
     stored_kind, tag_name,
 };
@@ -38,6 +39,7 @@ pub struct Sessions {
     store: Arc<SessionStore>,
     cache: SessionCache,
     events: Arc<EventHub>,
+    gauges: RadarGauges,
 }
 
 /// A session of any kind this release serves, as a client reads it.
@@ -127,6 +129,7 @@ impl Sessions {
             store: Arc::new(store),
             cache: SessionCache::new(cache_bytes),
             events,
+            gauges: RadarGauges::default(),
         }
     }
 
@@ -137,6 +140,11 @@ impl Sessions {
 
     pub fn store(&self) -> &SessionStore {
         &self.store
+    }
+
+    /// The per-session gauges `/metrics` shows after the recorder's.
+    pub fn gauges(&self) -> &RadarGauges {
+        &self.gauges
     }
 
     pub fn cache(&self) -> &SessionCache {
@@ -230,6 +238,7 @@ impl Sessions {
     pub async fn delete(&self, tenant: &str, id: &str) -> Result<(), ServiceError> {
         check_id(id)?;
         self.cache.forget(tenant, id);
+        self.gauges.forget(tenant, id);
         if self.store.delete(tenant, id).await? {
             if self.announces(tenant, id) {
                 self.publish(tenant, id, events::encode_deleted(tenant, id))
@@ -328,6 +337,8 @@ impl Sessions {
                 CasOutcome::Stored { version } => {
                     update.version = version;
                     self.cache.put(tenant, id, version, bytes, session);
+                    self.gauges
+                        .record(tenant, id, K::radar_biases(&update.body));
                     if self.announces(tenant, id) {
                         let event = events::encode_update::<K>(tenant, &update, &marks);
                         self.publish(tenant, id, event).await;

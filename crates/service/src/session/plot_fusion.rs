@@ -558,6 +558,10 @@ impl SessionKind for PlotFusionSession {
         std::mem::take(&mut self.marks)
     }
 
+    fn radar_biases(update: &BatchUpdate) -> &[RadarBiasView] {
+        &update.registration
+    }
+
     fn acknowledgement(&self) -> BatchUpdate {
         BatchUpdate {
             frames: 0,
