@@ -4,7 +4,8 @@
 //! ```text
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
-//!     [--batch-s 1] [--doppler] [--skip-compute] [--motion imm|cv] \
+//!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
+//!     [--motion imm|cv] \
 //!     [--late none|held|radars] [--store memory|redis://…]
 //! ```
 //!
@@ -18,6 +19,9 @@
 //!   time; `held` 3 % of the plots (every 33rd) arrive 5 s late; `radars`
 //!   radar k's plots arrive 2k/(R − 1) s late (0 to 2 s), so the radars'
 //!   plots interleave out of order. `--store` picks the session store.
+//!
+//! The allocator is the server binary's (mimalloc, `src/main.rs`), so both
+//! figures are what the shipped server does.
 
 use std::time::{Duration, Instant};
 
@@ -32,6 +36,9 @@ use service::plot_fusion as svc;
 use tokio::sync::oneshot;
 use tonic::transport::Channel;
 
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 struct Args {
     targets: usize,
     radars: usize,
@@ -40,6 +47,7 @@ struct Args {
     batch_s: f64,
     doppler: bool,
     skip_compute: bool,
+    skip_end_to_end: bool,
     /// `tracker.motion`: absent = the service's default.
     motion: Option<String>,
     late: String,
@@ -55,6 +63,7 @@ fn parse_args() -> anyhow::Result<Args> {
         batch_s: 1.0,
         doppler: false,
         skip_compute: false,
+        skip_end_to_end: false,
         motion: None,
         late: "none".into(),
         store: "memory".into(),
@@ -64,6 +73,7 @@ fn parse_args() -> anyhow::Result<Args> {
         match flag.as_str() {
             "--doppler" => args.doppler = true,
             "--skip-compute" => args.skip_compute = true,
+            "--skip-end-to-end" => args.skip_end_to_end = true,
             _ => {
                 let value = it.next().context("a flag needs a value")?;
                 match flag.as_str() {
@@ -242,6 +252,9 @@ async fn main() -> anyhow::Result<()> {
             wall,
             out.counters
         );
+    }
+    if args.skip_end_to_end {
+        return Ok(());
     }
 
     let mut settings = Settings::for_tests();

@@ -1034,7 +1034,11 @@ async fn a_request_without_plots_says_so() {
 
 /// The default scene with radar 2's plots biased by +300 m and +0.3°.
 fn biased_request() -> Value {
-    let mut req = with_height(request(false, 7));
+    biased(with_height(request(false, 7)))
+}
+
+/// `req` with radar 2's plots biased by +300 m and +0.3°.
+fn biased(mut req: Value) -> Value {
     let id = req["radars"][1]["id"].clone();
     for p in req["plots"].as_array_mut().unwrap() {
         if p["radar_id"] == id {
@@ -1122,6 +1126,36 @@ async fn a_biased_radar_is_registered_and_tracks_do_not_split() {
             .all(|b| b["converged"] == true && b["reference"] == false)
     );
     check_tracks(&out, 300.0);
+}
+
+/// Parallel mode learns the biases from the plots it fuses at each
+/// instant: the +300 m +0.3° radar is registered against the reference
+/// and the tracks stay one per target, without the warning that parallel
+/// mode learns nothing (which it did before).
+#[tokio::test]
+async fn parallel_mode_registers_a_biased_radar_too() {
+    let app = spawn_app().await;
+    // Parallel mode needs every radar's radial velocity.
+    let mut req = biased(with_height(request(true, 11)));
+    let reference = req["radars"][0]["id"].clone();
+    req["tracker"]["mode"] = json!("parallel");
+    req["tracker"]["registration"] = json!({"reference": [reference]});
+    let out = app.post_ok(PATH, &req).await;
+    assert_eq!(out["mode"], "parallel");
+    let b = &out["registration"][1];
+    assert_eq!(b["converged"], true, "{b}");
+    let (r, sr) = (f(&b["range_m"]), f(&b["sigma_range_m"]));
+    let (a, sa) = (f(&b["azimuth_deg"]), f(&b["sigma_azimuth_deg"]));
+    assert!((r - 300.0).abs() < 3.0 * sr + 10.0, "{b}");
+    assert!((a - 0.3).abs() < 3.0 * sa + 0.01, "{b}");
+    check_tracks(&out, 300.0);
+    let warnings = out["warnings"].as_array().unwrap();
+    assert!(
+        !warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("parallel mode")),
+        "{warnings:?}"
+    );
 }
 
 #[tokio::test]

@@ -76,17 +76,39 @@ pub fn moment_match<'a>(
 ) -> (DVector<f64>, DMatrix<f64>) {
     let (_, x0, p0) = parts.clone().next().expect("a mixture has a component");
     let mut x = DVector::zeros(x0.len());
+    let mut p = DMatrix::zeros(p0.nrows(), p0.ncols());
+    moment_match_into(parts, &mut x, &mut p);
+    (x, p)
+}
+
+/// [`moment_match`] into `x` and `p` (resized to the components' shape
+/// when they differ), the same arithmetic without the allocations: the
+/// IMM's mixing and output run it per track and frame.
+pub fn moment_match_into<'a>(
+    parts: impl Iterator<Item = (f64, &'a DVector<f64>, &'a DMatrix<f64>)> + Clone,
+    x: &mut DVector<f64>,
+    p: &mut DMatrix<f64>,
+) {
+    let (_, x0, p0) = parts.clone().next().expect("a mixture has a component");
+    if x.len() != x0.len() {
+        *x = DVector::zeros(x0.len());
+    }
+    if p.shape() != p0.shape() {
+        *p = DMatrix::zeros(p0.nrows(), p0.ncols());
+    }
+    x.fill(0.0);
     for (w, xi, _) in parts.clone() {
         x.axpy(w, xi, 1.0);
     }
-    let mut p = DMatrix::zeros(p0.nrows(), p0.ncols());
+    p.fill(0.0);
+    let mut d = DVector::zeros(x.len());
     for (w, xi, pi) in parts {
-        let d = xi - &x;
-        p += pi * w;
+        d.copy_from(xi);
+        d -= &*x;
+        p.zip_apply(pi, |a, b| *a += b * w);
         p.ger(w, &d, &d, 1.0);
     }
-    symmetrize(&mut p);
-    (x, p)
+    symmetrize(p);
 }
 
 /// Replaces a square `p` by `(p + p') / 2`. Non-square matrices are left unchanged.

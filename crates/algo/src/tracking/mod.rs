@@ -70,7 +70,7 @@ use associator::{
 };
 use conversion::{extrapolate, register};
 use initiator::Initiator;
-use plot_association::associate_and_fuse;
+use plot_association::associate_and_fuse_members;
 use registration::{RadarBias, RegistrationState};
 use sweep::View;
 use updater::{Measurements, update_imm};
@@ -250,6 +250,7 @@ impl Tracker {
             }
         }
         let mut report = StepReport::default();
+        self.pending.reserve(plots.len());
         for (i, plot) in plots.iter().enumerate() {
             if self.is_late(plot)? {
                 report.late.push(i);
@@ -426,37 +427,88 @@ impl Tracker {
         Ok(())
     }
 
-    /// Registration: the pairs of this frame (a confirmed track updated by
-    /// a plot of radar `index` whose previous update, in `previous`, was
-    /// another radar's plot), then the estimate solved again.
+    /// Registration in serial mode: the pairs of this frame (a confirmed
+    /// track updated by a plot of radar `index` whose previous update, in
+    /// `previous`, was another radar's plot), then the estimate solved
+    /// again.
     fn learn_biases(
         &mut self,
         index: usize,
         previous: &HashMap<u64, Plot>,
     ) -> Result<(), AlgoError> {
+        let pairs: Vec<(usize, Plot, Plot, bool)> = self
+            .tracks
+            .iter()
+            .enumerate()
+            .filter_map(|(k, tr)| {
+                // A last plot of radar `index` where the frame began with
+                // another radar's: the track was hit by this frame.
+                let newer = tr.last_plot.filter(|p| p.radar == index)?;
+                let older = previous.get(&tr.id)?;
+                Some((k, newer, *older, true))
+            })
+            .collect();
+        self.learn_pairs(&pairs)
+    }
+
+    /// Registration in parallel mode: every cluster of several radars'
+    /// plots (`members`, indices in `frame`) that updated a confirmed track
+    /// (`hits`: track id, cluster) gives a pair per two of its plots
+    /// consecutive in time; then the estimate is solved again.
+    fn learn_from_clusters(
+        &mut self,
+        frame: &[Plot],
+        members: &[Vec<usize>],
+        hits: &[(u64, usize)],
+    ) -> Result<(), AlgoError> {
+        let by_id: HashMap<u64, usize> = hits
+            .iter()
+            .filter(|(_, j)| members[*j].len() >= 2)
+            .copied()
+            .collect();
+        if by_id.is_empty() {
+            return Ok(());
+        }
+        let mut pairs = Vec::new();
+        for (k, tr) in self.tracks.iter().enumerate() {
+            let Some(&j) = by_id.get(&tr.id) else {
+                continue;
+            };
+            let mut plots: Vec<Plot> = members[j].iter().map(|&i| frame[i]).collect();
+            plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+            let shares_plots = plots.len() > 2;
+            for w in plots.windows(2) {
+                pairs.push((k, w[1], w[0], shares_plots));
+            }
+        }
+        self.learn_pairs(&pairs)
+    }
+
+    /// Adds the pairs (track index, newer plot, older plot, whether the
+    /// plots are in other pairs too; raw plots) to the registration, the
+    /// motion between them from the track's velocity, and solves again
+    /// when any was used.
+    fn learn_pairs(&mut self, pairs: &[(usize, Plot, Plot, bool)]) -> Result<(), AlgoError> {
+        if pairs.is_empty() {
+            return Ok(());
+        }
         let cfg = &self.config;
         let mut solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
         let q = cfg.largest_process_noise();
+        let axes = cfg.axes;
         let mut added = false;
-        for tr in &self.tracks {
-            // A last plot of radar `index` where the frame began with
-            // another radar's: the track was hit by this frame.
-            let (Some(newer), Some(older)) = (
-                tr.last_plot.filter(|p| p.radar == index),
-                previous.get(&tr.id),
-            ) else {
-                continue;
-            };
-            let axes = cfg.axes;
+        for (k, newer, older, shares_plots) in pairs {
+            let tr = &self.tracks[*k];
             let velocity: Vec<f64> = (0..axes).map(|i| tr.x[2 * i + 1]).collect();
             let velocity_cov =
                 nalgebra::DMatrix::from_fn(axes, axes, |i, k| tr.p[(2 * i + 1, 2 * k + 1)]);
             let pair = registration::Pair {
-                newer: &newer,
+                newer,
                 older,
                 velocity: &velocity,
                 velocity_cov: &velocity_cov,
                 q,
+                shares_plots: *shares_plots,
             };
             if registration::add_pair(
                 &cfg.registration,
@@ -505,7 +557,8 @@ impl Tracker {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let fused = associate_and_fuse(&registered, self.config.plot_gate_probability)?;
+        let (fused, members) =
+            associate_and_fuse_members(&registered, self.config.plot_gate_probability)?;
         let mut radars: Vec<usize> = frame.iter().map(|p| p.radar).collect();
         radars.sort_unstable();
         radars.dedup();
@@ -520,13 +573,17 @@ impl Tracker {
             clutter,
             detection_probability: 1.0 - miss,
         };
-        self.run_frame(t, source, fused, View::All, report)?;
+        let hits = self.run_frame(t, source, fused, View::All, report)?;
         self.last_instant = Some(k);
+        if self.config.registration.enabled && self.config.radars.len() >= 2 {
+            self.learn_from_clusters(&frame, &members, &hits)?;
+        }
         Ok(())
     }
 
     /// The tracking loop of one frame: predict, associate and update,
-    /// delete, initiate.
+    /// delete, initiate. Returns (track id, index in `plots`) of every
+    /// track a plot updated.
     fn run_frame(
         &mut self,
         t: f64,
@@ -534,7 +591,7 @@ impl Tracker {
         plots: Vec<CartesianPlot>,
         view: View,
         report: &mut StepReport,
-    ) -> Result<(), AlgoError> {
+    ) -> Result<Vec<(u64, usize)>, AlgoError> {
         let cfg = &self.config;
         let mut step = None;
         for track in &mut self.tracks {
@@ -593,6 +650,8 @@ impl Tracker {
                 Measurements::Cartesian { plots: &plots },
             ),
         };
+        // (track id, plot index) of every track a plot updated.
+        let mut hits = Vec::new();
         for (((track, est), hit), assoc) in self
             .tracks
             .iter_mut()
@@ -610,6 +669,7 @@ impl Tracker {
             }
             match hit {
                 Some(j) => {
+                    hits.push((track.id, *j));
                     track.record(Some(plots[*j].radars.clone()));
                     track.last_plot = plots[*j].measured;
                 }
@@ -662,6 +722,6 @@ impl Tracker {
         self.last_time = Some(t);
         self.counters.frames += 1;
         report.frames += 1;
-        Ok(())
+        Ok(hits)
     }
 }

@@ -37,6 +37,16 @@ pub fn associate_and_fuse(
     plots: &[CartesianPlot],
     gate_probability: f64,
 ) -> Result<Vec<CartesianPlot>, AlgoError> {
+    Ok(associate_and_fuse_members(plots, gate_probability)?.0)
+}
+
+/// [`associate_and_fuse`], with each cluster's members: the indices in
+/// `plots` of the plots fused into it (one per radar, in the order they
+/// joined). Registration in parallel mode learns from them.
+pub fn associate_and_fuse_members(
+    plots: &[CartesianPlot],
+    gate_probability: f64,
+) -> Result<(Vec<CartesianPlot>, Vec<Vec<usize>>), AlgoError> {
     let mut radars: Vec<usize> = plots
         .iter()
         .flat_map(|p| p.radars.iter().copied())
@@ -45,8 +55,13 @@ pub fn associate_and_fuse(
     radars.dedup();
     let gates = chi2_gates(gate_probability)?;
     let mut clusters: Vec<CartesianPlot> = Vec::new();
+    let mut members: Vec<Vec<usize>> = Vec::new();
     for radar in radars {
-        let batch: Vec<&CartesianPlot> = plots.iter().filter(|p| p.radars[0] == radar).collect();
+        let (index, batch): (Vec<usize>, Vec<&CartesianPlot>) = plots
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.radars[0] == radar)
+            .unzip();
         // Exact pruning: d'S⁻¹d ≥ d_0²/S_00, so only plots whose first
         // component lies within √(γ S_00) of the cluster's can pass; they
         // are found by binary search in the batch sorted by it.
@@ -72,15 +87,17 @@ pub fn associate_and_fuse(
         let mut taken = vec![false; batch.len()];
         for (c, j) in chosen {
             clusters[c] = fuse(&clusters[c], batch[j])?;
+            members[c].push(index[j]);
             taken[j] = true;
         }
         for (j, p) in batch.into_iter().enumerate() {
             if !taken[j] {
                 clusters.push(p.clone());
+                members.push(vec![index[j]]);
             }
         }
     }
-    Ok(clusters)
+    Ok((clusters, members))
 }
 
 /// d′ (R_a + R_b)⁻¹ d with d = z_b − z_a over the components both have.

@@ -30,7 +30,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
-use crate::gaussian::moment_match;
+use crate::gaussian::moment_match_into;
 use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
 use crate::tracking::config::{Imm, MotionModel, NoiseModel};
 
@@ -88,25 +88,37 @@ pub fn transition(model: &MotionModel, axes: usize, dt: f64) -> Result<DMatrix<f
     Ok(f)
 }
 
-/// x⁺ = F x, P⁺ = F P F′ + Q. F P F′ + Q of a positive definite P and a
-/// positive semi-definite Q is positive definite: no Cholesky check here
-/// (this runs per model, per track and frame); the updates check what
-/// they produce.
-fn predict_with(
-    f: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-    x: &DVector<f64>,
-    p: &DMatrix<f64>,
-) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    let x1 = f * x;
-    let mut p1 = f * p * f.transpose() + q;
-    crate::gaussian::symmetrize(&mut p1);
-    if x1.iter().chain(p1.iter()).any(|v| !v.is_finite()) {
+/// x⁺ = F x, P⁺ = F P F′ + Q, into `x` and `p` (F′ given: the step
+/// holds it; `fp` is scratch for F P). The products are nalgebra's `gemm`
+/// with β = 0, which is what its `*` runs, so the result is bit for bit
+/// that of `f * x0` and `f * p0 * f.transpose() + q`. F P F′ + Q of a
+/// positive definite P and a positive semi-definite Q is positive
+/// definite: no Cholesky check here (this runs per model, per track and
+/// frame); the updates check what they produce.
+fn predict_into(
+    (f, ft, q): (&DMatrix<f64>, &DMatrix<f64>, &DMatrix<f64>),
+    (x0, p0): (&DVector<f64>, &DMatrix<f64>),
+    fp: &mut DMatrix<f64>,
+    x: &mut DVector<f64>,
+    p: &mut DMatrix<f64>,
+) -> Result<(), AlgoError> {
+    let n = f.nrows();
+    if x.len() != n || p.shape() != (n, n) || fp.shape() != (n, n) {
+        *x = DVector::zeros(n);
+        *p = DMatrix::zeros(n, n);
+        *fp = DMatrix::zeros(n, n);
+    }
+    x.gemm(1.0, f, x0, 0.0);
+    fp.gemm(1.0, f, p0, 0.0);
+    p.gemm(1.0, fp, ft, 0.0);
+    *p += q;
+    crate::gaussian::symmetrize(p);
+    if x.iter().chain(p.iter()).any(|v| !v.is_finite()) {
         return Err(AlgoError::NonFinite {
             what: "predicted state",
         });
     }
-    Ok((x1, p1))
+    Ok(())
 }
 
 /// What an IMM step of length Δt needs whatever the track: the switching
@@ -118,7 +130,8 @@ pub struct ImmStep {
     dt: f64,
     axes: usize,
     pi: DMatrix<f64>,
-    models: Vec<(DMatrix<f64>, DMatrix<f64>)>,
+    /// Per model: F, F′ and Q.
+    models: Vec<(DMatrix<f64>, DMatrix<f64>, DMatrix<f64>)>,
 }
 
 impl ImmStep {
@@ -128,10 +141,9 @@ impl ImmStep {
             .models
             .iter()
             .map(|m| {
-                Ok((
-                    transition(m, axes, dt)?,
-                    process_noise(axes, dt, &m.sigma_a(), noise)?,
-                ))
+                let f = transition(m, axes, dt)?;
+                let ft = f.transpose();
+                Ok((f, ft, process_noise(axes, dt, &m.sigma_a(), noise)?))
             })
             .collect::<Result<_, AlgoError>>()?;
         Ok(Self {
@@ -204,37 +216,58 @@ pub fn predict_imm(
     dt: f64,
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let axes = modes.first().map_or(0, |m| m.x.len() / 2);
-    predict_imm_step(&ImmStep::new(imm, noise, axes, dt)?, modes)
+    let (mut x, mut p) = (DVector::zeros(0), DMatrix::zeros(0, 0));
+    predict_imm_step(&ImmStep::new(imm, noise, axes, dt)?, modes, &mut x, &mut p)?;
+    Ok((x, p))
 }
 
-/// [`predict_imm`] with the step's matrices built already.
+/// [`predict_imm`] with the step's matrices built already, the combined
+/// estimate written into `x` and `p` (the track's, reused: this runs per
+/// track and frame).
 pub fn predict_imm_step(
     step: &ImmStep,
     modes: &mut [ModeState],
-) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+    x: &mut DVector<f64>,
+    p: &mut DMatrix<f64>,
+) -> Result<(), AlgoError> {
+    const MAX_MODES: usize = 8;
     let r = modes.len();
     let pi = &step.pi;
-    let c: Vec<f64> = (0..r)
-        .map(|j| (0..r).map(|i| pi[(i, j)] * modes[i].probability).sum())
-        .collect();
-    let mut mixed = Vec::with_capacity(r);
-    for j in 0..r {
-        let weights: Vec<f64> = (0..r)
-            .map(|i| pi[(i, j)] * modes[i].probability / c[j])
-            .collect();
-        let (x0, p0) = moment_match(modes.iter().zip(&weights).map(|(m, &w)| (w, &m.x, &m.p)));
+    let mut c = [0.0; MAX_MODES];
+    let c = &mut c[..r.min(MAX_MODES)];
+    if c.len() < r {
+        return Err(AlgoError::InvalidParameter {
+            what: "imm_models",
+            reason: format!("{r} models: at most {MAX_MODES}"),
+        });
+    }
+    for (j, cj) in c.iter_mut().enumerate() {
+        *cj = (0..r).map(|i| pi[(i, j)] * modes[i].probability).sum();
+    }
+    // Mixing: every model's start from the previous modes, before any is
+    // replaced.
+    let mut mixed: Vec<(DVector<f64>, DMatrix<f64>)> = Vec::with_capacity(r);
+    for (j, &cj) in c.iter().enumerate() {
+        let mut x0 = DVector::zeros(0);
+        let mut p0 = DMatrix::zeros(0, 0);
+        moment_match_into(
+            modes
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (pi[(i, j)] * m.probability / cj, &m.x, &m.p)),
+            &mut x0,
+            &mut p0,
+        );
         mixed.push((x0, p0));
     }
-    for (j, ((x0, p0), mode)) in mixed.into_iter().zip(modes.iter_mut()).enumerate() {
-        let (f, q) = &step.models[j];
-        let (x, p) = predict_with(f, q, &x0, &p0)?;
-        mode.x = x;
-        mode.p = p;
+    let mut fp = DMatrix::zeros(0, 0);
+    for (j, ((x0, p0), mode)) in mixed.iter().zip(modes.iter_mut()).enumerate() {
+        let (f, ft, q) = &step.models[j];
+        predict_into((f, ft, q), (x0, p0), &mut fp, &mut mode.x, &mut mode.p)?;
         mode.probability = c[j];
     }
-    Ok(moment_match(
-        modes.iter().map(|m| (m.probability, &m.x, &m.p)),
-    ))
+    moment_match_into(modes.iter().map(|m| (m.probability, &m.x, &m.p)), x, p);
+    Ok(())
 }
 
 #[cfg(test)]

@@ -185,9 +185,7 @@ impl Track {
                     Some(s) if s.is_for(cfg.axes, dt) => s,
                     _ => step.insert(ImmStep::new(imm, cfg.noise, cfg.axes, dt)?),
                 };
-                let (x, p) = predict_imm_step(step, &mut self.modes)?;
-                self.x = x;
-                self.p = p;
+                predict_imm_step(step, &mut self.modes, &mut self.x, &mut self.p)?;
                 self.t = t;
                 Ok(())
             }

@@ -4,7 +4,10 @@
 //! ±0.5°), tracked three ways on the same plots:
 //! - **unbiased**: the scene without biases, the defaults (the floor);
 //! - **unregistered**: the biased plots, registration off;
-//! - **registered**: the biased plots, the defaults (registration on).
+//! - **registered**: the biased plots, the defaults (registration on);
+//! - the unbiased and the registered rows again in parallel mode
+//!   (`Mode::Parallel`, its default fusion period and deletion), which
+//!   learns from the plots of several radars fused at each instant.
 //!
 //! Scored as `seed001-montecarlo` (every frame against the truth at its
 //! time, 1 km cut-off): RMSE, NEES, GOSPA, false and duplicate tracks. For
@@ -20,7 +23,7 @@
 
 use std::fmt::Write as _;
 
-use algo::tracking::{Plot, RadarSpec, Tracker, TrackerConfig};
+use algo::tracking::{Mode, Plot, RadarSpec, Tracker, TrackerConfig};
 use rand::RngExt;
 
 use super::seed001_montecarlo::{
@@ -38,10 +41,12 @@ const AZIMUTH_BIAS_DEG: f64 = 0.5;
 /// Frames from this time on are scored apart ("settled"): every run's
 /// estimates converged by then (median 30–40 s).
 const SETTLED_S: f64 = 100.0;
-const METHODS: [&str; 3] = [
+const METHODS: [&str; 5] = [
     "unbiased (floor)",
     "biased, unregistered",
     "biased, registered",
+    "parallel mode, unbiased",
+    "parallel mode, biased, registered",
 ];
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -58,13 +63,37 @@ struct Figures {
 
 #[derive(Debug, Clone, Default)]
 struct RunOut {
-    figures: [Figures; 3],
+    figures: [Figures; 5],
     /// Per radar: (range error m, azimuth error °, range σ, azimuth σ,
     /// absolute range error, absolute azimuth error °); the first two
     /// relative to the network's mean bias.
     errors: Vec<[f64; 6]>,
     /// Time when every radar's estimate was applied (s), if it was.
     converged_at: Option<f64>,
+    /// The same two for parallel mode.
+    errors_parallel: Vec<[f64; 6]>,
+    converged_parallel: Option<f64>,
+}
+
+/// Per radar, the final estimate against the truth (see [`RunOut::errors`]).
+fn bias_errors(tracker: &Tracker, biases: &[[f64; 2]]) -> Vec<[f64; 6]> {
+    let n = biases.len() as f64;
+    let mean = |k: usize| biases.iter().map(|b| b[k]).sum::<f64>() / n;
+    let est = tracker.biases();
+    let est_mean = |k: usize| est.iter().map(|b| b.bias[k]).sum::<f64>() / n;
+    est.iter()
+        .zip(biases)
+        .map(|(e, b)| {
+            [
+                (e.bias[0] - est_mean(0)) - (b[0] - mean(0)),
+                ((e.bias[1] - est_mean(1)) - (b[1] - mean(1))).to_degrees(),
+                e.sigma[0],
+                e.sigma[1].to_degrees(),
+                e.bias[0] - b[0],
+                (e.bias[1] - b[1]).to_degrees(),
+            ]
+        })
+        .collect()
 }
 
 fn run_frames(
@@ -135,6 +164,8 @@ fn one_run(
     let config = TrackerConfig::new(2, specs);
     let mut unregistered = config.clone();
     unregistered.registration.enabled = false;
+    let mut parallel = config.clone();
+    parallel.set_mode(Mode::Parallel);
     let hours = duration / 3600.0;
     let mut out = RunOut::default();
     let mut converged_at = None;
@@ -142,6 +173,8 @@ fn one_run(
         (config.clone(), &plots),
         (unregistered, &biased),
         (config, &biased),
+        (parallel.clone(), &plots),
+        (parallel, &biased),
     ]
     .into_iter()
     .enumerate()
@@ -169,27 +202,52 @@ fn one_run(
         };
         if m == 2 {
             converged_at = at;
-            let mean = |k: usize| biases.iter().map(|b| b[k]).sum::<f64>() / n as f64;
-            let est = tracker.biases();
-            let est_mean = |k: usize| est.iter().map(|b| b.bias[k]).sum::<f64>() / n as f64;
-            out.errors = est
-                .iter()
-                .zip(&biases)
-                .map(|(e, b)| {
-                    [
-                        (e.bias[0] - est_mean(0)) - (b[0] - mean(0)),
-                        ((e.bias[1] - est_mean(1)) - (b[1] - mean(1))).to_degrees(),
-                        e.sigma[0],
-                        e.sigma[1].to_degrees(),
-                        e.bias[0] - b[0],
-                        (e.bias[1] - b[1]).to_degrees(),
-                    ]
-                })
-                .collect();
+            out.errors = bias_errors(&tracker, &biases);
+        } else if m == 4 {
+            out.converged_parallel = at;
+            out.errors_parallel = bias_errors(&tracker, &biases);
         }
     }
     out.converged_at = converged_at;
     Ok(out)
+}
+
+/// A row of the estimates' table: errors as [`RunOut::errors`], the
+/// convergence times of the runs that converged.
+fn bias_row(scene: String, errors: &[[f64; 6]], converged: &[f64], runs: usize) -> Vec<String> {
+    let k = errors.len().max(1) as f64;
+    let rms = |i: usize| (errors.iter().map(|e| e[i] * e[i]).sum::<f64>() / k).sqrt();
+    let nees = |i: usize, s: usize| {
+        errors
+            .iter()
+            .map(|e| (e[i] / e[s].max(1e-12)).powi(2))
+            .sum::<f64>()
+            / k
+    };
+    let within = |i: usize, s: usize| {
+        100.0 * errors.iter().filter(|e| e[i].abs() <= 2.0 * e[s]).count() as f64 / k
+    };
+    vec![
+        scene,
+        format!("{:.1} / {:.3}", rms(0), rms(1)),
+        format!("{:.1} / {:.3}", rms(4), rms(5)),
+        format!(
+            "{:.1} / {:.3}",
+            errors.iter().map(|e| e[2]).sum::<f64>() / k,
+            errors.iter().map(|e| e[3]).sum::<f64>() / k
+        ),
+        format!("{:.2} / {:.2}", nees(4, 2), nees(5, 3)),
+        format!("{:.0} % / {:.0} %", within(4, 2), within(5, 3)),
+        if converged.is_empty() {
+            format!("0 of {runs}")
+        } else {
+            format!(
+                "{} of {runs}, median {:.0} s",
+                converged.len(),
+                median(converged)
+            )
+        },
+    ]
 }
 
 /// Runs the experiment.
@@ -235,7 +293,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             let (v, se) = mean_se(&per_run.iter().map(|r| g(&r.figures[m])).collect::<Vec<_>>());
             format!("{v:.digits$} ± {se:.digits$}")
         };
-        for m in 0..3 {
+        for m in 0..METHODS.len() {
             rows.push(vec![
                 scene.clone(),
                 METHODS[m].into(),
@@ -261,42 +319,34 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
                 .0,
             ));
         }
-        let errors: Vec<[f64; 6]> = per_run.iter().flat_map(|r| r.errors.clone()).collect();
-        let k = errors.len().max(1) as f64;
-        let rms = |i: usize| (errors.iter().map(|e| e[i] * e[i]).sum::<f64>() / k).sqrt();
-        let nees = |i: usize, s: usize| {
-            errors
+        for parallel in [false, true] {
+            let errors: Vec<[f64; 6]> = per_run
                 .iter()
-                .map(|e| (e[i] / e[s].max(1e-12)).powi(2))
-                .sum::<f64>()
-                / k
-        };
-        let within = |i: usize, s: usize| {
-            100.0 * errors.iter().filter(|e| e[i].abs() <= 2.0 * e[s]).count() as f64 / k
-        };
-        let converged: Vec<f64> = per_run.iter().filter_map(|r| r.converged_at).collect();
-        bias_rows.push(vec![
-            scene.clone(),
-            format!("{:.1} / {:.3}", rms(0), rms(1)),
-            format!("{:.1} / {:.3}", rms(4), rms(5)),
-            format!(
-                "{:.1} / {:.3}",
-                errors.iter().map(|e| e[2]).sum::<f64>() / k,
-                errors.iter().map(|e| e[3]).sum::<f64>() / k
-            ),
-            format!("{:.2} / {:.2}", nees(4, 2), nees(5, 3)),
-            format!("{:.0} % / {:.0} %", within(4, 2), within(5, 3)),
-            if converged.is_empty() {
-                format!("0 of {}", per_run.len())
+                .flat_map(|r| {
+                    if parallel {
+                        r.errors_parallel.clone()
+                    } else {
+                        r.errors.clone()
+                    }
+                })
+                .collect();
+            let converged: Vec<f64> = per_run
+                .iter()
+                .filter_map(|r| {
+                    if parallel {
+                        r.converged_parallel
+                    } else {
+                        r.converged_at
+                    }
+                })
+                .collect();
+            let name = if parallel {
+                format!("{scene}, parallel mode")
             } else {
-                format!(
-                    "{} of {}, median {:.0} s",
-                    converged.len(),
-                    per_run.len(),
-                    median(&converged)
-                )
-            },
-        ]);
+                scene.clone()
+            };
+            bias_rows.push(bias_row(name, &errors, &converged, per_run.len()));
+        }
     }
     let mut md = String::from("# registration (radar biases estimated in the tracker)\n\n");
     let _ = writeln!(
@@ -305,7 +355,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
          from the centre (periods 4–6 s, random phases, P_D 0.9, 3 false plots per scan), every \
          radar biased at random (range in ±{RANGE_BIAS_M} m, azimuth in ±{AZIMUTH_BIAS_DEG}°), or \
          two radars of which the second is biased by a fixed amount; the tracker's defaults (IMM, \
-         serial). {} runs per scene from seed {}.\n",
+         serial), and parallel mode in the last two rows. {} runs per scene from seed {}.\n",
         opts.runner.runs, opts.runner.seed
     );
     md.push_str(&markdown_table(

@@ -683,12 +683,6 @@ pub fn registration_warnings(config: &TrackerConfig, views: &[RadarBiasView]) ->
             ));
         }
     }
-    if config.registration.enabled && config.is_parallel() {
-        out.push(
-            "parallel mode applies the radars' known biases (radars[].bias) but estimates none: use the serial mode (tracker.mode = auto) for registration"
-                .into(),
-        );
-    }
     out
 }
 
