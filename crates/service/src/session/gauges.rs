@@ -18,11 +18,16 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use crate::plot_fusion::RadarBiasView;
 
+/// (tenant, session id).
+type SessionKey = (String, String);
+
+/// When a session's gauges were set (unix seconds), and its radars.
+type Entry = (f64, Vec<RadarBiasView>);
+
 /// The registration gauges of the sessions this replica pushed to.
 #[derive(Debug, Default)]
 pub struct RadarGauges {
-    /// (tenant, session id) → (when set, unix seconds; the radars).
-    sessions: Mutex<HashMap<(String, String), (f64, Vec<RadarBiasView>)>>,
+    sessions: Mutex<HashMap<SessionKey, Entry>>,
 }
 
 /// One gauge family: its name, help, and the value of a radar's view (none:
@@ -153,7 +158,7 @@ impl RadarGauges {
     }
 }
 
-fn labels((tenant, session): &(String, String), radar: &str) -> String {
+fn labels((tenant, session): &SessionKey, radar: &str) -> String {
     format!(
         "tenant=\"{}\",session=\"{}\",radar=\"{}\"",
         escape(tenant),
