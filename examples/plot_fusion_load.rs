@@ -5,7 +5,7 @@
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
 //!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
-//!     [--motion imm|cv] \
+//!     [--motion imm|cv] [--no-registration] \
 //!     [--late none|held|radars] [--store memory|redis://…]
 //! ```
 //!
@@ -50,6 +50,8 @@ struct Args {
     skip_end_to_end: bool,
     /// `tracker.motion`: absent = the service's default.
     motion: Option<String>,
+    /// `tracker.registration.enabled = false` (its cost is the difference).
+    no_registration: bool,
     late: String,
     store: String,
 }
@@ -65,6 +67,7 @@ fn parse_args() -> anyhow::Result<Args> {
         skip_compute: false,
         skip_end_to_end: false,
         motion: None,
+        no_registration: false,
         late: "none".into(),
         store: "memory".into(),
     };
@@ -74,6 +77,7 @@ fn parse_args() -> anyhow::Result<Args> {
             "--doppler" => args.doppler = true,
             "--skip-compute" => args.skip_compute = true,
             "--skip-end-to-end" => args.skip_end_to_end = true,
+            "--no-registration" => args.no_registration = true,
             _ => {
                 let value = it.next().context("a flag needs a value")?;
                 match flag.as_str() {
@@ -125,6 +129,14 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
             .collect(),
         tracker: Some(pb::TrackerOptions {
             motion: spec.tracker.motion.clone(),
+            registration: spec
+                .tracker
+                .registration
+                .as_ref()
+                .map(|r| pb::RegistrationOptions {
+                    enabled: r.enabled,
+                    ..Default::default()
+                }),
             ..Default::default()
         }),
     }
@@ -216,6 +228,12 @@ async fn main() -> anyhow::Result<()> {
         args.doppler,
     );
     spec.tracker.motion = args.motion.clone();
+    if args.no_registration {
+        spec.tracker.registration = Some(Box::new(svc::RegistrationInput {
+            enabled: Some(false),
+            ..Default::default()
+        }));
+    }
     let n = plots.len();
     println!(
         "scene: {} targets, {} radars, {} s, {} clutter plots per scan, doppler {}, motion {}: \

@@ -504,7 +504,7 @@ pub fn add_pair(
     // = H b. About the raw plots instead, the second-order terms
     // (Δρ·Δθ across the beam: 6 m for 600 m and 0.6° at 50 km) made the
     // azimuth σ overconfident for large biases.
-    let (offsets, n) = layout(radars);
+    let (offsets, _) = layout(radars);
     let current = |r: usize| -> RadarBias {
         let mut bias = [0.0; 3];
         for (k, v) in bias.iter_mut().enumerate().take(dims(&radars[r])) {
@@ -525,12 +525,22 @@ pub fn add_pair(
     for i in 0..rows {
         d[i] -= pair.velocity[i] * dt;
     }
-    let mut h = DMatrix::zeros(rows, n);
-    h.view_mut((0, offsets[a]), (rows, ja.ncols()))
-        .copy_from(&ja);
-    let mut minus = h.view_mut((0, offsets[b]), (rows, jb.ncols()));
+    // H = [J_a at radar a's columns, −J_b at radar b's, 0 elsewhere]: kept
+    // as its non-zero columns `cols` only (≤ 6 of up to 3 × radars), so
+    // every product below is over the two radars' blocks.
+    let (ca, cb) = (ja.ncols(), jb.ncols());
+    let cols: Vec<usize> = (offsets[a]..offsets[a] + ca)
+        .chain(offsets[b]..offsets[b] + cb)
+        .collect();
+    let m = cols.len();
+    let mut h = DMatrix::zeros(rows, m);
+    h.view_mut((0, 0), (rows, ca)).copy_from(&ja);
+    let mut minus = h.view_mut((0, ca), (rows, cb));
     minus -= &jb;
-    d += &h * &solved.0;
+    let x = DVector::from_fn(m, |i, _| solved.0[cols[i]]);
+    let p = DMatrix::from_fn(m, m, |i, k| solved.1[(cols[i], cols[k])]);
+    let hx = &h * &x;
+    d += &hx;
     let mut s = &ja * polar_r(ra) * ja.transpose() + &jb * polar_r(rb) * jb.transpose();
     for i in 0..rows {
         for k in 0..rows {
@@ -547,8 +557,8 @@ pub fn add_pair(
     }
     symmetrize(&mut s);
     // Gate against the current estimate.
-    let nu = &d - &h * &solved.0;
-    let mut g = &s + &h * &solved.1 * h.transpose();
+    let nu = &d - &hx;
+    let mut g = &s + &h * &p * h.transpose();
     symmetrize(&mut g);
     let d2 = crate::gaussian::mahalanobis_sq(&nu, &g)?;
     if d2 > PAIR_GATE[rows - 2] {
@@ -566,9 +576,15 @@ pub fn add_pair(
     state.last_t = Some(state.last_t.map_or(pair.newer.t, |l| l.max(pair.newer.t)));
     let chol = cholesky("pair covariance", &s)?;
     let si_h = chol.solve(&h);
-    state.information += h.transpose() * &si_h;
+    let information = h.transpose() * &si_h;
+    let vector = si_h.transpose() * &d;
+    for (i, &ci) in cols.iter().enumerate() {
+        for (k, &ck) in cols.iter().enumerate() {
+            state.information[(ci, ck)] += information[(i, k)];
+        }
+        state.vector[ci] += vector[i];
+    }
     symmetrize(&mut state.information);
-    state.vector += si_h.transpose() * &d;
     state.pairs[a] += 1.0;
     state.pairs[b] += 1.0;
     Ok(true)
