@@ -487,17 +487,21 @@ impl Tracker {
     /// Adds the pairs (track index, newer plot, older plot, whether the
     /// plots are in other pairs too; raw plots) to the registration, the
     /// motion between them from the track's velocity, and solves again
-    /// when any was used.
+    /// when any was used. Of a frame's pairs at most
+    /// [`registration::MAX_PAIRS_PER_FRAME`] are used, every k-th when
+    /// there are more (tracks in creation order: spread over the
+    /// coverage), so that a dense picture costs no more than a sparse one.
     fn learn_pairs(&mut self, pairs: &[(usize, Plot, Plot, bool)]) -> Result<(), AlgoError> {
         if pairs.is_empty() {
             return Ok(());
         }
+        let stride = pairs.len().div_ceil(registration::MAX_PAIRS_PER_FRAME);
         let cfg = &self.config;
         let mut solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
         let q = cfg.largest_process_noise();
         let axes = cfg.axes;
         let mut added = false;
-        for (k, newer, older, shares_plots) in pairs {
+        for (k, newer, older, shares_plots) in pairs.iter().step_by(stride) {
             let tr = &self.tracks[*k];
             let velocity: Vec<f64> = (0..axes).map(|i| tr.x[2 * i + 1]).collect();
             let velocity_cov =
