@@ -887,3 +887,46 @@ fn a_lag_must_be_finite_and_at_most_the_limit() {
     }
     assert!(LagWindow::new(Tracker::new(fig5_config(false)).unwrap(), 0.0).is_ok());
 }
+
+/// A dense picture: 400 targets seen by two radars. Once confirmed, every
+/// frame hits about 400 tracks whose previous plot was the other radar's,
+/// but registration learns from at most `MAX_PAIRS_PER_FRAME` of them (the
+/// decayed pair count of a radar grows by at most that much a frame, plus
+/// the decay's rounding), and from more than half of that bound (so the
+/// bound, not a lack of pairs, is what limits).
+#[test]
+fn a_dense_frame_learns_from_at_most_the_bound_of_pairs() {
+    let radars = vec![
+        radar([-20_000.0, 0.0, 0.0], 4.0, false),
+        radar([20_000.0, 0.0, 0.0], 5.0, false),
+    ];
+    let targets: Vec<Target> = (0..400)
+        .map(|k| Target {
+            p0: [
+                -40_000.0 + 4_000.0 * (k % 20) as f64,
+                20_000.0 + 4_000.0 * (k / 20) as f64,
+                0.0,
+            ],
+            v: [150.0, 0.0, 0.0],
+        })
+        .collect();
+    let plots = scene(&radars, &[0.0, 1.0], &targets, 60.0, &mut Lcg(7));
+    let mut tracker = Tracker::new(TrackerConfig::new(2, radars)).unwrap();
+    let mut previous = 0.0;
+    let mut largest_step: f64 = 0.0;
+    tracker
+        .process_with(&plots, true, &mut |tr: &Tracker| {
+            let pairs = tr.biases()[0].pairs;
+            largest_step = largest_step.max(pairs - previous);
+            previous = pairs;
+        })
+        .unwrap();
+    let bound = registration::MAX_PAIRS_PER_FRAME as f64;
+    assert!(
+        tracker.counters().confirmed >= 390,
+        "{:?}",
+        tracker.counters()
+    );
+    assert!(largest_step <= bound + 1e-6, "{largest_step}");
+    assert!(largest_step > 0.5 * bound, "{largest_step}");
+}
