@@ -256,9 +256,13 @@ async fn a_write_fewer_replicas_hold_than_waited_for_is_unavailable_not_lost() {
     // has it (a retry with the same expected version then sees it applied).
     let three = SessionStore::connect(&settings(3)).await.unwrap();
     match three.compare_and_set("t", "a", 1, b"1".to_vec(), ttl).await {
-        Err(StoreError::Unavailable { reason }) => {
-            assert!(reason.contains("reached 2 of the 3 replicas"), "{reason}")
-        }
+        // Two replicas exist; on a loaded machine one of them may not
+        // acknowledge within the timeout either (seen in CI: "1 of the 3").
+        Err(StoreError::Unavailable { reason }) => assert!(
+            reason.contains("reached 2 of the 3 replicas")
+                || reason.contains("reached 1 of the 3 replicas"),
+            "{reason}"
+        ),
         other => panic!("{other:?}"),
     }
     assert_eq!(three.version("t", "a").await, Ok(Some(2)));
