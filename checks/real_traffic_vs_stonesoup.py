@@ -109,7 +109,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 
 import numpy as np
@@ -505,21 +505,20 @@ def biased(scene: Scene, bias: tuple[str, float, float, float]) -> Scene:
     if radar not in {r.id for r in scene.radars}:
         raise SystemExit(f"--bias: no radar {radar!r} in this scene "
                          f"({', '.join(r.id for r in scene.radars)})")
-    plots = [Plot(p.radar, p.t, p.range_m + dr, (p.azimuth_deg + da) % 360.0,
-                  p.elevation_deg + de, p.radial_velocity_mps, p.truth)
+    plots = [replace(p, range_m=p.range_m + dr, azimuth_deg=(p.azimuth_deg + da) % 360.0,
+                     elevation_deg=p.elevation_deg + de)
              if p.radar == radar and p.truth is not None else p for p in scene.plots]
     info = {**scene.info, "bias": {"radar": radar, "range_m": dr, "azimuth_deg": da,
                                    "elevation_deg": de}}
-    return Scene(scene.truths, scene.radars, scene.origin, scene.origin_frame, plots,
-                 scene.duration_s, scene.doppler, scene.clutter_mean, scene.max_range_m, info)
+    return replace(scene, plots=plots, info=info)
 
 
 def settled(res: Result, t0: float) -> Result:
     """The tracker's output from t0 on."""
     keep = res.t >= t0
-    return Result(f"{res.name} from {t0:g} s", res.times[res.times >= t0], res.t[keep],
-                  res.ids[keep], res.pos[keep], res.cov[keep], res.updated[keep], res.wall_s,
-                  res.compute_s, res.extra)
+    return replace(res, name=f"{res.name} from {t0:g} s", times=res.times[res.times >= t0],
+                   t=res.t[keep], ids=res.ids[keep], pos=res.pos[keep], cov=res.cov[keep],
+                   updated=res.updated[keep])
 
 
 def make_scene(args) -> Scene:

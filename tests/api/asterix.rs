@@ -546,17 +546,16 @@ async fn feed_the_listener(
     data: &'static [u8],
     plots: usize,
 ) -> (crate::helpers::TestApp, String, usize) {
-    let dir =
-        std::env::temp_dir().join(format!("asterix-udp-{}-{}", std::process::id(), data.len()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let spec_path = dir.join("session.json");
-    std::fs::write(&spec_path, spec.to_string()).unwrap();
     // A free port: bound and released (the listener binds it next).
     let port = std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
+    let dir = std::env::temp_dir().join(format!("asterix-udp-{}-{port}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec_path = dir.join("session.json");
+    std::fs::write(&spec_path, spec.to_string()).unwrap();
     let addr: std::net::SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
     let app = spawn_app_with(|s| {
         s.asterix_udp = Some(addr);
@@ -640,11 +639,12 @@ async fn the_udp_listener_registers_a_biased_radar() {
         "{b}"
     );
     let metrics = app.metrics_text().await;
-    let labels = format!("session=\"{LISTENER_SESSION}\",radar=\"b\"}} ");
-    let shown: Option<f64> = metrics
-        .lines()
-        .find(|l| l.starts_with("fusion_session_radar_range_bias_metres{") && l.contains(&labels))
-        .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap());
+    let shown = crate::helpers::radar_gauge(
+        &metrics,
+        "fusion_session_radar_range_bias_metres",
+        LISTENER_SESSION,
+        "b",
+    );
     assert_eq!(shown, Some(f(&b["range_m"])), "{metrics}");
 }
 

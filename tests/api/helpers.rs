@@ -211,3 +211,13 @@ pub fn grpc_fields(status: &tonic::Status) -> Vec<String> {
         .map(|v| v.field)
         .collect()
 }
+
+/// The value of a session radar gauge (`fusion_session_radar_…`) of session
+/// `session` and radar `radar` in a `/metrics` text, if shown.
+pub fn radar_gauge(metrics: &str, name: &str, session: &str, radar: &str) -> Option<f64> {
+    let labels = format!("session=\"{session}\",radar=\"{radar}\"}} ");
+    metrics
+        .lines()
+        .find(|l| l.starts_with(&format!("{name}{{")) && l.contains(&labels))
+        .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
+}

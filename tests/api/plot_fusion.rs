@@ -1267,12 +1267,8 @@ async fn bad_registration_options_are_named_and_a_session_keeps_its_estimates() 
 
     // `/metrics` shows each radar's estimate for the session, and forgets
     // the session when it is deleted.
-    let sample = |text: &str, name: &str, radar: &str| -> Option<f64> {
-        let labels = format!("session=\"{id}\",radar=\"{radar}\"}} ");
-        text.lines()
-            .find(|l| l.starts_with(&format!("{name}{{")) && l.contains(&labels))
-            .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
-    };
+    let sample =
+        |text: &str, name: &str, radar: &str| crate::helpers::radar_gauge(text, name, &id, radar);
     let text = app.metrics_text().await;
     let b = &whole["registration"][1];
     let radar = b["radar"].as_str().unwrap();

@@ -401,7 +401,7 @@ impl Tracker {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let learn = self.config.registration.enabled && self.config.radars.len() >= 2;
+        let learn = self.learns_biases();
         // Tracks whose last update was another radar's plot: those hit by
         // this frame give a pair.
         let previous: HashMap<u64, Plot> = if learn {
@@ -425,6 +425,12 @@ impl Tracker {
             self.learn_biases(index, &previous)?;
         }
         Ok(())
+    }
+
+    /// Whether frames learn the radars' biases: registration on, and two
+    /// radars or more to compare.
+    fn learns_biases(&self) -> bool {
+        self.config.registration.enabled && self.config.radars.len() >= 2
     }
 
     /// Registration in serial mode: the pairs of this frame (a confirmed
@@ -579,7 +585,7 @@ impl Tracker {
         };
         let hits = self.run_frame(t, source, fused, View::All, report)?;
         self.last_instant = Some(k);
-        if self.config.registration.enabled && self.config.radars.len() >= 2 {
+        if self.learns_biases() {
             self.learn_from_clusters(&frame, &members, &hits)?;
         }
         Ok(())

@@ -103,9 +103,13 @@ fn predict_into(
     p: &mut DMatrix<f64>,
 ) -> Result<(), AlgoError> {
     let n = f.nrows();
-    if x.len() != n || p.shape() != (n, n) || fp.shape() != (n, n) {
+    if x.len() != n {
         *x = DVector::zeros(n);
+    }
+    if p.shape() != (n, n) {
         *p = DMatrix::zeros(n, n);
+    }
+    if fp.shape() != (n, n) {
         *fp = DMatrix::zeros(n, n);
     }
     x.gemm(1.0, f, x0, 0.0);
@@ -260,7 +264,8 @@ pub fn predict_imm_step(
         );
         mixed.push((x0, p0));
     }
-    let mut fp = DMatrix::zeros(0, 0);
+    let n = mixed.first().map_or(0, |(x0, _)| x0.len());
+    let mut fp = DMatrix::zeros(n, n);
     for (j, ((x0, p0), mode)) in mixed.iter().zip(modes.iter_mut()).enumerate() {
         let (f, ft, q) = &step.models[j];
         predict_into((f, ft, q), (x0, p0), &mut fp, &mut mode.x, &mut mode.p)?;
