@@ -21,6 +21,27 @@ use crate::gaussian::mahalanobis_sq;
 /// α do not suffer from the cancellation in `1 − α`. The result is accurate
 /// to about 1e-13 relative.
 pub fn chi2_threshold(dof: usize, alpha: f64) -> Result<f64, AlgoError> {
+    // The trackers ask for the same few gates at every frame: the last
+    // answers of this thread are kept (a pure function of its inputs).
+    thread_local! {
+        static RECENT: std::cell::RefCell<Vec<(usize, u64, f64)>> =
+            const { std::cell::RefCell::new(Vec::new()) };
+    }
+    let key = (dof, alpha.to_bits());
+    if let Some(v) = RECENT.with_borrow(|r| r.iter().find(|e| (e.0, e.1) == key).map(|e| e.2)) {
+        return Ok(v);
+    }
+    let v = chi2_threshold_computed(dof, alpha)?;
+    RECENT.with_borrow_mut(|r| {
+        if r.len() >= 16 {
+            r.remove(0);
+        }
+        r.push((dof, alpha.to_bits(), v));
+    });
+    Ok(v)
+}
+
+fn chi2_threshold_computed(dof: usize, alpha: f64) -> Result<f64, AlgoError> {
     let chi2 = chi_squared(dof)?;
     if !(alpha > 0.0 && alpha < 1.0) {
         return Err(AlgoError::InvalidParameter {

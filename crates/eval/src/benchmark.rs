@@ -422,6 +422,41 @@ pub fn correlate_scene(s: &RealisticScene, cfg: &Config) -> EngineOutcome {
     }
 }
 
+/// How the plots of the plot-fusion benchmark scene are timed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlotTiming {
+    /// Each plot at the instant the beam crossed the target, as a real radar
+    /// times it (ASTERIX CAT048 I048/140), quantised to 1/128 s: almost
+    /// every plot has its own time.
+    Beam,
+    /// Every plot of a scan stamped with the scan's start, and the target
+    /// taken there: a convenient but unrealistic feed (a real plot's time
+    /// is then up to one scan off).
+    ScanStart,
+}
+
+/// The plot-fusion benchmark scene: the request's spec and plots, and the
+/// truth (each target's `[e, ve, n, vn]` at t = 0, straight flight).
+#[derive(Debug, Clone)]
+pub struct PlotFusionScene {
+    /// The network and default tracker options.
+    pub spec: plot_fusion::SpecInput,
+    /// Every plot, sorted by time.
+    pub plots: Vec<plot_fusion::PlotInput>,
+    /// Per target, `[e, ve, n, vn]` (m, m/s) at t = 0 in the radars' frame.
+    pub targets: Vec<[f64; 4]>,
+}
+
+impl PlotFusionScene {
+    /// Horizontal error (m) of a position at time `t` to the nearest target.
+    pub fn nearest_error(&self, t: f64, e: f64, n: f64) -> f64 {
+        self.targets
+            .iter()
+            .map(|x| (x[0] + x[1] * t - e).hypot(x[2] + x[3] * t - n))
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
 /// The plot-fusion benchmark scene (`examples/plot_fusion_load.rs`): `n`
 /// targets in straight flight uniform in a square of side 6 km·√n (one per
 /// 36 km²: 1,000 targets over 190 km × 190 km) at 100–300 m/s, seen by
@@ -429,14 +464,19 @@ pub fn correlate_scene(s: &RealisticScene, cfg: &Config) -> EngineOutcome {
 /// periods 4, 4.5, 5, 5.5 s with phases 0, 1.1, 2.3, 3.7 s, σ_ρ = 50 m,
 /// σ_θ = 0.1°, P_D = 0.9, `false_per_scan` clutter plots per scan
 /// (uniform in range 1–200 km and azimuth); with `doppler` every radar
-/// also gives the radial velocity (σ 1 m/s). Plots are in time order.
+/// also gives the radial velocity (σ 1 m/s). The beams turn clockwise
+/// from north, one turn per scan period from the scan's start; with
+/// [`PlotTiming::Beam`] a target's plot is at the time the beam crossed it
+/// (found by fixed-point iteration on the target's azimuth, to well below
+/// a millisecond) and stamped to 1/128 s. Plots are in time order.
 pub fn plot_fusion_scene(
     n: usize,
     radars: usize,
     duration_s: f64,
     false_per_scan: usize,
     doppler: bool,
-) -> (plot_fusion::SpecInput, Vec<plot_fusion::PlotInput>) {
+    timing: PlotTiming,
+) -> PlotFusionScene {
     use std::f64::consts::TAU;
     let mut rng = run_rng(43, n as u64);
     let normal = |rng: &mut super::SimRng| -> f64 { rng.sample(StandardNormal) };
@@ -462,20 +502,43 @@ pub fn plot_fusion_scene(
     let periods = [4.0, 4.5, 5.0, 5.5];
     let phases = [0.0, 1.1, 2.3, 3.7];
     let (sr, sa, sv) = (50.0, 0.1f64.to_radians(), 1.0);
+    // The time stamp of I048/140: 1/128 s.
+    let stamp = |t: f64| (t * 128.0).round() / 128.0;
     let mut plots: Vec<plot_fusion::PlotInput> = Vec::new();
     for (r, site) in sites.iter().enumerate() {
-        let mut t = phases[r % 4];
-        while t <= duration_s {
+        let period = periods[r % 4];
+        let mut start = phases[r % 4];
+        while start <= duration_s {
             for x in &targets {
                 if rng.random::<f64>() >= 0.9 {
                     continue;
                 }
-                let (e, nn) = (x[0] + x[1] * t - site[0], x[2] + x[3] * t - site[1]);
+                let at = |t: f64| (x[0] + x[1] * t - site[0], x[2] + x[3] * t - site[1]);
+                let t = match timing {
+                    PlotTiming::ScanStart => start,
+                    PlotTiming::Beam => {
+                        // The beam is at azimuth θ at start + θ/2π · period.
+                        let mut t = start;
+                        for _ in 0..4 {
+                            let (e, nn) = at(t);
+                            t = start + e.atan2(nn).rem_euclid(TAU) / TAU * period;
+                        }
+                        t
+                    }
+                };
+                let (e, nn) = at(t);
                 let range = e.hypot(nn);
                 let rv = (e * x[1] + nn * x[3]) / range;
+                let t_stamped = match timing {
+                    PlotTiming::ScanStart => t,
+                    PlotTiming::Beam => stamp(t),
+                };
+                if t_stamped > duration_s {
+                    continue;
+                }
                 plots.push(plot_fusion::PlotInput {
                     radar_id: Some(format!("r{r}")),
-                    t: Some(t),
+                    t: Some(t_stamped),
                     range_m: Some(range + sr * normal(&mut rng)),
                     azimuth_deg: Some((e.atan2(nn) + sa * normal(&mut rng)).to_degrees()),
                     elevation_deg: None,
@@ -483,16 +546,27 @@ pub fn plot_fusion_scene(
                 });
             }
             for _ in 0..false_per_scan {
+                // Drawn in the order of the scene before beam timing.
+                let range = rng.random_range(1_000.0..200_000.0);
+                let azimuth: f64 = rng.random_range(0.0..360.0);
+                let t = match timing {
+                    PlotTiming::ScanStart => start,
+                    PlotTiming::Beam => stamp(start + azimuth / 360.0 * period),
+                };
+                let radial = doppler.then(|| rng.random_range(-300.0..300.0));
+                if t > duration_s {
+                    continue;
+                }
                 plots.push(plot_fusion::PlotInput {
                     radar_id: Some(format!("r{r}")),
                     t: Some(t),
-                    range_m: Some(rng.random_range(1_000.0..200_000.0)),
-                    azimuth_deg: Some(rng.random_range(0.0..360.0)),
+                    range_m: Some(range),
+                    azimuth_deg: Some(azimuth),
                     elevation_deg: None,
-                    radial_velocity_mps: doppler.then(|| rng.random_range(-300.0..300.0)),
+                    radial_velocity_mps: radial,
                 });
             }
-            t += periods[r % 4];
+            start += period;
         }
     }
     plots.sort_by(|a, b| a.t.unwrap_or(0.0).total_cmp(&b.t.unwrap_or(0.0)));
@@ -525,7 +599,11 @@ pub fn plot_fusion_scene(
         tracker: Default::default(),
         cat062: None,
     };
-    (spec, plots)
+    PlotFusionScene {
+        spec,
+        plots,
+        targets,
+    }
 }
 
 #[cfg(test)]

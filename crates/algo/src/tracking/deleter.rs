@@ -33,31 +33,28 @@ pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
 }
 
 /// Which confirmed tracks duplicate another: two tracks whose best plot of
-/// this frame (`hit`) is the same plot and whose states are statistically
-/// indistinguishable, (x₁ − x₂)′(P₁ + P₂)⁻¹(x₁ − x₂) below the χ²_n
-/// quantile at `probability` (n the state size; P₁ + P₂ ignores the
-/// correlation of two tracks fed the same plots, so the test is
-/// conservative). Of such a pair the track with fewer hits (then the
-/// higher id) is the duplicate. JPDA feeds both tracks of a target from its
-/// plots, so neither would ever miss; without this they live on side by
-/// side. `probability` 0 disables the rule.
+/// this frame (`hits`: (track index, plot index)) is the same plot and
+/// whose states are statistically indistinguishable, (x₁ − x₂)′(P₁ +
+/// P₂)⁻¹(x₁ − x₂) below the χ²_n quantile at `probability` (n the state
+/// size; P₁ + P₂ ignores the correlation of two tracks fed the same plots,
+/// so the test is conservative). Of such a pair the track with fewer hits
+/// (then the higher id) is the duplicate. JPDA feeds both tracks of a
+/// target from its plots, so neither would ever miss; without this they
+/// live on side by side. `probability` 0 disables the rule. Returns the
+/// duplicates' indices.
 pub(super) fn duplicates(
     tracks: &[Track],
-    hit: &[Option<usize>],
+    hits: &[(usize, usize)],
     probability: f64,
-) -> Result<Vec<bool>, AlgoError> {
-    let mut out = vec![false; tracks.len()];
-    if probability <= 0.0 || tracks.len() < 2 {
+) -> Result<Vec<usize>, AlgoError> {
+    let mut out = Vec::new();
+    if probability <= 0.0 || hits.len() < 2 {
         return Ok(out);
     }
     let n = tracks[0].x.len();
     let threshold = chi2_threshold(n, 1.0 - probability)?;
     // Tracks by their best plot; only tracks sharing one are compared.
-    let mut by_plot: Vec<(usize, usize)> = hit
-        .iter()
-        .enumerate()
-        .filter_map(|(i, h)| h.map(|j| (j, i)))
-        .collect();
+    let mut by_plot: Vec<(usize, usize)> = hits.iter().map(|&(i, j)| (j, i)).collect();
     by_plot.sort_unstable();
     for group in by_plot.chunk_by(|a, b| a.0 == b.0) {
         if group.len() < 2 {
@@ -70,20 +67,24 @@ pub(super) fn duplicates(
                 .cmp(&tracks[a].hits)
                 .then(tracks[a].id.cmp(&tracks[b].id))
         });
-        for (k, &i) in members.iter().enumerate() {
-            for &keeper in &members[..k] {
-                if out[keeper] {
+        let mut duplicate = vec![false; members.len()];
+        for k in 0..members.len() {
+            let i = members[k];
+            for (m, &keeper) in members[..k].iter().enumerate() {
+                if duplicate[m] {
                     continue;
                 }
                 let d = &tracks[i].x - &tracks[keeper].x;
                 let s = &tracks[i].p + &tracks[keeper].p;
                 if mahalanobis_sq(&d, &s)? <= threshold {
-                    out[i] = true;
+                    duplicate[k] = true;
+                    out.push(i);
                     break;
                 }
             }
         }
     }
+    out.sort_unstable();
     Ok(out)
 }
 
@@ -149,29 +150,21 @@ mod tests {
         b.hits = 4;
         let c = Track::fresh(3, dvector![5.0, 100.0, 0.0, 0.0], p.clone());
         let tracks = vec![b.clone(), a.clone()];
+        let none: Vec<usize> = Vec::new();
+        assert_eq!(duplicates(&tracks, &[(0, 7), (1, 7)], 0.05).unwrap(), none);
         assert_eq!(
-            duplicates(&tracks, &[Some(7), Some(7)], 0.05).unwrap(),
-            vec![false, false]
-        );
-        assert_eq!(
-            duplicates(&tracks, &[Some(7), Some(7)], 0.5).unwrap(),
-            vec![true, false]
+            duplicates(&tracks, &[(0, 7), (1, 7)], 0.5).unwrap(),
+            vec![0]
         );
         // Different best plots: never duplicates; 0 disables the rule.
-        assert_eq!(
-            duplicates(&tracks, &[Some(7), Some(8)], 0.5).unwrap(),
-            vec![false, false]
-        );
-        assert_eq!(
-            duplicates(&tracks, &[Some(7), Some(7)], 0.0).unwrap(),
-            vec![false, false]
-        );
+        assert_eq!(duplicates(&tracks, &[(0, 7), (1, 8)], 0.5).unwrap(), none);
+        assert_eq!(duplicates(&tracks, &[(0, 7), (1, 7)], 0.0).unwrap(), none);
         // 5 m apart: d² = 25/200 = 0.125 < 0.7107 → the one with fewer hits
         // (c, 0 hits) goes at p = 0.05.
         let tracks = vec![a, c];
         assert_eq!(
-            duplicates(&tracks, &[Some(1), Some(1)], 0.05).unwrap(),
-            vec![false, true]
+            duplicates(&tracks, &[(0, 1), (1, 1)], 0.05).unwrap(),
+            vec![1]
         );
     }
 }

@@ -38,14 +38,48 @@ use crate::gaussian::{mahalanobis_sq, symmetrize};
 use crate::kalman;
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
+use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
 use crate::tracking::sweep::View;
-use crate::tracking::track::{Track, chi2_gates, position_selector};
+use crate::tracking::track::{Track, chi2_gates, position_selector, predict};
 
 /// Roots and tentative tracks, carried between frames.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default)]
 pub(crate) struct Initiator {
+    /// Unused plots of earlier frames, in time order. Within a call of
+    /// the tracker, roots that expired or were paired are only flagged
+    /// (`dead`); [`Initiator::compact`] removes them.
     pub roots: Vec<CartesianPlot>,
     pub tentatives: Vec<Track>,
+    /// Per root, paired or expired (empty: none). Derived.
+    dead: Vec<bool>,
+    dead_count: usize,
+    /// Roots before this index are known expired. Derived.
+    expired: usize,
+    /// The roots by position (slots = indices in `roots`). Derived.
+    root_grid: RootGrid,
+    /// The tentative tracks by position. Derived.
+    pub(crate) index: TrackIndex,
+}
+
+/// The roots' grid and the largest trace of a root's covariance.
+#[derive(Debug, Clone, Default)]
+struct RootGrid {
+    grid: Grid,
+    max_trace: f64,
+}
+
+impl PartialEq for Initiator {
+    /// The live roots and the tentatives (derived data and flagged roots
+    /// not yet removed aside).
+    fn eq(&self, other: &Self) -> bool {
+        self.tentatives == other.tentatives && self.live_roots().eq(other.live_roots())
+    }
+}
+
+impl PartialEq for RootGrid {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// What one frame of initiation did.
@@ -59,14 +93,83 @@ pub(crate) struct Initiated {
     pub started: usize,
 }
 
+/// How a frame treats the tentative tracks no plot extends.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Misses {
+    /// Every tentative is predicted to the frame, and a miss is counted
+    /// where the view says (parallel mode: every instant judges all).
+    Judge(View),
+    /// Only the tentatives a plot may extend are predicted; misses are
+    /// judged apart, from the beam ([`Initiator::judge`]).
+    Lazy,
+}
+
 impl Initiator {
+    /// Removes the roots flagged dead (keeping the order) and rebuilds
+    /// the roots' grid.
+    pub(crate) fn compact(&mut self) {
+        if self.dead_count > 0 {
+            let mut dead = self.dead.iter();
+            self.roots
+                .retain(|_| !*dead.next().expect("one flag per root"));
+        }
+        self.dead.clear();
+        self.dead_count = 0;
+        self.expired = 0;
+        self.root_grid.grid.invalidate();
+    }
+
+    /// The roots not flagged dead.
+    pub(crate) fn live_roots(&self) -> impl Iterator<Item = &CartesianPlot> {
+        self.roots
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !self.is_dead(*i))
+            .map(|(_, r)| r)
+    }
+
+    /// An initiator of these roots and tentatives.
+    pub(crate) fn from_parts(roots: Vec<CartesianPlot>, tentatives: Vec<Track>) -> Self {
+        Self {
+            roots,
+            tentatives,
+            ..Self::default()
+        }
+    }
+
+    fn refresh_roots(&mut self) {
+        if self.root_grid.grid.is_valid() {
+            return;
+        }
+        self.root_grid.grid.clear();
+        self.root_grid.max_trace = 0.0;
+        for (i, r) in self.roots.iter().enumerate() {
+            self.root_grid.grid.set(i, r.z[0], r.z[1]);
+            self.root_grid.max_trace = self.root_grid.max_trace.max(r.r.trace());
+        }
+    }
+
+    fn kill_root(&mut self, i: usize) {
+        if self.dead.len() < self.roots.len() {
+            self.dead.resize(self.roots.len(), false);
+        }
+        if !self.dead[i] {
+            self.dead[i] = true;
+            self.dead_count += 1;
+        }
+    }
+
+    fn is_dead(&self, i: usize) -> bool {
+        self.dead.get(i).copied().unwrap_or(false)
+    }
+
     /// One frame at time `t` with the plots no confirmed track used.
     pub(crate) fn step(
         &mut self,
         t: f64,
         plots: Vec<CartesianPlot>,
         cfg: &TrackerConfig,
-        view: View,
+        misses: Misses,
         next_id: &mut u64,
     ) -> Result<Initiated, AlgoError> {
         let init = &cfg.initiation;
@@ -74,31 +177,54 @@ impl Initiator {
         let mut out = Initiated::default();
         let mut taken = vec![false; plots.len()];
 
-        // 7b: extend the tentative tracks.
+        // 7b: extend the tentative tracks (those a plot may reach, when
+        // misses are judged apart), each predicted to the frame.
+        let lazy = matches!(misses, Misses::Lazy);
+        let slots: Vec<usize> = if lazy {
+            if plots.is_empty() {
+                Vec::new()
+            } else {
+                self.index.candidates(&self.tentatives, &plots, t, cfg)?
+            }
+        } else {
+            (0..self.tentatives.len()).collect()
+        };
+        let mut predicted = Vec::with_capacity(slots.len());
         let mut edges = Vec::new();
-        for (i, track) in self.tentatives.iter_mut().enumerate() {
-            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+        for (c, &i) in slots.iter().enumerate() {
+            let track = &self.tentatives[i];
+            let (x, p) = predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?;
             for (j, plot) in plots.iter().enumerate() {
                 let k = plot.z.len();
                 // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
-                let nu0 = plot.z[0] - track.x[0];
-                if nu0 * nu0 > gates[k - 2] * (track.p[(0, 0)] + plot.r[(0, 0)]) {
+                let nu0 = plot.z[0] - x[0];
+                if nu0 * nu0 > gates[k - 2] * (p[(0, 0)] + plot.r[(0, 0)]) {
                     continue;
                 }
                 let h = position_selector(k, cfg.axes);
-                let s = &h * &track.p * h.transpose() + &plot.r;
-                let d2 = mahalanobis_sq(&(&plot.z - &h * &track.x), &s)?;
+                let s = &h * &p * h.transpose() + &plot.r;
+                let d2 = mahalanobis_sq(&(&plot.z - &h * &x), &s)?;
                 if d2 <= gates[k - 2] {
-                    edges.push((i, j, d2 / gates[k - 2]));
+                    edges.push((c, j, d2 / gates[k - 2]));
                 }
             }
+            predicted.push((x, p));
         }
-        let mut hit = vec![None; self.tentatives.len()];
-        for (i, j) in assignment::solve(&edges, 1.0 + 1e-12) {
-            hit[i] = Some(j);
+        let mut hit = vec![None; slots.len()];
+        for (c, j) in assignment::solve(&edges, 1.0 + 1e-12) {
+            hit[c] = Some(j);
             taken[j] = true;
         }
-        for (track, hit) in self.tentatives.iter_mut().zip(hit) {
+        // The tentatives whose life this frame recorded.
+        let mut touched = Vec::new();
+        for ((&i, hit), (x, p)) in slots.iter().zip(hit).zip(predicted) {
+            if lazy && hit.is_none() {
+                continue;
+            }
+            let track = &mut self.tentatives[i];
+            track.x = x;
+            track.p = p;
+            track.t = t;
             match hit {
                 Some(j) => {
                     let plot = &plots[j];
@@ -109,62 +235,182 @@ impl Initiator {
                     track.record(Some(plot.radars.clone()));
                     track.last_plot = plot.measured;
                 }
-                None if view.misses(&track.x, track.last_update) => track.record(None),
-                None => {}
+                None => {
+                    if let Misses::Judge(view) = misses {
+                        if view.misses(&track.x, track.last_update) {
+                            track.record(None);
+                        }
+                    }
+                }
             }
+            self.index.moved(i, track);
+            touched.push(i);
         }
 
-        // 7a: pair the roots with the free plots.
-        self.roots.retain(|r| t - r.t <= init.max_dt);
-        let mut paired_root = vec![false; self.roots.len()];
-        let mut paired_plot = vec![false; plots.len()];
-        for (i, root) in self.roots.iter().enumerate() {
-            let dt = t - root.t;
-            if dt < init.min_dt {
+        // 7a: pair the roots with the free plots (roots within reach of a
+        // plot found by the roots' grid; pairs in root-then-plot order).
+        self.refresh_roots();
+        let v_reach = match init.velocity {
+            VelocityGate::Speed { v_max, .. } => v_max,
+            VelocityGate::PerAxis { v_min, v_max } => {
+                2.0 * (0..3)
+                    .map(|i| v_min[i].abs().max(v_max[i].abs()).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            }
+        };
+        let mut pairs: Vec<(usize, usize)> = Vec::new();
+        let mut near = Vec::new();
+        for (j, plot) in plots.iter().enumerate() {
+            if taken[j] {
                 continue;
             }
-            for (j, plot) in plots.iter().enumerate() {
-                if taken[j] {
-                    continue;
-                }
-                let k = root.z.len().min(plot.z.len());
-                if velocity_bound(root, plot, dt, &init.velocity) > gates[k - 2] {
-                    continue;
-                }
-                if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
-                    let (x, p) = two_point(root, plot, dt, cfg);
-                    self.tentatives
-                        .push(new_tentative(next_id, x, p, t, root, plot));
-                    out.started += 1;
-                    paired_root[i] = true;
-                    paired_plot[j] = true;
-                }
+            let radius = 2.0
+                * (v_reach * init.max_dt
+                    + (gates[1] * (plot.r.trace() + self.root_grid.max_trace)).sqrt())
+                + 1.0;
+            near.clear();
+            self.root_grid
+                .grid
+                .within(plot.z[0], plot.z[1], radius, &mut near);
+            pairs.extend(near.iter().map(|&i| (i as usize, j)));
+        }
+        pairs.sort_unstable();
+        let mut paired_plot = vec![false; plots.len()];
+        let mut paired_roots = Vec::new();
+        let first_new = self.tentatives.len();
+        for (i, j) in pairs {
+            if self.is_dead(i) {
+                continue;
+            }
+            let root = &self.roots[i];
+            let plot = &plots[j];
+            let dt = t - root.t;
+            if dt < init.min_dt || dt > init.max_dt {
+                continue;
+            }
+            let k = root.z.len().min(plot.z.len());
+            if velocity_bound(root, plot, dt, &init.velocity) > gates[k - 2] {
+                continue;
+            }
+            if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
+                let (x, p) = two_point(root, plot, dt, cfg);
+                let track = new_tentative(next_id, x, p, t, root, plot);
+                self.index.moved(self.tentatives.len(), &track);
+                self.tentatives.push(track);
+                out.started += 1;
+                paired_plot[j] = true;
+                paired_roots.push(i);
             }
         }
-        let mut keep = paired_root.iter().map(|p| !p);
-        self.roots
-            .retain(|_| keep.next().expect("one flag per root"));
+        // A root pairs with every plot it passes with, then is consumed;
+        // roots older than max_dt expire (they are in time order).
+        for i in paired_roots {
+            self.kill_root(i);
+        }
+        while self.expired < self.roots.len() && t - self.roots[self.expired].t > init.max_dt {
+            self.kill_root(self.expired);
+            self.expired += 1;
+        }
         for (j, plot) in plots.into_iter().enumerate() {
             if !taken[j] && !paired_plot[j] {
+                let i = self.roots.len();
+                self.root_grid.grid.set(i, plot.z[0], plot.z[1]);
+                self.root_grid.max_trace = self.root_grid.max_trace.max(plot.r.trace());
                 self.roots.push(plot);
+                if !self.dead.is_empty() {
+                    self.dead.push(false);
+                }
             }
+        }
+        if self.dead_count > 64 && 2 * self.dead_count > self.roots.len() {
+            self.compact();
         }
 
-        // 7c: confirm or drop.
-        let (m, n) = (init.confirm_m, init.confirm_n);
-        let mut remaining = Vec::with_capacity(self.tentatives.len());
-        for track in self.tentatives.drain(..) {
-            if track.hits_in_last(n) >= m {
-                out.confirmed.push(track);
-            } else if track.misses_in_last(n) > n - m {
-                out.dropped += 1;
-            } else {
-                remaining.push(track);
+        // 7c: confirm or drop the tentatives this frame recorded (the
+        // ones created now have two hits of at most N).
+        let judged = if lazy {
+            touched.extend(first_new..self.tentatives.len());
+            touched
+        } else {
+            (0..self.tentatives.len()).collect()
+        };
+        let mut gone = Vec::new();
+        for i in judged {
+            match self.verdict(i, cfg) {
+                Verdict::Confirm => gone.push((i, true)),
+                Verdict::Drop => gone.push((i, false)),
+                Verdict::Keep => {}
             }
         }
-        self.tentatives = remaining;
+        self.remove(gone, &mut out);
         Ok(out)
     }
+
+    /// Whether tentative `i` is confirmed, dropped or kept (7c).
+    fn verdict(&self, i: usize, cfg: &TrackerConfig) -> Verdict {
+        let (m, n) = (cfg.initiation.confirm_m, cfg.initiation.confirm_n);
+        let track = &self.tentatives[i];
+        if track.hits_in_last(n) >= m {
+            Verdict::Confirm
+        } else if track.misses_in_last(n) > n - m {
+            Verdict::Drop
+        } else {
+            Verdict::Keep
+        }
+    }
+
+    /// Removes tentatives (slot, confirmed), the confirmed ones into `out`
+    /// by ascending slot (the others take their places: `swap_remove`).
+    fn remove(&mut self, gone: Vec<(usize, bool)>, out: &mut Initiated) {
+        if gone.is_empty() {
+            return;
+        }
+        let confirmed: std::collections::HashSet<usize> =
+            gone.iter().filter(|g| g.1).map(|g| g.0).collect();
+        let slots = gone.into_iter().map(|g| g.0).collect();
+        let (removed, _) = swap_remove_all(&mut self.tentatives, slots, &mut self.index);
+        for (slot, track) in removed {
+            if confirmed.contains(&slot) {
+                out.confirmed.push(track);
+            } else {
+                out.dropped += 1;
+            }
+        }
+    }
+
+    /// Misses judged from the beam (serial mode): every tentative `judge`
+    /// says missed the sweep is predicted to `t` and gets a miss; those
+    /// that can no longer be confirmed are dropped.
+    pub(crate) fn judge(
+        &mut self,
+        t: f64,
+        cfg: &TrackerConfig,
+        judge: &dyn Fn(&Track) -> bool,
+        out: &mut Initiated,
+    ) -> Result<(), AlgoError> {
+        let mut gone = Vec::new();
+        for i in 0..self.tentatives.len() {
+            if !judge(&self.tentatives[i]) {
+                continue;
+            }
+            let track = &mut self.tentatives[i];
+            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+            track.record(None);
+            self.index.moved(i, &self.tentatives[i]);
+            if let Verdict::Drop = self.verdict(i, cfg) {
+                gone.push((i, false));
+            }
+        }
+        self.remove(gone, out);
+        Ok(())
+    }
+}
+
+enum Verdict {
+    Confirm,
+    Drop,
+    Keep,
 }
 
 /// A lower bound of [`velocity_statistic`] without allocation, for
@@ -366,7 +612,13 @@ mod tests {
         for k in 0..5 {
             let t = k as f64;
             let out = ini
-                .step(t, vec![plot(t, 10.0 * t, 100.0)], &c, View::All, &mut id)
+                .step(
+                    t,
+                    vec![plot(t, 10.0 * t, 100.0)],
+                    &c,
+                    Misses::Judge(View::All),
+                    &mut id,
+                )
                 .unwrap();
             if k == 1 {
                 assert_eq!(out.started, 1);
@@ -393,13 +645,29 @@ mod tests {
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, View::All, &mut id)
+        ini.step(
+            0.0,
+            vec![plot(0.0, 0.0, 0.0)],
+            &c,
+            Misses::Judge(View::All),
+            &mut id,
+        )
+        .unwrap();
+        ini.step(
+            1.0,
+            vec![plot(1.0, 10.0, 0.0)],
+            &c,
+            Misses::Judge(View::All),
+            &mut id,
+        )
+        .unwrap();
+        let a = ini
+            .step(2.0, vec![], &c, Misses::Judge(View::All), &mut id)
             .unwrap();
-        ini.step(1.0, vec![plot(1.0, 10.0, 0.0)], &c, View::All, &mut id)
-            .unwrap();
-        let a = ini.step(2.0, vec![], &c, View::All, &mut id).unwrap();
         assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
-        let b = ini.step(3.0, vec![], &c, View::All, &mut id).unwrap();
+        let b = ini
+            .step(3.0, vec![], &c, Misses::Judge(View::All), &mut id)
+            .unwrap();
         assert_eq!((b.dropped, ini.tentatives.len()), (1, 0));
     }
 
@@ -439,10 +707,22 @@ mod tests {
         let c = cfg();
         let mut ini = Initiator::default();
         let mut id = 0;
-        ini.step(0.0, vec![plot(0.0, 0.0, 0.0)], &c, View::All, &mut id)
-            .unwrap();
+        ini.step(
+            0.0,
+            vec![plot(0.0, 0.0, 0.0)],
+            &c,
+            Misses::Judge(View::All),
+            &mut id,
+        )
+        .unwrap();
         let out = ini
-            .step(1.0, vec![plot(1.0, 1000.0, 0.0)], &c, View::All, &mut id)
+            .step(
+                1.0,
+                vec![plot(1.0, 1000.0, 0.0)],
+                &c,
+                Misses::Judge(View::All),
+                &mut id,
+            )
             .unwrap();
         assert_eq!(out.started, 0);
         assert_eq!(ini.roots.len(), 2); // the new plot is a root; the old one waits
@@ -498,7 +778,9 @@ mod tests {
                     p
                 })
                 .collect();
-            let out = ini.step(t, plots, &c, View::All, &mut id).unwrap();
+            let out = ini
+                .step(t, plots, &c, Misses::Judge(View::All), &mut id)
+                .unwrap();
             started += out.started;
             confirmed += out.confirmed.len();
         }

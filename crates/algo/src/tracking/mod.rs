@@ -38,6 +38,7 @@ pub mod associator;
 pub mod config;
 pub mod conversion;
 mod deleter;
+mod hypothesiser;
 pub mod initiator;
 pub mod plot_association;
 pub mod predictor;
@@ -60,8 +61,6 @@ pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
 
-use std::collections::HashMap;
-
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
 use associator::{
@@ -69,8 +68,10 @@ use associator::{
     range_rate_sigma,
 };
 use conversion::{extrapolate, register};
-use initiator::Initiator;
+use hypothesiser::TrackIndex;
+use initiator::{Initiated, Initiator, Misses};
 use plot_association::associate_and_fuse_members;
+use predictor::ImmSteps;
 use registration::{RadarBias, RegistrationState};
 use sweep::View;
 use updater::{Measurements, update_imm};
@@ -133,6 +134,13 @@ pub struct Tracker {
     /// Serial mode, per radar: time and azimuth of the last plot of its
     /// last frame (where its beam was; [`sweep`]).
     beams: Vec<Option<(f64, f64)>>,
+    /// Serial mode, per radar: where its beam was when misses were last
+    /// judged from its sweep ([`Tracker::judge_sweep`]).
+    judged: Vec<Option<(f64, f64)>>,
+    /// The confirmed tracks by position (derived, never stored).
+    index: TrackIndex,
+    /// The IMM steps built so far, by Δt (derived, never stored).
+    steps: ImmSteps,
     /// The registration estimator's data ([`registration`]).
     registration: RegistrationState,
     /// Each radar's bias as applied now (from `registration`; not stored).
@@ -175,7 +183,10 @@ impl Tracker {
             last_time: None,
             last_instant: None,
             counters: Counters::default(),
+            judged: beams.clone(),
             beams,
+            index: TrackIndex::default(),
+            steps: ImmSteps::default(),
         })
     }
 
@@ -214,14 +225,16 @@ impl Tracker {
         self.pending.len()
     }
 
-    /// Confirmed tracks then tentative tracks, each by ascending id.
+    /// Confirmed tracks then tentative tracks, each by ascending id, every
+    /// one predicted to the time of the last frame (a track keeps its own
+    /// time, that of its last update or miss; [`Track::t`]).
     pub fn tracks(&self) -> Vec<TrackOutput> {
         let mut confirmed = self.confirmed_tracks();
         let mut tentative: Vec<TrackOutput> = self
             .initiator
             .tentatives
             .iter()
-            .map(|t| t.output(TrackStatus::Tentative))
+            .map(|t| self.output(t, TrackStatus::Tentative))
             .collect();
         tentative.sort_by_key(|t| t.id);
         confirmed.extend(tentative);
@@ -300,15 +313,23 @@ impl Tracker {
             .map(|t| t.id)
     }
 
-    /// The confirmed tracks by ascending id.
+    /// The confirmed tracks by ascending id, predicted to the time of the
+    /// last frame.
     pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
         let mut confirmed: Vec<TrackOutput> = self
             .tracks
             .iter()
-            .map(|t| t.output(TrackStatus::Confirmed))
+            .map(|t| self.output(t, TrackStatus::Confirmed))
             .collect();
         confirmed.sort_by_key(|t| t.id);
         confirmed
+    }
+
+    fn output(&self, track: &Track, status: TrackStatus) -> TrackOutput {
+        match self.last_time {
+            Some(t) => track.output_at(t, &self.config, status),
+            None => track.output(status),
+        }
     }
 
     fn is_late(&self, plot: &Plot) -> Result<bool, AlgoError> {
@@ -345,26 +366,51 @@ impl Tracker {
         report: &mut StepReport,
         after_frame: &mut dyn FnMut(&Self),
     ) -> Result<(), AlgoError> {
-        while !self.pending.is_empty() {
-            let first = self.pending[0];
+        // Frames are taken from the front by a cursor, the buffer cut
+        // once at the end (draining each frame from the front would move
+        // every later plot: quadratic in a call's plots).
+        let pending = std::mem::take(&mut self.pending);
+        let mut head = 0;
+        let result = self.drain_frames(&pending, &mut head, flush, report, after_frame);
+        self.pending = pending;
+        self.pending.drain(..head);
+        result?;
+        self.initiator.compact();
+        report.pending = self.pending.len();
+        Ok(())
+    }
+
+    /// The frames of `pending[*head..]` that are complete (all with
+    /// `flush`), `head` advanced past each one processed.
+    fn drain_frames(
+        &mut self,
+        pending: &[Plot],
+        head: &mut usize,
+        flush: bool,
+        report: &mut StepReport,
+        after_frame: &mut dyn FnMut(&Self),
+    ) -> Result<(), AlgoError> {
+        while *head < pending.len() {
+            let rest = &pending[*head..];
+            let first = rest[0];
             let len = if self.parallel {
                 let k = self.instant_of(first.t)?;
                 let mut n = 0;
-                while n < self.pending.len() && self.instant_of(self.pending[n].t)? == k {
+                while n < rest.len() && self.instant_of(rest[n].t)? == k {
                     n += 1;
                 }
                 n
             } else {
                 let tol = self.config.time_tolerance;
-                self.pending
-                    .iter()
+                rest.iter()
                     .take_while(|p| p.radar == first.radar && p.t - first.t <= tol)
                     .count()
             };
-            if len == self.pending.len() && !flush {
+            if len == rest.len() && !flush {
                 break;
             }
-            let frame: Vec<Plot> = self.pending.drain(..len).collect();
+            let frame: Vec<Plot> = rest[..len].to_vec();
+            *head += len;
             if self.parallel {
                 self.parallel_frame(self.instant_of(first.t)?, frame, report)?;
             } else {
@@ -372,11 +418,11 @@ impl Tracker {
             }
             after_frame(self);
         }
-        report.pending = self.pending.len();
         Ok(())
     }
 
-    /// Step 6: one radar's scan group at the time of its last plot.
+    /// Step 6: one radar's scan group at the time of its last plot; then
+    /// the misses of the sector its beam swept, when due.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
         let bias = self.biases[index];
@@ -387,7 +433,6 @@ impl Tracker {
             .collect();
         let last = corrected[corrected.len() - 1];
         let t = last.t;
-        let view = View::of_frame(&spec, self.beams[index], t, last.azimuth);
         self.beams[index] = Some((t, last.azimuth));
         // The measured plot a track reports (and registration pairs) is
         // the raw one.
@@ -401,30 +446,97 @@ impl Tracker {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let learn = self.learns_biases();
-        // Tracks whose last update was another radar's plot: those hit by
-        // this frame give a pair.
-        let previous: HashMap<u64, Plot> = if learn {
-            self.tracks
-                .iter()
-                .filter_map(|tr| {
-                    tr.last_plot
-                        .filter(|p| p.radar != index)
-                        .map(|p| (tr.id, p))
-                })
-                .collect()
-        } else {
-            HashMap::new()
-        };
         let source = Source::Radar {
-            spec,
+            spec: spec.clone(),
             plots: corrected,
         };
-        self.run_frame(t, source, plots, view, report)?;
-        if learn {
-            self.learn_biases(index, &previous)?;
+        let hits = self.run_frame(t, source, plots, report)?;
+        if self.learns_biases() {
+            self.learn_biases(index, &hits)?;
         }
+        self.judge_sweep(index, &spec, t, last.azimuth, report)
+    }
+
+    /// Misses from the beam of radar `index` (serial mode), judged in
+    /// bulk once it has swept 1/[`JUDGE_SLICES`] of its period since the
+    /// last judgement (and at its first frame): every track, confirmed or
+    /// tentative, that the swept sector judges ([`View`]: in the sector,
+    /// and no update in the last half scan) is predicted to `t` and gets a
+    /// miss; the deletion rules then apply to it. A whole-turn view
+    /// (a radar's first frame, or a gap) judges every track not updated
+    /// at `t`.
+    fn judge_sweep(
+        &mut self,
+        index: usize,
+        spec: &RadarSpec,
+        t: f64,
+        azimuth: f64,
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
+        if let Some((t0, _)) = self.judged[index] {
+            if t - t0 < spec.scan_period / JUDGE_SLICES {
+                return Ok(());
+            }
+        }
+        let view = View::of_frame(spec, self.judged[index], t, azimuth);
+        self.judged[index] = Some((t, azimuth));
+        let judge = |tr: &Track| -> bool {
+            if tr.last_update >= t {
+                return false;
+            }
+            let dt = t - tr.t;
+            view.misses_at(
+                tr.x[0] + tr.x[1] * dt,
+                tr.x[2] + tr.x[3] * dt,
+                tr.last_update,
+            )
+        };
+        let cfg = &self.config;
+        let mut doomed = Vec::new();
+        for (k, track) in self.tracks.iter_mut().enumerate() {
+            if !judge(track) {
+                continue;
+            }
+            track.predict_with(t, cfg, &mut self.steps)?;
+            track.record(None);
+            self.index.moved(k, track);
+            if deleter::should_delete(track, &cfg.deletion) {
+                doomed.push((k, false));
+            }
+        }
+        self.delete(doomed, report);
+        let mut dropped = Initiated::default();
+        self.initiator
+            .judge(t, &self.config, &judge, &mut dropped)?;
+        self.counters.dropped += dropped.dropped as u64;
         Ok(())
+    }
+
+    /// Removes tracks (slot, whether a duplicate), reporting each as it
+    /// was, by ascending slot (others take their places: `swap_remove`).
+    /// Returns the moves (from, to) of the tracks that took their places.
+    fn delete(
+        &mut self,
+        doomed: Vec<(usize, bool)>,
+        report: &mut StepReport,
+    ) -> Vec<(usize, usize)> {
+        if doomed.is_empty() {
+            return Vec::new();
+        }
+        let duplicates: std::collections::HashSet<usize> =
+            doomed.iter().filter(|d| d.1).map(|d| d.0).collect();
+        let slots = doomed.into_iter().map(|d| d.0).collect();
+        let (removed, moves) =
+            hypothesiser::swap_remove_all(&mut self.tracks, slots, &mut self.index);
+        for (slot, track) in removed {
+            report.deleted.push(track.output(TrackStatus::Deleted));
+            if duplicates.contains(&slot) {
+                self.counters.merged += 1;
+            } else {
+                self.counters.deleted += 1;
+            }
+        }
+        moves
     }
 
     /// Whether frames learn the radars' biases: registration on, and two
@@ -434,24 +546,15 @@ impl Tracker {
     }
 
     /// Registration in serial mode: the pairs of this frame (a confirmed
-    /// track updated by a plot of radar `index` whose previous update, in
-    /// `previous`, was another radar's plot), then the estimate solved
-    /// again.
-    fn learn_biases(
-        &mut self,
-        index: usize,
-        previous: &HashMap<u64, Plot>,
-    ) -> Result<(), AlgoError> {
-        let pairs: Vec<(usize, Plot, Plot, bool)> = self
-            .tracks
+    /// track updated by a plot of radar `index` whose previous update was
+    /// another radar's plot), then the estimate solved again.
+    fn learn_biases(&mut self, index: usize, hits: &[Hit]) -> Result<(), AlgoError> {
+        let pairs: Vec<(usize, Plot, Plot, bool)> = hits
             .iter()
-            .enumerate()
-            .filter_map(|(k, tr)| {
-                // A last plot of radar `index` where the frame began with
-                // another radar's: the track was hit by this frame.
-                let newer = tr.last_plot.filter(|p| p.radar == index)?;
-                let older = previous.get(&tr.id)?;
-                Some((k, newer, *older, true))
+            .filter_map(|h| {
+                let newer = self.tracks[h.slot].last_plot.filter(|p| p.radar == index)?;
+                let older = h.previous.filter(|p| p.radar != index)?;
+                Some((h.slot, newer, older, true))
             })
             .collect();
         self.learn_pairs(&pairs)
@@ -459,32 +562,25 @@ impl Tracker {
 
     /// Registration in parallel mode: every cluster of several radars'
     /// plots (`members`, indices in `frame`) that updated a confirmed track
-    /// (`hits`: track id, cluster) gives a pair per two of its plots
-    /// consecutive in time; then the estimate is solved again.
+    /// (`hits`) gives a pair per two of its plots consecutive in time;
+    /// then the estimate is solved again.
     fn learn_from_clusters(
         &mut self,
         frame: &[Plot],
         members: &[Vec<usize>],
-        hits: &[(u64, usize)],
+        hits: &[Hit],
     ) -> Result<(), AlgoError> {
-        let by_id: HashMap<u64, usize> = hits
-            .iter()
-            .filter(|(_, j)| members[*j].len() >= 2)
-            .copied()
-            .collect();
-        if by_id.is_empty() {
-            return Ok(());
-        }
         let mut pairs = Vec::new();
-        for (k, tr) in self.tracks.iter().enumerate() {
-            let Some(&j) = by_id.get(&tr.id) else {
+        for h in hits {
+            let j = h.plot;
+            if members[j].len() < 2 {
                 continue;
-            };
+            }
             let mut plots: Vec<Plot> = members[j].iter().map(|&i| frame[i]).collect();
             plots.sort_by(|a, b| a.t.total_cmp(&b.t));
             let shares_plots = plots.len() > 2;
             for w in plots.windows(2) {
-                pairs.push((k, w[1], w[0], shares_plots));
+                pairs.push((h.slot, w[1], w[0], shares_plots));
             }
         }
         self.learn_pairs(&pairs)
@@ -583,7 +679,7 @@ impl Tracker {
             clutter,
             detection_probability: 1.0 - miss,
         };
-        let hits = self.run_frame(t, source, fused, View::All, report)?;
+        let hits = self.run_frame(t, source, fused, report)?;
         self.last_instant = Some(k);
         if self.learns_biases() {
             self.learn_from_clusters(&frame, &members, &hits)?;
@@ -591,28 +687,39 @@ impl Tracker {
         Ok(())
     }
 
-    /// The tracking loop of one frame: predict, associate and update,
-    /// delete, initiate. Returns (track id, index in `plots`) of every
-    /// track a plot updated.
+    /// The tracking loop of one frame: hypothesise (the tracks a plot may
+    /// gate: from the index in serial mode, every track in parallel mode),
+    /// predict them, associate, update, delete, initiate. In serial mode a
+    /// track no plot gates is left as it was (its misses come from the
+    /// beam, [`Tracker::judge_sweep`]); in parallel mode every track is
+    /// predicted to the instant and misses when not detected. Returns the
+    /// tracks a plot updated (slots after the frame's deletions).
     fn run_frame(
         &mut self,
         t: f64,
         source: Source,
         plots: Vec<CartesianPlot>,
-        view: View,
         report: &mut StepReport,
-    ) -> Result<Vec<(u64, usize)>, AlgoError> {
+    ) -> Result<Vec<Hit>, AlgoError> {
+        let lazy = !self.parallel;
+        let slots: Vec<usize> = if !lazy {
+            (0..self.tracks.len()).collect()
+        } else if plots.is_empty() {
+            Vec::new()
+        } else {
+            self.index
+                .candidates(&self.tracks, &plots, t, &self.config)?
+        };
         let cfg = &self.config;
-        let mut step = None;
-        for track in &mut self.tracks {
-            track.predict_with(t, cfg, &mut step)?;
+        let mut predicted = Vec::with_capacity(slots.len());
+        for &k in &slots {
+            predicted.push(self.tracks[k].predicted(t, cfg, &mut self.steps)?);
         }
-        let mut estimates: Vec<TrackEstimate> = self
-            .tracks
+        let mut estimates: Vec<TrackEstimate> = predicted
             .iter()
-            .map(|tr| TrackEstimate {
-                x: tr.x.clone(),
-                p: tr.p.clone(),
+            .map(|p| TrackEstimate {
+                x: p.x.clone(),
+                p: p.p.clone(),
             })
             .collect();
         let (
@@ -660,15 +767,22 @@ impl Tracker {
                 Measurements::Cartesian { plots: &plots },
             ),
         };
-        // (track id, plot index) of every track a plot updated.
-        let mut hits = Vec::new();
-        for (((track, est), hit), assoc) in self
-            .tracks
-            .iter_mut()
+        // Commit the predictions of the tracks a plot gated (every track's
+        // in parallel mode) and update them.
+        let mut hits: Vec<Hit> = Vec::new();
+        let mut touched: Vec<usize> = Vec::new();
+        for ((((&k, prediction), est), hit), assoc) in slots
+            .iter()
+            .zip(predicted)
             .zip(estimates)
             .zip(&hit)
             .zip(&associations)
         {
+            if lazy && assoc.measurements.is_empty() {
+                continue;
+            }
+            let track = &mut self.tracks[k];
+            track.commit(t, prediction);
             if track.modes.is_empty() {
                 track.x = est.x;
                 track.p = est.p;
@@ -679,30 +793,47 @@ impl Tracker {
             }
             match hit {
                 Some(j) => {
-                    hits.push((track.id, *j));
+                    hits.push(Hit {
+                        slot: k,
+                        plot: *j,
+                        previous: track.last_plot,
+                    });
                     track.record(Some(plots[*j].radars.clone()));
                     track.last_plot = plots[*j].measured;
                 }
-                None if view.misses(&track.x, track.last_update) => track.record(None),
+                None if !lazy => track.record(None),
                 None => {}
             }
+            self.index.moved(k, track);
+            touched.push(k);
         }
 
-        let duplicate = deleter::duplicates(&self.tracks, &hit, cfg.duplicate_probability)?;
-        let rule = cfg.deletion;
-        let mut kept = Vec::with_capacity(self.tracks.len());
-        for (track, duplicate) in self.tracks.drain(..).zip(duplicate) {
-            if duplicate {
-                report.deleted.push(track.output(TrackStatus::Deleted));
-                self.counters.merged += 1;
-            } else if deleter::should_delete(&track, &rule) {
-                report.deleted.push(track.output(TrackStatus::Deleted));
-                self.counters.deleted += 1;
-            } else {
-                kept.push(track);
+        let hit_plots: Vec<(usize, usize)> = hits.iter().map(|h| (h.slot, h.plot)).collect();
+        let mut doomed: Vec<(usize, bool)> =
+            deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_probability)?
+                .into_iter()
+                .map(|k| (k, true))
+                .collect();
+        for &k in &touched {
+            if !doomed.iter().any(|d| d.0 == k)
+                && deleter::should_delete(&self.tracks[k], &cfg.deletion)
+            {
+                doomed.push((k, false));
             }
         }
-        self.tracks = kept;
+        // The hits' slots after the deletions; deleted tracks learn nothing.
+        let gone: std::collections::HashSet<usize> = doomed.iter().map(|d| d.0).collect();
+        let moves = self.delete(doomed, report);
+        let hits: Vec<Hit> = hits
+            .into_iter()
+            .filter(|h| !gone.contains(&h.slot))
+            .map(|h| Hit {
+                slot: moves
+                    .iter()
+                    .fold(h.slot, |s, &(from, to)| if s == from { to } else { s }),
+                ..h
+            })
+            .collect();
 
         // The initiator keeps positions only (what the stored state holds).
         let leftovers = plots
@@ -715,9 +846,14 @@ impl Tracker {
                 })
             })
             .collect();
-        let initiated = self
-            .initiator
-            .step(t, leftovers, &self.config, view, &mut self.next_id)?;
+        let misses = if lazy {
+            Misses::Lazy
+        } else {
+            Misses::Judge(View::All)
+        };
+        let initiated =
+            self.initiator
+                .step(t, leftovers, &self.config, misses, &mut self.next_id)?;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {
@@ -726,6 +862,7 @@ impl Tracker {
             }
             report.confirmed.push(track.id);
             self.counters.confirmed += 1;
+            self.index.moved(self.tracks.len(), &track);
             self.tracks.push(track);
         }
 
@@ -734,4 +871,22 @@ impl Tracker {
         report.frames += 1;
         Ok(hits)
     }
+}
+
+/// A serial radar's sweep is judged for misses every 1/`JUDGE_SLICES` of
+/// its scan period (a 4-s scan: every 0.25 s): often enough that a track's
+/// miss is counted soon after the beam passed it, rarely enough that the
+/// pass over every track costs about as much per plot whatever the size
+/// of the picture.
+const JUDGE_SLICES: f64 = 16.0;
+
+/// A track a plot updated in a frame.
+#[derive(Debug, Clone, Copy)]
+struct Hit {
+    /// Its index in the tracks.
+    slot: usize,
+    /// The plot (index in the frame's plots).
+    plot: usize,
+    /// Its last radar plot before this update.
+    previous: Option<Plot>,
 }

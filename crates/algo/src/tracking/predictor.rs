@@ -164,6 +164,44 @@ impl ImmStep {
     }
 }
 
+/// The IMM steps a tracker has built, by Δt: beam-timed plots give every
+/// track its own Δt, but stamps of 1/128 s make the same few hundred
+/// recur. At most [`ImmSteps::CAPACITY`] are kept (all dropped when full).
+/// Derived data: equal whatever it holds.
+#[derive(Debug, Clone, Default)]
+pub struct ImmSteps {
+    steps: std::collections::HashMap<(usize, u64), ImmStep>,
+}
+
+impl PartialEq for ImmSteps {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl ImmSteps {
+    /// Steps kept at most.
+    pub const CAPACITY: usize = 4096;
+
+    /// The step of `imm` over `dt` for `axes` axes, built when missing.
+    pub fn get(
+        &mut self,
+        imm: &Imm,
+        noise: NoiseModel,
+        axes: usize,
+        dt: f64,
+    ) -> Result<&ImmStep, AlgoError> {
+        let key = (axes, dt.to_bits());
+        if !self.steps.contains_key(&key) {
+            if self.steps.len() >= Self::CAPACITY {
+                self.steps.clear();
+            }
+            self.steps.insert(key, ImmStep::new(imm, noise, axes, dt)?);
+        }
+        Ok(&self.steps[&key])
+    }
+}
+
 /// π(Δt) = exp(G |Δt|), row i = from, column j = to: the transition matrix
 /// of the continuous-time Markov chain whose generator G leaves model i at
 /// rate 1/τ_i into each other model equally (g_ii = −1/τ_i, g_ij =

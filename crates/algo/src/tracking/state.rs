@@ -37,6 +37,9 @@ pub struct TrackerState<'a> {
     /// Serial mode, per radar: time and azimuth of the last plot of its
     /// last frame (`None` before its first).
     pub beams: &'a [Option<(f64, f64)>],
+    /// Serial mode, per radar: where its beam was when misses were last
+    /// judged from its sweep.
+    pub judged: &'a [Option<(f64, f64)>],
     /// The registration estimator's data.
     pub registration: &'a RegistrationState,
 }
@@ -65,6 +68,10 @@ pub struct TrackerParts {
     pub counters: Counters,
     /// Per radar, where its beam was at its last frame (empty: none yet).
     pub beams: Vec<Option<(f64, f64)>>,
+    /// Per radar, where its beam was when misses were last judged (empty:
+    /// as `beams`, which is where a tracker of an earlier release judged
+    /// them).
+    pub judged: Vec<Option<(f64, f64)>>,
     /// The registration estimator's data (`None`: none yet).
     pub registration: Option<RegistrationState>,
 }
@@ -83,6 +90,7 @@ impl TrackerState<'_> {
             last_instant: self.last_instant,
             counters: self.counters,
             beams: self.beams.to_vec(),
+            judged: self.judged.to_vec(),
             registration: Some(self.registration.clone()),
         }
     }
@@ -151,6 +159,7 @@ impl Tracker {
             last_instant: self.last_instant,
             counters: self.counters,
             beams: &self.beams,
+            judged: &self.judged,
             registration: &self.registration,
         }
     }
@@ -230,10 +239,7 @@ impl Tracker {
             return Err(bad("last time is not finite"));
         }
         tr.tracks = parts.tracks;
-        tr.initiator = Initiator {
-            roots: parts.roots,
-            tentatives: parts.tentatives,
-        };
+        tr.initiator = Initiator::from_parts(parts.roots, parts.tentatives);
         tr.pending = parts.pending;
         tr.next_id = parts.next_id;
         tr.last_time = parts.last_time;
@@ -257,6 +263,26 @@ impl Tracker {
             }
             tr.beams = parts.beams;
         }
+        tr.judged = if parts.judged.is_empty() {
+            tr.beams.clone()
+        } else {
+            if parts.judged.len() != tr.config.radars.len() {
+                return Err(bad(format!(
+                    "{} judged beam positions for {} radars",
+                    parts.judged.len(),
+                    tr.config.radars.len()
+                )));
+            }
+            if parts
+                .judged
+                .iter()
+                .flatten()
+                .any(|(t, az)| !(t.is_finite() && az.is_finite()))
+            {
+                return Err(bad("a judged beam position is not finite"));
+            }
+            parts.judged
+        };
         if let Some(state) = parts.registration {
             state.check(&tr.config.radars)?;
             let c = &tr.config;

@@ -80,6 +80,11 @@ impl View {
 
     /// Whether a track without a plot in this frame gets a miss.
     pub(crate) fn misses(&self, x: &DVector<f64>, last_update: f64) -> bool {
+        self.misses_at(x[0], x[2], last_update)
+    }
+
+    /// [`View::misses`] of a track at (e, n).
+    pub(crate) fn misses_at(&self, e: f64, n: f64, last_update: f64) -> bool {
         match *self {
             View::All => true,
             View::Sector {
@@ -88,8 +93,10 @@ impl View {
                 width,
                 quiet_since,
             } => {
-                let az = (x[0] - site[0]).atan2(x[2] - site[1]);
-                (az - start).rem_euclid(TAU) <= width && last_update < quiet_since
+                last_update < quiet_since && {
+                    let az = (e - site[0]).atan2(n - site[1]);
+                    (az - start).rem_euclid(TAU) <= width
+                }
             }
         }
     }

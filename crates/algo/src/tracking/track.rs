@@ -10,7 +10,7 @@ use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
 use crate::tracking::config::{Imm, Motion, NoiseModel, Plot, TrackerConfig};
-use crate::tracking::predictor::{ImmStep, ModeState, predict_imm_step, process_noise};
+use crate::tracking::predictor::{ImmSteps, ModeState, predict_imm_step, process_noise};
 
 /// Where a track stands in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -170,27 +170,91 @@ impl Track {
     }
 
     /// Predicts the track to time `t` with the tracker's predictor: one
-    /// constant-velocity model, or the IMM of its modes with the frame's
-    /// `step` (built here when it is missing or of another Δt).
+    /// constant-velocity model, or the IMM of its modes with the step over
+    /// its Δt from `steps`.
     pub(crate) fn predict_with(
         &mut self,
         t: f64,
         cfg: &TrackerConfig,
-        step: &mut Option<ImmStep>,
+        steps: &mut ImmSteps,
     ) -> Result<(), AlgoError> {
         match (&cfg.motion, self.modes.is_empty()) {
             (Motion::Imm(imm), false) => {
-                let dt = t - self.t;
-                let step = match step {
-                    Some(s) if s.is_for(cfg.axes, dt) => s,
-                    _ => step.insert(ImmStep::new(imm, cfg.noise, cfg.axes, dt)?),
-                };
+                let step = steps.get(imm, cfg.noise, cfg.axes, t - self.t)?;
                 predict_imm_step(step, &mut self.modes, &mut self.x, &mut self.p)?;
                 self.t = t;
                 Ok(())
             }
             _ => self.predict(t, &cfg.sigma_a, cfg.noise),
         }
+    }
+
+    /// The track's prediction to time `t` (as [`Track::predict_with`]),
+    /// leaving the track as it is.
+    pub(crate) fn predicted(
+        &self,
+        t: f64,
+        cfg: &TrackerConfig,
+        steps: &mut ImmSteps,
+    ) -> Result<Prediction, AlgoError> {
+        let mut copy = Prediction {
+            x: self.x.clone(),
+            p: self.p.clone(),
+            modes: self.modes.clone(),
+        };
+        match (&cfg.motion, copy.modes.is_empty()) {
+            (Motion::Imm(imm), false) => {
+                let step = steps.get(imm, cfg.noise, cfg.axes, t - self.t)?;
+                predict_imm_step(step, &mut copy.modes, &mut copy.x, &mut copy.p)?;
+            }
+            _ => {
+                let (x, p) = predict(&self.x, &self.p, t - self.t, &cfg.sigma_a, cfg.noise)?;
+                copy.x = x;
+                copy.p = p;
+            }
+        }
+        Ok(copy)
+    }
+
+    /// Takes a prediction to time `t` as the track's state.
+    pub(crate) fn commit(&mut self, t: f64, prediction: Prediction) {
+        self.x = prediction.x;
+        self.p = prediction.p;
+        self.modes = prediction.modes;
+        self.t = t;
+    }
+
+    /// The track as reported at time `t` (predicted there, the track left
+    /// as it is; as it stands when the prediction fails or `t` is its
+    /// own time).
+    pub(crate) fn output_at(
+        &self,
+        t: f64,
+        cfg: &TrackerConfig,
+        status: TrackStatus,
+    ) -> TrackOutput {
+        let mut out = self.output(status);
+        if t.to_bits() == self.t.to_bits() {
+            return out;
+        }
+        let predicted = if status == TrackStatus::Tentative {
+            predict(&self.x, &self.p, t - self.t, &cfg.sigma_a, cfg.noise).map(|(x, p)| {
+                Prediction {
+                    x,
+                    p,
+                    modes: Vec::new(),
+                }
+            })
+        } else {
+            self.predicted(t, cfg, &mut ImmSteps::default())
+        };
+        if let Ok(pr) = predicted {
+            out.t = t;
+            out.state = pr.x;
+            out.covariance = pr.p;
+            out.modes = pr.modes.iter().map(|m| m.probability).collect();
+        }
+        out
     }
 
     /// Starts the modes of a track just confirmed under an IMM: every model
@@ -225,6 +289,14 @@ impl Track {
             last_plot: self.last_plot,
         }
     }
+}
+
+/// A track's predicted state, not yet taken ([`Track::predicted`]).
+#[derive(Debug, Clone)]
+pub(crate) struct Prediction {
+    pub x: DVector<f64>,
+    pub p: DMatrix<f64>,
+    pub modes: Vec<ModeState>,
 }
 
 /// Constant-velocity prediction over `dt`, F = blockdiag([[1, Δt], [0, 1]]),

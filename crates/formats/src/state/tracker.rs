@@ -18,7 +18,10 @@
 //! pairs, longest pair interval, time constant) and its estimator's data
 //! (information matrix and vector, pair counts, last pair time); formats
 //! 1 to 3 read as registration by default (on with two radars or more)
-//! from no data.
+//! from no data. Format 5 adds, at the end, each radar's beam position
+//! when its sweep was last judged for misses (trackers since issue 48
+//! judge a sweep in slices, not at every frame); formats 1 to 4 read it as
+//! the last beam position, where they had judged.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -37,7 +40,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
@@ -66,15 +69,27 @@ pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     w.opt(s.last_time, Writer::f64);
     w.opt(s.last_instant, |w, k| w.u64(k as u64));
     encode_counters(&mut w, &s.counters);
-    w.usize(s.beams.len());
-    for b in s.beams {
+    beams(&mut w, s.beams);
+    registration(&mut w, &s.config.registration, s.registration);
+    beams(&mut w, s.judged);
+    w.buf
+}
+
+fn beams(w: &mut Writer, beams: &[Option<(f64, f64)>]) {
+    w.usize(beams.len());
+    for b in beams {
         w.opt(*b, |w, (t, az)| {
             w.f64(t);
             w.f64(az);
         });
     }
-    registration(&mut w, &s.config.registration, s.registration);
-    w.buf
+}
+
+fn read_beams(r: &mut Reader<'_>) -> Result<Vec<Option<(f64, f64)>>, FormatError> {
+    let n = r.len(1)?;
+    (0..n)
+        .map(|_| r.opt(|r| Ok((r.f64()?, r.f64()?))))
+        .collect()
 }
 
 fn registration(w: &mut Writer, c: &RegistrationConfig, s: &RegistrationState) {
@@ -221,10 +236,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     let last_instant = r.opt(|r| r.u64().map(|k| k as i64))?;
     let counters = decode_counters(&mut r)?;
     let beams = if version >= 2 {
-        let n = r.len(1)?;
-        (0..n)
-            .map(|_| r.opt(|r| Ok((r.f64()?, r.f64()?))))
-            .collect::<Result<_, FormatError>>()?
+        read_beams(&mut r)?
     } else {
         Vec::new()
     };
@@ -235,6 +247,11 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         Some(state)
     } else {
         None
+    };
+    let judged = if version >= 5 {
+        read_beams(&mut r)?
+    } else {
+        Vec::new()
     };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
@@ -251,6 +268,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         last_instant,
         counters,
         beams,
+        judged,
     })?)
 }
 
@@ -749,6 +767,7 @@ mod tests {
         // provenance).
         let mut parts = t.state().to_parts();
         parts.beams = vec![None; 2];
+        parts.judged = vec![None; 2];
         for tr in parts.tracks.iter_mut().chain(&mut parts.tentatives) {
             tr.started = None;
             tr.last_plot = None;
@@ -779,6 +798,7 @@ mod tests {
         t_off.flush().unwrap();
         let mut replayed = t_off.state().to_parts();
         replayed.beams = vec![None; 2];
+        replayed.judged = vec![None; 2];
         for tr in replayed.tracks.iter_mut().chain(&mut replayed.tentatives) {
             tr.started = None;
             tr.last_plot = None;
@@ -794,9 +814,9 @@ mod tests {
             assert!(d < 5.0, "track {}: {d} m", a.id);
         }
         assert_eq!(t.counters().confirmed, 2);
-        // Written again it is format 4 and reads back the same.
+        // Written again it is format 5 and reads back the same.
         let bytes = encode_tracker(&t);
-        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 4);
+        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 5);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
     }
 
@@ -810,7 +830,9 @@ mod tests {
         let fresh = Tracker::new(cfg).unwrap();
         assert_eq!(fresh.mode(), Mode::Serial);
         let mut bytes = encode_tracker(&fresh);
-        // Format 4's registration block goes first.
+        // Format 5's judged beams go first (a count and two absent
+        // options), then format 4's registration block.
+        bytes.truncate(bytes.len() - 10);
         let mut block = Writer::default();
         registration(
             &mut block,
@@ -842,6 +864,15 @@ mod tests {
         assert!(!t.state().tracks.is_empty());
         let bytes = encode_tracker(&t);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
+        // Format 4 (no judged beams) reads them as the last beams, where a
+        // tracker of that release had judged its misses.
+        let mut judged = Writer::default();
+        beams(&mut judged, t.state().judged);
+        let mut v4 = bytes[..bytes.len() - judged.buf.len()].to_vec();
+        v4[4..8].copy_from_slice(&4u32.to_le_bytes());
+        let old = decode_tracker(&v4).unwrap();
+        assert_eq!(old.state().judged, t.state().beams);
+        assert!(old.state().beams.iter().all(Option::is_some));
     }
 
     #[test]
@@ -871,9 +902,9 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v5 = bytes.clone();
-        v5[4] = 5;
-        assert!(matches!(decode_tracker(&v5), Err(FormatError::Corrupt(_))));
+        let mut v6 = bytes.clone();
+        v6[4] = 6;
+        assert!(matches!(decode_tracker(&v6), Err(FormatError::Corrupt(_))));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {
@@ -882,7 +913,7 @@ mod tests {
             let _ = decode_tracker(&b);
         }
         // Well-formed bytes of a state no tracker could hold: a track's
-        // first variance made negative. Layout: magic 4, version 4, then
+        // first variance made negative. Layout: magic 4, version 4 bytes, then
         // the configuration; find the covariance by its bits.
         let p00 = tracker.state().tracks[0].p[(0, 0)].to_le_bytes();
         let at = bytes
