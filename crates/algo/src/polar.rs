@@ -326,7 +326,7 @@ fn check_elevation(el: f64) -> Result<f64, AlgoError> {
 }
 
 /// Azimuth clockwise from north in [0, 2π).
-fn azimuth_of(east: f64, north: f64) -> f64 {
+pub(crate) fn azimuth_of(east: f64, north: f64) -> f64 {
     let a = east.atan2(north);
     if a < 0.0 { a + TAU } else { a }
 }

@@ -339,6 +339,36 @@ pub fn scan(
     scan: &Scan,
     config: &Config,
 ) -> Result<ScanReport, AlgoError> {
+    let (report, lin) = weigh(tracks, scan, config)?;
+    for (t, track) in tracks.iter_mut().enumerate() {
+        combined_update(
+            track,
+            &lin[t],
+            &report.associations[t],
+            &scan.measurements,
+            &scan.model,
+        )?;
+    }
+    Ok(report)
+}
+
+/// The association of [`scan`] without its update: each track's β_0 and
+/// β_j of its gated measurements, the tracks left as they are (for an
+/// updater of its own, such as the tracker's IMM).
+pub fn associate(
+    tracks: &[TrackEstimate],
+    scan: &Scan,
+    config: &Config,
+) -> Result<ScanReport, AlgoError> {
+    weigh(tracks, scan, config).map(|(report, _)| report)
+}
+
+/// The association of [`scan`] and each track's linearisation.
+fn weigh(
+    tracks: &[TrackEstimate],
+    scan: &Scan,
+    config: &Config,
+) -> Result<(ScanReport, Vec<Linearised>), AlgoError> {
     let dim = scan.model.dim();
     let Prepared {
         lin,
@@ -453,20 +483,13 @@ pub fn scan(
         }
         reports.push(report);
     }
-
-    for (t, track) in tracks.iter_mut().enumerate() {
-        combined_update(
-            track,
-            &lin[t],
-            &associations[t],
-            &scan.measurements,
-            &scan.model,
-        )?;
-    }
-    Ok(ScanReport {
-        clusters: reports,
-        associations,
-    })
+    Ok((
+        ScanReport {
+            clusters: reports,
+            associations,
+        },
+        lin,
+    ))
 }
 
 /// The weights of one cluster (see [`marginals`]): a_tj = P_D N_tj / λ with

@@ -74,6 +74,7 @@ use plot_association::associate_and_fuse_members;
 use predictor::ImmSteps;
 use registration::{RadarBias, RegistrationState};
 use sweep::View;
+use track::Prediction;
 use updater::{Measurements, update_imm};
 
 /// Running totals since the tracker was created.
@@ -141,6 +142,12 @@ pub struct Tracker {
     index: TrackIndex,
     /// The IMM steps built so far, by Δt (derived, never stored).
     steps: ImmSteps,
+    /// The registration's solution for its current data, once solved
+    /// (derived, never stored: [`registration::solve`] depends on the
+    /// data alone, which change only when a pair is added).
+    solved: Derived<Option<(nalgebra::DVector<f64>, nalgebra::DMatrix<f64>)>>,
+    /// Buffers a frame reuses (derived, never stored).
+    scratch: Derived<Scratch>,
     /// The registration estimator's data ([`registration`]).
     registration: RegistrationState,
     /// Each radar's bias as applied now (from `registration`; not stored).
@@ -187,6 +194,8 @@ impl Tracker {
             beams,
             index: TrackIndex::default(),
             steps: ImmSteps::default(),
+            solved: Derived::default(),
+            scratch: Derived::default(),
         })
     }
 
@@ -599,7 +608,10 @@ impl Tracker {
         }
         let stride = pairs.len().div_ceil(registration::MAX_PAIRS_PER_FRAME);
         let cfg = &self.config;
-        let mut solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
+        let mut solved = match self.solved.0.take() {
+            Some(s) => s,
+            None => registration::solve(&cfg.registration, &cfg.radars, &self.registration)?,
+        };
         let q = cfg.largest_process_noise();
         let axes = cfg.axes;
         let mut added = false;
@@ -631,6 +643,7 @@ impl Tracker {
             self.biases =
                 registration::applied(&cfg.registration, &cfg.radars, &self.registration, &solved);
         }
+        self.solved.0 = Some(solved);
         Ok(())
     }
 
@@ -711,17 +724,28 @@ impl Tracker {
                 .candidates(&self.tracks, &plots, t, &self.config)?
         };
         let cfg = &self.config;
-        let mut predicted = Vec::with_capacity(slots.len());
-        for &k in &slots {
-            predicted.push(self.tracks[k].predicted(t, cfg, &mut self.steps)?);
+        // Predictions into reused buffers (a committed one leaves the
+        // track's old buffers behind for the next frame).
+        let mut scratch = std::mem::take(&mut self.scratch.0);
+        if scratch.predictions.len() < slots.len() {
+            scratch
+                .predictions
+                .resize_with(slots.len(), Prediction::default);
         }
-        let mut estimates: Vec<TrackEstimate> = predicted
-            .iter()
-            .map(|p| TrackEstimate {
-                x: p.x.clone(),
-                p: p.p.clone(),
-            })
-            .collect();
+        while scratch.estimates.len() < slots.len() {
+            scratch.estimates.push(TrackEstimate {
+                x: nalgebra::DVector::zeros(0),
+                p: nalgebra::DMatrix::zeros(0, 0),
+            });
+        }
+        for (c, &k) in slots.iter().enumerate() {
+            let pred = &mut scratch.predictions[c];
+            self.tracks[k].predict_into(t, cfg, &mut self.steps, pred)?;
+            let est = &mut scratch.estimates[c];
+            track::copy_vector(&mut est.x, &pred.x);
+            track::copy_matrix(&mut est.p, &pred.p);
+        }
+        let estimates = &mut scratch.estimates[..slots.len()];
         let (
             Outcome {
                 hit,
@@ -733,7 +757,7 @@ impl Tracker {
             Source::Radar { spec, plots: raw } => {
                 let radar = spec;
                 let outcome = associate_polar(
-                    &mut estimates,
+                    estimates,
                     radar,
                     raw,
                     cfg.axes,
@@ -757,7 +781,7 @@ impl Tracker {
                 detection_probability,
             } => (
                 associate_cartesian(
-                    &mut estimates,
+                    estimates,
                     &plots,
                     clutter,
                     *detection_probability,
@@ -773,8 +797,8 @@ impl Tracker {
         let mut touched: Vec<usize> = Vec::new();
         for ((((&k, prediction), est), hit), assoc) in slots
             .iter()
-            .zip(predicted)
-            .zip(estimates)
+            .zip(scratch.predictions.iter_mut())
+            .zip(estimates.iter_mut())
             .zip(&hit)
             .zip(&associations)
         {
@@ -782,10 +806,10 @@ impl Tracker {
                 continue;
             }
             let track = &mut self.tracks[k];
-            track.commit(t, prediction);
+            track.commit_swap(t, prediction);
             if track.modes.is_empty() {
-                track.x = est.x;
-                track.p = est.p;
+                std::mem::swap(&mut track.x, &mut est.x);
+                std::mem::swap(&mut track.p, &mut est.p);
             } else {
                 let (x, p) = update_imm(&mut track.modes, assoc, &measurements)?;
                 track.x = x;
@@ -808,6 +832,7 @@ impl Tracker {
             touched.push(k);
         }
 
+        self.scratch.0 = scratch;
         let hit_plots: Vec<(usize, usize)> = hits.iter().map(|h| (h.slot, h.plot)).collect();
         let mut doomed: Vec<(usize, bool)> =
             deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_probability)?
@@ -879,6 +904,25 @@ impl Tracker {
 /// pass over every track costs about as much per plot whatever the size
 /// of the picture.
 const JUDGE_SLICES: f64 = 16.0;
+
+/// Data derived from the tracker's state and kept to save work: two
+/// trackers in the same state are equal whatever it holds.
+#[derive(Debug, Clone, Default)]
+struct Derived<T>(T);
+
+impl<T> PartialEq for Derived<T> {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+/// Buffers a frame reuses: the candidate tracks' predictions and the
+/// estimates the associator updates.
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    predictions: Vec<track::Prediction>,
+    estimates: Vec<TrackEstimate>,
+}
 
 /// A track a plot updated in a frame.
 #[derive(Debug, Clone, Copy)]

@@ -27,7 +27,7 @@
 //! prediction x̄ = Σ c_j x_j, P̄ = Σ c_j (P_j + (x_j − x̄)(x_j − x̄)′) is what
 //! the hypothesiser gates and associates with.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use crate::error::AlgoError;
 use crate::gaussian::moment_match_into;
@@ -136,12 +136,37 @@ pub struct ImmStep {
     pi: DMatrix<f64>,
     /// Per model: F, F′ and Q.
     models: Vec<(DMatrix<f64>, DMatrix<f64>, DMatrix<f64>)>,
+    /// The same F and Q on the stack, for the states of 4 and 6.
+    fixed: Fixed,
+}
+
+/// Per model, F and Q as fixed-size matrices.
+#[derive(Debug, Clone)]
+enum Fixed {
+    Four(Vec<FixedModel<4>>),
+    Six(Vec<FixedModel<6>>),
+}
+
+type FixedModel<const N: usize> = (SMatrix<f64, N, N>, SMatrix<f64, N, N>);
+
+fn fixed_models<const N: usize>(
+    models: &[(DMatrix<f64>, DMatrix<f64>, DMatrix<f64>)],
+) -> Vec<FixedModel<N>> {
+    models
+        .iter()
+        .map(|(f, _, q)| {
+            (
+                SMatrix::<f64, N, N>::from_column_slice(f.as_slice()),
+                SMatrix::<f64, N, N>::from_column_slice(q.as_slice()),
+            )
+        })
+        .collect()
 }
 
 impl ImmStep {
     /// The step of `imm` over `dt` for states of `axes` axes.
     pub fn new(imm: &Imm, noise: NoiseModel, axes: usize, dt: f64) -> Result<Self, AlgoError> {
-        let models = imm
+        let models: Vec<_> = imm
             .models
             .iter()
             .map(|m| {
@@ -150,11 +175,17 @@ impl ImmStep {
                 Ok((f, ft, process_noise(axes, dt, &m.sigma_a(), noise)?))
             })
             .collect::<Result<_, AlgoError>>()?;
+        let fixed = if axes == 2 {
+            Fixed::Four(fixed_models::<4>(&models))
+        } else {
+            Fixed::Six(fixed_models::<6>(&models))
+        };
         Ok(Self {
             dt,
             axes,
             pi: switching(&imm.mean_sojourn, dt),
             models,
+            fixed,
         })
     }
 
@@ -272,7 +303,123 @@ pub fn predict_imm_step(
     x: &mut DVector<f64>,
     p: &mut DMatrix<f64>,
 ) -> Result<(), AlgoError> {
-    const MAX_MODES: usize = 8;
+    let done = match &step.fixed {
+        Fixed::Four(m) => predict_imm_fixed::<4>(&step.pi, m, modes, x, p)?,
+        Fixed::Six(m) => predict_imm_fixed::<6>(&step.pi, m, modes, x, p)?,
+    };
+    if done {
+        return Ok(());
+    }
+    predict_imm_dynamic(step, modes, x, p)
+}
+
+/// The most modes an IMM may have.
+const MAX_MODES: usize = 8;
+
+/// [`predict_imm_step`] on the stack for states of size `N` (the same
+/// arithmetic as the heap version, but for the order of the sums in the
+/// matrix products); `false` when the modes are not of size `N`.
+fn predict_imm_fixed<const N: usize>(
+    pi: &DMatrix<f64>,
+    models: &[FixedModel<N>],
+    modes: &mut [ModeState],
+    x: &mut DVector<f64>,
+    p: &mut DMatrix<f64>,
+) -> Result<bool, AlgoError> {
+    let r = modes.len();
+    if r > MAX_MODES
+        || models.len() != r
+        || modes
+            .iter()
+            .any(|m| m.x.len() != N || m.p.shape() != (N, N))
+    {
+        return Ok(false);
+    }
+    let sym = |m: &mut SMatrix<f64, N, N>| {
+        for j in 0..N {
+            for i in (j + 1)..N {
+                let v = 0.5 * (m[(i, j)] + m[(j, i)]);
+                m[(i, j)] = v;
+                m[(j, i)] = v;
+            }
+        }
+    };
+    let mut xs = [SVector::<f64, N>::zeros(); MAX_MODES];
+    let mut ps = [SMatrix::<f64, N, N>::zeros(); MAX_MODES];
+    // (Filled below from the modes.)
+    let mut mu = [0.0; MAX_MODES];
+    for (i, m) in modes.iter().enumerate() {
+        xs[i] = SVector::from_column_slice(m.x.as_slice());
+        ps[i] = SMatrix::from_column_slice(m.p.as_slice());
+        mu[i] = m.probability;
+    }
+    let mut c = [0.0; MAX_MODES];
+    for (j, cj) in c.iter_mut().enumerate().take(r) {
+        *cj = (0..r).map(|i| pi[(i, j)] * mu[i]).sum();
+    }
+    // Every model mixes from the previous modes (`xs`, `ps`, read only);
+    // the predictions go to `nx`, `np`.
+    let mut nx = [SVector::<f64, N>::zeros(); MAX_MODES];
+    let mut np = [SMatrix::<f64, N, N>::zeros(); MAX_MODES];
+    for (j, mode) in modes.iter_mut().enumerate() {
+        // Mixing: model j's start from every previous mode.
+        let mut x0 = SVector::<f64, N>::zeros();
+        for i in 0..r {
+            x0.axpy(pi[(i, j)] * mu[i] / c[j], &xs[i], 1.0);
+        }
+        let mut p0 = SMatrix::<f64, N, N>::zeros();
+        for i in 0..r {
+            let w = pi[(i, j)] * mu[i] / c[j];
+            let d = xs[i] - x0;
+            p0 += ps[i] * w;
+            p0.ger(w, &d, &d, 1.0);
+        }
+        sym(&mut p0);
+        let (f, q) = &models[j];
+        let xj = f * x0;
+        let mut pj = f * p0 * f.transpose() + q;
+        sym(&mut pj);
+        if xj.iter().chain(pj.iter()).any(|v| !v.is_finite()) {
+            return Err(AlgoError::NonFinite {
+                what: "predicted state",
+            });
+        }
+        mode.x.as_mut_slice().copy_from_slice(xj.as_slice());
+        mode.p.as_mut_slice().copy_from_slice(pj.as_slice());
+        mode.probability = c[j];
+        nx[j] = xj;
+        np[j] = pj;
+    }
+    // The combined (moment-matched) prediction.
+    let mut xb = SVector::<f64, N>::zeros();
+    for j in 0..r {
+        xb.axpy(c[j], &nx[j], 1.0);
+    }
+    let mut pb = SMatrix::<f64, N, N>::zeros();
+    for j in 0..r {
+        let d = nx[j] - xb;
+        pb += np[j] * c[j];
+        pb.ger(c[j], &d, &d, 1.0);
+    }
+    sym(&mut pb);
+    if x.len() != N {
+        *x = DVector::zeros(N);
+    }
+    if p.shape() != (N, N) {
+        *p = DMatrix::zeros(N, N);
+    }
+    x.as_mut_slice().copy_from_slice(xb.as_slice());
+    p.as_mut_slice().copy_from_slice(pb.as_slice());
+    Ok(true)
+}
+
+/// [`predict_imm_step`] on heap matrices (any state size).
+fn predict_imm_dynamic(
+    step: &ImmStep,
+    modes: &mut [ModeState],
+    x: &mut DVector<f64>,
+    p: &mut DMatrix<f64>,
+) -> Result<(), AlgoError> {
     let r = modes.len();
     let pi = &step.pi;
     let mut c = [0.0; MAX_MODES];
@@ -418,5 +565,47 @@ mod tests {
         let (_, _) = predict_imm(&imm, NoiseModel::Cwna, &mut modes, 1e6).unwrap();
         assert!((modes[0].x[0] - modes[1].x[0]).abs() < 1e-9);
         assert!((modes[0].probability - 0.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_stack_prediction_is_the_heap_prediction_to_rounding() {
+        // Four models of the aircraft IMM, 2 and 3 axes, modes apart and
+        // correlated: the fixed-size path equals the heap path (the same
+        // arithmetic, sums in another order) to 1e-12 relative.
+        let imm = Imm::aircraft();
+        for axes in [2, 3] {
+            let n = 2 * axes;
+            let modes: Vec<ModeState> = (0..4)
+                .map(|j| {
+                    let x = DVector::from_fn(n, |i, _| 1000.0 * (i as f64 + 1.0) + 37.0 * j as f64);
+                    let a = DMatrix::from_fn(n, n, |i, k| ((i * 7 + k * 3 + j) % 5) as f64 + 0.5);
+                    let p = &a * a.transpose() + DMatrix::identity(n, n) * 10.0;
+                    ModeState {
+                        probability: [0.55, 0.2, 0.15, 0.1][j],
+                        x,
+                        p,
+                    }
+                })
+                .collect();
+            for dt in [0.0078125, 1.3, 4.0] {
+                let step = ImmStep::new(&imm, NoiseModel::Cwna, axes, dt).unwrap();
+                let (mut a, mut b) = (modes.clone(), modes.clone());
+                let (mut xa, mut pa) = (DVector::zeros(0), DMatrix::zeros(0, 0));
+                let (mut xb, mut pb) = (DVector::zeros(0), DMatrix::zeros(0, 0));
+                predict_imm_step(&step, &mut a, &mut xa, &mut pa).unwrap();
+                predict_imm_dynamic(&step, &mut b, &mut xb, &mut pb).unwrap();
+                let close = |u: &[f64], v: &[f64]| {
+                    u.iter()
+                        .zip(v)
+                        .all(|(p, q)| (p - q).abs() <= 1e-12 * p.abs().max(q.abs()).max(1.0))
+                };
+                assert!(close(xa.as_slice(), xb.as_slice()) && close(pa.as_slice(), pb.as_slice()));
+                for (ma, mb) in a.iter().zip(&b) {
+                    assert!(close(ma.x.as_slice(), mb.x.as_slice()));
+                    assert!(close(ma.p.as_slice(), mb.p.as_slice()));
+                    assert!((ma.probability - mb.probability).abs() < 1e-15);
+                }
+            }
+        }
     }
 }

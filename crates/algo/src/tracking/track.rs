@@ -197,30 +197,53 @@ impl Track {
         cfg: &TrackerConfig,
         steps: &mut ImmSteps,
     ) -> Result<Prediction, AlgoError> {
-        let mut copy = Prediction {
-            x: self.x.clone(),
-            p: self.p.clone(),
-            modes: self.modes.clone(),
-        };
-        match (&cfg.motion, copy.modes.is_empty()) {
+        let mut out = Prediction::default();
+        self.predict_into(t, cfg, steps, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Track::predicted`] into `out`, whose buffers are reused when
+    /// they have the track's shapes (no allocation then: a frame predicts
+    /// every candidate track this way).
+    pub(crate) fn predict_into(
+        &self,
+        t: f64,
+        cfg: &TrackerConfig,
+        steps: &mut ImmSteps,
+        out: &mut Prediction,
+    ) -> Result<(), AlgoError> {
+        copy_vector(&mut out.x, &self.x);
+        copy_matrix(&mut out.p, &self.p);
+        if out.modes.len() == self.modes.len() {
+            for (o, m) in out.modes.iter_mut().zip(&self.modes) {
+                o.probability = m.probability;
+                copy_vector(&mut o.x, &m.x);
+                copy_matrix(&mut o.p, &m.p);
+            }
+        } else {
+            out.modes.clone_from(&self.modes);
+        }
+        match (&cfg.motion, out.modes.is_empty()) {
             (Motion::Imm(imm), false) => {
                 let step = steps.get(imm, cfg.noise, cfg.axes, t - self.t)?;
-                predict_imm_step(step, &mut copy.modes, &mut copy.x, &mut copy.p)?;
+                predict_imm_step(step, &mut out.modes, &mut out.x, &mut out.p)?;
             }
             _ => {
                 let (x, p) = predict(&self.x, &self.p, t - self.t, &cfg.sigma_a, cfg.noise)?;
-                copy.x = x;
-                copy.p = p;
+                out.x = x;
+                out.p = p;
             }
         }
-        Ok(copy)
+        Ok(())
     }
 
-    /// Takes a prediction to time `t` as the track's state.
-    pub(crate) fn commit(&mut self, t: f64, prediction: Prediction) {
-        self.x = prediction.x;
-        self.p = prediction.p;
-        self.modes = prediction.modes;
+    /// Takes a prediction to time `t` as the track's state, by exchanging
+    /// buffers: `prediction` is left with
+    /// the track's previous state (of the same shapes, to be reused).
+    pub(crate) fn commit_swap(&mut self, t: f64, prediction: &mut Prediction) {
+        std::mem::swap(&mut self.x, &mut prediction.x);
+        std::mem::swap(&mut self.p, &mut prediction.p);
+        std::mem::swap(&mut self.modes, &mut prediction.modes);
         self.t = t;
     }
 
@@ -291,12 +314,40 @@ impl Track {
     }
 }
 
+/// `dst` = `src`, in place when the lengths agree.
+pub(crate) fn copy_vector(dst: &mut DVector<f64>, src: &DVector<f64>) {
+    if dst.len() == src.len() {
+        dst.copy_from(src);
+    } else {
+        *dst = src.clone();
+    }
+}
+
+/// `dst` = `src`, in place when the shapes agree.
+pub(crate) fn copy_matrix(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
+    if dst.shape() == src.shape() {
+        dst.copy_from(src);
+    } else {
+        *dst = src.clone();
+    }
+}
+
 /// A track's predicted state, not yet taken ([`Track::predicted`]).
 #[derive(Debug, Clone)]
 pub(crate) struct Prediction {
     pub x: DVector<f64>,
     pub p: DMatrix<f64>,
     pub modes: Vec<ModeState>,
+}
+
+impl Default for Prediction {
+    fn default() -> Self {
+        Self {
+            x: DVector::zeros(0),
+            p: DMatrix::zeros(0, 0),
+            modes: Vec::new(),
+        }
+    }
 }
 
 /// Constant-velocity prediction over `dt`, F = blockdiag([[1, Δt], [0, 1]]),
