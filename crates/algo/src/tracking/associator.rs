@@ -1,5 +1,7 @@
-//! Hypothesiser, associator and updater of confirmed tracks: JPDA with an
-//! (extended) Kalman update (seed 001 steps 5 and 6).
+//! The associator of confirmed tracks (seed 001 steps 5 and 6): JPDA (or
+//! NN, GNN) weights of a frame's plots for the tracks the hypothesiser
+//! found, from their predictions. It never updates a track: the
+//! [`super::updater`] does, with these weights.
 //!
 //! Serial mode (step 6): one radar's scan group is one [`jpda::Scan`] with
 //! the polar [`SensorModel::Polar`] at the radar's site, so the update is
@@ -24,13 +26,13 @@
 //! 3D). The fused scan's P_D is 1 − Π(1 − P_D,i) over the radars that
 //! delivered plots in the instant.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 use crate::assignment;
 use crate::error::AlgoError;
 use crate::gating::SortedByFirst;
 use crate::gating::chi2_threshold;
-use crate::gaussian::{check_covariance, cholesky, moment_match, symmetrize};
+use crate::gaussian::{cholesky, symmetrize};
 use crate::jpda::{
     self, ClusterProblem, Clutter, Config, Gate, Method, Scan, SensorModel, TrackEstimate,
     amsjpda_marginals, exact_marginals,
@@ -53,10 +55,10 @@ pub struct Outcome {
     pub associations: Vec<jpda::Association>,
 }
 
-/// Serial mode: JPDA + EKF of `tracks` (predicted to the scan time) with the
-/// polar plots of one radar.
+/// Serial mode: the JPDA weights of the polar plots of one radar for
+/// `tracks` (predicted to the scan time), through the EKF's linearisation.
 pub fn associate_polar(
-    tracks: &mut [TrackEstimate],
+    tracks: &[TrackEstimate],
     radar: &RadarSpec,
     plots: &[Plot],
     axes: usize,
@@ -92,7 +94,7 @@ pub fn associate_polar(
         gate: Gate::from_probability(dim, gate_probability)?,
         clutter: Clutter::Density(radar.clutter_density),
     };
-    let report = jpda::scan(tracks, &scan, config)?;
+    let report = jpda::associate(tracks, &scan, config)?;
     let mut used = vec![false; plots.len()];
     let hit = report
         .associations
@@ -132,10 +134,12 @@ pub fn polar_layout(radar: &RadarSpec, axes: usize) -> PositionLayout {
     }
 }
 
-/// Parallel mode: JPDA of `tracks` with Cartesian plots of their own
-/// covariance; `clutter[j]` is λ_j > 0 in the space of plot j.
+/// Parallel mode: the JPDA weights of Cartesian plots of their own
+/// covariance for `tracks`; `clutter[j]` is λ_j > 0 in the space of plot
+/// j. (The update, a mixture of the per-plot Kalman updates moment
+/// matched, is the updater's.)
 pub fn associate_cartesian(
-    tracks: &mut [TrackEstimate],
+    tracks: &[TrackEstimate],
     plots: &[CartesianPlot],
     clutter: &[f64],
     detection_probability: f64,
@@ -221,12 +225,9 @@ pub fn associate_cartesian(
             config,
         ),
     };
-    // Update: mixture reduction of the per-hypothesis Kalman updates.
     let mut hit = Vec::with_capacity(tracks.len());
     let mut associations = Vec::with_capacity(tracks.len());
-    for (t, track) in tracks.iter_mut().enumerate() {
-        let row = &hyps[t];
-        let b = &beta[t];
+    for (row, b) in hyps.iter().zip(&beta) {
         let pairs: Vec<(usize, f64)> = row
             .iter()
             .map(|h| h.measurement)
@@ -237,22 +238,6 @@ pub fn associate_cartesian(
             miss: b[0],
             measurements: pairs,
         });
-        if b[0] >= 1.0 {
-            continue;
-        }
-        let mut comps: Vec<(f64, DVector<f64>, DMatrix<f64>)> = Vec::new();
-        if b[0] > 0.0 {
-            comps.push((b[0], track.x.clone(), track.p.clone()));
-        }
-        for (h, &bj) in row.iter().zip(&b[1..]) {
-            if bj > 0.0 {
-                let u = plots[h.measurement].update(&track.x, &track.p)?;
-                comps.push((bj, u.x, u.p));
-            }
-        }
-        let (x, p) = reduce(&comps)?;
-        track.x = x;
-        track.p = p;
     }
     Ok(Outcome {
         hit,
@@ -390,25 +375,28 @@ fn soft(
     beta
 }
 
-/// Moment-matched Gaussian of a mixture Σ w_i N(x_i, P_i) with Σ w_i = 1.
-fn reduce(
-    comps: &[(f64, DVector<f64>, DMatrix<f64>)],
-) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    let total: f64 = comps.iter().map(|c| c.0).sum();
-    let (x, p) = moment_match(comps.iter().map(|(w, x, p)| (w / total, x, p)));
-    if x.iter().any(|v| !v.is_finite()) {
-        return Err(AlgoError::NonFinite {
-            what: "updated state",
-        });
-    }
-    check_covariance("updated covariance", &p)?;
-    Ok((x, p))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{dmatrix, dvector};
+    use crate::tracking::predictor::ModeState;
+    use crate::tracking::updater::{CartesianUpdater, Updater};
+    use nalgebra::{DMatrix, dmatrix, dvector};
+
+    /// The updater's update of one track with the association's weights
+    /// (one mode: the PDA update).
+    fn updated(
+        track: &TrackEstimate,
+        assoc: &jpda::Association,
+        plots: &[CartesianPlot],
+    ) -> TrackEstimate {
+        let mut one = [ModeState {
+            probability: 1.0,
+            x: track.x.clone(),
+            p: track.p.clone(),
+        }];
+        let (x, p) = CartesianUpdater { plots }.update(&mut one, assoc).unwrap();
+        TrackEstimate { x, p }
+    }
 
     fn cfg(method: Method) -> Config {
         Config {
@@ -437,19 +425,13 @@ mod tests {
         // Kalman: K_pos = 100/200 = 0.5 → x_1 = 5, P_1,xx = 50.
         // Mixture: x = β₁·5, P_xx = β₀·100 + β₁·50 + β₀β₁·25.
         let (p_d, p_g, lambda) = (0.9, 0.99, 1e-5);
-        let mut tracks = vec![TrackEstimate {
+        let tracks = vec![TrackEstimate {
             x: dvector![0.0, 0.0, 0.0, 0.0],
             p: DMatrix::from_diagonal(&dvector![100.0, 1.0, 100.0, 1.0]),
         }];
-        let out = associate_cartesian(
-            &mut tracks,
-            &[plot(10.0, 0.0, 100.0)],
-            &[lambda],
-            p_d,
-            p_g,
-            &cfg(Method::Exact),
-        )
-        .unwrap();
+        let plots = [plot(10.0, 0.0, 100.0)];
+        let out =
+            associate_cartesian(&tracks, &plots, &[lambda], p_d, p_g, &cfg(Method::Exact)).unwrap();
         let n = (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0);
         let a = p_d * n / lambda;
         let b = 1.0 - p_d * p_g;
@@ -457,6 +439,10 @@ mod tests {
         let b0 = 1.0 - b1;
         assert_eq!(out.hit, vec![Some(0)]);
         assert_eq!(out.used, vec![true]);
+        assert!((out.associations[0].measurements[0].1 - b1).abs() < 1e-12);
+        // The tracks are left as they were; the updater updates them.
+        assert_eq!(tracks[0].x[0], 0.0);
+        let tracks = [updated(&tracks[0], &out.associations[0], &plots)];
         assert!((tracks[0].x[0] - 5.0 * b1).abs() < 1e-9);
         let want = b0 * 100.0 + b1 * 50.0 + b0 * b1 * 25.0;
         assert!(
@@ -468,7 +454,7 @@ mod tests {
 
     #[test]
     fn gnn_gives_each_track_its_own_plot_and_ignores_the_far_plot() {
-        let mut tracks = vec![
+        let tracks = vec![
             TrackEstimate {
                 x: dvector![0.0, 0.0, 0.0, 0.0],
                 p: DMatrix::identity(4, 4) * 100.0,
@@ -484,7 +470,7 @@ mod tests {
             plot(1e4, 0.0, 100.0),
         ];
         let out = associate_cartesian(
-            &mut tracks,
+            &tracks,
             &plots,
             &[1e-6; 3],
             0.9,
@@ -494,6 +480,11 @@ mod tests {
         .unwrap();
         assert_eq!(out.hit, vec![Some(1), Some(0)]);
         assert_eq!(out.used, vec![true, true, false]);
+        let tracks: Vec<TrackEstimate> = tracks
+            .iter()
+            .zip(&out.associations)
+            .map(|(t, a)| updated(t, a, &plots))
+            .collect();
         // Kalman with gain 1/2: 0 → 2.5 and 40 → 37.5.
         assert!((tracks[0].x[0] - 2.5).abs() < 1e-12);
         assert!((tracks[1].x[0] - 37.5).abs() < 1e-12);

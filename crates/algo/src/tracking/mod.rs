@@ -42,6 +42,7 @@ mod hypothesiser;
 pub mod initiator;
 pub mod plot_association;
 pub mod predictor;
+mod registrar;
 pub mod registration;
 mod state;
 mod sweep;
@@ -71,11 +72,12 @@ use conversion::{extrapolate, register};
 use hypothesiser::TrackIndex;
 use initiator::{Initiated, Initiator, Misses};
 use plot_association::associate_and_fuse_members;
-use predictor::ImmSteps;
+use predictor::{CvPredictor, ModeState, Predictor, TrackPredictor};
+use registrar::{Hit, Registrar};
 use registration::{RadarBias, RegistrationState};
 use sweep::View;
 use track::Prediction;
-use updater::{Measurements, update_imm};
+use updater::{CartesianUpdater, PolarUpdater, Updater};
 
 /// Running totals since the tracker was created.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -138,20 +140,15 @@ pub struct Tracker {
     /// Serial mode, per radar: where its beam was when misses were last
     /// judged from its sweep ([`Tracker::judge_sweep`]).
     judged: Vec<Option<(f64, f64)>>,
-    /// The confirmed tracks by position (derived, never stored).
+    /// The hypothesiser's index of the confirmed tracks (derived, never
+    /// stored).
     index: TrackIndex,
-    /// The IMM steps built so far, by Δt (derived, never stored).
-    steps: ImmSteps,
-    /// The registration's solution for its current data, once solved
-    /// (derived, never stored: [`registration::solve`] depends on the
-    /// data alone, which change only when a pair is added).
-    solved: Derived<Option<(nalgebra::DVector<f64>, nalgebra::DMatrix<f64>)>>,
+    /// The predictor of confirmed tracks (with its cache of IMM steps).
+    predictor: TrackPredictor,
+    /// The registrar: the radars' biases learnt online.
+    registrar: Registrar,
     /// Buffers a frame reuses (derived, never stored).
     scratch: Derived<Scratch>,
-    /// The registration estimator's data ([`registration`]).
-    registration: RegistrationState,
-    /// Each radar's bias as applied now (from `registration`; not stored).
-    biases: Vec<RadarBias>,
 }
 
 /// A frame's plots as the associator needs them.
@@ -171,16 +168,10 @@ impl Tracker {
     pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
         config.validate()?;
         let beams = vec![None; config.radars.len()];
-        let registration = RegistrationState::new(&config.radars);
-        let biases = registration::applied(
-            &config.registration,
-            &config.radars,
-            &registration,
-            &registration::solve(&config.registration, &config.radars, &registration)?,
-        );
+        let registrar = Registrar::new(&config, RegistrationState::new(&config.radars))?;
         Ok(Self {
-            registration,
-            biases,
+            registrar,
+            predictor: TrackPredictor::of(&config),
             parallel: config.is_parallel(),
             config,
             tracks: Vec::new(),
@@ -193,8 +184,6 @@ impl Tracker {
             judged: beams.clone(),
             beams,
             index: TrackIndex::default(),
-            steps: ImmSteps::default(),
-            solved: Derived::default(),
             scratch: Derived::default(),
         })
     }
@@ -226,7 +215,7 @@ impl Tracker {
     /// Each radar's bias as the tracker applies it now (estimate and σ
     /// once converged, else the prior).
     pub fn biases(&self) -> &[RadarBias] {
-        &self.biases
+        &self.registrar.biases
     }
 
     /// Number of buffered plots.
@@ -335,9 +324,12 @@ impl Tracker {
     }
 
     fn output(&self, track: &Track, status: TrackStatus) -> TrackOutput {
-        match self.last_time {
-            Some(t) => track.output_at(t, &self.config, status),
-            None => track.output(status),
+        match (self.last_time, status) {
+            (Some(t), TrackStatus::Tentative) => {
+                track.output_at(t, &mut CvPredictor::of(&self.config), status)
+            }
+            (Some(t), _) => track.output_at(t, &mut TrackPredictor::of(&self.config), status),
+            (None, _) => track.output(status),
         }
     }
 
@@ -434,7 +426,7 @@ impl Tracker {
     /// the misses of the sector its beam swept, when due.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
-        let bias = self.biases[index];
+        let bias = self.registrar.biases[index];
         let spec = registration::inflated(&self.config.radars[index], &bias);
         let corrected: Vec<Plot> = frame
             .iter()
@@ -460,8 +452,9 @@ impl Tracker {
             plots: corrected,
         };
         let hits = self.run_frame(t, source, plots, report)?;
-        if self.learns_biases() {
-            self.learn_biases(index, &hits)?;
+        if Registrar::learns(&self.config) {
+            self.registrar
+                .learn_serial(&self.config, &self.tracks, index, &hits)?;
         }
         self.judge_sweep(index, &spec, t, last.azimuth, report)
     }
@@ -506,7 +499,7 @@ impl Tracker {
             if !judge(track) {
                 continue;
             }
-            track.predict_with(t, cfg, &mut self.steps)?;
+            self.predictor.predict(track, t)?;
             track.record(None);
             self.index.moved(k, track);
             if deleter::should_delete(track, &cfg.deletion) {
@@ -548,105 +541,6 @@ impl Tracker {
         moves
     }
 
-    /// Whether frames learn the radars' biases: registration on, and two
-    /// radars or more to compare.
-    fn learns_biases(&self) -> bool {
-        self.config.registration.enabled && self.config.radars.len() >= 2
-    }
-
-    /// Registration in serial mode: the pairs of this frame (a confirmed
-    /// track updated by a plot of radar `index` whose previous update was
-    /// another radar's plot), then the estimate solved again.
-    fn learn_biases(&mut self, index: usize, hits: &[Hit]) -> Result<(), AlgoError> {
-        let pairs: Vec<(usize, Plot, Plot, bool)> = hits
-            .iter()
-            .filter_map(|h| {
-                let newer = self.tracks[h.slot].last_plot.filter(|p| p.radar == index)?;
-                let older = h.previous.filter(|p| p.radar != index)?;
-                Some((h.slot, newer, older, true))
-            })
-            .collect();
-        self.learn_pairs(&pairs)
-    }
-
-    /// Registration in parallel mode: every cluster of several radars'
-    /// plots (`members`, indices in `frame`) that updated a confirmed track
-    /// (`hits`) gives a pair per two of its plots consecutive in time;
-    /// then the estimate is solved again.
-    fn learn_from_clusters(
-        &mut self,
-        frame: &[Plot],
-        members: &[Vec<usize>],
-        hits: &[Hit],
-    ) -> Result<(), AlgoError> {
-        let mut pairs = Vec::new();
-        for h in hits {
-            let j = h.plot;
-            if members[j].len() < 2 {
-                continue;
-            }
-            let mut plots: Vec<Plot> = members[j].iter().map(|&i| frame[i]).collect();
-            plots.sort_by(|a, b| a.t.total_cmp(&b.t));
-            let shares_plots = plots.len() > 2;
-            for w in plots.windows(2) {
-                pairs.push((h.slot, w[1], w[0], shares_plots));
-            }
-        }
-        self.learn_pairs(&pairs)
-    }
-
-    /// Adds the pairs (track index, newer plot, older plot, whether the
-    /// plots are in other pairs too; raw plots) to the registration, the
-    /// motion between them from the track's velocity, and solves again
-    /// when any was used. Of a frame's pairs at most
-    /// [`registration::MAX_PAIRS_PER_FRAME`] are used, every k-th when
-    /// there are more (tracks in creation order: spread over the
-    /// coverage), so that a dense picture costs no more than a sparse one.
-    fn learn_pairs(&mut self, pairs: &[(usize, Plot, Plot, bool)]) -> Result<(), AlgoError> {
-        if pairs.is_empty() {
-            return Ok(());
-        }
-        let stride = pairs.len().div_ceil(registration::MAX_PAIRS_PER_FRAME);
-        let cfg = &self.config;
-        let mut solved = match self.solved.0.take() {
-            Some(s) => s,
-            None => registration::solve(&cfg.registration, &cfg.radars, &self.registration)?,
-        };
-        let q = cfg.largest_process_noise();
-        let axes = cfg.axes;
-        let mut added = false;
-        for (k, newer, older, shares_plots) in pairs.iter().step_by(stride) {
-            let tr = &self.tracks[*k];
-            let velocity: Vec<f64> = (0..axes).map(|i| tr.x[2 * i + 1]).collect();
-            let velocity_cov =
-                nalgebra::DMatrix::from_fn(axes, axes, |i, k| tr.p[(2 * i + 1, 2 * k + 1)]);
-            let pair = registration::Pair {
-                newer,
-                older,
-                velocity: &velocity,
-                velocity_cov: &velocity_cov,
-                q,
-                shares_plots: *shares_plots,
-            };
-            if registration::add_pair(
-                &cfg.registration,
-                &cfg.radars,
-                &mut self.registration,
-                &solved,
-                &pair,
-            )? {
-                added = true;
-            }
-        }
-        if added {
-            solved = registration::solve(&cfg.registration, &cfg.radars, &self.registration)?;
-            self.biases =
-                registration::applied(&cfg.registration, &cfg.radars, &self.registration, &solved);
-        }
-        self.solved.0 = Some(solved);
-        Ok(())
-    }
-
     /// Steps 3–5: the plots of fusion instant k.
     fn parallel_frame(
         &mut self,
@@ -660,7 +554,7 @@ impl Tracker {
             .config
             .radars
             .iter()
-            .zip(&self.biases)
+            .zip(&self.registrar.biases)
             .map(|(r, b)| registration::inflated(r, b))
             .collect();
         let registered = frame
@@ -669,7 +563,7 @@ impl Tracker {
                 extrapolate(
                     &specs[p.radar],
                     p.radar,
-                    &registration::correct(p, &self.biases[p.radar]),
+                    &registration::correct(p, &self.registrar.biases[p.radar]),
                     t,
                     self.config.sigma_tangential_speed,
                     manoeuvre_q,
@@ -694,19 +588,23 @@ impl Tracker {
         };
         let hits = self.run_frame(t, source, fused, report)?;
         self.last_instant = Some(k);
-        if self.learns_biases() {
-            self.learn_from_clusters(&frame, &members, &hits)?;
+        if Registrar::learns(&self.config) {
+            self.registrar
+                .learn_parallel(&self.config, &self.tracks, &frame, &members, &hits)?;
         }
         Ok(())
     }
 
-    /// The tracking loop of one frame: hypothesise (the tracks a plot may
-    /// gate: from the index in serial mode, every track in parallel mode),
-    /// predict them, associate, update, delete, initiate. In serial mode a
-    /// track no plot gates is left as it was (its misses come from the
-    /// beam, [`Tracker::judge_sweep`]); in parallel mode every track is
-    /// predicted to the instant and misses when not detected. Returns the
-    /// tracks a plot updated (slots after the frame's deletions).
+    /// The tracking loop of one frame, over its components (Stone Soup's
+    /// `tracker/simple.py`): the hypothesiser finds the tracks a plot may
+    /// gate (every track in parallel mode), the predictor predicts them,
+    /// the associator weighs plots against them, the updater updates the
+    /// tracks a plot gated (every track in parallel mode, where a track not
+    /// detected misses), the deleter removes duplicates and lost tracks,
+    /// the initiator starts tracks from the plots no track used. In serial
+    /// mode a track no plot gates is left as it was: its misses come from
+    /// the beam ([`Tracker::judge_sweep`]). Returns the tracks a plot
+    /// updated (slots after the frame's deletions).
     fn run_frame(
         &mut self,
         t: f64,
@@ -714,68 +612,28 @@ impl Tracker {
         plots: Vec<CartesianPlot>,
         report: &mut StepReport,
     ) -> Result<Vec<Hit>, AlgoError> {
-        let lazy = !self.parallel;
-        let slots: Vec<usize> = if !lazy {
-            (0..self.tracks.len()).collect()
-        } else if plots.is_empty() {
-            Vec::new()
-        } else {
-            self.index
-                .candidates(&self.tracks, &plots, t, &self.config)?
-        };
-        let cfg = &self.config;
-        // Predictions into reused buffers (a committed one leaves the
-        // track's old buffers behind for the next frame).
+        let slots = self.hypothesise(t, &plots)?;
         let mut scratch = std::mem::take(&mut self.scratch.0);
-        if scratch.predictions.len() < slots.len() {
-            scratch
-                .predictions
-                .resize_with(slots.len(), Prediction::default);
-        }
-        while scratch.estimates.len() < slots.len() {
-            scratch.estimates.push(TrackEstimate {
-                x: nalgebra::DVector::zeros(0),
-                p: nalgebra::DMatrix::zeros(0, 0),
-            });
-        }
-        for (c, &k) in slots.iter().enumerate() {
-            let pred = &mut scratch.predictions[c];
-            self.tracks[k].predict_into(t, cfg, &mut self.steps, pred)?;
-            let est = &mut scratch.estimates[c];
-            track::copy_vector(&mut est.x, &pred.x);
-            track::copy_matrix(&mut est.p, &pred.p);
-        }
-        let estimates = &mut scratch.estimates[..slots.len()];
-        let (
-            Outcome {
-                hit,
-                used,
-                associations,
-            },
-            measurements,
-        ) = match &source {
-            Source::Radar { spec, plots: raw } => {
-                let radar = spec;
-                let outcome = associate_polar(
+        scratch.predict(&mut self.predictor, &self.tracks, &slots, t)?;
+        let estimates = &scratch.estimates[..slots.len()];
+        let cfg = &self.config;
+        let (outcome, updater): (Outcome, Box<dyn Updater + '_>) = match &source {
+            Source::Radar { spec, plots: raw } => (
+                associate_polar(
                     estimates,
-                    radar,
+                    spec,
                     raw,
                     cfg.axes,
                     cfg.track_gate_probability,
                     &cfg.association,
-                )?;
-                let layout = polar_layout(radar, cfg.axes);
-                let range_rate = range_rate_sigma(radar, raw);
-                (
-                    outcome,
-                    Measurements::Polar {
-                        radar,
-                        layout,
-                        plots: raw,
-                        range_rate,
-                    },
-                )
-            }
+                )?,
+                Box::new(PolarUpdater {
+                    radar: spec,
+                    layout: polar_layout(spec, cfg.axes),
+                    plots: raw,
+                    range_rate: range_rate_sigma(spec, raw),
+                }),
+            ),
             Source::Fused {
                 clutter,
                 detection_probability,
@@ -788,42 +646,81 @@ impl Tracker {
                     cfg.track_gate_probability,
                     &cfg.association,
                 )?,
-                Measurements::Cartesian { plots: &plots },
+                Box::new(CartesianUpdater { plots: &plots }),
             ),
         };
-        // Commit the predictions of the tracks a plot gated (every track's
-        // in parallel mode) and update them.
-        let mut hits: Vec<Hit> = Vec::new();
-        let mut touched: Vec<usize> = Vec::new();
-        for ((((&k, prediction), est), hit), assoc) in slots
-            .iter()
-            .zip(scratch.predictions.iter_mut())
-            .zip(estimates.iter_mut())
-            .zip(&hit)
-            .zip(&associations)
-        {
+        let (hits, touched) = self.update(t, &slots, &mut scratch, &outcome, &*updater, &plots)?;
+        drop(updater);
+        self.scratch.0 = scratch;
+        let hits = self.delete_after_update(hits, &touched, report)?;
+        self.initiate(t, plots, &outcome.used, report)?;
+        self.last_time = Some(t);
+        self.counters.frames += 1;
+        report.frames += 1;
+        Ok(hits)
+    }
+
+    /// The hypothesiser: the tracks a frame's plots may gate, from the
+    /// index in serial mode, every track in parallel mode.
+    fn hypothesise(&mut self, t: f64, plots: &[CartesianPlot]) -> Result<Vec<usize>, AlgoError> {
+        if self.parallel {
+            Ok((0..self.tracks.len()).collect())
+        } else if plots.is_empty() {
+            Ok(Vec::new())
+        } else {
+            self.index.candidates(&self.tracks, plots, t, &self.config)
+        }
+    }
+
+    /// The updater's part of a frame: the predictions of the tracks a plot
+    /// gated (every one in parallel mode) taken and updated with the
+    /// association's weights, one update path for single-model and IMM
+    /// tracks; hits and misses recorded. Returns the hits and every track
+    /// whose life this frame recorded.
+    fn update(
+        &mut self,
+        t: f64,
+        slots: &[usize],
+        scratch: &mut Scratch,
+        outcome: &Outcome,
+        updater: &dyn Updater,
+        plots: &[CartesianPlot],
+    ) -> Result<(Vec<Hit>, Vec<usize>), AlgoError> {
+        let lazy = !self.parallel;
+        let mut hits = Vec::new();
+        let mut touched = Vec::new();
+        for (c, &k) in slots.iter().enumerate() {
+            let assoc = &outcome.associations[c];
             if lazy && assoc.measurements.is_empty() {
                 continue;
             }
             let track = &mut self.tracks[k];
-            track.commit_swap(t, prediction);
-            if track.modes.is_empty() {
-                std::mem::swap(&mut track.x, &mut est.x);
-                std::mem::swap(&mut track.p, &mut est.p);
+            track.commit_swap(t, &mut scratch.predictions[c]);
+            let (x, p) = if track.modes.is_empty() {
+                let single = &mut scratch.single;
+                single.resize_with(1, || ModeState {
+                    probability: 1.0,
+                    x: nalgebra::DVector::zeros(0),
+                    p: nalgebra::DMatrix::zeros(0, 0),
+                });
+                single[0].probability = 1.0;
+                std::mem::swap(&mut single[0].x, &mut track.x);
+                std::mem::swap(&mut single[0].p, &mut track.p);
+                updater.update(single, assoc)?
             } else {
-                let (x, p) = update_imm(&mut track.modes, assoc, &measurements)?;
-                track.x = x;
-                track.p = p;
-            }
-            match hit {
+                updater.update(&mut track.modes, assoc)?
+            };
+            track.x = x;
+            track.p = p;
+            match outcome.hit[c] {
                 Some(j) => {
                     hits.push(Hit {
                         slot: k,
-                        plot: *j,
+                        plot: j,
                         previous: track.last_plot,
                     });
-                    track.record(Some(plots[*j].radars.clone()));
-                    track.last_plot = plots[*j].measured;
+                    track.record(Some(plots[j].radars.clone()));
+                    track.last_plot = plots[j].measured;
                 }
                 None if !lazy => track.record(None),
                 None => {}
@@ -831,25 +728,35 @@ impl Tracker {
             self.index.moved(k, track);
             touched.push(k);
         }
+        Ok((hits, touched))
+    }
 
-        self.scratch.0 = scratch;
+    /// The deleter's part of a frame: duplicates among the tracks a plot
+    /// updated, and every touched track its rule deletes. Returns the hits
+    /// of the tracks kept, at their slots after the deletions.
+    fn delete_after_update(
+        &mut self,
+        hits: Vec<Hit>,
+        touched: &[usize],
+        report: &mut StepReport,
+    ) -> Result<Vec<Hit>, AlgoError> {
+        let cfg = &self.config;
         let hit_plots: Vec<(usize, usize)> = hits.iter().map(|h| (h.slot, h.plot)).collect();
         let mut doomed: Vec<(usize, bool)> =
             deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_probability)?
                 .into_iter()
                 .map(|k| (k, true))
                 .collect();
-        for &k in &touched {
+        for &k in touched {
             if !doomed.iter().any(|d| d.0 == k)
                 && deleter::should_delete(&self.tracks[k], &cfg.deletion)
             {
                 doomed.push((k, false));
             }
         }
-        // The hits' slots after the deletions; deleted tracks learn nothing.
         let gone: std::collections::HashSet<usize> = doomed.iter().map(|d| d.0).collect();
         let moves = self.delete(doomed, report);
-        let hits: Vec<Hit> = hits
+        Ok(hits
             .into_iter()
             .filter(|h| !gone.contains(&h.slot))
             .map(|h| Hit {
@@ -858,9 +765,19 @@ impl Tracker {
                     .fold(h.slot, |s, &(from, to)| if s == from { to } else { s }),
                 ..h
             })
-            .collect();
+            .collect())
+    }
 
-        // The initiator keeps positions only (what the stored state holds).
+    /// The initiator's part of a frame: the plots no track used (`used`),
+    /// their positions only (what the stored state holds); tracks it
+    /// confirms join the confirmed tracks.
+    fn initiate(
+        &mut self,
+        t: f64,
+        plots: Vec<CartesianPlot>,
+        used: &[bool],
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
         let leftovers = plots
             .into_iter()
             .zip(used)
@@ -871,10 +788,10 @@ impl Tracker {
                 })
             })
             .collect();
-        let misses = if lazy {
-            Misses::Lazy
-        } else {
+        let misses = if self.parallel {
             Misses::Judge(View::All)
+        } else {
+            Misses::Lazy
         };
         let initiated =
             self.initiator
@@ -890,11 +807,7 @@ impl Tracker {
             self.index.moved(self.tracks.len(), &track);
             self.tracks.push(track);
         }
-
-        self.last_time = Some(t);
-        self.counters.frames += 1;
-        report.frames += 1;
-        Ok(hits)
+        Ok(())
     }
 }
 
@@ -916,21 +829,42 @@ impl<T> PartialEq for Derived<T> {
     }
 }
 
-/// Buffers a frame reuses: the candidate tracks' predictions and the
-/// estimates the associator updates.
+/// Buffers a frame reuses: the candidate tracks' predictions, the
+/// estimates the associator reads, and the one mode of a single-model
+/// track's update.
 #[derive(Debug, Clone, Default)]
 struct Scratch {
-    predictions: Vec<track::Prediction>,
+    predictions: Vec<Prediction>,
     estimates: Vec<TrackEstimate>,
+    single: Vec<ModeState>,
 }
 
-/// A track a plot updated in a frame.
-#[derive(Debug, Clone, Copy)]
-struct Hit {
-    /// Its index in the tracks.
-    slot: usize,
-    /// The plot (index in the frame's plots).
-    plot: usize,
-    /// Its last radar plot before this update.
-    previous: Option<Plot>,
+impl Scratch {
+    /// The predictor's part of a frame: the tracks `slots` predicted to
+    /// `t` into `predictions` (and copied into `estimates`), in order.
+    fn predict(
+        &mut self,
+        predictor: &mut dyn Predictor,
+        tracks: &[Track],
+        slots: &[usize],
+        t: f64,
+    ) -> Result<(), AlgoError> {
+        if self.predictions.len() < slots.len() {
+            self.predictions
+                .resize_with(slots.len(), Prediction::default);
+        }
+        while self.estimates.len() < slots.len() {
+            self.estimates.push(TrackEstimate {
+                x: nalgebra::DVector::zeros(0),
+                p: nalgebra::DMatrix::zeros(0, 0),
+            });
+        }
+        for (c, &k) in slots.iter().enumerate() {
+            let pred = &mut self.predictions[c];
+            predictor.predict_into(&tracks[k], t, pred)?;
+            track::copy_vector(&mut self.estimates[c].x, &pred.x);
+            track::copy_matrix(&mut self.estimates[c].p, &pred.p);
+        }
+        Ok(())
+    }
 }

@@ -33,6 +33,143 @@ use crate::error::AlgoError;
 use crate::gaussian::moment_match_into;
 use crate::motion::{cv_transition, cwna_process_noise, dwna_process_noise};
 use crate::tracking::config::{Imm, MotionModel, NoiseModel};
+use crate::tracking::config::{Motion, TrackerConfig};
+use crate::tracking::track::{Prediction, Track, copy_matrix, copy_vector, predict};
+
+/// A predictor (Stone Soup's `Predictor`): a track's state at another
+/// time. The tracker predicts a track only when a plot may gate it, when
+/// its miss is judged, or for an output.
+pub(crate) trait Predictor {
+    /// `track` predicted to `t` into `out` (whose buffers are reused when
+    /// of the track's shapes: no allocation then), the track left as it
+    /// is.
+    fn predict_into(
+        &mut self,
+        track: &Track,
+        t: f64,
+        out: &mut Prediction,
+    ) -> Result<(), AlgoError>;
+
+    /// `track` predicted to `t` in place.
+    fn predict(&mut self, track: &mut Track, t: f64) -> Result<(), AlgoError> {
+        let mut out = Prediction::default();
+        self.predict_into(track, t, &mut out)?;
+        track.commit_swap(t, &mut out);
+        Ok(())
+    }
+}
+
+/// One constant-velocity model of the combined state, σ per axis
+/// ([`NoiseModel`]): tentative tracks, and confirmed tracks without an
+/// IMM.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct CvPredictor {
+    sigma_a: [f64; 3],
+    noise: NoiseModel,
+}
+
+impl CvPredictor {
+    /// The tracker's single model (`sigma_a`, `noise`).
+    pub(crate) fn of(cfg: &TrackerConfig) -> Self {
+        Self {
+            sigma_a: cfg.sigma_a,
+            noise: cfg.noise,
+        }
+    }
+}
+
+impl Predictor for CvPredictor {
+    fn predict_into(
+        &mut self,
+        track: &Track,
+        t: f64,
+        out: &mut Prediction,
+    ) -> Result<(), AlgoError> {
+        let (x, p) = predict(&track.x, &track.p, t - track.t, &self.sigma_a, self.noise)?;
+        out.x = x;
+        out.p = p;
+        out.modes.clear();
+        Ok(())
+    }
+}
+
+/// The IMM of the configuration's models over a track's modes, with the
+/// steps built so far by Δt (a track without modes: [`CvPredictor`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ImmPredictor {
+    imm: Imm,
+    noise: NoiseModel,
+    axes: usize,
+    steps: ImmSteps,
+    single: CvPredictor,
+}
+
+impl Predictor for ImmPredictor {
+    fn predict_into(
+        &mut self,
+        track: &Track,
+        t: f64,
+        out: &mut Prediction,
+    ) -> Result<(), AlgoError> {
+        if track.modes.is_empty() {
+            return self.single.predict_into(track, t, out);
+        }
+        copy_vector(&mut out.x, &track.x);
+        copy_matrix(&mut out.p, &track.p);
+        if out.modes.len() == track.modes.len() {
+            for (o, m) in out.modes.iter_mut().zip(&track.modes) {
+                o.probability = m.probability;
+                copy_vector(&mut o.x, &m.x);
+                copy_matrix(&mut o.p, &m.p);
+            }
+        } else {
+            out.modes.clone_from(&track.modes);
+        }
+        let step = self
+            .steps
+            .get(&self.imm, self.noise, self.axes, t - track.t)?;
+        predict_imm_step(step, &mut out.modes, &mut out.x, &mut out.p)
+    }
+}
+
+/// The predictor of confirmed tracks the configuration names.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum TrackPredictor {
+    /// One constant-velocity model.
+    Single(CvPredictor),
+    /// An IMM.
+    Imm(ImmPredictor),
+}
+
+impl TrackPredictor {
+    /// The predictor of `cfg.motion`.
+    pub(crate) fn of(cfg: &TrackerConfig) -> Self {
+        match &cfg.motion {
+            Motion::ConstantVelocity => Self::Single(CvPredictor::of(cfg)),
+            Motion::Imm(imm) => Self::Imm(ImmPredictor {
+                imm: imm.clone(),
+                noise: cfg.noise,
+                axes: cfg.axes,
+                steps: ImmSteps::default(),
+                single: CvPredictor::of(cfg),
+            }),
+        }
+    }
+}
+
+impl Predictor for TrackPredictor {
+    fn predict_into(
+        &mut self,
+        track: &Track,
+        t: f64,
+        out: &mut Prediction,
+    ) -> Result<(), AlgoError> {
+        match self {
+            Self::Single(p) => p.predict_into(track, t, out),
+            Self::Imm(p) => p.predict_into(track, t, out),
+        }
+    }
+}
 
 /// One model's part of an IMM track: its mode probability and its state.
 #[derive(Debug, Clone, PartialEq)]

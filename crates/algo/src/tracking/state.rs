@@ -7,7 +7,8 @@
 //! that parts read from corrupt bytes give an error here, never a panic in
 //! a later call.
 
-use super::registration::{self, RegistrationState};
+use super::registrar::Registrar;
+use super::registration::RegistrationState;
 use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
@@ -160,7 +161,7 @@ impl Tracker {
             counters: self.counters,
             beams: &self.beams,
             judged: &self.judged,
-            registration: &self.registration,
+            registration: &self.registrar.state,
         }
     }
 
@@ -285,10 +286,7 @@ impl Tracker {
         };
         if let Some(state) = parts.registration {
             state.check(&tr.config.radars)?;
-            let c = &tr.config;
-            let solved = registration::solve(&c.registration, &c.radars, &state)?;
-            tr.biases = registration::applied(&c.registration, &c.radars, &state, &solved);
-            tr.registration = state;
+            tr.registrar = Registrar::new(&tr.config, state)?;
         }
         Ok(tr)
     }

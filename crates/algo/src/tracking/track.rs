@@ -9,8 +9,8 @@ use crate::error::AlgoError;
 use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
-use crate::tracking::config::{Imm, Motion, NoiseModel, Plot, TrackerConfig};
-use crate::tracking::predictor::{ImmSteps, ModeState, predict_imm_step, process_noise};
+use crate::tracking::config::{Imm, NoiseModel, Plot};
+use crate::tracking::predictor::{ModeState, Predictor, process_noise};
 
 /// Where a track stands in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -169,74 +169,6 @@ impl Track {
         Ok(())
     }
 
-    /// Predicts the track to time `t` with the tracker's predictor: one
-    /// constant-velocity model, or the IMM of its modes with the step over
-    /// its Δt from `steps`.
-    pub(crate) fn predict_with(
-        &mut self,
-        t: f64,
-        cfg: &TrackerConfig,
-        steps: &mut ImmSteps,
-    ) -> Result<(), AlgoError> {
-        match (&cfg.motion, self.modes.is_empty()) {
-            (Motion::Imm(imm), false) => {
-                let step = steps.get(imm, cfg.noise, cfg.axes, t - self.t)?;
-                predict_imm_step(step, &mut self.modes, &mut self.x, &mut self.p)?;
-                self.t = t;
-                Ok(())
-            }
-            _ => self.predict(t, &cfg.sigma_a, cfg.noise),
-        }
-    }
-
-    /// The track's prediction to time `t` (as [`Track::predict_with`]),
-    /// leaving the track as it is.
-    pub(crate) fn predicted(
-        &self,
-        t: f64,
-        cfg: &TrackerConfig,
-        steps: &mut ImmSteps,
-    ) -> Result<Prediction, AlgoError> {
-        let mut out = Prediction::default();
-        self.predict_into(t, cfg, steps, &mut out)?;
-        Ok(out)
-    }
-
-    /// [`Track::predicted`] into `out`, whose buffers are reused when
-    /// they have the track's shapes (no allocation then: a frame predicts
-    /// every candidate track this way).
-    pub(crate) fn predict_into(
-        &self,
-        t: f64,
-        cfg: &TrackerConfig,
-        steps: &mut ImmSteps,
-        out: &mut Prediction,
-    ) -> Result<(), AlgoError> {
-        copy_vector(&mut out.x, &self.x);
-        copy_matrix(&mut out.p, &self.p);
-        if out.modes.len() == self.modes.len() {
-            for (o, m) in out.modes.iter_mut().zip(&self.modes) {
-                o.probability = m.probability;
-                copy_vector(&mut o.x, &m.x);
-                copy_matrix(&mut o.p, &m.p);
-            }
-        } else {
-            out.modes.clone_from(&self.modes);
-        }
-        match (&cfg.motion, out.modes.is_empty()) {
-            (Motion::Imm(imm), false) => {
-                let step = steps.get(imm, cfg.noise, cfg.axes, t - self.t)?;
-                predict_imm_step(step, &mut out.modes, &mut out.x, &mut out.p)?;
-            }
-            _ => {
-                let (x, p) = predict(&self.x, &self.p, t - self.t, &cfg.sigma_a, cfg.noise)?;
-                out.x = x;
-                out.p = p;
-            }
-        }
-        Ok(())
-    }
-
     /// Takes a prediction to time `t` as the track's state, by exchanging
     /// buffers: `prediction` is left with
     /// the track's previous state (of the same shapes, to be reused).
@@ -247,31 +179,21 @@ impl Track {
         self.t = t;
     }
 
-    /// The track as reported at time `t` (predicted there, the track left
-    /// as it is; as it stands when the prediction fails or `t` is its
-    /// own time).
+    /// The track as reported at time `t` (predicted there by `predictor`,
+    /// the track left as it is; as it stands when the prediction fails or
+    /// `t` is its own time).
     pub(crate) fn output_at(
         &self,
         t: f64,
-        cfg: &TrackerConfig,
+        predictor: &mut dyn Predictor,
         status: TrackStatus,
     ) -> TrackOutput {
         let mut out = self.output(status);
         if t.to_bits() == self.t.to_bits() {
             return out;
         }
-        let predicted = if status == TrackStatus::Tentative {
-            predict(&self.x, &self.p, t - self.t, &cfg.sigma_a, cfg.noise).map(|(x, p)| {
-                Prediction {
-                    x,
-                    p,
-                    modes: Vec::new(),
-                }
-            })
-        } else {
-            self.predicted(t, cfg, &mut ImmSteps::default())
-        };
-        if let Ok(pr) = predicted {
+        let mut pr = Prediction::default();
+        if predictor.predict_into(self, t, &mut pr).is_ok() {
             out.t = t;
             out.state = pr.x;
             out.covariance = pr.p;

@@ -28,31 +28,55 @@ use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::conversion::{CartesianPlot, polar_measurement};
 use crate::tracking::predictor::{MIN_PROBABILITY, ModeState};
 
-/// The measurements of one frame as the updater sees them.
+/// An updater (Stone Soup's `Updater`): a frame's measurements of one
+/// kind, with the update of a track's predicted modes (one mode for a
+/// single-model track) by the associator's weights. A new measurement
+/// model is one more type implementing it.
+pub trait Updater {
+    /// The Kalman update of (x, P) with measurement `j`, and its
+    /// ln N(ν; 0, S).
+    fn update_one(
+        &self,
+        x: &DVector<f64>,
+        p: &DMatrix<f64>,
+        j: usize,
+    ) -> Result<Updated, AlgoError>;
+
+    /// The (IMM) update of `modes` (predicted: probabilities c_j) with the
+    /// association `assoc` of the track (module documentation); returns
+    /// the combined estimate. With one mode it is the PDA update.
+    fn update(
+        &self,
+        modes: &mut [ModeState],
+        assoc: &Association,
+    ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+        update_imm_with(self, modes, assoc)
+    }
+}
+
+/// One radar's plots, updated by the polar EKF at the radar's site, with
+/// the range rate when the radar gives it (Doppler) and the plot has one.
 #[derive(Debug, Clone, Copy)]
-pub enum Measurements<'a> {
-    /// One radar's plots, updated by the polar EKF at the radar's site,
-    /// with the range rate when the radar gives it (Doppler) and the plot
-    /// has one.
-    Polar {
-        /// The radar.
-        radar: &'a RadarSpec,
-        /// Where the position lies in the state (a 2D radar measures the
-        /// horizontal range).
-        layout: PositionLayout,
-        /// The plots, indexed as in the association.
-        plots: &'a [Plot],
-        /// σ_ṙ when the range rate is measured
-        /// ([`crate::tracking::associator::range_rate_sigma`], as the
-        /// association decided).
-        range_rate: Option<f64>,
-    },
-    /// Fused Cartesian plots with their own covariance (and the range rates
-    /// of the plots moved to the instant, [`CartesianPlot::linearise`]).
-    Cartesian {
-        /// The plots, indexed as in the association.
-        plots: &'a [CartesianPlot],
-    },
+pub struct PolarUpdater<'a> {
+    /// The radar.
+    pub radar: &'a RadarSpec,
+    /// Where the position lies in the state (a 2D radar measures the
+    /// horizontal range).
+    pub layout: PositionLayout,
+    /// The plots, indexed as in the association.
+    pub plots: &'a [Plot],
+    /// σ_ṙ when the range rate is measured
+    /// ([`crate::tracking::associator::range_rate_sigma`], as the
+    /// association decided).
+    pub range_rate: Option<f64>,
+}
+
+/// Fused Cartesian plots with their own covariance (and the range rates of
+/// the plots moved to the instant, [`CartesianPlot::linearise`]).
+#[derive(Debug, Clone, Copy)]
+pub struct CartesianUpdater<'a> {
+    /// The plots, indexed as in the association.
+    pub plots: &'a [CartesianPlot],
 }
 
 /// A per-measurement update and its log-likelihood ln N(ν; 0, S).
@@ -66,60 +90,68 @@ pub struct Updated {
     pub ln_likelihood: f64,
 }
 
-impl Measurements<'_> {
-    /// The Kalman update of (x, P) with measurement `j`.
-    pub fn update(
+fn updated(u: kalman::Update) -> Updated {
+    let k = u.s.nrows() as f64;
+    Updated {
+        ln_likelihood: -0.5 * (u.ln_det_s + k * (2.0 * std::f64::consts::PI).ln() + u.nis),
+        x: u.x,
+        p: u.p,
+    }
+}
+
+impl Updater for PolarUpdater<'_> {
+    fn update_one(
         &self,
         x: &DVector<f64>,
         p: &DMatrix<f64>,
         j: usize,
     ) -> Result<Updated, AlgoError> {
-        let u = match self {
-            Measurements::Polar {
-                radar,
-                layout,
-                plots,
-                range_rate,
-            } => {
-                let plot = &plots[j];
-                let meas = polar_measurement(radar, plot);
-                let range_rate = plot.radial_velocity.zip(*range_rate);
-                // The IMM's model states are positive definite by
-                // construction (predicted from updated ones): no Cholesky
-                // checks of P and P⁺ per model and plot.
-                kalman::update_polar_trusted(x, p, &meas, range_rate, *layout, radar.site)?
-            }
-            Measurements::Cartesian { plots } => plots[j].update(x, p)?,
-        };
-        let k = u.s.nrows() as f64;
-        let ln_det = u.ln_det_s;
-        Ok(Updated {
-            x: u.x,
-            p: u.p,
-            ln_likelihood: -0.5 * (ln_det + k * (2.0 * std::f64::consts::PI).ln() + u.nis),
-        })
+        let plot = &self.plots[j];
+        let meas = polar_measurement(self.radar, plot);
+        let range_rate = plot.radial_velocity.zip(self.range_rate);
+        // The IMM's model states are positive definite by construction
+        // (predicted from updated ones): no Cholesky checks of P and P⁺
+        // per model and plot.
+        Ok(updated(kalman::update_polar_trusted(
+            x,
+            p,
+            &meas,
+            range_rate,
+            self.layout,
+            self.radar.site,
+        )?))
+    }
+
+    /// On the stack for states of 4 and 6 ([`fixed`]), else on the heap.
+    fn update(
+        &self,
+        modes: &mut [ModeState],
+        assoc: &Association,
+    ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
+        if let Some(out) = fixed::update_imm(modes, assoc, self)? {
+            return Ok(out);
+        }
+        update_imm_with(self, modes, assoc)
     }
 }
 
-/// The IMM update of `modes` (predicted: probabilities c_j) with the
-/// association `assoc` of the track (module documentation); returns the
-/// combined estimate.
-pub fn update_imm(
-    modes: &mut [ModeState],
-    assoc: &Association,
-    measurements: &Measurements<'_>,
-) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
-    if let Some(out) = fixed::update_imm(modes, assoc, measurements)? {
-        return Ok(out);
+impl Updater for CartesianUpdater<'_> {
+    fn update_one(
+        &self,
+        x: &DVector<f64>,
+        p: &DMatrix<f64>,
+        j: usize,
+    ) -> Result<Updated, AlgoError> {
+        Ok(updated(self.plots[j].update(x, p)?))
     }
-    update_imm_dynamic(modes, assoc, measurements)
 }
 
-/// [`update_imm`] on heap matrices (any state and measurement).
-fn update_imm_dynamic(
+/// [`Updater::update`] on heap matrices over [`Updater::update_one`]
+/// (any state and measurement).
+fn update_imm_with<U: Updater + ?Sized>(
+    updater: &U,
     modes: &mut [ModeState],
     assoc: &Association,
-    measurements: &Measurements<'_>,
 ) -> Result<(DVector<f64>, DMatrix<f64>), AlgoError> {
     let detected: Vec<(usize, f64)> = assoc
         .measurements
@@ -134,7 +166,7 @@ fn update_imm_dynamic(
         updates.push(
             detected
                 .iter()
-                .map(|&(j, _)| measurements.update(&mode.x, &mode.p, j))
+                .map(|&(j, _)| updater.update_one(&mode.x, &mode.p, j))
                 .collect::<Result<_, _>>()?,
         );
     }
@@ -211,17 +243,14 @@ mod fixed {
     pub(super) fn update_imm(
         modes: &mut [ModeState],
         assoc: &Association,
-        measurements: &Measurements<'_>,
+        measurements: &PolarUpdater<'_>,
     ) -> Result<Combined, AlgoError> {
-        let Measurements::Polar {
+        let PolarUpdater {
             radar,
             layout,
             range_rate,
             ..
-        } = measurements
-        else {
-            return Ok(None);
-        };
+        } = measurements;
         let n = modes.first().map_or(0, |m| m.x.len());
         let standard = layout.x == 0 && layout.y == 2 && layout.z.is_none_or(|z| z == 4);
         if !standard || modes.len() > MAX_MODES {
@@ -253,17 +282,14 @@ mod fixed {
     fn run<const N: usize, const M: usize>(
         modes: &mut [ModeState],
         assoc: &Association,
-        measurements: &Measurements<'_>,
+        measurements: &PolarUpdater<'_>,
     ) -> Result<Combined, AlgoError> {
-        let Measurements::Polar {
+        let PolarUpdater {
             radar,
             layout,
             plots,
             range_rate,
-        } = measurements
-        else {
-            return Ok(None);
-        };
+        } = measurements;
         if modes
             .iter()
             .any(|m| m.x.len() != N || m.p.shape() != (N, N))
@@ -556,7 +582,7 @@ mod fixed {
                 } else {
                     PositionLayout::CV_2D
                 };
-                let m = Measurements::Polar {
+                let m = PolarUpdater {
                     radar: &radar,
                     layout,
                     plots: &plots,
@@ -574,7 +600,7 @@ mod fixed {
                 ] {
                     let (mut a, mut b) = (modes.clone(), modes.clone());
                     let (xa, pa) = update_imm(&mut a, &assoc, &m).unwrap().expect("stack path");
-                    let (xb, pb) = update_imm_dynamic(&mut b, &assoc, &m).unwrap();
+                    let (xb, pb) = update_imm_with(&m, &mut b, &assoc).unwrap();
                     let close = |u: &[f64], v: &[f64]| {
                         u.iter()
                             .zip(v)
