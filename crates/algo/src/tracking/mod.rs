@@ -2,9 +2,16 @@
 //! patent, steps 1–8): a [`Tracker`] fed with polar plots of several radars
 //! that keeps confirmed and tentative tracks in the fusion centre's ENU frame.
 //!
-//! The loop, per frame, reads like Stone Soup's `tracker/simple.py`:
-//! predict (`track`), hypothesise/associate/update (`associator`: JPDA with
-//! an EKF), delete (`deleter`), initiate (`initiator`, the logic method).
+//! The loop, per frame, reads like Stone Soup's `tracker/simple.py`, over
+//! components ([`Tracker::run_frame`]): hypothesise (`hypothesiser`: the
+//! tracks a plot may gate, from a spatial index), predict (`predictor`,
+//! trait `Predictor`: CV or IMM), associate (`associator`: JPDA weights
+//! through the EKF's linearisation), update (`updater`, trait `Updater`:
+//! polar or fused Cartesian measurements, one IMM update path), delete
+//! (`deleter`), initiate (`initiator`, the logic method), learn the
+//! radars' biases (`registrar`). Tracks keep their own time: a track is
+//! predicted only when a plot may gate it, when its miss is judged, or for
+//! an output, so a plot costs the tracks it can touch, not the picture.
 //! What a frame is depends on the mode (step 2):
 //! - **parallel** (every radar gives Doppler): fusion instants
 //!   t_k = epoch + k·T. The plots with τ ∈ (t_{k−1}, t_k] are registered
@@ -15,7 +22,9 @@
 //! - **serial** (step 6): plots in time order; each run of consecutive
 //!   plots of one radar within `time_tolerance` of its first plot is a scan
 //!   group, processed at the time of its last plot with that radar's polar
-//!   EKF, tracks predicted over the variable Δt.
+//!   EKF, tracks predicted over the variable Δt. Misses come from the
+//!   beam, in bulk every 1/16 scan of a radar ([`Tracker::judge_sweep`]).
+//!   Every track is judged by parallel instants.
 //!
 //! Streaming: plots are buffered and a frame is processed only once it is
 //! complete — a later frame's plot has arrived, or [`Tracker::flush`] is
