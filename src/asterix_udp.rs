@@ -7,12 +7,17 @@
 //! The session is `--asterix-session-id` of `--asterix-tenant`, configured
 //! by `--asterix-session-spec` (the JSON of a `plot_fusion` create
 //! request); the listener creates it at start when it does not exist, and
-//! again if it expires. Datagrams waiting together are pushed as one batch
-//! (at most [`MAX_DATAGRAMS_PER_BATCH`]; data blocks are self-delimiting,
-//! so their concatenation is valid ASTERIX). Times of day are taken
-//! nearest to the session's newest plot, or to the time of reception for a
-//! session that has processed none. The session takes plots in any order
-//! within its `tracker.max_lag_s`, and each update holds every plot
+//! again if it expires. A reader task takes every datagram off the socket
+//! as it arrives (stamped with its time of receipt), and the datagrams
+//! waiting together are pushed as one batch (data blocks are
+//! self-delimiting, so their concatenation is valid ASTERIX), at most what
+//! the session's size check admits under `--max-batch-reports` (one plot
+//! counted per 10 bytes). While a push runs, the next batch grows; the
+//! socket's buffer only holds what arrives while the reader is not
+//! running (`--asterix-recv-buffer-bytes`, SO_RCVBUF). Times of day are
+//! taken nearest to the session's newest plot, or to the time of reception
+//! for a session that has processed none. The session takes plots in any
+//! order within its `tracker.max_lag_s`, and each update holds every plot
 //! received (the open scan group included): the tracks do not lag a scan.
 //!
 //! CAT062 out (`--asterix-out-udp ADDR`, off by default): each update of
@@ -26,31 +31,43 @@
 //! Counters in `/metrics`: `fusion_asterix_datagrams_total`,
 //! `fusion_asterix_records_total`, `fusion_asterix_plots_total`,
 //! `fusion_asterix_decode_errors_total`, `fusion_asterix_late_plots_total`,
-//! `fusion_asterix_push_failures_total`; out: `fusion_cat062_datagrams_total`,
-//! `fusion_cat062_records_total`, `fusion_cat062_skipped_total` (values
-//! left out of a record, out of their item's range),
-//! `fusion_cat062_send_failures_total`.
+//! `fusion_asterix_push_failures_total`, and the histogram
+//! `fusion_asterix_latency_seconds`: per applied batch, from the receipt
+//! of its earliest datagram to the applied update. Out:
+//! `fusion_cat062_datagrams_total`, `fusion_cat062_records_total`,
+//! `fusion_cat062_skipped_total` (values left out of a record, out of
+//! their item's range), `fusion_cat062_send_failures_total`.
 
 use std::{
+    collections::VecDeque,
     net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket as StdUdpSocket},
-    time::{SystemTime, UNIX_EPOCH},
+    sync::{Arc, Mutex},
+    time::{Instant, SystemTime, UNIX_EPOCH},
 };
 
 use anyhow::Context;
-use tokio::{net::UdpSocket, task::JoinHandle};
+use tokio::{
+    net::UdpSocket,
+    sync::Notify,
+    task::{JoinHandle, JoinSet},
+};
 
 use crate::state::AppState;
 use service::{
     ServiceError,
-    plot_fusion::{SpecInput, asterix::AsterixInput},
+    plot_fusion::{
+        SpecInput,
+        asterix::{AsterixInput, MIN_PLOT_RECORD_BYTES},
+    },
     session::{
         Batch, Spec,
         plot_fusion::{BatchInput, PlotFusionSession},
     },
 };
 
-/// Most datagrams pushed as one batch.
-pub const MAX_DATAGRAMS_PER_BATCH: usize = 64;
+/// Bytes of datagrams waiting for a push beyond which the listener stops
+/// reading its socket until a push takes them.
+pub const MAX_WAITING_BYTES: usize = 16 << 20;
 /// Largest datagram read (the UDP maximum).
 const DATAGRAM_BYTES: usize = 65_536;
 
@@ -83,8 +100,12 @@ pub async fn spawn(
         Some(to) => Some(Out::open(settings, &spec, to)?),
         None => None,
     };
-    let socket = bind(addr, settings.asterix_interface)
-        .with_context(|| format!("binding the ASTERIX UDP address {addr}"))?;
+    let socket = bind(
+        addr,
+        settings.asterix_interface,
+        settings.asterix_recv_buffer_bytes,
+    )
+    .with_context(|| format!("binding the ASTERIX UDP address {addr}"))?;
     let listener = Listener {
         state: state.clone(),
         tenant: settings.asterix_tenant.clone(),
@@ -102,7 +123,7 @@ pub async fn spawn(
     Ok(Some(tokio::spawn(listener.run(socket))))
 }
 
-fn bind(addr: SocketAddr, interface: Ipv4Addr) -> anyhow::Result<UdpSocket> {
+fn bind(addr: SocketAddr, interface: Ipv4Addr, recv_buffer: usize) -> anyhow::Result<UdpSocket> {
     let socket = match addr.ip() {
         IpAddr::V4(group) if group.is_multicast() => {
             let s = StdUdpSocket::bind(SocketAddr::new(Ipv4Addr::UNSPECIFIED.into(), addr.port()))?;
@@ -118,6 +139,18 @@ fn bind(addr: SocketAddr, interface: Ipv4Addr) -> anyhow::Result<UdpSocket> {
         }
         _ => StdUdpSocket::bind(addr)?,
     };
+    let sock = socket2::SockRef::from(&socket);
+    if recv_buffer > 0 {
+        sock.set_recv_buffer_size(recv_buffer)
+            .context("--asterix-recv-buffer-bytes (SO_RCVBUF)")?;
+    }
+    // Linux caps the request at net.core.rmem_max and reports twice what
+    // it granted (its bookkeeping overhead included).
+    tracing::info!(
+        requested = recv_buffer,
+        granted = sock.recv_buffer_size().unwrap_or(0),
+        "ASTERIX UDP receive buffer (bytes)"
+    );
     socket.set_nonblocking(true)?;
     Ok(UdpSocket::from_std(socket)?)
 }
@@ -245,34 +278,28 @@ impl Listener {
         }
     }
 
+    /// Reads datagrams and pushes them: a reader task takes every datagram
+    /// off the socket as it arrives, stamped with its time of receipt, into
+    /// a [`Queue`], while this task pushes what waits as one batch at a
+    /// time. A push that takes long makes the next batch larger; it does
+    /// not leave datagrams in the socket's buffer to overflow it.
     async fn run(self, socket: UdpSocket) {
-        let mut buf = vec![0u8; DATAGRAM_BYTES];
+        let queue = Arc::new(Queue::default());
+        // Aborted with this task (the listener is aborted at shutdown).
+        let mut reader = JoinSet::new();
+        reader.spawn(read(socket, Arc::clone(&queue)));
+        let max_bytes = batch_bytes(self.state.settings().max_batch_reports);
         loop {
-            let n = match socket.recv(&mut buf).await {
-                Ok(n) => n,
-                Err(e) => {
-                    tracing::warn!(error = %e, "ASTERIX UDP receive failed");
-                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-                    continue;
-                }
+            let Some(batch) = queue.take(max_bytes) else {
+                queue.arrived.notified().await;
+                continue;
             };
-            let mut data = buf[..n].to_vec();
-            let mut datagrams = 1u64;
-            while (datagrams as usize) < MAX_DATAGRAMS_PER_BATCH {
-                match socket.try_recv(&mut buf) {
-                    Ok(n) => {
-                        data.extend_from_slice(&buf[..n]);
-                        datagrams += 1;
-                    }
-                    Err(_) => break,
-                }
-            }
-            metrics::counter!("fusion_asterix_datagrams_total").increment(datagrams);
-            self.push(data).await;
+            queue.room.notify_one();
+            self.push(batch.data, batch.first_received).await;
         }
     }
 
-    async fn push(&self, data: Vec<u8>) {
+    async fn push(&self, data: Vec<u8>, first_received: Instant) {
         let now = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0.0, |d| d.as_secs_f64());
@@ -302,6 +329,8 @@ impl Listener {
         }
         match result {
             Ok(update) => {
+                metrics::histogram!("fusion_asterix_latency_seconds")
+                    .record(first_received.elapsed().as_secs_f64());
                 if let (Some(out), Some(c)) = (&self.out, &update.body.cat062) {
                     out.send(c).await;
                 }
@@ -318,5 +347,142 @@ impl Listener {
                 tracing::warn!(error = %e, "ASTERIX batch not applied");
             }
         }
+    }
+}
+
+/// Bytes of ASTERIX in one batch: what the session's size check admits
+/// (one plot counted per [`MIN_PLOT_RECORD_BYTES`]) under
+/// `--max-batch-reports`.
+fn batch_bytes(max_batch_reports: usize) -> usize {
+    max_batch_reports
+        .saturating_mul(MIN_PLOT_RECORD_BYTES)
+        .max(1)
+}
+
+/// Datagrams received and not yet pushed, shared by the reader and the
+/// pusher of [`Listener::run`].
+#[derive(Default)]
+struct Queue {
+    waiting: Mutex<Waiting>,
+    /// A datagram was queued (the reader wakes the pusher).
+    arrived: Notify,
+    /// Datagrams were taken (the pusher wakes a reader that waits for room).
+    room: Notify,
+}
+
+#[derive(Default)]
+struct Waiting {
+    /// Each datagram with its time of receipt, in order of receipt.
+    datagrams: VecDeque<(Instant, Vec<u8>)>,
+    bytes: usize,
+}
+
+/// What one push takes off the queue.
+struct Taken {
+    data: Vec<u8>,
+    /// When its earliest datagram was received.
+    first_received: Instant,
+}
+
+impl Queue {
+    fn waiting(&self) -> std::sync::MutexGuard<'_, Waiting> {
+        // The lock guards plain data whose every update is complete: a
+        // panic elsewhere cannot leave it half changed.
+        self.waiting
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn put(&self, received: Instant, datagram: Vec<u8>) {
+        let mut w = self.waiting();
+        w.bytes += datagram.len();
+        w.datagrams.push_back((received, datagram));
+    }
+
+    fn bytes(&self) -> usize {
+        self.waiting().bytes
+    }
+
+    /// The datagrams waiting, oldest first, concatenated up to `max_bytes`
+    /// (at least one); `None` when none waits.
+    fn take(&self, max_bytes: usize) -> Option<Taken> {
+        let mut w = self.waiting();
+        let first_received = w.datagrams.front()?.0;
+        let mut data = Vec::with_capacity(w.bytes.min(max_bytes));
+        while let Some((_, d)) = w.datagrams.front() {
+            if !data.is_empty() && data.len() + d.len() > max_bytes {
+                break;
+            }
+            data.extend_from_slice(d);
+            w.datagrams.pop_front();
+        }
+        w.bytes -= data.len();
+        Some(Taken {
+            data,
+            first_received,
+        })
+    }
+}
+
+/// The reader of [`Listener::run`]: every datagram into `queue` as it
+/// arrives, counted in `fusion_asterix_datagrams_total`. While more than
+/// [`MAX_WAITING_BYTES`] wait, it stops reading until a push takes them
+/// (the socket's receive buffer, `--asterix-recv-buffer-bytes`, holds what
+/// arrives meanwhile).
+async fn read(socket: UdpSocket, queue: Arc<Queue>) {
+    let mut buf = vec![0u8; DATAGRAM_BYTES];
+    loop {
+        while queue.bytes() >= MAX_WAITING_BYTES {
+            queue.room.notified().await;
+        }
+        match socket.recv(&mut buf).await {
+            Ok(n) => {
+                let received = Instant::now();
+                metrics::counter!("fusion_asterix_datagrams_total").increment(1);
+                queue.put(received, buf[..n].to_vec());
+                queue.arrived.notify_one();
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "ASTERIX UDP receive failed");
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_push_takes_the_oldest_datagrams_up_to_its_bytes_and_at_least_one() {
+        let q = Queue::default();
+        assert!(q.take(100).is_none());
+        let t0 = Instant::now();
+        let t1 = t0 + std::time::Duration::from_millis(1);
+        q.put(t0, vec![1; 40]);
+        q.put(t1, vec![2; 40]);
+        q.put(t1, vec![3; 40]);
+        q.put(t1, vec![4; 200]);
+        // 40 + 40 = 80 ≤ 100; a third would make 120.
+        let a = q.take(100).unwrap();
+        assert_eq!(a.data, [vec![1; 40], vec![2; 40]].concat());
+        assert_eq!(a.first_received, t0);
+        assert_eq!(q.bytes(), 240);
+        let b = q.take(100).unwrap();
+        assert_eq!((b.data, b.first_received), (vec![3; 40], t1));
+        // A datagram larger than the limit goes alone.
+        assert_eq!(q.take(100).unwrap().data, vec![4; 200]);
+        assert_eq!(q.bytes(), 0);
+        assert!(q.take(100).is_none());
+    }
+
+    #[test]
+    fn a_batch_holds_what_the_session_size_check_admits() {
+        // 100,000 reports of at least 10 bytes: 1,000,000 bytes, whose
+        // count 1,000,000 / 10 = 100,000 is within the limit.
+        assert_eq!(batch_bytes(100_000), 1_000_000);
+        assert_eq!(batch_bytes(0), 1);
+        assert_eq!(batch_bytes(usize::MAX), usize::MAX);
     }
 }

@@ -287,6 +287,16 @@ pub struct Settings {
     /// the system's choice).
     #[arg(long, env = "FUSION_ASTERIX_INTERFACE", default_value = "0.0.0.0")]
     pub asterix_interface: std::net::Ipv4Addr,
+    /// Receive buffer of the ASTERIX socket (SO_RCVBUF, bytes; 0: the
+    /// system's default). It holds the datagrams that arrive while the
+    /// listener's reader is not running; Linux caps it at
+    /// net.core.rmem_max.
+    #[arg(
+        long,
+        env = "FUSION_ASTERIX_RECV_BUFFER_BYTES",
+        default_value_t = 4 << 20
+    )]
+    pub asterix_recv_buffer_bytes: usize,
     /// Send the ASTERIX session's updates as CAT062 datagrams to this
     /// address (unicast or a multicast group); needs `--asterix-udp` and a
     /// session spec with `cat062`. Off by default.
@@ -529,6 +539,13 @@ impl Settings {
                 self.asterix_out_max_datagram
             ));
         }
+        if self.asterix_recv_buffer_bytes > i32::MAX as usize {
+            return Err(format!(
+                "--asterix-recv-buffer-bytes must be at most {} (SO_RCVBUF is an int), not {}",
+                i32::MAX,
+                self.asterix_recv_buffer_bytes
+            ));
+        }
         if self.asterix_out_ttl > 255 {
             return Err(format!(
                 "--asterix-out-ttl must be 0 to 255, not {}",
@@ -719,5 +736,18 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.contains("--max-sessions-per-tenant"), "{err}");
+    }
+
+    #[test]
+    fn the_asterix_receive_buffer_is_4_mib_unless_set() {
+        assert_eq!(with(&[]).asterix_recv_buffer_bytes, 4_194_304);
+        let s = with(&["--asterix-recv-buffer-bytes", "0"]);
+        assert_eq!(s.asterix_recv_buffer_bytes, 0);
+        s.validate().unwrap();
+        // 2³¹ does not fit SO_RCVBUF's int.
+        let err = with(&["--asterix-recv-buffer-bytes", "2147483648"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--asterix-recv-buffer-bytes"), "{err}");
     }
 }

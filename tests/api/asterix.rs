@@ -604,6 +604,15 @@ async fn the_udp_listener_feeds_its_session_from_datagrams_on_loopback() {
     let records = expected()["records"].as_array().unwrap().len();
     assert_eq!(value("fusion_asterix_records_total") as usize, records);
     assert_eq!(value("fusion_asterix_decode_errors_total"), 0);
+    // Every applied batch observed once in the latency histogram: at
+    // least one batch, at most one per datagram (their sizes depend on
+    // how the datagrams met the pushes, so only the bounds are asserted).
+    let batches = value("fusion_asterix_latency_seconds_count") as usize;
+    assert!((1..=datagrams).contains(&batches), "{batches} batches");
+    assert!(
+        metrics.contains("fusion_asterix_latency_seconds_bucket{le=\"1\"}"),
+        "{metrics}"
+    );
 }
 
 /// Radar B of the scene biased by +300 m and +0.3° (`scene_biased.bin`,

@@ -8,6 +8,8 @@
 //! - [`sensor`]: 2D/3D radars with optional Doppler, coverage, detection
 //!   probability, Gaussian errors, systematic biases and Poisson clutter.
 //! - [`ais`]: an AIS reporter in WGS84 and an NMEA 0183 `!AIVDM` type-1 encoder.
+//! - [`asterix048`]: an ASTERIX CAT048 encoder (2D primary radar target
+//!   reports), the bytes of `examples/asterix_load.rs`.
 //! - [`tracker`]: the local Kalman filters of the distributed experiments
 //!   (seed 000 eqs. 24–30), one per target per node.
 //! - [`scenario000`]: the two-node scene of seed 000 §5.1 and the truth
@@ -26,6 +28,7 @@
 //! files; it calls `algo` for every piece of numerics the service also uses.
 
 pub mod ais;
+pub mod asterix048;
 pub mod async_network;
 pub mod benchmark;
 pub mod experiments;
