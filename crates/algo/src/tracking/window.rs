@@ -348,8 +348,8 @@ impl LagWindow {
     /// streaming rule).
     fn feed(&mut self, start: usize, out: &mut Push) -> Result<(), AlgoError> {
         let newest = self.window[self.window.len() - 1].t;
-        let cut = start
-            + self.window[start..].partition_point(|p| p.t <= newest - RECENT_SNAPSHOT_S);
+        let cut =
+            start + self.window[start..].partition_point(|p| p.t <= newest - RECENT_SNAPSHOT_S);
         let mut from = start;
         if cut > start && cut < self.window.len() {
             let report = self.head.process(&self.window[start..cut])?;
