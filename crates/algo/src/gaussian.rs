@@ -111,6 +111,17 @@ pub fn moment_match_into<'a>(
     symmetrize(p);
 }
 
+/// [`symmetrize`] of a fixed-size square matrix.
+pub fn symmetrize_fixed<const N: usize>(p: &mut nalgebra::SMatrix<f64, N, N>) {
+    for j in 0..N {
+        for i in (j + 1)..N {
+            let m = 0.5 * (p[(i, j)] + p[(j, i)]);
+            p[(i, j)] = m;
+            p[(j, i)] = m;
+        }
+    }
+}
+
 /// Replaces a square `p` by `(p + p') / 2`. Non-square matrices are left unchanged.
 pub fn symmetrize(p: &mut DMatrix<f64>) {
     if !p.is_square() {

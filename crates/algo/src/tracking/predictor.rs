@@ -472,15 +472,7 @@ fn predict_imm_fixed<const N: usize>(
     {
         return Ok(false);
     }
-    let sym = |m: &mut SMatrix<f64, N, N>| {
-        for j in 0..N {
-            for i in (j + 1)..N {
-                let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-                m[(i, j)] = v;
-                m[(j, i)] = v;
-            }
-        }
-    };
+    use crate::gaussian::symmetrize_fixed as sym;
     let mut xs = [SVector::<f64, N>::zeros(); MAX_MODES];
     let mut ps = [SMatrix::<f64, N, N>::zeros(); MAX_MODES];
     // (Filled below from the modes.)

@@ -104,6 +104,22 @@ fn bad(reason: impl Into<String>) -> AlgoError {
     }
 }
 
+/// Per radar, a beam position (time, azimuth) or none: one per radar,
+/// finite.
+fn check_beams(what: &str, beams: &[Option<(f64, f64)>], radars: usize) -> Result<(), AlgoError> {
+    if beams.len() != radars {
+        return Err(bad(format!("{} {what} for {radars} radars", beams.len())));
+    }
+    if beams
+        .iter()
+        .flatten()
+        .any(|(t, az)| !(t.is_finite() && az.is_finite()))
+    {
+        return Err(bad(format!("one of the {what} is not finite")));
+    }
+    Ok(())
+}
+
 /// An IMM track's modes: one per model of the configuration's IMM (none
 /// without one, and none for a tentative track, checked by the caller),
 /// each of the track's dimension, finite, positive definite, probabilities
@@ -247,41 +263,17 @@ impl Tracker {
         tr.last_instant = parts.last_instant;
         tr.counters = parts.counters;
         if !parts.beams.is_empty() {
-            if parts.beams.len() != tr.config.radars.len() {
-                return Err(bad(format!(
-                    "{} beam positions for {} radars",
-                    parts.beams.len(),
-                    tr.config.radars.len()
-                )));
-            }
-            if parts
-                .beams
-                .iter()
-                .flatten()
-                .any(|(t, az)| !(t.is_finite() && az.is_finite()))
-            {
-                return Err(bad("a beam position is not finite"));
-            }
+            check_beams("beam positions", &parts.beams, tr.config.radars.len())?;
             tr.beams = parts.beams;
         }
         tr.judged = if parts.judged.is_empty() {
             tr.beams.clone()
         } else {
-            if parts.judged.len() != tr.config.radars.len() {
-                return Err(bad(format!(
-                    "{} judged beam positions for {} radars",
-                    parts.judged.len(),
-                    tr.config.radars.len()
-                )));
-            }
-            if parts
-                .judged
-                .iter()
-                .flatten()
-                .any(|(t, az)| !(t.is_finite() && az.is_finite()))
-            {
-                return Err(bad("a judged beam position is not finite"));
-            }
+            check_beams(
+                "judged beam positions",
+                &parts.judged,
+                tr.config.radars.len(),
+            )?;
             parts.judged
         };
         if let Some(state) = parts.registration {

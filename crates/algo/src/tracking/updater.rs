@@ -234,6 +234,8 @@ mod fixed {
     const MAX_PLOTS: usize = 8;
     const MAX_MODES: usize = 8;
 
+    use crate::gaussian::symmetrize_fixed as sym;
+
     type Upd<const N: usize> = (SVector<f64, N>, SMatrix<f64, N, N>, f64);
 
     /// The combined estimate, or `None` where the stack path does not
@@ -266,16 +268,6 @@ mod fixed {
             (6, 3) => run::<6, 3>(modes, assoc, measurements),
             (6, 4) => run::<6, 4>(modes, assoc, measurements),
             _ => Ok(None),
-        }
-    }
-
-    fn sym<const N: usize>(p: &mut SMatrix<f64, N, N>) {
-        for j in 0..N {
-            for i in (j + 1)..N {
-                let v = 0.5 * (p[(i, j)] + p[(j, i)]);
-                p[(i, j)] = v;
-                p[(j, i)] = v;
-            }
         }
     }
 
@@ -480,13 +472,7 @@ mod fixed {
         for i in 0..M {
             s[(i, i)] += rd[i];
         }
-        for j in 0..M {
-            for i in (j + 1)..M {
-                let v = 0.5 * (s[(i, j)] + s[(j, i)]);
-                s[(i, j)] = v;
-                s[(j, i)] = v;
-            }
-        }
+        sym(&mut s);
         let chol = s.cholesky().ok_or(AlgoError::NotPositiveDefinite {
             what: "innovation covariance",
         })?;
