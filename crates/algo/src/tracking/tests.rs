@@ -838,6 +838,53 @@ proptest::proptest! {
     }
 }
 
+/// A live feed whose every push holds one plot older than the previous
+/// push's newest (several radars' datagrams overlapping) replays a few
+/// plots a push, not the stream: the window keeps a snapshot
+/// `RECENT_SNAPSHOT_S` (0.5 s) before each push's newest plot. Pushes:
+/// {p1}, {p0, p3}, {p2, p5}, … (p sorted by time). Without that snapshot
+/// each push dropped the previous push's own snapshot and replayed from
+/// the oldest one left, or `base`.
+#[test]
+fn a_feed_late_by_one_plot_replays_a_few_plots_a_push() {
+    let cfg = fig5_config(false);
+    let mut plots = scene(
+        &cfg.radars,
+        &[0.0, 3.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(5),
+    );
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    // Each plot at its own time, as the beam times them (a scan's two
+    // targets 10 ms apart here).
+    for (i, p) in plots.iter_mut().enumerate() {
+        p.t += 0.01 * i as f64;
+    }
+    assert!(plots.len() > 30);
+    let mut window = LagWindow::new(
+        Tracker::new(cfg.clone()).unwrap(),
+        window::DEFAULT_MAX_LAG_S,
+    )
+    .unwrap();
+    let mut received = vec![plots[1]];
+    window.push(&[plots[1]]).unwrap();
+    let mut most = 0;
+    let mut k = 1;
+    while 2 * k + 1 < plots.len() {
+        let batch = [plots[2 * k - 2], plots[2 * k + 1]];
+        let push = window.push(&batch).unwrap();
+        most = most.max(push.replayed);
+        received.extend(batch);
+        k += 1;
+    }
+    // A replay starts at the recent snapshot: here one plot a push
+    // (without it, 13: from whatever older snapshot or base survived,
+    // growing with the lag).
+    assert!(most <= 3, "{most} plots replayed in one push");
+    assert_eq!(window.picture(), &batch_picture(&cfg, &received));
+}
+
 #[test]
 fn a_plot_older_than_the_lag_is_late_and_changes_nothing() {
     let cfg = fig5_config(false);
