@@ -67,7 +67,7 @@ fn main() -> anyhow::Result<()> {
     let start = Instant::now();
     let mut plots = 0usize;
     for _ in 0..passes {
-        plots += input::plots(&net, &config, std::hint::black_box(SCENE), clock)
+        plots += input::plots(&net, &config, std::hint::black_box(SCENE), clock, None)
             .plots
             .len();
     }

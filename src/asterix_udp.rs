@@ -57,7 +57,7 @@ use service::{
     ServiceError,
     plot_fusion::{
         SpecInput,
-        asterix::{AsterixInput, MIN_PLOT_RECORD_BYTES},
+        asterix::{AsterixInput, MIN_PLOT_RECORD_BYTES, Reception},
     },
     session::{
         Batch, Spec,
@@ -112,6 +112,7 @@ pub async fn spawn(
         id: settings.asterix_session_id.clone(),
         spec,
         out,
+        max_clock_offset_s: settings.asterix_max_clock_offset_s,
     };
     listener.ensure_session().await;
     tracing::info!(
@@ -161,6 +162,8 @@ struct Listener {
     id: String,
     spec: Spec<SpecInput>,
     out: Option<Out>,
+    /// `--asterix-max-clock-offset-s` (0: no check).
+    max_clock_offset_s: f64,
 }
 
 /// Where CAT062 goes.
@@ -312,6 +315,10 @@ impl Listener {
                     date: None,
                     day_start_t: None,
                     reference_t: Some(now),
+                    reception: (self.max_clock_offset_s > 0.0).then_some(Reception {
+                        t: now,
+                        max_offset_s: self.max_clock_offset_s,
+                    }),
                 }),
                 flush: false,
             },

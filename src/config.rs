@@ -297,6 +297,16 @@ pub struct Settings {
         default_value_t = 4 << 20
     )]
     pub asterix_recv_buffer_bytes: usize,
+    /// Largest distance (s) between a target report's time and the
+    /// listener's time of reception: a report further off (a radar clock
+    /// glitch, a forged datagram) is refused and moves nothing; 0 turns the
+    /// check off (a recording replayed into the listener).
+    #[arg(
+        long,
+        env = "FUSION_ASTERIX_MAX_CLOCK_OFFSET_S",
+        default_value_t = 60.0
+    )]
+    pub asterix_max_clock_offset_s: f64,
     /// Send the ASTERIX session's updates as CAT062 datagrams to this
     /// address (unicast or a multicast group); needs `--asterix-udp` and a
     /// session spec with `cat062`. Off by default.
@@ -539,6 +549,13 @@ impl Settings {
                 self.asterix_out_max_datagram
             ));
         }
+        if !(self.asterix_max_clock_offset_s.is_finite() && self.asterix_max_clock_offset_s >= 0.0)
+        {
+            return Err(format!(
+                "--asterix-max-clock-offset-s must be finite and ≥ 0 (0: no check), not {}",
+                self.asterix_max_clock_offset_s
+            ));
+        }
         if self.asterix_recv_buffer_bytes > i32::MAX as usize {
             return Err(format!(
                 "--asterix-recv-buffer-bytes must be at most {} (SO_RCVBUF is an int), not {}",
@@ -736,6 +753,19 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.contains("--max-sessions-per-tenant"), "{err}");
+    }
+
+    #[test]
+    fn the_asterix_clock_check_is_60_s_unless_set() {
+        assert_eq!(with(&[]).asterix_max_clock_offset_s, 60.0);
+        assert_eq!(
+            with(&["--asterix-max-clock-offset-s", "0"]).asterix_max_clock_offset_s,
+            0.0
+        );
+        let err = with(&["--asterix-max-clock-offset-s", "-1"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--asterix-max-clock-offset-s"), "{err}");
     }
 
     #[test]

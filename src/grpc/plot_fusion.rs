@@ -209,6 +209,7 @@ pub(crate) fn asterix_in(a: pb::AsterixData) -> svc::asterix::AsterixInput {
         date: a.date,
         day_start_t: a.day_start_t,
         reference_t: None,
+        reception: None,
     }
 }
 

@@ -383,6 +383,7 @@ pub(crate) fn asterix_in(
         date: a.date,
         day_start_t: a.day_start_t,
         reference_t: None,
+        reception: None,
     }))
 }
 

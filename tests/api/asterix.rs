@@ -546,6 +546,20 @@ async fn feed_the_listener(
     data: &'static [u8],
     plots: usize,
 ) -> (crate::helpers::TestApp, String, usize) {
+    // A recording: its times are days from now, so the listener's clock
+    // check (`--asterix-max-clock-offset-s`) is off.
+    let all = blocks_of(data).into_iter().map(<[u8]>::to_vec).collect();
+    feed_datagrams(spec, all, plots, 0.0).await
+}
+
+/// [`feed_the_listener`] with datagrams of one's own and the listener's
+/// clock check at `max_clock_offset_s`.
+async fn feed_datagrams(
+    spec: Value,
+    all: Vec<Vec<u8>>,
+    plots: usize,
+    max_clock_offset_s: f64,
+) -> (crate::helpers::TestApp, String, usize) {
     // A free port: bound and released (the listener binds it next).
     let port = std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
@@ -560,12 +574,12 @@ async fn feed_the_listener(
     let app = spawn_app_with(|s| {
         s.asterix_udp = Some(addr);
         s.asterix_session_spec = Some(spec_path.clone());
+        s.asterix_max_clock_offset_s = max_clock_offset_s;
     })
     .await;
     std::fs::remove_dir_all(&dir).ok();
     let before = app.metrics_text().await;
     let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let all = blocks_of(data);
     for b in &all {
         sender.send_to(b, addr).unwrap();
     }
@@ -583,6 +597,50 @@ async fn feed_the_listener(
     }
     assert_eq!(counted as usize, plots);
     (app, before, all.len())
+}
+
+/// One radar's clock jumps 6 h ahead for one datagram (a glitch, or a
+/// forged packet): the listener's clock check (60 s, the default) refuses
+/// that report, so the session's newest time and lag horizon do not move,
+/// and the good plots after it are kept, none late. (With the check off
+/// the report is accepted as a seventh plot, 6 h ahead: every plot after
+/// it in a later batch would be late.)
+#[tokio::test]
+async fn a_datagram_hours_ahead_is_refused_and_moves_nothing() {
+    use eval::asterix048::{Report, block, time_of_day};
+    let _one_at_a_time = UDP_TESTS.lock().await;
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    // Radar a (SAC 25, SIC 1, 20 km west of the centre): an aircraft 30 km
+    // east of it moving away at 25 m/s, a plot every 4-s scan, the last 4 s
+    // before now.
+    let report = |t: f64, k: usize| Report {
+        sac: 25,
+        sic: 1,
+        time_of_day_s: time_of_day(t),
+        range_m: 30_000.0 + 100.0 * k as f64,
+        azimuth_deg: 90.0,
+    };
+    let good: Vec<Vec<u8>> = (0..6)
+        .map(|k| block(&[report(now - 24.0 + 4.0 * k as f64, k)]).unwrap())
+        .collect();
+    let ahead = block(&[report(now + 6.0 * 3600.0, 3)]).unwrap();
+    let mut datagrams = good[..3].to_vec();
+    datagrams.push(ahead);
+    datagrams.extend_from_slice(&good[3..]);
+    let spec = json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker()});
+    let (app, before, _) = feed_datagrams(spec, datagrams, 6, 60.0).await;
+    let view = app
+        .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
+        .await;
+    assert_eq!(view["plot_fusion"]["counters"]["late"], 0, "{view}");
+    let metrics = app.metrics_text().await;
+    let value = |name: &str| counter(&metrics, name) - counter(&before, name);
+    assert_eq!(value("fusion_asterix_records_total"), 7);
+    assert_eq!(value("fusion_asterix_plots_total"), 6);
+    assert_eq!(value("fusion_asterix_decode_errors_total"), 1);
 }
 
 /// The session the listener creates (its id is fixed by the listener).
@@ -710,6 +768,8 @@ async fn asterix_in_gives_cat062_datagrams_out_on_loopback() {
         s.asterix_session_spec = Some(spec_path.clone());
         s.asterix_out_udp = Some(out);
         s.asterix_out_max_datagram = 400;
+        // A recording: no clock check.
+        s.asterix_max_clock_offset_s = 0.0;
     })
     .await;
     let before = app.metrics_text().await;

@@ -51,6 +51,21 @@ pub struct AsterixInput {
     /// back to when the session has processed no frame yet (the UDP
     /// listener's time of reception).
     pub reference_t: Option<f64>,
+    /// Not on the wire: the UDP listener's check of every report's time
+    /// against the time of reception.
+    pub reception: Option<Reception>,
+}
+
+/// A report whose time lies more than `max_offset_s` from the time of
+/// reception `t` is refused (a radar clock glitch or a forged datagram
+/// would otherwise move a session's newest time, and its lag horizon with
+/// it, hours ahead: every good plot after it late).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reception {
+    /// Time of reception (the session's time scale: Unix seconds).
+    pub t: f64,
+    /// Largest |report time − t| accepted (s), > 0.
+    pub max_offset_s: f64,
 }
 
 /// How times of day become times.
@@ -202,7 +217,13 @@ pub fn nearest(time_of_day: f64, reference: f64) -> f64 {
 }
 
 /// Decodes `data` and makes plots of the target reports of declared radars.
-pub fn plots(network: &Network, config: &TrackerConfig, data: &[u8], clock: Clock) -> AsterixPlots {
+pub fn plots(
+    network: &Network,
+    config: &TrackerConfig,
+    data: &[u8],
+    clock: Clock,
+    reception: Option<Reception>,
+) -> AsterixPlots {
     let decoded = asterix::decode(data);
     let mut s = AsterixSummary {
         bytes: data.len(),
@@ -268,6 +289,22 @@ pub fn plots(network: &Network, config: &TrackerConfig, data: &[u8], clock: Cloc
             (None, Clock::DayStart(d)) => d + tod,
             (None, Clock::Near(n)) => nearest(tod, n),
         };
+        if let Some(rx) = reception {
+            let off = t - rx.t;
+            if off.is_nan() || off.abs() > rx.max_offset_s {
+                s.rejected += 1;
+                errors.push(DecodeError {
+                    offset: r.offset,
+                    reason: format!(
+                        "target report of radar '{}' refused: its time of day is {:.1} s from                          the time of reception, beyond {} s (--asterix-max-clock-offset-s; a                          radar clock glitch or a forged datagram)",
+                        network.radar_ids[radar],
+                        off,
+                        rx.max_offset_s
+                    ),
+                });
+                continue;
+            }
+        }
         let input = PlotInput {
             radar_id: Some(network.radar_ids[radar].clone()),
             t: Some(t),

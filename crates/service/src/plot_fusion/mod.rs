@@ -283,7 +283,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     let start = Instant::now();
     let summary = match (&input.asterix, clock) {
         (Some(a), Some(clock)) => {
-            let from = asterix::plots(&network, &config, &a.data, clock);
+            let from = asterix::plots(&network, &config, &a.data, clock, a.reception);
             plots.extend(from.plots);
             warnings.extend(from.warnings);
             Some(from.summary)

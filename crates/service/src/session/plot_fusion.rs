@@ -440,7 +440,7 @@ impl SessionKind for PlotFusionSession {
         if let Some(a) = &batch.asterix {
             let reference = self.window.newest().or(a.reference_t);
             let clock = asterix::clock(a, "asterix", reference)?;
-            let from = asterix::plots(&self.network, &config, &a.data, clock);
+            let from = asterix::plots(&self.network, &config, &a.data, clock, a.reception);
             plots.extend(from.plots);
             offsets = from.offsets;
             warnings.extend(from.warnings);
