@@ -307,6 +307,12 @@ pub struct Settings {
         default_value_t = 60.0
     )]
     pub asterix_max_clock_offset_s: f64,
+    /// Sources the ASTERIX listener takes datagrams from: IP addresses or
+    /// CIDR prefixes (`192.0.2.7`, `10.1.0.0/16`, `2001:db8::/32`), comma
+    /// separated. Empty (the default): every source. UDP is
+    /// unauthenticated: this and the host's firewall are what restrict it.
+    #[arg(long, env = "FUSION_ASTERIX_ALLOW", value_delimiter = ',')]
+    pub asterix_allow: Vec<String>,
     /// Send the ASTERIX session's updates as CAT062 datagrams to this
     /// address (unicast or a multicast group); needs `--asterix-udp` and a
     /// session spec with `cat062`. Off by default.
@@ -549,6 +555,7 @@ impl Settings {
                 self.asterix_out_max_datagram
             ));
         }
+        crate::asterix_udp::Sources::parse(&self.asterix_allow)?;
         if !(self.asterix_max_clock_offset_s.is_finite() && self.asterix_max_clock_offset_s >= 0.0)
         {
             return Err(format!(
@@ -753,6 +760,18 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.contains("--max-sessions-per-tenant"), "{err}");
+    }
+
+    #[test]
+    fn the_asterix_allowlist_takes_addresses_and_prefixes_and_names_a_bad_one() {
+        assert!(with(&[]).asterix_allow.is_empty());
+        let s = with(&["--asterix-allow", "192.0.2.7,10.1.0.0/16"]);
+        assert_eq!(s.asterix_allow, ["192.0.2.7", "10.1.0.0/16"]);
+        assert!(s.validate().is_ok());
+        let err = with(&["--asterix-allow", "10.1.0.0/33"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--asterix-allow"), "{err}");
     }
 
     #[test]

@@ -549,16 +549,17 @@ async fn feed_the_listener(
     // A recording: its times are days from now, so the listener's clock
     // check (`--asterix-max-clock-offset-s`) is off.
     let all = blocks_of(data).into_iter().map(<[u8]>::to_vec).collect();
-    feed_datagrams(spec, all, plots, 0.0).await
+    feed_datagrams(spec, all, plots, 0.0, &[]).await
 }
 
-/// [`feed_the_listener`] with datagrams of one's own and the listener's
-/// clock check at `max_clock_offset_s`.
+/// [`feed_the_listener`] with datagrams of one's own, the listener's
+/// clock check at `max_clock_offset_s` and its sources `allow`.
 async fn feed_datagrams(
     spec: Value,
     all: Vec<Vec<u8>>,
     plots: usize,
     max_clock_offset_s: f64,
+    allow: &[&str],
 ) -> (crate::helpers::TestApp, String, usize) {
     // A free port: bound and released (the listener binds it next).
     let port = std::net::UdpSocket::bind("127.0.0.1:0")
@@ -575,6 +576,7 @@ async fn feed_datagrams(
         s.asterix_udp = Some(addr);
         s.asterix_session_spec = Some(spec_path.clone());
         s.asterix_max_clock_offset_s = max_clock_offset_s;
+        s.asterix_allow = allow.iter().map(|a| a.to_string()).collect();
     })
     .await;
     std::fs::remove_dir_all(&dir).ok();
@@ -631,7 +633,7 @@ async fn a_datagram_hours_ahead_is_refused_and_moves_nothing() {
     datagrams.push(ahead);
     datagrams.extend_from_slice(&good[3..]);
     let spec = json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker()});
-    let (app, before, _) = feed_datagrams(spec, datagrams, 6, 60.0).await;
+    let (app, before, _) = feed_datagrams(spec, datagrams, 6, 60.0, &[]).await;
     let view = app
         .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
         .await;
@@ -641,6 +643,35 @@ async fn a_datagram_hours_ahead_is_refused_and_moves_nothing() {
     assert_eq!(value("fusion_asterix_records_total"), 7);
     assert_eq!(value("fusion_asterix_plots_total"), 6);
     assert_eq!(value("fusion_asterix_decode_errors_total"), 1);
+}
+
+/// A listener that takes datagrams from 10.0.0.0/8 only refuses those of
+/// 127.0.0.1 (counted), and its session receives nothing.
+#[tokio::test]
+async fn a_listener_refuses_datagrams_from_sources_it_does_not_allow() {
+    let _one_at_a_time = UDP_TESTS.lock().await;
+    let spec = json!({"kind": "plot_fusion", "radars": radars(), "tracker": tracker()});
+    let all: Vec<Vec<u8>> = blocks_of(SCENE_BIN)
+        .into_iter()
+        .map(<[u8]>::to_vec)
+        .collect();
+    let sent = all.len() as u64;
+    let (app, before, _) = feed_datagrams(spec, all, 0, 0.0, &["10.0.0.0/8"]).await;
+    let mut refused = 0;
+    for _ in 0..500 {
+        let metrics = app.metrics_text().await;
+        refused = counter(&metrics, "fusion_asterix_refused_datagrams_total")
+            - counter(&before, "fusion_asterix_refused_datagrams_total");
+        if refused >= sent {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    assert_eq!(refused, sent);
+    let view = app
+        .get_ok(&format!("/v1/sessions/{LISTENER_SESSION}"))
+        .await;
+    assert_eq!(view["plot_fusion"]["counters"]["plots"], 0, "{view}");
 }
 
 /// The session the listener creates (its id is fixed by the listener).
