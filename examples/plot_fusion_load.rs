@@ -6,7 +6,8 @@
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
 //!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
 //!     [--motion imm|cv] [--no-registration] [--timing beam|scan] \
-//!     [--late none|held|radars] [--store memory|redis://…]
+//!     [--late none|held|radars|both] [--store memory|redis://…] \
+//!     [--snapshot-batches 32] [--takeover-at 0.5]
 //! ```
 //!
 //! Plots are timed at the beam by default, as a real radar times them
@@ -26,7 +27,19 @@
 //!   cut by arrival time: `--late none` (default) every plot arrives at its
 //!   time; `held` 3 % of the plots (every 33rd) arrive 5 s late; `radars`
 //!   radar k's plots arrive 2k/(R − 1) s late (0 to 2 s), so the radars'
-//!   plots interleave out of order. `--store` picks the session store.
+//!   plots interleave out of order; `both` the two at once. `--store`
+//!   picks the session store, `--snapshot-batches` the server's
+//!   `--session-snapshot-batches` (1: a snapshot every batch, as before
+//!   the session log). The line also gives the bytes written to the store
+//!   per batch (snapshots and log entries, from the server's counters)
+//!   and the session's stored bytes at the end.
+//! - takeover (`--takeover-at f`, Redis only): the stream again on a new
+//!   session, with a second replica on the same store; after the fraction
+//!   f of the batches the serving replica is stopped and the stream
+//!   attaches to the other, which reads the session (snapshot and log)
+//!   from the store. Reports the time from the stop to the first batch the
+//!   other replica accepted, and whether the final tracks equal the
+//!   uninterrupted run's.
 //!
 //! The allocator is the server binary's (mimalloc, `src/main.rs`), so both
 //! figures are what the shipped server does.
@@ -63,6 +76,8 @@ struct Args {
     late: String,
     store: String,
     timing: PlotTiming,
+    snapshot_batches: Option<usize>,
+    takeover_at: Option<f64>,
 }
 
 fn parse_args() -> anyhow::Result<Args> {
@@ -78,6 +93,8 @@ fn parse_args() -> anyhow::Result<Args> {
         motion: None,
         no_registration: false,
         late: "none".into(),
+        snapshot_batches: None,
+        takeover_at: None,
         store: "memory".into(),
         timing: PlotTiming::Beam,
     };
@@ -99,6 +116,8 @@ fn parse_args() -> anyhow::Result<Args> {
                     "--motion" => args.motion = Some(value),
                     "--late" => args.late = value,
                     "--store" => args.store = value,
+                    "--snapshot-batches" => args.snapshot_batches = Some(value.parse()?),
+                    "--takeover-at" => args.takeover_at = Some(value.parse()?),
                     "--timing" => {
                         args.timing = match value.as_str() {
                             "beam" => PlotTiming::Beam,
@@ -192,12 +211,14 @@ fn arrivals(
         .enumerate()
         .map(|(i, p)| {
             let t = p.t.unwrap_or(0.0);
+            let held = if i % 33 == 16 { 5.0 } else { 0.0 };
+            let by_radar = 2.0 * (radar_index(p) % radars) as f64 / (radars.max(2) - 1) as f64;
             let delay = match late {
                 "none" => 0.0,
-                "held" if i % 33 == 16 => 5.0,
-                "held" => 0.0,
-                "radars" => 2.0 * (radar_index(p) % radars) as f64 / (radars.max(2) - 1) as f64,
-                other => anyhow::bail!("--late: none, held or radars, not {other}"),
+                "held" => held,
+                "radars" => by_radar,
+                "both" => held + by_radar,
+                other => anyhow::bail!("--late: none, held, radars or both, not {other}"),
             };
             Ok((t + delay, p.clone()))
         })
@@ -311,6 +332,86 @@ async fn main() -> anyhow::Result<()> {
         return Ok(());
     }
 
+    let batches = batches(&arrivals(&plots, &args.late, args.radars)?, args.batch_s);
+    let run = stream(&args, &spec, &batches, n, None).await?;
+    println!(
+        "end to end (gRPC stream, {} batches of {} s, late {}, store {}, snapshot every {} \
+         batches): {:.0} plots/s, {:.1} batches/s; per-batch latency p50 {:.2} ms, p99 {:.2} \
+         ms; written to the store per batch {:.3} MB ({} snapshots, {} log entries); final \
+         counters {:?}; stored session {} bytes",
+        batches.len(),
+        args.batch_s,
+        args.late,
+        args.store,
+        args.snapshot_batches
+            .unwrap_or(service::session::persist::DEFAULT_SNAPSHOT_BATCHES),
+        n as f64 / run.seconds,
+        batches.len() as f64 / run.seconds,
+        run.pct(0.5),
+        run.pct(0.99),
+        run.written_bytes / batches.len() as f64 / 1e6,
+        run.snapshots,
+        run.entries,
+        run.counters,
+        run.stored_bytes
+    );
+    if let Some(at) = args.takeover_at {
+        ensure!(
+            args.store != "memory",
+            "--takeover-at needs a Redis --store"
+        );
+        let cut = ((batches.len() as f64 * at) as usize).clamp(1, batches.len() - 1);
+        let again = stream(&args, &spec, &batches, n, Some(cut)).await?;
+        println!(
+            "takeover after batch {cut} of {}: the other replica accepted its first batch {:.0} \
+             ms after the serving one stopped; final tracks {} the uninterrupted run's ({} \
+             tracks)",
+            batches.len(),
+            again.takeover_ms.unwrap_or(f64::NAN),
+            if again.tracks == run.tracks {
+                "equal"
+            } else {
+                "DIFFER from"
+            },
+            run.tracks.len()
+        );
+    }
+    Ok(())
+}
+
+/// What one streamed run measured.
+struct Run {
+    seconds: f64,
+    latencies: Vec<Duration>,
+    written_bytes: f64,
+    snapshots: f64,
+    entries: f64,
+    counters: Option<pb::TrackerCounters>,
+    stored_bytes: u64,
+    /// The session's tracks at the end (GetSession).
+    tracks: Vec<pb::FusedTrack>,
+    /// With a takeover: from the stop of the serving replica to the first
+    /// batch the other accepted.
+    takeover_ms: Option<f64>,
+}
+
+impl Run {
+    fn pct(&self, p: f64) -> f64 {
+        let l = &self.latencies;
+        let i = ((l.len() as f64 * p).ceil() as usize).clamp(1, l.len()) - 1;
+        l[i].as_secs_f64() * 1e3
+    }
+}
+
+/// A replica of the service in this process, on `args.store`.
+struct Replica {
+    state: radar_fusion::state::AppState,
+    client: SessionServiceClient<Channel>,
+    stop: oneshot::Sender<()>,
+    server: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+async fn replica(args: &Args, n: usize) -> anyhow::Result<Replica> {
     let mut settings = Settings::for_tests();
     settings.session_store = args.store.clone();
     settings.max_batch_reports = n.max(1);
@@ -318,12 +419,18 @@ async fn main() -> anyhow::Result<()> {
     settings.max_body_bytes = 1 << 30;
     settings.session_memory_bytes = 16 << 30;
     settings.request_timeout_s = 600.0;
+    if let Some(b) = args.snapshot_batches {
+        settings.session_snapshot_batches = b;
+    }
     let app = Application::build(settings).await?;
     let (grpc_addr, state) = (app.grpc_addr(), app.state());
     let (stop, stopped) = oneshot::channel::<()>();
-    let server = tokio::spawn(app.run_until(async move {
-        let _ = stopped.await;
-    }));
+    let server = tokio::spawn(async move {
+        app.run_until(async move {
+            let _ = stopped.await;
+        })
+        .await
+    });
     for _ in 0..400 {
         if state.is_ready() {
             break;
@@ -333,28 +440,93 @@ async fn main() -> anyhow::Result<()> {
     let channel = Channel::from_shared(format!("http://{grpc_addr}"))?
         .connect()
         .await?;
-    let mut client = SessionServiceClient::new(channel)
+    let client = SessionServiceClient::new(channel)
         .max_decoding_message_size(usize::MAX)
         .max_encoding_message_size(usize::MAX);
-    let batches = batches(&arrivals(&plots, &args.late, args.radars)?, args.batch_s);
-    let (tx, rx) = tokio::sync::mpsc::channel(4);
-    tx.send(pb::StreamRequest {
-        kind: Some(pb::stream_request::Kind::Open(pb::CreateSessionRequest {
-            kind: "plot_fusion".into(),
-            plot_fusion: Some(pb_config(&spec)),
-            ..Default::default()
-        })),
+    Ok(Replica {
+        state,
+        client,
+        stop,
+        server,
     })
-    .await?;
-    let mut updates = client
+}
+
+/// A counter of the replica's metrics, summed over its labels.
+fn counter(state: &radar_fusion::state::AppState, name: &str, label: Option<&str>) -> f64 {
+    state
+        .metrics()
+        .render()
+        .lines()
+        .filter(|l| l.starts_with(name) && label.is_none_or(|x| l.contains(x)))
+        .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .sum()
+}
+
+type Updates = tonic::Streaming<pb::BatchUpdate>;
+
+/// Opens (or attaches to) a session stream on `r`.
+async fn open(
+    r: &mut Replica,
+    first: pb::stream_request::Kind,
+) -> anyhow::Result<(
+    tokio::sync::mpsc::Sender<pb::StreamRequest>,
+    Updates,
+    String,
+)> {
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tx.send(pb::StreamRequest { kind: Some(first) }).await?;
+    let mut updates = r
+        .client
         .stream(tokio_stream::wrappers::ReceiverStream::new(rx))
         .await?
         .into_inner();
     let opened = updates.message().await?.context("the stream opens")?;
+    Ok((tx, updates, opened.session_id))
+}
+
+/// Streams every batch to a session on one replica or, with
+/// `takeover = Some(k)`, the first k on one replica and the rest on
+/// another after the first is stopped.
+async fn stream(
+    args: &Args,
+    spec: &svc::SpecInput,
+    batches: &[pb::PushBatchRequest],
+    n: usize,
+    takeover: Option<usize>,
+) -> anyhow::Result<Run> {
+    let mut r = replica(args, n).await?;
+    let mut other = match takeover {
+        Some(_) => Some(replica(args, n).await?),
+        None => None,
+    };
+    let open_kind = pb::stream_request::Kind::Open(pb::CreateSessionRequest {
+        kind: "plot_fusion".into(),
+        plot_fusion: Some(pb_config(spec)),
+        ..Default::default()
+    });
+    let (mut tx, mut updates, id) = open(&mut r, open_kind).await?;
     let mut latencies = Vec::with_capacity(batches.len());
     let started = Instant::now();
     let mut last = None;
-    for batch in batches.iter() {
+    let mut takeover_ms = None;
+    let mut stopped_at = None;
+    let (mut written, mut snapshots, mut entries) = (0.0, 0.0, 0.0);
+    for (k, batch) in batches.iter().enumerate() {
+        if takeover == Some(k) {
+            // Stop the serving replica (its counters first), then attach
+            // to the session on the other.
+            written += counter(&r.state, "fusion_session_written_bytes_total", None);
+            snapshots += counter(&r.state, "fusion_session_writes_total", Some("snapshot"));
+            entries += counter(&r.state, "fusion_session_writes_total", Some("\"log\""));
+            drop(tx);
+            drop(updates);
+            let next = other.take().context("a second replica")?;
+            let old = std::mem::replace(&mut r, next);
+            let _ = old.stop.send(());
+            old.server.await??;
+            stopped_at = Some(Instant::now());
+            (tx, updates, _) = open(&mut r, pb::stream_request::Kind::Attach(id.clone())).await?;
+        }
         let t = Instant::now();
         tx.send(pb::StreamRequest {
             kind: Some(pb::stream_request::Kind::Batch(batch.clone())),
@@ -363,37 +535,43 @@ async fn main() -> anyhow::Result<()> {
         let update = updates.message().await?.context("an update per batch")?;
         ensure!(update.error.is_none(), "batch failed: {:?}", update.error);
         latencies.push(t.elapsed());
+        if let Some(s) = stopped_at.take() {
+            takeover_ms = Some(s.elapsed().as_secs_f64() * 1e3);
+        }
         last = update.plot_fusion;
     }
-    let total = started.elapsed().as_secs_f64();
+    let seconds = started.elapsed().as_secs_f64();
     drop(tx);
     latencies.sort();
-    let pct = |p: f64| {
-        let i = ((latencies.len() as f64 * p).ceil() as usize).clamp(1, latencies.len()) - 1;
-        latencies[i].as_secs_f64() * 1e3
-    };
-    let state_now = client
+    written += counter(&r.state, "fusion_session_written_bytes_total", None);
+    snapshots += counter(&r.state, "fusion_session_writes_total", Some("snapshot"));
+    entries += counter(&r.state, "fusion_session_writes_total", Some("\"log\""));
+    let state_now = r
+        .client
         .get_session(pb::GetSessionRequest {
-            session_id: opened.session_id,
+            session_id: id.clone(),
         })
         .await?
         .into_inner();
-    println!(
-        "end to end (gRPC stream, {} batches of {} s, late {}, store {}): {:.0} plots/s, {:.1} \
-         batches/s; per-batch latency p50 {:.2} ms, p99 {:.2} ms; final counters {:?}; stored \
-         session {} bytes",
-        batches.len(),
-        args.batch_s,
-        args.late,
-        args.store,
-        n as f64 / total,
-        batches.len() as f64 / total,
-        pct(0.5),
-        pct(0.99),
-        last.and_then(|l| l.counters),
-        state_now.encoded_bytes
-    );
-    let _ = stop.send(());
-    server.await??;
-    Ok(())
+    let tracks = state_now
+        .plot_fusion
+        .as_ref()
+        .map(|p| p.tracks.clone())
+        .unwrap_or_default();
+    r.client
+        .delete_session(pb::DeleteSessionRequest { session_id: id })
+        .await?;
+    let _ = r.stop.send(());
+    r.server.await??;
+    Ok(Run {
+        seconds,
+        latencies,
+        written_bytes: written,
+        snapshots,
+        entries,
+        counters: last.and_then(|l| l.counters),
+        stored_bytes: state_now.encoded_bytes,
+        tracks,
+        takeover_ms,
+    })
 }

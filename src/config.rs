@@ -229,6 +229,14 @@ pub struct Settings {
     /// compare-and-set on the version still guards every write.
     #[arg(long, env = "FUSION_SESSION_CACHE_BYTES", default_value_t = 256 * 1024 * 1024)]
     pub session_cache_bytes: usize,
+    /// A session is stored as a snapshot and the batches applied since (a
+    /// log), so a batch writes what it carries, not the whole session:
+    /// after this many batches (or once the log is as large as the
+    /// snapshot) a push stores a new snapshot and drops the log. A replica
+    /// that takes a session over replays at most this many batches. 1: a
+    /// snapshot every batch.
+    #[arg(long, env = "FUSION_SESSION_SNAPSHOT_BATCHES", default_value_t = service::session::persist::DEFAULT_SNAPSHOT_BATCHES)]
+    pub session_snapshot_batches: usize,
     /// Most watchers (`GET /v1/sessions/{id}/events`, gRPC `Watch`) of one
     /// session on one replica; 429 beyond.
     #[arg(long, env = "FUSION_WATCHERS_PER_SESSION", default_value_t = 32)]
@@ -488,6 +496,11 @@ impl Settings {
             return Err("--max-in-flight must be at least 1".into());
         }
         positive("store-timeout-s", self.store_timeout_s)?;
+        if self.session_snapshot_batches == 0 {
+            return Err(
+                "--session-snapshot-batches must be at least 1 (1: a snapshot every batch)".into(),
+            );
+        }
         if self.max_tracks_per_session == 0 {
             return Err("--max-tracks-per-session must be at least 1".into());
         }
@@ -781,10 +794,22 @@ mod tests {
             with(&["--asterix-max-clock-offset-s", "0"]).asterix_max_clock_offset_s,
             0.0
         );
-        let err = with(&["--asterix-max-clock-offset-s", "-1"])
+        let err = with(&["--asterix-max-clock-offset-s=-1"])
             .validate()
             .unwrap_err();
         assert!(err.starts_with("--asterix-max-clock-offset-s"), "{err}");
+    }
+
+    #[test]
+    fn a_snapshot_every_32_batches_unless_set() {
+        assert_eq!(with(&[]).session_snapshot_batches, 32);
+        with(&["--session-snapshot-batches", "1"])
+            .validate()
+            .unwrap();
+        let err = with(&["--session-snapshot-batches", "0"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--session-snapshot-batches"), "{err}");
     }
 
     #[test]

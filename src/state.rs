@@ -11,7 +11,7 @@ use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use crate::{auth::ApiKeys, config::Settings};
-use service::session::persist::Sessions;
+use service::session::persist::{Sessions, SnapshotPolicy};
 use store::SessionStore;
 
 #[derive(Clone)]
@@ -39,7 +39,10 @@ impl AppState {
             store,
             settings.session_cache_bytes,
             settings.watch_limits(),
-        );
+        )
+        .with_snapshots(SnapshotPolicy {
+            max_entries: settings.session_snapshot_batches,
+        });
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         Self {
             inner: Arc::new(Inner {

@@ -24,7 +24,9 @@ use store::{SessionStore, StoreSettings};
 #[path = "common/redis.rs"]
 mod redis_harness;
 
-use redis_harness::{redis_is_up, redis_url, unique};
+use redis_harness::{
+    RedisServer, free_port, redis_is_up, redis_server_available, redis_url, unique,
+};
 
 /// The toy kind: a running total of integer increments, each at most
 /// `limit`. Its apply adds the increments one by one and fails at the first
@@ -93,6 +95,20 @@ impl SessionKind for Counter {
         w.u8(1);
         w.u64(self.limit as u64);
         w.u64(self.total as u64);
+        // Ballast: a snapshot larger than a few batches, as a real
+        // session's is, so that pushes go to the log.
+        w.bytes(&[0; BALLAST]);
+    }
+
+    fn encode_batch(batch: &Vec<i64>, w: &mut Writer) -> bool {
+        w.usize(batch.len());
+        batch.iter().for_each(|&i| w.u64(i as u64));
+        true
+    }
+
+    fn decode_batch(r: &mut Reader<'_>) -> Result<Vec<i64>, FormatError> {
+        let n = r.len(8)?;
+        (0..n).map(|_| r.u64().map(|i| i as i64)).collect()
     }
 
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError> {
@@ -100,10 +116,10 @@ impl SessionKind for Counter {
         if r.u8().map_err(bad)? != 1 {
             return Err(ServiceError::Internal("counter format".into()));
         }
-        Ok(Self {
-            limit: r.u64().map_err(bad)? as i64,
-            total: r.u64().map_err(bad)? as i64,
-        })
+        let limit = r.u64().map_err(bad)? as i64;
+        let total = r.u64().map_err(bad)? as i64;
+        r.bytes().map_err(bad)?;
+        Ok(Self { limit, total })
     }
 
     fn encode_update(u: &i64, w: &mut Writer) {
@@ -116,6 +132,9 @@ impl SessionKind for Counter {
             .map_err(|_| wire::corrupt("counter update"))
     }
 }
+
+/// Bytes of ballast in a counter's snapshot.
+const BALLAST: usize = 512;
 
 const LIMITS: Limits = Limits {
     max_tracks: 100,
@@ -384,6 +403,16 @@ async fn suite(a: &Sessions, b: &Sessions) {
     let end = b.get_as::<Counter>(TENANT, &id).await.unwrap();
     assert_eq!((end.body.1, end.version), (23, 14));
 
+    // Stored as a snapshot and the batches since: 13 writes of at most
+    // 25 bytes each after the creation's snapshot of 535 bytes (1 + 16 +
+    // 8 + 512 ballast and 2 + 8 + 9 + 1 + 8 + 8 envelope bytes) fit the
+    // default of 32 entries and the snapshot's size, so the log holds them
+    // all, and either replica's view replays it.
+    let stored = a.store().get(TENANT, &id).await.unwrap().unwrap();
+    assert_eq!(stored.version, 14);
+    assert_eq!(stored.log.len(), 13, "{stored:?}");
+    assert!(stored.log_bytes() < stored.data.len());
+
     // Deleted on one replica: gone on the other, cache or not.
     a.delete(TENANT, &id).await.unwrap();
     assert!(matches!(
@@ -391,6 +420,125 @@ async fn suite(a: &Sessions, b: &Sessions) {
             .await,
         Err(ServiceError::NotFound(_))
     ));
+}
+
+/// A version lost in a failover and made again by another write (two
+/// replicas, each with its cache, so Redis only): a replica
+/// whose cache holds the lost one must not build on it (the write token,
+/// not the version alone, identifies what it read).
+async fn a_lost_version_made_again(a: &Sessions, b: &Sessions) {
+    let id = format!("{:032x}", rand_id());
+    a.create_with_id::<Counter>(TENANT, &id, counter(10))
+        .await
+        .unwrap();
+    let u = a
+        .push::<Counter>(TENANT, &id, batch(Some(1), &[1]), LIMITS)
+        .await
+        .unwrap();
+    assert_eq!((u.body, u.version), (1, 2));
+    // The store loses version 2 (as a Redis primary that had not passed it
+    // to the replica promoted in its place) and another writer makes a
+    // version 2 of its own.
+    b.delete(TENANT, &id).await.unwrap();
+    b.create_with_id::<Counter>(TENANT, &id, counter(10))
+        .await
+        .unwrap();
+    let u = b
+        .push::<Counter>(TENANT, &id, batch(Some(1), &[5]), LIMITS)
+        .await
+        .unwrap();
+    assert_eq!((u.body, u.version), (5, 2));
+    // `a` caches its own version 2 (total 1): it must find the store's.
+    let u = a
+        .push::<Counter>(TENANT, &id, batch(Some(2), &[2]), LIMITS)
+        .await
+        .unwrap();
+    assert_eq!((u.body, u.version, u.duplicate), (7, 3, false));
+    let view = b.get_as::<Counter>(TENANT, &id).await.unwrap();
+    assert_eq!((view.body.1, view.version), (7, 3));
+}
+
+fn rand_id() -> u128 {
+    use std::time::{SystemTime, UNIX_EPOCH};
+    let t = SystemTime::now().duration_since(UNIX_EPOCH).unwrap();
+    t.as_nanos() ^ (u128::from(std::process::id()) << 64)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lost_version_made_again_is_not_built_on_with_two_redis_replicas() {
+    let Some((a, b)) = redis_pair().await else {
+        return;
+    };
+    a_lost_version_made_again(&a, &b).await;
+}
+
+/// A redis-server replicating `primary`, killed on drop.
+struct Replica(std::process::Child);
+
+impl Drop for Replica {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// With `WAIT 1`, the acknowledgement of a duplicate (a retry whose first
+/// answer was lost) also waits for the replica: the first write may not
+/// have reached it, and a failover then would lose a batch the client was
+/// told is applied.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_duplicate_is_acknowledged_only_once_the_replicas_hold_it() {
+    if !redis_server_available() {
+        return;
+    }
+    let primary = RedisServer::start(free_port(), None);
+    primary.wait_accepting();
+    let port = free_port();
+    let replica = Replica(
+        std::process::Command::new("redis-server")
+            .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
+            .args(["--save", "", "--appendonly", "no"])
+            .args(["--replicaof", "127.0.0.1", &primary.port.to_string()])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("redis-server starts"),
+    );
+    let mut s = settings(&primary.url(), &unique("radar-fusion-wait:"));
+    s.wait_replicas = 1;
+    let sessions = Sessions::new(SessionStore::connect(&s).await.unwrap(), 1 << 20);
+    let c = sessions
+        .create::<Counter>(TENANT, counter(10))
+        .await
+        .unwrap();
+    // Until the replica has synchronised, writes are not confirmed: the
+    // same batch is retried (a duplicate once a write landed).
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let first = loop {
+        match sessions
+            .push::<Counter>(TENANT, &c.id, batch(Some(1), &[2]), LIMITS)
+            .await
+        {
+            Ok(u) => break u,
+            Err(ServiceError::Unavailable(_)) if std::time::Instant::now() < deadline => {
+                tokio::time::sleep(Duration::from_millis(100)).await
+            }
+            Err(e) => panic!("{e:?}"),
+        }
+    };
+    assert_eq!(first.body, 2);
+    // The replica is gone: a retry of batch 1 is a duplicate, but cannot be
+    // confirmed as replicated, so it is not acknowledged.
+    drop(replica);
+    let again = sessions
+        .push::<Counter>(TENANT, &c.id, batch(Some(1), &[2]), LIMITS)
+        .await
+        .unwrap_err();
+    assert!(
+        matches!(&again, ServiceError::Unavailable(m) if m.contains("may or may not")),
+        "{again:?}"
+    );
+    let view = sessions.get_as::<Counter>(TENANT, &c.id).await.unwrap();
+    assert_eq!((view.body.1, view.last_sequence), (2, Some(1)));
 }
 
 /// Runs the futures concurrently on the current task (a minimal

@@ -10,7 +10,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use store::{CasOutcome, SessionStore, StoreError, StoreSettings, Stored};
+use store::{CasOutcome, Expected, SessionStore, StoreError, StoreSettings, Stored, Write};
 
 #[path = "common/redis.rs"]
 mod redis_harness;
@@ -89,6 +89,7 @@ both_backends!(
     limit_redis,
     |s: &mut StoreSettings| s.max_sessions_per_tenant = 3
 );
+both_backends!(log_and_snapshots, log_memory, log_redis);
 both_backends!(
     concurrent_cas_loses_no_update,
     concurrent_memory,
@@ -130,14 +131,18 @@ async fn crud(store: &Arc<SessionStore>) {
         store.get("default", "a").await.unwrap(),
         Some(Stored {
             version: 1,
-            data: vec![0, 255, 7]
+            token: 0,
+            data: vec![0, 255, 7],
+            log: vec![],
         })
     );
     assert_eq!(
         store.get("default", "c").await.unwrap(),
         Some(Stored {
             version: 1,
-            data: vec![]
+            token: 0,
+            data: vec![],
+            log: vec![],
         })
     );
 
@@ -202,13 +207,9 @@ async fn cas(store: &Arc<SessionStore>) {
             .await,
         Ok(CasOutcome::Conflict { current: 2 })
     );
-    assert_eq!(
-        store.get(t, "x").await.unwrap(),
-        Some(Stored {
-            version: 2,
-            data: b"v2".to_vec()
-        })
-    );
+    let x = store.get(t, "x").await.unwrap().unwrap();
+    assert_eq!((x.version, x.data, x.log), (2, b"v2".to_vec(), vec![]));
+    assert_ne!(x.token, 0, "a write's token is never 0");
     for expected in 2..10 {
         let data = format!("v{}", expected + 1).into_bytes();
         assert_eq!(
@@ -232,6 +233,111 @@ async fn cas(store: &Arc<SessionStore>) {
     store.delete(t, "x").await.unwrap();
     assert_eq!(
         store.compare_and_set(t, "x", 11, vec![], LONG).await,
+        Ok(CasOutcome::Missing)
+    );
+}
+
+/// Appends go to the log after the snapshot, a snapshot drops the log,
+/// and a write expects the token of the write it read as well as the
+/// version.
+async fn log_and_snapshots(store: &Arc<SessionStore>) {
+    let t = "log";
+    store
+        .create(t, "s", "plot_fusion", b"snap1".to_vec(), LONG)
+        .await
+        .unwrap();
+    let at = |version: u64, token: u64| Expected {
+        version,
+        token: Some(token),
+    };
+    let append = |e: &[u8]| Write::Append(e.to_vec());
+    // A created session's token is 0.
+    assert_eq!(
+        store.write(t, "s", at(1, 0), 11, append(b"e2"), LONG).await,
+        Ok(CasOutcome::Stored { version: 2 })
+    );
+    assert_eq!(
+        store
+            .write(t, "s", at(2, 11), 12, append(b"e3"), LONG)
+            .await,
+        Ok(CasOutcome::Stored { version: 3 })
+    );
+    assert_eq!(
+        store.get(t, "s").await.unwrap(),
+        Some(Stored {
+            version: 3,
+            token: 12,
+            data: b"snap1".to_vec(),
+            log: vec![b"e2".to_vec(), b"e3".to_vec()],
+        })
+    );
+    // Listed with its log's bytes.
+    assert_eq!(store.list(t).await.unwrap()[0].bytes, 5 + 2 + 2);
+    // The right version under another token (a version lost and made
+    // again): a conflict, nothing written.
+    assert_eq!(
+        store
+            .write(t, "s", at(3, 99), 13, append(b"e4"), LONG)
+            .await,
+        Ok(CasOutcome::Conflict { current: 3 })
+    );
+    assert_eq!(
+        store
+            .write(t, "s", at(2, 11), 13, append(b"e4"), LONG)
+            .await,
+        Ok(CasOutcome::Conflict { current: 3 })
+    );
+    // Any token: the version alone.
+    let any = Expected {
+        version: 3,
+        token: None,
+    };
+    assert_eq!(
+        store.write(t, "s", any, 14, append(b"e4"), LONG).await,
+        Ok(CasOutcome::Stored { version: 4 })
+    );
+    // A snapshot drops the log.
+    assert_eq!(
+        store
+            .write(
+                t,
+                "s",
+                at(4, 14),
+                15,
+                Write::Snapshot(b"snap5".to_vec()),
+                LONG
+            )
+            .await,
+        Ok(CasOutcome::Stored { version: 5 })
+    );
+    assert_eq!(
+        store.get(t, "s").await.unwrap(),
+        Some(Stored {
+            version: 5,
+            token: 15,
+            data: b"snap5".to_vec(),
+            log: vec![],
+        })
+    );
+    assert_eq!(
+        store
+            .write(t, "s", at(5, 15), 16, append(b"e6"), LONG)
+            .await,
+        Ok(CasOutcome::Stored { version: 6 })
+    );
+    let s = store.get(t, "s").await.unwrap().unwrap();
+    assert_eq!(
+        (s.version, s.data, s.log),
+        (6, b"snap5".to_vec(), vec![b"e6".to_vec()])
+    );
+    assert_eq!(store.list(t).await.unwrap()[0].bytes, 5 + 2);
+    // Waiting for replicas needs none here (wait_replicas 0).
+    store.replicated(t, "s", LONG).await.unwrap();
+    assert!(store.delete(t, "s").await.unwrap());
+    assert_eq!(
+        store
+            .write(t, "s", at(6, 16), 17, append(b"e7"), LONG)
+            .await,
         Ok(CasOutcome::Missing)
     );
 }
@@ -267,7 +373,9 @@ async fn tenants_are_isolated(store: &Arc<SessionStore>) {
         store.get("acme", "s1").await.unwrap(),
         Some(Stored {
             version: 1,
-            data: b"acme's".to_vec()
+            token: 0,
+            data: b"acme's".to_vec(),
+            log: vec![],
         })
     );
     assert!(store.delete("default", "s1").await.unwrap());

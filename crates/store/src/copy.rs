@@ -1,7 +1,7 @@
 //! Moving sessions between Redis key layouts: from a single Redis or
 //! Sentinel (keys `{prefix}:{tenant}:…`) to a Redis Cluster (the tenant as a
-//! hash tag, `{prefix}:{{tenant}}:…`), or back. Version, kind, data and
-//! the remaining idle TTL are kept; a session the target holds already is
+//! hash tag, `{prefix}:{{tenant}}:…`), or back. Every field (version,
+//! token, kind, snapshot and log) and the remaining idle TTL are kept; a session the target holds already is
 //! left as it is, so a copy can be run again. The source is read with
 //! `SCAN` on one server, so it cannot be a Cluster; sessions written to the
 //! source while it runs may be missed (run it again once the replicas point
@@ -23,11 +23,11 @@ pub struct Copied {
     pub skipped: usize,
 }
 
-/// KEYS: session, index. ARGV: escaped id, version, ttl ms, data, kind.
-/// Returns 1 written, 0 present already.
+/// KEYS: session, index. ARGV: escaped id, (unused), ttl ms, then the
+/// hash's fields and values. Returns 1 written, 0 present already.
 const RESTORE: &str = r"
 if redis.call('EXISTS', KEYS[1]) == 1 then return 0 end
-redis.call('HSET', KEYS[1], 'v', ARGV[2], 'd', ARGV[4], 'k', ARGV[5])
+redis.call('HSET', KEYS[1], unpack(ARGV, 4))
 redis.call('PEXPIRE', KEYS[1], ARGV[3])
 redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
 ";
@@ -56,11 +56,10 @@ pub async fn copy(from: &RedisStore, to: &RedisStore) -> Result<Copied, StoreErr
             })?;
             let written = to
                 .run_script(&restore, &tenant, &id, |call| {
-                    call.arg(&raw.escaped_id)
-                        .arg(&raw.version)
-                        .arg(raw.ttl_ms)
-                        .arg(raw.data.as_slice())
-                        .arg(raw.kind.as_str());
+                    call.arg(&raw.escaped_id).arg("").arg(raw.ttl_ms);
+                    for (field, value) in &raw.fields {
+                        call.arg(field).arg(value.as_slice());
+                    }
                 })
                 .await?;
             if written == 1 {

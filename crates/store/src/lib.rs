@@ -64,11 +64,68 @@ pub struct Topology {
     pub redirections: u64,
 }
 
-/// A session's state as stored.
+/// A session's state as stored: a snapshot and the log of the writes
+/// appended since it ([`Write::Append`]), so that a write costs what it
+/// carries rather than the whole state.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Stored {
     pub version: u64,
+    /// The token of the write that made `version` (0: created and not
+    /// written since, or written by a release before tokens).
+    pub token: u64,
+    /// The snapshot: the state at version `version - log.len()`.
     pub data: Vec<u8>,
+    /// The entries appended since the snapshot, oldest first: entry `i`
+    /// made version `version - log.len() + i + 1`.
+    pub log: Vec<Vec<u8>>,
+}
+
+impl Stored {
+    /// Bytes held: the snapshot and the log.
+    pub fn bytes(&self) -> usize {
+        self.data.len() + self.log_bytes()
+    }
+
+    /// Bytes of the log.
+    pub fn log_bytes(&self) -> usize {
+        self.log.iter().map(Vec::len).sum()
+    }
+}
+
+/// What a [`SessionStore::write`] stores.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Write {
+    /// A new snapshot: the whole state at the new version; the log is
+    /// dropped (compaction).
+    Snapshot(Vec<u8>),
+    /// An entry appended to the log (the change from the expected version
+    /// to the new one).
+    Append(Vec<u8>),
+}
+
+impl Write {
+    /// Bytes written.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Snapshot(d) | Self::Append(d) => d.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// What a [`SessionStore::write`] expects to find: the version and,
+/// unless `None`, the token of the write that made it. The token tells
+/// apart two different writes that made the same version number (a
+/// replica that read version 5 before a failover lost it, and another
+/// that wrote a new version 5 after): a log entry appended to the wrong
+/// one would corrupt the session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Expected {
+    pub version: u64,
+    pub token: Option<u64>,
 }
 
 /// One live session of a tenant, as listed.
@@ -169,9 +226,10 @@ impl SessionStore {
         }
     }
 
-    /// Atomically replaces the data when the session's version is
-    /// `expected_version`; the new version is `expected_version + 1` and the
-    /// time-to-live restarts at `ttl` (idle expiry).
+    /// Atomically replaces the data (a snapshot, the log dropped) when the
+    /// session's version is `expected_version`, whatever its token; the new
+    /// version is `expected_version + 1` and the time-to-live restarts at
+    /// `ttl` (idle expiry). [`SessionStore::write`] with a snapshot.
     pub async fn compare_and_set(
         &self,
         tenant: &str,
@@ -180,12 +238,49 @@ impl SessionStore {
         data: Vec<u8>,
         ttl: Duration,
     ) -> Result<CasOutcome, StoreError> {
+        let expected = Expected {
+            version: expected_version,
+            token: None,
+        };
+        let token = rand::random::<u64>() | 1;
+        self.write(tenant, id, expected, token, Write::Snapshot(data), ttl)
+            .await
+    }
+
+    /// Atomically writes when the session is at `expected` (its version,
+    /// and its token unless that is `None`): a snapshot or a log entry, the
+    /// new version `expected.version + 1` made by `token` (never 0). The
+    /// time-to-live restarts at `ttl`. Another version or token is a
+    /// `Conflict`.
+    pub async fn write(
+        &self,
+        tenant: &str,
+        id: &str,
+        expected: Expected,
+        token: u64,
+        write: Write,
+        ttl: Duration,
+    ) -> Result<CasOutcome, StoreError> {
         match self {
-            Self::Memory(s) => s.compare_and_set(tenant, id, expected_version, data, ttl),
-            Self::Redis(s) => {
-                s.compare_and_set(tenant, id, expected_version, data, ttl)
-                    .await
-            }
+            Self::Memory(s) => s.write(tenant, id, expected, token, write, ttl),
+            Self::Redis(s) => s.write(tenant, id, expected, token, write, ttl).await,
+        }
+    }
+
+    /// Waits until the writes the session has had are replicated as every
+    /// write is (`wait_replicas`): for an answer given without a write (a
+    /// duplicate batch), whose original write may not have reached the
+    /// replicas yet. Restarts the idle TTL at `ttl`. `Unavailable` when the
+    /// replicas do not acknowledge in time.
+    pub async fn replicated(
+        &self,
+        tenant: &str,
+        id: &str,
+        ttl: Duration,
+    ) -> Result<(), StoreError> {
+        match self {
+            Self::Memory(_) => Ok(()),
+            Self::Redis(s) => s.touch_replicated(tenant, id, ttl).await,
         }
     }
 

@@ -9,7 +9,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored};
+use super::{CasOutcome, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write};
 
 /// How often, at most, a write sweeps the expired sessions of every tenant.
 const SWEEP_EVERY: Duration = Duration::from_secs(1);
@@ -22,16 +22,25 @@ pub struct MemoryStore {
 
 struct Inner {
     tenants: HashMap<String, BTreeMap<String, Entry>>,
-    /// Sum of `data.len()` over every entry held (expired ones included until swept).
+    /// Bytes (snapshot and log) of every entry held (expired ones included until swept).
     bytes: usize,
     last_sweep: Instant,
 }
 
 struct Entry {
     version: u64,
+    token: u64,
     kind: String,
+    /// The snapshot, at `version - log.len()`.
     data: Vec<u8>,
+    log: Vec<Vec<u8>>,
     expires_at: Instant,
+}
+
+impl Entry {
+    fn bytes(&self) -> usize {
+        self.data.len() + self.log.iter().map(Vec::len).sum::<usize>()
+    }
 }
 
 impl MemoryStore {
@@ -78,8 +87,10 @@ impl MemoryStore {
             id.to_string(),
             Entry {
                 version: 1,
+                token: 0,
                 kind: kind.to_string(),
                 data,
+                log: Vec::new(),
                 expires_at: expiry(now, ttl),
             },
         );
@@ -100,16 +111,19 @@ impl MemoryStore {
         let entry = inner.tenants.get(tenant)?.get(id)?;
         Some(Stored {
             version: entry.version,
+            token: entry.token,
             data: entry.data.clone(),
+            log: entry.log.clone(),
         })
     }
 
-    pub fn compare_and_set(
+    pub fn write(
         &self,
         tenant: &str,
         id: &str,
-        expected_version: u64,
-        data: Vec<u8>,
+        expected: Expected,
+        token: u64,
+        write: Write,
         ttl: Duration,
     ) -> Result<CasOutcome, StoreError> {
         let now = Instant::now();
@@ -119,14 +133,18 @@ impl MemoryStore {
         let Some(entry) = inner.tenants.get(tenant).and_then(|m| m.get(id)) else {
             return Ok(CasOutcome::Missing);
         };
-        if entry.version != expected_version {
+        if entry.version != expected.version || expected.token.is_some_and(|t| t != entry.token) {
             return Ok(CasOutcome::Conflict {
                 current: entry.version,
             });
         }
-        let old_len = entry.data.len();
-        self.reserve(&mut inner, now, old_len, data.len())?;
-        let version = expected_version + 1;
+        let old_len = entry.bytes();
+        let new_len = match &write {
+            Write::Snapshot(d) => d.len(),
+            Write::Append(e) => old_len + e.len(),
+        };
+        self.reserve(&mut inner, now, old_len, new_len)?;
+        let version = expected.version + 1;
         let inner = &mut *inner;
         let entry = inner
             .tenants
@@ -134,7 +152,14 @@ impl MemoryStore {
             .and_then(|m| m.get_mut(id))
             .expect("the entry was live a moment ago under the same lock");
         entry.version = version;
-        entry.data = data;
+        entry.token = token;
+        match write {
+            Write::Snapshot(d) => {
+                entry.data = d;
+                entry.log.clear();
+            }
+            Write::Append(e) => entry.log.push(e),
+        }
         entry.expires_at = expiry(now, ttl);
         Ok(CasOutcome::Stored { version })
     }
@@ -152,7 +177,7 @@ impl MemoryStore {
         }
         match removed {
             Some(entry) => {
-                inner.bytes -= entry.data.len();
+                inner.bytes -= entry.bytes();
                 true
             }
             None => false,
@@ -170,7 +195,7 @@ impl MemoryStore {
                     id: id.clone(),
                     version: e.version,
                     kind: e.kind.clone(),
-                    bytes: e.data.len(),
+                    bytes: e.bytes(),
                     ttl_remaining: e.expires_at.saturating_duration_since(now),
                 })
                 .collect()
@@ -242,7 +267,7 @@ fn prune(sessions: &mut BTreeMap<String, Entry>, now: Instant) -> usize {
     sessions.retain(|_, e| {
         let live = e.expires_at > now;
         if !live {
-            freed += e.data.len();
+            freed += e.bytes();
         }
         live
     });

@@ -28,7 +28,9 @@ use redis::{
     cluster_async::ClusterConnection,
 };
 
-use super::{CasOutcome, SessionMeta, StoreError, StoreSettings, Stored, access, ttl_ms};
+use super::{
+    CasOutcome, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write, access, ttl_ms,
+};
 
 pub struct RedisStore {
     /// For the event listener's own pub/sub connection (a single server).
@@ -47,7 +49,7 @@ pub struct RedisStore {
     max_sessions_per_tenant: usize,
     timeout: Duration,
     create: Script,
-    cas: Script,
+    write: Script,
     delete: Script,
     list: Script,
 }
@@ -76,13 +78,30 @@ redis.call('PEXPIRE', KEYS[1], ARGV[3])
 redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
 ";
 
-/// KEYS: session, index. ARGV: escaped id, data, ttl ms, expected version,
-/// new version. Returns {0, ''} missing, {1, new} stored, {2, current} conflict.
-const CAS: &str = r"
-local v = redis.call('HGET', KEYS[1], 'v')
+/// KEYS: session, index. ARGV: escaped id, payload, ttl ms, expected
+/// version, new version, expected token ('' for any), new token, mode
+/// ('s' a snapshot, 'a' a log entry). Returns {0, ''} missing, {1, new}
+/// stored, {2, current} conflict.
+///
+/// A session is a hash: `v` its version, `t` the token of the write that
+/// made it (absent: 0), `k` its kind, `d` a snapshot, `b` the snapshot's
+/// version (absent: `v`, no log) and `e<n>` the log entry that made
+/// version n, for n in b+1..=v. A snapshot deletes the entries.
+const WRITE: &str = r"
+local f = redis.call('HMGET', KEYS[1], 'v', 't', 'b')
+local v = f[1]
 if not v then return {0, ''} end
 if v ~= ARGV[4] then return {2, v} end
-redis.call('HSET', KEYS[1], 'v', ARGV[5], 'd', ARGV[2])
+if ARGV[6] ~= '' and (f[2] or '0') ~= ARGV[6] then return {2, v} end
+if ARGV[8] == 's' then
+  for n = tonumber(f[3] or v) + 1, tonumber(v) do
+    redis.call('HDEL', KEYS[1], 'e' .. n)
+  end
+  redis.call('HSET', KEYS[1], 'v', ARGV[5], 'd', ARGV[2], 't', ARGV[7], 'b', ARGV[5])
+else
+  if not f[3] then redis.call('HSET', KEYS[1], 'b', v) end
+  redis.call('HSET', KEYS[1], 'v', ARGV[5], 'e' .. ARGV[5], ARGV[2], 't', ARGV[7])
+end
 redis.call('PEXPIRE', KEYS[1], ARGV[3])
 redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
 ";
@@ -95,16 +114,21 @@ return n
 ";
 
 /// KEYS: index. ARGV: the session key prefix `{prefix}:{tenant}:s:`.
-/// Returns {escaped id, version, data bytes, pttl, kind} per live session.
+/// Returns {escaped id, version, bytes (snapshot and log), pttl, kind} per
+/// live session.
 const LIST: &str = r"
 redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now)
 local out = {}
 for _, m in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do
   local k = ARGV[1] .. m
-  local v = redis.call('HGET', k, 'v')
+  local f = redis.call('HMGET', k, 'v', 'k', 'b')
+  local v = f[1]
   if v then
-    local kind = redis.call('HGET', k, 'k') or 'correlation'
-    table.insert(out, {m, v, redis.call('HSTRLEN', k, 'd'), redis.call('PTTL', k), kind})
+    local bytes = redis.call('HSTRLEN', k, 'd')
+    for n = tonumber(f[3] or v) + 1, tonumber(v) do
+      bytes = bytes + redis.call('HSTRLEN', k, 'e' .. n)
+    end
+    table.insert(out, {m, v, bytes, redis.call('PTTL', k), f[2] or 'correlation'})
   else
     redis.call('ZREM', KEYS[1], m)
   end
@@ -181,7 +205,9 @@ impl RedisStore {
             max_sessions_per_tenant: settings.max_sessions_per_tenant,
             timeout: settings.timeout,
             create: Script::new(&format!("{NOW_MS}{CREATE}{EXTEND_INDEX}return 1")),
-            cas: Script::new(&format!("{NOW_MS}{CAS}{EXTEND_INDEX}return {{1, ARGV[5]}}")),
+            write: Script::new(&format!(
+                "{NOW_MS}{WRITE}{EXTEND_INDEX}return {{1, ARGV[5]}}"
+            )),
             delete: Script::new(DELETE),
             list: Script::new(&format!("{NOW_MS}{LIST}")),
         }
@@ -256,44 +282,42 @@ impl RedisStore {
     pub async fn get(&self, tenant: &str, id: &str) -> Result<Option<Stored>, StoreError> {
         let mut conn = self.connection().await?;
         let key = self.session_key(tenant, id);
-        let (version, data): (Option<String>, Option<Vec<u8>>) = self
-            .bounded(
-                redis::cmd("HMGET")
-                    .arg(&key)
-                    .arg("v")
-                    .arg("d")
-                    .query_async(&mut conn),
-            )
+        let fields: Vec<(String, Vec<u8>)> = self
+            .bounded(redis::cmd("HGETALL").arg(&key).query_async(&mut conn))
             .await?;
-        match (version, data) {
-            (None, None) => Ok(None),
-            (Some(v), Some(data)) => Ok(Some(Stored {
-                version: parse_version(&v)?,
-                data,
-            })),
-            _ => Err(corrupt(format!("{key} lacks field v or d"))),
+        if fields.is_empty() {
+            return Ok(None);
         }
+        stored_of(&key, fields).map(Some)
     }
 
-    pub async fn compare_and_set(
+    pub async fn write(
         &self,
         tenant: &str,
         id: &str,
-        expected_version: u64,
-        data: Vec<u8>,
+        expected: Expected,
+        token: u64,
+        write: Write,
         ttl: Duration,
     ) -> Result<CasOutcome, StoreError> {
-        let Some(new_version) = expected_version.checked_add(1) else {
+        let Some(new_version) = expected.version.checked_add(1) else {
             return Err(corrupt("version overflow".into()));
         };
         let mut conn = self.connection().await?;
-        let mut call = self.cas.key(self.session_key(tenant, id));
+        let mut call = self.write.key(self.session_key(tenant, id));
+        let (mode, payload) = match write {
+            Write::Snapshot(d) => ("s", d),
+            Write::Append(e) => ("a", e),
+        };
         call.key(self.index_key(tenant))
             .arg(escape(id))
-            .arg(data)
+            .arg(payload)
             .arg(ttl_ms(ttl))
-            .arg(expected_version.to_string())
-            .arg(new_version.to_string());
+            .arg(expected.version.to_string())
+            .arg(new_version.to_string())
+            .arg(expected.token.map_or_else(String::new, |t| t.to_string()))
+            .arg(token.to_string())
+            .arg(mode);
         let (status, version): (i64, String) = self.bounded(call.invoke_async(&mut conn)).await?;
         match status {
             0 => Ok(CasOutcome::Missing),
@@ -306,8 +330,32 @@ impl RedisStore {
             2 => Ok(CasOutcome::Conflict {
                 current: parse_version(&version)?,
             }),
-            other => Err(corrupt(format!("compare-and-set script answered {other}"))),
+            other => Err(corrupt(format!("write script answered {other}"))),
         }
+    }
+
+    /// Restarts the session's TTL (a write, replicated after every earlier
+    /// one) and, with `wait_replicas`, waits until the replicas hold it,
+    /// so every earlier write of the session with it.
+    pub async fn touch_replicated(
+        &self,
+        tenant: &str,
+        id: &str,
+        ttl: Duration,
+    ) -> Result<(), StoreError> {
+        if self.wait_replicas == 0 {
+            return Ok(());
+        }
+        let mut conn = self.connection().await?;
+        let _: i64 = self
+            .bounded(
+                redis::cmd("PEXPIRE")
+                    .arg(self.session_key(tenant, id))
+                    .arg(ttl_ms(ttl))
+                    .query_async(&mut conn),
+            )
+            .await?;
+        self.replicated(&mut conn).await
     }
 
     pub async fn delete(&self, tenant: &str, id: &str) -> Result<bool, StoreError> {
@@ -502,26 +550,20 @@ impl RedisStore {
         let mut out = Vec::new();
         for id in ids {
             let key = format!("{}:s:{id}", self.tenant_part(tenant));
-            type Fields = (Option<String>, Option<Vec<u8>>, Option<String>);
-            let ((v, d, k), pttl): (Fields, i64) = self
+            let (fields, pttl): (Vec<(String, Vec<u8>)>, i64) = self
                 .bounded(
                     redis::pipe()
-                        .cmd("HMGET")
+                        .cmd("HGETALL")
                         .arg(&key)
-                        .arg("v")
-                        .arg("d")
-                        .arg("k")
                         .cmd("PTTL")
                         .arg(&key)
                         .query_async(&mut conn),
                 )
                 .await?;
-            if let (Some(version), Some(data), true) = (v, d, pttl > 0) {
+            if fields.iter().any(|(f, _)| f == "v") && pttl > 0 {
                 out.push(RawSession {
                     escaped_id: id,
-                    version,
-                    data,
-                    kind: k.unwrap_or_else(|| "correlation".into()),
+                    fields,
                     ttl_ms: pttl,
                 });
             }
@@ -596,9 +638,8 @@ impl RedisStore {
 /// A session's fields as stored (for a copy between key layouts).
 pub(crate) struct RawSession {
     pub(crate) escaped_id: String,
-    pub(crate) version: String,
-    pub(crate) data: Vec<u8>,
-    pub(crate) kind: String,
+    /// Every field of the session's hash (version, kind, snapshot, log).
+    pub(crate) fields: Vec<(String, Vec<u8>)>,
     pub(crate) ttl_ms: i64,
 }
 
@@ -670,6 +711,50 @@ pub fn unescape(s: &str) -> Option<String> {
     }
     out.push_str(rest);
     Some(out)
+}
+
+/// A session hash's fields as a [`Stored`] (see [`WRITE`] for the layout).
+fn stored_of(key: &str, fields: Vec<(String, Vec<u8>)>) -> Result<Stored, StoreError> {
+    let text = |v: &[u8]| String::from_utf8_lossy(v).into_owned();
+    let (mut version, mut token, mut base, mut data) = (None, 0, None, None);
+    let mut entries = std::collections::BTreeMap::new();
+    for (name, value) in fields {
+        match name.as_str() {
+            "v" => version = Some(parse_version(&text(&value))?),
+            "t" => {
+                token = text(&value)
+                    .parse()
+                    .map_err(|_| corrupt(format!("{key} has a bad token")))?
+            }
+            "b" => base = Some(parse_version(&text(&value))?),
+            "d" => data = Some(value),
+            "k" => {}
+            e => {
+                let n = e
+                    .strip_prefix('e')
+                    .and_then(|n| n.parse::<u64>().ok())
+                    .ok_or_else(|| corrupt(format!("{key} has an unknown field {e:?}")))?;
+                entries.insert(n, value);
+            }
+        }
+    }
+    let (Some(version), Some(data)) = (version, data) else {
+        return Err(corrupt(format!("{key} lacks field v or d")));
+    };
+    let base = base.unwrap_or(version);
+    let expected: Vec<u64> = (base.saturating_add(1)..=version).collect();
+    if base > version || entries.keys().copied().ne(expected.iter().copied()) {
+        return Err(corrupt(format!(
+            "{key}: the log after the snapshot at version {base} does not hold exactly the \
+             entries up to version {version}"
+        )));
+    }
+    Ok(Stored {
+        version,
+        token,
+        data,
+        log: entries.into_values().collect(),
+    })
 }
 
 fn parse_version(v: &str) -> Result<u64, StoreError> {

@@ -309,6 +309,25 @@ async fn sessions_of_a_single_redis_are_copied_to_the_cluster_layout() {
                     .await
                     .unwrap();
             }
+            // A log after the snapshot, copied with it.
+            let version = j as u64 + 1;
+            let expected = store::Expected {
+                version,
+                token: None,
+            };
+            single
+                .write(
+                    t,
+                    &id,
+                    expected,
+                    7,
+                    store::Write::Append(vec![9, j as u8]),
+                    ttl,
+                )
+                .await
+                .unwrap();
+            let stored = single.get(t, &id).await.unwrap().unwrap();
+            assert_eq!((stored.log.len(), stored.token), (1, 7));
         }
     }
     let target = store(&cluster).await;

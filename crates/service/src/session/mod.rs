@@ -37,6 +37,8 @@ use formats::wire::{FormatError, Reader, Writer};
 /// format. Correlation sessions of earlier releases start with their own
 /// format, 1 or 2, and are read as correlation sessions.
 pub const ENVELOPE_FORMAT: u8 = 4;
+/// Format of a log entry ([`Envelope::encode_entry`]).
+pub const ENTRY_FORMAT: u8 = 1;
 /// Unsequenced batches remembered by their fingerprint, so that a retry of
 /// one whose outcome the client could not know is not applied twice.
 pub const RECENT_BATCHES: usize = 64;
@@ -134,6 +136,19 @@ pub trait SessionKind: Sized + Send + 'static {
     fn decode(r: &mut Reader<'_>) -> Result<Self, ServiceError>;
     fn encode_update(u: &Self::Update, w: &mut Writer);
     fn decode_update(r: &mut Reader<'_>) -> Result<Self::Update, FormatError>;
+    /// Writes a batch as the payload of a log entry (see [`persist`]): every
+    /// field, exactly, so that applying the decoded batch to the same state
+    /// gives the same state. `false`: this batch (or this kind) has no such
+    /// form, and the session stores a snapshot instead.
+    fn encode_batch(batch: &Self::Batch, w: &mut Writer) -> bool {
+        let _ = (batch, w);
+        false
+    }
+    /// Reads what [`SessionKind::encode_batch`] wrote.
+    fn decode_batch(r: &mut Reader<'_>) -> Result<Self::Batch, FormatError> {
+        let _ = r;
+        Err(formats::wire::corrupt("this session kind keeps no log"))
+    }
     /// A session this kind wrote before the envelope existed (its first byte
     /// is below [`ENVELOPE_FORMAT`]); only the first kind has one.
     fn decode_legacy(buf: &[u8]) -> Result<Envelope<Self>, ServiceError> {
@@ -554,6 +569,53 @@ impl<K: SessionKind> Envelope<K> {
         // The store keeps this buffer as it is: no spare capacity.
         w.buf.shrink_to_fit();
         w.buf
+    }
+
+    /// A batch this session applied as a log entry: `[ENTRY_FORMAT]
+    /// [sequence] [limits] [the kind's batch]`; `None` when the kind has no
+    /// encoding for it (the session then stores a snapshot).
+    pub fn encode_entry(batch: &Batch<K::Batch>, limits: &Limits) -> Option<Vec<u8>> {
+        let mut w = Writer::default();
+        w.u8(ENTRY_FORMAT);
+        w.opt(batch.sequence, Writer::u64);
+        w.usize(limits.max_tracks);
+        w.usize(limits.max_batch_reports);
+        K::encode_batch(&batch.body, &mut w).then(|| {
+            w.buf.shrink_to_fit();
+            w.buf
+        })
+    }
+
+    /// Applies a log entry (a batch the serving replica applied to this
+    /// state, with its limits): the same state as that replica's after it.
+    /// An entry that does not read or apply is a corrupt stored session.
+    pub fn replay(&mut self, id: &str, entry: &[u8]) -> Result<(), ServiceError> {
+        let bad = |e: String| ServiceError::Internal(format!("stored session: log entry: {e}"));
+        let mut r = Reader::new(entry);
+        let format = r.u8().map_err(|e| bad(e.to_string()))?;
+        if format != ENTRY_FORMAT {
+            return Err(bad(format!(
+                "format {format}; this release reads {ENTRY_FORMAT}"
+            )));
+        }
+        let read = |r: &mut Reader<'_>| -> Result<_, FormatError> {
+            let sequence = r.opt(Reader::u64)?;
+            let limits = Limits {
+                max_tracks: r.usize()?,
+                max_batch_reports: r.usize()?,
+            };
+            let body = K::decode_batch(r)?;
+            Ok((Batch { sequence, body }, limits))
+        };
+        let (batch, limits) = read(&mut r).map_err(|e| bad(e.to_string()))?;
+        if !r.is_empty() {
+            return Err(bad("trailing bytes".into()));
+        }
+        self.apply(id, &batch, &limits)
+            .map_err(|e| bad(format!("did not apply again: {e}")))?;
+        // What a batch marks for watchers went out when it was applied.
+        self.state.take_marks();
+        Ok(())
     }
 
     /// Reads stored bytes of kind `K`; bytes of another kind are

@@ -645,6 +645,86 @@ impl SessionKind for PlotFusionSession {
         })
     }
 
+    fn encode_batch(batch: &BatchInput, w: &mut Writer) -> bool {
+        // Destructured whole: a field added to the input is a compile error
+        // here until the log carries it.
+        let BatchInput {
+            plots,
+            asterix,
+            flush,
+        } = batch;
+        w.usize(plots.len());
+        for p in plots {
+            let PlotInput {
+                radar_id,
+                t,
+                range_m,
+                azimuth_deg,
+                elevation_deg,
+                radial_velocity_mps,
+            } = p;
+            w.opt(radar_id.as_deref(), Writer::str);
+            for x in [t, range_m, azimuth_deg, elevation_deg, radial_velocity_mps] {
+                w.opt(*x, Writer::f64);
+            }
+        }
+        w.opt(asterix.as_ref(), |w, a| {
+            let AsterixInput {
+                data,
+                date,
+                day_start_t,
+                reference_t,
+                reception,
+            } = a;
+            w.bytes(data);
+            w.opt(date.as_deref(), Writer::str);
+            w.opt(*day_start_t, Writer::f64);
+            w.opt(*reference_t, Writer::f64);
+            w.opt(*reception, |w, r| {
+                w.f64(r.t);
+                w.f64(r.max_offset_s);
+            });
+        });
+        w.bool(*flush);
+        true
+    }
+
+    fn decode_batch(r: &mut Reader<'_>) -> Result<BatchInput, FormatError> {
+        // A plot takes at least six bytes (six option tags).
+        let n = r.len(6)?;
+        let plots = (0..n)
+            .map(|_| {
+                Ok(PlotInput {
+                    radar_id: r.opt(Reader::str)?,
+                    t: r.opt(Reader::f64)?,
+                    range_m: r.opt(Reader::f64)?,
+                    azimuth_deg: r.opt(Reader::f64)?,
+                    elevation_deg: r.opt(Reader::f64)?,
+                    radial_velocity_mps: r.opt(Reader::f64)?,
+                })
+            })
+            .collect::<Result<_, FormatError>>()?;
+        let asterix = r.opt(|r| {
+            Ok(AsterixInput {
+                data: r.bytes()?,
+                date: r.opt(Reader::str)?,
+                day_start_t: r.opt(Reader::f64)?,
+                reference_t: r.opt(Reader::f64)?,
+                reception: r.opt(|r| {
+                    Ok(asterix::Reception {
+                        t: r.f64()?,
+                        max_offset_s: r.f64()?,
+                    })
+                })?,
+            })
+        })?;
+        Ok(BatchInput {
+            plots,
+            asterix,
+            flush: r.bool()?,
+        })
+    }
+
     fn encode(&self, w: &mut Writer) {
         w.u8(FORMAT_VERSION);
         self.network.encode(w);
@@ -992,12 +1072,12 @@ fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, FormatError> {
 
 // The batch endpoint's types, for the equality test below.
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::plot_fusion::{self as pf, RadarInput, SiteInput, TrackInput};
     use formats::state::tracker::encode_tracker;
 
-    fn spec() -> SpecInput {
+    pub(crate) fn spec() -> SpecInput {
         SpecInput {
             origin: None,
             radars: [("a", -200.0, 10.0), ("b", 200.0, 8.0)]
@@ -1022,7 +1102,7 @@ mod tests {
 
     /// Two crossing targets seen every 10 s and 8 s, with a deterministic
     /// wobble standing in for noise.
-    fn plots() -> Vec<PlotInput> {
+    pub(crate) fn plots() -> Vec<PlotInput> {
         let mut out = Vec::new();
         for (id, x, period) in [("a", -200.0, 10.0), ("b", 200.0, 8.0)] {
             let mut t: f64 = 0.0;

@@ -219,6 +219,85 @@ impl SessionKind for CorrelationSession {
         self.view_state()
     }
 
+    fn encode_batch(batch: &BatchInput, w: &mut Writer) -> bool {
+        let BatchInput { reports, flush } = batch;
+        w.usize(reports.len());
+        for report in reports {
+            let ReportInput {
+                node,
+                track,
+                sample:
+                    SampleInput {
+                        t,
+                        state,
+                        covariance,
+                        gain,
+                    },
+            } = report;
+            w.opt(node.as_deref(), Writer::str);
+            w.opt(track.as_deref(), Writer::str);
+            w.opt(*t, Writer::f64);
+            w.f64s(state);
+            // A ragged matrix has no exact form here: the batch is stored
+            // as a snapshot (such a batch is refused anyway).
+            for m in std::iter::once(Some(covariance)).chain([gain.as_ref()]) {
+                let Some(m) = m else {
+                    w.bool(false);
+                    continue;
+                };
+                let Some((rows, cols)) = m.shape() else {
+                    return false;
+                };
+                w.bool(true);
+                w.usize(rows);
+                w.usize(cols);
+                w.f64s(m.values());
+            }
+        }
+        w.bool(*flush);
+        true
+    }
+
+    fn decode_batch(r: &mut Reader<'_>) -> Result<BatchInput, FormatError> {
+        let matrix = |r: &mut Reader<'_>| -> Result<Option<Rows>, FormatError> {
+            if !r.bool()? {
+                return Ok(None);
+            }
+            let (rows, cols) = (r.usize()?, r.usize()?);
+            let values = r.f64s()?;
+            Rows::from_flat(values, rows, cols)
+                .map(Some)
+                .ok_or_else(|| formats::wire::corrupt("a matrix's values do not fill its shape"))
+        };
+        // A report takes at least five bytes.
+        let n = r.len(5)?;
+        let reports = (0..n)
+            .map(|_| {
+                let node = r.opt(Reader::str)?;
+                let track = r.opt(Reader::str)?;
+                let t = r.opt(Reader::f64)?;
+                let state = r.f64s()?;
+                let covariance = matrix(r)?
+                    .ok_or_else(|| formats::wire::corrupt("a report without its covariance"))?;
+                let gain = matrix(r)?;
+                Ok(ReportInput {
+                    node,
+                    track,
+                    sample: SampleInput {
+                        t,
+                        state,
+                        covariance,
+                        gain,
+                    },
+                })
+            })
+            .collect::<Result<_, FormatError>>()?;
+        Ok(BatchInput {
+            reports,
+            flush: r.bool()?,
+        })
+    }
+
     fn encode(&self, w: &mut Writer) {
         codec::encode(self, w);
     }
