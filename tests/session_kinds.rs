@@ -506,13 +506,19 @@ async fn a_duplicate_is_acknowledged_only_once_the_replicas_hold_it() {
     let mut s = settings(&primary.url(), &unique("radar-fusion-wait:"));
     s.wait_replicas = 1;
     let sessions = Sessions::new(SessionStore::connect(&s).await.unwrap(), 1 << 20);
-    let c = sessions
-        .create::<Counter>(TENANT, counter(10))
-        .await
-        .unwrap();
     // Until the replica has synchronised, writes are not confirmed: the
-    // same batch is retried (a duplicate once a write landed).
+    // creation is tried again, then the same batch (a duplicate once a
+    // write landed).
     let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let c = loop {
+        match sessions.create::<Counter>(TENANT, counter(10)).await {
+            Ok(c) => break c,
+            Err(ServiceError::Unavailable(_)) if std::time::Instant::now() < deadline => {
+                tokio::time::sleep(Duration::from_millis(100)).await
+            }
+            Err(e) => panic!("{e:?}"),
+        }
+    };
     let first = loop {
         match sessions
             .push::<Counter>(TENANT, &c.id, batch(Some(1), &[2]), LIMITS)
