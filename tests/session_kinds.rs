@@ -499,6 +499,9 @@ async fn a_duplicate_is_acknowledged_only_once_the_replicas_hold_it() {
             .args(["--port", &port.to_string(), "--bind", "127.0.0.1"])
             .args(["--save", "", "--appendonly", "no"])
             .args(["--replicaof", "127.0.0.1", &primary.port.to_string()])
+            // A replica writes the primary's dump on its first sync.
+            .arg("--dir")
+            .arg(std::env::temp_dir())
             .stdout(std::process::Stdio::null())
             .spawn()
             .expect("redis-server starts"),
