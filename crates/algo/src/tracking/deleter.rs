@@ -42,16 +42,17 @@ pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
 /// target from its plots, so neither would ever miss; without this they
 /// live on side by side. `probability` 0 disables the rule. Returns the
 /// duplicates' indices.
-pub(super) fn duplicates(
-    tracks: &[Track],
+pub(super) fn duplicates<T: std::borrow::Borrow<Track>>(
+    tracks: &[T],
     hits: &[(usize, usize)],
     probability: f64,
 ) -> Result<Vec<usize>, AlgoError> {
+    let tracks = |i: usize| -> &Track { tracks[i].borrow() };
     let mut out = Vec::new();
     if probability <= 0.0 || hits.len() < 2 {
         return Ok(out);
     }
-    let n = tracks[0].x.len();
+    let n = tracks(0).x.len();
     let threshold = chi2_threshold(n, 1.0 - probability)?;
     // Tracks by their best plot; only tracks sharing one are compared.
     let mut by_plot: Vec<(usize, usize)> = hits.iter().map(|&(i, j)| (j, i)).collect();
@@ -62,10 +63,10 @@ pub(super) fn duplicates(
         }
         let mut members: Vec<usize> = group.iter().map(|&(_, i)| i).collect();
         members.sort_by(|&a, &b| {
-            tracks[b]
+            tracks(b)
                 .hits
-                .cmp(&tracks[a].hits)
-                .then(tracks[a].id.cmp(&tracks[b].id))
+                .cmp(&tracks(a).hits)
+                .then(tracks(a).id.cmp(&tracks(b).id))
         });
         let mut duplicate = vec![false; members.len()];
         for k in 0..members.len() {
@@ -74,8 +75,8 @@ pub(super) fn duplicates(
                 if duplicate[m] {
                     continue;
                 }
-                let d = &tracks[i].x - &tracks[keeper].x;
-                let s = &tracks[i].p + &tracks[keeper].p;
+                let d = &tracks(i).x - &tracks(keeper).x;
+                let s = &tracks(i).p + &tracks(keeper).p;
                 if mahalanobis_sq(&d, &s)? <= threshold {
                     duplicate[k] = true;
                     out.push(i);

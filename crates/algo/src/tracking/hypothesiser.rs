@@ -30,8 +30,8 @@
 //! index finds a superset of the pre-test's pairs and never changes an
 //! answer (property test `the_index_finds_every_pair_the_pre_test_passes`).
 
-use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
+use std::{borrow::Borrow, collections::HashMap};
 
 use nalgebra::{DMatrix, DVector};
 
@@ -386,9 +386,9 @@ impl TrackIndex {
 
     /// Rebuilds the index at time `t` when it is out of date or `t` is
     /// outside its horizon.
-    pub(crate) fn refresh(
+    pub(crate) fn refresh<T: Borrow<Track>>(
         &mut self,
-        tracks: &[Track],
+        tracks: &[T],
         t: f64,
         cfg: &TrackerConfig,
     ) -> Result<(), AlgoError> {
@@ -409,7 +409,7 @@ impl TrackIndex {
         self.place.clear();
         self.wide_slots.clear();
         for (i, tr) in tracks.iter().enumerate() {
-            self.put(i, tr);
+            self.put(i, tr.borrow());
         }
         Ok(())
     }
@@ -513,9 +513,9 @@ pub(crate) fn swap_remove_all<T>(
 impl TrackIndex {
     /// The slots of `tracks` that pass the pre-test with any of `plots`
     /// (at time `t`), ascending.
-    pub(crate) fn candidates(
+    pub(crate) fn candidates<T: Borrow<Track>>(
         &mut self,
-        tracks: &[Track],
+        tracks: &[T],
         plots: &[CartesianPlot],
         t: f64,
         cfg: &TrackerConfig,
@@ -532,7 +532,7 @@ impl TrackIndex {
             }
             self.scratch.extend_from_slice(&self.wide_slots);
             for &s in &self.scratch {
-                let tr = &tracks[s as usize];
+                let tr: &Track = tracks[s as usize].borrow();
                 if reach.may_gate(
                     &Kinematics::of(tr.t, &tr.x, &tr.p),
                     t,

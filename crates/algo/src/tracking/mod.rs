@@ -71,6 +71,8 @@ pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
 
+use std::sync::Arc;
+
 use crate::error::AlgoError;
 use crate::jpda::TrackEstimate;
 use associator::{
@@ -132,8 +134,10 @@ pub struct StepReport {
 pub struct Tracker {
     config: TrackerConfig,
     parallel: bool,
-    /// Confirmed tracks.
-    tracks: Vec<Track>,
+    /// Confirmed tracks, shared copy-on-write: a clone of the tracker (the
+    /// lag window keeps several a batch) copies a track only when one of
+    /// the two changes it.
+    tracks: Vec<Arc<Track>>,
     initiator: Initiator,
     /// Accepted plots of frames not yet complete, sorted by time (stable).
     pending: Vec<Plot>,
@@ -237,11 +241,12 @@ impl Tracker {
     /// time, that of its last update or miss; [`Track::t`]).
     pub fn tracks(&self) -> Vec<TrackOutput> {
         let mut confirmed = self.confirmed_tracks();
+        let mut cv = CvPredictor::of(&self.config);
         let mut tentative: Vec<TrackOutput> = self
             .initiator
             .tentatives
             .iter()
-            .map(|t| self.output(t, TrackStatus::Tentative))
+            .map(|t| self.output(t, TrackStatus::Tentative, &mut cv))
             .collect();
         tentative.sort_by_key(|t| t.id);
         confirmed.extend(tentative);
@@ -316,29 +321,35 @@ impl Tracker {
     pub fn track_ids(&self) -> impl Iterator<Item = u64> + '_ {
         self.tracks
             .iter()
-            .chain(&self.initiator.tentatives)
             .map(|t| t.id)
+            .chain(self.initiator.tentatives.iter().map(|t| t.id))
     }
 
     /// The confirmed tracks by ascending id, predicted to the time of the
     /// last frame.
     pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
+        // One predictor for all (its IMM steps are asked again and again).
+        let mut predictor = TrackPredictor::of(&self.config);
         let mut confirmed: Vec<TrackOutput> = self
             .tracks
             .iter()
-            .map(|t| self.output(t, TrackStatus::Confirmed))
+            .map(|t| self.output(t, TrackStatus::Confirmed, &mut predictor))
             .collect();
         confirmed.sort_by_key(|t| t.id);
         confirmed
     }
 
-    fn output(&self, track: &Track, status: TrackStatus) -> TrackOutput {
-        match (self.last_time, status) {
-            (Some(t), TrackStatus::Tentative) => {
-                track.output_at(t, &mut CvPredictor::of(&self.config), status)
-            }
-            (Some(t), _) => track.output_at(t, &mut TrackPredictor::of(&self.config), status),
-            (None, _) => track.output(status),
+    /// A track predicted to the last frame's time by `predictor` (a
+    /// confirmed track's, or a tentative track's constant velocity).
+    fn output(
+        &self,
+        track: &Track,
+        status: TrackStatus,
+        predictor: &mut dyn Predictor,
+    ) -> TrackOutput {
+        match self.last_time {
+            Some(t) => track.output_at(t, predictor, status),
+            None => track.output(status),
         }
     }
 
@@ -508,6 +519,7 @@ impl Tracker {
             if !judge(track) {
                 continue;
             }
+            let track = Arc::make_mut(track);
             self.predictor.predict(track, t)?;
             track.record(None);
             self.index.moved(k, track);
@@ -703,7 +715,7 @@ impl Tracker {
             if lazy && assoc.measurements.is_empty() {
                 continue;
             }
-            let track = &mut self.tracks[k];
+            let track = Arc::make_mut(&mut self.tracks[k]);
             track.commit_swap(t, &mut scratch.predictions[c]);
             let (x, p) = if track.modes.is_empty() {
                 let single = &mut scratch.single;
@@ -814,7 +826,7 @@ impl Tracker {
             report.confirmed.push(track.id);
             self.counters.confirmed += 1;
             self.index.moved(self.tracks.len(), &track);
-            self.tracks.push(track);
+            self.tracks.push(Arc::new(track));
         }
         Ok(())
     }
@@ -854,7 +866,7 @@ impl Scratch {
     fn predict(
         &mut self,
         predictor: &mut dyn Predictor,
-        tracks: &[Track],
+        tracks: &[Arc<Track>],
         slots: &[usize],
         t: f64,
     ) -> Result<(), AlgoError> {

@@ -70,7 +70,7 @@ impl Registrar {
     pub(crate) fn learn_serial(
         &mut self,
         cfg: &TrackerConfig,
-        tracks: &[Track],
+        tracks: &[std::sync::Arc<Track>],
         radar: usize,
         hits: &[Hit],
     ) -> Result<(), AlgoError> {
@@ -92,7 +92,7 @@ impl Registrar {
     pub(crate) fn learn_parallel(
         &mut self,
         cfg: &TrackerConfig,
-        tracks: &[Track],
+        tracks: &[std::sync::Arc<Track>],
         frame: &[Plot],
         members: &[Vec<usize>],
         hits: &[Hit],
@@ -123,7 +123,7 @@ impl Registrar {
     fn learn(
         &mut self,
         cfg: &TrackerConfig,
-        tracks: &[Track],
+        tracks: &[std::sync::Arc<Track>],
         pairs: &[(usize, Plot, Plot, bool)],
     ) -> Result<(), AlgoError> {
         if pairs.is_empty() {

@@ -20,7 +20,7 @@ pub struct TrackerState<'a> {
     /// The validated configuration.
     pub config: &'a TrackerConfig,
     /// Confirmed tracks.
-    pub tracks: &'a [Track],
+    pub tracks: &'a [std::sync::Arc<Track>],
     /// The initiator's roots: plots that may start a track.
     pub roots: &'a [CartesianPlot],
     /// The initiator's tentative tracks.
@@ -82,7 +82,7 @@ impl TrackerState<'_> {
     pub fn to_parts(&self) -> TrackerParts {
         TrackerParts {
             config: self.config.clone(),
-            tracks: self.tracks.to_vec(),
+            tracks: self.tracks.iter().map(|t| Track::clone(t)).collect(),
             roots: self.roots.to_vec(),
             tentatives: self.tentatives.to_vec(),
             pending: self.pending.to_vec(),
@@ -255,7 +255,7 @@ impl Tracker {
         if parts.last_time.is_some_and(|t| !t.is_finite()) {
             return Err(bad("last time is not finite"));
         }
-        tr.tracks = parts.tracks;
+        tr.tracks = parts.tracks.into_iter().map(std::sync::Arc::new).collect();
         tr.initiator = Initiator::from_parts(parts.roots, parts.tentatives);
         tr.pending = parts.pending;
         tr.next_id = parts.next_id;

@@ -230,6 +230,9 @@ pub struct SiteView {
 pub struct PlotFusionSession {
     /// Where the last applied batch's plots are, for watchers (not stored).
     marks: Vec<PlotMark>,
+    /// The picture's tracks as the last batch left them (not stored: a
+    /// decoded session asks the tracker), so a batch computes them once.
+    last_tracks: Option<Vec<TrackOutput>>,
     network: Network,
     window: LagWindow,
     cat062: Option<Cat062Options>,
@@ -405,6 +408,7 @@ impl SessionKind for PlotFusionSession {
             .map_err(|e| network::config_error(&e))?;
         Ok(Self {
             marks: Vec::new(),
+            last_tracks: None,
             network,
             window,
             cat062,
@@ -446,7 +450,10 @@ impl SessionKind for PlotFusionSession {
             warnings.extend(from.warnings);
             summary = Some(from.summary);
         }
-        let before: Vec<TrackOutput> = self.tracker().tracks();
+        let before: Vec<TrackOutput> = self
+            .last_tracks
+            .take()
+            .unwrap_or_else(|| self.tracker().tracks());
         let biases_before = self.network.bias_views(self.tracker());
         let horizon = self.window.horizon();
         let push = self.window.push(&plots).map_err(computation_error)?;
@@ -538,6 +545,7 @@ impl SessionKind for PlotFusionSession {
                 .collect();
             cat062::encode(o, &self.network, &items, warnings)
         });
+        self.last_tracks = Some(live);
         Ok(BatchUpdate {
             frames: push.frames as u32,
             pending_plots: self.window.pending() as u32,
@@ -765,6 +773,7 @@ impl SessionKind for PlotFusionSession {
         };
         Ok(Self {
             marks: Vec::new(),
+            last_tracks: None,
             network,
             window,
             cat062,
