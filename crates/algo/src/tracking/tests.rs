@@ -925,6 +925,44 @@ fn the_window_holds_the_lag_not_the_history() {
     assert_eq!(window.picture(), &batch_picture(&cfg, &plots));
 }
 
+/// A window bounded in plots holds at most that many: the oldest go into
+/// `base` early and the horizon moves up with them, so a plot older than
+/// it is late although within the lag. Plots in time order lose nothing
+/// (`base` takes them in order: the picture is one tracker's).
+#[test]
+fn a_window_holds_at_most_its_bound_of_plots() {
+    let cfg = fig5_config(false);
+    let mut plots = scene(
+        &cfg.radars,
+        &[0.0, 3.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(6),
+    );
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    // Distinct times, as the beam gives them.
+    for (i, p) in plots.iter_mut().enumerate() {
+        p.t += 0.01 * i as f64;
+    }
+    let mut window = LagWindow::new(Tracker::new(cfg.clone()).unwrap(), 60.0).unwrap();
+    window.set_max_plots(8);
+    let mut bounded = None;
+    for chunk in plots.chunks(3) {
+        let push = window.push(chunk).unwrap();
+        assert!(window.window_len() <= 8, "{}", window.window_len());
+        bounded = push.bounded_horizon.or(bounded);
+    }
+    let h = bounded.expect("the bound acted");
+    assert!(window.horizon() >= Some(h));
+    // 100 s of plots, a 60-s lag: without the bound the horizon would be
+    // near 40 s; with it, it is the time of the 8th newest plot.
+    assert!(h > 60.0, "{h}");
+    assert_eq!(window.picture(), &batch_picture(&cfg, &plots));
+    let older = *plots.iter().rev().find(|p| p.t < h).unwrap();
+    let push = window.push(&[older]).unwrap();
+    assert_eq!(push.late, vec![0]);
+}
+
 #[test]
 fn a_lag_must_be_finite_and_at_most_the_limit() {
     for bad in [-1.0, f64::NAN, f64::INFINITY, window::MAX_LAG_LIMIT_S + 1.0] {

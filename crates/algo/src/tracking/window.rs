@@ -43,6 +43,12 @@ use crate::error::AlgoError;
 pub const DEFAULT_MAX_LAG_S: f64 = 15.0;
 /// The largest lag accepted (s): memory and replay cost grow with it.
 pub const MAX_LAG_LIMIT_S: f64 = 120.0;
+/// Most plots a window holds by default (a plot takes 64 bytes in memory,
+/// about 50 stored): at 4,000 aircraft under four radars (4,000 plots/s)
+/// that is 250 s, more than the largest lag, so the bound acts only on
+/// denser feeds. Beyond it the oldest plots move into `base` before their
+/// lag is over: the horizon moves up, and the push says so.
+pub const DEFAULT_MAX_WINDOW_PLOTS: usize = 1_000_000;
 /// Snapshots of `head` kept in memory at most; beyond it the one whose
 /// neighbours are closest in time goes.
 const MAX_SNAPSHOTS: usize = 16;
@@ -73,6 +79,8 @@ pub struct LagWindow {
     late: u64,
     /// `(n, head after window[..n])`, ascending n; not stored.
     snapshots: Vec<(usize, Tracker)>,
+    /// Most plots held ([`DEFAULT_MAX_WINDOW_PLOTS`]; not stored).
+    max_plots: usize,
 }
 
 /// What one [`LagWindow::push`] did.
@@ -97,6 +105,10 @@ pub struct Push {
     /// included, so a deletion already reported may come again), as they
     /// were when deleted.
     pub deleted: Vec<TrackOutput>,
+    /// Set when the window held more plots than its bound: the horizon
+    /// was moved up to this time (plots older than it are now late,
+    /// though within the lag).
+    pub bounded_horizon: Option<f64>,
 }
 
 /// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
@@ -167,6 +179,7 @@ impl LagWindow {
             window: Vec::new(),
             late: 0,
             snapshots: Vec::new(),
+            max_plots: DEFAULT_MAX_WINDOW_PLOTS,
         })
     }
 
@@ -201,7 +214,19 @@ impl LagWindow {
             newest: parts.newest,
             late: parts.late,
             snapshots: Vec::new(),
+            max_plots: DEFAULT_MAX_WINDOW_PLOTS,
         })
+    }
+
+    /// Holds at most `max_plots` plots from the next push on (at least 1;
+    /// not stored: a decoded window has the default).
+    pub fn set_max_plots(&mut self, max_plots: usize) {
+        self.max_plots = max_plots.max(1);
+    }
+
+    /// Most plots the window holds.
+    pub fn max_plots(&self) -> usize {
+        self.max_plots
     }
 
     /// The stored parts (without the snapshots).
@@ -333,6 +358,7 @@ impl LagWindow {
         self.horizon = Some(self.horizon.map_or(horizon, |h| h.max(horizon)));
         self.snapshots.push((self.window.len(), self.head.clone()));
         self.commit()?;
+        out.bounded_horizon = self.bound()?;
         self.thin();
         let mut picture = self.head.clone();
         let report = picture.flush()?;
@@ -392,6 +418,25 @@ impl LagWindow {
                 .collect();
         }
         Ok(())
+    }
+
+    /// Holds the window to `max_plots`: the oldest plots beyond it go into
+    /// `base` and the horizon moves up to the oldest plot kept; that time.
+    fn bound(&mut self) -> Result<Option<f64>, AlgoError> {
+        if self.window.len() <= self.max_plots {
+            return Ok(None);
+        }
+        let h = self.window[self.window.len() - self.max_plots].t;
+        self.horizon = Some(self.horizon.map_or(h, |x| x.max(h)));
+        let n = self.window.partition_point(|p| p.t < h);
+        self.base.process(&self.window[..n])?;
+        self.window.drain(..n);
+        self.snapshots = std::mem::take(&mut self.snapshots)
+            .into_iter()
+            .filter(|(m, _)| *m >= n)
+            .map(|(m, t)| (m - n, t))
+            .collect();
+        Ok(Some(h))
     }
 
     /// Keeps at most [`MAX_SNAPSHOTS`]: drops the inner snapshot whose

@@ -509,6 +509,16 @@ impl SessionKind for PlotFusionSession {
                 algo::tracking::window::MAX_LAG_LIMIT_S,
             ));
         }
+        if let Some(h) = push.bounded_horizon {
+            warnings.push(format!(
+                "the lag window reached its bound of {} plots: plots older than t = {h} are \
+                 now late, though within tracker.max_lag_s = {} s (the feed brings more plots \
+                 than the lag can hold: a smaller tracker.max_lag_s, or the radars split over \
+                 more sessions)",
+                self.window.max_plots(),
+                self.window.max_lag(),
+            ));
+        }
         let registration = self.network.bias_views(self.tracker());
         warnings.extend(network::registration_warnings(&config, &registration));
         warnings.extend(realigned(&biases_before, &registration));
@@ -1182,6 +1192,32 @@ pub(crate) mod tests {
         assert_eq!(view.counters, whole.counters);
         assert_eq!(view.max_lag_s, 15.0);
         assert_eq!(whole.tracks.len(), 2);
+    }
+
+    #[test]
+    fn a_window_at_its_bound_of_plots_says_so() {
+        let limits = Limits {
+            max_tracks: 100,
+            max_batch_reports: 1000,
+        };
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
+        session.window.set_max_plots(3);
+        let all = plots();
+        let mut said = Vec::new();
+        for chunk in all.chunks(7) {
+            let mut warnings = Vec::new();
+            let batch = BatchInput {
+                plots: chunk.to_vec(),
+                ..Default::default()
+            };
+            session.apply(&batch, &limits, &mut warnings).unwrap();
+            said.extend(warnings);
+        }
+        assert!(
+            said.iter()
+                .any(|w| w.contains("bound of 3 plots") && w.contains("tracker.max_lag_s")),
+            "{said:?}"
+        );
     }
 
     #[test]
