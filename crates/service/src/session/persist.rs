@@ -207,7 +207,7 @@ fn check_id(id: &str) -> Result<(), ServiceError> {
 }
 
 fn not_found(id: &str) -> ServiceError {
-    ServiceError::NotFound(format!("no session '{id}'"))
+    ServiceError::NotFound(format!("no session '{}'", crate::validate::quoted(id)))
 }
 
 /// Where a push's decoded session comes from.
