@@ -275,6 +275,37 @@ async fn watchers_are_capped_per_session_and_tenant_and_isolated() {
 }
 
 #[tokio::test]
+async fn watching_an_id_that_names_no_session_is_a_404_and_registers_no_watcher() {
+    let app = spawn_app_with(|s| s.watchers_per_tenant = 2).await;
+    let hub = app.state.sessions().events();
+    // Random well-formed ids, more than the tenant's watcher cap: each is
+    // a 404 (never a 429), and none leaves a channel in the hub.
+    let ids: Vec<String> = (0..5u128)
+        .map(|i| format!("{:032x}", 0x5eed_0000_u128 + i))
+        .collect();
+    for id in &ids {
+        assert_problem(open(&app, id, None).await, 404).await;
+        assert!(!hub.watched("default", id), "a channel left for {id}");
+    }
+    let mut client = SessionServiceClient::new(app.channel().await);
+    for id in &ids {
+        let missing = client
+            .watch(pb::WatchRequest {
+                session_id: id.clone(),
+                after_version: None,
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(missing.code(), tonic::Code::NotFound);
+        assert!(!hub.watched("default", id), "a channel left for {id}");
+    }
+    // A session that exists is watched, and its channel is there.
+    let (id, _) = scene(&app, 1).await;
+    let _watch = reader(&app, &id, None).await;
+    assert!(hub.watched("default", &id));
+}
+
+#[tokio::test]
 async fn grpc_watch_streams_the_same_updates() {
     let app = spawn_app().await;
     let (id, batches) = scene(&app, 3).await;
