@@ -410,11 +410,38 @@ async fn the_view_page_is_served_whole_and_offline() {
         .unwrap()
         .to_string();
     assert!(csp.contains("default-src 'none'"), "{csp}");
+    // Scripts only from this origin's files, none inline; no framing.
+    let script_src = csp
+        .split(';')
+        .map(str::trim)
+        .find(|d| d.starts_with("script-src"))
+        .expect("a script-src directive");
+    assert_eq!(script_src, "script-src 'self'", "{csp}");
+    assert!(csp.contains("frame-ancestors 'none'"), "{csp}");
+    assert_eq!(r.headers()["x-frame-options"], "DENY");
     let page = r.text().await.unwrap();
-    assert!(page.contains("/v1/sessions/") && page.contains("Last-Event-ID"));
-    // Nothing fetched from anywhere else.
-    assert!(
-        !page.contains("http://") && !page.contains("https://"),
-        "no external URL"
+    // The page's one script is its file; no inline script or handler.
+    assert_eq!(page.matches("<script").count(), 1);
+    assert!(page.contains(r#"<script src="view.js"></script>"#));
+    assert!(!page.contains(" onclick=") && !page.contains(" onload="));
+    let r = app
+        .client
+        .get(app.url("/view/view.js"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(
+        r.headers()["content-type"],
+        "text/javascript; charset=utf-8"
     );
+    let script = r.text().await.unwrap();
+    assert!(script.contains("/v1/sessions/") && script.contains("Last-Event-ID"));
+    // Nothing fetched from anywhere else.
+    for text in [&page, &script] {
+        assert!(
+            !text.contains("http://") && !text.contains("https://"),
+            "no external URL"
+        );
+    }
 }
