@@ -70,7 +70,7 @@ def scenario():
 
 def batches_served(url):
     """POST /v1/sessions/{id}/batches answered by one replica (its /metrics)."""
-    _, text = call("GET", url + "/metrics", auth=False)
+    _, text = call("GET", url + "/metrics")
     total = 0.0
     for line in str(text).splitlines():
         if line.startswith("http_requests_total{") and 'route="/v1/sessions/{id}/batches"' in line:

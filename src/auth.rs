@@ -68,6 +68,8 @@ pub enum AuthError {
 #[derive(Clone, Default)]
 pub struct ApiKeys {
     keys: Vec<(Vec<u8>, Tenant)>,
+    /// `--metrics-key`: the one key `/metrics` takes, when given.
+    metrics: Option<Vec<u8>>,
 }
 
 impl fmt::Debug for ApiKeys {
@@ -75,6 +77,7 @@ impl fmt::Debug for ApiKeys {
         f.debug_struct("ApiKeys")
             .field("keys", &self.keys.len())
             .field("tenants", &self.tenant_count())
+            .field("metrics_key", &self.metrics.is_some())
             .finish()
     }
 }
@@ -117,7 +120,36 @@ impl ApiKeys {
                 given.join(" and ")
             ));
         }
-        Self::from_entries(entries)
+        let mut keys = Self::from_entries(entries)?;
+        if let Some(key) = &settings.metrics_key {
+            let key = key.expose().trim();
+            check_key(key, "--metrics-key (FUSION_METRICS_KEY)")?;
+            keys.metrics = Some(key.as_bytes().to_vec());
+        }
+        Ok(keys)
+    }
+
+    /// Whether a request may read `/metrics`, which names every tenant's
+    /// sessions and radars: with `--metrics-key`, its `Authorization:
+    /// Bearer <key>` must be that key; otherwise whatever authenticates an
+    /// API request (any tenant's key, a client certificate that stands for
+    /// a tenant, anything in open mode; [`Self::authenticate_request`]).
+    pub fn authorize_metrics(
+        &self,
+        cert: Option<&CertTenant>,
+        authorization: Option<&str>,
+    ) -> Result<(), AuthError> {
+        let Some(metrics_key) = &self.metrics else {
+            return self
+                .authenticate_request(cert, authorization, None)
+                .map(|_| ());
+        };
+        let key = bearer(authorization.ok_or(AuthError::Missing)?)?;
+        if constant_time_eq(metrics_key, key.as_bytes()) {
+            Ok(())
+        } else {
+            Err(AuthError::UnknownKey)
+        }
     }
 
     /// True when no key is configured: every request is tenant `default`.
@@ -139,12 +171,8 @@ impl ApiKeys {
         if self.is_open() {
             return Ok(default_tenant());
         }
-        let value = authorization.ok_or(AuthError::Missing)?;
-        let (scheme, key) = value.trim().split_once(' ').ok_or(AuthError::Malformed)?;
-        if !scheme.eq_ignore_ascii_case("bearer") {
-            return Err(AuthError::Malformed);
-        }
-        self.authenticate_key(Some(key.trim()))
+        let key = bearer(authorization.ok_or(AuthError::Missing)?)?;
+        self.authenticate_key(Some(key))
     }
 
     /// The tenant of a request from its credentials: the connection's
@@ -223,7 +251,21 @@ impl ApiKeys {
             keys.push((entry.key.into_bytes(), Tenant(entry.tenant)));
             origins.push(entry.origin);
         }
-        Ok(Self { keys })
+        Ok(Self {
+            keys,
+            metrics: None,
+        })
+    }
+}
+
+/// The key of an `Authorization: Bearer <key>` value (the scheme is
+/// case-insensitive).
+fn bearer(value: &str) -> Result<&str, AuthError> {
+    let (scheme, key) = value.trim().split_once(' ').ok_or(AuthError::Malformed)?;
+    if scheme.eq_ignore_ascii_case("bearer") {
+        Ok(key.trim())
+    } else {
+        Err(AuthError::Malformed)
     }
 }
 
@@ -279,11 +321,9 @@ fn parse_file(text: &str) -> Result<Vec<Entry>, String> {
         .collect()
 }
 
-fn parse_entry(item: &str, origin: String) -> Result<Entry, String> {
-    let Some((key, tenant)) = item.split_once('=') else {
-        return Err(format!("{origin}: expected `key=tenant`"));
-    };
-    let (key, tenant) = (key.trim(), tenant.trim());
+/// A key is at least [`MIN_KEY_LEN`] printable ASCII characters without
+/// spaces; the error names `origin`, never the key.
+fn check_key(key: &str, origin: &str) -> Result<(), String> {
     if key.len() < MIN_KEY_LEN {
         return Err(format!(
             "{origin}: the key must be at least {MIN_KEY_LEN} characters"
@@ -294,6 +334,15 @@ fn parse_entry(item: &str, origin: String) -> Result<Entry, String> {
             "{origin}: the key must be printable ASCII without spaces"
         ));
     }
+    Ok(())
+}
+
+fn parse_entry(item: &str, origin: String) -> Result<Entry, String> {
+    let Some((key, tenant)) = item.split_once('=') else {
+        return Err(format!("{origin}: expected `key=tenant`"));
+    };
+    let (key, tenant) = (key.trim(), tenant.trim());
+    check_key(key, &origin)?;
     if !valid_tenant(tenant) {
         return Err(format!(
             "{origin}: the tenant must match [A-Za-z0-9_-]{{1,{MAX_TENANT_LEN}}}"

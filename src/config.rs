@@ -270,6 +270,12 @@ pub struct Settings {
     /// combined with `--api-keys`.
     #[arg(long, env = "FUSION_API_KEYS_FILE")]
     pub api_keys_file: Option<PathBuf>,
+    /// The key `/metrics` takes (`Authorization: Bearer <key>`, at least 8
+    /// printable characters), and then no other. Without it, `/metrics`
+    /// takes any tenant's API key when API keys are configured, and is open
+    /// otherwise.
+    #[arg(long, env = "FUSION_METRICS_KEY", hide_env_values = true)]
+    pub metrics_key: Option<Secret>,
     /// Listen for ASTERIX (CAT048/CAT034) UDP datagrams on this address and
     /// feed them to a plot_fusion session (off by default). A multicast
     /// group address (224.0.0.0/4, ff00::/8) is joined.

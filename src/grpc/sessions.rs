@@ -17,7 +17,7 @@ use super::{
     },
 };
 use crate::{
-    auth::{DEFAULT_TENANT, Tenant},
+    auth::Tenant,
     proto::{self as pb, session_service_server::SessionService, stream_request::Kind},
     state::AppState,
 };
@@ -38,11 +38,16 @@ pub struct SessionGrpc {
     pub state: AppState,
 }
 
-fn tenant<T>(request: &Request<T>) -> String {
+/// The tenant the authentication layer resolved for the call. It puts one
+/// into every call it lets through (open mode's is `default`), so a call
+/// without one did not pass it: UNAUTHENTICATED, never another tenant's
+/// sessions.
+fn tenant<T>(request: &Request<T>) -> Result<String, Status> {
     request
         .extensions()
         .get::<Tenant>()
-        .map_or_else(|| DEFAULT_TENANT.to_string(), |t| t.0.clone())
+        .map(|t| t.0.clone())
+        .ok_or_else(|| Status::unauthenticated("no tenant was resolved for this call"))
 }
 
 /// A create request: the kind it names and its configuration.
@@ -443,7 +448,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::CreateSessionRequest>,
     ) -> Result<Response<pb::SessionState>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let spec = spec_in(request.into_inner()).map_err(to_status)?;
         let view = create(&self.state, &tenant, spec)
             .await
@@ -455,7 +460,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::GetSessionRequest>,
     ) -> Result<Response<pb::SessionState>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let id = request.into_inner().session_id;
         let view = self
             .state
@@ -470,7 +475,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::ListSessionsRequest>,
     ) -> Result<Response<pb::ListSessionsResponse>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let metas = self
             .state
             .sessions()
@@ -495,7 +500,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::DeleteSessionRequest>,
     ) -> Result<Response<pb::DeleteSessionResponse>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let id = request.into_inner().session_id;
         self.state
             .sessions()
@@ -509,7 +514,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::PushBatchRequest>,
     ) -> Result<Response<pb::BatchUpdate>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let req = request.into_inner();
         let id = req.session_id.clone();
         let update = push(&self.state, &tenant, &id, req)
@@ -524,7 +529,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<Streaming<pb::StreamRequest>>,
     ) -> Result<Response<Self::StreamStream>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let mut inbound = request.into_inner();
         let state = self.state.clone();
         // A few answers ahead at most: a client that does not read makes
@@ -557,7 +562,7 @@ impl SessionService for SessionGrpc {
         &self,
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchStream>, Status> {
-        let tenant = tenant(&request);
+        let tenant = tenant(&request)?;
         let req = request.into_inner();
         let watch = self
             .state
@@ -686,5 +691,54 @@ fn code_name(code: Code) -> &'static str {
         Code::Unavailable => "UNAVAILABLE",
         Code::DataLoss => "DATA_LOSS",
         Code::Unauthenticated => "UNAUTHENTICATED",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{auth::ApiKeys, config::Settings};
+
+    fn open_state() -> AppState {
+        let settings = Settings::for_tests();
+        let api_keys = ApiKeys::from_settings(&settings).unwrap();
+        let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
+            &settings.store_settings(),
+        ));
+        AppState::new(
+            settings,
+            api_keys,
+            crate::telemetry::metrics_handle(),
+            store,
+        )
+    }
+
+    #[tokio::test]
+    async fn a_call_without_a_resolved_tenant_is_unauthenticated_not_tenant_default() {
+        let service = SessionGrpc {
+            state: open_state(),
+        };
+        // Even in open mode: the authentication layer puts `default` into
+        // every call it lets through, so a call without a tenant did not
+        // pass it.
+        let status = service
+            .list_sessions(Request::new(pb::ListSessionsRequest {}))
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), tonic::Code::Unauthenticated);
+        let status = service
+            .get_session(Request::new(pb::GetSessionRequest {
+                session_id: "0123456789abcdef0123456789abcdef".into(),
+            }))
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), tonic::Code::Unauthenticated);
+        // With the tenant the layer resolves, the call is served.
+        let mut request = Request::new(pb::ListSessionsRequest {});
+        request
+            .extensions_mut()
+            .insert(Tenant(crate::auth::DEFAULT_TENANT.into()));
+        let listed = service.list_sessions(request).await.unwrap().into_inner();
+        assert!(listed.sessions.is_empty());
     }
 }

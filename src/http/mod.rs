@@ -317,6 +317,7 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .merge(api)
         .merge(streams)
         .route("/view/", get(view::page))
+        .route("/view/view.js", get(view::script))
         .route("/view", get(view::redirect))
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))

@@ -1,15 +1,22 @@
 //! Operational routes: liveness, readiness and Prometheus metrics. They are
 //! served outside the in-flight limit so that probes answer under load.
+//! The probes need no key and say nothing of the deployment (no host);
+//! `/metrics`, which names every tenant's sessions and radars, needs a key
+//! when keys are configured ([`ApiKeys::authorize_metrics`]).
 
 use axum::{
-    Json,
+    Extension, Json,
     extract::State,
-    http::{StatusCode, header},
-    response::IntoResponse,
+    http::{HeaderMap, StatusCode, header},
+    response::{IntoResponse, Response},
 };
 use serde::Serialize;
 use utoipa::ToSchema;
 
+#[cfg(doc)]
+use crate::auth::ApiKeys;
+use crate::auth::{AuthError, CertTenant};
+use crate::http::problem;
 use crate::state::{AppState, Readiness, StoreHealth};
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -26,15 +33,9 @@ pub struct HealthStatus {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(example = "ok")]
     pub store: Option<&'static str>,
-    /// `/healthz/store` and `/readyz` with Redis: the server in use
-    /// (`host:port`, the primary the sentinels named behind Sentinel; absent
-    /// while none is known).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(example = "10.0.0.5:6379")]
-    pub primary: Option<String>,
     /// `/healthz/store` and `/readyz` with Redis: whether the store lost its
     /// primary and has not completed a command since (a Sentinel failover
-    /// being followed).
+    /// being followed). No host is named: the probes need no key.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failing_over: Option<bool>,
 }
@@ -49,16 +50,14 @@ impl HealthStatus {
             status,
             reason,
             store,
-            primary: None,
             failing_over: None,
         }
     }
 
-    /// With the Redis store's server and failover state (read after the
-    /// check, so they describe its outcome).
+    /// With the Redis store's failover state (read after the check, so it
+    /// describes its outcome).
     fn with_topology(mut self, state: &AppState) -> Self {
         if let Some(t) = state.store().topology() {
-            self.primary = t.primary;
             self.failing_over = Some(t.failing_over);
         }
         self
@@ -131,10 +130,35 @@ pub async fn readyz(State(state): State<AppState>) -> (StatusCode, Json<HealthSt
 /// With Redis behind Sentinel, also the store's failovers and redirections.
 /// Per plot-fusion session this replica pushed to in the last 15 minutes,
 /// each radar's registration: `fusion_session_radar_*` gauges labelled by
-/// tenant, session and radar.
+/// tenant, session and radar. They name every tenant's sessions, so with
+/// `FUSION_METRICS_KEY` set this needs `Authorization: Bearer` that key,
+/// and otherwise, with API keys configured, what a `/v1/` request needs:
+/// any tenant's key or a client certificate standing for a tenant (401
+/// without).
 #[utoipa::path(get, path = "/metrics", tag = "operations",
-    responses((status = 200, description = "Prometheus text format", body = String, content_type = "text/plain")))]
-pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    responses(
+        (status = 200, description = "Prometheus text format", body = String, content_type = "text/plain"),
+        (status = 401, description = "A key is configured and the request has none of the keys /metrics takes", body = crate::http::problem::Problem, content_type = "application/problem+json")))]
+pub async fn metrics(
+    State(state): State<AppState>,
+    cert: Option<Extension<CertTenant>>,
+    headers: HeaderMap,
+) -> Response {
+    let authorization = headers
+        .get(header::AUTHORIZATION)
+        .map(|v| v.to_str().unwrap_or(""));
+    if let Err(error) = state
+        .api_keys()
+        .authorize_metrics(cert.as_deref(), authorization)
+    {
+        metrics::counter!("auth_failures_total", "transport" => "http").increment(1);
+        return match error {
+            AuthError::TenantMismatch => problem::forbidden(error),
+            AuthError::Missing | AuthError::Malformed | AuthError::UnknownKey => {
+                problem::unauthenticated(error)
+            }
+        };
+    }
     if let Some(t) = state.store().topology() {
         // The store counts; the exporter shows the counts as of this scrape.
         metrics::counter!("session_store_failovers_total").absolute(t.failovers);
@@ -143,5 +167,5 @@ pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
     }
     let mut text = state.metrics().render();
     text.push_str(&state.sessions().gauges().render());
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text)
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text).into_response()
 }

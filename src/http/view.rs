@@ -1,6 +1,6 @@
-//! `GET /view/`: the air-picture page, one self-contained HTML document
-//! (its CSS and JavaScript inline, no CDN, no map tiles: it works offline)
-//! embedded in the binary. It lists the tenant's sessions and draws the
+//! `GET /view/`: the air-picture page, an HTML document with its CSS
+//! inline and its script beside it (`GET /view/view.js`), both embedded in
+//! the binary (no CDN, no map tiles: it works offline). It lists the tenant's sessions and draws the
 //! chosen one live from `GET /v1/sessions/{id}/events`, read with `fetch`
 //! streaming so that it can send the API key (`EventSource` cannot send
 //! headers). The page itself is public, like `/docs`: it holds no data, and
@@ -13,18 +13,33 @@ use axum::{
 
 /// The page (`src/http/view/index.html`).
 pub const PAGE: &str = include_str!("view/index.html");
+/// Its script (`src/http/view/view.js`), a file of its own so that the
+/// page's Content-Security-Policy allows no inline script.
+pub const SCRIPT: &str = include_str!("view/view.js");
+
+/// The page's Content-Security-Policy: scripts only from this origin's
+/// files (none inline, so an injected `<script>` or `on…` attribute does
+/// not run), calls only to this origin, and no framing by any page.
+pub const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'unsafe-inline'; \
+     connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; \
+     frame-ancestors 'none'";
 
 pub async fn page() -> Response {
-    let mut response = ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], PAGE).into_response();
+    served("text/html; charset=utf-8", PAGE)
+}
+
+pub async fn script() -> Response {
+    served("text/javascript; charset=utf-8", SCRIPT)
+}
+
+fn served(content_type: &'static str, body: &'static str) -> Response {
+    let mut response = ([(header::CONTENT_TYPE, content_type)], body).into_response();
     let headers = response.headers_mut();
-    // Everything the page needs is in it; it talks only to this origin.
     headers.insert(
         header::CONTENT_SECURITY_POLICY,
-        HeaderValue::from_static(
-            "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; \
-             connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'",
-        ),
+        HeaderValue::from_static(CSP),
     );
+    headers.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
     headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
     headers.insert(
         header::X_CONTENT_TYPE_OPTIONS,

@@ -1,6 +1,7 @@
 //! API keys: with keys configured, the `/v1/` routes and the fusion gRPC
-//! services need a valid key on both ports; probes, metrics, health checks
-//! and reflection do not. Open mode (no keys) is what every other test runs.
+//! services need a valid key on both ports, and `/metrics` a tenant's key
+//! or the metrics key; probes, health checks and reflection do not. Open
+//! mode (no keys) is what every other test runs.
 
 use radar_fusion::proto as pb;
 use serde_json::json;
@@ -94,13 +95,93 @@ async fn rest_api_routes_need_a_valid_bearer_key() {
 #[tokio::test]
 async fn rest_operational_routes_need_no_key() {
     let app = spawn_with_keys().await;
-    for path in ["/healthz", "/readyz", "/metrics", "/openapi.json"] {
+    for path in [
+        "/healthz",
+        "/readyz",
+        "/healthz/store",
+        "/openapi.json",
+        "/view/",
+    ] {
         let response = app.client.get(app.url(path)).send().await.unwrap();
         assert_eq!(response.status(), 200, "{path}");
     }
     // An unknown route is still a 404, not a 401.
     let response = app.client.get(app.url("/v2/nothing")).send().await.unwrap();
     assert_problem(response, 404).await;
+}
+
+async fn get_metrics(app: &TestApp, authorization: Option<&str>) -> reqwest::Response {
+    let mut request = app.client.get(app.url("/metrics"));
+    if let Some(value) = authorization {
+        request = request.header("authorization", value);
+    }
+    request.send().await.expect("request sent")
+}
+
+#[tokio::test]
+async fn metrics_name_every_tenant_so_they_need_a_key_when_keys_are_on() {
+    // API keys without a metrics key: any tenant's key.
+    let app = spawn_with_keys().await;
+    for authorization in [None, Some("Bearer wrong-key-0123456789"), Some("Basic x")] {
+        let response = get_metrics(&app, authorization).await;
+        let challenge = response.headers()["www-authenticate"]
+            .to_str()
+            .unwrap()
+            .to_string();
+        assert!(challenge.starts_with("Bearer"), "{challenge}");
+        assert_problem(response, 401).await;
+    }
+    for key in [ACME_KEY, GLOBEX_KEY] {
+        let response = get_metrics(&app, Some(&format!("Bearer {key}"))).await;
+        assert_eq!(response.status(), 200);
+        assert!(
+            response
+                .text()
+                .await
+                .unwrap()
+                .contains("http_requests_total")
+        );
+    }
+
+    // A metrics key: that key only, tenants' keys no longer.
+    const METRICS_KEY: &str = "metrics-key-0123456789";
+    let app = spawn_app_with(|s| {
+        s.api_keys = Some(format!("{ACME_KEY}=acme").as_str().into());
+        s.metrics_key = Some(METRICS_KEY.into());
+    })
+    .await;
+    let response = get_metrics(&app, Some(&format!("Bearer {METRICS_KEY}"))).await;
+    assert_eq!(response.status(), 200);
+    for authorization in [None, Some(format!("Bearer {ACME_KEY}"))] {
+        assert_problem(get_metrics(&app, authorization.as_deref()).await, 401).await;
+    }
+    // The metrics key is not an API key.
+    let response = post_evaluate(&app, Some(&format!("Bearer {METRICS_KEY}"))).await;
+    assert_problem(response, 401).await;
+
+    // Open mode: open, unless a metrics key is given.
+    let app = spawn_app_with(|_| {}).await;
+    assert_eq!(get_metrics(&app, None).await.status(), 200);
+    let app = spawn_app_with(|s| s.metrics_key = Some(METRICS_KEY.into())).await;
+    assert_problem(get_metrics(&app, None).await, 401).await;
+    let response = get_metrics(&app, Some(&format!("Bearer {METRICS_KEY}"))).await;
+    assert_eq!(response.status(), 200);
+}
+
+#[tokio::test]
+async fn a_short_metrics_key_stops_the_start_naming_the_option() {
+    let mut settings = radar_fusion::config::Settings::for_tests();
+    settings.metrics_key = Some("short".into());
+    let error = radar_fusion::app::Application::build(settings)
+        .await
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        error.contains("--metrics-key (FUSION_METRICS_KEY)"),
+        "{error}"
+    );
+    assert!(!error.contains("short"), "the key is never shown: {error}");
 }
 
 fn evaluate_request(

@@ -275,6 +275,37 @@ async fn watchers_are_capped_per_session_and_tenant_and_isolated() {
 }
 
 #[tokio::test]
+async fn watching_an_id_that_names_no_session_is_a_404_and_registers_no_watcher() {
+    let app = spawn_app_with(|s| s.watchers_per_tenant = 2).await;
+    let hub = app.state.sessions().events();
+    // Random well-formed ids, more than the tenant's watcher cap: each is
+    // a 404 (never a 429), and none leaves a channel in the hub.
+    let ids: Vec<String> = (0..5u128)
+        .map(|i| format!("{:032x}", 0x5eed_0000_u128 + i))
+        .collect();
+    for id in &ids {
+        assert_problem(open(&app, id, None).await, 404).await;
+        assert!(!hub.watched("default", id), "a channel left for {id}");
+    }
+    let mut client = SessionServiceClient::new(app.channel().await);
+    for id in &ids {
+        let missing = client
+            .watch(pb::WatchRequest {
+                session_id: id.clone(),
+                after_version: None,
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(missing.code(), tonic::Code::NotFound);
+        assert!(!hub.watched("default", id), "a channel left for {id}");
+    }
+    // A session that exists is watched, and its channel is there.
+    let (id, _) = scene(&app, 1).await;
+    let _watch = reader(&app, &id, None).await;
+    assert!(hub.watched("default", &id));
+}
+
+#[tokio::test]
 async fn grpc_watch_streams_the_same_updates() {
     let app = spawn_app().await;
     let (id, batches) = scene(&app, 3).await;
@@ -379,11 +410,38 @@ async fn the_view_page_is_served_whole_and_offline() {
         .unwrap()
         .to_string();
     assert!(csp.contains("default-src 'none'"), "{csp}");
+    // Scripts only from this origin's files, none inline; no framing.
+    let script_src = csp
+        .split(';')
+        .map(str::trim)
+        .find(|d| d.starts_with("script-src"))
+        .expect("a script-src directive");
+    assert_eq!(script_src, "script-src 'self'", "{csp}");
+    assert!(csp.contains("frame-ancestors 'none'"), "{csp}");
+    assert_eq!(r.headers()["x-frame-options"], "DENY");
     let page = r.text().await.unwrap();
-    assert!(page.contains("/v1/sessions/") && page.contains("Last-Event-ID"));
-    // Nothing fetched from anywhere else.
-    assert!(
-        !page.contains("http://") && !page.contains("https://"),
-        "no external URL"
+    // The page's one script is its file; no inline script or handler.
+    assert_eq!(page.matches("<script").count(), 1);
+    assert!(page.contains(r#"<script src="view.js"></script>"#));
+    assert!(!page.contains(" onclick=") && !page.contains(" onload="));
+    let r = app
+        .client
+        .get(app.url("/view/view.js"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(
+        r.headers()["content-type"],
+        "text/javascript; charset=utf-8"
     );
+    let script = r.text().await.unwrap();
+    assert!(script.contains("/v1/sessions/") && script.contains("Last-Event-ID"));
+    // Nothing fetched from anywhere else.
+    for text in [&page, &script] {
+        assert!(
+            !text.contains("http://") && !text.contains("https://"),
+            "no external URL"
+        );
+    }
 }

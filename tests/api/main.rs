@@ -15,6 +15,7 @@ mod events;
 mod fuzz;
 mod grpc;
 mod helpers;
+mod hostile;
 mod jpda;
 mod ops;
 mod plot_fusion;

@@ -375,7 +375,11 @@ fn validate(mut input: JpdaInput) -> Result<Plan, ServiceError> {
             if !NAMES.contains(&name.as_str()) {
                 v.add(
                     format!("state_layout[{i}]"),
-                    format!("must be one of {}, got '{name}'", NAMES.join(", ")),
+                    format!(
+                        "must be one of {}, got '{}'",
+                        NAMES.join(", "),
+                        crate::validate::quoted(name)
+                    ),
                 );
             } else if !names.insert(name.as_str()) {
                 v.add(
@@ -601,7 +605,10 @@ fn sensor(
         Some(other) => {
             v.add(
                 format!("{f}.kind"),
-                format!("must be one of linear, polar, got '{other}'"),
+                format!(
+                    "must be one of linear, polar, got '{}'",
+                    crate::validate::quoted(other)
+                ),
             );
             None
         }

@@ -14,7 +14,9 @@
 //! |---|---|
 //! | missing | `is required` (with its choices: `is required: one of a, b`) |
 //! | empty id | `must not be empty` |
+//! | long id | `must be at most 64 bytes, got 200000` |
 //! | duplicate id | `duplicates radars[0].id 'a'` |
+//! | unknown id | `no radar 'x' in the network (radars: a, b)`; later ones `(radars: as listed at plots[0].radar_id)` |
 //! | not finite | `must be finite, got NaN` |
 //! | out of range | `must lie in [0, 90], got 91` (`(0, 1]`, `2..=1000`) |
 //! | half-line | `must be finite and > 0, got -1` (`≥ 0`) |
@@ -25,6 +27,13 @@
 //! | vector | `must have 4 components, got 3` / `contains a non-finite value` |
 //! | matrix | `must be a 4 × 4 matrix` / `contains a non-finite value` |
 //! | covariance | `is not symmetric (…)` / `is not positive definite` |
+//! | more | `and 12 more violations not listed` (after [`MAX_LISTED_VIOLATIONS`]) |
+//!
+//! A problem body stays small whatever the request: ids are at most
+//! [`MAX_ID_BYTES`] long, a string the client sent is quoted at most
+//! [`MAX_ID_BYTES`] long ([`quoted`]), a list of ids is given once
+//! ([`Listed`]), and at most [`MAX_LISTED_VIOLATIONS`] violations are
+//! listed.
 
 use std::borrow::Cow;
 use std::collections::{HashMap, hash_map::Entry};
@@ -195,10 +204,50 @@ pub const LONGITUDE: Interval = Interval::closed(-180.0, 180.0);
 /// the edge of space.
 pub const SITE_HEIGHT: Interval = Interval::closed(-11_000.0, 100_000.0);
 
+/// The longest id a client may choose (radars, nodes, tracks), in bytes.
+pub const MAX_ID_BYTES: usize = 64;
+
+/// The most violations one error lists; the rest are counted in a last
+/// entry, so that a large bad request does not get a larger answer.
+pub const MAX_LISTED_VIOLATIONS: usize = 100;
+
+/// `s` as a message quotes it: whole up to [`MAX_ID_BYTES`] bytes, else its
+/// first bytes (on a character boundary) and `…`.
+pub fn quoted(s: &str) -> Cow<'_, str> {
+    if s.len() <= MAX_ID_BYTES {
+        return Cow::Borrowed(s);
+    }
+    let mut end = MAX_ID_BYTES;
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    Cow::Owned(format!("{}…", &s[..end]))
+}
+
+/// What is wrong with a client-chosen id, if anything: empty, or longer
+/// than [`MAX_ID_BYTES`].
+pub fn id_problem(id: &str) -> Option<String> {
+    if id.is_empty() {
+        Some("must not be empty".to_string())
+    } else if id.len() > MAX_ID_BYTES {
+        Some(format!(
+            "must be at most {MAX_ID_BYTES} bytes, got {}",
+            id.len()
+        ))
+    } else {
+        None
+    }
+}
+
 /// Collects field violations while a request is parsed, so that a client
-/// learns of every bad field at once.
+/// learns of every bad field at once (the first
+/// [`MAX_LISTED_VIOLATIONS`] of them, and how many more there are).
 #[derive(Debug, Default)]
-pub struct Violations(Vec<FieldViolation>);
+pub struct Violations {
+    listed: Vec<FieldViolation>,
+    /// The first violation not listed, and how many were not.
+    more: Option<(String, usize)>,
+}
 
 impl Violations {
     pub fn new() -> Self {
@@ -215,10 +264,34 @@ impl Violations {
 
     /// Records a violation of `field`.
     pub fn add(&mut self, field: impl Field, message: impl Into<String>) {
-        self.0.push(FieldViolation {
+        self.push(FieldViolation {
             field: field.path(),
             message: message.into(),
         });
+    }
+
+    fn push(&mut self, violation: FieldViolation) {
+        if self.listed.len() < MAX_LISTED_VIOLATIONS {
+            self.listed.push(violation);
+        } else {
+            self.more.get_or_insert((violation.field, 0)).1 += 1;
+        }
+    }
+
+    /// A required client-chosen id (not empty, at most [`MAX_ID_BYTES`]),
+    /// or a recorded violation.
+    pub fn id<'a>(&mut self, field: impl Field, id: Option<&'a str>) -> Option<&'a str> {
+        match id.map(|id| (id, id_problem(id))) {
+            None => {
+                self.add(field, "is required");
+                None
+            }
+            Some((_, Some(problem))) => {
+                self.add(field, problem);
+                None
+            }
+            Some((id, None)) => Some(id),
+        }
     }
 
     /// Returns the value of a required field, or records that it is missing.
@@ -334,7 +407,10 @@ impl Violations {
             Some(name) => match choices.iter().find(|(n, _)| *n == name) {
                 Some((_, value)) => Some(*value),
                 None => {
-                    self.add(field, format!("must be one of {}, got '{name}'", names()));
+                    self.add(
+                        field,
+                        format!("must be one of {}, got '{}'", names(), quoted(name)),
+                    );
                     None
                 }
             },
@@ -474,8 +550,7 @@ impl Violations {
         match result {
             Ok(value) => Some(value),
             Err(e) => {
-                let violation = param_violation(prefix, e);
-                self.0.push(violation);
+                self.push(param_violation(prefix, e));
                 None
             }
         }
@@ -487,16 +562,24 @@ impl Violations {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
+        self.listed.is_empty()
     }
 
-    /// `Ok(())` when nothing was recorded, otherwise the invalid-input error.
+    /// `Ok(())` when nothing was recorded, otherwise the invalid-input
+    /// error: the listed violations, and a last one at the first field not
+    /// listed that says how many more there are.
     pub fn finish(self) -> Result<(), ServiceError> {
-        if self.0.is_empty() {
-            Ok(())
-        } else {
-            Err(ServiceError::InvalidInput(self.0))
+        let mut listed = self.listed;
+        if listed.is_empty() {
+            return Ok(());
         }
+        if let Some((field, more)) = self.more {
+            listed.push(FieldViolation {
+                field,
+                message: format!("and {more} more violations not listed"),
+            });
+        }
+        Err(ServiceError::InvalidInput(listed))
     }
 
     /// The typed input, when nothing was recorded; otherwise the
@@ -578,7 +661,8 @@ impl RowMajor for Rows {
     }
 }
 
-/// Ids that must be present, non-empty and unique within their list.
+/// Ids that must be present, non-empty, at most [`MAX_ID_BYTES`] long and
+/// unique within their list.
 #[derive(Debug, Default)]
 pub struct Ids<'a> {
     seen: HashMap<&'a str, usize>,
@@ -597,8 +681,8 @@ impl<'a> Ids<'a> {
     }
 
     /// The id of element `index` of the list; `field(i)` is the path of
-    /// element i's id. A missing, empty or repeated id is a violation (and
-    /// `None`).
+    /// element i's id. A missing, empty, too long or repeated id is a
+    /// violation (and `None`).
     pub fn check(
         &mut self,
         v: &mut Violations,
@@ -611,8 +695,8 @@ impl<'a> Ids<'a> {
                 v.add(field(index), "is required");
                 None
             }
-            Some("") => {
-                v.add(field(index), "must not be empty");
+            Some(id) if id_problem(id).is_some() => {
+                v.id(field(index), Some(id));
                 None
             }
             // The first holder keeps the id.
@@ -629,6 +713,33 @@ impl<'a> Ids<'a> {
                     Some(id)
                 }
             },
+        }
+    }
+}
+
+/// A list of ids that violations refer to (a network's radars, a
+/// session's nodes): the first violation that needs it gives it whole and
+/// later ones point to that violation's field, so that many bad references
+/// do not repeat the list.
+#[derive(Debug, Default)]
+pub struct Listed {
+    at: Option<String>,
+}
+
+impl Listed {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `ids` joined by `, ` for the violation of `field`, the first time;
+    /// `as listed at {that field}` afterwards.
+    pub fn ids<S: AsRef<str>>(&mut self, ids: &[S], field: impl Field) -> String {
+        match &self.at {
+            Some(at) => format!("as listed at {at}"),
+            None => {
+                self.at = Some(field.path());
+                ids.iter().map(AsRef::as_ref).collect::<Vec<_>>().join(", ")
+            }
         }
     }
 }
@@ -763,6 +874,10 @@ mod tests {
         assert_eq!(ids.check(&mut v, Some("a"), 3, path), None);
         assert_eq!(ids.check(&mut v, Some(""), 4, path), None);
         assert_eq!(ids.check(&mut v, None, 5, path), None);
+        let long = "x".repeat(MAX_ID_BYTES + 1);
+        assert_eq!(ids.check(&mut v, Some(&long), 6, path), None);
+        let longest = "y".repeat(MAX_ID_BYTES);
+        assert_eq!(ids.check(&mut v, Some(&longest), 7, path), Some(&*longest));
         assert_eq!(
             messages(v),
             [
@@ -770,6 +885,54 @@ mod tests {
                 ("nodes[3].id", "duplicates nodes[0].id 'a'"),
                 ("nodes[4].id", "must not be empty"),
                 ("nodes[5].id", "is required"),
+                ("nodes[6].id", "must be at most 64 bytes, got 65"),
+            ]
+            .map(|(f, m)| (f.to_string(), m.to_string()))
+        );
+    }
+
+    #[test]
+    fn a_long_bad_request_lists_the_first_violations_and_counts_the_rest() {
+        let mut v = Violations::new();
+        for i in 0..MAX_LISTED_VIOLATIONS + 250 {
+            v.add(format!("plots[{i}].t"), "is required");
+        }
+        let list = messages(v);
+        assert_eq!(list.len(), MAX_LISTED_VIOLATIONS + 1);
+        assert_eq!(list[99], ("plots[99].t".into(), "is required".into()));
+        assert_eq!(
+            list[100],
+            (
+                "plots[100].t".into(),
+                "and 250 more violations not listed".into()
+            )
+        );
+    }
+
+    #[test]
+    fn quoted_strings_and_listed_ids_stay_short() {
+        assert_eq!(quoted("abc"), "abc");
+        // 'é' is two bytes: a cut inside it moves back to its start.
+        let long = format!("{}é{}", "a".repeat(63), "b".repeat(1000));
+        assert_eq!(quoted(&long), format!("{}…", "a".repeat(63)));
+        let mut listed = Listed::new();
+        let ids = ["north", "south"];
+        assert_eq!(listed.ids(&ids, "plots[3].radar_id"), "north, south");
+        assert_eq!(
+            listed.ids(&ids, "plots[9].radar_id"),
+            "as listed at plots[3].radar_id"
+        );
+        let mut v = Violations::new();
+        assert_eq!(v.id("a", Some("ok")), Some("ok"));
+        assert_eq!(v.id("b", Some("")), None);
+        assert_eq!(v.id("c", None), None);
+        assert_eq!(v.id("d", Some(&"z".repeat(200_000))), None);
+        assert_eq!(
+            messages(v),
+            [
+                ("b", "must not be empty"),
+                ("c", "is required"),
+                ("d", "must be at most 64 bytes, got 200000"),
             ]
             .map(|(f, m)| (f.to_string(), m.to_string()))
         );

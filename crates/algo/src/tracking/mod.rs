@@ -325,6 +325,12 @@ impl Tracker {
             .chain(self.initiator.tentatives.iter().map(|t| t.id))
     }
 
+    /// The number of confirmed tracks ([`Tracker::confirmed_tracks`]'s
+    /// length, without building them).
+    pub fn confirmed_count(&self) -> usize {
+        self.tracks.len()
+    }
+
     /// The confirmed tracks by ascending id, predicted to the time of the
     /// last frame.
     pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {

@@ -138,7 +138,10 @@ pub fn clock(
             Some(t) => Ok(Clock::DayStart(t)),
             None => Err(Violations::single(
                 format!("{field}.date"),
-                format!("must be a UTC date YYYY-MM-DD (1970 to 9999), got '{d}'"),
+                format!(
+                    "must be a UTC date YYYY-MM-DD (1970 to 9999), got '{}'",
+                    crate::validate::quoted(d)
+                ),
             )),
         },
         (None, Some(t)) => {

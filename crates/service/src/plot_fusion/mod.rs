@@ -34,9 +34,11 @@ pub const DEFAULT_P_DETECTION: f64 = 0.9;
 /// Default clutter density: false plots per m·rad (2D) or m·rad² (3D).
 /// 1e-7 is about one false plot per scan over 250 km × 360° for a 2D radar.
 pub const DEFAULT_CLUTTER_DENSITY: f64 = 1e-7;
-/// Most history entries × tracks in one response (a history bigger than
-/// this is cut, with a warning).
-pub const MAX_HISTORY_TRACK_STATES: usize = 2_000_000;
+/// Most track states a `history` may hold (the confirmed tracks summed over
+/// the frames): each is about 1 kB of JSON, so the answer stays under
+/// about 50 MB. A request whose history would hold more is refused, naming
+/// `history`, rather than answered with gigabytes.
+pub const MAX_HISTORY_TRACK_STATES: usize = 50_000;
 
 /// A WGS84 position: the dimension service's site input, shared.
 pub use super::dimension::SiteInput as GeoInput;
@@ -305,27 +307,24 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     let mut tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
     let mut history = input.history.then(Vec::new);
     let mut states = 0usize;
-    let mut cut = false;
     let report = tracker
         .process_with(&plots, true, &mut |t: &Tracker| {
             if let Some(h) = history.as_mut() {
-                let confirmed = t.confirmed_tracks();
-                if states + confirmed.len() > MAX_HISTORY_TRACK_STATES {
-                    cut = true;
+                let confirmed = t.confirmed_count();
+                states += confirmed;
+                if states > MAX_HISTORY_TRACK_STATES {
+                    // Refused below: keep counting, stop collecting.
+                    h.clear();
                     return;
                 }
-                states += confirmed.len();
-                h.push((t.last_time().unwrap_or(f64::NAN), confirmed));
+                h.push((t.last_time().unwrap_or(f64::NAN), t.confirmed_tracks()));
             }
         })
         .map_err(computation_error)?;
-    let compute_us = micros_since(start);
-    if cut {
-        warnings.push(format!(
-            "history cut after {states} track states (limit {MAX_HISTORY_TRACK_STATES}); \
-             send fewer plots per request or use a plot_fusion session"
-        ));
+    if states > MAX_HISTORY_TRACK_STATES {
+        return Err(history_too_large(states, report.frames));
     }
+    let compute_us = micros_since(start);
     let tracks = tracker.tracks();
     let counters = tracker.counters();
     let registration = network.bias_views(&tracker);
@@ -379,6 +378,18 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         compute_us,
         warnings,
     })
+}
+
+/// The error of a `history` larger than [`MAX_HISTORY_TRACK_STATES`].
+fn history_too_large(states: usize, frames: usize) -> ServiceError {
+    super::validate::Violations::single(
+        "history",
+        format!(
+            "would hold {states} track states (confirmed tracks summed over {frames} frames); \
+             at most {MAX_HISTORY_TRACK_STATES} per request: send fewer plots per request, \
+             or push them to a plot_fusion session and read its updates"
+        ),
+    )
 }
 
 /// Warnings about what the data gave: radars without plots, nothing

@@ -36,7 +36,8 @@ use super::{
     DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, RadarBiasView,
     SpecInput, TrackView,
 };
-use crate::{FieldViolation, Ids, Interval, ServiceError, Violations};
+use crate::validate::{Listed, id_problem};
+use crate::{Ids, Interval, ServiceError, Violations};
 use algo::{
     AlgoError,
     geo::{Ellipsoid, LocalFrame},
@@ -54,8 +55,6 @@ use formats::wire::{FormatError, Reader, Writer};
 const MAX_RANGE_M: f64 = 1.0e7;
 /// Largest |t| accepted (s): about 31,700 years, so Unix times fit.
 const MAX_ABS_T_S: f64 = 1.0e12;
-/// Most violations reported for the plots of one request.
-const MAX_PLOT_VIOLATIONS: usize = 100;
 
 /// What the service keeps of a validated network besides the core's
 /// configuration: the fusion frame, the radars' ids and their rotations.
@@ -887,7 +886,8 @@ impl Network {
     }
 
     /// Validates plots against the network and re-expresses their angles in
-    /// the fusion axes; violations name `{field}[i].…`.
+    /// the fusion axes; violations name `{field}[i].…` (the radars' ids
+    /// are listed in the first violation of an unknown radar only).
     pub fn plots(
         &self,
         inputs: &[PlotInput],
@@ -896,33 +896,28 @@ impl Network {
     ) -> Result<Vec<Plot>, ServiceError> {
         let parallel = config.is_parallel();
         let mut out = Vec::with_capacity(inputs.len());
-        let mut bad: Vec<FieldViolation> = Vec::new();
-        let mut more = 0usize;
+        let mut v = Violations::new();
+        let mut radars = Listed::new();
         for (i, p) in inputs.iter().enumerate() {
             match self.plot(p, config, parallel) {
                 Ok(plot) => out.push(plot),
-                Err((name, message)) => {
-                    if bad.len() < MAX_PLOT_VIOLATIONS {
-                        bad.push(FieldViolation {
-                            field: format!("{field}[{i}].{name}"),
-                            message,
-                        });
-                    } else {
-                        more += 1;
+                Err((name, mut message)) => {
+                    let path = format!("{field}[{i}].{name}");
+                    if name == "radar_id" && self.is_unknown(p.radar_id.as_deref()) {
+                        message =
+                            format!("{message} (radars: {})", radars.ids(&self.radar_ids, &path));
                     }
+                    v.add(path, message);
                 }
             }
         }
-        if bad.is_empty() {
-            return Ok(out);
-        }
-        if more > 0 {
-            bad.push(FieldViolation {
-                field: field.to_string(),
-                message: format!("{more} more invalid plots not listed"),
-            });
-        }
-        Err(ServiceError::InvalidInput(bad))
+        v.finish()?;
+        Ok(out)
+    }
+
+    /// Whether `id` is a well-formed id that names no radar of the network.
+    fn is_unknown(&self, id: Option<&str>) -> bool {
+        id.is_some_and(|id| id_problem(id).is_none() && !self.index.contains_key(id))
     }
 
     /// One plot validated and re-expressed, or the name of its bad field
@@ -937,15 +932,13 @@ impl Network {
             .radar_id
             .as_deref()
             .ok_or(("radar_id", "is required".to_string()))?;
-        let &radar = self.index.get(id).ok_or_else(|| {
-            (
-                "radar_id",
-                format!(
-                    "no radar '{id}' in the network (radars: {})",
-                    self.radar_ids.join(", ")
-                ),
-            )
-        })?;
+        if let Some(problem) = id_problem(id) {
+            return Err(("radar_id", problem));
+        }
+        let &radar = self
+            .index
+            .get(id)
+            .ok_or_else(|| ("radar_id", format!("no radar '{id}' in the network")))?;
         let spec = &config.radars[radar];
         let t = p.t.ok_or(("t", "is required".to_string()))?;
         if !(t.is_finite() && t.abs() <= MAX_ABS_T_S) {

@@ -475,16 +475,27 @@ impl EventHub {
             guard: Guard {
                 hub: Arc::clone(self),
                 key,
+                forget: false,
             },
         })
     }
 
-    fn leave(&self, key: &Key) {
+    /// Counts a watcher out. `forget`: a channel left without watchers and
+    /// without history goes at once, with its subscription, instead of
+    /// after [`HISTORY_GRACE`] (a watch that failed as it started).
+    fn leave(&self, key: &Key, forget: bool) {
         let mut state = self.lock();
         if let Some(c) = state.channels.get_mut(key) {
             c.watchers = c.watchers.saturating_sub(1);
             if c.watchers == 0 {
                 c.idle_since = Some(Instant::now());
+                if forget
+                    && c.history.is_empty()
+                    && let Some(c) = state.channels.remove(key)
+                    && let (Some(l), Some(name)) = (&self.listener, c.subscribed)
+                {
+                    l.unsubscribe(name);
+                }
             }
         }
         if let Some(n) = state.tenants.get_mut(&key.0) {
@@ -501,11 +512,20 @@ impl EventHub {
 pub(super) struct Guard {
     hub: Arc<EventHub>,
     key: Key,
+    forget: bool,
+}
+
+impl Guard {
+    /// Leaves at once for a watch that did not start (its session is
+    /// gone): a channel this watch made is removed, not kept for resuming.
+    pub(super) fn abandon(mut self) {
+        self.forget = true;
+    }
 }
 
 impl Drop for Guard {
     fn drop(&mut self) {
-        self.hub.leave(&self.key);
+        self.hub.leave(&self.key, self.forget);
     }
 }
 

@@ -200,7 +200,11 @@ impl KindName {
                     let known: Vec<&str> = Self::ALL.iter().map(|k| k.name()).collect();
                     Violations::single(
                         field,
-                        format!("must be one of {}, got '{n}'", known.join(", ")),
+                        format!(
+                            "must be one of {}, got '{}'",
+                            known.join(", "),
+                            crate::validate::quoted(n)
+                        ),
                     )
                 }),
         }

@@ -207,7 +207,7 @@ fn check_id(id: &str) -> Result<(), ServiceError> {
 }
 
 fn not_found(id: &str) -> ServiceError {
-    ServiceError::NotFound(format!("no session '{id}'"))
+    ServiceError::NotFound(format!("no session '{}'", crate::validate::quoted(id)))
 }
 
 /// Where a push's decoded session comes from.
@@ -557,6 +557,12 @@ impl Sessions {
     /// events after that version when this replica still holds them all),
     /// then every committed update in version order. `QuotaExceeded` when
     /// a watcher cap is reached, `NotFound` for no such session.
+    ///
+    /// The session's existence is checked (its version read) before the
+    /// watcher joins the hub, so that a watch of an id that names no
+    /// session holds no channel and no Redis subscription; a session gone
+    /// between that check and the read after joining leaves nothing
+    /// behind either (`events::Guard::abandon`).
     pub async fn watch(
         &self,
         tenant: &str,
@@ -564,13 +570,22 @@ impl Sessions {
         after: Option<u64>,
     ) -> Result<Watch, ServiceError> {
         check_id(id)?;
+        if self.store.version(tenant, id).await?.is_none() {
+            return Err(not_found(id));
+        }
         let joined = self
             .events
             .join(tenant, id, self.store.channel(tenant, id))
             .map_err(ServiceError::QuotaExceeded)?;
         // Read after joining: an update committed in between is in the
         // channel, and one before is in this read.
-        let stored = self.read(tenant, id).await?;
+        let stored = match self.read(tenant, id).await {
+            Ok(stored) => stored,
+            Err(e) => {
+                joined.guard.abandon();
+                return Err(e);
+            }
+        };
         let version = stored.version;
         let resumed = after.filter(|&l| {
             l <= version && (l + 1..=version).all(|v| joined.history.iter().any(|e| e.version == v))
@@ -896,6 +911,29 @@ mod tests {
             sessions.cache.put(TENANT, &id, version, bytes, serving);
         }
         logs
+    }
+
+    #[tokio::test]
+    async fn a_watch_that_does_not_start_leaves_no_channel_and_one_that_ends_keeps_it() {
+        let sessions = memory(32).await;
+        let hub = &sessions.events;
+        let id = "0123456789abcdef0123456789abcdef";
+        // No such session: refused before joining.
+        assert!(matches!(
+            sessions.watch(TENANT, id, None).await,
+            Err(ServiceError::NotFound(_))
+        ));
+        assert!(!hub.watched(TENANT, id));
+        // A watch abandoned as it starts (its session gone between the
+        // check and the read) removes the channel it made at once.
+        let joined = hub.join(TENANT, id, None).unwrap();
+        assert!(hub.watched(TENANT, id));
+        joined.guard.abandon();
+        assert!(!hub.watched(TENANT, id));
+        // A watch that ran and ended keeps the channel for resuming.
+        let joined = hub.join(TENANT, id, None).unwrap();
+        drop(joined);
+        assert!(hub.watched(TENANT, id));
     }
 
     #[tokio::test]

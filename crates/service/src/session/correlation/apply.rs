@@ -14,6 +14,7 @@ use crate::{
     Interval, ServiceError, Violations,
     correlation::{self, AlignMode, Links},
     session::Limits,
+    validate::Listed,
 };
 use algo::{
     correlation::{
@@ -36,30 +37,26 @@ impl CorrelationSession {
         let mut v = Violations::new();
         // Validate every report before touching the state.
         let mut accepted: Vec<(usize, String, f64, &ReportInput)> = Vec::new();
-        let choices: Vec<(&str, usize)> = self
-            .node_ids
-            .iter()
-            .enumerate()
-            .map(|(ni, id)| (id.as_str(), ni))
-            .collect();
+        let mut nodes = Listed::new();
         for (i, r) in batch.reports.iter().enumerate() {
             let field = format!("reports[{i}]");
-            let node = v.one_of(format!("{field}.node"), r.node.as_deref(), None, &choices);
-            let track = match r.track.as_deref() {
-                None => {
-                    v.add(format!("{field}.track"), "is required");
-                    None
-                }
-                Some("") => {
-                    v.add(format!("{field}.track"), "must not be empty");
-                    None
-                }
-                Some(t) if t.len() > 256 => {
-                    v.add(format!("{field}.track"), "is longer than 256 bytes");
-                    None
-                }
-                Some(t) => Some(t.to_string()),
+            // The session's node ids are listed in the first violation of
+            // an unknown node only.
+            let node = match v.id(format!("{field}.node"), r.node.as_deref()) {
+                Some(id) => match self.node_ids.iter().position(|n| n == id) {
+                    Some(ni) => Some(ni),
+                    None => {
+                        let path = format!("{field}.node");
+                        let known = nodes.ids(&self.node_ids, &path);
+                        v.add(path, format!("must be one of {known}, got '{id}'"));
+                        None
+                    }
+                },
+                None => None,
             };
+            let track = v
+                .id(format!("{field}.track"), r.track.as_deref())
+                .map(str::to_string);
             let t = v.number(format!("{field}.t"), r.sample.t, Interval::FINITE);
             let ok = correlation::check_sample(
                 &mut v,

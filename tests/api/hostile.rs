@@ -1,0 +1,249 @@
+//! Hostile clients (issue 53) through the real servers: a request can not
+//! make the service answer much more than it sent. Ids are at most 64
+//! bytes, a list of ids is given once however many violations refer to it,
+//! a bad request lists at most 100 violations, and a plot-fusion `history`
+//! has a bound.
+
+use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
+use serde_json::{Value, json};
+use tonic::Code;
+
+use crate::helpers::{TestApp, assert_problem, grpc_fields, problem_fields, spawn_app};
+use crate::plot_fusion::plot_scene::{self, SceneRadar, Target, plots, radars_json};
+use crate::plot_fusion::proto_request;
+use crate::sessions::data::{scenario, session_config};
+
+const PATH: &str = "/v1/plot-fusion/track";
+
+/// A 200 kB id, as the issue's probe sent.
+fn huge_id() -> String {
+    "r".repeat(200_000)
+}
+
+/// Posts `body` and expects a 422 whose whole body is under `max_bytes`;
+/// returns the problem.
+async fn small_422(app: &TestApp, path: &str, body: &Value, max_bytes: usize) -> Value {
+    let response = app.post_json(path, body).await;
+    assert_eq!(response.status(), 422);
+    let text = response.text().await.unwrap();
+    assert!(
+        text.len() < max_bytes,
+        "a {} byte problem body: {}…",
+        text.len(),
+        &text[..2000.min(text.len())]
+    );
+    serde_json::from_str(&text).unwrap()
+}
+
+/// The message of the violation of `field`.
+fn message<'a>(problem: &'a Value, field: &str) -> &'a str {
+    problem["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["field"] == field)
+        .unwrap_or_else(|| panic!("no violation of {field}: {problem}"))["message"]
+        .as_str()
+        .unwrap()
+}
+
+#[tokio::test]
+async fn a_200_kb_radar_id_is_a_small_422_naming_the_field_on_both_transports() {
+    let app = spawn_app().await;
+    // The probe: a radar with a 200 kB id and plots naming another radar.
+    // Each of the 100 listed violations used to repeat the radars' ids: a
+    // 20 MB answer.
+    let mut req = plot_scene::request(false, 5);
+    req["radars"][0]["id"] = json!(huge_id());
+    let p = small_422(&app, PATH, &req, 1_000).await;
+    assert_eq!(problem_fields(&p), ["radars[0].id"]);
+    assert_eq!(
+        message(&p, "radars[0].id"),
+        "must be at most 64 bytes, got 200000"
+    );
+
+    // The same over gRPC: INVALID_ARGUMENT naming the field, as short.
+    let status = PlotFusionServiceClient::new(app.channel().await)
+        .track(proto_request(&req))
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), Code::InvalidArgument);
+    assert_eq!(grpc_fields(&status), ["radars[0].id"]);
+    assert!(status.message().len() < 1_000, "{}", status.message());
+
+    // A plot naming a 200 kB radar id is refused by its length, not quoted.
+    let mut req = plot_scene::request(false, 5);
+    req["plots"][3]["radar_id"] = json!(huge_id());
+    let p = small_422(&app, PATH, &req, 4_000).await;
+    assert_eq!(problem_fields(&p), ["plots[3].radar_id"]);
+    assert_eq!(
+        message(&p, "plots[3].radar_id"),
+        "must be at most 64 bytes, got 200000"
+    );
+}
+
+#[tokio::test]
+async fn unknown_radars_list_the_network_once_and_violations_are_capped_at_100() {
+    let app = spawn_app().await;
+    // 64 radars with 64-byte ids (4 kB of ids), and 300 plots naming none
+    // of them: the ids are listed in the first violation only, and 100
+    // violations are listed, the last entry counting the rest.
+    let mut req = plot_scene::request(false, 5);
+    let template = req["radars"][0].clone();
+    let ids: Vec<String> = (0..64).map(|i| format!("{i:064}")).collect();
+    req["radars"] = ids
+        .iter()
+        .map(|id| {
+            let mut r = template.clone();
+            r["id"] = json!(id);
+            r
+        })
+        .collect();
+    let plots: Vec<Value> = req["plots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .cycle()
+        .take(300)
+        .map(|p| {
+            let mut p = p.clone();
+            p["radar_id"] = json!("nowhere");
+            p
+        })
+        .collect();
+    req["plots"] = json!(plots);
+    // 64 × 66 bytes of ids once, and 100 violations of about 120 bytes.
+    let p = small_422(&app, PATH, &req, 20_000).await;
+    let errors = p["errors"].as_array().unwrap();
+    assert_eq!(errors.len(), 101);
+    let first = message(&p, "plots[0].radar_id");
+    assert!(first.starts_with("no radar 'nowhere' in the network (radars: 0000"));
+    assert!(first.contains(&ids[63]), "{first}");
+    assert_eq!(
+        message(&p, "plots[1].radar_id"),
+        "no radar 'nowhere' in the network (radars: as listed at plots[0].radar_id)"
+    );
+    assert_eq!(
+        message(&p, "plots[100].radar_id"),
+        "and 200 more violations not listed"
+    );
+}
+
+#[tokio::test]
+async fn long_node_and_track_ids_are_refused_by_their_length() {
+    let app = spawn_app().await;
+    let (mut batch, reports) = scenario();
+    // Batch correlation: a node and a track id over 64 bytes.
+    batch["nodes"][0]["id"] = json!(huge_id());
+    batch["nodes"][1]["tracks"][2]["id"] = json!("t".repeat(65));
+    let p = small_422(&app, "/v1/correlation/tracks", &batch, 4_000).await;
+    assert_eq!(problem_fields(&p), ["nodes[0].id", "nodes[1].tracks[2].id"]);
+    assert_eq!(
+        message(&p, "nodes[1].tracks[2].id"),
+        "must be at most 64 bytes, got 65"
+    );
+
+    // A session: 200 reports naming an unknown node, the first 20 with a
+    // 200 kB track. The session's nodes are listed once, the track's name
+    // is not quoted, and 100 violations are listed.
+    let (batch, _) = scenario();
+    let r = app.post_json("/v1/sessions", &session_config(&batch)).await;
+    assert_eq!(r.status(), 201);
+    let session: Value = r.json().await.unwrap();
+    let url = format!("/v1/sessions/{}/batches", session["id"].as_str().unwrap());
+    let huge = huge_id();
+    let bad: Vec<Value> = reports
+        .iter()
+        .cycle()
+        .take(200)
+        .enumerate()
+        .map(|(i, r)| {
+            let mut r = r.clone();
+            r["node"] = json!("c");
+            if i < 20 {
+                r["track"] = json!(huge);
+            }
+            r
+        })
+        .collect();
+    let p = small_422(&app, &url, &json!({"reports": bad}), 16_000).await;
+    assert_eq!(p["errors"].as_array().unwrap().len(), 101);
+    assert_eq!(
+        message(&p, "reports[0].node"),
+        "must be one of a, b, got 'c'"
+    );
+    assert_eq!(
+        message(&p, "reports[0].track"),
+        "must be at most 64 bytes, got 200000"
+    );
+    assert_eq!(
+        message(&p, "reports[1].node"),
+        "must be one of as listed at reports[0].node, got 'c'"
+    );
+    // 64 bytes is still an id; a session takes it.
+    let mut good = reports[0].clone();
+    good["track"] = json!("t".repeat(64));
+    let r = app.post_json(&url, &json!({"reports": [good]})).await;
+    assert_eq!(r.status(), 200, "{}", r.text().await.unwrap());
+}
+
+#[tokio::test]
+async fn a_history_over_its_bound_is_refused_naming_the_option() {
+    let app = spawn_app().await;
+    // 60 aircraft 4 km apart under one 2D radar with 1-s scans, each plot
+    // at its own time: every plot is a frame, and after confirmation each
+    // frame holds about 60 confirmed tracks. 30 s give about 1,600 frames
+    // and 90,000 track states, over the bound of 50,000.
+    let radar = SceneRadar {
+        id: "west",
+        lat: 52.05,
+        lon: 3.4,
+        three_d: false,
+        doppler: false,
+        period: 1.0,
+        phase: 0.0,
+    };
+    let targets: Vec<Target> = (0..60)
+        .map(|i| Target {
+            start: 0.0,
+            end: 1e9,
+            p0: [
+                -60_000.0 + 4_000.0 * f64::from(i % 10),
+                -12_000.0 + 4_000.0 * f64::from(i / 10),
+                8_000.0,
+            ],
+            v: [200.0, 0.0, 0.0],
+        })
+        .collect();
+    let mut scan_plots = plots(std::slice::from_ref(&radar), &targets, 30.0, 0.0, 7);
+    // Spread each scan's plots over 60 ms: 200 m/s × 60 ms = 12 m, well
+    // within the 50 m range noise.
+    let mut last = f64::NEG_INFINITY;
+    let mut k = 0.0;
+    for p in &mut scan_plots {
+        let t = p["t"].as_f64().unwrap();
+        k = if t == last { k + 1.0 } else { 0.0 };
+        last = t;
+        p["t"] = json!(t + k * 1e-3);
+    }
+    let mut req = json!({
+        "origin": {"lat_deg": plot_scene::ORIGIN.0, "lon_deg": plot_scene::ORIGIN.1, "height_m": 0.0},
+        "radars": radars_json(std::slice::from_ref(&radar), 1e-7),
+        "plots": scan_plots,
+        "tracker": {"default_height_m": 8000.0},
+    });
+    // Without the history the request is fine.
+    let out = app.post_ok(PATH, &req).await;
+    assert!(out["counters"]["frames"].as_u64().unwrap() > 1_500);
+    req["history"] = json!(true);
+    let p = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&p), ["history"]);
+    let m = message(&p, "history");
+    assert!(
+        m.contains(&format!(
+            "at most {} per request",
+            service::plot_fusion::MAX_HISTORY_TRACK_STATES
+        )),
+        "{m}"
+    );
+}
