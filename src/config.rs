@@ -255,7 +255,8 @@ pub struct Settings {
     /// Longest time one session-store (Redis) command may take before it fails.
     #[arg(long, env = "FUSION_STORE_TIMEOUT_S", default_value_t = 1.0)]
     pub store_timeout_s: f64,
-    /// Most live tracks one streaming session may hold.
+    /// Most live tracks one streaming session may hold (a plot-fusion
+    /// session at the limit starts no new track, with a warning).
     #[arg(long, env = "FUSION_MAX_TRACKS_PER_SESSION", default_value_t = 10_000)]
     pub max_tracks_per_session: usize,
     /// Most track reports in one batch pushed to a session.

@@ -91,6 +91,8 @@ pub(crate) struct Initiated {
     pub dropped: usize,
     /// Number of tentative tracks started.
     pub started: usize,
+    /// Starts refused: the tracker held its bound of tracks.
+    pub refused: usize,
 }
 
 /// How a frame treats the tentative tracks no plot extends.
@@ -171,6 +173,7 @@ impl Initiator {
         cfg: &TrackerConfig,
         misses: Misses,
         next_id: &mut u64,
+        room: usize,
     ) -> Result<Initiated, AlgoError> {
         let init = &cfg.initiation;
         let gates = chi2_gates(init.gate_probability)?;
@@ -294,6 +297,10 @@ impl Initiator {
                 continue;
             }
             if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
+                if out.started >= room {
+                    out.refused += 1;
+                    continue;
+                }
                 let (x, p) = two_point(root, plot, dt, cfg);
                 let track = new_tentative(next_id, x, p, t, root, plot);
                 self.index.moved(self.tentatives.len(), &track);
@@ -618,6 +625,7 @@ mod tests {
                     &c,
                     Misses::Judge(View::All),
                     &mut id,
+                    usize::MAX,
                 )
                 .unwrap();
             if k == 1 {
@@ -651,6 +659,7 @@ mod tests {
             &c,
             Misses::Judge(View::All),
             &mut id,
+            usize::MAX,
         )
         .unwrap();
         ini.step(
@@ -659,14 +668,29 @@ mod tests {
             &c,
             Misses::Judge(View::All),
             &mut id,
+            usize::MAX,
         )
         .unwrap();
         let a = ini
-            .step(2.0, vec![], &c, Misses::Judge(View::All), &mut id)
+            .step(
+                2.0,
+                vec![],
+                &c,
+                Misses::Judge(View::All),
+                &mut id,
+                usize::MAX,
+            )
             .unwrap();
         assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
         let b = ini
-            .step(3.0, vec![], &c, Misses::Judge(View::All), &mut id)
+            .step(
+                3.0,
+                vec![],
+                &c,
+                Misses::Judge(View::All),
+                &mut id,
+                usize::MAX,
+            )
             .unwrap();
         assert_eq!((b.dropped, ini.tentatives.len()), (1, 0));
     }
@@ -713,6 +737,7 @@ mod tests {
             &c,
             Misses::Judge(View::All),
             &mut id,
+            usize::MAX,
         )
         .unwrap();
         let out = ini
@@ -722,6 +747,7 @@ mod tests {
                 &c,
                 Misses::Judge(View::All),
                 &mut id,
+                usize::MAX,
             )
             .unwrap();
         assert_eq!(out.started, 0);
@@ -779,7 +805,7 @@ mod tests {
                 })
                 .collect();
             let out = ini
-                .step(t, plots, &c, Misses::Judge(View::All), &mut id)
+                .step(t, plots, &c, Misses::Judge(View::All), &mut id, usize::MAX)
                 .unwrap();
             started += out.started;
             confirmed += out.confirmed.len();

@@ -127,6 +127,9 @@ pub struct StepReport {
     pub deleted: Vec<TrackOutput>,
     /// Plots buffered for a frame not yet complete.
     pub pending: usize,
+    /// Tentative tracks not started because the tracker held its bound
+    /// of tracks ([`Tracker::set_max_tracks`]).
+    pub refused: usize,
 }
 
 /// The tracker: configuration plus everything carried between calls.
@@ -162,6 +165,9 @@ pub struct Tracker {
     registrar: Registrar,
     /// Buffers a frame reuses (derived, never stored).
     scratch: Derived<Scratch>,
+    /// Most live tracks, confirmed and tentative: no tentative track is
+    /// started beyond it (a session's limit; set by its owner, not stored).
+    max_tracks: Derived<Option<usize>>,
 }
 
 /// A frame's plots as the associator needs them.
@@ -198,6 +204,7 @@ impl Tracker {
             beams,
             index: TrackIndex::default(),
             scratch: Derived::default(),
+            max_tracks: Derived::default(),
         })
     }
 
@@ -308,6 +315,13 @@ impl Tracker {
         } else {
             !(plot.radar == first.radar && plot.t - first.t <= self.config.time_tolerance)
         })
+    }
+
+    /// Bounds the live tracks (confirmed and tentative): at `max`, a frame
+    /// starts no tentative track and counts the starts it refused
+    /// ([`StepReport::refused`]); tracks already held go on. Not stored.
+    pub fn set_max_tracks(&mut self, max: Option<usize>) {
+        self.max_tracks.0 = max;
     }
 
     /// Processes every buffered plot, closing the last frame. Plots that
@@ -820,9 +834,15 @@ impl Tracker {
         } else {
             Misses::Lazy
         };
+        let live = self.tracks.len() + self.initiator.tentatives.len();
+        let room = self
+            .max_tracks
+            .0
+            .map_or(usize::MAX, |m| m.saturating_sub(live));
         let initiated =
             self.initiator
-                .step(t, leftovers, &self.config, misses, &mut self.next_id)?;
+                .step(t, leftovers, &self.config, misses, &mut self.next_id, room)?;
+        report.refused += initiated.refused;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {

@@ -925,6 +925,31 @@ fn the_window_holds_the_lag_not_the_history() {
     assert_eq!(window.picture(), &batch_picture(&cfg, &plots));
 }
 
+/// A tracker bounded in tracks starts none beyond the bound and counts
+/// the starts it refused; unbounded, the same plots give two tracks.
+#[test]
+fn a_tracker_at_its_bound_of_tracks_starts_no_more() {
+    let cfg = fig5_config(false);
+    let plots = scene(
+        &cfg.radars,
+        &[0.0, 3.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(8),
+    );
+    let mut bounded = Tracker::new(cfg.clone()).unwrap();
+    bounded.set_max_tracks(Some(1));
+    let mut refused = 0;
+    for chunk in plots.chunks(4) {
+        refused += bounded.process(chunk).unwrap().refused;
+        assert!(bounded.tracks().len() <= 1);
+    }
+    refused += bounded.flush().unwrap().refused;
+    assert!(refused > 0);
+    assert_eq!(bounded.confirmed_tracks().len(), 1);
+    assert_eq!(batch_picture(&cfg, &plots).confirmed_tracks().len(), 2);
+}
+
 /// A window bounded in plots holds at most that many: the oldest go into
 /// `base` early and the horizon moves up with them, so a plot older than
 /// it is late although within the lag. Plots in time order lose nothing

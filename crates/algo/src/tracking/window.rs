@@ -109,6 +109,9 @@ pub struct Push {
     /// was moved up to this time (plots older than it are now late,
     /// though within the lag).
     pub bounded_horizon: Option<f64>,
+    /// Tentative tracks not started because the tracker held its bound of
+    /// tracks, in the frames the call processed (replayed ones included).
+    pub refused: usize,
 }
 
 /// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
@@ -222,6 +225,17 @@ impl LagWindow {
     /// not stored: a decoded window has the default).
     pub fn set_max_plots(&mut self, max_plots: usize) {
         self.max_plots = max_plots.max(1);
+    }
+
+    /// Bounds the live tracks of every tracker the window holds (see
+    /// [`Tracker::set_max_tracks`]; not stored).
+    pub fn set_max_tracks(&mut self, max: Option<usize>) {
+        self.base.set_max_tracks(max);
+        self.head.set_max_tracks(max);
+        self.picture.set_max_tracks(max);
+        for (_, t) in &mut self.snapshots {
+            t.set_max_tracks(max);
+        }
     }
 
     /// Most plots the window holds.
@@ -363,6 +377,7 @@ impl LagWindow {
         let mut picture = self.head.clone();
         let report = picture.flush()?;
         out.frames += report.frames;
+        out.refused += report.refused;
         out.deleted.extend(report.deleted);
         self.picture = picture;
         Ok(out)
@@ -380,12 +395,14 @@ impl LagWindow {
         if cut > start && cut < self.window.len() {
             let report = self.head.process(&self.window[start..cut])?;
             out.frames += report.frames;
+            out.refused += report.refused;
             out.deleted.extend(report.deleted);
             self.snapshots.push((cut, self.head.clone()));
             from = cut;
         }
         let report = self.head.process(&self.window[from..])?;
         out.frames += report.frames;
+        out.refused += report.refused;
         out.deleted.extend(report.deleted);
         Ok(())
     }

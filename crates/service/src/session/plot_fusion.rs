@@ -456,6 +456,7 @@ impl SessionKind for PlotFusionSession {
             .unwrap_or_else(|| self.tracker().tracks());
         let biases_before = self.network.bias_views(self.tracker());
         let horizon = self.window.horizon();
+        self.window.set_max_tracks(Some(limits.max_tracks));
         let push = self.window.push(&plots).map_err(computation_error)?;
         let late_json: Vec<usize> = push
             .late
@@ -481,14 +482,14 @@ impl SessionKind for PlotFusionSession {
             .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
             .collect();
         let live = self.tracker().tracks();
-        if live.len() > limits.max_tracks {
-            return Err(ServiceError::QuotaExceeded(format!(
-                "the session would hold {} tracks (confirmed and tentative); the limit is {} \
-                 per session: lower the clutter density's effect (tracker.initiation) or use \
-                 more sessions",
-                live.len(),
-                limits.max_tracks
-            )));
+        if push.refused > 0 {
+            warnings.push(format!(
+                "the session holds its limit of {} tracks (confirmed and tentative): {} \
+                 track start(s) refused in this batch's frames; the tracks held go on, and \
+                 new ones start as others end (lower the clutter's effect with \
+                 tracker.initiation, or split the radars over more sessions)",
+                limits.max_tracks, push.refused
+            ));
         }
         if !push.late.is_empty() {
             let first = match (late_json.first(), &summary) {
@@ -1192,6 +1193,39 @@ pub(crate) mod tests {
         assert_eq!(view.counters, whole.counters);
         assert_eq!(view.max_lag_s, 15.0);
         assert_eq!(whole.tracks.len(), 2);
+    }
+
+    /// At its limit of tracks a session applies the batch and refuses new
+    /// track starts with a warning, instead of refusing every batch from
+    /// then on (which wedged a session fed by a listener).
+    #[test]
+    fn a_session_at_its_track_limit_goes_on_and_says_so() {
+        let limits = Limits {
+            max_tracks: 1,
+            max_batch_reports: 1000,
+        };
+        let mut session = PlotFusionSession::create(spec(), &mut Vec::new()).unwrap();
+        let mut said = Vec::new();
+        let mut applied = 0;
+        for chunk in plots().chunks(7) {
+            let mut warnings = Vec::new();
+            let batch = BatchInput {
+                plots: chunk.to_vec(),
+                ..Default::default()
+            };
+            session.apply(&batch, &limits, &mut warnings).unwrap();
+            applied += 1;
+            assert!(session.tracker().tracks().len() <= 1);
+            said.extend(warnings);
+        }
+        assert!(applied > 5);
+        // Two targets, one track allowed: the other's starts are refused.
+        assert!(
+            said.iter()
+                .any(|w| w.contains("limit of 1 tracks") && w.contains("refused")),
+            "{said:?}"
+        );
+        assert_eq!(session.view().unwrap().tracks.len(), 1);
     }
 
     #[test]
