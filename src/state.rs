@@ -56,6 +56,21 @@ impl AppState {
         }
     }
 
+    /// A state over `settings` with their API keys and a memory store (for
+    /// unit tests of the adapters).
+    #[cfg(test)]
+    pub(crate) fn for_tests(settings: Settings) -> Self {
+        let api_keys = ApiKeys::from_settings(&settings).expect("test API keys");
+        let store =
+            SessionStore::Memory(store::memory::MemoryStore::new(&settings.store_settings()));
+        Self::new(
+            settings,
+            api_keys,
+            crate::telemetry::metrics_handle(),
+            store,
+        )
+    }
+
     pub fn settings(&self) -> &Settings {
         &self.inner.settings
     }

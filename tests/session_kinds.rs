@@ -427,7 +427,7 @@ async fn suite(a: &Sessions, b: &Sessions) {
 /// whose cache holds the lost one must not build on it (the write token,
 /// not the version alone, identifies what it read).
 async fn a_lost_version_made_again(a: &Sessions, b: &Sessions) {
-    let id = format!("{:032x}", rand_id());
+    let id = format!("{:032x}", rand::random::<u128>());
     a.create_with_id::<Counter>(TENANT, &id, counter(10))
         .await
         .unwrap();
@@ -458,12 +458,6 @@ async fn a_lost_version_made_again(a: &Sessions, b: &Sessions) {
     assert_eq!((view.body.1, view.version), (7, 3));
 }
 
-fn rand_id() -> u128 {
-    use std::time::{SystemTime, UNIX_EPOCH};
-    let t = SystemTime::now().duration_since(UNIX_EPOCH).unwrap();
-    t.as_nanos() ^ (u128::from(std::process::id()) << 64)
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_lost_version_made_again_is_not_built_on_with_two_redis_replicas() {
     let Some((a, b)) = redis_pair().await else {
@@ -479,6 +473,23 @@ impl Drop for Replica {
     fn drop(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
+    }
+}
+
+/// `call` again, every 100 ms, while it is `Unavailable` and the deadline
+/// is ahead; its answer (any other error fails the test).
+async fn while_unavailable<T, F: Future<Output = Result<T, ServiceError>>>(
+    deadline: std::time::Instant,
+    mut call: impl FnMut() -> F,
+) -> T {
+    loop {
+        match call().await {
+            Ok(answer) => return answer,
+            Err(ServiceError::Unavailable(_)) if std::time::Instant::now() < deadline => {
+                tokio::time::sleep(Duration::from_millis(100)).await
+            }
+            Err(e) => panic!("{e:?}"),
+        }
     }
 }
 
@@ -513,27 +524,11 @@ async fn a_duplicate_is_acknowledged_only_once_the_replicas_hold_it() {
     // creation is tried again, then the same batch (a duplicate once a
     // write landed).
     let deadline = std::time::Instant::now() + Duration::from_secs(20);
-    let c = loop {
-        match sessions.create::<Counter>(TENANT, counter(10)).await {
-            Ok(c) => break c,
-            Err(ServiceError::Unavailable(_)) if std::time::Instant::now() < deadline => {
-                tokio::time::sleep(Duration::from_millis(100)).await
-            }
-            Err(e) => panic!("{e:?}"),
-        }
-    };
-    let first = loop {
-        match sessions
-            .push::<Counter>(TENANT, &c.id, batch(Some(1), &[2]), LIMITS)
-            .await
-        {
-            Ok(u) => break u,
-            Err(ServiceError::Unavailable(_)) if std::time::Instant::now() < deadline => {
-                tokio::time::sleep(Duration::from_millis(100)).await
-            }
-            Err(e) => panic!("{e:?}"),
-        }
-    };
+    let c = while_unavailable(deadline, || sessions.create::<Counter>(TENANT, counter(10))).await;
+    let first = while_unavailable(deadline, || {
+        sessions.push::<Counter>(TENANT, &c.id, batch(Some(1), &[2]), LIMITS)
+    })
+    .await;
     assert_eq!(first.body, 2);
     // The replica is gone: a retry of batch 1 is a duplicate, but cannot be
     // confirmed as replicated, so it is not acknowledged.

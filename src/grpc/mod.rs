@@ -450,28 +450,14 @@ mod tests {
     use tower::ServiceExt;
 
     use super::*;
-    use crate::{
-        auth::{ApiKeys, Tenant},
-        config::Settings,
-    };
+    use crate::{auth::Tenant, config::Settings};
 
     /// The tenant a tonic service would see: tonic builds its `Request` from
     /// the http request, extensions included.
     async fn tenant_seen(metadata: &[(&str, &str)]) -> Result<String, String> {
         let mut settings = Settings::for_tests();
         settings.api_keys = Some("k1secret=acme,k2secret=globex".into());
-        let api_keys = ApiKeys::from_settings(&settings).unwrap();
-        let state = {
-            let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
-                &settings.store_settings(),
-            ));
-            AppState::new(
-                settings,
-                api_keys,
-                crate::telemetry::metrics_handle(),
-                store,
-            )
-        };
+        let state = AppState::for_tests(settings);
         let app = Router::new()
             .route(
                 "/radar.fusion.v1.CorrelationService/EvaluateRules",

@@ -697,20 +697,10 @@ fn code_name(code: Code) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{auth::ApiKeys, config::Settings};
+    use crate::config::Settings;
 
     fn open_state() -> AppState {
-        let settings = Settings::for_tests();
-        let api_keys = ApiKeys::from_settings(&settings).unwrap();
-        let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
-            &settings.store_settings(),
-        ));
-        AppState::new(
-            settings,
-            api_keys,
-            crate::telemetry::metrics_handle(),
-            store,
-        )
+        AppState::for_tests(Settings::for_tests())
     }
 
     #[tokio::test]

@@ -493,26 +493,12 @@ mod tests {
     use axum::{Extension, body::Body};
 
     use super::*;
-    use crate::{
-        auth::{ApiKeys, Tenant},
-        config::Settings,
-    };
+    use crate::{auth::Tenant, config::Settings};
 
     fn state(keys: Option<&str>) -> AppState {
         let mut settings = Settings::for_tests();
         settings.api_keys = keys.map(Into::into);
-        let api_keys = ApiKeys::from_settings(&settings).unwrap();
-        {
-            let store = store::SessionStore::Memory(store::memory::MemoryStore::new(
-                &settings.store_settings(),
-            ));
-            AppState::new(
-                settings,
-                api_keys,
-                crate::telemetry::metrics_handle(),
-                store,
-            )
-        }
+        AppState::for_tests(settings)
     }
 
     async fn tenant_seen(state: AppState, authorization: Option<&str>) -> (StatusCode, String) {

@@ -781,6 +781,23 @@ fn delayed(plots: &[Plot], held: f64, rng: &mut Lcg) -> Vec<(f64, Plot)> {
     arrivals
 }
 
+/// The fig. 5 scene (phases 0 and 3 s, 100 s) in time order, each plot at
+/// its own time as the beam times them (a scan's two targets 10 ms apart).
+fn beam_timed_scene(cfg: &TrackerConfig, seed: u64) -> Vec<Plot> {
+    let mut plots = scene(
+        &cfg.radars,
+        &[0.0, 3.0],
+        &fig5_targets(),
+        100.0,
+        &mut Lcg(seed),
+    );
+    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+    for (i, p) in plots.iter_mut().enumerate() {
+        p.t += 0.01 * i as f64;
+    }
+    plots
+}
+
 /// One tracker given `plots` in that order, flushed.
 fn batch_picture(cfg: &TrackerConfig, plots: &[Plot]) -> Tracker {
     let mut t = Tracker::new(cfg.clone()).unwrap();
@@ -848,19 +865,7 @@ proptest::proptest! {
 #[test]
 fn a_feed_late_by_one_plot_replays_a_few_plots_a_push() {
     let cfg = fig5_config(false);
-    let mut plots = scene(
-        &cfg.radars,
-        &[0.0, 3.0],
-        &fig5_targets(),
-        100.0,
-        &mut Lcg(5),
-    );
-    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
-    // Each plot at its own time, as the beam times them (a scan's two
-    // targets 10 ms apart here).
-    for (i, p) in plots.iter_mut().enumerate() {
-        p.t += 0.01 * i as f64;
-    }
+    let plots = beam_timed_scene(&cfg, 5);
     assert!(plots.len() > 30);
     let mut window = LagWindow::new(
         Tracker::new(cfg.clone()).unwrap(),
@@ -957,18 +962,7 @@ fn a_tracker_at_its_bound_of_tracks_starts_no_more() {
 #[test]
 fn a_window_holds_at_most_its_bound_of_plots() {
     let cfg = fig5_config(false);
-    let mut plots = scene(
-        &cfg.radars,
-        &[0.0, 3.0],
-        &fig5_targets(),
-        100.0,
-        &mut Lcg(6),
-    );
-    plots.sort_by(|a, b| a.t.total_cmp(&b.t));
-    // Distinct times, as the beam gives them.
-    for (i, p) in plots.iter_mut().enumerate() {
-        p.t += 0.01 * i as f64;
-    }
+    let plots = beam_timed_scene(&cfg, 6);
     let mut window = LagWindow::new(Tracker::new(cfg.clone()).unwrap(), 60.0).unwrap();
     window.set_max_plots(8);
     let mut bounded = None;

@@ -425,15 +425,22 @@ impl LagWindow {
             self.snapshots = kept.into_iter().map(|(m, t)| (m - n, t)).collect();
         }
         if self.window.first().is_some_and(|p| p.t < h - self.max_lag) {
-            let n = self.window.partition_point(|p| p.t < h);
-            self.base.process(&self.window[..n])?;
-            self.window.drain(..n);
-            self.snapshots = std::mem::take(&mut self.snapshots)
-                .into_iter()
-                .filter(|(m, _)| *m >= n)
-                .map(|(m, t)| (m - n, t))
-                .collect();
+            self.feed_base_before(h)?;
         }
+        Ok(())
+    }
+
+    /// Feeds the window's plots older than `h` to `base` and drops them
+    /// (and the snapshots within them) from the window.
+    fn feed_base_before(&mut self, h: f64) -> Result<(), AlgoError> {
+        let n = self.window.partition_point(|p| p.t < h);
+        self.base.process(&self.window[..n])?;
+        self.window.drain(..n);
+        self.snapshots = std::mem::take(&mut self.snapshots)
+            .into_iter()
+            .filter(|(m, _)| *m >= n)
+            .map(|(m, t)| (m - n, t))
+            .collect();
         Ok(())
     }
 
@@ -445,14 +452,7 @@ impl LagWindow {
         }
         let h = self.window[self.window.len() - self.max_plots].t;
         self.horizon = Some(self.horizon.map_or(h, |x| x.max(h)));
-        let n = self.window.partition_point(|p| p.t < h);
-        self.base.process(&self.window[..n])?;
-        self.window.drain(..n);
-        self.snapshots = std::mem::take(&mut self.snapshots)
-            .into_iter()
-            .filter(|(m, _)| *m >= n)
-            .map(|(m, t)| (m - n, t))
-            .collect();
+        self.feed_base_before(h)?;
         Ok(Some(h))
     }
 

@@ -486,12 +486,7 @@ impl Sessions {
                 .store
                 .write(tenant, id, expected, token, write, ttl)
                 .await
-                .map_err(|e| match e {
-                    StoreError::Unavailable { reason } => {
-                        unconfirmed(StoreError::Unavailable { reason })
-                    }
-                    other => other.into(),
-                })?;
+                .map_err(unconfirmed)?;
             match outcome {
                 CasOutcome::Stored { version } => {
                     metrics::counter!("fusion_session_writes_total", "write" => kind).increment(1);
