@@ -5,7 +5,7 @@
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
 //!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
-//!     [--motion imm|cv] [--no-registration] [--timing beam|scan] \
+//!     [--motion imm|cv] [--late-plots reprocess|retrodict] [--no-registration] [--timing beam|scan] \
 //!     [--late none|held|radars|both] [--store memory|redis://…] \
 //!     [--snapshot-batches 32] [--takeover-at 0.5]
 //! ```
@@ -71,6 +71,8 @@ struct Args {
     skip_end_to_end: bool,
     /// `tracker.motion`: absent = the service's default.
     motion: Option<String>,
+    /// `tracker.late_plots`: absent = the service's default.
+    late_plots: Option<String>,
     /// `tracker.registration.enabled = false` (its cost is the difference).
     no_registration: bool,
     late: String,
@@ -91,6 +93,7 @@ fn parse_args() -> anyhow::Result<Args> {
         skip_compute: false,
         skip_end_to_end: false,
         motion: None,
+        late_plots: None,
         no_registration: false,
         late: "none".into(),
         snapshot_batches: None,
@@ -114,6 +117,7 @@ fn parse_args() -> anyhow::Result<Args> {
                     "--clutter" => args.clutter = value.parse()?,
                     "--batch-s" => args.batch_s = value.parse()?,
                     "--motion" => args.motion = Some(value),
+                    "--late-plots" => args.late_plots = Some(value),
                     "--late" => args.late = value,
                     "--store" => args.store = value,
                     "--snapshot-batches" => args.snapshot_batches = Some(value.parse()?),
@@ -165,6 +169,7 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
             .collect(),
         tracker: Some(pb::TrackerOptions {
             motion: spec.tracker.motion.clone(),
+            late_plots: spec.tracker.late_plots.clone(),
             registration: spec
                 .tracker
                 .registration
@@ -268,6 +273,7 @@ async fn main() -> anyhow::Result<()> {
     );
     let (mut spec, plots) = (scene.spec.clone(), scene.plots.clone());
     spec.tracker.motion = args.motion.clone();
+    spec.tracker.late_plots = args.late_plots.clone();
     if args.no_registration {
         spec.tracker.registration = Some(Box::new(svc::RegistrationInput {
             enabled: Some(false),

@@ -162,6 +162,7 @@ pub(crate) fn spec_in(
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
             duplicate_gate_probability: t.duplicate_gate_probability,
             motion: t.motion,
+            late_plots: t.late_plots,
             imm_models: (!t.imm_models.is_empty()).then(|| {
                 t.imm_models
                     .into_iter()

@@ -50,10 +50,11 @@ fn tenant<T>(request: &Request<T>) -> Result<String, Status> {
         .ok_or_else(|| Status::unauthenticated("no tenant was resolved for this call"))
 }
 
-/// A create request: the kind it names and its configuration.
+/// A create request: the kind it names and its configuration (boxed: the
+/// plot-fusion spec is the larger by far).
 enum KindSpec {
-    Correlation(Spec<domain::SessionSpec>),
-    PlotFusion(Spec<service::plot_fusion::SpecInput>),
+    Correlation(Box<Spec<domain::SessionSpec>>),
+    PlotFusion(Box<Spec<service::plot_fusion::SpecInput>>),
 }
 
 fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
@@ -76,7 +77,7 @@ fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
         ],
     )?;
     match kind {
-        KindName::Correlation => Ok(KindSpec::Correlation(correlation_spec_in(req)?)),
+        KindName::Correlation => Ok(KindSpec::Correlation(Box::new(correlation_spec_in(req)?))),
         KindName::PlotFusion => {
             let Some(c) = req.plot_fusion else {
                 return Err(Violations::single(
@@ -84,10 +85,10 @@ fn spec_in(req: pb::CreateSessionRequest) -> Result<KindSpec, ServiceError> {
                     "is required for a plot_fusion session",
                 ));
             };
-            Ok(KindSpec::PlotFusion(Spec {
+            Ok(KindSpec::PlotFusion(Box::new(Spec {
                 idle_expiry_s: req.idle_expiry_s,
                 body: plot_spec_in(c.origin, c.radars, c.tracker, c.cat062),
-            }))
+            })))
         }
     }
 }
@@ -246,6 +247,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,
             max_lag_s: b.max_lag_s,
+            late_plots: b.late_plots.to_string(),
             late_before_t: b.late_before_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
             counters: Some(counters_out(b.counters)),
@@ -344,10 +346,10 @@ async fn create(state: &AppState, tenant: &str, spec: KindSpec) -> Result<AnyVie
     let sessions = state.sessions();
     Ok(match spec {
         KindSpec::Correlation(spec) => {
-            AnyView::Correlation(sessions.create::<CorrelationSession>(tenant, spec).await?)
+            AnyView::Correlation(sessions.create::<CorrelationSession>(tenant, *spec).await?)
         }
         KindSpec::PlotFusion(spec) => {
-            AnyView::PlotFusion(sessions.create::<PlotFusionSession>(tenant, spec).await?)
+            AnyView::PlotFusion(sessions.create::<PlotFusionSession>(tenant, *spec).await?)
         }
     })
 }

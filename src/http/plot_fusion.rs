@@ -270,6 +270,17 @@ pub struct TrackerOptions {
     /// 120. The batch call sorts its plots and only checks the value.
     #[schema(minimum = 0.0, maximum = 120.0, example = 15.0)]
     pub max_lag_s: Option<f64>,
+    /// Sessions: how a plot older than the newest received (within the
+    /// lag) is taken. `reprocess` (default): every plot after it is
+    /// processed again, so the tracks equal the batch call's bit for bit.
+    /// `retrodict`: it updates the tracks it gates with where they stand
+    /// (Bar-Shalom's out-of-sequence update, per IMM model), nothing is
+    /// replayed: about a sixth of the compute under ordinary delays, but
+    /// approximate (tracks tens of metres from the batch call's after
+    /// hiccups, docs/RESULTS.md). Serial mode only (parallel mode
+    /// reprocesses).
+    #[schema(example = "reprocess")]
+    pub late_plots: Option<String>,
     /// Radar registration: on by default with two radars or more.
     pub registration: Option<RegistrationOptions>,
 }
@@ -675,6 +686,7 @@ pub(crate) fn spec_in(
             sigma_tangential_speed_mps: t.sigma_tangential_speed_mps,
             duplicate_gate_probability: t.duplicate_gate_probability,
             motion: t.motion,
+            late_plots: t.late_plots,
             imm_models: t.imm_models.map(|models| {
                 models
                     .into_iter()

@@ -274,6 +274,11 @@ pub struct PlotFusionSessionState {
     pub pending_plots: u32,
     /// The lag (s): plots are taken in any order within it.
     pub max_lag_s: f64,
+    /// How a plot older than the newest received is taken: `reprocess`
+    /// (exact) or `retrodict` (`tracker.late_plots`; a parallel-mode
+    /// session reprocesses).
+    #[schema(example = "reprocess")]
+    pub late_plots: String,
     /// Plots older than this are late beyond the lag (dropped); null
     /// before the first plot.
     pub late_before_t: Option<f64>,
@@ -603,6 +608,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             last_frame_t: b.last_frame_t,
             pending_plots: b.pending_plots,
             max_lag_s: b.max_lag_s,
+            late_plots: b.late_plots.to_string(),
             late_before_t: b.late_before_t,
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),

@@ -39,8 +39,10 @@ use crate::kalman;
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
+use crate::tracking::predictor::ModeState;
+use crate::tracking::retrodiction::{Retro, carry, retrodict};
 use crate::tracking::sweep::View;
-use crate::tracking::track::{Track, chi2_gates, position_selector, predict};
+use crate::tracking::track::{Prediction, Track, chi2_gates, position_selector, predict};
 
 /// Roots and tentative tracks, carried between frames.
 #[derive(Debug, Clone, Default)]
@@ -193,10 +195,20 @@ impl Initiator {
             (0..self.tentatives.len()).collect()
         };
         let mut predicted = Vec::with_capacity(slots.len());
+        // Per candidate newer than the frame (an out-of-sequence plot):
+        // what carries its update back to its time.
+        let mut retros: Vec<Option<Retro>> = Vec::with_capacity(slots.len());
         let mut edges = Vec::new();
         for (c, &i) in slots.iter().enumerate() {
             let track = &self.tentatives[i];
-            let (x, p) = predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?;
+            let (x, p) = if track.t > t {
+                let mut pred = Prediction::default();
+                retros.push(Some(retrodict(cfg, track, t, &mut pred)?));
+                (pred.x, pred.p)
+            } else {
+                retros.push(None);
+                predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?
+            };
             for (j, plot) in plots.iter().enumerate() {
                 let k = plot.z.len();
                 // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
@@ -220,7 +232,27 @@ impl Initiator {
         }
         // The tentatives whose life this frame recorded.
         let mut touched = Vec::new();
-        for ((&i, hit), (x, p)) in slots.iter().zip(hit).zip(predicted) {
+        for (((&i, hit), (x, p)), retro) in slots.iter().zip(hit).zip(predicted).zip(retros) {
+            if let Some(retro) = retro {
+                // An older plot: its update at t carried to the track's
+                // time (no miss judged: a later frame did that).
+                if let Some(j) = hit {
+                    let plot = &plots[j];
+                    let h = position_selector(plot.z.len(), cfg.axes);
+                    let u = kalman::update_linear(&x, &p, &plot.z, &h, &plot.r)?;
+                    let up = [ModeState {
+                        probability: 1.0,
+                        x: u.x,
+                        p: u.p,
+                    }];
+                    let track = &mut self.tentatives[i];
+                    carry(track, &retro, &up)?;
+                    track.record_late_hit(false);
+                    self.index.moved(i, track);
+                    touched.push(i);
+                }
+                continue;
+            }
             if lazy && hit.is_none() {
                 continue;
             }
@@ -286,23 +318,28 @@ impl Initiator {
             if self.is_dead(i) {
                 continue;
             }
-            let root = &self.roots[i];
-            let plot = &plots[j];
-            let dt = t - root.t;
+            // The earlier and the later plot of the pair: a root newer
+            // than the frame (an out-of-sequence plot's) is the later.
+            let (early, late, at) = if self.roots[i].t <= t {
+                (&self.roots[i], &plots[j], t)
+            } else {
+                (&plots[j], &self.roots[i], self.roots[i].t)
+            };
+            let dt = if at == t { t - early.t } else { at - t };
             if dt < init.min_dt || dt > init.max_dt {
                 continue;
             }
-            let k = root.z.len().min(plot.z.len());
-            if velocity_bound(root, plot, dt, &init.velocity) > gates[k - 2] {
+            let k = early.z.len().min(late.z.len());
+            if velocity_bound(early, late, dt, &init.velocity) > gates[k - 2] {
                 continue;
             }
-            if velocity_statistic(root, plot, dt, &init.velocity)? <= gates[k - 2] {
+            if velocity_statistic(early, late, dt, &init.velocity)? <= gates[k - 2] {
                 if out.started >= room {
                     out.refused += 1;
                     continue;
                 }
-                let (x, p) = two_point(root, plot, dt, cfg);
-                let track = new_tentative(next_id, x, p, t, root, plot);
+                let (x, p) = two_point(early, late, dt, cfg);
+                let track = new_tentative(next_id, x, p, at, early, late);
                 self.index.moved(self.tentatives.len(), &track);
                 self.tentatives.push(track);
                 out.started += 1;
@@ -402,7 +439,9 @@ impl Initiator {
                 continue;
             }
             let track = &mut self.tentatives[i];
-            track.predict(t, &cfg.sigma_a, cfg.noise)?;
+            if track.t <= t {
+                track.predict(t, &cfg.sigma_a, cfg.noise)?;
+            }
             track.record(None);
             self.index.moved(i, &self.tentatives[i]);
             if let Verdict::Drop = self.verdict(i, cfg) {

@@ -53,6 +53,7 @@ pub mod plot_association;
 pub mod predictor;
 mod registrar;
 pub mod registration;
+mod retrodiction;
 mod state;
 mod sweep;
 mod track;
@@ -69,7 +70,7 @@ pub use config::{
 pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
-pub use window::{LagWindow, LagWindowParts, LagWindowState, Push};
+pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 
 use std::sync::Arc;
 
@@ -168,6 +169,11 @@ pub struct Tracker {
     /// Most live tracks, confirmed and tentative: no tentative track is
     /// started beyond it (a session's limit; set by its owner, not stored).
     max_tracks: Derived<Option<usize>>,
+    /// Serial mode: plots older than the last frame are processed as
+    /// frames of their own, the tracks newer than them updated by
+    /// retrodiction ([`Tracker::set_out_of_sequence`]; set by the owner,
+    /// not stored).
+    out_of_sequence: Derived<bool>,
 }
 
 /// A frame's plots as the associator needs them.
@@ -205,6 +211,7 @@ impl Tracker {
             index: TrackIndex::default(),
             scratch: Derived::default(),
             max_tracks: Derived::default(),
+            out_of_sequence: Derived::default(),
         })
     }
 
@@ -324,6 +331,20 @@ impl Tracker {
         self.max_tracks.0 = max;
     }
 
+    /// Out-of-sequence plots (serial mode): when on, a plot older than the
+    /// last processed frame is not late but processed as a frame at its
+    /// own time; a track newer than it is updated where it stands by
+    /// retrodiction (`retrodiction.rs`: the plot's update at its time
+    /// carried to the track's), a track older predicted forward as usual,
+    /// a tentative track likewise, an unused plot a root. Nothing is
+    /// replayed: the cost is the tracks the plot may gate. Registration
+    /// learns from in-sequence hits only, and the beam's misses are judged
+    /// in each radar's own time (a late plot judges none). Parallel mode
+    /// ignores it (its late plots stay late). Not stored.
+    pub fn set_out_of_sequence(&mut self, on: bool) {
+        self.out_of_sequence.0 = on;
+    }
+
     /// Processes every buffered plot, closing the last frame. Plots that
     /// arrive later for that frame will be late.
     pub fn flush(&mut self) -> Result<StepReport, AlgoError> {
@@ -378,7 +399,7 @@ impl Tracker {
             let k = self.instant_of(plot.t)?;
             self.last_instant.is_some_and(|last| k <= last)
         } else {
-            self.last_time.is_some_and(|last| plot.t < last)
+            !self.out_of_sequence.0 && self.last_time.is_some_and(|last| plot.t < last)
         })
     }
 
@@ -474,7 +495,9 @@ impl Tracker {
             .collect();
         let last = corrected[corrected.len() - 1];
         let t = last.t;
-        self.beams[index] = Some((t, last.azimuth));
+        if self.beams[index].is_none_or(|(t0, _)| t >= t0) {
+            self.beams[index] = Some((t, last.azimuth));
+        }
         // The measured plot a track reports (and registration pairs) is
         // the raw one.
         let plots = corrected
@@ -491,7 +514,9 @@ impl Tracker {
             spec: spec.clone(),
             plots: corrected,
         };
+        self.scratch.0.behind_sweep = self.judged[index].is_some_and(|(tj, _)| t <= tj);
         let hits = self.run_frame(t, source, plots, report)?;
+        self.scratch.0.behind_sweep = false;
         if Registrar::learns(&self.config) {
             self.registrar
                 .learn_serial(&self.config, &self.tracks, index, &hits)?;
@@ -540,7 +565,11 @@ impl Tracker {
                 continue;
             }
             let track = Arc::make_mut(track);
-            self.predictor.predict(track, t)?;
+            // A track newer than the sweep (updated by an out-of-sequence
+            // radar's later plot) records the miss where it stands.
+            if track.t <= t {
+                self.predictor.predict(track, t)?;
+            }
             track.record(None);
             self.index.moved(k, track);
             if deleter::should_delete(track, &cfg.deletion) {
@@ -655,7 +684,7 @@ impl Tracker {
     ) -> Result<Vec<Hit>, AlgoError> {
         let slots = self.hypothesise(t, &plots)?;
         let mut scratch = std::mem::take(&mut self.scratch.0);
-        scratch.predict(&mut self.predictor, &self.tracks, &slots, t)?;
+        scratch.predict(&self.config, &mut self.predictor, &self.tracks, &slots, t)?;
         let estimates = &scratch.estimates[..slots.len()];
         let cfg = &self.config;
         let (outcome, updater): (Outcome, Box<dyn Updater + '_>) = match &source {
@@ -695,7 +724,7 @@ impl Tracker {
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, report)?;
         self.initiate(t, plots, &outcome.used, report)?;
-        self.last_time = Some(t);
+        self.last_time = Some(self.last_time.map_or(t, |last| last.max(t)));
         self.counters.frames += 1;
         report.frames += 1;
         Ok(hits)
@@ -736,6 +765,30 @@ impl Tracker {
                 continue;
             }
             let track = Arc::make_mut(&mut self.tracks[k]);
+            if let Some(retro) = scratch.retro[c].take() {
+                // A plot older than the track: its update at t carried to
+                // the track's time; the hit recorded, the track's time and
+                // last update kept; no registration pair.
+                let pred = &mut scratch.predictions[c];
+                if pred.modes.is_empty() {
+                    let mut single = vec![ModeState {
+                        probability: 1.0,
+                        x: std::mem::replace(&mut pred.x, nalgebra::DVector::zeros(0)),
+                        p: std::mem::replace(&mut pred.p, nalgebra::DMatrix::zeros(0, 0)),
+                    }];
+                    updater.update(&mut single, assoc)?;
+                    retrodiction::carry(track, &retro, &single)?;
+                } else {
+                    updater.update(&mut pred.modes, assoc)?;
+                    retrodiction::carry(track, &retro, &pred.modes)?;
+                }
+                if outcome.hit[c].is_some() {
+                    track.record_late_hit(scratch.behind_sweep);
+                }
+                self.index.moved(k, track);
+                touched.push(k);
+                continue;
+            }
             track.commit_swap(t, &mut scratch.predictions[c]);
             let (x, p) = if track.modes.is_empty() {
                 let single = &mut scratch.single;
@@ -760,7 +813,14 @@ impl Tracker {
                         plot: j,
                         previous: track.last_plot,
                     });
-                    track.record(Some(plots[j].radars.clone()));
+                    if scratch.behind_sweep && track.replace_miss() {
+                        // Its radar's sweep judged it missed before the
+                        // plot arrived: that miss was this hit.
+                        track.radars = plots[j].radars.clone();
+                        track.last_update = t;
+                    } else {
+                        track.record(Some(plots[j].radars.clone()));
+                    }
                     track.last_plot = plots[j].measured;
                 }
                 None if !lazy => track.record(None),
@@ -884,13 +944,22 @@ struct Scratch {
     predictions: Vec<Prediction>,
     estimates: Vec<TrackEstimate>,
     single: Vec<ModeState>,
+    /// Per candidate, what carries its update back to its own time when it
+    /// is newer than the frame (retrodicted).
+    retro: Vec<Option<retrodiction::Retro>>,
+    /// The frame is older than its radar's last judged sweep (out of
+    /// sequence within the radar): a hit replaces the miss that sweep
+    /// judged.
+    behind_sweep: bool,
 }
 
 impl Scratch {
     /// The predictor's part of a frame: the tracks `slots` predicted to
-    /// `t` into `predictions` (and copied into `estimates`), in order.
+    /// `t` into `predictions` (and copied into `estimates`), in order; a
+    /// track newer than `t` retrodicted there.
     fn predict(
         &mut self,
+        cfg: &TrackerConfig,
         predictor: &mut dyn Predictor,
         tracks: &[Arc<Track>],
         slots: &[usize],
@@ -906,9 +975,15 @@ impl Scratch {
                 p: nalgebra::DMatrix::zeros(0, 0),
             });
         }
+        self.retro.clear();
+        self.retro.resize(slots.len(), None);
         for (c, &k) in slots.iter().enumerate() {
             let pred = &mut self.predictions[c];
-            predictor.predict_into(&tracks[k], t, pred)?;
+            if tracks[k].t > t {
+                self.retro[c] = Some(retrodiction::retrodict(cfg, &tracks[k], t, pred)?);
+            } else {
+                predictor.predict_into(&tracks[k], t, pred)?;
+            }
             track::copy_vector(&mut self.estimates[c].x, &pred.x);
             track::copy_matrix(&mut self.estimates[c].p, &pred.p);
         }

@@ -141,6 +141,11 @@ pub const REGISTRY: &[Experiment] = &[
         run: late_plots::run,
     },
     Experiment {
+        name: "late-plots-fifo",
+        summary: "late-plots with links that keep each radar's order (radar k's plots a fixed delay late, 3 % held 6–10 s): reprocessing against retrodiction",
+        run: late_plots::run_fifo,
+    },
+    Experiment {
         name: "registration",
         summary: "radar registration in the tracker: the seed-001 scene with every radar biased (±500 m, ±0.5°), unbiased vs unregistered vs registered; RMSE, NEES, false and duplicate tracks, bias errors against their σ",
         run: registration::run,

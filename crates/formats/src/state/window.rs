@@ -1,23 +1,30 @@
 //! The stored form of a [`LagWindow`]: a tracker that takes late plots
 //! within a lag (`algo::tracking::window`).
 //!
-//! Layout (after the magic `RFLW` and a `u32` format version, 1):
-//! the lag (f64), the base tracker and the head tracker (each as
-//! [`super::tracker::encode_tracker`] bytes), the window's plots, the
-//! horizon and the newest plot time (optional f64), and the count of plots
-//! dropped as late beyond the lag (u64). The in-memory snapshots are not
-//! stored: a window decoded elsewhere replays a late plot from its base.
-//! So the bytes grow with the lag (two trackers and the plots of the
-//! window), not with the stream's history.
+//! Layout (after the magic `RFLW` and a `u32` format version):
+//! - format 2 (this release): the policy (u8: 0 reprocessing, 1
+//!   retrodiction), then under reprocessing format 1's fields, under
+//!   retrodiction the lag, the head tracker, horizon, newest and late
+//!   count (no base, no plots: a retrodicting window holds none);
+//! - format 1 (earlier releases, decoded as reprocessing): the lag (f64),
+//!   the base tracker and the head tracker (each as
+//!   [`super::tracker::encode_tracker`] bytes), the window's plots, the
+//!   horizon and the newest plot time (optional f64), and the count of
+//!   plots dropped as late beyond the lag (u64).
+//!
+//! The in-memory snapshots are not stored: a reprocessing window decoded
+//! elsewhere replays a late plot from its base. So the bytes grow with the
+//! lag (two trackers and the plots of the window) under reprocessing, and
+//! are one tracker's under retrodiction.
 
-use algo::tracking::{LagWindow, LagWindowParts};
+use algo::tracking::{LagWindow, LagWindowParts, LatePolicy, Tracker};
 
 use super::tracker::{decode_tracker, encode_tracker, plot, read_plot};
 use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFLW";
 /// The format this release writes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// The bytes of `window` (see the module header).
 pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
@@ -25,12 +32,20 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     let mut w = Writer::default();
     w.buf.extend_from_slice(MAGIC);
     w.u32(FORMAT_VERSION);
+    w.u8(match s.policy {
+        LatePolicy::Reprocess => 0,
+        LatePolicy::Retrodict => 1,
+    });
     w.f64(s.max_lag);
-    w.bytes(&encode_tracker(s.base));
+    if s.policy == LatePolicy::Reprocess {
+        w.bytes(&encode_tracker(s.base));
+    }
     w.bytes(&encode_tracker(s.head));
-    w.usize(s.window.len());
-    for p in s.window {
-        plot(&mut w, p);
+    if s.policy == LatePolicy::Reprocess {
+        w.usize(s.window.len());
+        for p in s.window {
+            plot(&mut w, p);
+        }
     }
     w.opt(s.horizon, Writer::f64);
     w.opt(s.newest, Writer::f64);
@@ -38,25 +53,38 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     w.buf
 }
 
-/// A window from [`encode_lag_window`]'s bytes: bytes that are not such an
-/// encoding are [`FormatError::Corrupt`], parts the window rejects
-/// [`FormatError::Invalid`].
+/// A window from [`encode_lag_window`]'s bytes (formats 1 and 2): bytes
+/// that are not such an encoding are [`FormatError::Corrupt`], parts the
+/// window rejects [`FormatError::Invalid`].
 pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     if bytes.len() < 4 || &bytes[..4] != MAGIC {
         return Err(corrupt("not an encoded lag window"));
     }
     let mut r = Reader::new(&bytes[4..]);
     let version = r.u32()?;
-    if version != FORMAT_VERSION {
-        return Err(corrupt(&format!("unknown lag window format {version}")));
-    }
+    let policy = match version {
+        1 => LatePolicy::Reprocess,
+        2 => match r.u8()? {
+            0 => LatePolicy::Reprocess,
+            1 => LatePolicy::Retrodict,
+            other => return Err(corrupt(&format!("unknown late-plot policy {other}"))),
+        },
+        _ => return Err(corrupt(&format!("unknown lag window format {version}"))),
+    };
     let max_lag = r.f64()?;
-    let base = decode_tracker(&r.bytes()?)?;
-    let head = decode_tracker(&r.bytes()?)?;
-    let n = r.len(16)?;
-    let window = (0..n)
-        .map(|_| read_plot(&mut r))
-        .collect::<Result<Vec<_>, _>>()?;
+    let (base, head, window) = if policy == LatePolicy::Reprocess {
+        let base = decode_tracker(&r.bytes()?)?;
+        let head = decode_tracker(&r.bytes()?)?;
+        let n = r.len(16)?;
+        let window = (0..n)
+            .map(|_| read_plot(&mut r))
+            .collect::<Result<Vec<_>, _>>()?;
+        (base, head, window)
+    } else {
+        let head = decode_tracker(&r.bytes()?)?;
+        let base = Tracker::new(head.config().clone()).map_err(FormatError::from)?;
+        (base, head, Vec::new())
+    };
     let horizon = r.opt(Reader::f64)?;
     let newest = r.opt(Reader::f64)?;
     let late = r.u64()?;
@@ -64,6 +92,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         return Err(corrupt("trailing bytes"));
     }
     Ok(LagWindow::from_parts(LagWindowParts {
+        policy,
         max_lag,
         base,
         window,
@@ -122,6 +151,52 @@ mod tests {
     fn window() -> LagWindow {
         let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
         LagWindow::new(Tracker::new(config).unwrap(), 10.0).unwrap()
+    }
+
+    /// A retrodicting window stores its head alone and continues as the
+    /// original; the policy round-trips.
+    #[test]
+    fn a_retrodicting_window_round_trips_and_continues_as_the_original() {
+        let all = plots();
+        let (first, rest) = all.split_at(all.len() / 2);
+        let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        let mut a =
+            LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, LatePolicy::Retrodict)
+                .unwrap();
+        a.push(first).unwrap();
+        let mut late = first[first.len() - 4];
+        late.t -= 2.0;
+        a.push(&[late]).unwrap();
+        let bytes = encode_lag_window(&a);
+        let mut b = decode_lag_window(&bytes).unwrap();
+        assert_eq!(b.policy(), LatePolicy::Retrodict);
+        assert_eq!(a.to_parts(), b.to_parts());
+        assert_eq!(a.picture(), b.picture());
+        // Smaller than a reprocessing window of the same plots (two
+        // trackers and the plots).
+        let mut c = window();
+        c.push(first).unwrap();
+        c.push(&[late]).unwrap();
+        assert!(bytes.len() < encode_lag_window(&c).len());
+        a.push(rest).unwrap();
+        b.push(rest).unwrap();
+        assert_eq!(a.picture(), b.picture());
+        assert_eq!(a.counters(), b.counters());
+    }
+
+    /// Format 1 (earlier releases): a reprocessing window.
+    #[test]
+    fn a_window_of_format_1_decodes_as_reprocessing() {
+        let mut a = window();
+        a.push(&plots()).unwrap();
+        let bytes = encode_lag_window(&a);
+        // Format 2's bytes less the policy byte are format 1's.
+        let mut v1 = bytes[..4].to_vec();
+        v1.extend_from_slice(&1u32.to_le_bytes());
+        v1.extend_from_slice(&bytes[9..]);
+        let b = decode_lag_window(&v1).unwrap();
+        assert_eq!(b.policy(), LatePolicy::Reprocess);
+        assert_eq!(a.to_parts(), b.to_parts());
     }
 
     #[test]

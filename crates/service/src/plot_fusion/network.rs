@@ -144,6 +144,26 @@ pub fn max_lag(spec: &SpecInput) -> Result<f64, ServiceError> {
     Ok(lag)
 }
 
+/// The session's policy for late plots (`tracker.late_plots`, default
+/// `reprocess`).
+pub fn late_policy(spec: &SpecInput) -> Result<algo::tracking::LatePolicy, ServiceError> {
+    use algo::tracking::LatePolicy;
+    let mut v = Violations::new();
+    let policy = v.one_of(
+        "tracker.late_plots",
+        spec.tracker.late_plots.as_deref(),
+        Some(LatePolicy::Reprocess),
+        &[
+            ("reprocess", LatePolicy::Reprocess),
+            ("retrodict", LatePolicy::Retrodict),
+        ],
+    );
+    match policy {
+        Some(p) => Ok(p),
+        None => Err(v.finish_with(None::<()>).unwrap_err()),
+    }
+}
+
 /// A configuration error of the core, named by its wire field.
 pub fn config_error(e: &AlgoError) -> ServiceError {
     match e {
@@ -165,6 +185,7 @@ enum Site {
 /// was decided for the caller (the mode, a missing origin).
 pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
     max_lag(spec)?;
+    late_policy(spec)?;
     let mut v = Violations::new();
     let mut warnings = Vec::new();
     if !v.count_within("radars", spec.radars.len(), MAX_RADARS, "radar") && !spec.radars.is_empty()

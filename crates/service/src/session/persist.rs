@@ -843,12 +843,23 @@ mod tests {
     /// of the replica that served the batch, byte for byte. Returns the
     /// log's length after each push.
     async fn serve_and_rebuild(sessions: &Sessions, chunks: &[Vec<PlotInput>]) -> Vec<usize> {
+        serve_and_rebuild_with(sessions, chunks, None).await
+    }
+
+    /// [`serve_and_rebuild`] with `tracker.late_plots`.
+    async fn serve_and_rebuild_with(
+        sessions: &Sessions,
+        chunks: &[Vec<PlotInput>],
+        late_plots: Option<&str>,
+    ) -> Vec<usize> {
+        let mut body = spec();
+        body.tracker.late_plots = late_plots.map(str::to_string);
         let created = sessions
             .create::<PlotFusionSession>(
                 TENANT,
                 Spec {
                     idle_expiry_s: None,
-                    body: spec(),
+                    body,
                 },
             )
             .await
@@ -949,5 +960,8 @@ mod tests {
             pair.reverse();
         }
         serve_and_rebuild(&memory(32).await, &swapped).await;
+        // The same under retrodiction: the late plots update the tracks
+        // where they stand, identically on both replicas.
+        serve_and_rebuild_with(&memory(4).await, &swapped, Some("retrodict")).await;
     }
 }

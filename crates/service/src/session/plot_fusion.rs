@@ -185,6 +185,10 @@ pub struct SessionView {
     pub pending_plots: u32,
     /// The lag (s): plots older than the newest received minus it are late.
     pub max_lag_s: f64,
+    /// How a plot older than the newest is taken: `reprocess` or
+    /// `retrodict` (`tracker.late_plots`; a parallel-mode session
+    /// reprocesses).
+    pub late_plots: &'static str,
     /// Plots older than this are late beyond the lag (dropped); none
     /// before the first plot.
     pub late_before_t: Option<f64>,
@@ -404,8 +408,12 @@ impl SessionKind for PlotFusionSession {
             None => None,
         };
         let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
-        let window = LagWindow::new(tracker, network::max_lag(&spec)?)
-            .map_err(|e| network::config_error(&e))?;
+        let window = LagWindow::with_policy(
+            tracker,
+            network::max_lag(&spec)?,
+            network::late_policy(&spec)?,
+        )
+        .map_err(|e| network::config_error(&e))?;
         Ok(Self {
             marks: Vec::new(),
             last_tracks: None,
@@ -653,6 +661,10 @@ impl SessionKind for PlotFusionSession {
             last_frame_t: tracker.last_time(),
             pending_plots: self.window.pending() as u32,
             max_lag_s: self.window.max_lag(),
+            late_plots: match self.window.policy() {
+                algo::tracking::LatePolicy::Reprocess => "reprocess",
+                algo::tracking::LatePolicy::Retrodict => "retrodict",
+            },
             late_before_t: self.window.horizon(),
             counters: self.window.counters().into(),
             tracks: tracker
