@@ -514,7 +514,11 @@ impl Tracker {
             spec: spec.clone(),
             plots: corrected,
         };
-        self.scratch.0.behind_sweep = self.judged[index].is_some_and(|(tj, _)| t <= tj);
+        // Out of sequence, a frame at or before its radar's last judged
+        // sweep: its hits replace the misses that sweep judged (in
+        // sequence a radar's frames follow its judgements).
+        self.scratch.0.behind_sweep =
+            self.out_of_sequence.0 && self.judged[index].is_some_and(|(tj, _)| t <= tj);
         let hits = self.run_frame(t, source, plots, report)?;
         self.scratch.0.behind_sweep = false;
         if Registrar::learns(&self.config) {
