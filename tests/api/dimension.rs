@@ -98,6 +98,79 @@ async fn one_target_is_one_system_track_under_lifting_and_splitting() {
     }
 }
 
+/// `scene()` with a second 2D track, "far", 50 km further in slant range than
+/// the target: it never hits the 3D track ("a": 3 σ is 1.5 km in range).
+fn scene_with_a_far_track() -> Value {
+    let mut body = scene();
+    let mut far = plots((30.1, 120.1, 100.0), 15.0, 10, false);
+    for p in &mut far {
+        p["range_m"] = json!(p["range_m"].as_f64().unwrap() + 50_000.0);
+    }
+    body["radars"][1]["tracks"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"id": "far", "plots": far}));
+    body
+}
+
+#[tokio::test]
+async fn pairs_without_a_hit_are_counted_unless_all_pairs_are_asked() {
+    let app = spawn_app().await;
+    let short = app.post_ok(PATH, &scene_with_a_far_track()).await;
+    let mut body = scene_with_a_far_track();
+    body["all_pairs"] = json!(true);
+    let all = app.post_ok(PATH, &body).await;
+    for (s, a) in short["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(all["results"].as_array().unwrap())
+    {
+        // r3/a against r2/b (the same target) and r2/far.
+        let listed: Vec<&Value> = s["pairs"].as_array().unwrap().iter().collect();
+        assert_eq!(listed.len(), 1, "{}", s["method"]);
+        assert_eq!(listed[0]["b"], json!({"radar": "r2", "track": "b"}));
+        assert_eq!(s["omitted_pairs"], 1);
+        let every = a["pairs"].as_array().unwrap();
+        assert_eq!(every.len(), 2);
+        assert_eq!(a["omitted_pairs"], 0);
+        let far = every.iter().find(|p| p["b"]["track"] == "far").unwrap();
+        assert_eq!(far["hits"], 0, "{far}");
+        assert_eq!(&every[0], listed[0]);
+        assert_eq!(s["system_tracks"], a["system_tracks"]);
+    }
+}
+
+#[tokio::test]
+async fn system_tracks_answer_their_latest_sample_unless_history_is_asked() {
+    let app = spawn_app().await;
+    let latest = app.post_ok(PATH, &scene()).await;
+    let mut body = scene();
+    body["history"] = json!(true);
+    let full = app.post_ok(PATH, &body).await;
+    for (l, f) in latest["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(full["results"].as_array().unwrap())
+    {
+        // Pairs and members do not depend on the option.
+        assert_eq!(l["pairs"], f["pairs"]);
+        let (ls, fs) = (&l["system_tracks"][0], &f["system_tracks"][0]);
+        assert_eq!(ls["members"], fs["members"]);
+        let one = ls["samples"].as_array().unwrap();
+        let all = fs["samples"].as_array().unwrap();
+        assert_eq!(one.len(), 1, "{}", l["method"]);
+        // The local filters estimate from their second plot: the 3D track
+        // at 10, 20, …, 140 s (14 instants), the 2D track at 15, 30, …,
+        // 135 s (9); the system track fuses at every instant of either, 14 +
+        // 9 − 4 shared (30, 60, 90, 120) = 19.
+        assert_eq!(all.len(), 19, "{}", l["method"]);
+        let times: Vec<f64> = all.iter().map(|s| s["t"].as_f64().unwrap()).collect();
+        assert!(times.windows(2).all(|w| w[0] < w[1]), "{times:?}");
+        assert_eq!(&one[0], all.last().unwrap());
+    }
+}
 #[tokio::test]
 async fn rest_and_grpc_agree() {
     let app = spawn_app().await;
