@@ -25,6 +25,8 @@ pub struct TransverseMercator {
     e: f64,
     alpha: [f64; 6],
     beta: [f64; 6],
+    /// φ − χ = Σ δⱼ sin 2jχ, geodetic from conformal latitude.
+    delta: [f64; 6],
 }
 
 impl TransverseMercator {
@@ -70,6 +72,21 @@ impl TransverseMercator {
             4583.0 / 161_280.0 * n5 - 108_847.0 / 3_991_680.0 * n6,
             20_648_693.0 / 638_668_800.0 * n6,
         ];
+        // Geodetic from conformal latitude to n⁶ (Krüger 1912; Karney 2011
+        // §4 and GeographicLib's `TransverseMercator` use the same series);
+        // the n⁷ terms are ~1e-19 rad. The test checks it against Newton's
+        // method on the exact relation (Karney eqs. 19–21).
+        let delta = [
+            2.0 * n - 2.0 / 3.0 * n2 - 2.0 * n3 + 116.0 / 45.0 * n4 + 26.0 / 45.0 * n5
+                - 2854.0 / 675.0 * n6,
+            7.0 / 3.0 * n2 - 8.0 / 5.0 * n3 - 227.0 / 45.0 * n4
+                + 2704.0 / 315.0 * n5
+                + 2323.0 / 945.0 * n6,
+            56.0 / 15.0 * n3 - 136.0 / 35.0 * n4 - 1262.0 / 105.0 * n5 + 73814.0 / 2835.0 * n6,
+            4279.0 / 630.0 * n4 - 332.0 / 35.0 * n5 - 399_572.0 / 14175.0 * n6,
+            4174.0 / 315.0 * n5 - 144_838.0 / 6237.0 * n6,
+            601_676.0 / 22275.0 * n6,
+        ];
         Ok(Self {
             ellipsoid,
             lon0,
@@ -78,6 +95,7 @@ impl TransverseMercator {
             e: ellipsoid.e2().sqrt(),
             alpha,
             beta,
+            delta,
         })
     }
 
@@ -116,18 +134,21 @@ impl TransverseMercator {
         let (xi_p, eta_p) = (xi - dxi, eta - deta);
         let (sin_xi, cos_xi) = xi_p.sin_cos();
         let sinh_eta = eta_p.sinh();
-        // Both terms are at most a few units: no overflow to guard against.
-        let tau_p = sin_xi / sinh_eta.mul_add(sinh_eta, cos_xi * cos_xi).sqrt();
+        // The conformal latitude χ (tan χ = τ′, Karney eq. 18); both terms
+        // of the root are at most a few units.
+        let chi = sin_xi.atan2(sinh_eta.mul_add(sinh_eta, cos_xi * cos_xi).sqrt());
         let lam = sinh_eta.atan2(cos_xi);
-        let tau = self.tau_from_conformal(tau_p);
-        (tau.atan(), crate::polar::wrap_angle(self.lon0 + lam))
+        let lat = chi + sine_series(&self.delta, chi);
+        (lat, crate::polar::wrap_angle(self.lon0 + lam))
     }
 
-    /// τ = tan φ from τ′ = tan χ by Newton's method (Karney eqs. 19–21),
+    /// The reference for the χ → φ series (the inverse's method before
+    /// issue 54): τ = tan φ from τ′ = tan χ by Newton's method (Karney eqs. 19–21),
     /// started as GeographicLib's `Math::tauf` does (τ′/(1 − e²), or
     /// τ′ e^{e atanh e} near the poles), which saves a step against τ′.
     /// √(1 + x²) stands for hypot(1, x): τ = tan φ stays below 1.7e16 (the
     /// tangent of the largest double below π/2), far from overflow.
+    #[cfg(test)]
     fn tau_from_conformal(&self, tau_p: f64) -> f64 {
         let e2 = self.ellipsoid.e2();
         let sec_of = |x: f64| x.mul_add(x, 1.0).sqrt();
@@ -150,6 +171,17 @@ impl TransverseMercator {
         }
         tau
     }
+}
+
+/// Σⱼ cⱼ sin(2jx) by Clenshaw's recurrence (one sine and cosine).
+fn sine_series(c: &[f64; 6], x: f64) -> f64 {
+    let (s, co) = (2.0 * x).sin_cos();
+    let a = 2.0 * co;
+    let (mut y1, mut y2) = (0.0, 0.0);
+    for &ck in c.iter().rev() {
+        (y2, y1) = (y1, ck + a * y1 - y2);
+    }
+    s * y1
 }
 
 /// Σⱼ cⱼ sin(2jζ) for ζ = ξ + iη as (real, imaginary) parts: Karney (2011)
@@ -297,8 +329,29 @@ mod tests {
         }
     }
 
-    /// Near the pole τ′ passes 70 and the Newton start switches (τ′ e^{e
-    /// atanh e}): the round trip holds there too (latitudes 88.8°–89.98°).
+    /// The χ → φ series against Newton's method on the exact relation, from
+    /// the equator to 89.99° on three ellipsoids: equal to 1e-15 rad (6 nm).
+    #[test]
+    fn conformal_series_matches_newton() {
+        for ell in [
+            Ellipsoid::WGS84,
+            Ellipsoid::KRASOVSKY_1940,
+            Ellipsoid::GRS80,
+        ] {
+            let tm = TransverseMercator::new(ell, 0.0, 1.0).unwrap();
+            for i in -1000..=1000 {
+                let chi = i as f64 * 1.5706 / 1000.0;
+                let newton = tm.tau_from_conformal(chi.tan()).atan();
+                let series = chi + sine_series(&tm.delta, chi);
+                assert!(
+                    (newton - series).abs() < 1e-15,
+                    "{chi}: {newton} vs {series}"
+                );
+            }
+        }
+    }
+
+    /// Near the pole (latitudes 88.8°–89.98°) the round trip holds too.
     #[test]
     fn inverse_round_trips_near_the_pole() {
         let plane = LocalPlane::new(Ellipsoid::WGS84, 1.55, 0.3).unwrap();
