@@ -208,7 +208,7 @@ struct Plan {
 /// Validates, then runs every requested method.
 pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     let plan = validate(&input)?;
-    let (input_history, all_pairs) = (input.history, input.all_pairs);
+    let (history, all_pairs) = (input.history, input.all_pairs);
     drop(input);
     let start = Instant::now();
     let mut results = Vec::new();
@@ -260,7 +260,7 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
             }
             // Without history only the latest sample is answered (and
             // converted): the answer stays small against the request.
-            let shown = if input_history {
+            let shown = if history {
                 &st.samples[..]
             } else {
                 &st.samples[st.samples.len().saturating_sub(1)..]

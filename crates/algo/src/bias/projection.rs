@@ -72,10 +72,9 @@ impl TransverseMercator {
             4583.0 / 161_280.0 * n5 - 108_847.0 / 3_991_680.0 * n6,
             20_648_693.0 / 638_668_800.0 * n6,
         ];
-        // Geodetic from conformal latitude to n⁶ (Krüger 1912; Karney 2011
-        // §4 and GeographicLib's `TransverseMercator` use the same series);
-        // the n⁷ terms are ~1e-19 rad. The test checks it against Newton's
-        // method on the exact relation (Karney eqs. 19–21).
+        // Geodetic from conformal latitude: the classical series in n to n⁶
+        // (Krüger 1912); the n⁷ terms are ~1e-19 rad. The test checks it
+        // against Newton's method on the exact relation (Karney eqs. 19–21).
         let delta = [
             2.0 * n - 2.0 / 3.0 * n2 - 2.0 * n3 + 116.0 / 45.0 * n4 + 26.0 / 45.0 * n5
                 - 2854.0 / 675.0 * n6,
@@ -134,7 +133,7 @@ impl TransverseMercator {
         let (xi_p, eta_p) = (xi - dxi, eta - deta);
         let (sin_xi, cos_xi) = xi_p.sin_cos();
         let sinh_eta = eta_p.sinh();
-        // The conformal latitude χ (tan χ = τ′, Karney eq. 18); both terms
+        // The conformal latitude χ (tan χ = τ′); both terms
         // of the root are at most a few units.
         let chi = sin_xi.atan2(sinh_eta.mul_add(sinh_eta, cos_xi * cos_xi).sqrt());
         let lam = sinh_eta.atan2(cos_xi);
@@ -142,28 +141,18 @@ impl TransverseMercator {
         (lat, crate::polar::wrap_angle(self.lon0 + lam))
     }
 
-    /// The reference for the χ → φ series (the inverse's method before
-    /// issue 54): τ = tan φ from τ′ = tan χ by Newton's method (Karney eqs. 19–21),
-    /// started as GeographicLib's `Math::tauf` does (τ′/(1 − e²), or
-    /// τ′ e^{e atanh e} near the poles), which saves a step against τ′.
-    /// √(1 + x²) stands for hypot(1, x): τ = tan φ stays below 1.7e16 (the
-    /// tangent of the largest double below π/2), far from overflow.
+    /// The reference for the χ → φ series, the inverse's method before
+    /// issue 54: τ = tan φ from τ′ = tan χ by Newton's method (Karney eqs.
+    /// 19–21).
     #[cfg(test)]
     fn tau_from_conformal(&self, tau_p: f64) -> f64 {
         let e2 = self.ellipsoid.e2();
-        let sec_of = |x: f64| x.mul_add(x, 1.0).sqrt();
-        let mut tau = if tau_p.abs() > 70.0 {
-            tau_p * (self.e * self.e.atanh()).exp()
-        } else {
-            tau_p / (1.0 - e2)
-        };
+        let mut tau = tau_p;
         for _ in 0..8 {
-            // sec φ, once per step (the same value at each use).
-            let sec = sec_of(tau);
-            let sigma = (self.e * (self.e * tau / sec).atanh()).sinh();
-            let tau_i = tau * sec_of(sigma) - sigma * sec;
-            let d = (tau_p - tau_i) / sec_of(tau_i) * (1.0 + (1.0 - e2) * tau * tau)
-                / ((1.0 - e2) * sec);
+            let sigma = (self.e * (self.e * tau / tau.hypot(1.0)).atanh()).sinh();
+            let tau_i = tau * sigma.hypot(1.0) - sigma * tau.hypot(1.0);
+            let d = (tau_p - tau_i) / tau_i.hypot(1.0) * (1.0 + (1.0 - e2) * tau * tau)
+                / ((1.0 - e2) * tau.hypot(1.0));
             tau += d;
             if d.abs() <= 1e-15 * tau.abs().max(1.0) {
                 break;
@@ -185,9 +174,9 @@ fn sine_series(c: &[f64; 6], x: f64) -> f64 {
 }
 
 /// Σⱼ cⱼ sin(2jζ) for ζ = ξ + iη as (real, imaginary) parts: Karney (2011)
-/// eq. (11) and its inverse, by Clenshaw's recurrence in complex arithmetic
-/// (his §5), so one sine, cosine, sinh and cosh serve all six terms instead
-/// of six of each. Agrees with the term-by-term sum to rounding (test).
+/// eq. (11) and its inverse, by Clenshaw's recurrence in complex arithmetic,
+/// so one sine, cosine, sinh and cosh serve all six terms instead of six of
+/// each. Agrees with the term-by-term sum to rounding (test).
 fn krueger_series(c: &[f64; 6], xi: f64, eta: f64) -> (f64, f64) {
     let (s, co) = (2.0 * xi).sin_cos();
     let (sh, ch) = ((2.0 * eta).sinh(), (2.0 * eta).cosh());
