@@ -171,11 +171,25 @@ async fn system_tracks_answer_their_latest_sample_unless_history_is_asked() {
         assert_eq!(&one[0], all.last().unwrap());
     }
 }
+
 #[tokio::test]
 async fn rest_and_grpc_agree() {
+    rest_and_grpc_agree_on(scene(), false).await;
+}
+
+#[tokio::test]
+async fn rest_and_grpc_agree_on_the_whole_history() {
+    rest_and_grpc_agree_on(scene_with_a_far_track(), true).await;
+}
+
+/// The same request over both transports, with `history` and `all_pairs`
+/// both set to `full`: every pair's and every sample's fields agree.
+async fn rest_and_grpc_agree_on(s: Value, full: bool) {
     let app = spawn_app().await;
-    let rest = app.post_ok(PATH, &scene()).await;
-    let s = scene();
+    let mut body = s.clone();
+    body["history"] = json!(full);
+    body["all_pairs"] = json!(full);
+    let rest = app.post_ok(PATH, &body).await;
     let site = |v: &Value| pb::DimensionSite {
         lat_deg: v["lat_deg"].as_f64(),
         lon_deg: v["lon_deg"].as_f64(),
@@ -188,6 +202,8 @@ async fn rest_and_grpc_agree() {
         k: Some(3),
         significance: Some(0.001),
         preset_altitude_m: Some(7000.0),
+        history: full,
+        all_pairs: full,
         radars: s["radars"]
             .as_array()
             .unwrap()
@@ -227,17 +243,30 @@ async fn rest_and_grpc_agree() {
     assert_eq!(grpc.results.len(), 2);
     for (g, r) in grpc.results.iter().zip(rest["results"].as_array().unwrap()) {
         assert_eq!(g.method, r["method"]);
-        assert_eq!(g.pairs[0].period, r["pairs"][0]["period"]);
-        assert_eq!(
-            g.pairs[0].mean_statistic,
-            r["pairs"][0]["mean_statistic"].as_f64()
-        );
-        assert_eq!(g.system_tracks.len(), 1);
+        assert_eq!(g.omitted_pairs, r["omitted_pairs"].as_u64().unwrap());
+        assert_eq!(g.pairs.len(), r["pairs"].as_array().unwrap().len());
+        for (gp, rp) in g.pairs.iter().zip(r["pairs"].as_array().unwrap()) {
+            assert_eq!(gp.period, rp["period"]);
+            assert_eq!(gp.hits, rp["hits"]);
+            assert_eq!(gp.mean_statistic, rp["mean_statistic"].as_f64());
+        }
+        // With the far track and all_pairs, its pair is listed too.
+        assert_eq!(g.pairs.len(), if full { 2 } else { 1 });
+        // The far track is a system track of its own.
+        assert_eq!(g.system_tracks.len(), if full { 2 } else { 1 });
+        let k = g
+            .system_tracks
+            .iter()
+            .position(|st| st.members.len() == 2)
+            .unwrap();
+        assert_eq!(g.system_tracks[k].id, r["system_tracks"][k]["id"]);
         let (gs, rs) = (
-            &g.system_tracks[0].samples,
-            &r["system_tracks"][0]["samples"],
+            &g.system_tracks[k].samples,
+            &r["system_tracks"][k]["samples"],
         );
         assert_eq!(gs.len(), rs.as_array().unwrap().len());
+        // 19 fused instants (see above), or the latest one.
+        assert_eq!(gs.len(), if full { 19 } else { 1 });
         for (a, b) in gs.iter().zip(rs.as_array().unwrap()) {
             assert_eq!(a.t, b["t"].as_f64().unwrap());
             let bs: Vec<f64> = b["state"]
