@@ -46,6 +46,8 @@ fn input(req: pb::DimensionFuseRequest) -> svc::FuseInput {
         altitude_sigma_m: req.altitude_sigma_m,
         gate_sigmas: req.gate_sigmas,
         significance: req.significance,
+        history: req.history,
+        all_pairs: req.all_pairs,
         radars: req
             .radars
             .into_iter()
@@ -111,6 +113,7 @@ fn response(out: svc::FuseOutput) -> pb::DimensionFuseResponse {
                         mean_statistic: p.mean_statistic,
                     })
                     .collect(),
+                omitted_pairs: m.omitted_pairs,
                 uncorrelated: m.uncorrelated.into_iter().map(track_ref).collect(),
                 system_tracks: m
                     .system_tracks

@@ -43,6 +43,14 @@ pub struct DimensionFuseRequest {
     /// Significance α of the check period's χ² test, in (0, 1) (default 0.01).
     #[schema(exclusive_minimum = 0.0, exclusive_maximum = 1.0)]
     pub significance: Option<f64>,
+    /// Also return every fused sample of each system track; default: only
+    /// its latest sample (`samples` holds one), so the answer stays small.
+    #[serde(default)]
+    pub history: bool,
+    /// List every pair of tracks tested; default: pairs without a hit, a
+    /// check or a revocation are only counted (`omitted_pairs`).
+    #[serde(default)]
+    pub all_pairs: bool,
     pub radars: Vec<DimensionRadar>,
 }
 
@@ -109,8 +117,12 @@ pub struct DimensionFuseResponse {
 #[derive(Debug, Serialize, ToSchema)]
 pub struct DimensionMethodResult {
     pub method: String,
-    /// Every pair of tracks of different radars that overlapped, with its K-NN period.
+    /// The pairs of tracks of different radars that hit in their current
+    /// association period, were checked or revoked (every pair tested with
+    /// `all_pairs`), with their K-NN period.
     pub pairs: Vec<DimensionPair>,
+    /// Pairs tested but not listed (none with `all_pairs`).
+    pub omitted_pairs: u64,
     /// Tracks correlated with no other radar's track.
     pub uncorrelated: Vec<DimensionTrackRef>,
     pub system_tracks: Vec<DimensionSystemTrack>,
@@ -149,6 +161,8 @@ pub struct DimensionSystemTrack {
     pub members: Vec<DimensionTrackRef>,
     /// False when only 2D radars see the track (not under mapping): the height is unknown.
     pub altitude_known: bool,
+    /// The fused samples in time order: only the latest unless the request
+    /// asked for `history`.
     pub samples: Vec<DimensionSample>,
 }
 
@@ -218,6 +232,8 @@ fn fuse_on_lane(req: DimensionFuseRequest) -> Result<DimensionFuseResponse, Prob
         altitude_sigma_m: req.altitude_sigma_m,
         gate_sigmas: req.gate_sigmas,
         significance: req.significance,
+        history: req.history,
+        all_pairs: req.all_pairs,
         radars: req
             .radars
             .into_iter()
@@ -274,6 +290,7 @@ fn fuse_on_lane(req: DimensionFuseRequest) -> Result<DimensionFuseResponse, Prob
                         mean_statistic: p.mean_statistic,
                     })
                     .collect(),
+                omitted_pairs: m.omitted_pairs,
                 uncorrelated: m.uncorrelated.into_iter().map(track_ref).collect(),
                 system_tracks: m
                     .system_tracks

@@ -98,11 +98,98 @@ async fn one_target_is_one_system_track_under_lifting_and_splitting() {
     }
 }
 
+/// `scene()` with a second 2D track, "far", 50 km further in slant range than
+/// the target: it never hits the 3D track ("a": 3 σ is 1.5 km in range).
+fn scene_with_a_far_track() -> Value {
+    let mut body = scene();
+    let mut far = plots((30.1, 120.1, 100.0), 15.0, 10, false);
+    for p in &mut far {
+        p["range_m"] = json!(p["range_m"].as_f64().unwrap() + 50_000.0);
+    }
+    body["radars"][1]["tracks"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"id": "far", "plots": far}));
+    body
+}
+
+#[tokio::test]
+async fn pairs_without_a_hit_are_counted_unless_all_pairs_are_asked() {
+    let app = spawn_app().await;
+    let short = app.post_ok(PATH, &scene_with_a_far_track()).await;
+    let mut body = scene_with_a_far_track();
+    body["all_pairs"] = json!(true);
+    let all = app.post_ok(PATH, &body).await;
+    for (s, a) in short["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(all["results"].as_array().unwrap())
+    {
+        // r3/a against r2/b (the same target) and r2/far.
+        let listed: Vec<&Value> = s["pairs"].as_array().unwrap().iter().collect();
+        assert_eq!(listed.len(), 1, "{}", s["method"]);
+        assert_eq!(listed[0]["b"], json!({"radar": "r2", "track": "b"}));
+        assert_eq!(s["omitted_pairs"], 1);
+        let every = a["pairs"].as_array().unwrap();
+        assert_eq!(every.len(), 2);
+        assert_eq!(a["omitted_pairs"], 0);
+        let far = every.iter().find(|p| p["b"]["track"] == "far").unwrap();
+        assert_eq!(far["hits"], 0, "{far}");
+        assert_eq!(&every[0], listed[0]);
+        assert_eq!(s["system_tracks"], a["system_tracks"]);
+    }
+}
+
+#[tokio::test]
+async fn system_tracks_answer_their_latest_sample_unless_history_is_asked() {
+    let app = spawn_app().await;
+    let latest = app.post_ok(PATH, &scene()).await;
+    let mut body = scene();
+    body["history"] = json!(true);
+    let full = app.post_ok(PATH, &body).await;
+    for (l, f) in latest["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(full["results"].as_array().unwrap())
+    {
+        // Pairs and members do not depend on the option.
+        assert_eq!(l["pairs"], f["pairs"]);
+        let (ls, fs) = (&l["system_tracks"][0], &f["system_tracks"][0]);
+        assert_eq!(ls["members"], fs["members"]);
+        let one = ls["samples"].as_array().unwrap();
+        let all = fs["samples"].as_array().unwrap();
+        assert_eq!(one.len(), 1, "{}", l["method"]);
+        // The local filters estimate from their second plot: the 3D track
+        // at 10, 20, …, 140 s (14 instants), the 2D track at 15, 30, …,
+        // 135 s (9); the system track fuses at every instant of either, 14 +
+        // 9 − 4 shared (30, 60, 90, 120) = 19.
+        assert_eq!(all.len(), 19, "{}", l["method"]);
+        let times: Vec<f64> = all.iter().map(|s| s["t"].as_f64().unwrap()).collect();
+        assert!(times.windows(2).all(|w| w[0] < w[1]), "{times:?}");
+        assert_eq!(&one[0], all.last().unwrap());
+    }
+}
+
 #[tokio::test]
 async fn rest_and_grpc_agree() {
+    rest_and_grpc_agree_on(scene(), false).await;
+}
+
+#[tokio::test]
+async fn rest_and_grpc_agree_on_the_whole_history() {
+    rest_and_grpc_agree_on(scene_with_a_far_track(), true).await;
+}
+
+/// The same request over both transports, with `history` and `all_pairs`
+/// both set to `full`: every pair's and every sample's fields agree.
+async fn rest_and_grpc_agree_on(s: Value, full: bool) {
     let app = spawn_app().await;
-    let rest = app.post_ok(PATH, &scene()).await;
-    let s = scene();
+    let mut body = s.clone();
+    body["history"] = json!(full);
+    body["all_pairs"] = json!(full);
+    let rest = app.post_ok(PATH, &body).await;
     let site = |v: &Value| pb::DimensionSite {
         lat_deg: v["lat_deg"].as_f64(),
         lon_deg: v["lon_deg"].as_f64(),
@@ -115,6 +202,8 @@ async fn rest_and_grpc_agree() {
         k: Some(3),
         significance: Some(0.001),
         preset_altitude_m: Some(7000.0),
+        history: full,
+        all_pairs: full,
         radars: s["radars"]
             .as_array()
             .unwrap()
@@ -154,17 +243,30 @@ async fn rest_and_grpc_agree() {
     assert_eq!(grpc.results.len(), 2);
     for (g, r) in grpc.results.iter().zip(rest["results"].as_array().unwrap()) {
         assert_eq!(g.method, r["method"]);
-        assert_eq!(g.pairs[0].period, r["pairs"][0]["period"]);
-        assert_eq!(
-            g.pairs[0].mean_statistic,
-            r["pairs"][0]["mean_statistic"].as_f64()
-        );
-        assert_eq!(g.system_tracks.len(), 1);
+        assert_eq!(g.omitted_pairs, r["omitted_pairs"].as_u64().unwrap());
+        assert_eq!(g.pairs.len(), r["pairs"].as_array().unwrap().len());
+        for (gp, rp) in g.pairs.iter().zip(r["pairs"].as_array().unwrap()) {
+            assert_eq!(gp.period, rp["period"]);
+            assert_eq!(gp.hits, rp["hits"]);
+            assert_eq!(gp.mean_statistic, rp["mean_statistic"].as_f64());
+        }
+        // With the far track and all_pairs, its pair is listed too.
+        assert_eq!(g.pairs.len(), if full { 2 } else { 1 });
+        // The far track is a system track of its own.
+        assert_eq!(g.system_tracks.len(), if full { 2 } else { 1 });
+        let k = g
+            .system_tracks
+            .iter()
+            .position(|st| st.members.len() == 2)
+            .unwrap();
+        assert_eq!(g.system_tracks[k].id, r["system_tracks"][k]["id"]);
         let (gs, rs) = (
-            &g.system_tracks[0].samples,
-            &r["system_tracks"][0]["samples"],
+            &g.system_tracks[k].samples,
+            &r["system_tracks"][k]["samples"],
         );
         assert_eq!(gs.len(), rs.as_array().unwrap().len());
+        // 19 fused instants (see above), or the latest one.
+        assert_eq!(gs.len(), if full { 19 } else { 1 });
         for (a, b) in gs.iter().zip(rs.as_array().unwrap()) {
             assert_eq!(a.t, b["t"].as_f64().unwrap());
             let bs: Vec<f64> = b["state"]

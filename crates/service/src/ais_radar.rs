@@ -7,7 +7,7 @@
 use std::{collections::BTreeMap, time::Instant};
 
 use super::validate::{Bound, LATITUDE, LONGITUDE};
-use super::{Ids, Increasing, Interval, ServiceError, Violations, micros_since};
+use super::{Ids, Increasing, Interval, ServiceError, Violations, at, micros_since};
 use algo::{
     bias::{
         associate::{self, AisPoint, Config, Path, RadarSample, Seeding},
@@ -412,36 +412,40 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let mut ids = Vec::with_capacity(input.radar_tracks.len());
     let mut tracks = Vec::with_capacity(input.radar_tracks.len());
     for (i, t) in input.radar_tracks.iter().enumerate() {
-        let f = format!("radar_tracks[{i}]");
         let id = track_ids.check(&mut v, t.id.as_deref(), i, |j| {
             format!("radar_tracks[{j}].id")
         });
         ids.push(id.unwrap_or_default().to_string());
         if t.samples.len() < 2 {
-            v.add(format!("{f}.samples"), "must hold at least 2 samples");
+            v.add(
+                format!("radar_tracks[{i}].samples"),
+                "must hold at least 2 samples",
+            );
         }
         let mut samples = Vec::with_capacity(t.samples.len());
         let mut times = Increasing::new();
         for (k, s) in t.samples.iter().enumerate() {
-            let sf = format!("{f}.samples[{k}]");
-            let time = times.next(&mut v, format!("{sf}.t"), s.t, TIME);
+            // Field paths are built only for a violation (this loop runs
+            // per sample).
+            let sf = |name: &str| format!("radar_tracks[{i}].samples[{k}]{name}");
+            let time = times.next(&mut v, at(|| sf(".t")), s.t, TIME);
             let polar = s.range_m.is_some() || s.azimuth_deg.is_some();
             let cart = s.east_m.is_some() || s.north_m.is_some();
             let pos = match (polar, cart) {
                 (true, false) => {
-                    let r = v.number_in(format!("{sf}.range_m"), s.range_m, 0.0, 1e7);
-                    let a = v.number_in(format!("{sf}.azimuth_deg"), s.azimuth_deg, -360.0, 360.0);
+                    let r = v.number_in(at(|| sf(".range_m")), s.range_m, 0.0, 1e7);
+                    let a = v.number_in(at(|| sf(".azimuth_deg")), s.azimuth_deg, -360.0, 360.0);
                     r.zip(a)
                         .map(|(r, a)| (r, a.to_radians().rem_euclid(std::f64::consts::TAU)))
                 }
                 (false, true) => {
-                    let e = v.number(format!("{sf}.east_m"), s.east_m, PLANE);
-                    let n = v.number(format!("{sf}.north_m"), s.north_m, PLANE);
+                    let e = v.number(at(|| sf(".east_m")), s.east_m, PLANE);
+                    let n = v.number(at(|| sf(".north_m")), s.north_m, PLANE);
                     e.zip(n).map(|(e, n)| associate::plane_to_polar([e, n]))
                 }
                 _ => {
                     v.add(
-                        sf,
+                        sf(""),
                         "give either range_m and azimuth_deg, or east_m and north_m",
                     );
                     None
@@ -457,11 +461,11 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let decoded = nmea::decode(&input.nmea);
     let mut reports: Vec<Report> = Vec::new();
     for (k, r) in input.ais_reports.iter().enumerate() {
-        let f = format!("ais_reports[{k}]");
-        let mmsi = v.required(format!("{f}.mmsi"), r.mmsi);
-        let t = v.number(format!("{f}.t"), r.t, TIME);
-        let lat = v.number_in(format!("{f}.lat_deg"), r.lat_deg, -90.0, 90.0);
-        let lon = v.number(format!("{f}.lon_deg"), r.lon_deg, LONGITUDE);
+        let f = |name: &str| format!("ais_reports[{k}].{name}");
+        let mmsi = v.required(at(|| f("mmsi")), r.mmsi);
+        let t = v.number(at(|| f("t")), r.t, TIME);
+        let lat = v.number_in(at(|| f("lat_deg")), r.lat_deg, -90.0, 90.0);
+        let lon = v.number(at(|| f("lon_deg")), r.lon_deg, LONGITUDE);
         if let (Some(mmsi), Some(t), Some(lat), Some(lon)) = (mmsi, t, lat, lon) {
             reports.push(Report {
                 mmsi,

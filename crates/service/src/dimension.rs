@@ -58,6 +58,12 @@ pub struct FuseInput {
     pub altitude_sigma_m: Option<f64>,
     pub gate_sigmas: Option<f64>,
     pub significance: Option<f64>,
+    /// Every sample of each system track; `false` (the default): only its
+    /// latest, so the answer does not repeat the request's history.
+    pub history: bool,
+    /// Every pair tested; `false` (the default): the pairs without a hit,
+    /// a check or a revocation are counted in `omitted_pairs` instead.
+    pub all_pairs: bool,
     pub radars: Vec<RadarInput>,
 }
 
@@ -106,6 +112,9 @@ pub struct FuseOutput {
 pub struct MethodOutput {
     pub method: &'static str,
     pub pairs: Vec<PairOutput>,
+    /// Pairs not listed (without `all_pairs`): no hit in their current
+    /// association period, never checked, never revoked.
+    pub omitted_pairs: u64,
     /// Tracks in no system track with another radar's track.
     pub uncorrelated: Vec<TrackRef>,
     pub system_tracks: Vec<SystemTrackOutput>,
@@ -141,6 +150,7 @@ pub struct SystemTrackOutput {
     pub members: Vec<TrackRef>,
     /// False: only 2D radars see it, its height is the nominal preset.
     pub altitude_known: bool,
+    /// Every fused instant with `history`, else the latest one.
     pub samples: Vec<SystemSample>,
 }
 
@@ -198,6 +208,8 @@ struct Plan {
 /// Validates, then runs every requested method.
 pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     let plan = validate(&input)?;
+    let (history, all_pairs) = (input.history, input.all_pairs);
+    drop(input);
     let start = Instant::now();
     let mut results = Vec::new();
     // The local filters run once for all methods: their time is in the
@@ -213,9 +225,19 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     for (&method, out) in plan.methods.iter().zip(outs) {
         let t0 = Instant::now();
         let r = |i: usize| plan.refs[i].clone();
-        let pairs = out
+        // A pair that never hit, was never checked nor revoked says only
+        // that two tracks are apart: counted, listed on request.
+        let listed = |p: &&dimension::PairReport| {
+            all_pairs
+                || p.state.hits > 0
+                || p.state.check_tests > 0
+                || p.state.revocations > 0
+                || p.state.correlated()
+        };
+        let pairs: Vec<PairOutput> = out
             .pairs
             .iter()
+            .filter(listed)
             .map(|p| PairOutput {
                 a: r(p.a),
                 b: r(p.b),
@@ -236,8 +258,15 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
             if st.members.len() == 1 {
                 uncorrelated.push(r(st.members[0]));
             }
-            let mut samples = Vec::with_capacity(st.samples.len());
-            for s in &st.samples {
+            // Without history only the latest sample is answered (and
+            // converted): the answer stays small against the request.
+            let shown = if history {
+                &st.samples[..]
+            } else {
+                &st.samples[st.samples.len().saturating_sub(1)..]
+            };
+            let mut samples = Vec::with_capacity(shown.len());
+            for s in shown {
                 let (lat, lon, h) = plan
                     .centre
                     .enu_to_geodetic([s.x[0], s.x[2], s.x[4]])
@@ -274,6 +303,7 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
         results.push((
             MethodOutput {
                 method: method_name(method),
+                omitted_pairs: (out.pairs.len() - pairs.len()) as u64,
                 pairs,
                 uncorrelated,
                 system_tracks,
