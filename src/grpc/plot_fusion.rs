@@ -163,6 +163,7 @@ pub(crate) fn spec_in(
             duplicate_gate_probability: t.duplicate_gate_probability,
             motion: t.motion,
             late_plots: t.late_plots,
+            max_replay_plots: t.max_replay_plots,
             imm_models: (!t.imm_models.is_empty()).then(|| {
                 t.imm_models
                     .into_iter()

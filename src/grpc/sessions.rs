@@ -248,6 +248,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             pending_plots: b.pending_plots,
             max_lag_s: b.max_lag_s,
             late_plots: b.late_plots.to_string(),
+            approximate_from: b.approximate_from,
             late_before_t: b.late_before_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
             counters: Some(counters_out(b.counters)),

@@ -271,16 +271,22 @@ pub struct TrackerOptions {
     #[schema(minimum = 0.0, maximum = 120.0, example = 15.0)]
     pub max_lag_s: Option<f64>,
     /// Sessions: how a plot older than the newest received (within the
-    /// lag) is taken. `reprocess` (default): every plot after it is
-    /// processed again, so the tracks equal the batch call's bit for bit.
-    /// `retrodict`: it updates the tracks it gates with where they stand
-    /// (Bar-Shalom's out-of-sequence update, per IMM model), nothing is
-    /// replayed: about a sixth of the compute under ordinary delays, but
-    /// approximate (tracks tens of metres from the batch call's after
-    /// hiccups, docs/RESULTS.md). Serial mode only (parallel mode
+    /// lag) is taken. `reprocess`: every plot after it is processed again,
+    /// so the tracks equal the batch call's bit for bit. `retrodict`: it
+    /// updates the tracks it gates with where they stand (Bar-Shalom's
+    /// out-of-sequence update, per IMM model), nothing is replayed: about
+    /// a sixth of the compute, but approximate (docs/RESULTS.md). `auto`
+    /// (default): `reprocess` while the lag window holds at most
+    /// `max_replay_plots` plots, `retrodict` beyond (the update's
+    /// `warnings` say so, the session's `approximate_from` since when its
+    /// tracks are approximate). Serial mode only (parallel mode
     /// reprocesses).
-    #[schema(example = "reprocess")]
+    #[schema(example = "auto")]
     pub late_plots: Option<String>,
+    /// `late_plots: "auto"`: most plots the lag window may hold for late
+    /// plots to be replayed; default 5,000 (a replay of about 35 ms).
+    #[schema(example = 5000)]
+    pub max_replay_plots: Option<u32>,
     /// Radar registration: on by default with two radars or more.
     pub registration: Option<RegistrationOptions>,
 }
@@ -687,6 +693,7 @@ pub(crate) fn spec_in(
             duplicate_gate_probability: t.duplicate_gate_probability,
             motion: t.motion,
             late_plots: t.late_plots,
+            max_replay_plots: t.max_replay_plots,
             imm_models: t.imm_models.map(|models| {
                 models
                     .into_iter()

@@ -277,8 +277,12 @@ pub struct PlotFusionSessionState {
     /// How a plot older than the newest received is taken: `reprocess`
     /// (exact) or `retrodict` (`tracker.late_plots`; a parallel-mode
     /// session reprocesses).
-    #[schema(example = "reprocess")]
+    #[schema(example = "auto")]
     pub late_plots: String,
+    /// Under `auto`: the tracks are approximate from this time (a late
+    /// plot was taken by retrodiction because replaying it would have
+    /// exceeded `tracker.max_replay_plots`); null when exact.
+    pub approximate_from: Option<f64>,
     /// Plots older than this are late beyond the lag (dropped); null
     /// before the first plot.
     pub late_before_t: Option<f64>,
@@ -609,6 +613,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             pending_plots: b.pending_plots,
             max_lag_s: b.max_lag_s,
             late_plots: b.late_plots.to_string(),
+            approximate_from: b.approximate_from,
             late_before_t: b.late_before_t,
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),

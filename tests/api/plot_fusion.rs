@@ -736,6 +736,19 @@ async fn retrodiction_takes_late_plots_and_ends_near_the_batch_calls_tracks() {
     assert_eq!(response.status(), 422);
     let body: Value = response.json().await.unwrap();
     assert_eq!(body["errors"][0]["field"], "tracker.late_plots", "{body}");
+    create["tracker"]["late_plots"] = json!("reprocess");
+    create["tracker"]["max_replay_plots"] = json!(5);
+    let response = app.post_json("/v1/sessions", &create).await;
+    assert_eq!(response.status(), 422);
+    let body: Value = response.json().await.unwrap();
+    assert_eq!(
+        body["errors"][0]["field"], "tracker.max_replay_plots",
+        "{body}"
+    );
+    create["tracker"]
+        .as_object_mut()
+        .unwrap()
+        .remove("max_replay_plots");
     create["tracker"]["late_plots"] = json!("retrodict");
     let created = create_session(&app, &create).await;
     assert_eq!(created["plot_fusion"]["late_plots"], "retrodict");
@@ -769,6 +782,58 @@ async fn retrodiction_takes_late_plots_and_ends_near_the_batch_calls_tracks() {
             .fold(f64::INFINITY, f64::min);
         assert!(nearest <= sigma, "{nearest} m of σ {sigma}");
     }
+}
+
+/// The default, `auto`, with a bound of one replayed plot: batches whose
+/// late plots would replay more are taken by retrodiction and say so in a
+/// warning naming `tracker.max_replay_plots`, with the time since which
+/// the tracks are approximate (the session's `approximate_from`); the
+/// end is within the approximation of the batch call's tracks.
+#[tokio::test]
+async fn auto_says_when_its_bound_makes_it_retrodict() {
+    let app = spawn_app().await;
+    let req = with_height(request(false, 7));
+    let mut create = session_create(&req);
+    create["tracker"]["max_replay_plots"] = json!(1);
+    let created = create_session(&app, &create).await;
+    assert_eq!(created["plot_fusion"]["late_plots"], "auto");
+    assert_eq!(created["plot_fusion"]["approximate_from"], Value::Null);
+    let id = created["id"].as_str().unwrap().to_string();
+    let path = format!("/v1/sessions/{id}/batches");
+    let mut warned = 0;
+    for (i, plots) in arrivals(&req).into_iter().enumerate() {
+        let u = app
+            .post_ok(&path, &json!({"sequence": i + 1, "plots": plots}))
+            .await;
+        let said = u["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|w| {
+                let w = w.as_str().unwrap();
+                w.contains("retrodiction") && w.contains("tracker.max_replay_plots = 1")
+            })
+            .count();
+        if said > 0 {
+            let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+            assert!(state["plot_fusion"]["approximate_from"].is_f64(), "{state}");
+        }
+        warned += said;
+    }
+    assert!(warned > 0, "no batch retrodicted");
+    let whole = app.post_ok(PATH, &req).await;
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let confirmed = |v: &Value| {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .filter(|t| t["status"] == "confirmed")
+            .count()
+    };
+    assert_eq!(
+        confirmed(&state["plot_fusion"]["tracks"]),
+        confirmed(&whole["tracks"])
+    );
 }
 
 #[tokio::test]
@@ -966,7 +1031,8 @@ async fn a_grpc_stream_tracks_like_the_batch_call() {
     let pf = state.plot_fusion.expect("a plot_fusion state");
     assert_eq!(pf.mode, "serial");
     assert_eq!(pf.max_lag_s, 60.0);
-    assert_eq!(pf.late_plots, "reprocess");
+    assert_eq!(pf.late_plots, "auto");
+    assert_eq!(pf.approximate_from, None);
     assert_eq!(pf.tracks, whole.tracks);
     // The radars' biases, as the batch call's.
     assert_eq!(pf.registration.len(), 2);

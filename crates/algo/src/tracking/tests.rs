@@ -816,7 +816,13 @@ proptest::proptest! {
     /// (no snapshots) between batches.
     #[test]
     fn arrival_order_within_the_lag_does_not_matter(seed in 0u64..1_000_000, rebuild in 0u64..3) {
-        for doppler in [false, true] {
+        // Reprocessing, and the default (auto: this scene's replays are
+        // within its bound).
+        for (doppler, policy) in [
+            (false, LatePolicy::Reprocess),
+            (true, LatePolicy::Reprocess),
+            (false, LatePolicy::default()),
+        ] {
             let mut cfg = fig5_config(doppler);
             if doppler {
                 cfg.set_mode(Mode::Parallel);
@@ -828,7 +834,7 @@ proptest::proptest! {
                 LagWindow::with_policy(
                     Tracker::new(cfg.clone()).unwrap(),
                     window::DEFAULT_MAX_LAG_S,
-                    LatePolicy::Reprocess,
+                    policy,
                 )
                 .unwrap();
             let mut received: Vec<Plot> = Vec::new();
@@ -1187,4 +1193,63 @@ fn delayed_by_radar(plots: &[Plot], links: &[f64], held: f64, rng: &mut Lcg) -> 
         .collect();
     arrivals.sort_by(|a, b| a.0.total_cmp(&b.0));
     arrivals
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(8))]
+
+    /// Auto with a bound of 1 replayed plot on the retrodiction test's
+    /// arrivals: pushes whose replay exceeds it retrodict (the head then
+    /// approximate from the earliest such plot), the others replay, from
+    /// before any retrodicted plot, and are exact again. After every push a
+    /// window rebuilt from its stored parts continues like the original
+    /// (the decisions depend on stored data only), and the end is within
+    /// the retrodiction test's tolerance of the batch call.
+    #[test]
+    fn auto_replays_within_its_bound_and_retrodicts_beyond(seed in 0u64..1_000_000) {
+        let cfg = fig5_config(false);
+        let mut rng = Lcg(seed);
+        let plots = beam_timed_scene(&cfg, seed);
+        let arrivals = delayed_by_radar(&plots, &[0.0, 2.0], 0.03, &mut rng);
+        let policy = LatePolicy::Auto { max_replay: 1 };
+        let mut window =
+            LagWindow::with_policy(Tracker::new(cfg.clone()).unwrap(), window::DEFAULT_MAX_LAG_S, policy)
+                .unwrap();
+        let mut k = 0;
+        let mut second = 1.0;
+        let (mut retrodicted, mut exact_again) = (0, 0);
+        while k < arrivals.len() {
+            let batch: Vec<Plot> = arrivals[k..]
+                .iter()
+                .take_while(|(a, _)| *a < second)
+                .map(|(_, p)| *p)
+                .collect();
+            k += batch.len();
+            second += 1.0;
+            let was = window.approximate_from();
+            let mut rebuilt = LagWindow::from_parts(window.to_parts()).unwrap();
+            let push = window.push(&batch).unwrap();
+            rebuilt.push(&batch).unwrap();
+            proptest::prop_assert_eq!(window.picture(), rebuilt.picture());
+            proptest::prop_assert_eq!(window.approximate_from(), rebuilt.approximate_from());
+            proptest::prop_assert!(push.replayed <= 1 + batch.len());
+            retrodicted += push.retrodicted;
+            if push.retrodicted > 0 {
+                proptest::prop_assert!(window.approximate_from().is_some());
+            }
+            exact_again += usize::from(was.is_some() && window.approximate_from().is_none());
+        }
+        proptest::prop_assert!(retrodicted > 0, "nothing was retrodicted");
+        let mut sorted = plots.clone();
+        sorted.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let batch = batch_picture(&cfg, &sorted);
+        proptest::prop_assert_eq!(window.picture().confirmed_count(), batch.confirmed_count());
+        let gap = largest_gap(window.picture(), &batch);
+        proptest::prop_assert!(
+            gap.as_ref().is_ok_and(|(m, s)| *m <= 5.0 || *s <= 0.5),
+            "{:?} ({} exact again)",
+            gap,
+            exact_again
+        );
+    }
 }

@@ -83,31 +83,55 @@ pub struct LagWindow {
     max_plots: usize,
     /// How plots older than the newest are taken.
     policy: LatePolicy,
+    /// [`LatePolicy::Auto`]: the time of the earliest plot taken by
+    /// retrodiction since the head was last exact (stored).
+    approximate_from: Option<f64>,
 }
 
 /// How a [`LagWindow`] takes a plot older than the newest it has received
 /// (within the lag).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LatePolicy {
-    /// Retrodiction (serial mode; `late_plots: "retrodict"` of a
-    /// session): the plot is a frame of its own and
-    /// updates the tracks it gates with where they stand
-    /// ([`Tracker::set_out_of_sequence`]); nothing is replayed, so its cost
-    /// is the tracks it may touch. The picture equals one call over the
-    /// plots in time order within a tolerance (association, initiation and
-    /// deletion may differ where the order mattered; docs/plot-fusion.md
-    /// states the figures). The window keeps no plots and no base. A
-    /// parallel-mode tracker reprocesses whatever the policy. Measured
-    /// (`late-plots` experiment, docs/RESULTS.md): a sixth of
-    /// reprocessing's compute, GOSPA 5 % higher, final tracks tens of
-    /// metres from the batch call's; hence not the default.
-    Retrodict,
-    /// Exact reprocessing (the default): the picture equals one call over
-    /// every plot in time order, bit for bit, at the cost of replaying
-    /// every plot received after the late one (module header).
-    #[default]
+    /// Exact reprocessing: the picture equals one call over every plot in
+    /// time order, bit for bit, at the cost of replaying every plot
+    /// received after the late one (module header).
     Reprocess,
+    /// Retrodiction (serial mode; `late_plots: "retrodict"` of a
+    /// session): the plot is a frame of its own and updates the tracks it
+    /// gates with where they stand ([`Tracker::set_out_of_sequence`]);
+    /// nothing is replayed, so its cost is the tracks it may touch. The
+    /// picture equals one call over the plots in time order within a
+    /// tolerance (association, initiation and deletion may differ where
+    /// the order mattered; docs/RESULTS.md). The window keeps no plots and
+    /// no base. A parallel-mode tracker reprocesses whatever the policy.
+    Retrodict,
+    /// Reprocessing while the window holds at most `max_replay` plots
+    /// (what a replay from `base` costs at most), retrodiction beyond
+    /// (the default, with [`DEFAULT_MAX_REPLAY_PLOTS`]): exact for
+    /// networks whose lag holds few plots, bounded for those where a replay
+    /// would cost more. The window keeps its plots; a late plot taken by
+    /// retrodiction leaves the head approximate from its time
+    /// ([`LagWindow::approximate_from`]) until a push with late plots finds
+    /// the window within the bound again (a replay from `base`: exact).
+    Auto {
+        /// Most plots a push replays.
+        max_replay: u32,
+    },
 }
+
+impl Default for LatePolicy {
+    fn default() -> Self {
+        Self::Auto {
+            max_replay: DEFAULT_MAX_REPLAY_PLOTS,
+        }
+    }
+}
+
+/// The default bound of [`LatePolicy::Auto`]: a replay of at most about
+/// 35 ms at the tracker's 140 k plots/s (docs/RESULTS.md). A 15-s lag
+/// holds that many plots up to about 330 plots/s (some 80 aircraft under
+/// four 4-s radars): such sessions are exact; larger ones retrodict.
+pub const DEFAULT_MAX_REPLAY_PLOTS: u32 = 5_000;
 
 /// What one [`LagWindow::push`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -138,6 +162,9 @@ pub struct Push {
     /// Tentative tracks not started because the tracker held its bound of
     /// tracks, in the frames the call processed (replayed ones included).
     pub refused: usize,
+    /// [`LatePolicy::Auto`]: late plots taken by retrodiction because
+    /// their replay would have exceeded the bound.
+    pub retrodicted: usize,
 }
 
 /// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
@@ -161,6 +188,8 @@ pub struct LagWindowParts {
     pub newest: Option<f64>,
     /// Plots dropped as late beyond the lag.
     pub late: u64,
+    /// The head is approximate from this time ([`LatePolicy::Auto`]).
+    pub approximate_from: Option<f64>,
 }
 
 /// What a [`LagWindow`] stores, borrowed.
@@ -182,6 +211,8 @@ pub struct LagWindowState<'a> {
     pub newest: Option<f64>,
     /// Plots dropped as late beyond the lag.
     pub late: u64,
+    /// The head is approximate from this time ([`LatePolicy::Auto`]).
+    pub approximate_from: Option<f64>,
 }
 
 /// Checks a lag (s): finite, in [0, [`MAX_LAG_LIMIT_S`]].
@@ -217,8 +248,8 @@ impl LagWindow {
         let mut picture = tracker.clone();
         picture.flush()?;
         let base = match policy {
-            LatePolicy::Reprocess => tracker.clone(),
             LatePolicy::Retrodict => Tracker::new(tracker.config().clone())?,
+            _ => tracker.clone(),
         };
         Ok(Self {
             max_lag,
@@ -232,12 +263,20 @@ impl LagWindow {
             snapshots: Vec::new(),
             max_plots: DEFAULT_MAX_WINDOW_PLOTS,
             policy,
+            approximate_from: None,
         })
     }
 
     /// How late plots are taken.
     pub fn policy(&self) -> LatePolicy {
         self.policy
+    }
+
+    /// [`LatePolicy::Auto`]: the head (and the picture) is approximate from
+    /// this time, a late plot having been taken by retrodiction; `None`
+    /// when exact.
+    pub fn approximate_from(&self) -> Option<f64> {
+        self.approximate_from
     }
 
     /// Rebuilds a window from its parts, checking them: the window's plots
@@ -270,8 +309,12 @@ impl LagWindow {
         head.set_out_of_sequence(policy == LatePolicy::Retrodict);
         let mut picture = head.clone();
         picture.flush()?;
+        if parts.approximate_from.is_some() && !matches!(policy, LatePolicy::Auto { .. }) {
+            return Err(bad("only an auto window's head is approximate"));
+        }
         Ok(Self {
             policy,
+            approximate_from: parts.approximate_from,
             max_lag: parts.max_lag,
             base: parts.base,
             window: parts.window,
@@ -311,6 +354,7 @@ impl LagWindow {
     pub fn to_parts(&self) -> LagWindowParts {
         LagWindowParts {
             policy: self.policy,
+            approximate_from: self.approximate_from,
             max_lag: self.max_lag,
             base: self.base.clone(),
             window: self.window.clone(),
@@ -325,6 +369,7 @@ impl LagWindow {
     pub fn state(&self) -> LagWindowState<'_> {
         LagWindowState {
             policy: self.policy,
+            approximate_from: self.approximate_from,
             max_lag: self.max_lag,
             base: &self.base,
             window: &self.window,
@@ -422,20 +467,50 @@ impl LagWindow {
             self.window.extend_from_slice(&accepted);
             self.feed(start, &mut out)?;
         } else {
+            // Auto judges by the window's plots: the replay of a replica
+            // that read the store starts at `base` (it has no snapshots),
+            // and so may the serving replica's (a late plot inserted before
+            // a snapshot makes it useless: with per-radar delays every
+            // snapshot newer than the slowest link's delay goes).
+            let exact_from = at;
+            let retrodict = match self.policy {
+                LatePolicy::Auto { max_replay } => self.window.len() > max_replay as usize,
+                _ => false,
+            };
             let tail = merge(&self.window[at..], &accepted);
             self.window.truncate(at);
             self.window.extend(tail);
-            self.snapshots.retain(|(n, _)| *n <= at);
-            let (start, from) = match self.snapshots.last() {
-                Some((n, tr)) => (*n, tr.clone()),
-                None => (0, self.base.clone()),
-            };
-            self.head = from;
-            self.feed(start, &mut out)?;
-            out.replayed = self.window.len() - start - accepted.len();
+            if retrodict {
+                // The head takes them where its tracks stand; the window
+                // keeps them in order (for `base` and a later replay).
+                self.snapshots.retain(|(n, _)| *n <= at);
+                self.head.set_out_of_sequence(true);
+                let report = self.head.process(&accepted);
+                self.head.set_out_of_sequence(false);
+                let report = report?;
+                out.frames += report.frames;
+                out.refused += report.refused;
+                out.deleted.extend(report.deleted);
+                out.retrodicted = out.within_lag;
+                let earliest = accepted[0].t;
+                self.approximate_from =
+                    Some(self.approximate_from.map_or(earliest, |a| a.min(earliest)));
+            } else {
+                self.snapshots.retain(|(n, _)| *n <= exact_from);
+                let (start, from) = match self.snapshots.last() {
+                    Some((n, tr)) => (*n, tr.clone()),
+                    None => (0, self.base.clone()),
+                };
+                self.head = from;
+                self.feed(start, &mut out)?;
+                out.replayed = self.window.len() - start - accepted.len();
+                self.approximate_from = None;
+            }
         }
         self.advance(accepted[accepted.len() - 1].t);
-        self.snapshots.push((self.window.len(), self.head.clone()));
+        if self.approximate_from.is_none() {
+            self.snapshots.push((self.window.len(), self.head.clone()));
+        }
         self.commit()?;
         out.bounded_horizon = self.bound()?;
         self.thin();
@@ -486,7 +561,7 @@ impl LagWindow {
         let cut =
             start + self.window[start..].partition_point(|p| p.t <= newest - RECENT_SNAPSHOT_S);
         let mut from = start;
-        if cut > start && cut < self.window.len() {
+        if cut > start && cut < self.window.len() && self.approximate_from.is_none() {
             let report = self.head.process(&self.window[start..cut])?;
             out.frames += report.frames;
             out.refused += report.refused;
@@ -518,7 +593,15 @@ impl LagWindow {
             self.window.drain(..n);
             self.snapshots = kept.into_iter().map(|(m, t)| (m - n, t)).collect();
         }
-        if self.window.first().is_some_and(|p| p.t < h - self.max_lag) {
+        // Without snapshots to adopt (an approximate head takes none) the
+        // base follows the horizon push by push, not a lag at a time (a
+        // lag's plots at once is a spike of a replay's size).
+        let behind = if self.approximate_from.is_some() {
+            h
+        } else {
+            h - self.max_lag
+        };
+        if self.window.first().is_some_and(|p| p.t < behind) {
             self.feed_base_before(h)?;
         }
         Ok(())

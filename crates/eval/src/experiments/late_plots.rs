@@ -14,7 +14,8 @@
 //!   batch as it arrives: a plot older than the last processed frame is
 //!   dropped, and a frame is processed only when a later frame's plot has
 //!   arrived (flushed once at the end);
-//! - **reprocessing**: the session's default, a `LagWindow` (lag 15 s)
+//! - **reprocessing**: what the session's default (auto) does at this
+//!   scale (its replays stay within the bound), a `LagWindow` (lag 15 s)
 //!   under `LatePolicy::Reprocess`: after every batch its picture holds
 //!   every plot received, bit for bit the batch call's;
 //! - **retrodiction**: a `LagWindow` under
@@ -80,7 +81,7 @@ const N: usize = 4;
 const METHODS: [&str; N] = [
     "batch call (all plots sorted)",
     "earlier releases: tracker fed as plots arrive",
-    "lag window (15 s), reprocessing (default)",
+    "lag window (15 s), reprocessing (the default, auto, at this scale)",
     "lag window (15 s), retrodiction",
 ];
 

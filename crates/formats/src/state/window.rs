@@ -3,9 +3,11 @@
 //!
 //! Layout (after the magic `RFLW` and a `u32` format version):
 //! - format 2 (this release): the policy (u8: 0 reprocessing, 1
-//!   retrodiction), then under reprocessing format 1's fields, under
-//!   retrodiction the lag, the head tracker, horizon, newest and late
-//!   count (no base, no plots: a retrodicting window holds none);
+//!   retrodiction, 2 auto followed by its bound of replayed plots, u32),
+//!   then under reprocessing and auto format 1's fields and the time from
+//!   which the head is approximate (optional f64), under retrodiction the
+//!   lag, the head tracker, horizon, newest and late count (no base, no
+//!   plots: a retrodicting window holds none);
 //! - format 1 (earlier releases, decoded as reprocessing): the lag (f64),
 //!   the base tracker and the head tracker (each as
 //!   [`super::tracker::encode_tracker`] bytes), the window's plots, the
@@ -32,16 +34,21 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     let mut w = Writer::default();
     w.buf.extend_from_slice(MAGIC);
     w.u32(FORMAT_VERSION);
-    w.u8(match s.policy {
-        LatePolicy::Reprocess => 0,
-        LatePolicy::Retrodict => 1,
-    });
+    match s.policy {
+        LatePolicy::Reprocess => w.u8(0),
+        LatePolicy::Retrodict => w.u8(1),
+        LatePolicy::Auto { max_replay } => {
+            w.u8(2);
+            w.u32(max_replay);
+        }
+    }
+    let plots = s.policy != LatePolicy::Retrodict;
     w.f64(s.max_lag);
-    if s.policy == LatePolicy::Reprocess {
+    if plots {
         w.bytes(&encode_tracker(s.base));
     }
     w.bytes(&encode_tracker(s.head));
-    if s.policy == LatePolicy::Reprocess {
+    if plots {
         w.usize(s.window.len());
         for p in s.window {
             plot(&mut w, p);
@@ -50,6 +57,9 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     w.opt(s.horizon, Writer::f64);
     w.opt(s.newest, Writer::f64);
     w.u64(s.late);
+    if plots {
+        w.opt(s.approximate_from, Writer::f64);
+    }
     w.buf
 }
 
@@ -67,12 +77,16 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         2 => match r.u8()? {
             0 => LatePolicy::Reprocess,
             1 => LatePolicy::Retrodict,
+            2 => LatePolicy::Auto {
+                max_replay: r.u32()?,
+            },
             other => return Err(corrupt(&format!("unknown late-plot policy {other}"))),
         },
         _ => return Err(corrupt(&format!("unknown lag window format {version}"))),
     };
     let max_lag = r.f64()?;
-    let (base, head, window) = if policy == LatePolicy::Reprocess {
+    let plots = policy != LatePolicy::Retrodict;
+    let (base, head, window) = if plots {
         let base = decode_tracker(&r.bytes()?)?;
         let head = decode_tracker(&r.bytes()?)?;
         let n = r.len(16)?;
@@ -88,11 +102,17 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let horizon = r.opt(Reader::f64)?;
     let newest = r.opt(Reader::f64)?;
     let late = r.u64()?;
+    let approximate_from = if plots && version >= 2 {
+        r.opt(Reader::f64)?
+    } else {
+        None
+    };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
     Ok(LagWindow::from_parts(LagWindowParts {
         policy,
+        approximate_from,
         max_lag,
         base,
         window,
@@ -187,13 +207,17 @@ mod tests {
     /// Format 1 (earlier releases): a reprocessing window.
     #[test]
     fn a_window_of_format_1_decodes_as_reprocessing() {
-        let mut a = window();
+        let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        let mut a =
+            LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, LatePolicy::Reprocess)
+                .unwrap();
         a.push(&plots()).unwrap();
         let bytes = encode_lag_window(&a);
-        // Format 2's bytes less the policy byte are format 1's.
+        // Format 2's bytes less the policy byte and the (absent)
+        // approximate time are format 1's.
         let mut v1 = bytes[..4].to_vec();
         v1.extend_from_slice(&1u32.to_le_bytes());
-        v1.extend_from_slice(&bytes[9..]);
+        v1.extend_from_slice(&bytes[9..bytes.len() - 1]);
         let b = decode_lag_window(&v1).unwrap();
         assert_eq!(b.policy(), LatePolicy::Reprocess);
         assert_eq!(a.to_parts(), b.to_parts());

@@ -173,11 +173,15 @@ pub struct TrackerInput {
     /// newest plot received; default 15, at most 120. The batch call
     /// sorts its plots and only checks it.
     pub max_lag_s: Option<f64>,
-    /// Sessions: how a plot older than the newest is taken, `reprocess`
-    /// (default: exact, the batch call's tracks bit for bit) or
-    /// `retrodict` (the tracks it gates with updated where they stand;
-    /// cheaper, approximate; serial mode).
+    /// Sessions: how a plot older than the newest is taken: `auto`
+    /// (default: `reprocess` while the lag window holds at most
+    /// `max_replay_plots`, `retrodict` beyond), `reprocess` (exact, the
+    /// batch call's tracks bit for bit) or `retrodict` (the tracks it
+    /// gates with updated where they stand; approximate; serial mode).
     pub late_plots: Option<String>,
+    /// `auto`: most plots the lag window may hold for a replay (default
+    /// 5,000).
+    pub max_replay_plots: Option<u32>,
     /// Radar registration (bias estimation); default on with two radars.
     pub registration: Option<Box<RegistrationInput>>,
 }

@@ -145,23 +145,36 @@ pub fn max_lag(spec: &SpecInput) -> Result<f64, ServiceError> {
 }
 
 /// The session's policy for late plots (`tracker.late_plots`, default
-/// `reprocess`).
+/// `auto` with `tracker.max_replay_plots`, default
+/// [`algo::tracking::window::DEFAULT_MAX_REPLAY_PLOTS`]).
 pub fn late_policy(spec: &SpecInput) -> Result<algo::tracking::LatePolicy, ServiceError> {
     use algo::tracking::LatePolicy;
+    let max_replay = spec
+        .tracker
+        .max_replay_plots
+        .unwrap_or(algo::tracking::window::DEFAULT_MAX_REPLAY_PLOTS);
+    let auto = LatePolicy::Auto { max_replay };
     let mut v = Violations::new();
     let policy = v.one_of(
         "tracker.late_plots",
         spec.tracker.late_plots.as_deref(),
-        Some(LatePolicy::Reprocess),
+        Some(auto),
         &[
+            ("auto", auto),
             ("reprocess", LatePolicy::Reprocess),
             ("retrodict", LatePolicy::Retrodict),
         ],
     );
-    match policy {
-        Some(p) => Ok(p),
-        None => Err(v.finish_with(None::<()>).unwrap_err()),
+    let Some(policy) = policy else {
+        return Err(v.finish_with(None::<()>).unwrap_err());
+    };
+    if spec.tracker.max_replay_plots.is_some() && !matches!(policy, LatePolicy::Auto { .. }) {
+        return Err(Violations::single(
+            "tracker.max_replay_plots",
+            "is for tracker.late_plots \"auto\" (the default); remove it or the policy",
+        ));
     }
+    Ok(policy)
 }
 
 /// A configuration error of the core, named by its wire field.

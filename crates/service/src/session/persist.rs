@@ -843,17 +843,20 @@ mod tests {
     /// of the replica that served the batch, byte for byte. Returns the
     /// log's length after each push.
     async fn serve_and_rebuild(sessions: &Sessions, chunks: &[Vec<PlotInput>]) -> Vec<usize> {
-        serve_and_rebuild_with(sessions, chunks, None).await
+        serve_and_rebuild_with(sessions, chunks, None, None).await
     }
 
-    /// [`serve_and_rebuild`] with `tracker.late_plots`.
+    /// [`serve_and_rebuild`] with `tracker.late_plots` and
+    /// `tracker.max_replay_plots`.
     async fn serve_and_rebuild_with(
         sessions: &Sessions,
         chunks: &[Vec<PlotInput>],
         late_plots: Option<&str>,
+        max_replay_plots: Option<u32>,
     ) -> Vec<usize> {
         let mut body = spec();
         body.tracker.late_plots = late_plots.map(str::to_string);
+        body.tracker.max_replay_plots = max_replay_plots;
         let created = sessions
             .create::<PlotFusionSession>(
                 TENANT,
@@ -962,6 +965,10 @@ mod tests {
         serve_and_rebuild(&memory(32).await, &swapped).await;
         // The same under retrodiction: the late plots update the tracks
         // where they stand, identically on both replicas.
-        serve_and_rebuild_with(&memory(4).await, &swapped, Some("retrodict")).await;
+        serve_and_rebuild_with(&memory(4).await, &swapped, Some("retrodict"), None).await;
+        // Auto with a bound of 2 replayed plots: some batches retrodict,
+        // others replay; the decisions are the stored state's, so the
+        // replicas agree.
+        serve_and_rebuild_with(&memory(4).await, &swapped, None, Some(2)).await;
     }
 }

@@ -189,6 +189,10 @@ pub struct SessionView {
     /// `retrodict` (`tracker.late_plots`; a parallel-mode session
     /// reprocesses).
     pub late_plots: &'static str,
+    /// Under `auto`: the tracks are approximate from this time (a late
+    /// plot was taken by retrodiction, its replay over the bound); `None`
+    /// when exact.
+    pub approximate_from: Option<f64>,
     /// Plots older than this are late beyond the lag (dropped); none
     /// before the first plot.
     pub late_before_t: Option<f64>,
@@ -518,6 +522,19 @@ impl SessionKind for PlotFusionSession {
                 algo::tracking::window::MAX_LAG_LIMIT_S,
             ));
         }
+        if let (true, algo::tracking::LatePolicy::Auto { max_replay }) =
+            (push.retrodicted > 0, self.window.policy())
+        {
+            warnings.push(format!(
+                "{} late plot(s) taken by retrodiction, not replayed: the lag window holds \
+                 more than tracker.max_replay_plots = {max_replay} plots; the tracks are \
+                 approximate from t = {} until a batch's late plots find it within the bound \
+                 (a larger tracker.max_replay_plots, or tracker.late_plots \"reprocess\", \
+                 keeps them exact at the cost of a replay)",
+                push.retrodicted,
+                self.window.approximate_from().unwrap_or(f64::NAN),
+            ));
+        }
         if let Some(h) = push.bounded_horizon {
             warnings.push(format!(
                 "the lag window reached its bound of {} plots: plots older than t = {h} are \
@@ -664,7 +681,9 @@ impl SessionKind for PlotFusionSession {
             late_plots: match self.window.policy() {
                 algo::tracking::LatePolicy::Reprocess => "reprocess",
                 algo::tracking::LatePolicy::Retrodict => "retrodict",
+                algo::tracking::LatePolicy::Auto { .. } => "auto",
             },
+            approximate_from: self.window.approximate_from(),
             late_before_t: self.window.horizon(),
             counters: self.window.counters().into(),
             tracks: tracker
