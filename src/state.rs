@@ -138,6 +138,18 @@ impl AppState {
         self.inner.body_budget.charged()
     }
 
+    /// Charges `n` more bytes of a body to the budget, into `charge`;
+    /// false (nothing charged) when the budget cannot take them. For bodies
+    /// read piecemeal (the messages of a gRPC stream) rather than by
+    /// [`Self::read_body`].
+    pub fn charge_body_bytes(&self, charge: &mut BodyCharge, n: usize) -> bool {
+        let charged = self.inner.body_budget.charge(charge, n).is_ok();
+        if !charged {
+            metrics::counter!("request_bodies_over_budget_total").increment(1);
+        }
+        charged
+    }
+
     pub fn metrics(&self) -> &PrometheusHandle {
         &self.inner.metrics
     }
@@ -243,6 +255,7 @@ struct BodyBudget {
 /// Bytes of one request's body charged to the budget; given back when
 /// dropped.
 #[must_use = "the bytes are given back to the budget when this is dropped"]
+#[derive(Default)]
 pub struct BodyCharge(Option<OwnedSemaphorePermit>);
 
 impl BodyBudget {
@@ -258,6 +271,22 @@ impl BodyBudget {
         self.total - self.bytes.available_permits()
     }
 
+    /// Adds `n` bytes to `charge`, or [`BodyReadError::OverBudget`] (and
+    /// nothing charged) when the budget cannot take them now.
+    fn charge(&self, charge: &mut BodyCharge, n: usize) -> Result<(), BodyReadError> {
+        let n = u32::try_from(n).map_err(|_| BodyReadError::OverBudget)?;
+        let permit = self
+            .bytes
+            .clone()
+            .try_acquire_many_owned(n)
+            .map_err(|_| BodyReadError::OverBudget)?;
+        match &mut charge.0 {
+            Some(held) => held.merge(permit),
+            None => charge.0 = Some(permit),
+        }
+        Ok(())
+    }
+
     /// Reads `body` whole, each chunk charged before it is kept: more than
     /// `limit` bytes is [`BodyReadError::TooLarge`] (whatever the budget
     /// holds), a chunk the budget cannot take [`BodyReadError::OverBudget`];
@@ -271,7 +300,7 @@ impl BodyBudget {
         let mut body = std::pin::pin!(body);
         let mut chunks: Vec<axum::body::Bytes> = Vec::new();
         let mut len = 0usize;
-        let mut charge = BodyCharge(None);
+        let mut charge = BodyCharge::default();
         while let Some(frame) = body.frame().await {
             let frame = frame.map_err(|e| BodyReadError::classify(&e))?;
             let Ok(chunk) = frame.into_data() else {
@@ -284,16 +313,7 @@ impl BodyBudget {
             if len > limit {
                 return Err(BodyReadError::TooLarge);
             }
-            let n = u32::try_from(chunk.len()).map_err(|_| BodyReadError::OverBudget)?;
-            let permit = self
-                .bytes
-                .clone()
-                .try_acquire_many_owned(n)
-                .map_err(|_| BodyReadError::OverBudget)?;
-            match &mut charge.0 {
-                Some(held) => held.merge(permit),
-                None => charge.0 = Some(permit),
-            }
+            self.charge(&mut charge, chunk.len())?;
             chunks.push(chunk);
         }
         let bytes = match chunks.len() {

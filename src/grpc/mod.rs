@@ -9,6 +9,7 @@ pub mod error;
 pub mod jpda;
 pub mod plot_fusion;
 pub mod sessions;
+mod stream_budget;
 
 use std::time::Instant;
 
@@ -191,7 +192,9 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
         return next.run(req).await;
     }
     let (req, _charge) = if is_streaming(req.uri().path()) {
-        (req, None)
+        // Read message by message by the call: its incomplete message is
+        // charged to the budget as it arrives.
+        (req.map(|body| stream_budget::budgeted(&state, body)), None)
     } else {
         match read_unary_body(&state, req).await {
             Ok((req, charge)) => (req, Some(charge)),

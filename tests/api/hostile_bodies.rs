@@ -2,7 +2,7 @@
 //! compressed body counts decompressed against `FUSION_MAX_BODY_BYTES`, the
 //! bodies being read at once share the budget of
 //! `FUSION_MAX_BUFFERED_BODY_BYTES` (beyond it: 503 + `Retry-After`, or
-//! UNAVAILABLE), and an HTTP/2 connection carries at most
+//! UNAVAILABLE; the message of a gRPC stream too), and an HTTP/2 connection carries at most
 //! `FUSION_H2_MAX_CONCURRENT_STREAMS` requests at once.
 //!
 //! The waits below are bounds on an outcome (the server has read a body,
@@ -16,6 +16,7 @@ use tokio::{io::AsyncWriteExt, net::TcpStream};
 use tonic::Code;
 
 use crate::helpers::{TestApp, assert_problem, spawn_app_with};
+use crate::sessions::data::{open_stream, pb_open, pb_report, scenario};
 
 const EVALUATE: &str = "/v1/correlation/rules/evaluate";
 const BOUND: Duration = Duration::from_secs(10);
@@ -185,4 +186,74 @@ async fn an_http2_connection_is_announced_the_configured_stream_cap() {
         .expect("the server's SETTINGS arrive");
         assert_eq!(announced, 7, "{addr}");
     }
+}
+
+#[tokio::test]
+async fn a_stream_message_over_the_buffered_budget_ends_the_stream_unavailable() {
+    let app = spawn_app_with(|s| {
+        s.max_body_bytes = 65_536;
+        s.max_buffered_body_bytes = 65_536;
+    })
+    .await;
+    let (_, reports) = scenario();
+    let batch = pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+            sequence: Some(1),
+            reports: reports.iter().map(pb_report).collect(),
+            ..Default::default()
+        })),
+    };
+    let open = pb::StreamRequest {
+        kind: Some(pb::stream_request::Kind::Open(pb_open())),
+    };
+    let (batch_len, open_len) = (
+        prost::Message::encoded_len(&batch),
+        prost::Message::encoded_len(&open),
+    );
+    assert!(open_len < batch_len / 2, "{open_len} and {batch_len} bytes");
+    // A held bomb leaves half the batch's size of the budget: the open
+    // message fits, the batch does not.
+    let inflated = 65_536 - batch_len / 2;
+    let held = held_gzip_bomb(&app, padded_request(inflated - 43).as_bytes()).await;
+    wait_for_buffered(&app, inflated).await;
+
+    let mut client = pb::session_service_client::SessionServiceClient::new(app.channel().await);
+    let Some(pb::stream_request::Kind::Open(first)) = open.kind.clone() else {
+        unreachable!()
+    };
+    let (tx, mut updates) = open_stream(&mut client, pb::stream_request::Kind::Open(first)).await;
+    let opened = updates
+        .message()
+        .await
+        .unwrap()
+        .expect("the open is answered");
+    assert!(opened.error.is_none(), "{opened:?}");
+    tx.send(batch.clone()).await.unwrap();
+    let status = updates.message().await.unwrap_err();
+    assert_eq!(status.code(), Code::Unavailable, "{status:?}");
+    assert!(
+        status.message().contains("FUSION_MAX_BUFFERED_BODY_BYTES"),
+        "{status:?}"
+    );
+
+    // With the budget free again, the same batch is taken and answered.
+    drop(held);
+    wait_for_buffered(&app, 0).await;
+    let Some(pb::stream_request::Kind::Open(first)) = open.kind else {
+        unreachable!()
+    };
+    let (tx, mut updates) = open_stream(&mut client, pb::stream_request::Kind::Open(first)).await;
+    updates
+        .message()
+        .await
+        .unwrap()
+        .expect("the open is answered");
+    tx.send(batch).await.unwrap();
+    let applied = updates
+        .message()
+        .await
+        .unwrap()
+        .expect("the batch is answered");
+    assert!(applied.error.is_none(), "{applied:?}");
+    assert_eq!(applied.sequence, Some(1));
 }
