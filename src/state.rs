@@ -320,6 +320,9 @@ impl BodyBudget {
             0 => axum::body::Bytes::new(),
             1 => chunks.pop().expect("one chunk"),
             _ => {
+                // One contiguous copy for the parsers; the chunks it is made
+                // of are freed at once, so a whole body is held twice only
+                // for the moment of the copy.
                 let mut whole = Vec::with_capacity(len);
                 for chunk in chunks {
                     whole.extend_from_slice(&chunk);

@@ -269,10 +269,11 @@ fn v_text_decimals(v: &str) -> usize {
 }
 
 fn check_sum(body: &str, sum: &str) -> Result<(), String> {
-    let want = u8::from_str_radix(sum, 16).map_err(|_| format!("bad checksum field {sum:?}"))?;
-    if sum.len() != 2 {
+    // Two hex digits: `from_str_radix` alone would take "+F".
+    if !(sum.len() == 2 && sum.bytes().all(|b| b.is_ascii_hexdigit())) {
         return Err(format!("bad checksum field {sum:?}"));
     }
+    let want = u8::from_str_radix(sum, 16).map_err(|_| format!("bad checksum field {sum:?}"))?;
     let got = checksum(body);
     if got != want {
         return Err(format!(
@@ -555,6 +556,15 @@ mod tests {
         ]);
         let d = decode(&src);
         assert_eq!(d.lines, 6);
+        // A checksum field of two characters that are not two hex digits:
+        // "+6" would parse as 0x06, this body's checksum (XOR by hand with
+        // Python: functools.reduce(operator.xor, map(ord, body))).
+        let body = "AIVDM,1,1,,,1P,0";
+        assert_eq!(checksum(body), 0x06);
+        assert_eq!(decode(&[format!("!{body}*06")]).sentences, 1);
+        let d = decode(&[format!("!{body}*+6")]);
+        assert!(d.errors[0].message.contains("bad checksum field"), "{d:?}");
+        let d = decode(&src);
         assert_eq!(d.positions.len(), 1);
         let bad: Vec<usize> = d.errors.iter().map(|e| e.line).collect();
         assert_eq!(bad, vec![0, 1, 4, 5]);
