@@ -435,6 +435,7 @@ async fn main() -> anyhow::Result<()> {
     settings.max_batch_reports = scene.plots.len().max(100_000);
     settings.max_tracks_per_session = 1_000_000;
     settings.session_memory_bytes = 16 << 30;
+    settings.session_memory_bytes_per_tenant = 16 << 30;
     settings.request_timeout_s = 600.0;
     let app = Application::build(settings).await?;
     let state = app.state();

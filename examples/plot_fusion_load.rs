@@ -423,7 +423,9 @@ async fn replica(args: &Args, n: usize) -> anyhow::Result<Replica> {
     settings.max_batch_reports = n.max(1);
     settings.max_tracks_per_session = 1_000_000;
     settings.max_body_bytes = 1 << 30;
+    settings.max_buffered_body_bytes = 2 << 30;
     settings.session_memory_bytes = 16 << 30;
+    settings.session_memory_bytes_per_tenant = 16 << 30;
     settings.request_timeout_s = 600.0;
     if let Some(b) = args.snapshot_batches {
         settings.session_snapshot_batches = b;

@@ -346,6 +346,7 @@ async fn run_config(
     settings.session_key_prefix = format!("radar-fusion-load:{}", std::process::id());
     settings.max_sessions_per_tenant = sessions.max(100);
     settings.session_memory_bytes = 16 << 30;
+    settings.session_memory_bytes_per_tenant = 16 << 30;
     let app = Application::build(settings).await?;
     let (http, grpc_addr, state) = (app.http_addr(), app.grpc_addr(), app.state());
     let (stop, stopped) = oneshot::channel::<()>();

@@ -169,9 +169,25 @@ pub struct Settings {
     /// before the connection is closed as dead.
     #[arg(long, env = "FUSION_H2_KEEPALIVE_S", default_value_t = 20.0)]
     pub h2_keepalive_s: f64,
-    /// Largest request body (REST) or message (gRPC) in bytes; larger ones get 413 / RESOURCE_EXHAUSTED.
+    /// Most concurrent streams (requests) on one HTTP/2 connection, both
+    /// ports (the SETTINGS_MAX_CONCURRENT_STREAMS the server announces).
+    #[arg(long, env = "FUSION_H2_MAX_CONCURRENT_STREAMS", default_value_t = 100)]
+    pub h2_max_concurrent_streams: u32,
+    /// Largest request body (REST) or message (gRPC) in bytes, counted
+    /// decompressed when it comes compressed; larger ones get 413 /
+    /// RESOURCE_EXHAUSTED.
     #[arg(long, env = "FUSION_MAX_BODY_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
+    /// Most request-body bytes (decompressed) held at once by all the
+    /// requests whose bodies are being read or served, both transports: a
+    /// body that would take the total over it is shed as it arrives with
+    /// 503 + `Retry-After` / UNAVAILABLE. At least `--max-body-bytes`.
+    #[arg(
+        long,
+        env = "FUSION_MAX_BUFFERED_BODY_BYTES",
+        default_value_t = 256 * 1024 * 1024
+    )]
+    pub max_buffered_body_bytes: usize,
     /// Most API requests in flight at once over both transports; beyond it requests are
     /// shed at once with 503 / UNAVAILABLE instead of queueing.
     #[arg(long, env = "FUSION_MAX_IN_FLIGHT", default_value_t = 512)]
@@ -223,6 +239,11 @@ pub struct Settings {
     /// Memory session store: most bytes of session state held in total.
     #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES", default_value_t = 512 * 1024 * 1024)]
     pub session_memory_bytes: usize,
+    /// Memory session store: most bytes of session state one tenant may
+    /// hold (429 beyond), so that one tenant cannot fill the store for all.
+    /// A service with one tenant may raise it to `--session-memory-bytes`.
+    #[arg(long, env = "FUSION_SESSION_MEMORY_BYTES_PER_TENANT", default_value_t = 128 * 1024 * 1024)]
+    pub session_memory_bytes_per_tenant: usize,
     /// Decoded sessions kept in process in front of the store, bounded by
     /// their encoded size in bytes (0: none). A push to a session this
     /// replica wrote last then skips the read and the decode; the
@@ -454,6 +475,7 @@ impl Settings {
             max_connections: self.max_connections,
             max_per_client: self.max_connections_per_client,
             h2_keepalive: Duration::from_secs_f64(self.h2_keepalive_s),
+            h2_max_concurrent_streams: self.h2_max_concurrent_streams,
         }
     }
 
@@ -475,6 +497,7 @@ impl Settings {
             key_prefix: self.session_key_prefix.clone(),
             max_sessions_per_tenant: self.max_sessions_per_tenant,
             max_memory_bytes: self.session_memory_bytes,
+            max_memory_bytes_per_tenant: self.session_memory_bytes_per_tenant,
             timeout: Duration::from_secs_f64(self.store_timeout_s),
         }
     }
@@ -498,6 +521,17 @@ impl Settings {
         }
         if self.max_body_bytes < 1024 {
             return Err("--max-body-bytes must be at least 1024".into());
+        }
+        if self.max_buffered_body_bytes < self.max_body_bytes {
+            return Err(format!(
+                "--max-buffered-body-bytes (FUSION_MAX_BUFFERED_BODY_BYTES, {}) must be at least \
+                 --max-body-bytes (FUSION_MAX_BODY_BYTES, {}), or a body at the limit could \
+                 never be read",
+                self.max_buffered_body_bytes, self.max_body_bytes
+            ));
+        }
+        if self.h2_max_concurrent_streams == 0 {
+            return Err("--h2-max-concurrent-streams must be at least 1".into());
         }
         if self.max_in_flight == 0 {
             return Err("--max-in-flight must be at least 1".into());
@@ -669,6 +703,7 @@ mod tests {
         assert_eq!(store.key_prefix, "radar-fusion");
         assert_eq!(store.max_sessions_per_tenant, 100);
         assert_eq!(store.max_memory_bytes, 512 * 1024 * 1024);
+        assert_eq!(store.max_memory_bytes_per_tenant, 128 * 1024 * 1024);
         assert_eq!(store.timeout, Duration::from_secs(1));
         let s = with(&[
             "--session-store",
@@ -678,6 +713,27 @@ mod tests {
         ]);
         assert_eq!(s.validate(), Ok(()));
         assert_eq!(s.store_settings().timeout, Duration::from_millis(250));
+    }
+
+    #[test]
+    fn the_body_budget_is_256_mib_and_holds_a_body_at_the_limit() {
+        let s = with(&[]);
+        assert_eq!(s.max_buffered_body_bytes, 256 << 20);
+        assert_eq!(s.h2_max_concurrent_streams, 100);
+        assert_eq!(s.connection_limits().h2_max_concurrent_streams, 100);
+        let err = with(&[
+            "--max-body-bytes",
+            "4096",
+            "--max-buffered-body-bytes",
+            "4095",
+        ])
+        .validate()
+        .unwrap_err();
+        assert!(err.starts_with("--max-buffered-body-bytes"), "{err}");
+        let err = with(&["--h2-max-concurrent-streams", "0"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--h2-max-concurrent-streams"), "{err}");
     }
 
     #[test]

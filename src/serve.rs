@@ -12,6 +12,10 @@
 //!   loop stops accepting, so new clients wait in the kernel's backlog
 //!   instead of being refused), and at most `max_per_client` from one IP
 //!   address (beyond it a new connection is closed at once, counted).
+//! - **HTTP/2 streams.** At most `h2_max_concurrent_streams` requests at once
+//!   on one HTTP/2 connection (the SETTINGS_MAX_CONCURRENT_STREAMS the
+//!   server announces; hyper's default is 200), so one connection cannot
+//!   open more bodies at once than that.
 //! - **Dead HTTP/2 peers.** A keep-alive PING every `h2_keepalive`; a peer
 //!   that does not answer within it is closed, so idle gRPC streams of
 //!   vanished clients do not hold connections.
@@ -28,7 +32,8 @@
 //!
 //! Bodies are bounded elsewhere: the REST router reads a body within its own
 //! timeout before a request takes an in-flight slot (`http::admit`), and so
-//! does the gRPC router for unary calls (`grpc::admit`).
+//! does the gRPC router for unary calls (`grpc::admit`); the bytes of all
+//! bodies being read at once share one budget (`AppState::read_body`).
 //!
 //! Graceful shutdown: when `shutdown` completes the loop stops accepting,
 //! every connection is asked to finish its requests in flight and close
@@ -79,6 +84,8 @@ pub struct ConnectionLimits {
     pub max_per_client: usize,
     /// HTTP/2 keep-alive PING interval and answer timeout.
     pub h2_keepalive: Duration,
+    /// Most concurrent streams on one HTTP/2 connection.
+    pub h2_max_concurrent_streams: u32,
 }
 
 /// Serves `router` on `listener` under `limits` until `shutdown` completes,
@@ -211,6 +218,7 @@ async fn serve_connection<I>(
         .timer(TokioTimer::new())
         .keep_alive_interval(limits.h2_keepalive)
         .keep_alive_timeout(limits.h2_keepalive)
+        .max_concurrent_streams(limits.h2_max_concurrent_streams)
         .enable_connect_protocol();
     let conn =
         builder.serve_connection_with_upgrades(TokioIo::new(io), TowerToHyperService::new(service));

@@ -1,5 +1,6 @@
 //! The state shared by both adapters: settings, the API keys, readiness, the
-//! in-flight limit, the metrics handle and the session store. One `AppState` is built at start-up and cloned
+//! in-flight limit, the budget of request-body bytes buffered before
+//! admission, the metrics handle and the session store. One `AppState` is built at start-up and cloned
 //! (cheaply, it is an `Arc`) into every server.
 
 use std::sync::{
@@ -24,6 +25,7 @@ struct Inner {
     api_keys: ApiKeys,
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
+    body_budget: BodyBudget,
     metrics: PrometheusHandle,
     sessions: Sessions,
 }
@@ -44,12 +46,14 @@ impl AppState {
             max_entries: settings.session_snapshot_batches,
         });
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
+        let body_budget = BodyBudget::new(settings.max_buffered_body_bytes);
         Self {
             inner: Arc::new(Inner {
                 settings,
                 api_keys,
                 ready: AtomicBool::new(false),
                 in_flight,
+                body_budget,
                 metrics,
                 sessions,
             }),
@@ -97,24 +101,53 @@ impl AppState {
     }
 
     /// Reads a request body whole, within `limit` bytes (after any
-    /// decompression layer in front) and the body-read timeout
-    /// (`FUSION_BODY_READ_TIMEOUT_S`): both adapters call it before a
-    /// request takes an in-flight slot, so a slow or withholding client
-    /// holds none. A timeout is counted in `requests_slow_body_total`.
+    /// decompression layer in front), the body-read timeout
+    /// (`FUSION_BODY_READ_TIMEOUT_S`) and the global budget of buffered
+    /// body bytes (`FUSION_MAX_BUFFERED_BODY_BYTES`): both adapters call it
+    /// before a request takes an in-flight slot, so a slow or withholding
+    /// client holds none, and all the bodies being read at once hold at
+    /// most the budget. The bytes stay charged to the budget until the
+    /// returned [`BodyCharge`] is dropped (the caller keeps it while the
+    /// request is served, since the body lives as long). A timeout is
+    /// counted in `requests_slow_body_total`, a body refused for the budget
+    /// in `request_bodies_over_budget_total`.
     pub async fn read_body(
         &self,
         body: axum::body::Body,
         limit: usize,
-    ) -> Result<axum::body::Bytes, BodyReadError> {
-        let read = axum::body::to_bytes(body, limit);
+    ) -> Result<(axum::body::Bytes, BodyCharge), BodyReadError> {
+        let read = self.inner.body_budget.read(body, limit);
         match tokio::time::timeout(self.settings().body_read_timeout(), read).await {
-            Ok(Ok(bytes)) => Ok(bytes),
-            Ok(Err(e)) => Err(BodyReadError::classify(&e)),
+            Ok(Ok(read)) => Ok(read),
+            Ok(Err(e)) => {
+                if matches!(e, BodyReadError::OverBudget) {
+                    metrics::counter!("request_bodies_over_budget_total").increment(1);
+                }
+                Err(e)
+            }
             Err(_) => {
                 metrics::counter!("requests_slow_body_total").increment(1);
                 Err(BodyReadError::TimedOut)
             }
         }
+    }
+
+    /// Request-body bytes buffered now (charged to the budget of
+    /// `FUSION_MAX_BUFFERED_BODY_BYTES`).
+    pub fn buffered_body_bytes(&self) -> usize {
+        self.inner.body_budget.charged()
+    }
+
+    /// Charges `n` more bytes of a body to the budget, into `charge`;
+    /// false (nothing charged) when the budget cannot take them. For bodies
+    /// read piecemeal (the messages of a gRPC stream) rather than by
+    /// [`Self::read_body`].
+    pub fn charge_body_bytes(&self, charge: &mut BodyCharge, n: usize) -> bool {
+        let charged = self.inner.body_budget.charge(charge, n).is_ok();
+        if !charged {
+            metrics::counter!("request_bodies_over_budget_total").increment(1);
+        }
+        charged
     }
 
     pub fn metrics(&self) -> &PrometheusHandle {
@@ -180,6 +213,9 @@ pub enum Readiness {
 pub enum BodyReadError {
     /// Over the limit (decompressed, when the body was compressed).
     TooLarge,
+    /// The bodies being read hold the whole budget of buffered bytes
+    /// (`FUSION_MAX_BUFFERED_BODY_BYTES`): the request is shed.
+    OverBudget,
     /// It does not decompress as its `Content-Encoding` says.
     Undecodable(std::io::Error),
     /// The connection failed mid-body.
@@ -192,9 +228,6 @@ impl BodyReadError {
     fn classify(e: &axum::Error) -> Self {
         let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
         while let Some(err) = source {
-            if err.is::<http_body_util::LengthLimitError>() {
-                return Self::TooLarge;
-            }
             if let Some(io) = err.downcast_ref::<std::io::Error>()
                 && matches!(
                     io.kind(),
@@ -206,5 +239,97 @@ impl BodyReadError {
             source = err.source();
         }
         Self::Failed(e.to_string())
+    }
+}
+
+/// The global budget of request-body bytes buffered by requests not yet
+/// answered: a semaphore whose permits are bytes. A body takes permits for
+/// each chunk as it arrives (decompressed, when it was compressed) and
+/// never waits for them: a chunk that does not fit sheds its request.
+#[derive(Clone)]
+struct BodyBudget {
+    bytes: Arc<Semaphore>,
+    total: usize,
+}
+
+/// Bytes of one request's body charged to the budget; given back when
+/// dropped.
+#[must_use = "the bytes are given back to the budget when this is dropped"]
+#[derive(Default)]
+pub struct BodyCharge(Option<OwnedSemaphorePermit>);
+
+impl BodyBudget {
+    fn new(total: usize) -> Self {
+        let total = total.min(Semaphore::MAX_PERMITS);
+        Self {
+            bytes: Arc::new(Semaphore::new(total)),
+            total,
+        }
+    }
+
+    fn charged(&self) -> usize {
+        self.total - self.bytes.available_permits()
+    }
+
+    /// Adds `n` bytes to `charge`, or [`BodyReadError::OverBudget`] (and
+    /// nothing charged) when the budget cannot take them now.
+    fn charge(&self, charge: &mut BodyCharge, n: usize) -> Result<(), BodyReadError> {
+        let n = u32::try_from(n).map_err(|_| BodyReadError::OverBudget)?;
+        let permit = self
+            .bytes
+            .clone()
+            .try_acquire_many_owned(n)
+            .map_err(|_| BodyReadError::OverBudget)?;
+        match &mut charge.0 {
+            Some(held) => held.merge(permit),
+            None => charge.0 = Some(permit),
+        }
+        Ok(())
+    }
+
+    /// Reads `body` whole, each chunk charged before it is kept: more than
+    /// `limit` bytes is [`BodyReadError::TooLarge`] (whatever the budget
+    /// holds), a chunk the budget cannot take [`BodyReadError::OverBudget`];
+    /// either way what was read is dropped and given back at once.
+    async fn read(
+        &self,
+        body: axum::body::Body,
+        limit: usize,
+    ) -> Result<(axum::body::Bytes, BodyCharge), BodyReadError> {
+        use http_body_util::BodyExt;
+        let mut body = std::pin::pin!(body);
+        let mut chunks: Vec<axum::body::Bytes> = Vec::new();
+        let mut len = 0usize;
+        let mut charge = BodyCharge::default();
+        while let Some(frame) = body.frame().await {
+            let frame = frame.map_err(|e| BodyReadError::classify(&e))?;
+            let Ok(chunk) = frame.into_data() else {
+                continue; // trailers: not part of the body
+            };
+            if chunk.is_empty() {
+                continue;
+            }
+            len = len.saturating_add(chunk.len());
+            if len > limit {
+                return Err(BodyReadError::TooLarge);
+            }
+            self.charge(&mut charge, chunk.len())?;
+            chunks.push(chunk);
+        }
+        let bytes = match chunks.len() {
+            0 => axum::body::Bytes::new(),
+            1 => chunks.pop().expect("one chunk"),
+            _ => {
+                // One contiguous copy for the parsers; the chunks it is made
+                // of are freed at once, so a whole body is held twice only
+                // for the moment of the copy.
+                let mut whole = Vec::with_capacity(len);
+                for chunk in chunks {
+                    whole.extend_from_slice(&chunk);
+                }
+                axum::body::Bytes::from(whole)
+            }
+        };
+        Ok((bytes, charge))
     }
 }

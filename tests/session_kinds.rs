@@ -150,6 +150,7 @@ fn settings(url: &str, prefix: &str) -> StoreSettings {
         redis: Default::default(),
         wait_replicas: 0,
         max_memory_bytes: 1 << 24,
+        max_memory_bytes_per_tenant: 1 << 24,
         timeout: Duration::from_secs(1),
     }
 }

@@ -32,6 +32,7 @@ fn settings(url: &str) -> StoreSettings {
         redis: Default::default(),
         wait_replicas: 0,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_secs(1),
     }
 }

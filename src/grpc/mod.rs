@@ -9,6 +9,7 @@ pub mod error;
 pub mod jpda;
 pub mod plot_fusion;
 pub mod sessions;
+mod stream_budget;
 
 use std::time::Instant;
 
@@ -190,11 +191,13 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
     if is_health_or_reflection(req.uri().path()) {
         return next.run(req).await;
     }
-    let req = if is_streaming(req.uri().path()) {
-        req
+    let (req, _charge) = if is_streaming(req.uri().path()) {
+        // Read message by message by the call: its incomplete message is
+        // charged to the budget as it arrives.
+        (req.map(|body| stream_budget::budgeted(&state, body)), None)
     } else {
         match read_unary_body(&state, req).await {
-            Ok(req) => req,
+            Ok((req, charge)) => (req, Some(charge)),
             Err(status) => return status.into_http(),
         }
     };
@@ -270,18 +273,32 @@ fn is_streaming(path: &str) -> bool {
 }
 
 /// Reads a unary call's whole body (its one message) within the body-read
-/// timeout and the message limit before the call takes an in-flight slot,
-/// as the REST side does: a client that sends its headers and then trickles
-/// or withholds its message holds no slot, and is answered DEADLINE_EXCEEDED.
-async fn read_unary_body(state: &AppState, req: Request) -> Result<Request, Status> {
+/// timeout, the message limit and the budget of buffered body bytes before
+/// the call takes an in-flight slot, as the REST side does: a client that
+/// sends its headers and then trickles or withholds its message holds no
+/// slot, and is answered DEADLINE_EXCEEDED; a message the budget cannot
+/// take is shed with UNAVAILABLE. The bytes stay charged until the call is
+/// answered (the returned charge).
+async fn read_unary_body(
+    state: &AppState,
+    req: Request,
+) -> Result<(Request, crate::state::BodyCharge), Status> {
     let limit = state.settings().max_body_bytes;
     let (parts, body) = req.into_parts();
     // The 5-byte gRPC frame header (compression flag, length) rides on the
     // message: a body over limit + 5 carries a message over the limit.
     match state.read_body(body, limit.saturating_add(5)).await {
-        Ok(bytes) => Ok(Request::from_parts(parts, axum::body::Body::from(bytes))),
+        Ok((bytes, charge)) => Ok((
+            Request::from_parts(parts, axum::body::Body::from(bytes)),
+            charge,
+        )),
         Err(BodyReadError::TooLarge) => Err(Status::resource_exhausted(format!(
             "the request message is larger than {limit} bytes (FUSION_MAX_BODY_BYTES)"
+        ))),
+        Err(BodyReadError::OverBudget) => Err(Status::unavailable(format!(
+            "the request bodies being read hold the budget of {} buffered bytes \
+             (FUSION_MAX_BUFFERED_BODY_BYTES); retry shortly",
+            state.settings().max_buffered_body_bytes
         ))),
         Err(BodyReadError::Undecodable(e)) => Err(Status::invalid_argument(format!(
             "the request body could not be read: {e}"

@@ -543,6 +543,13 @@ impl SessionService for SessionGrpc {
             let mut session: Option<String> = None;
             while let Some(message) = inbound.next().await {
                 let result = match message {
+                    // A message the budget of buffered body bytes could not
+                    // take (`grpc::stream_budget`): the stream ends with it,
+                    // so the client knows to retry.
+                    Err(status) if status.code() == Code::Unavailable => {
+                        let _ = tx.send(Err(status)).await;
+                        break;
+                    }
                     // The client went away or sent garbage: stop; every
                     // applied batch is already stored whole.
                     Err(_) => break,

@@ -139,7 +139,8 @@ impl utoipa::Modify for BearerAuth {
                 "503",
                 problem(
                     503,
-                    "Shed (too many requests in flight; `Retry-After`), or a session store that \
+                    "Shed (too many requests in flight, or the request bodies being read hold \
+                     FUSION_MAX_BUFFERED_BODY_BYTES; `Retry-After`), or a session store that \
                      does not answer (`Retry-After`; for a session write the outcome is unknown: \
                      retry with the same sequence number)",
                 ),
@@ -373,16 +374,21 @@ async fn authenticate(State(state): State<AppState>, mut req: Request, next: Nex
     }
 }
 
-/// Reads an API request's whole body first, within the body limit and the
-/// body-read timeout (`FUSION_BODY_READ_TIMEOUT_S`), and only then takes an
-/// in-flight slot: a client that sends its headers and then trickles or
-/// withholds its body holds no slot, and is answered 408 when the timeout
-/// passes. Sheds the request with 503 when `max_in_flight` are being served.
+/// Reads an API request's whole body first, within the body limit, the
+/// body-read timeout (`FUSION_BODY_READ_TIMEOUT_S`) and the global budget of
+/// buffered body bytes (`FUSION_MAX_BUFFERED_BODY_BYTES`), and only then
+/// takes an in-flight slot: a client that sends its headers and then
+/// trickles or withholds its body holds no slot, and is answered 408 when
+/// the timeout passes; bodies that would take the buffered bytes over the
+/// budget are shed with 503 as they arrive. Sheds the request with 503 when
+/// `max_in_flight` are being served. The body's bytes stay charged to the
+/// budget until the request is answered.
 async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Response {
     let (parts, body) = req.into_parts();
-    let bytes = match state.read_body(body, state.settings().max_body_bytes).await {
-        Ok(bytes) => bytes,
-        Err(e) => return body_error(e),
+    let limit = state.settings().max_body_bytes;
+    let (bytes, _charge) = match state.read_body(body, limit).await {
+        Ok(read) => read,
+        Err(e) => return body_error(e, &state),
     };
     let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     match state.try_admit() {
@@ -395,10 +401,13 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
 }
 
 /// The answer to a body that could not be read: over the limit (after
-/// decompression) a 413; a body that does not decompress as its
+/// decompression) a 413 naming it; over the budget of buffered bytes a 503
+/// with `Retry-After`; a body that does not decompress as its
 /// `Content-Encoding` says a 400; the connection failed mid-body a 400 that
-/// nobody may read; too slow a 408 with the connection closed.
-fn body_error(e: BodyReadError) -> Response {
+/// nobody may read; too slow a 408. Every answer but the 400 of a body that
+/// does not decompress leaves the rest of the body unread, so it closes the
+/// connection.
+fn body_error(e: BodyReadError, state: &AppState) -> Response {
     let malformed = |detail: String| {
         Problem::new(
             StatusCode::BAD_REQUEST,
@@ -408,23 +417,42 @@ fn body_error(e: BodyReadError) -> Response {
         )
         .into_response()
     };
-    match e {
-        BodyReadError::TooLarge => {
-            Problem::for_status(StatusCode::PAYLOAD_TOO_LARGE).into_response()
+    let mut response = match e {
+        BodyReadError::TooLarge => Problem::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "payload-too-large",
+            "Payload too large",
+            format!(
+                "the request body exceeds {} bytes (FUSION_MAX_BODY_BYTES; a compressed body \
+                 counts decompressed)",
+                state.settings().max_body_bytes
+            ),
+        )
+        .into_response(),
+        BodyReadError::OverBudget => Problem::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "overloaded",
+            "Service overloaded",
+            format!(
+                "the request bodies being read hold the budget of {} buffered bytes \
+                 (FUSION_MAX_BUFFERED_BODY_BYTES); retry shortly",
+                state.settings().max_buffered_body_bytes
+            ),
+        )
+        .into_response(),
+        BodyReadError::Undecodable(io) => {
+            return malformed(format!(
+                "the body does not decompress as its Content-Encoding says: {io}"
+            ));
         }
-        BodyReadError::Undecodable(io) => malformed(format!(
-            "the body does not decompress as its Content-Encoding says: {io}"
-        )),
         BodyReadError::Failed(e) => malformed(format!("the body could not be read: {e}")),
-        BodyReadError::TimedOut => {
-            let mut response = Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response();
-            response.headers_mut().insert(
-                header::CONNECTION,
-                header::HeaderValue::from_static("close"),
-            );
-            response
-        }
-    }
+        BodyReadError::TimedOut => Problem::for_status(StatusCode::REQUEST_TIMEOUT).into_response(),
+    };
+    response.headers_mut().insert(
+        header::CONNECTION,
+        header::HeaderValue::from_static("close"),
+    );
+    response
 }
 
 /// Hands requests with a gRPC content type to the gRPC router.

@@ -8,7 +8,9 @@ use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
 use serde_json::{Value, json};
 use tonic::Code;
 
-use crate::helpers::{TestApp, assert_problem, grpc_fields, problem_fields, spawn_app};
+use crate::helpers::{
+    TestApp, assert_problem, grpc_fields, problem_fields, spawn_app, spawn_app_with,
+};
 use crate::plot_fusion::plot_scene::{self, SceneRadar, Target, plots, radars_json};
 use crate::plot_fusion::proto_request;
 use crate::sessions::data::{scenario, session_config};
@@ -246,4 +248,43 @@ async fn a_history_over_its_bound_is_refused_naming_the_option() {
         )),
         "{m}"
     );
+}
+
+#[tokio::test]
+async fn a_tenant_over_its_share_of_the_memory_store_gets_a_429_naming_the_limit() {
+    const ACME: &str = "acme-key-0123456789";
+    const GLOBEX: &str = "globex-key-0123456789";
+    let (batch, _) = scenario();
+    let config = session_config(&batch);
+    // One such session's stored size, from a store without the bound.
+    let probe = spawn_app().await;
+    let created = probe.post_json("/v1/sessions", &config).await;
+    assert_eq!(created.status(), 201);
+    let one = created.json::<Value>().await.unwrap()["encoded_bytes"]
+        .as_u64()
+        .unwrap() as usize;
+    // Room for one session of each tenant, not two.
+    let share = one * 3 / 2;
+    let app = spawn_app_with(|s| {
+        s.api_keys = Some(format!("{ACME}=acme,{GLOBEX}=globex").as_str().into());
+        s.session_memory_bytes_per_tenant = share;
+    })
+    .await;
+    let create = |key: &'static str| {
+        app.client
+            .post(app.url("/v1/sessions"))
+            .bearer_auth(key)
+            .json(&config)
+            .send()
+    };
+    assert_eq!(create(ACME).await.unwrap().status(), 201);
+    let problem = assert_problem(create(ACME).await.unwrap(), 429).await;
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains(&format!("{share} bytes"))
+            && detail.contains("FUSION_SESSION_MEMORY_BYTES_PER_TENANT"),
+        "{detail}"
+    );
+    // The other tenant's share is its own.
+    assert_eq!(create(GLOBEX).await.unwrap().status(), 201);
 }

@@ -16,6 +16,7 @@ mod fuzz;
 mod grpc;
 mod helpers;
 mod hostile;
+mod hostile_bodies;
 mod jpda;
 mod ops;
 mod plot_fusion;

@@ -13,3 +13,6 @@ pub mod cat062;
 pub mod nmea;
 pub mod state;
 pub mod wire;
+
+#[cfg(test)]
+mod mutation;

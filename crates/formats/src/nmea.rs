@@ -269,10 +269,11 @@ fn v_text_decimals(v: &str) -> usize {
 }
 
 fn check_sum(body: &str, sum: &str) -> Result<(), String> {
-    let want = u8::from_str_radix(sum, 16).map_err(|_| format!("bad checksum field {sum:?}"))?;
-    if sum.len() != 2 {
+    // Two hex digits: `from_str_radix` alone would take "+F".
+    if !(sum.len() == 2 && sum.bytes().all(|b| b.is_ascii_hexdigit())) {
         return Err(format!("bad checksum field {sum:?}"));
     }
+    let want = u8::from_str_radix(sum, 16).map_err(|_| format!("bad checksum field {sum:?}"))?;
     let got = checksum(body);
     if got != want {
         return Err(format!(
@@ -555,6 +556,15 @@ mod tests {
         ]);
         let d = decode(&src);
         assert_eq!(d.lines, 6);
+        // A checksum field of two characters that are not two hex digits:
+        // "+6" would parse as 0x06, this body's checksum (XOR by hand with
+        // Python: functools.reduce(operator.xor, map(ord, body))).
+        let body = "AIVDM,1,1,,,1P,0";
+        assert_eq!(checksum(body), 0x06);
+        assert_eq!(decode(&[format!("!{body}*06")]).sentences, 1);
+        let d = decode(&[format!("!{body}*+6")]);
+        assert!(d.errors[0].message.contains("bad checksum field"), "{d:?}");
+        let d = decode(&src);
         assert_eq!(d.positions.len(), 1);
         let bad: Vec<usize> = d.errors.iter().map(|e| e.line).collect();
         assert_eq!(bad, vec![0, 1, 4, 5]);
@@ -609,5 +619,234 @@ mod tests {
         assert_eq!((b.message_type, b.mmsi), (27, 987_654_321));
         assert!((b.lon_deg + 70.5).abs() < 1e-12 && (b.lat_deg + 33.25).abs() < 1e-12);
         assert_eq!((b.sog_knots, b.cog_deg), (Some(9.0), Some(270.0)));
+    }
+
+    /// What any decode must satisfy: counts within the lines, every error
+    /// and position at a line that exists, errors in line order.
+    fn sound(src: &[String], d: &Decoded) -> Result<(), proptest::test_runner::TestCaseError> {
+        use proptest::prop_assert;
+        prop_assert!(d.lines == src.len());
+        let nonblank = src.iter().filter(|l| !l.trim().is_empty()).count();
+        prop_assert!(d.sentences <= nonblank);
+        prop_assert!(d.messages <= d.sentences);
+        prop_assert!(d.positions.len() + d.skipped_by_type.values().sum::<usize>() <= d.messages);
+        prop_assert!(d.errors.iter().all(|e| e.line < src.len()));
+        prop_assert!(d.errors.windows(2).all(|w| w[0].line <= w[1].line));
+        for p in &d.positions {
+            prop_assert!(p.line < src.len());
+            prop_assert!(p.lat_deg.abs() <= 90.0 && p.lon_deg.abs() <= 180.0);
+        }
+        Ok(())
+    }
+
+    /// `!{body}*hh` with the right checksum.
+    fn sentence(body: &str) -> String {
+        format!("!{body}*{:02X}", checksum(body))
+    }
+
+    /// Sentences whose checksum is right but whose fields are anything of
+    /// the right shape or near it: talker, fragment numbers, ids, payload
+    /// characters (a few outside the armour), fill bits, and a tag block
+    /// whose time may not be a number.
+    fn arb_framed_line() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::prelude::*;
+        (
+            prop_oneof![
+                Just("AIVDM".to_string()),
+                Just("AIVDO".to_string()),
+                "[A-Z]{0,6}"
+            ],
+            0u32..12,
+            0u32..12,
+            "[0-9]{0,2}",
+            "[AB12]?",
+            "[0-W`-w~ ]{0,90}",
+            0usize..8,
+            proptest::option::of("[-+.eE0-9a-z:]{0,24}"),
+            "(,[^,*]{0,4}){0,2}",
+        )
+            .prop_map(
+                |(talker, count, number, seq, channel, payload, fill, tag, extra)| {
+                    let body = format!(
+                        "{talker},{count},{number},{seq},{channel},{payload},{fill}{extra}"
+                    );
+                    let line = sentence(&body);
+                    match tag {
+                        Some(t) => {
+                            let tag = format!("c:{t}");
+                            format!("\\{tag}*{:02X}\\{line}", checksum(&tag))
+                        }
+                        None => line,
+                    }
+                },
+            )
+    }
+
+    /// A position report to encode: (type, MMSI, raw lon, raw lat, raw
+    /// SOG, raw COG) in the units of its type's fields (ITU-R M.1371-5
+    /// Tables 45 (types 1–3), 70 (18), 88 (27)), "not available" values
+    /// included.
+    fn arb_report() -> impl proptest::strategy::Strategy<Value = (u8, u32, i64, i64, u64, u64)> {
+        use proptest::prelude::*;
+        prop_oneof![
+            (
+                prop_oneof![Just(1u8), Just(2), Just(3), Just(18), Just(19)],
+                any::<u32>().prop_map(|m| m % 1_000_000_000),
+                -108_000_000i64..=108_000_000, // ±180° in 1/10 000 min
+                -54_000_000i64..=54_000_000,   // ±90°
+                0u64..=1023,                   // 1/10 kn, 1023: n/a
+                0u64..=3600,                   // 1/10°, 3600: n/a
+            ),
+            (
+                Just(27u8),
+                any::<u32>().prop_map(|m| m % 1_000_000_000),
+                -108_000i64..=108_000, // ±180° in 1/10 min
+                -54_000i64..=54_000,
+                0u64..=63,                          // kn, 63: n/a
+                prop_oneof![0u64..=359, Just(511)], // °, 511: n/a
+            ),
+        ]
+    }
+
+    /// The payload bits of a report, field by field as the tables lay them
+    /// out (spare and unused fields zero).
+    fn report_bits(r: &(u8, u32, i64, i64, u64, u64)) -> BitWriter {
+        let &(kind, mmsi, lon, lat, sog, cog) = r;
+        let mut w = BitWriter::default();
+        w.put(u64::from(kind), 6);
+        w.put(0, 2); // repeat indicator
+        w.put(u64::from(mmsi), 30);
+        match kind {
+            27 => {
+                w.put(0, 1 + 1 + 4); // accuracy, RAIM, status
+                w.put_signed(lon, 18);
+                w.put_signed(lat, 17);
+                w.put(sog, 6);
+                w.put(cog, 9);
+                w.put(0, 2); // GNSS status, spare: 96 bits
+            }
+            18 | 19 => {
+                w.put(0, 8); // regional reserved
+                w.put(sog, 10);
+                w.put(0, 1); // accuracy
+                w.put_signed(lon, 28);
+                w.put_signed(lat, 27);
+                w.put(cog, 12);
+                w.put(511, 9); // heading n/a
+                while w.len() < 168 {
+                    w.put(0, 1);
+                }
+            }
+            _ => {
+                w.put(0, 4 + 8); // status, rate of turn
+                w.put(sog, 10);
+                w.put(0, 1); // accuracy
+                w.put_signed(lon, 28);
+                w.put_signed(lat, 27);
+                w.put(cog, 12);
+                w.put(511, 9); // heading n/a
+                while w.len() < 168 {
+                    w.put(0, 1);
+                }
+            }
+        }
+        w
+    }
+
+    /// The report as lines: its armoured payload cut into `parts` fragments
+    /// (fill bits on the last), sequential id `seq`, a tag block with time
+    /// `t` on the first when given.
+    fn report_lines(w: &BitWriter, parts: usize, seq: usize, t: Option<u32>) -> Vec<String> {
+        let (payload, fill) = w.armoured();
+        let chars: Vec<char> = payload.chars().collect();
+        let parts = parts.clamp(1, chars.len());
+        let size = chars.len().div_ceil(parts);
+        let pieces: Vec<String> = chars.chunks(size).map(|c| c.iter().collect()).collect();
+        let n = pieces.len();
+        let seq = if n == 1 {
+            String::new()
+        } else {
+            seq.to_string()
+        };
+        pieces
+            .iter()
+            .enumerate()
+            .map(|(k, piece)| {
+                let fill = if k + 1 == n { fill } else { 0 };
+                let line = sentence(&format!("AIVDM,{n},{},{seq},A,{piece},{fill}", k + 1));
+                match t.filter(|_| k == 0) {
+                    Some(t) => {
+                        let tag = format!("c:{t}");
+                        format!("\\{tag}*{:02X}\\{line}", checksum(&tag))
+                    }
+                    None => line,
+                }
+            })
+            .collect()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(256))]
+
+        /// Any lines at all (any Unicode, any bytes read as text): a count
+        /// of what was found and errors by line, never a panic.
+        #[test]
+        fn arbitrary_lines_never_panic(
+            src in proptest::collection::vec(".{0,120}", 0..24),
+            bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..2_048),
+        ) {
+            let d = decode(&src);
+            sound(&src, &d)?;
+            let text: Vec<String> = String::from_utf8_lossy(&bytes)
+                .split('\n')
+                .map(str::to_string)
+                .collect();
+            let d = decode(&text);
+            sound(&text, &d)?;
+        }
+
+        /// Lines that pass the checksum with fields of any value: deeper
+        /// into framing, fragments and payloads, still never a panic.
+        #[test]
+        fn framed_lines_with_odd_fields_never_panic(
+            src in proptest::collection::vec(arb_framed_line(), 0..24),
+        ) {
+            let d = decode(&src);
+            sound(&src, &d)?;
+        }
+
+        /// Position reports encoded field by field, in 1 to 3 fragments,
+        /// some with a receive time, are decoded to the values encoded:
+        /// degrees = raw / scale, "not available" SOG and COG as `None`.
+        #[test]
+        fn encoded_position_reports_round_trip(
+            reports in proptest::collection::vec(
+                (arb_report(), 1usize..=3, proptest::option::of(1_000_000_000u32..2_000_000_000)),
+                1..6,
+            ),
+        ) {
+            use proptest::prop_assert_eq;
+            let mut src = Vec::new();
+            for (i, (r, parts, t)) in reports.iter().enumerate() {
+                src.extend(report_lines(&report_bits(r), *parts, i % 10, *t));
+            }
+            let d = decode(&src);
+            sound(&src, &d)?;
+            prop_assert_eq!(&d.errors, &vec![]);
+            prop_assert_eq!(d.positions.len(), reports.len());
+            for (p, ((kind, mmsi, lon, lat, sog, cog), _, t)) in d.positions.iter().zip(&reports) {
+                let (scale, sog_na, sog_scale, cog_na, cog_scale) = if *kind == 27 {
+                    (600.0, 63, 1.0, 511, 1.0)
+                } else {
+                    (600_000.0, 1023, 10.0, 3600, 10.0)
+                };
+                prop_assert_eq!((p.message_type, p.mmsi), (*kind, *mmsi));
+                prop_assert_eq!(p.lon_deg, *lon as f64 / scale);
+                prop_assert_eq!(p.lat_deg, *lat as f64 / scale);
+                prop_assert_eq!(p.sog_knots, (*sog != sog_na).then(|| *sog as f64 / sog_scale));
+                prop_assert_eq!(p.cog_deg, (*cog != cog_na).then(|| *cog as f64 / cog_scale));
+                prop_assert_eq!(p.t, t.map(f64::from));
+            }
+        }
     }
 }

@@ -42,6 +42,8 @@ pub struct StoreSettings {
     pub max_sessions_per_tenant: usize,
     /// Memory backend: bound on the total bytes of session data held.
     pub max_memory_bytes: usize,
+    /// Memory backend: bound on the bytes of session data one tenant holds.
+    pub max_memory_bytes_per_tenant: usize,
     /// Redis backend: longest time one command may take before `Unavailable`.
     pub timeout: Duration,
 }
@@ -162,6 +164,10 @@ pub enum StoreError {
     /// The memory backend holds as many bytes as allowed.
     #[error("session store full: at most {limit_bytes} bytes of session data")]
     MemoryFull { limit_bytes: usize },
+    /// The memory backend holds as many bytes of this tenant's sessions as
+    /// one tenant may hold.
+    #[error("the tenant's session data is at its bound of {limit_bytes} bytes")]
+    TenantMemoryFull { limit_bytes: usize },
     /// `create` of an id that is live already.
     #[error("a session with this id exists already")]
     AlreadyExists,

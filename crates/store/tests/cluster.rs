@@ -34,6 +34,7 @@ async fn store(cluster: &Cluster) -> SessionStore {
         key_prefix: PREFIX.into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_secs(1),
     })
     .await
@@ -290,6 +291,7 @@ async fn sessions_of_a_single_redis_are_copied_to_the_cluster_layout() {
         key_prefix: PREFIX.into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_secs(1),
     })
     .await

@@ -220,6 +220,7 @@ fn settings(url: String, redis: RedisAccessSettings) -> StoreSettings {
         key_prefix: "tls-test".into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_secs(2),
     }
 }

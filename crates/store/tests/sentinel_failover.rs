@@ -27,6 +27,7 @@ async fn pushes_survive_a_primary_kill_exactly_once() {
         redis: Default::default(),
         wait_replicas: 0,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_millis(500),
     };
     let store = SessionStore::connect(&settings).await.unwrap();
@@ -150,6 +151,7 @@ async fn a_switch_master_announcement_moves_the_store_before_any_command_fails()
         key_prefix: "switch-test".into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_millis(500),
     })
     .await
@@ -222,6 +224,7 @@ async fn a_write_fewer_replicas_hold_than_waited_for_is_unavailable_not_lost() {
         key_prefix: "wait-test".into(),
         max_sessions_per_tenant: 10,
         max_memory_bytes: 1 << 20,
+        max_memory_bytes_per_tenant: 1 << 20,
         timeout: Duration::from_millis(500),
     };
     let ttl = Duration::from_secs(600);

@@ -939,4 +939,42 @@ mod tests {
         b[at..at + 8].copy_from_slice(&(-1.0f64).to_le_bytes());
         assert!(matches!(decode_tracker(&b), Err(FormatError::Invalid(_))));
     }
+
+    /// Valid encodings of trackers with tracks and pending plots, without
+    /// and with Doppler (built once).
+    fn valid_encodings() -> &'static [Vec<u8>] {
+        static ENCODED: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+        ENCODED.get_or_init(|| {
+            [false, true]
+                .into_iter()
+                .map(|doppler| {
+                    let mut tracker = Tracker::new(config(doppler)).unwrap();
+                    tracker
+                        .process(&plots(&tracker.config().clone(), 60.0))
+                        .unwrap();
+                    encode_tracker(&tracker)
+                })
+                .collect()
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(256))]
+
+        /// Several edits of a valid encoding (bytes, extreme words where
+        /// lengths and counts are, insertions, cuts) decode to an error or
+        /// to a tracker that encodes and decodes again: never a panic, and
+        /// never an allocation a length in the bytes asked for.
+        #[test]
+        fn mutated_trackers_are_errors_or_trackers_never_panics(
+            which in 0..2usize,
+            edits in crate::mutation::edits(),
+        ) {
+            let bytes = crate::mutation::apply(&valid_encodings()[which], &edits);
+            if let Ok(tracker) = decode_tracker(&bytes) {
+                let again = encode_tracker(&tracker);
+                proptest::prop_assert!(decode_tracker(&again).is_ok());
+            }
+        }
+    }
 }

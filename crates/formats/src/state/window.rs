@@ -267,4 +267,41 @@ mod tests {
             let _ = decode_lag_window(&flipped);
         }
     }
+
+    /// Valid encodings of a reprocessing window holding plots and of a
+    /// retrodicting one (built once).
+    fn valid_encodings() -> &'static [Vec<u8>] {
+        static ENCODED: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+        ENCODED.get_or_init(|| {
+            let mut reprocessing = window();
+            reprocessing.push(&plots()[..20]).unwrap();
+            let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+            let mut retrodicting =
+                LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, LatePolicy::Retrodict)
+                    .unwrap();
+            retrodicting.push(&plots()[..20]).unwrap();
+            vec![
+                encode_lag_window(&reprocessing),
+                encode_lag_window(&retrodicting),
+            ]
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(256))]
+
+        /// Several edits of a valid encoding decode to an error or to a
+        /// window that encodes and decodes again: never a panic.
+        #[test]
+        fn mutated_windows_are_errors_or_windows_never_panics(
+            which in 0..2usize,
+            edits in crate::mutation::edits(),
+        ) {
+            let bytes = crate::mutation::apply(&valid_encodings()[which], &edits);
+            if let Ok(window) = decode_lag_window(&bytes) {
+                let again = encode_lag_window(&window);
+                proptest::prop_assert!(decode_lag_window(&again).is_ok());
+            }
+        }
+    }
 }

@@ -165,6 +165,11 @@ impl From<StoreError> for ServiceError {
             StoreError::MemoryFull { limit_bytes } => ServiceError::QuotaExceeded(format!(
                 "the session store's memory ({limit_bytes} bytes) is full"
             )),
+            StoreError::TenantMemoryFull { limit_bytes } => ServiceError::QuotaExceeded(format!(
+                "this write would take the tenant's sessions over {limit_bytes} bytes, the most \
+                 one tenant may hold in the session store's memory \
+                 (FUSION_SESSION_MEMORY_BYTES_PER_TENANT): delete a session or let one expire"
+            )),
             StoreError::AlreadyExists => {
                 ServiceError::Internal("a fresh random session id collided".into())
             }
@@ -831,6 +836,7 @@ mod tests {
             key_prefix: String::new(),
             max_sessions_per_tenant: 10,
             max_memory_bytes: 1 << 26,
+            max_memory_bytes_per_tenant: 1 << 26,
             timeout: Duration::from_secs(1),
         })
         .await
