@@ -3,22 +3,13 @@
 //! decompressed size, and a body that does not decompress is the client's
 //! error (400 / INVALID_ARGUMENT), never a 500.
 
-use std::io::Write;
-
-use flate2::{Compression, write::GzEncoder};
 use radar_fusion::proto as pb;
 use serde_json::json;
 use tonic::{Code, codec::CompressionEncoding};
 
-use crate::helpers::{assert_problem, h2_connection, spawn_app, spawn_app_with};
+use crate::helpers::{assert_problem, gzip, h2_connection, spawn_app, spawn_app_with};
 
 const EVALUATE: &str = "/v1/correlation/rules/evaluate";
-
-fn gzip(bytes: &[u8]) -> Vec<u8> {
-    let mut encoder = GzEncoder::new(Vec::new(), Compression::default());
-    encoder.write_all(bytes).unwrap();
-    encoder.finish().unwrap()
-}
 
 async fn post_encoded(
     app: &crate::helpers::TestApp,

@@ -221,3 +221,11 @@ pub fn radar_gauge(metrics: &str, name: &str, session: &str, radar: &str) -> Opt
         .find(|l| l.starts_with(&format!("{name}{{")) && l.contains(&labels))
         .map(|l| l.rsplit(' ').next().unwrap().parse().unwrap())
 }
+
+/// `bytes` gzip-compressed (the default level).
+pub fn gzip(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    encoder.write_all(bytes).unwrap();
+    encoder.finish().unwrap()
+}

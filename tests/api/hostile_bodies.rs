@@ -8,24 +8,17 @@
 //! The waits below are bounds on an outcome (the server has read a body,
 //! given its bytes back), never measurements of speed.
 
-use std::{io::Write, time::Duration};
+use std::time::Duration;
 
-use flate2::{Compression, write::GzEncoder};
 use radar_fusion::proto as pb;
 use tokio::{io::AsyncWriteExt, net::TcpStream};
 use tonic::Code;
 
-use crate::helpers::{TestApp, assert_problem, spawn_app_with};
+use crate::helpers::{TestApp, assert_problem, gzip, spawn_app_with};
 use crate::sessions::data::{open_stream, pb_open, pb_report, scenario};
 
 const EVALUATE: &str = "/v1/correlation/rules/evaluate";
 const BOUND: Duration = Duration::from_secs(10);
-
-fn gzip(bytes: &[u8]) -> Vec<u8> {
-    let mut encoder = GzEncoder::new(Vec::new(), Compression::default());
-    encoder.write_all(bytes).unwrap();
-    encoder.finish().unwrap()
-}
 
 /// A valid rules request padded with `pad` spaces (JSON whitespace): its
 /// size is `pad` plus 43 bytes.

@@ -775,13 +775,11 @@ impl Tracker {
                 // last update kept; no registration pair.
                 let pred = &mut scratch.predictions[c];
                 if pred.modes.is_empty() {
-                    let mut single = vec![ModeState {
-                        probability: 1.0,
-                        x: std::mem::replace(&mut pred.x, nalgebra::DVector::zeros(0)),
-                        p: std::mem::replace(&mut pred.p, nalgebra::DMatrix::zeros(0, 0)),
-                    }];
-                    updater.update(&mut single, assoc)?;
-                    retrodiction::carry(track, &retro, &single)?;
+                    let single = single_mode(&mut scratch.single);
+                    std::mem::swap(&mut single[0].x, &mut pred.x);
+                    std::mem::swap(&mut single[0].p, &mut pred.p);
+                    updater.update(single, assoc)?;
+                    retrodiction::carry(track, &retro, single)?;
                 } else {
                     updater.update(&mut pred.modes, assoc)?;
                     retrodiction::carry(track, &retro, &pred.modes)?;
@@ -795,13 +793,7 @@ impl Tracker {
             }
             track.commit_swap(t, &mut scratch.predictions[c]);
             let (x, p) = if track.modes.is_empty() {
-                let single = &mut scratch.single;
-                single.resize_with(1, || ModeState {
-                    probability: 1.0,
-                    x: nalgebra::DVector::zeros(0),
-                    p: nalgebra::DMatrix::zeros(0, 0),
-                });
-                single[0].probability = 1.0;
+                let single = single_mode(&mut scratch.single);
                 std::mem::swap(&mut single[0].x, &mut track.x);
                 std::mem::swap(&mut single[0].p, &mut track.p);
                 updater.update(single, assoc)?
@@ -955,6 +947,19 @@ struct Scratch {
     /// sequence within the radar): a hit replaces the miss that sweep
     /// judged.
     behind_sweep: bool,
+}
+
+/// The one mode of a single-model track's update in `single` (a
+/// [`Scratch`] buffer), probability 1, its state buffers whatever the last
+/// update left.
+fn single_mode(single: &mut Vec<ModeState>) -> &mut Vec<ModeState> {
+    single.resize_with(1, || ModeState {
+        probability: 1.0,
+        x: nalgebra::DVector::zeros(0),
+        p: nalgebra::DMatrix::zeros(0, 0),
+    });
+    single[0].probability = 1.0;
+    single
 }
 
 impl Scratch {

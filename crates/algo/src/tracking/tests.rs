@@ -838,23 +838,14 @@ proptest::proptest! {
                 )
                 .unwrap();
             let mut received: Vec<Plot> = Vec::new();
-            let mut k = 0;
-            let mut second = 1.0;
             let mut corrected = 0;
-            while k < arrivals.len() {
-                let batch: Vec<Plot> = arrivals[k..]
-                    .iter()
-                    .take_while(|(a, _)| *a < second)
-                    .map(|(_, p)| *p)
-                    .collect();
-                k += batch.len();
-                second += 1.0;
+            for batch in batches_of_arrival(&arrivals) {
                 let push = window.push(&batch).unwrap();
                 proptest::prop_assert!(push.late.is_empty());
                 corrected += usize::from(push.within_lag > 0);
                 received.extend(batch);
                 proptest::prop_assert_eq!(window.picture(), &batch_picture(&cfg, &received));
-                if rebuild > 0 && k % (rebuild as usize + 1) == 0 {
+                if rebuild > 0 && received.len() % (rebuild as usize + 1) == 0 {
                     window = LagWindow::from_parts(window.to_parts()).unwrap();
                 }
             }
@@ -1136,19 +1127,10 @@ fn retrodiction_gap(
         )
         .unwrap();
         proptest::prop_assert_eq!(window.policy(), LatePolicy::Retrodict);
-        let mut k = 0;
-        let mut second = 1.0;
         let mut late = 0;
         let mut ever = std::collections::BTreeSet::new();
         let mut deleted = 0;
-        while k < arrivals.len() {
-            let batch: Vec<Plot> = arrivals[k..]
-                .iter()
-                .take_while(|(a, _)| *a < second)
-                .map(|(_, p)| *p)
-                .collect();
-            k += batch.len();
-            second += 1.0;
+        for batch in batches_of_arrival(&arrivals) {
             let push = window.push(&batch).unwrap();
             proptest::prop_assert!(push.late.is_empty());
             proptest::prop_assert_eq!(push.replayed, 0);
@@ -1181,6 +1163,25 @@ fn retrodiction_gap(
         out.push(sigmas);
     }
     Ok(())
+}
+
+/// `arrivals` (in arrival order) cut into 1-s batches of arrival: the
+/// plots that arrive in [s − 1, s) for s = 1, 2, … up to the last (empty
+/// seconds included).
+fn batches_of_arrival(arrivals: &[(f64, Plot)]) -> Vec<Vec<Plot>> {
+    let mut out = Vec::new();
+    let (mut k, mut second) = (0, 1.0);
+    while k < arrivals.len() {
+        let batch: Vec<Plot> = arrivals[k..]
+            .iter()
+            .take_while(|(a, _)| *a < second)
+            .map(|(_, p)| *p)
+            .collect();
+        k += batch.len();
+        second += 1.0;
+        out.push(batch);
+    }
+    out
 }
 
 /// Arrival times: each radar's link delay, 0–0.3 s more per plot, and a
@@ -1230,17 +1231,8 @@ fn auto_run(seed: u64) -> Result<(), proptest::test_runner::TestCaseError> {
         policy,
     )
     .unwrap();
-    let mut k = 0;
-    let mut second = 1.0;
     let (mut retrodicted, mut exact_again) = (0, 0);
-    while k < arrivals.len() {
-        let batch: Vec<Plot> = arrivals[k..]
-            .iter()
-            .take_while(|(a, _)| *a < second)
-            .map(|(_, p)| *p)
-            .collect();
-        k += batch.len();
-        second += 1.0;
+    for batch in batches_of_arrival(&arrivals) {
         let was = window.approximate_from();
         let mut rebuilt = LagWindow::from_parts(window.to_parts()).unwrap();
         let push = window.push(&batch).unwrap();

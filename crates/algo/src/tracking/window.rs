@@ -35,7 +35,7 @@
 //! covariance between the late plot and later updates, and its cost is the
 //! replay of the plots after the late one, bounded by the lag.
 
-use super::{Counters, Plot, TrackOutput, Tracker};
+use super::{Counters, Plot, StepReport, TrackOutput, Tracker};
 use crate::error::AlgoError;
 
 /// The default lag (s): ordinary radar network delays (processing and
@@ -165,6 +165,16 @@ pub struct Push {
     /// [`LatePolicy::Auto`]: late plots taken by retrodiction because
     /// their replay would have exceeded the bound.
     pub retrodicted: usize,
+}
+
+impl Push {
+    /// Counts what one tracker call did (frames, refused starts, deleted
+    /// tracks).
+    fn add(&mut self, report: StepReport) {
+        self.frames += report.frames;
+        self.refused += report.refused;
+        self.deleted.extend(report.deleted);
+    }
 }
 
 /// Everything a [`LagWindow`] stores, owned (the snapshots are not kept).
@@ -472,7 +482,6 @@ impl LagWindow {
             // and so may the serving replica's (a late plot inserted before
             // a snapshot makes it useless: with per-radar delays every
             // snapshot newer than the slowest link's delay goes).
-            let exact_from = at;
             let retrodict = match self.policy {
                 LatePolicy::Auto { max_replay } => self.window.len() > max_replay as usize,
                 _ => false,
@@ -488,15 +497,13 @@ impl LagWindow {
                 let report = self.head.process(&accepted);
                 self.head.set_out_of_sequence(false);
                 let report = report?;
-                out.frames += report.frames;
-                out.refused += report.refused;
-                out.deleted.extend(report.deleted);
+                out.add(report);
                 out.retrodicted = out.within_lag;
                 let earliest = accepted[0].t;
                 self.approximate_from =
                     Some(self.approximate_from.map_or(earliest, |a| a.min(earliest)));
             } else {
-                self.snapshots.retain(|(n, _)| *n <= exact_from);
+                self.snapshots.retain(|(n, _)| *n <= at);
                 let (start, from) = match self.snapshots.last() {
                     Some((n, tr)) => (*n, tr.clone()),
                     None => (0, self.base.clone()),
@@ -514,12 +521,7 @@ impl LagWindow {
         self.commit()?;
         out.bounded_horizon = self.bound()?;
         self.thin();
-        let mut picture = self.head.clone();
-        let report = picture.flush()?;
-        out.frames += report.frames;
-        out.refused += report.refused;
-        out.deleted.extend(report.deleted);
-        self.picture = picture;
+        self.refresh_picture(&mut out)?;
         Ok(out)
     }
 
@@ -531,17 +533,19 @@ impl LagWindow {
             std::mem::swap(&mut self.head, &mut self.picture);
         }
         let report = self.head.process(accepted)?;
-        out.frames += report.frames;
-        out.refused += report.refused;
-        out.deleted.extend(report.deleted);
+        out.add(report);
         self.advance(accepted[accepted.len() - 1].t);
-        let mut picture = self.head.clone();
-        let report = picture.flush()?;
-        out.frames += report.frames;
-        out.refused += report.refused;
-        out.deleted.extend(report.deleted);
-        self.picture = picture;
+        self.refresh_picture(&mut out)?;
         Ok(out)
+    }
+
+    /// The picture: `head` flushed (its open frame closed), what the
+    /// flush did counted in `out`.
+    fn refresh_picture(&mut self, out: &mut Push) -> Result<(), AlgoError> {
+        let mut picture = self.head.clone();
+        out.add(picture.flush()?);
+        self.picture = picture;
+        Ok(())
     }
 
     /// The newest plot time and the horizon after plots up to `last`.
@@ -563,16 +567,12 @@ impl LagWindow {
         let mut from = start;
         if cut > start && cut < self.window.len() && self.approximate_from.is_none() {
             let report = self.head.process(&self.window[start..cut])?;
-            out.frames += report.frames;
-            out.refused += report.refused;
-            out.deleted.extend(report.deleted);
+            out.add(report);
             self.snapshots.push((cut, self.head.clone()));
             from = cut;
         }
         let report = self.head.process(&self.window[from..])?;
-        out.frames += report.frames;
-        out.refused += report.refused;
-        out.deleted.extend(report.deleted);
+        out.add(report);
         Ok(())
     }
 
