@@ -44,6 +44,9 @@ import asterix.generated as gen
 
 SPEC = gen.Cat_062_1_20
 FT = 0.3048
+# I062/080 PSR/SSR/MDS: aged beyond this (s), as the service says
+# (crates/service/src/plot_fusion/cat062.rs AGED_AFTER_S).
+AGED_AFTER_S = 12.0
 NM = 1852.0
 
 
@@ -418,13 +421,46 @@ def service_compare(fixture, dec):
             return math.sqrt(max(0.0, sum(row[a] * p[u][v] * row[b]
                                           for a, u in enumerate(ix) for b, v in enumerate(ix))))
 
+        ident = t.get("identity") or {}
+        pa = ident.get("pressure_altitude")
         if three_d:
             c.value(i, it, ["130"], t["height_m"] / FT, 3.125)
+        else:
+            c.value(i, it, ["130"], None, 0)
+        # I062/220: the pressure altitude's rate when the track has one,
+        # else the geometric rate of a 3D track.
+        if pa is not None:
+            c.value(i, it, ["220"], pa["rate_of_climb_ftpm"], 3.125)
+        elif three_d:
             rate = sum(j[2][k] * s[vel[k]] for k in range(3))
             c.value(i, it, ["220"], rate / FT * 60.0, 3.125)
         else:
-            c.value(i, it, ["130"], None, 0)
             c.value(i, it, ["220"], None, 0)
+        # Identity: I062/060, /245, /380 ADR and ID, /136.
+        code = ident.get("mode_3a")
+        if code is None:
+            c.raw(i, it, ["060", "MODE3A"], None)
+        else:
+            c.raw(i, it, ["060", "MODE3A"], int(code["value"], 8))
+            c.raw(i, it, ["060", "V"], 0)
+            c.raw(i, it, ["060", "G"], 0)
+            start = t.get("start_t")
+            changed = ident.get("pending_mode_3a") is not None or (
+                code["first_t"] > (start if start is not None else -math.inf)
+                and t["t"] - code["first_t"] <= AGED_AFTER_S)
+            c.raw(i, it, ["060", "CH"], int(changed))
+        cs = ident.get("callsign")
+        want = None if cs is None else cs["value"].ljust(8)
+        for path in (["245", "CHR"], ["380", "ID"]):
+            c.fields += 1
+            got = c.get(it, path)
+            got = None if got is None else got.get("string")
+            if got != want:
+                c.fail(i, "/".join(path), f"decoded {got!r}, expected {want!r}")
+        c.raw(i, it, ["245", "STI"], None if cs is None else 0)
+        adr = ident.get("mode_s_address")
+        c.raw(i, it, ["380", "ADR"], None if adr is None else int(adr["value"], 16))
+        c.value(i, it, ["136"], None if pa is None else pa["measured_flight_level"], 0.125)
         c.raw(i, it, ["080", "CNF"], int(t["status"] == "tentative"))
         c.raw(i, it, ["080", "MON"], int(len(req["radars"]) == 1))
         c.raw(i, it, ["080", "MRH"], int(three_d))
@@ -435,7 +471,21 @@ def service_compare(fixture, dec):
         start = t.get("start_t")
         c.value(i, it, ["290", "TRK"], None if start is None else
                 capped(t["t"] - start, 0.25, 255), 0.125)
-        c.value(i, it, ["290", "PSR"], capped(t["t"] - t["last_update_t"], 0.25, 255), 0.125)
+        # Ages: a track that heard secondary replies gives its PSR, SSR
+        # and Mode S ages from their last updates; one that never did,
+        # PSR from its last update.
+        def age(key):
+            last = ident.get(key)
+            return None if last is None else t["t"] - last
+
+        psr = age("last_primary_t") if ident else t["t"] - t["last_update_t"]
+        ages = {"PSR": psr, "SSR": age("last_secondary_t"), "MDS": age("last_mode_s_t")}
+        for sub, a in ages.items():
+            c.value(i, it, ["290", sub], capped(a, 0.25, 255), 0.125)
+            flag = a is not None and a > AGED_AFTER_S
+            c.raw(i, it, ["080", sub], int(flag) if c.get(it, ["080", sub]) is not None
+                  else (None if not flag else 1))
+        c.raw(i, it, ["080", "SPI"], int(bool(ident.get("spi"))))
         c.value(i, it, ["500", "APC", "X"], capped(math.sqrt(p[0][0]), 0.5, 65535), 0.25)
         c.value(i, it, ["500", "APC", "Y"], capped(math.sqrt(p[2][2]), 0.5, 65535), 0.25)
         comp = math.copysign(math.sqrt(abs(p[0][2])), p[0][2])

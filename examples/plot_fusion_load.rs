@@ -191,6 +191,7 @@ fn pb_plot(p: &svc::PlotInput) -> pb::RadarPlot {
         azimuth_deg: p.azimuth_deg,
         elevation_deg: p.elevation_deg,
         radial_velocity_mps: p.radial_velocity_mps,
+        ..Default::default()
     }
 }
 

@@ -201,6 +201,18 @@ pub(crate) fn plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
             azimuth_deg: p.azimuth_deg,
             elevation_deg: p.elevation_deg,
             radial_velocity_mps: p.radial_velocity_mps,
+            ssr: svc::SsrInput {
+                mode_3a: p.mode_3a,
+                mode_3a_validated: p.mode_3a_validated,
+                mode_3a_garbled: p.mode_3a_garbled,
+                flight_level: p.flight_level,
+                flight_level_validated: p.flight_level_validated,
+                flight_level_garbled: p.flight_level_garbled,
+                mode_s_address: p.mode_s_address,
+                callsign: p.callsign,
+                detection: p.detection,
+                spi: p.spi,
+            },
         })
         .collect()
 }
@@ -280,6 +292,39 @@ pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
             elevation_deg: p.elevation_deg,
             radial_velocity_mps: p.radial_velocity_mps,
         }),
+        identity: t.identity.map(identity_out),
+    }
+}
+
+fn item_out(i: svc::IdentityItem) -> pb::IdentityItem {
+    pb::IdentityItem {
+        value: i.value,
+        plots: i.plots,
+        first_t: i.first_t,
+        last_t: i.last_t,
+    }
+}
+
+fn identity_out(v: svc::IdentityView) -> pb::TrackIdentity {
+    pb::TrackIdentity {
+        mode_s_address: v.mode_s_address.map(item_out),
+        mode_3a: v.mode_3a.map(item_out),
+        pending_mode_3a: v.pending_mode_3a.map(item_out),
+        callsign: v.callsign.map(item_out),
+        pressure_altitude: v.pressure_altitude.map(|a| pb::PressureAltitude {
+            t: a.t,
+            flight_level: a.flight_level,
+            flight_level_sigma: a.flight_level_sigma,
+            rate_of_climb_ftpm: a.rate_of_climb_ftpm,
+            rate_of_climb_sigma_ftpm: a.rate_of_climb_sigma_ftpm,
+            measured_flight_level: a.measured_flight_level,
+            measured_t: a.measured_t,
+        }),
+        emergency: v.emergency.map(str::to_string),
+        spi: v.spi,
+        last_secondary_t: v.last_secondary_t,
+        last_mode_s_t: v.last_mode_s_t,
+        last_primary_t: v.last_primary_t,
     }
 }
 

@@ -6,6 +6,7 @@ pub mod ais_radar;
 pub mod correlation;
 pub mod dimension;
 pub mod events;
+pub mod identity;
 pub mod jpda;
 pub mod ops;
 pub mod plot_fusion;

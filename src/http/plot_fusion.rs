@@ -157,6 +157,31 @@ pub struct PlotIn {
     pub elevation_deg: Option<f64>,
     /// Positive receding; only from a radar with `sigma_radial_velocity_mps`.
     pub radial_velocity_mps: Option<f64>,
+    /// Mode 3/A code, four octal digits (SSR).
+    #[schema(example = "7000")]
+    pub mode_3a: Option<String>,
+    /// The code was validated (default true; I048/070 V = 0).
+    pub mode_3a_validated: Option<bool>,
+    /// The code is garbled (default false; I048/070 G): it weighs nothing.
+    pub mode_3a_garbled: Option<bool>,
+    /// Mode C flight level, hundreds of feet (−12 to 1270; FL 350.25 =
+    /// 35,025 ft).
+    #[schema(example = 350.0)]
+    pub flight_level: Option<f64>,
+    /// The flight level was validated (default true; I048/090 V = 0).
+    pub flight_level_validated: Option<bool>,
+    /// The flight level is garbled (default false; I048/090 G).
+    pub flight_level_garbled: Option<bool>,
+    /// Mode S address, six hexadecimal digits (24 bits).
+    #[schema(example = "4CA2D1")]
+    pub mode_s_address: Option<String>,
+    /// Aircraft identification: 1 to 8 of A–Z, 0–9, space.
+    #[schema(example = "EZY12AB")]
+    pub callsign: Option<String>,
+    /// `primary`, `secondary` or `combined` (I048/020 TYP).
+    pub detection: Option<String>,
+    /// Special position identification (I048/020 SPI).
+    pub spi: Option<bool>,
 }
 
 /// Logic-based track initiation (seed 001 step 7).
@@ -550,6 +575,10 @@ pub struct FusedTrack {
     /// (serial mode; absent after a fused plot of parallel mode).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub last_plot: Option<LastPlot>,
+    /// What the track knows of its aircraft from SSR and Mode S plots
+    /// (absent when none updated it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub identity: Option<super::identity::TrackIdentity>,
 }
 
 /// One model's probability in an IMM track.
@@ -739,6 +768,18 @@ pub(crate) fn plots_in(plots: Vec<PlotIn>) -> Vec<svc::PlotInput> {
             azimuth_deg: Some(p.azimuth_deg),
             elevation_deg: p.elevation_deg,
             radial_velocity_mps: p.radial_velocity_mps,
+            ssr: svc::SsrInput {
+                mode_3a: p.mode_3a,
+                mode_3a_validated: p.mode_3a_validated,
+                mode_3a_garbled: p.mode_3a_garbled,
+                flight_level: p.flight_level,
+                flight_level_validated: p.flight_level_validated,
+                flight_level_garbled: p.flight_level_garbled,
+                mode_s_address: p.mode_s_address,
+                callsign: p.callsign,
+                detection: p.detection,
+                spi: p.spi,
+            },
         })
         .collect()
 }
@@ -777,6 +818,7 @@ pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
             elevation_deg: p.elevation_deg,
             radial_velocity_mps: p.radial_velocity_mps,
         }),
+        identity: t.identity.map(super::identity::identity_out),
     }
 }
 

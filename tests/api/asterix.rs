@@ -157,6 +157,26 @@ fn json_plots() -> Vec<Value> {
             p["elevation_deg"] = json!((h / rho).asin().to_degrees());
             p["radial_velocity_mps"] = r["doppler_mps"].clone();
         }
+        // The secondary fields as libasterix decoded them (the fixture's
+        // replies are validated and ungarbled).
+        if let Some(code) = r["mode_3a"].as_str() {
+            p["mode_3a"] = json!(code);
+        }
+        if let Some(fl) = r["flight_level"].as_f64() {
+            p["flight_level"] = json!(fl);
+        }
+        if let Some(a) = r["aircraft_address"].as_u64() {
+            p["mode_s_address"] = json!(format!("{a:06X}"));
+        }
+        let detection = match r["typ"].as_u64() {
+            Some(1) => Some("primary"),
+            Some(2 | 4 | 5) => Some("secondary"),
+            Some(3 | 6 | 7) => Some("combined"),
+            _ => None,
+        };
+        if let Some(d) = detection {
+            p["detection"] = json!(d);
+        }
         out.push(p);
     }
     out

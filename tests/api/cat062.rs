@@ -39,6 +39,15 @@ pub(crate) struct Record {
     pub sensor: Option<(u8, u8)>,
     /// I062/340 POS (NM, °).
     pub polar: Option<(f64, f64)>,
+    /// I062/060 (V, G, CH, code).
+    pub mode_3a: Option<(bool, bool, bool, u16)>,
+    /// I062/245 STI and characters, and I062/380 ID (the same 6 octets).
+    pub callsign: Option<(u8, [u8; 6])>,
+    pub derived_id: Option<[u8; 6]>,
+    /// I062/380 ADR.
+    pub address: Option<u32>,
+    /// I062/136, FL.
+    pub measured_fl: Option<f64>,
 }
 
 impl Record {
@@ -200,6 +209,26 @@ fn record(data: &[u8], at: &mut usize) -> Record {
                     (rho, theta)
                 });
             }
+            9 => {
+                let w = u16::from_be_bytes(take(at, 2).try_into().unwrap());
+                r.mode_3a = Some((
+                    w & 0x8000 != 0,
+                    w & 0x4000 != 0,
+                    w & 0x2000 != 0,
+                    w & 0x0FFF,
+                ));
+            }
+            10 => {
+                let b = take(at, 7);
+                r.callsign = Some((b[0] >> 6, b[1..7].try_into().unwrap()));
+            }
+            11 => {
+                // ADR(3) ID(6); the service writes no other subfield.
+                let s = compound(data, at, &[3, 6]);
+                r.address = s[0].map(|b| u32::from_be_bytes([0, b[0], b[1], b[2]]));
+                r.derived_id = s[1].map(|b| b.try_into().unwrap());
+            }
+            17 => r.measured_fl = Some(i16be(take(at, 2)) * 0.25),
             other => panic!("FRN {other}: an item the service does not write"),
         }
     }

@@ -338,6 +338,7 @@ async fn grpc_watch_streams_the_same_updates() {
                 azimuth_deg: p["azimuth_deg"].as_f64(),
                 elevation_deg: p["elevation_deg"].as_f64(),
                 radial_velocity_mps: p["radial_velocity_mps"].as_f64(),
+                ..Default::default()
             })
             .collect();
         // Odd batches over the unary call, even ones over the batch stream.

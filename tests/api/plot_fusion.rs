@@ -244,6 +244,16 @@ pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
                 azimuth_deg: o(&p["azimuth_deg"]),
                 elevation_deg: o(&p["elevation_deg"]),
                 radial_velocity_mps: o(&p["radial_velocity_mps"]),
+                mode_3a: p["mode_3a"].as_str().map(str::to_string),
+                mode_3a_validated: p["mode_3a_validated"].as_bool(),
+                mode_3a_garbled: p["mode_3a_garbled"].as_bool(),
+                flight_level: o(&p["flight_level"]),
+                flight_level_validated: p["flight_level_validated"].as_bool(),
+                flight_level_garbled: p["flight_level_garbled"].as_bool(),
+                mode_s_address: p["mode_s_address"].as_str().map(str::to_string),
+                callsign: p["callsign"].as_str().map(str::to_string),
+                detection: p["detection"].as_str().map(str::to_string),
+                spi: p["spi"].as_bool(),
             })
             .collect(),
         tracker: Some(pb::TrackerOptions {

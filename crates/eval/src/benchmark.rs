@@ -543,6 +543,7 @@ pub fn plot_fusion_scene(
                     azimuth_deg: Some((e.atan2(nn) + sa * normal(&mut rng)).to_degrees()),
                     elevation_deg: None,
                     radial_velocity_mps: doppler.then(|| rv + sv * normal(&mut rng)),
+                    ssr: Default::default(),
                 });
             }
             for _ in 0..false_per_scan {
@@ -564,6 +565,7 @@ pub fn plot_fusion_scene(
                     azimuth_deg: Some(azimuth),
                     elevation_deg: None,
                     radial_velocity_mps: radial,
+                    ssr: Default::default(),
                 });
             }
             start += period;

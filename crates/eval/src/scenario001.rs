@@ -78,6 +78,7 @@ pub fn scan_plots(
                         azimuth: p.azimuth,
                         elevation: p.elevation,
                         radial_velocity: p.radial_velocity,
+                        identity: Default::default(),
                     },
                     p.origin,
                 ));

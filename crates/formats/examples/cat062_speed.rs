@@ -49,6 +49,10 @@ fn tracks(n: usize) -> Vec<SystemTrack> {
                     polar: Some((40_000.0 + k * 50.0, (k * 7.3) % 360.0)),
                     height: None,
                 }),
+                callsign: Default::default(),
+                address: Default::default(),
+                measured_flight_level: Default::default(),
+                mode_3a: Default::default(),
             }
         })
         .collect()

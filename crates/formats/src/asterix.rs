@@ -19,7 +19,8 @@
 //! Items decoded: I048/010 SAC/SIC, /140 time of day (1/128 s), /020
 //! target report descriptor (TYP, SIM, RDP, SPI, RAB; TST of the first
 //! extension), /040 measured position (RHO 1/256 NM, THETA 360/2¹⁶ °),
-//! /070 Mode 3/A, /090 flight level (1/4 FL, two's complement), /110 3D
+//! /070 Mode 3/A with V, G, L, /090 flight level (V, G; 1/4 FL, two's
+//! complement), /240 aircraft identification (8 × 6-bit ICAO), /110 3D
 //! height (25 ft, two's complement), /120 calculated Doppler speed (D,
 //! CAL: 10-bit two's complement, 1 m/s), /220 aircraft address, /161
 //! track number; I034/010, /000 message type, /030 time of day, /020
@@ -91,6 +92,51 @@ pub struct Descriptor {
     pub tst: Option<bool>,
 }
 
+/// The validity bits a CAT048 reply item carries (I048/070, I048/090).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReplyFlags {
+    /// V = 0: validated.
+    pub validated: bool,
+    /// G = 1: garbled.
+    pub garbled: bool,
+    /// L = 1 (I048/070 only): the code was not extracted during the last
+    /// scan (smoothed).
+    pub smoothed: bool,
+}
+
+impl ReplyFlags {
+    fn of(word: u16, has_l: bool) -> Self {
+        Self {
+            validated: word & 0x8000 == 0,
+            garbled: word & 0x4000 != 0,
+            smoothed: has_l && word & 0x2000 != 0,
+        }
+    }
+}
+
+/// The ICAO 6-bit character set of I048/240 (Annex 10 vol. IV, table
+/// 3-9): 1–26 are A–Z, 32 space, 48–57 the digits; anything else is not
+/// a character of an identification.
+fn ia5(c: u8) -> Option<char> {
+    match c {
+        1..=26 => Some((b'A' + c - 1) as char),
+        32 => Some(' '),
+        48..=57 => Some((b'0' + c - 48) as char),
+        _ => None,
+    }
+}
+
+/// I048/240: eight 6-bit characters in 48 bits, space-padded; `None`
+/// when a character is outside the set or all are spaces.
+fn callsign(v: &[u8]) -> Option<String> {
+    let bits = v[..6].iter().fold(0u64, |acc, &b| acc << 8 | b as u64);
+    let text: Option<String> = (0..8)
+        .map(|i| ia5(((bits >> (42 - 6 * i)) & 0x3F) as u8))
+        .collect();
+    text.map(|t| t.trim_end().to_string())
+        .filter(|t| !t.is_empty())
+}
+
 /// A CAT048 record: a monoradar target report.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TargetReport {
@@ -107,8 +153,15 @@ pub struct TargetReport {
     pub azimuth_deg: Option<f64>,
     /// I048/070 Mode 3/A code, 12 bits (four octal digits).
     pub mode_3a: Option<u16>,
+    /// I048/070 V, G (and L) of the code.
+    pub mode_3a_flags: Option<ReplyFlags>,
     /// I048/090 flight level (FL, 1/4 resolution).
     pub flight_level: Option<f64>,
+    /// I048/090 V and G of the flight level (`smoothed` unused).
+    pub flight_level_flags: Option<ReplyFlags>,
+    /// I048/240 aircraft identification (callsign), trailing spaces
+    /// removed.
+    pub callsign: Option<String>,
     /// I048/110 height measured by a 3D radar (m).
     pub height_m: Option<f64>,
     /// I048/120 subfield 1 (CAL), calculated Doppler speed (m/s).
@@ -568,9 +621,16 @@ fn read_048(frn: usize, v: &[u8], t: &mut TargetReport) {
             t.range_m = Some(u16_at(v, 0) as f64 / 256.0 * NM_M);
             t.azimuth_deg = Some(u16_at(v, 2) as f64 * (360.0 / 65536.0));
         }
-        5 => t.mode_3a = Some(u16_at(v, 0) & 0x0FFF),
-        6 => t.flight_level = Some(signed(u16_at(v, 0) as u32, 14) as f64 / 4.0),
+        5 => {
+            t.mode_3a = Some(u16_at(v, 0) & 0x0FFF);
+            t.mode_3a_flags = Some(ReplyFlags::of(u16_at(v, 0), true));
+        }
+        6 => {
+            t.flight_level = Some(signed(u16_at(v, 0) as u32, 14) as f64 / 4.0);
+            t.flight_level_flags = Some(ReplyFlags::of(u16_at(v, 0), false));
+        }
         8 => t.aircraft_address = Some(u24_at(v, 0)),
+        9 => t.callsign = callsign(v),
         11 => t.track_number = Some(u16_at(v, 0) & 0x0FFF),
         19 => t.height_m = Some(signed(u16_at(v, 0) as u32, 14) as f64 * 25.0 * FT_M),
         // Primary subfield bit 8: CAL present, right after the primary.
@@ -631,6 +691,37 @@ mod tests {
         assert_eq!(t.descriptor.unwrap().tst, None);
         assert_eq!(t.range_m, Some(16.0 * 1852.0));
         assert_eq!(t.azimuth_deg, Some(90.0));
+    }
+
+    #[test]
+    fn secondary_items_decode_with_their_flags() {
+        // FSPEC 0x0D 0xC0: octet 1 bits 4 and 3 are FRN 5 (070) and 6
+        // (090), bit 1 FX; octet 2 bits 8 and 7 are FRN 8 (220) and 9
+        // (240), FX clear.
+        // I048/070 0xE1FF: V = 1 (not validated), G = 1, L = 1, code
+        // 0x1FF = octal 0777. I048/090 0x4578: V = 0, G = 1, FL bits
+        // 0x0578 = 1400 quarter-FL = FL 350. I048/220 0x4CA2D1.
+        // I048/240 "EZY1" + 4 spaces: E = 5, Z = 26, Y = 25, '1' = 49,
+        // ' ' = 32: bits 000101 011010 011001 110001 100000 ×4, in
+        // octets 00010101 10100110 01110001 10000010 00001000 00100000 =
+        // 0x15 0xA6 0x71 0x82 0x08 0x20.
+        let rec = [
+            0x0D, 0xC0, 0xE1, 0xFF, 0x45, 0x78, 0x4C, 0xA2, 0xD1, 0x15, 0xA6, 0x71, 0x82, 0x08,
+            0x20,
+        ];
+        let d = decode(&block(48, &rec));
+        assert!(d.errors.is_empty(), "{:?}", d.errors);
+        let t = &d.target_reports[0];
+        assert_eq!(t.mode_3a, Some(0o777));
+        let f = t.mode_3a_flags.unwrap();
+        assert!(!f.validated && f.garbled && f.smoothed);
+        assert_eq!(t.flight_level, Some(350.0));
+        let f = t.flight_level_flags.unwrap();
+        assert!(f.validated && f.garbled && !f.smoothed);
+        assert_eq!(t.aircraft_address, Some(0x4CA2D1));
+        assert_eq!(t.callsign.as_deref(), Some("EZY1"));
+        // A character outside the set (0) makes no identification.
+        assert_eq!(callsign(&[0, 0, 0, 0, 0, 0]), None);
     }
 
     #[test]

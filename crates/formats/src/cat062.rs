@@ -38,11 +38,19 @@
 //!   item has no range narrower than its 16 bits, so nothing wraps);
 //! - I062/080 track status, extensible (see [`TrackStatusFlags`]);
 //! - I062/290 system track update ages (compound: TRK, PSR, SSR, MDS);
+//! - I062/060 track Mode 3/A code (V, G, CH, the code);
+//! - I062/245 target identification (STI 0, downlinked, and 8 ICAO 6-bit
+//!   characters). The 1.20 remark asks that it not be used beside I062/380
+//!   ID; both are written with the same characters, for receivers that
+//!   read one or the other;
+//! - I062/380 aircraft derived data: ADR (Mode S address) and ID;
+//! - I062/136 measured flight level, 1/4 FL signed, in [-15, 1,500] FL;
 //! - I062/130 calculated track **geometric** altitude, 6.25 ft signed, in
 //!   [-1,500 ft, 150,000 ft]: the height above the WGS-84 ellipsoid. The
-//!   service holds no barometric altitude, so I062/135 (barometric) and
-//!   I062/136 (measured flight level) are never written;
-//! - I062/220 rate of climb/descent, 6.25 ft/min signed;
+//!   calculated barometric altitude (I062/135) is not written;
+//! - I062/220 rate of climb/descent, 6.25 ft/min signed (the service
+//!   gives the pressure altitude's rate when it has one, else the
+//!   geometric);
 //! - I062/500 estimated accuracies (compound: APC, COV, APW, AGA, ATV, AA,
 //!   ARC; not ABA, barometric);
 //! - I062/340 measured information (compound: SID, POS, HEIGHT).
@@ -261,6 +269,31 @@ pub struct SystemTrack {
     pub vertical_rate: Option<f64>,
     /// I062/340; left out when `None`.
     pub last_measurement: Option<LastMeasurement>,
+    /// I062/060; left out when `None`.
+    pub mode_3a: Option<TrackMode3A>,
+    /// I062/245 (STI 0: downlinked from the target) and I062/380 ID: the
+    /// aircraft identification, up to 8 characters of the ICAO 6-bit set
+    /// (A–Z, 0–9, space), space-padded; left out when `None` or when a
+    /// character is outside the set.
+    pub callsign: Option<[u8; 8]>,
+    /// I062/380 ADR: the Mode S address (24 bits); left out when `None`.
+    pub address: Option<u32>,
+    /// I062/136: the last valid flight level used to update the track
+    /// (FL; LSB 1/4 FL, −15 to 1,500 FL); left out when `None`.
+    pub measured_flight_level: Option<f64>,
+}
+
+/// I062/060 track Mode 3/A code.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TrackMode3A {
+    /// The code, 12 bits (four octal digits: `0o7000`).
+    pub code: u16,
+    /// V = 0: validated.
+    pub validated: bool,
+    /// G = 1: garbled.
+    pub garbled: bool,
+    /// CH = 1: the code has changed.
+    pub changed: bool,
 }
 
 /// A value the encoder did not write as given: out of range or not finite
@@ -517,6 +550,7 @@ const VX: Quantity = Quantity::new("I062/185 VX", "m/s", 0.25, I16_MIN, I16_MAX)
 const VY: Quantity = Quantity::new("I062/185 VY", "m/s", 0.25, I16_MIN, I16_MAX);
 /// -1,500 ft = -240 LSB, 150,000 ft = 24,000 LSB.
 const HEIGHT: Quantity = Quantity::new("I062/130", "m", LSB_6_25_FT, -240, 24_000);
+const MFL: Quantity = Quantity::new("I062/136", "FL", 0.25, -60, 6_000);
 const ROCD: Quantity = Quantity::new("I062/220", "m/s", LSB_6_25_FT_MIN, I16_MIN, I16_MAX);
 
 const AGE_TRK: Quantity = Quantity::new("I062/290 TRK", "s", 0.25, 0, U8_MAX).saturating();
@@ -557,6 +591,10 @@ mod frn {
     pub(super) const I185: u32 = 7;
     pub(super) const I040: u32 = 12;
     pub(super) const I080: u32 = 13;
+    pub(super) const I060: u32 = 9;
+    pub(super) const I245: u32 = 10;
+    pub(super) const I380: u32 = 11;
+    pub(super) const I136: u32 = 17;
     pub(super) const I290: u32 = 14;
     pub(super) const I130: u32 = 18;
     pub(super) const I220: u32 = 20;
@@ -733,6 +771,28 @@ fn encode_record(
     if let (Some(vx), Some(vy)) = (vx, vy) {
         rec.item(frn::I185, &pair::<2>(vx, vy)[..4]);
     }
+    if let Some(c) = t.mode_3a {
+        let bit = |b: bool, shift: u16| u16::from(b) << shift;
+        let word =
+            bit(!c.validated, 15) | bit(c.garbled, 14) | bit(c.changed, 13) | (c.code & 0o7777);
+        rec.item(frn::I060, &word.to_be_bytes());
+    }
+    let callsign = t.callsign.and_then(|c| icao_chars(&c));
+    if let Some(chars) = callsign {
+        let mut item = [0u8; 7];
+        // STI 0 (downlinked from the target), 6 spare bits.
+        item[1..].copy_from_slice(&chars);
+        rec.item(frn::I245, &item);
+    }
+    let mut derived = CompoundBuf::new();
+    if let Some(a) = t.address.filter(|&a| a <= 0xFF_FFFF) {
+        derived.sub(1, &be::<3>(i64::from(a)));
+    }
+    if let Some(chars) = callsign {
+        derived.sub(2, &chars);
+    }
+    derived.finish(frn::I380, &mut rec);
+    // Items go in FRN order: 040 (12) after 060, 245, 380 (9–11).
     rec.item(frn::I040, &t.track_number.to_be_bytes());
 
     let height = t.height.and_then(|h| HEIGHT.quantise(h, notes));
@@ -752,6 +812,9 @@ fn encode_record(
     }
     ages.finish(frn::I290, &mut rec);
 
+    if let Some(fl) = t.measured_flight_level.and_then(|v| MFL.quantise(v, notes)) {
+        rec.item(frn::I136, &be::<2>(fl));
+    }
     if let Some(h) = height {
         rec.item(frn::I130, &be::<2>(h));
     }
@@ -766,6 +829,26 @@ fn encode_record(
     }
     rec.write(out);
     true
+}
+
+/// Eight characters in the ICAO 6-bit set (Annex 10 vol. IV table 3-9:
+/// A–Z 1–26, space 32, digits 48–57), 48 bits big-endian; `None` when a
+/// character is outside the set.
+fn icao_chars(c: &[u8; 8]) -> Option<[u8; 6]> {
+    let mut bits = 0u64;
+    for &ch in c {
+        let code = match ch {
+            b'A'..=b'Z' => ch - b'A' + 1,
+            b' ' => 32,
+            b'0'..=b'9' => ch - b'0' + 48,
+            _ => return None,
+        };
+        bits = bits << 6 | u64::from(code);
+    }
+    let b = bits.to_be_bytes();
+    let mut out = [0u8; 6];
+    out.copy_from_slice(&b[2..]);
+    Some(out)
 }
 
 /// I062/080: the first octet, and the extensions up to the last one with

@@ -258,6 +258,28 @@ struct Hit {
     measurement: usize,
     /// ν' S⁻¹ ν.
     d2: f64,
+    /// ln of the evidence's likelihood ratio for the pairing (0 without).
+    ln_evidence: f64,
+}
+
+/// Evidence beside the position for pairing track `t` with measurement
+/// `j` (an identity, a pressure altitude): `Some(ln Λ)`, the log of its
+/// likelihood ratio, Λ = p(evidence | j is t's) / p(evidence | j is
+/// clutter or another target), which multiplies a_tj; `None` rules the
+/// pairing out. Without evidence every gated pairing has Λ = 1.
+pub type Evidence<'a> = &'a dyn Fn(usize, usize) -> Option<f64>;
+
+/// The largest |ln Λ| an [`Evidence`] may give: larger values are clamped,
+/// so that nearest-neighbour costs d² − 2 ln Λ stay bounded below.
+pub const MAX_LN_EVIDENCE: f64 = 30.0;
+
+impl Hit {
+    /// The nearest neighbours' cost, d² − 2 ln Λ shifted by
+    /// 2 [`MAX_LN_EVIDENCE`] to stay ≥ 0 (the unassigned cost shares the
+    /// shift, so a pairing is worth taking when d² − 2 ln Λ < γ).
+    fn cost(&self) -> f64 {
+        self.d2 - 2.0 * self.ln_evidence + 2.0 * MAX_LN_EVIDENCE
+    }
 }
 
 /// The linearised models, the validation matrix and the clusters of a scan.
@@ -267,7 +289,11 @@ struct Prepared {
     clusters: Vec<(Vec<usize>, Vec<usize>)>,
 }
 
-fn prepare(tracks: &[TrackEstimate], scan: &Scan) -> Result<Prepared, AlgoError> {
+fn prepare(
+    tracks: &[TrackEstimate],
+    scan: &Scan,
+    evidence: Option<Evidence<'_>>,
+) -> Result<Prepared, AlgoError> {
     let dim = scan.model.dim();
     let lin: Vec<Linearised> = tracks
         .iter()
@@ -292,7 +318,8 @@ fn prepare(tracks: &[TrackEstimate], scan: &Scan) -> Result<Prepared, AlgoError>
     let mut candidates: Vec<usize> = Vec::new();
     let hits: Vec<Vec<Hit>> = lin
         .iter()
-        .map(|l| {
+        .enumerate()
+        .map(|(t, l)| {
             let reach = (scan.gate.threshold * l.s00).sqrt() * (1.0 + 1e-9);
             by_first.within(l.z_pred[0], reach, &mut candidates);
             let mut row = Vec::new();
@@ -300,7 +327,18 @@ fn prepare(tracks: &[TrackEstimate], scan: &Scan) -> Result<Prepared, AlgoError>
                 innovation(&mut nu, &scan.measurements[j], &l.z_pred, polar);
                 let d2 = quad(&l.s_inv, nu.as_slice());
                 if d2 <= scan.gate.threshold {
-                    row.push(Hit { measurement: j, d2 });
+                    let ln_evidence = match evidence {
+                        None => 0.0,
+                        Some(f) => match f(t, j) {
+                            None => continue,
+                            Some(v) => v.clamp(-MAX_LN_EVIDENCE, MAX_LN_EVIDENCE),
+                        },
+                    };
+                    row.push(Hit {
+                        measurement: j,
+                        d2,
+                        ln_evidence,
+                    });
                 }
             }
             row
@@ -325,7 +363,7 @@ pub fn cluster_problems(
         lin,
         hits,
         clusters,
-    } = prepare(tracks, scan)?;
+    } = prepare(tracks, scan, None)?;
     let miss_weight = 1.0 - scan.detection_probability * scan.gate.probability;
     Ok(clusters
         .iter()
@@ -339,7 +377,7 @@ pub fn scan(
     scan: &Scan,
     config: &Config,
 ) -> Result<ScanReport, AlgoError> {
-    let (report, lin) = weigh(tracks, scan, config)?;
+    let (report, lin) = weigh(tracks, scan, config, None)?;
     for (t, track) in tracks.iter_mut().enumerate() {
         combined_update(
             track,
@@ -360,7 +398,19 @@ pub fn associate(
     scan: &Scan,
     config: &Config,
 ) -> Result<ScanReport, AlgoError> {
-    weigh(tracks, scan, config).map(|(report, _)| report)
+    weigh(tracks, scan, config, None).map(|(report, _)| report)
+}
+
+/// [`associate`] with evidence beside the position ([`Evidence`]): each
+/// a_tj is multiplied by the pairing's likelihood ratio, pairings it rules
+/// out are not gated; nearest neighbours minimise d² − 2 ln Λ.
+pub fn associate_with(
+    tracks: &[TrackEstimate],
+    scan: &Scan,
+    config: &Config,
+    evidence: Evidence<'_>,
+) -> Result<ScanReport, AlgoError> {
+    weigh(tracks, scan, config, Some(evidence)).map(|(report, _)| report)
 }
 
 /// The association of [`scan`] and each track's linearisation.
@@ -368,13 +418,14 @@ fn weigh(
     tracks: &[TrackEstimate],
     scan: &Scan,
     config: &Config,
+    evidence: Option<Evidence<'_>>,
 ) -> Result<(ScanReport, Vec<Linearised>), AlgoError> {
     let dim = scan.model.dim();
     let Prepared {
         lin,
         hits,
         clusters,
-    } = prepare(tracks, scan)?;
+    } = prepare(tracks, scan, evidence)?;
     let mut associations: Vec<Association> = hits
         .iter()
         .map(|_| Association {
@@ -401,7 +452,7 @@ fn weigh(
                         .map(|&t| {
                             hits[t]
                                 .iter()
-                                .min_by(|a, b| a.d2.total_cmp(&b.d2))
+                                .min_by(|a, b| a.cost().total_cmp(&b.cost()))
                                 .map(|h| (t, h.measurement))
                         })
                         .collect::<Vec<_>>()
@@ -411,10 +462,10 @@ fn weigh(
                 } else {
                     let edges: Vec<(usize, usize, f64)> = cluster_tracks
                         .iter()
-                        .flat_map(|&t| hits[t].iter().map(move |h| (t, h.measurement, h.d2)))
+                        .flat_map(|&t| hits[t].iter().map(move |h| (t, h.measurement, h.cost())))
                         .collect();
                     let unassigned = if scan.gate.threshold.is_finite() {
-                        scan.gate.threshold * (1.0 + 1e-12) + 1e-12
+                        (scan.gate.threshold + 2.0 * MAX_LN_EVIDENCE) * (1.0 + 1e-12) + 1e-12
                     } else {
                         1e300
                     };
@@ -530,7 +581,7 @@ fn cluster_problem(
     for &t in cluster_tracks {
         let ln_a: Vec<f64> = hits[t]
             .iter()
-            .map(|h| ln_pd - 0.5 * h.d2 + lin[t].ln_norm - ln_lambda)
+            .map(|h| ln_pd - 0.5 * h.d2 + h.ln_evidence + lin[t].ln_norm - ln_lambda)
             .collect();
         let top = ln_a.iter().copied().fold(ln_b, f64::max);
         miss.push((ln_b - top).exp());

@@ -64,6 +64,7 @@ pub fn associate_polar(
     axes: usize,
     gate_probability: f64,
     config: &Config,
+    evidence: Option<jpda::Evidence<'_>>,
 ) -> Result<Outcome, AlgoError> {
     let layout = polar_layout(radar, axes);
     let range_rate = range_rate_sigma(radar, plots);
@@ -94,7 +95,10 @@ pub fn associate_polar(
         gate: Gate::from_probability(dim, gate_probability)?,
         clutter: Clutter::Density(radar.clutter_density),
     };
-    let report = jpda::associate(tracks, &scan, config)?;
+    let report = match evidence {
+        Some(e) => jpda::associate_with(tracks, &scan, config, e)?,
+        None => jpda::associate(tracks, &scan, config)?,
+    };
     let mut used = vec![false; plots.len()];
     let hit = report
         .associations

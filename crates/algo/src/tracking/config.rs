@@ -8,6 +8,7 @@
 
 use crate::error::{AlgoError, finite, finite_slice, non_negative, positive};
 use crate::jpda::{Config as JpdaConfig, Method};
+use crate::tracking::identity::{self, Identity};
 
 /// How plots reach the tracks (seed 001 step 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -95,6 +96,9 @@ pub struct Plot {
     /// Radial (Doppler) velocity ṙ (m/s), positive receding; required from
     /// every radar in parallel mode.
     pub radial_velocity: Option<f64>,
+    /// What a secondary reply said of the aircraft (empty for a primary
+    /// plot): Mode 3/A code, Mode C, Mode S address and identification.
+    pub identity: Identity,
 }
 
 /// The velocity gate of the logic-based initiation (step 7, 7a).
@@ -513,6 +517,7 @@ impl TrackerConfig {
             }
             (false, None) => {}
         }
+        identity::validate(&plot.identity)?;
         if let Some(v) = plot.radial_velocity {
             finite("radial_velocity", v)?;
         } else if self.is_parallel() {

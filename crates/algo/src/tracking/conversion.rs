@@ -342,6 +342,7 @@ mod tests {
             azimuth,
             elevation: None,
             radial_velocity: v,
+            identity: Default::default(),
         }
     }
 
@@ -512,6 +513,7 @@ mod tests {
                 azimuth: az + 1e-3 * gauss(),
                 elevation: None,
                 radial_velocity: Some(-100.0 + 2.0 * gauss()),
+                identity: Default::default(),
             };
             let c = extrapolate(&r, 0, &p, 3.0, 0.0, 0.0).unwrap();
             let v = p.radial_velocity.unwrap();
@@ -532,6 +534,7 @@ mod tests {
                 azimuth: az,
                 elevation: None,
                 radial_velocity: Some(-100.0),
+                identity: Default::default(),
             },
             3.0,
             0.0,

@@ -39,6 +39,7 @@ use crate::kalman;
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
+use crate::tracking::identity::TrackIdentity;
 use crate::tracking::predictor::ModeState;
 use crate::tracking::retrodiction::{Retro, carry, retrodict};
 use crate::tracking::sweep::View;
@@ -210,6 +211,9 @@ impl Initiator {
                 predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?
             };
             for (j, plot) in plots.iter().enumerate() {
+                if !identity_fits(&track.identity, plot) {
+                    continue;
+                }
                 let k = plot.z.len();
                 // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
                 let nu0 = plot.z[0] - x[0];
@@ -248,6 +252,9 @@ impl Initiator {
                     let track = &mut self.tentatives[i];
                     carry(track, &retro, &up)?;
                     track.record_late_hit(false);
+                    if let Some(m) = &plot.measured {
+                        track.identity.observe(&m.identity, m.t);
+                    }
                     self.index.moved(i, track);
                     touched.push(i);
                 }
@@ -269,6 +276,9 @@ impl Initiator {
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
                     track.last_plot = plot.measured;
+                    if let Some(m) = &plot.measured {
+                        track.identity.observe(&m.identity, m.t);
+                    }
                 }
                 None => {
                     if let Misses::Judge(view) = misses {
@@ -326,7 +336,7 @@ impl Initiator {
                 (&plots[j], &self.roots[i], self.roots[i].t)
             };
             let dt = if at == t { t - early.t } else { at - t };
-            if dt < init.min_dt || dt > init.max_dt {
+            if dt < init.min_dt || dt > init.max_dt || !roots_fit(early, late, dt) {
                 continue;
             }
             let k = early.z.len().min(late.z.len());
@@ -604,8 +614,53 @@ fn new_tentative(
         modes: Vec::new(),
         started: Some(root.t),
         last_plot: plot.measured,
+        identity: {
+            let mut identity = TrackIdentity::default();
+            for m in [root, plot].into_iter().filter_map(|p| p.measured.as_ref()) {
+                identity.observe(&m.identity, m.t);
+            }
+            identity
+        },
     }
 }
+
+/// Whether a plot may extend a tentative track: not another Mode S
+/// address than the track's.
+fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot) -> bool {
+    match (
+        track.address,
+        plot.measured.and_then(|m| m.identity.address),
+    ) {
+        (Some(a), Some(b)) => a.value == b,
+        _ => true,
+    }
+}
+
+/// Whether two plots `dt` apart may be one aircraft's by what they say of
+/// it: not two Mode S addresses, and not a climb or descent faster than
+/// [`MAX_VERTICAL_RATE_FTPS`] between two validated Mode C values.
+fn roots_fit(a: &CartesianPlot, b: &CartesianPlot, dt: f64) -> bool {
+    let (Some(a), Some(b)) = (a.measured, b.measured) else {
+        return true;
+    };
+    if !TrackIdentity::compatible(&a.identity, &b.identity) {
+        return false;
+    }
+    let valid =
+        |c: Option<crate::tracking::identity::ModeC>| c.filter(|c| c.validated && !c.garbled);
+    match (valid(a.identity.mode_c), valid(b.identity.mode_c)) {
+        (Some(x), Some(y)) => {
+            // Both quantised to at most 100 ft: allow one quantum each.
+            (x.flight_level - y.flight_level).abs() * 100.0
+                <= MAX_VERTICAL_RATE_FTPS * dt.abs() + 200.0
+        }
+        _ => true,
+    }
+}
+
+/// The fastest climb or descent two plots of one aircraft may show
+/// (ft/s): 10,000 ft/min.
+const MAX_VERTICAL_RATE_FTPS: f64 = 10_000.0 / 60.0;
 
 #[cfg(test)]
 mod tests {

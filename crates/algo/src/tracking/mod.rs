@@ -48,6 +48,7 @@ pub mod config;
 pub mod conversion;
 mod deleter;
 mod hypothesiser;
+pub mod identity;
 pub mod initiator;
 pub mod plot_association;
 pub mod predictor;
@@ -68,6 +69,7 @@ pub use config::{
     TrackerConfig, VelocityGate,
 };
 pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate};
+pub use identity::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentity};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
@@ -75,7 +77,7 @@ pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 use std::sync::Arc;
 
 use crate::error::AlgoError;
-use crate::jpda::TrackEstimate;
+use crate::jpda::{self, TrackEstimate};
 use associator::{
     Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout,
     range_rate_sigma,
@@ -693,14 +695,26 @@ impl Tracker {
         let cfg = &self.config;
         let (outcome, updater): (Outcome, Box<dyn Updater + '_>) = match &source {
             Source::Radar { spec, plots: raw } => (
-                associate_polar(
-                    estimates,
-                    spec,
-                    raw,
-                    cfg.axes,
-                    cfg.track_gate_probability,
-                    &cfg.association,
-                )?,
+                {
+                    // Identity beside the position, when a plot carries
+                    // one (identity::TrackIdentity::ln_ratio).
+                    let tracks = &self.tracks;
+                    let evidence = |c: usize, j: usize| {
+                        tracks[slots[c]]
+                            .identity
+                            .ln_ratio(&raw[j].identity, raw[j].t)
+                    };
+                    let any = raw.iter().any(|p| !p.identity.is_empty());
+                    associate_polar(
+                        estimates,
+                        spec,
+                        raw,
+                        cfg.axes,
+                        cfg.track_gate_probability,
+                        &cfg.association,
+                        any.then_some(&evidence as jpda::Evidence<'_>),
+                    )?
+                },
                 Box::new(PolarUpdater {
                     radar: spec,
                     layout: polar_layout(spec, cfg.axes),
@@ -784,8 +798,11 @@ impl Tracker {
                     updater.update(&mut pred.modes, assoc)?;
                     retrodiction::carry(track, &retro, &pred.modes)?;
                 }
-                if outcome.hit[c].is_some() {
+                if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
+                    if let Some(m) = &plots[j].measured {
+                        track.identity.observe(&m.identity, m.t);
+                    }
                 }
                 self.index.moved(k, track);
                 touched.push(k);
@@ -818,6 +835,9 @@ impl Tracker {
                         track.record(Some(plots[j].radars.clone()));
                     }
                     track.last_plot = plots[j].measured;
+                    if let Some(m) = &plots[j].measured {
+                        track.identity.observe(&m.identity, m.t);
+                    }
                 }
                 None if !lazy => track.record(None),
                 None => {}

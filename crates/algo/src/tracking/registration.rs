@@ -626,6 +626,7 @@ mod tests {
             azimuth: e.atan2(n) + bias[1],
             elevation: None,
             radial_velocity: None,
+            identity: Default::default(),
         }
     }
 
@@ -639,6 +640,7 @@ mod tests {
             azimuth: 0.7,
             elevation: Some(0.1),
             radial_velocity: None,
+            identity: Default::default(),
         };
         let (_, j) = position(&r3, &p, 3);
         for k in 0..3 {
@@ -750,6 +752,7 @@ mod tests {
             azimuth: 1.0,
             elevation: Some(0.05),
             radial_velocity: None,
+            identity: Default::default(),
         };
         let c = correct(&p, &b);
         assert_eq!((c.range, c.azimuth), (9_900.0, 0.99));

@@ -80,6 +80,7 @@ fn scene(
                         .sigma_elevation
                         .map(|s| rel[2].atan2(horizontal) + s * rng.normal()),
                     radial_velocity: r.sigma_radial_velocity.map(|s| radial + s * rng.normal()),
+                    identity: Default::default(),
                 });
             }
             k += 1;
@@ -462,6 +463,7 @@ fn bad_input_is_an_error_without_a_state_change() {
         azimuth: 0.5,
         elevation: None,
         radial_velocity: None,
+        identity: Default::default(),
     };
     let bad = [
         Plot { radar: 2, ..good },
@@ -532,6 +534,7 @@ fn turning_plots(radars: &[RadarSpec], duration: f64, rng: &mut Lcg) -> Vec<Plot
                 azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
                 elevation: None,
                 radial_velocity: None,
+                identity: Default::default(),
             });
             t += r.scan_period;
         }
@@ -730,6 +733,7 @@ fn beam_timed_plots_are_tracked_like_whole_scans() {
                         azimuth: rel[0].atan2(rel[1]) + r.sigma_azimuth * rng.normal(),
                         elevation: None,
                         radial_velocity: None,
+                        identity: Default::default(),
                     });
                 }
                 start += r.scan_period;
@@ -1259,4 +1263,64 @@ fn auto_run(seed: u64) -> Result<(), proptest::test_runner::TestCaseError> {
         exact_again
     );
     Ok(())
+}
+
+/// Two aircraft converge at a shallow angle and cross (B 400 m north of A,
+/// closing at 4 m/s: they meet at t = 100 s), a thousand feet apart, under
+/// the Fig. 5 radars. With their Mode S replies each track keeps its
+/// aircraft: at the end every confirmed track is nearest the aircraft
+/// whose address it carries, and its flight level is that aircraft's.
+#[test]
+fn mode_s_keeps_crossing_aircraft_apart() {
+    let targets = [
+        Target {
+            p0: [-20_000.0, 30_000.0, 0.0],
+            v: [100.0, 0.0, 0.0],
+        },
+        Target {
+            p0: [-20_000.0, 30_400.0, 0.0],
+            v: [100.0, -4.0, 0.0],
+        },
+    ];
+    let addresses = [0x4CA2D1, 0x3C6586];
+    let levels = [300.0, 310.0];
+    let cfg = fig5_config(false);
+    for seed in 0..8 {
+        let mut rng = Lcg(seed);
+        let mut plots = scene(&cfg.radars, &[0.0, 3.0], &targets, 200.0, &mut rng);
+        // The scene lists a scan's targets in order: tag each plot by the
+        // target nearest its true position (the plots alternate A, B).
+        for (k, p) in plots.iter_mut().enumerate() {
+            let i = k % 2;
+            p.identity = Identity {
+                address: Some(addresses[i]),
+                mode_c: Some(ModeC {
+                    flight_level: levels[i],
+                    validated: true,
+                    garbled: false,
+                }),
+                detection: Some(Detection::Combined),
+                ..Identity::default()
+            };
+        }
+        let mut tracker = Tracker::new(cfg.clone()).unwrap();
+        tracker.process(&plots).unwrap();
+        tracker.flush().unwrap();
+        let confirmed: Vec<TrackOutput> = tracker
+            .tracks()
+            .into_iter()
+            .filter(|t| t.status == TrackStatus::Confirmed)
+            .collect();
+        assert_eq!(confirmed.len(), 2, "seed {seed}");
+        for t in &confirmed {
+            let address = t.identity.address.expect("a Mode S track").value;
+            let i = addresses.iter().position(|&a| a == address).unwrap();
+            let truth = targets[i].at(t.t);
+            let other = targets[1 - i].at(t.t);
+            let d = |p: [f64; 3]| (t.state[0] - p[0]).hypot(t.state[2] - p[1]);
+            assert!(d(truth) < d(other), "seed {seed}: track {} swapped", t.id);
+            let fl = t.identity.altitude.unwrap().x[0] / 100.0;
+            assert!((fl - levels[i]).abs() < 0.5, "seed {seed}: FL {fl}");
+        }
+    }
 }

@@ -10,6 +10,7 @@ use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
 use crate::tracking::config::{Imm, NoiseModel, Plot};
+use crate::tracking::identity::TrackIdentity;
 use crate::tracking::predictor::{ModeState, Predictor, process_noise};
 
 /// Where a track stands in its life.
@@ -61,6 +62,9 @@ pub struct TrackOutput {
     /// parallel mode, or for a track stored by a release that did not keep
     /// it).
     pub last_plot: Option<Plot>,
+    /// What the track has learnt of its aircraft's identity (Mode S,
+    /// Mode 3/A, callsign, pressure altitude).
+    pub identity: TrackIdentity,
 }
 
 /// A track inside the tracker (tentative or confirmed), with what its life
@@ -102,6 +106,9 @@ pub struct Track {
     /// was one radar's plot (not a fused one); provenance only, the filter
     /// does not read it.
     pub last_plot: Option<Plot>,
+    /// What the track has learnt of its aircraft's identity from the
+    /// secondary plots that updated it.
+    pub identity: TrackIdentity,
 }
 
 impl Track {
@@ -123,6 +130,7 @@ impl Track {
             started: Some(0.0),
             last_plot: None,
             modes: Vec::new(),
+            identity: TrackIdentity::default(),
         }
     }
 
@@ -232,6 +240,7 @@ impl Track {
             last_update: self.last_update,
             started: self.started,
             last_plot: self.last_plot,
+            identity: self.identity.clone(),
         }
     }
 }

@@ -561,6 +561,7 @@ mod fixed {
                     azimuth: (29_000.0f64 - 1000.0).atan2(40_300.0 + 2000.0) + daz,
                     elevation: three_d.then_some(0.16),
                     radial_velocity: doppler.then_some(-30.0),
+                    identity: Default::default(),
                 };
                 let plots = [plot(0.0, 0.0), plot(80.0, 0.002)];
                 let layout = if three_d && axes == 3 {

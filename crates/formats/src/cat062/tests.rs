@@ -178,6 +178,10 @@ fn a_record_with_every_item_byte_by_byte() {
             sensor: Some((25, 1)),
             ..LastMeasurement::default()
         }),
+        address: Default::default(),
+        measured_flight_level: Default::default(),
+        callsign: Default::default(),
+        mode_3a: Default::default(),
     };
     let c = Cat062Config {
         sac: 25,
@@ -835,6 +839,10 @@ fn any_track() -> impl Strategy<Value = SystemTrack> {
                     polar,
                     height,
                 }),
+                address: Default::default(),
+                measured_flight_level: Default::default(),
+                callsign: Default::default(),
+                mode_3a: Default::default(),
             }
         })
 }

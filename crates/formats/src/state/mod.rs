@@ -9,8 +9,11 @@
 //! - [`correlator`]: a pair correlator's candidate pairs and decisions.
 //! - [`window`]: a tracker that takes late plots within a lag (two
 //!   trackers and the plots between them).
+//! - `identity`: what secondary surveillance says of a plot and a track,
+//!   inside the tracker's and the window's formats.
 
 pub mod correlator;
+mod identity;
 pub mod scene;
 pub mod tracker;
 pub mod window;

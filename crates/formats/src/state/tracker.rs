@@ -3,7 +3,7 @@
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
-//! Layout: magic `RFTK`, format version (u32, currently 3), the
+//! Layout: magic `RFTK`, format version (u32, currently 6), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
 //! Format 2 adds the predictor (`motion`) after the configuration, each
@@ -21,7 +21,11 @@
 //! from no data. Format 5 adds, at the end, each radar's beam position
 //! when its sweep was last judged for misses (trackers since issue 48
 //! judge a sweep in slices, not at every frame); formats 1 to 4 read it as
-//! the last beam position, where they had judged.
+//! the last beam position, where they had judged. Format 6 adds each
+//! plot's identity (Mode S address, Mode 3/A, Mode C, callsign, detection
+//! type, SPI) after its radial velocity and each track's identity after
+//! its last plot ([`super::identity`]); formats 1 to 5 read primary plots
+//! and tracks that have learnt no identity.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -29,41 +33,53 @@
 
 use algo::jpda::{Config as JpdaConfig, Method};
 use algo::tracking::{
-    CartesianPlot, Counters, Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel,
-    Plot, RadarSpec, Track, Tracker, TrackerConfig, TrackerParts, VelocityGate,
+    CartesianPlot, Counters, Deletion, Identity, Imm, Initiation, Mode, Motion, MotionModel,
+    NoiseModel, Plot, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig, TrackerParts,
+    VelocityGate,
     predictor::ModeState,
     registration::{BiasPrior, RegistrationConfig, RegistrationState},
 };
 use nalgebra::{DMatrix, DVector};
 
+use super::identity::{
+    TRACKER_FORMAT, read_identity, read_track_identity, write_identity, write_track_identity,
+};
 use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
+    encode_tracker_as(tr, FORMAT_VERSION)
+}
+
+/// The tracker in format 5 or 6 (5: without identities, as the previous
+/// release wrote it; for the tests of older formats).
+pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
+    assert!((5..=FORMAT_VERSION).contains(&version));
+    let ids = version >= TRACKER_FORMAT;
     let s = tr.state();
     let mut w = Writer::default();
     w.buf.extend_from_slice(MAGIC);
-    w.u32(FORMAT_VERSION);
+    w.u32(version);
     config(&mut w, s.config);
     w.usize(s.tracks.len());
     for t in s.tracks {
-        track(&mut w, t);
+        track(&mut w, t, ids);
     }
     w.usize(s.roots.len());
     for r in s.roots {
-        cartesian(&mut w, r);
+        cartesian(&mut w, r, ids);
     }
     w.usize(s.tentatives.len());
     for t in s.tentatives {
-        track(&mut w, t);
+        track(&mut w, t, ids);
     }
     w.usize(s.pending.len());
     for p in s.pending {
-        plot(&mut w, p);
+        plot_as(&mut w, p, ids);
     }
     w.u64(s.next_id);
     w.opt(s.last_time, Writer::f64);
@@ -229,7 +245,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         .collect::<Result<_, _>>()?;
     let n = r.len(8)?;
     let pending = (0..n)
-        .map(|_| read_plot(&mut r))
+        .map(|_| read_plot(&mut r, version))
         .collect::<Result<_, _>>()?;
     let next_id = r.u64()?;
     let last_time = r.opt(Reader::f64)?;
@@ -508,7 +524,7 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
     })
 }
 
-fn track(w: &mut Writer, t: &Track) {
+fn track(w: &mut Writer, t: &Track, ids: bool) {
     w.u64(t.id);
     w.f64s(t.x.as_slice());
     w.f64s(t.p.as_slice());
@@ -527,7 +543,10 @@ fn track(w: &mut Writer, t: &Track) {
         w.f64_run(m.p.as_slice());
     }
     w.opt(t.started, Writer::f64);
-    w.opt(t.last_plot.as_ref(), plot);
+    w.opt(t.last_plot.as_ref(), |w, p| plot_as(w, p, ids));
+    if ids {
+        write_track_identity(w, &t.identity);
+    }
 }
 
 /// A track as stored; its dimension, covariance and radar indices are
@@ -572,20 +591,24 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
         },
         started: None,
         last_plot: None,
+        identity: TrackIdentity::default(),
     };
     if version >= 3 {
         track.started = r.opt(Reader::f64)?;
-        track.last_plot = r.opt(read_plot)?;
+        track.last_plot = r.opt(|r| read_plot(r, version))?;
+    }
+    if version >= TRACKER_FORMAT {
+        track.identity = read_track_identity(r)?;
     }
     Ok(track)
 }
 
-fn cartesian(w: &mut Writer, p: &CartesianPlot) {
+fn cartesian(w: &mut Writer, p: &CartesianPlot, ids: bool) {
     w.f64(p.t);
     w.f64s(p.z.as_slice());
     w.f64s(p.r.as_slice());
     radars(w, &p.radars);
-    w.opt(p.measured.as_ref(), plot);
+    w.opt(p.measured.as_ref(), |w, p| plot_as(w, p, ids));
 }
 
 fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, FormatError> {
@@ -602,7 +625,7 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
         r: DMatrix::from_vec(k, k, cov),
         radars: read_radars(r)?,
         measured: if version >= 3 {
-            r.opt(read_plot)?
+            r.opt(|r| read_plot(r, version))?
         } else {
             None
         },
@@ -612,16 +635,25 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
     })
 }
 
+/// A plot as this release stores it (format 6).
 pub(crate) fn plot(w: &mut Writer, p: &Plot) {
+    plot_as(w, p, true);
+}
+
+pub(crate) fn plot_as(w: &mut Writer, p: &Plot, ids: bool) {
     w.usize(p.radar);
     w.f64(p.t);
     w.f64(p.range);
     w.f64(p.azimuth);
     w.opt(p.elevation, Writer::f64);
     w.opt(p.radial_velocity, Writer::f64);
+    if ids {
+        write_identity(w, &p.identity);
+    }
 }
 
-pub(crate) fn read_plot(r: &mut Reader<'_>) -> Result<Plot, FormatError> {
+/// A plot as tracker format `version` stores it.
+pub(crate) fn read_plot(r: &mut Reader<'_>, version: u32) -> Result<Plot, FormatError> {
     Ok(Plot {
         radar: r.usize()?,
         t: r.f64()?,
@@ -629,6 +661,11 @@ pub(crate) fn read_plot(r: &mut Reader<'_>) -> Result<Plot, FormatError> {
         azimuth: r.f64()?,
         elevation: r.opt(Reader::f64)?,
         radial_velocity: r.opt(Reader::f64)?,
+        identity: if version >= TRACKER_FORMAT {
+            read_identity(r)?
+        } else {
+            Identity::default()
+        },
     })
 }
 
@@ -703,6 +740,7 @@ mod tests {
                         radial_velocity: r
                             .sigma_radial_velocity
                             .map(|_| v[0] * unit[0] + v[1] * unit[1]),
+                        identity: Default::default(),
                     });
                     n += 1;
                 }
@@ -829,9 +867,9 @@ mod tests {
             assert!(d < 5.0, "track {}: {d} m", a.id);
         }
         assert_eq!(t.counters().confirmed, 2);
-        // Written again it is format 5 and reads back the same.
+        // Written again it is format 6 and reads back the same.
         let bytes = encode_tracker(&t);
-        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 5);
+        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 6);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
     }
 
@@ -879,11 +917,14 @@ mod tests {
         assert!(!t.state().tracks.is_empty());
         let bytes = encode_tracker(&t);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
+        // Format 5 (no identities: none here) reads back the same.
+        let v5 = encode_tracker_as(&t, 5);
+        assert_eq!(decode_tracker(&v5).unwrap(), t);
         // Format 4 (no judged beams) reads them as the last beams, where a
         // tracker of that release had judged its misses.
         let mut judged = Writer::default();
         beams(&mut judged, t.state().judged);
-        let mut v4 = bytes[..bytes.len() - judged.buf.len()].to_vec();
+        let mut v4 = v5[..v5.len() - judged.buf.len()].to_vec();
         v4[4..8].copy_from_slice(&4u32.to_le_bytes());
         let old = decode_tracker(&v4).unwrap();
         assert_eq!(old.state().judged, t.state().beams);
@@ -917,9 +958,9 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v6 = bytes.clone();
-        v6[4] = 6;
-        assert!(matches!(decode_tracker(&v6), Err(FormatError::Corrupt(_))));
+        let mut v7 = bytes.clone();
+        v7[4] = 7;
+        assert!(matches!(decode_tracker(&v7), Err(FormatError::Corrupt(_))));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {

@@ -2,7 +2,9 @@
 //! within a lag (`algo::tracking::window`).
 //!
 //! Layout (after the magic `RFLW` and a `u32` format version):
-//! - format 2 (this release): the policy (u8: 0 reprocessing, 1
+//! - format 3 (this release): format 2 with each plot's identity (Mode S,
+//!   Mode 3/A, Mode C, callsign: tracker format 6's plots);
+//! - format 2: the policy (u8: 0 reprocessing, 1
 //!   retrodiction, 2 auto followed by its bound of replayed plots, u32),
 //!   then under reprocessing and auto format 1's fields and the time from
 //!   which the head is approximate (optional f64), under retrodiction the
@@ -26,7 +28,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFLW";
 /// The format this release writes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The bytes of `window` (see the module header).
 pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
@@ -74,7 +76,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let version = r.u32()?;
     let policy = match version {
         1 => LatePolicy::Reprocess,
-        2 => match r.u8()? {
+        2 | 3 => match r.u8()? {
             0 => LatePolicy::Reprocess,
             1 => LatePolicy::Retrodict,
             2 => LatePolicy::Auto {
@@ -84,6 +86,8 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         },
         _ => return Err(corrupt(&format!("unknown lag window format {version}"))),
     };
+    // Format 3 stores plots with their identity (tracker format 6).
+    let plot_format = if version >= 3 { 6 } else { 5 };
     let max_lag = r.f64()?;
     let plots = policy != LatePolicy::Retrodict;
     let (base, head, window) = if plots {
@@ -91,7 +95,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         let head = decode_tracker(&r.bytes()?)?;
         let n = r.len(16)?;
         let window = (0..n)
-            .map(|_| read_plot(&mut r))
+            .map(|_| read_plot(&mut r, plot_format))
             .collect::<Result<Vec<_>, _>>()?;
         (base, head, window)
     } else {
@@ -126,6 +130,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::state::tracker::{encode_tracker_as, plot_as};
     use algo::tracking::{Plot, RadarSpec, Tracker, TrackerConfig};
 
     fn radar(site: [f64; 3]) -> RadarSpec {
@@ -159,6 +164,7 @@ mod tests {
                         azimuth: e.atan2(n),
                         elevation: None,
                         radial_velocity: None,
+                        identity: Default::default(),
                     });
                 }
                 t += 4.0;
@@ -212,12 +218,24 @@ mod tests {
             LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, LatePolicy::Reprocess)
                 .unwrap();
         a.push(&plots()).unwrap();
-        let bytes = encode_lag_window(&a);
-        // Format 2's bytes less the policy byte and the (absent)
-        // approximate time are format 1's.
-        let mut v1 = bytes[..4].to_vec();
-        v1.extend_from_slice(&1u32.to_le_bytes());
-        v1.extend_from_slice(&bytes[9..bytes.len() - 1]);
+        // Format 1: the lag, the two trackers (format 5 here: the release
+        // before identities), the plots without identities, horizon,
+        // newest, late count.
+        let s = a.state();
+        let mut w = Writer::default();
+        w.buf.extend_from_slice(MAGIC);
+        w.u32(1);
+        w.f64(s.max_lag);
+        w.bytes(&encode_tracker_as(s.base, 5));
+        w.bytes(&encode_tracker_as(s.head, 5));
+        w.usize(s.window.len());
+        for p in s.window {
+            plot_as(&mut w, p, false);
+        }
+        w.opt(s.horizon, Writer::f64);
+        w.opt(s.newest, Writer::f64);
+        w.u64(s.late);
+        let v1 = w.buf;
         let b = decode_lag_window(&v1).unwrap();
         assert_eq!(b.policy(), LatePolicy::Reprocess);
         assert_eq!(a.to_parts(), b.to_parts());

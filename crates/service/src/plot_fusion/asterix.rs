@@ -319,6 +319,7 @@ pub fn plots(
             } else {
                 None
             },
+            ssr: super::SsrInput::from_asterix(r),
         };
         match network.plot(&input, config, parallel) {
             Ok(p) => {

@@ -36,10 +36,16 @@
 //! A value outside its item's range is left out and counted (the encoder's
 //! `skipped`); the warnings say how many, with the first reason.
 
+use formats::asterix::FT_M;
 use formats::cat062::{
     self, Accuracy, AltitudeSource, Cat062Config, Encoded, LastMeasurement, SystemTrack,
-    TrackStatusFlags, UpdateAges,
+    TrackMode3A, TrackStatusFlags, UpdateAges,
 };
+
+/// I062/080 PSR, SSR and MDS say a kind of update is aged beyond this
+/// (s): two scans of a 6-s en-route radar, as the track's I062/290 ages
+/// show them.
+pub const AGED_AFTER_S: f64 = 12.0;
 use formats::wire::{FormatError, Reader, Writer};
 
 use super::{Network, TrackView};
@@ -283,7 +289,45 @@ pub fn system_track(
         polar: Some((p.range_m, p.azimuth_deg)),
         height: None,
     });
+    let identity = t.identity.as_ref();
+    let pressure = identity.and_then(|i| i.pressure_altitude.as_ref());
+    // The rate of climb of the pressure altitude when the track has one
+    // (Mode C: what ATC reads), else the geometric one of a 3D track.
+    let vertical_rate = pressure
+        .map(|a| a.rate_of_climb_ftpm * FT_M / 60.0)
+        .or(vertical_rate);
+    let stale_after = AGED_AFTER_S;
+    let age = |last: Option<f64>| last.map(|l| t.t - l);
+    let (ssr_age, mds_age) = (
+        age(identity.and_then(|i| i.last_secondary_t)),
+        age(identity.and_then(|i| i.last_mode_s_t)),
+    );
+    let psr_age = match identity {
+        // A track that has heard secondary replies knows whether its
+        // updates were primary; one that never has was updated by primary
+        // plots only.
+        Some(i) => age(i.last_primary_t),
+        None => Some(t.t - t.last_update_t),
+    };
     SystemTrack {
+        mode_3a: identity.and_then(|i| i.mode_3a.as_ref()).and_then(|c| {
+            Some(TrackMode3A {
+                code: super::ssr::parse_code(&c.value)?,
+                validated: true,
+                garbled: false,
+                // CH: adopted within the last two scans.
+                changed: identity.is_some_and(|i| i.pending_mode_3a.is_some())
+                    || (c.first_t > t.start_t.unwrap_or(f64::NEG_INFINITY)
+                        && t.t - c.first_t <= stale_after),
+            })
+        }),
+        callsign: identity
+            .and_then(|i| i.callsign.as_ref())
+            .and_then(|c| super::ssr::parse_callsign(&c.value)),
+        address: identity
+            .and_then(|i| i.mode_s_address.as_ref())
+            .and_then(|a| super::ssr::parse_address(&a.value)),
+        measured_flight_level: pressure.map(|a| a.measured_flight_level),
         track_number: (t.id % 65_536) as u16,
         time_of_day: cat062::time_of_day(t.t - options.day_start_t),
         wgs84: t.lat_deg.zip(t.lon_deg),
@@ -300,13 +344,17 @@ pub fn system_track(
             first_message: life == Life::First,
             last_message: life == Life::End,
             coasting: t.consecutive_misses > 0,
+            spi: identity.is_some_and(|i| i.spi),
+            psr_aged: psr_age.is_some_and(|a| a > stale_after),
+            ssr_aged: ssr_age.is_some_and(|a| a > stale_after),
+            mode_s_aged: mds_age.is_some_and(|a| a > stale_after),
             ..TrackStatusFlags::default()
         },
         ages: UpdateAges {
             track: t.start_t.map(|s| t.t - s),
-            psr: Some(t.t - t.last_update_t),
-            ssr: None,
-            mode_s: None,
+            psr: psr_age,
+            ssr: ssr_age,
+            mode_s: mds_age,
         },
         accuracy: Some(accuracy),
         height,

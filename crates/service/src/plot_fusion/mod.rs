@@ -14,6 +14,7 @@ pub mod asterix;
 pub mod cat062;
 pub mod network;
 pub mod output;
+pub mod ssr;
 
 use std::time::Instant;
 
@@ -24,6 +25,7 @@ use algo::{
 };
 pub use network::Network;
 pub use output::{HistoryEntry, LastPlotView, ModeView, TrackView, TrackerCounters, model_names};
+pub use ssr::{IdentityItem, IdentityView, PressureAltitudeView, SsrInput};
 
 /// Most radars in a network.
 pub const MAX_RADARS: usize = 64;
@@ -223,6 +225,8 @@ pub struct PlotInput {
     pub azimuth_deg: Option<f64>,
     pub elevation_deg: Option<f64>,
     pub radial_velocity_mps: Option<f64>,
+    /// The plot's SSR and Mode S fields (none for a primary plot).
+    pub ssr: SsrInput,
 }
 
 /// A batch request: the network, its plots (any order) and whether to
@@ -348,6 +352,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &counters,
         &tracks,
     ));
+    warnings.extend(ssr::warnings(&tracks));
     let motion = &tracker.config().motion;
     let tracks: Vec<TrackView> = tracks
         .iter()

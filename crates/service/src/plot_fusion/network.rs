@@ -49,6 +49,7 @@ use algo::{
         registration::{BiasPrior, RegistrationConfig},
     },
 };
+use formats::asterix::FT_M;
 use formats::wire::{FormatError, Reader, Writer};
 
 /// Longest plot range accepted (m): far beyond any radar's horizon.
@@ -1039,6 +1040,7 @@ impl Network {
             }
             (_, None) => None,
         };
+        let identity = p.ssr.parse()?;
         let site = &self.sites[radar];
         let (range, azimuth, elevation, radial_velocity) = if spec.is_3d() {
             let (azimuth, elevation) = match &site.rotation {
@@ -1055,7 +1057,14 @@ impl Network {
             // fusion axes and its horizontal part kept: the horizontal range
             // ρ cos ε_f and azimuth in the fusion frame. In level flight the
             // horizontal radial velocity is ṙ / cos ε.
-            let (h, big_h) = (site.height, self.target_height);
+            // A validated Mode C altitude is the target's height (pressure
+            // altitude for geometric: within a few hundred feet, against
+            // `target_height`'s guess of thousands).
+            let big_h = identity
+                .mode_c
+                .filter(|c| c.validated && !c.garbled)
+                .map_or(self.target_height, |c| c.flight_level * 100.0 * FT_M);
+            let h = site.height;
             let sin_el = match site.rotation {
                 None => (big_h - h) / range,
                 Some(_) => {
@@ -1088,6 +1097,7 @@ impl Network {
             azimuth,
             elevation,
             radial_velocity,
+            identity,
         })
     }
 

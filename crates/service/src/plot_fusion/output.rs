@@ -51,6 +51,9 @@ pub struct TrackView {
     /// one radar's plot (serial mode); absent after a fused plot (parallel
     /// mode).
     pub last_plot: Option<LastPlotView>,
+    /// What the track knows of its aircraft from SSR and Mode S (absent
+    /// when no secondary plot has updated it).
+    pub identity: Option<super::ssr::IdentityView>,
 }
 
 /// The plot that last updated a track, as the radar measured it.
@@ -199,6 +202,7 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
             elevation_deg: p.elevation.map(f64::to_degrees),
             radial_velocity_mps: p.radial_velocity,
         }),
+        identity: super::ssr::view(&t.identity, t.t),
     }
 }
 

@@ -42,7 +42,7 @@ use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
-        LastPlotView, ModeView, Network, PlotInput, RadarBiasView, SpecInput, TrackView,
+        LastPlotView, ModeView, Network, PlotInput, RadarBiasView, SpecInput, SsrInput, TrackView,
         TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
@@ -86,8 +86,16 @@ const LATE_FLAG: u32 = 1 << 27;
 /// Set in the frame count of a kept update that carries the radars'
 /// biases (after the late fields).
 const REGISTRATION_FLAG: u32 = 1 << 26;
-const FLAGS: u32 =
-    ASTERIX_FLAG | MODES_FLAG | PROVENANCE_FLAG | CAT062_FLAG | LATE_FLAG | REGISTRATION_FLAG;
+/// Set in the frame count of a kept update whose tracks carry their
+/// identity (SSR and Mode S).
+const IDENTITY_FLAG: u32 = 1 << 25;
+const FLAGS: u32 = ASTERIX_FLAG
+    | MODES_FLAG
+    | PROVENANCE_FLAG
+    | CAT062_FLAG
+    | LATE_FLAG
+    | REGISTRATION_FLAG
+    | IDENTITY_FLAG;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -305,6 +313,7 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
         w.opt(p.elevation_deg, Writer::f64);
         w.opt(p.radial_velocity_mps, Writer::f64);
     });
+    crate::plot_fusion::ssr::encode_view(w, t.identity.as_ref());
 }
 
 /// What a kept update's tracks carry, by the release that kept it.
@@ -312,6 +321,7 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
 struct TrackFields {
     modes: bool,
     provenance: bool,
+    identity: bool,
 }
 
 fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, FormatError> {
@@ -368,6 +378,11 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
     } else {
         (None, None)
     };
+    let identity = if fields.identity {
+        crate::plot_fusion::ssr::decode_view(r)?
+    } else {
+        None
+    };
     Ok(TrackView {
         id,
         status,
@@ -387,6 +402,7 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
         turn_rate_dps,
         start_t,
         last_plot,
+        identity,
     })
 }
 
@@ -547,6 +563,7 @@ impl SessionKind for PlotFusionSession {
         }
         let registration = self.network.bias_views(self.tracker());
         warnings.extend(network::registration_warnings(&config, &registration));
+        warnings.extend(crate::plot_fusion::ssr::warnings(&live));
         warnings.extend(realigned(&biases_before, &registration));
         let changes = diff(&before, &live, &push);
         let view = |t: &TrackOutput| self.network.track_view(&config.motion, t);
@@ -712,6 +729,7 @@ impl SessionKind for PlotFusionSession {
                 azimuth_deg,
                 elevation_deg,
                 radial_velocity_mps,
+                ssr: _,
             } = p;
             w.opt(radar_id.as_deref(), Writer::str);
             for x in [t, range_m, azimuth_deg, elevation_deg, radial_velocity_mps] {
@@ -736,6 +754,14 @@ impl SessionKind for PlotFusionSession {
             });
         });
         w.bool(*flush);
+        // Since SSR: each plot's secondary fields, after the batch (an
+        // entry of an earlier release ends at `flush` and reads as
+        // primary plots).
+        if plots.iter().any(|p| !p.ssr.is_empty()) {
+            for p in plots {
+                p.ssr.encode(w);
+            }
+        }
         true
     }
 
@@ -751,6 +777,7 @@ impl SessionKind for PlotFusionSession {
                     azimuth_deg: r.opt(Reader::f64)?,
                     elevation_deg: r.opt(Reader::f64)?,
                     radial_velocity_mps: r.opt(Reader::f64)?,
+                    ssr: SsrInput::default(),
                 })
             })
             .collect::<Result<_, FormatError>>()?;
@@ -768,10 +795,17 @@ impl SessionKind for PlotFusionSession {
                 })?,
             })
         })?;
+        let flush = r.bool()?;
+        let mut plots: Vec<PlotInput> = plots;
+        if !r.is_empty() {
+            for p in &mut plots {
+                p.ssr = SsrInput::decode(r)?;
+            }
+        }
         Ok(BatchInput {
             plots,
             asterix,
-            flush: r.bool()?,
+            flush,
         })
     }
 
@@ -825,7 +859,15 @@ impl SessionKind for PlotFusionSession {
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
         let optional = if u.asterix.is_some() { ASTERIX_FLAG } else { 0 }
             | if u.cat062.is_some() { CAT062_FLAG } else { 0 };
-        w.u32(u.frames | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG | optional);
+        w.u32(
+            u.frames
+                | MODES_FLAG
+                | PROVENANCE_FLAG
+                | LATE_FLAG
+                | REGISTRATION_FLAG
+                | IDENTITY_FLAG
+                | optional,
+        );
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
@@ -884,6 +926,7 @@ impl SessionKind for PlotFusionSession {
         let fields = TrackFields {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
+            identity: frames & IDENTITY_FLAG != 0,
         };
         let frames = frames & !FLAGS;
         let pending_plots = r.u32()?;
@@ -1378,7 +1421,8 @@ pub(crate) mod tests {
         PlotFusionSession::encode_update(&update, &mut plain);
         assert_eq!(
             plain.buf[..4],
-            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG).to_le_bytes()
+            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG | IDENTITY_FLAG)
+                .to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
         // without modes) still reads.

@@ -58,6 +58,10 @@ fn sample_tracks() -> Vec<SystemTrack> {
                 polar: Some((45_000.0, 123.4)),
                 height: Some(3_000.0),
             }),
+            address: Default::default(),
+            measured_flight_level: Default::default(),
+            callsign: Default::default(),
+            mode_3a: Default::default(),
         },
         // 1: 2D, tentative, first message.
         SystemTrack {

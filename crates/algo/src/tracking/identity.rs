@@ -1,0 +1,623 @@
+//! Secondary surveillance in the tracker: what an SSR or Mode S reply tells
+//! about the aircraft (its Mode 3/A code, Mode C pressure altitude, Mode S
+//! address and identification), what a track has learnt of it, and the
+//! evidence it gives the association.
+//!
+//! Association (operational trackers put identity first: OpenATS COMPASS's
+//! reconstructor associates by Mode S address, then by Mode A/C and
+//! position, then by position alone). Here each pairing of a plot with a
+//! track gets a likelihood ratio Λ = p(identity | the plot is the track's)
+//! / p(identity | the plot is clutter or another aircraft's), which
+//! multiplies the JPDA weight a_tj (`jpda::Evidence`); the position gate
+//! still applies:
+//! - **Mode S address.** The same address: Λ = (1 − ε_A) / ε_A with
+//!   ε_A = 10⁻⁴ (an address is unique; the reply's parity protects it). A
+//!   different address rules the pairing out. Without an address on
+//!   either side, Λ = 1.
+//! - **Mode 3/A code** (when neither side's address decides): a validated,
+//!   ungarbled code equal to the track's gives Λ = (1 − p_c) / f(c), with
+//!   p_c = 0.02 the chance of a code change or an undetected garble
+//!   between two replies and f(c) the chance that another aircraft
+//!   squawks c: 1/1000 for a discrete code, 1/4 for the conspicuity codes
+//!   7000, 2000 and 1200 (so two aircraft squawking 7000 side by side are
+//!   told apart by position, not by their code). A different code gives
+//!   Λ = p_c / (1 − f(c)): a code change is unlikely, not a new aircraft.
+//!   An unvalidated code counts half (ln Λ / 2); a garbled one not at all.
+//! - **Mode C.** The track's pressure altitude predicted to the plot's
+//!   time, N(ν; 0, S) with S = P_hh + R, against a uniform altitude over
+//!   [`ALTITUDE_SPAN_FT`]: Λ = (1 − ε_C) N(ν; 0, S) H + ε_C, with ε_C = 0.05
+//!   (0.2 unvalidated) for a wrong or garbled altitude. Aircraft that cross
+//!   1,000 ft apart are told apart even where their plots overlap.
+//!
+//! A track keeps its identity with its evidence ([`Evidence`]: the plots
+//! that gave it, when first and last seen). A new Mode 3/A code is adopted
+//! after [`CODE_CHANGE_REPLIES`] replies agree on it (a garbled reply
+//! does not change a track's code). The pressure altitude is its own
+//! filter ([`PressureAltitude`], flight level and rate of climb, constant
+//! vertical rate with white acceleration), kept apart from the geometric
+//! height as air traffic control does. The quantisation of Mode C (100 ft
+//! for Gillham-coded replies, 25 ft for Mode S) is part of its
+//! measurement noise, q²/12.
+
+use crate::error::AlgoError;
+
+/// The largest Mode S address (24 bits).
+pub const MAX_ADDRESS: u32 = 0xFF_FFFF;
+/// The largest Mode 3/A code (four octal digits, 12 bits).
+pub const MAX_CODE: u16 = 0o7777;
+/// Flight levels a Mode C or Mode S reply can carry (I048/090: −12 to
+/// 1,270 FL).
+pub const FLIGHT_LEVEL_RANGE: (f64, f64) = (-12.0, 1270.0);
+/// The altitude span the Mode C evidence compares against (ft).
+pub const ALTITUDE_SPAN_FT: f64 = 60_000.0;
+/// Replies with a new Mode 3/A code before a track adopts it.
+pub const CODE_CHANGE_REPLIES: u32 = 2;
+/// How long a track shows the SPI flag after the last reply that set it
+/// (s; the transponder holds it about 18 s).
+pub const SPI_HOLD_S: f64 = 18.0;
+
+const ADDRESS_ERROR: f64 = 1e-4;
+const CODE_CHANGE: f64 = 0.02;
+const DISCRETE_CODE_SHARE: f64 = 1e-3;
+const CONSPICUITY_CODE_SHARE: f64 = 0.25;
+const ALTITUDE_ERROR: f64 = 0.05;
+const UNVALIDATED_ALTITUDE_ERROR: f64 = 0.2;
+/// Spectral density of the vertical acceleration (ft²/s³): a level-off
+/// or a change of climb rate of about 2 ft/s² (0.6 m/s²).
+const VERTICAL_Q: f64 = 4.0;
+/// A Mode C value further than this many σ from the prediction is not
+/// used to update the pressure altitude (a wrong reply); after
+/// [`RESTART_AFTER`] in a row the filter starts again from the reply.
+const ALTITUDE_GATE_SIGMAS: f64 = 5.0;
+const RESTART_AFTER: u32 = 3;
+/// Prior σ of the rate of climb of a new pressure-altitude filter (ft/s):
+/// 3,000 ft/min.
+const PRIOR_RATE_SIGMA: f64 = 50.0;
+
+/// How a radar detected a plot (I048/020 TYP).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Detection {
+    /// Primary radar only: position, no identity.
+    Primary,
+    /// Secondary (SSR or Mode S) only.
+    Secondary,
+    /// Primary and secondary together.
+    Combined,
+}
+
+/// A Mode 3/A code as a reply gave it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Mode3A {
+    /// The code, 12 bits (four octal digits: 7000 is `0o7000`).
+    pub code: u16,
+    /// Validated by the radar (I048/070 V = 0).
+    pub validated: bool,
+    /// Garbled (I048/070 G = 1).
+    pub garbled: bool,
+}
+
+/// A Mode C (or Mode S) pressure altitude as a reply gave it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModeC {
+    /// Flight level (hundreds of feet above the 1013.25 hPa isobar).
+    pub flight_level: f64,
+    /// Validated by the radar (I048/090 V = 0).
+    pub validated: bool,
+    /// Garbled (I048/090 G = 1).
+    pub garbled: bool,
+}
+
+/// An aircraft identification (callsign): up to 8 characters of the
+/// ICAO 6-bit set (A–Z, 0–9, space), space-padded.
+pub type Callsign = [u8; 8];
+
+/// What a plot says of the aircraft beside its position. Empty (the
+/// default) for a primary plot.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Identity {
+    /// Mode S address (24 bits).
+    pub address: Option<u32>,
+    /// Mode 3/A code.
+    pub mode_3a: Option<Mode3A>,
+    /// Mode C pressure altitude.
+    pub mode_c: Option<ModeC>,
+    /// Aircraft identification.
+    pub callsign: Option<Callsign>,
+    /// How the plot was detected, when the radar says.
+    pub detection: Option<Detection>,
+    /// Special position identification pulse.
+    pub spi: bool,
+}
+
+impl Identity {
+    /// No identity at all (a primary plot).
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The plot came (at least partly) from a secondary reply.
+    pub fn is_secondary(&self) -> bool {
+        matches!(
+            self.detection,
+            Some(Detection::Secondary | Detection::Combined)
+        ) || self.address.is_some()
+            || self.mode_3a.is_some()
+            || self.mode_c.is_some()
+    }
+
+    /// The plot came (at least partly) from the primary radar: said so,
+    /// or said nothing and carries no secondary field.
+    pub fn is_primary(&self) -> bool {
+        match self.detection {
+            Some(d) => d != Detection::Secondary,
+            None => !self.is_secondary(),
+        }
+    }
+
+    /// The Mode C measurement's quantum (ft): 25 ft from Mode S replies
+    /// (or a value off the 100-ft grid), 100 ft for Gillham-coded Mode C.
+    pub fn altitude_quantum_ft(&self) -> f64 {
+        match self.mode_c {
+            Some(c)
+                if self.address.is_none()
+                    && (c.flight_level - c.flight_level.round()).abs() < 1e-9 =>
+            {
+                100.0
+            }
+            _ => 25.0,
+        }
+    }
+}
+
+/// The emergency a special Mode 3/A code declares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Emergency {
+    /// 7500: unlawful interference.
+    UnlawfulInterference,
+    /// 7600: radio failure.
+    RadioFailure,
+    /// 7700: general emergency.
+    General,
+}
+
+impl Emergency {
+    /// The emergency `code` declares, if any.
+    pub fn of(code: u16) -> Option<Self> {
+        match code {
+            0o7500 => Some(Self::UnlawfulInterference),
+            0o7600 => Some(Self::RadioFailure),
+            0o7700 => Some(Self::General),
+            _ => None,
+        }
+    }
+
+    /// The wire name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::UnlawfulInterference => "unlawful_interference",
+            Self::RadioFailure => "radio_failure",
+            Self::General => "emergency",
+        }
+    }
+}
+
+/// A conspicuity code (7000 in Europe, 1200 in America, 2000 entering
+/// SSR airspace): many aircraft squawk it at once.
+pub fn is_conspicuity(code: u16) -> bool {
+    matches!(code, 0o7000 | 0o2000 | 0o1200)
+}
+
+/// One identity a track holds and the evidence for it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Evidence<T> {
+    /// The value.
+    pub value: T,
+    /// Plots associated with the track that gave it.
+    pub plots: u32,
+    /// Time of the first of them (s).
+    pub first_t: f64,
+    /// Time of the last of them (s).
+    pub last_t: f64,
+}
+
+impl<T: PartialEq + Copy> Evidence<T> {
+    fn new(value: T, t: f64) -> Self {
+        Self {
+            value,
+            plots: 1,
+            first_t: t,
+            last_t: t,
+        }
+    }
+
+    fn seen(&mut self, t: f64) {
+        self.plots = self.plots.saturating_add(1);
+        self.first_t = self.first_t.min(t);
+        self.last_t = self.last_t.max(t);
+    }
+}
+
+/// The pressure altitude of a track: flight level h (ft) and rate of
+/// climb ḣ (ft/s) at time `t`, constant vertical rate with white
+/// acceleration of spectral density [`VERTICAL_Q`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PressureAltitude {
+    /// Time of the estimate (s).
+    pub t: f64,
+    /// `[h, ḣ]` (ft, ft/s).
+    pub x: [f64; 2],
+    /// Covariance `[P_hh, P_hḣ, P_ḣḣ]`.
+    pub p: [f64; 3],
+    /// The last Mode C value used (ft) and its time (s).
+    pub measured: (f64, f64),
+    /// Mode C values in a row that fell outside the gate.
+    pub rejected: u32,
+}
+
+impl PressureAltitude {
+    fn start(feet: f64, r: f64, t: f64) -> Self {
+        Self {
+            t,
+            x: [feet, 0.0],
+            p: [r, 0.0, PRIOR_RATE_SIGMA * PRIOR_RATE_SIGMA],
+            measured: (feet, t),
+            rejected: 0,
+        }
+    }
+
+    /// `[h, ḣ]` and covariance predicted to `t` (backwards too, for a late
+    /// plot's evidence; the process noise grows with |Δt|).
+    pub fn predicted(&self, t: f64) -> ([f64; 2], [f64; 3]) {
+        let dt = t - self.t;
+        let a = dt.abs();
+        let q = VERTICAL_Q;
+        let [p00, p01, p11] = self.p;
+        (
+            [self.x[0] + dt * self.x[1], self.x[1]],
+            [
+                p00 + 2.0 * dt * p01 + dt * dt * p11 + q * a * a * a / 3.0,
+                p01 + dt * p11 + q * a * a / 2.0 * dt.signum(),
+                p11 + q * a,
+            ],
+        )
+    }
+
+    /// The Kalman update with a Mode C value `z` (ft) of variance `r` at
+    /// `t` (≥ the estimate's time), or a rejection when it lies beyond the
+    /// gate.
+    fn update(&mut self, z: f64, r: f64, t: f64) {
+        let (x, p) = self.predicted(t);
+        let s = p[0] + r;
+        let nu = z - x[0];
+        if nu * nu > ALTITUDE_GATE_SIGMAS * ALTITUDE_GATE_SIGMAS * s {
+            self.rejected += 1;
+            if self.rejected >= RESTART_AFTER {
+                *self = Self::start(z, r, t);
+            }
+            return;
+        }
+        let (k0, k1) = (p[0] / s, p[1] / s);
+        self.x = [x[0] + k0 * nu, x[1] + k1 * nu];
+        self.p = [(1.0 - k0) * p[0], (1.0 - k0) * p[1], p[2] - k1 * p[1]];
+        self.t = t;
+        self.measured = (z, t);
+        self.rejected = 0;
+    }
+}
+
+/// What a track has learnt of its aircraft's identity.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrackIdentity {
+    /// Mode S address.
+    pub address: Option<Evidence<u32>>,
+    /// Mode 3/A code.
+    pub mode_3a: Option<Evidence<u16>>,
+    /// A code replies have given since the adopted one, not yet adopted.
+    pub pending_3a: Option<Evidence<u16>>,
+    /// Aircraft identification.
+    pub callsign: Option<Evidence<Callsign>>,
+    /// Pressure altitude (from validated, ungarbled Mode C).
+    pub altitude: Option<PressureAltitude>,
+    /// Time of the last reply with SPI set (s).
+    pub spi_t: Option<f64>,
+    /// Time of the last update by a secondary plot (s).
+    pub last_secondary: Option<f64>,
+    /// Time of the last update by a plot with a Mode S address (s).
+    pub last_mode_s: Option<f64>,
+    /// Time of the last update by a primary (or combined) plot (s).
+    pub last_primary: Option<f64>,
+}
+
+impl TrackIdentity {
+    /// `true` when the track has learnt nothing of its identity.
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The emergency the track's code declares.
+    pub fn emergency(&self) -> Option<Emergency> {
+        self.mode_3a.and_then(|c| Emergency::of(c.value))
+    }
+
+    /// The SPI flag at `t`.
+    pub fn spi(&self, t: f64) -> bool {
+        self.spi_t.is_some_and(|s| t - s <= SPI_HOLD_S)
+    }
+
+    /// ln Λ of pairing a plot of identity `plot` at `t` with this track
+    /// (see the module's documentation); `None` rules the pairing out.
+    pub fn ln_ratio(&self, plot: &Identity, t: f64) -> Option<f64> {
+        let mut ln = 0.0;
+        match (self.address, plot.address) {
+            (Some(a), Some(b)) if a.value != b => return None,
+            (Some(_), Some(_)) => ln += ((1.0 - ADDRESS_ERROR) / ADDRESS_ERROR).ln(),
+            _ => ln += self.code_ln_ratio(plot),
+        }
+        ln += self.altitude_ln_ratio(plot, t);
+        Some(ln)
+    }
+
+    fn code_ln_ratio(&self, plot: &Identity) -> f64 {
+        let (Some(track), Some(reply)) = (self.mode_3a, plot.mode_3a) else {
+            return 0.0;
+        };
+        if reply.garbled {
+            return 0.0;
+        }
+        let share = if is_conspicuity(reply.code) {
+            CONSPICUITY_CODE_SHARE
+        } else {
+            DISCRETE_CODE_SHARE
+        };
+        let matches =
+            reply.code == track.value || self.pending_3a.is_some_and(|p| p.value == reply.code);
+        let ln = if matches {
+            ((1.0 - CODE_CHANGE) / share).ln()
+        } else {
+            (CODE_CHANGE / (1.0 - share)).ln()
+        };
+        if reply.validated { ln } else { ln / 2.0 }
+    }
+
+    fn altitude_ln_ratio(&self, plot: &Identity, t: f64) -> f64 {
+        let (Some(alt), Some(c)) = (self.altitude, plot.mode_c) else {
+            return 0.0;
+        };
+        if c.garbled {
+            return 0.0;
+        }
+        let eps = if c.validated {
+            ALTITUDE_ERROR
+        } else {
+            UNVALIDATED_ALTITUDE_ERROR
+        };
+        let (x, p) = alt.predicted(t);
+        let s = p[0] + altitude_variance(plot);
+        let nu = c.flight_level * 100.0 - x[0];
+        let density = (-0.5 * nu * nu / s).exp() / (2.0 * std::f64::consts::PI * s).sqrt();
+        ((1.0 - eps) * density * ALTITUDE_SPAN_FT + eps).ln()
+    }
+
+    /// Learns from a plot of identity `plot` at `t` that updated the track
+    /// (its most likely plot). A plot older than the pressure altitude
+    /// (out of sequence) adds its evidence but does not move the filter.
+    pub fn observe(&mut self, plot: &Identity, t: f64) {
+        if plot.is_empty() {
+            // A plot that says nothing of itself (a primary radar's, or
+            // one whose detection type is unknown): nothing to learn.
+            return;
+        }
+        if plot.is_secondary() {
+            self.last_secondary = Some(self.last_secondary.map_or(t, |s| s.max(t)));
+        }
+        if plot.is_primary() {
+            self.last_primary = Some(self.last_primary.map_or(t, |s| s.max(t)));
+        }
+        if let Some(a) = plot.address {
+            self.last_mode_s = Some(self.last_mode_s.map_or(t, |s| s.max(t)));
+            match &mut self.address {
+                Some(e) if e.value == a => e.seen(t),
+                // A different address never pairs (ln_ratio), except where
+                // evidence was not asked (parallel mode): the newer wins.
+                _ => self.address = Some(Evidence::new(a, t)),
+            }
+        }
+        if let Some(c) = plot.mode_3a.filter(|c| c.validated && !c.garbled) {
+            self.observe_code(c.code, t);
+        }
+        if let Some(cs) = plot.callsign {
+            match &mut self.callsign {
+                Some(e) if e.value == cs => e.seen(t),
+                _ => self.callsign = Some(Evidence::new(cs, t)),
+            }
+        }
+        if plot.spi {
+            self.spi_t = Some(self.spi_t.map_or(t, |s| s.max(t)));
+        }
+        if let Some(c) = plot.mode_c.filter(|c| c.validated && !c.garbled) {
+            let z = c.flight_level * 100.0;
+            let r = altitude_variance(plot);
+            match &mut self.altitude {
+                None => self.altitude = Some(PressureAltitude::start(z, r, t)),
+                Some(alt) if t >= alt.t => alt.update(z, r, t),
+                Some(_) => {}
+            }
+        }
+    }
+
+    fn observe_code(&mut self, code: u16, t: f64) {
+        match (&mut self.mode_3a, &mut self.pending_3a) {
+            (None, _) => self.mode_3a = Some(Evidence::new(code, t)),
+            (Some(e), _) if e.value == code => {
+                e.seen(t);
+                self.pending_3a = None;
+            }
+            (Some(_), Some(p)) if p.value == code => {
+                p.seen(t);
+                if p.plots >= CODE_CHANGE_REPLIES {
+                    self.mode_3a = self.pending_3a.take();
+                }
+            }
+            (Some(_), _) => self.pending_3a = Some(Evidence::new(code, t)),
+        }
+    }
+
+    /// Whether two identities can be the same aircraft's: not two
+    /// different Mode S addresses.
+    pub fn compatible(a: &Identity, b: &Identity) -> bool {
+        !matches!((a.address, b.address), (Some(x), Some(y)) if x != y)
+    }
+}
+
+/// Variance of a plot's Mode C value (ft²): its quantisation, q²/12.
+fn altitude_variance(plot: &Identity) -> f64 {
+    let q = plot.altitude_quantum_ft();
+    q * q / 12.0
+}
+
+/// Checks a plot's identity fields (the service reports them by name
+/// first; this guards the library's own callers).
+pub fn validate(identity: &Identity) -> Result<(), AlgoError> {
+    if identity.address.is_some_and(|a| a > MAX_ADDRESS) {
+        return Err(AlgoError::InvalidParameter {
+            what: "address",
+            reason: "must fit in 24 bits".to_string(),
+        });
+    }
+    if identity.mode_3a.is_some_and(|c| c.code > MAX_CODE) {
+        return Err(AlgoError::InvalidParameter {
+            what: "mode_3a",
+            reason: "must be four octal digits".to_string(),
+        });
+    }
+    if let Some(c) = identity.mode_c {
+        let (lo, hi) = FLIGHT_LEVEL_RANGE;
+        if !(c.flight_level.is_finite() && (lo..=hi).contains(&c.flight_level)) {
+            return Err(AlgoError::InvalidParameter {
+                what: "flight_level",
+                reason: format!("must lie in [{lo}, {hi}]"),
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reply(address: Option<u32>, code: Option<u16>, fl: Option<f64>) -> Identity {
+        Identity {
+            address,
+            mode_3a: code.map(|code| Mode3A {
+                code,
+                validated: true,
+                garbled: false,
+            }),
+            mode_c: fl.map(|flight_level| ModeC {
+                flight_level,
+                validated: true,
+                garbled: false,
+            }),
+            detection: Some(Detection::Combined),
+            ..Identity::default()
+        }
+    }
+
+    #[test]
+    fn addresses_decide_and_codes_weigh_by_how_common_they_are() {
+        let mut track = TrackIdentity::default();
+        track.observe(&reply(Some(0x4CA2D1), Some(0o1234), None), 0.0);
+        // A different address: ruled out; the same: ln((1 − 1e-4)/1e-4)
+        // = ln 9999 = 9.2102.
+        assert_eq!(
+            track.ln_ratio(&reply(Some(0x4CA2D2), None, None), 1.0),
+            None
+        );
+        let same = track
+            .ln_ratio(&reply(Some(0x4CA2D1), None, None), 1.0)
+            .unwrap();
+        assert!((same - 9999f64.ln()).abs() < 1e-12, "{same}");
+        // Without an address on the plot, the code: a discrete match is
+        // ln(0.98 / 0.001) = ln 980 = 6.8876; a mismatch ln(0.02 / 0.999)
+        // = −3.9110; unvalidated, half; garbled, nothing.
+        let m = track
+            .ln_ratio(&reply(None, Some(0o1234), None), 1.0)
+            .unwrap();
+        assert!((m - 980f64.ln()).abs() < 1e-12, "{m}");
+        let x = track
+            .ln_ratio(&reply(None, Some(0o4321), None), 1.0)
+            .unwrap();
+        assert!((x - (0.02f64 / 0.999).ln()).abs() < 1e-12, "{x}");
+        let mut half = reply(None, Some(0o1234), None);
+        half.mode_3a.as_mut().unwrap().validated = false;
+        let h = track.ln_ratio(&half, 1.0).unwrap();
+        assert!((h - 980f64.ln() / 2.0).abs() < 1e-12);
+        half.mode_3a.as_mut().unwrap().garbled = true;
+        assert_eq!(track.ln_ratio(&half, 1.0), Some(0.0));
+        // A conspicuity code matches weakly: ln(0.98 / 0.25) = 1.3661.
+        let mut vfr = TrackIdentity::default();
+        vfr.observe(&reply(None, Some(0o7000), None), 0.0);
+        let c = vfr.ln_ratio(&reply(None, Some(0o7000), None), 1.0).unwrap();
+        assert!((c - (0.98f64 / 0.25).ln()).abs() < 1e-12, "{c}");
+        // A primary plot says nothing.
+        assert_eq!(track.ln_ratio(&Identity::default(), 1.0), Some(0.0));
+    }
+
+    #[test]
+    fn a_code_change_needs_two_agreeing_replies_and_a_garbled_one_changes_nothing() {
+        let mut t = TrackIdentity::default();
+        t.observe(&reply(None, Some(0o1234), None), 0.0);
+        let mut garbled = reply(None, Some(0o7777), None);
+        garbled.mode_3a.as_mut().unwrap().garbled = true;
+        t.observe(&garbled, 1.0);
+        assert_eq!(t.mode_3a.unwrap().value, 0o1234);
+        assert!(t.pending_3a.is_none());
+        t.observe(&reply(None, Some(0o5501), None), 2.0);
+        assert_eq!(t.mode_3a.unwrap().value, 0o1234);
+        assert_eq!(t.pending_3a.unwrap().value, 0o5501);
+        // The pending code counts as a match meanwhile (no new aircraft).
+        assert!(t.ln_ratio(&reply(None, Some(0o5501), None), 3.0).unwrap() > 6.0);
+        t.observe(&reply(None, Some(0o5501), None), 3.0);
+        let code = t.mode_3a.unwrap();
+        assert_eq!((code.value, code.plots, code.first_t), (0o5501, 2, 2.0));
+        assert!(t.pending_3a.is_none());
+        t.observe(&reply(None, Some(0o7700), None), 4.0);
+        t.observe(&reply(None, Some(0o7700), None), 5.0);
+        assert_eq!(t.emergency(), Some(Emergency::General));
+    }
+
+    #[test]
+    fn the_pressure_altitude_follows_a_climb_and_tells_levels_apart() {
+        // A climb of 1,500 ft/min (25 ft/s) from FL 100, Mode S replies
+        // every 2 s quantised to 25 ft.
+        let mut t = TrackIdentity::default();
+        for k in 0..60 {
+            let time = 2.0 * k as f64;
+            let feet = 10_000.0 + 25.0 * time;
+            let fl = (feet / 25.0).round() * 25.0 / 100.0;
+            t.observe(&reply(Some(1), None, Some(fl)), time);
+        }
+        let alt = t.altitude.unwrap();
+        let truth = 10_000.0 + 25.0 * 118.0;
+        assert!((alt.x[0] - truth).abs() < 25.0, "{:?}", alt.x);
+        assert!((alt.x[1] - 25.0).abs() < 2.0, "{:?}", alt.x);
+        // A reply 1,000 ft away is evidence against (ln(0.05) = −3.0);
+        // one at the predicted level for (the density at the peak
+        // times the 60,000-ft span, well above 1).
+        let at = |fl: f64| t.ln_ratio(&reply(None, None, Some(fl)), 120.0).unwrap();
+        let level = (truth + 50.0) / 100.0;
+        assert!(at(level) > 4.0, "{}", at(level));
+        assert!(
+            (at(level + 10.0) - 0.05f64.ln()).abs() < 0.01,
+            "{}",
+            at(level + 10.0)
+        );
+        // A single wild reply is not used; three in a row restart the
+        // filter there.
+        for k in 0..3 {
+            t.observe(&reply(Some(1), None, Some(400.0)), 122.0 + k as f64);
+            assert_eq!(t.altitude.unwrap().x[0] == 40_000.0, k == 2);
+        }
+    }
+}
