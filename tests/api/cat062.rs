@@ -271,8 +271,37 @@ pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
     let (vx, vy) = rec.velocity.expect("I062/185");
     assert!(near(vx, s(1), 0.25) && near(vy, s(3), 0.25));
     assert_eq!(rec.tentative(), track["status"] == "tentative");
-    let psr = (f("t") - f("last_update_t")).min(63.75);
-    assert!(near(rec.psr_age.unwrap(), psr, 0.25), "{rec:?}");
+    // PSR age: from the last primary update when the track heard a
+    // secondary reply, else from its last update (docs/plot-fusion.md).
+    let identity = track.get("identity");
+    let psr = match identity {
+        Some(i) => i["last_primary_t"]
+            .as_f64()
+            .map(|p| (f("t") - p).min(63.75)),
+        None => Some((f("t") - f("last_update_t")).min(63.75)),
+    };
+    match psr {
+        Some(psr) => assert!(near(rec.psr_age.unwrap(), psr, 0.25), "{rec:?}"),
+        None => assert_eq!(rec.psr_age, None, "{rec:?}"),
+    }
+    // Identity: I062/060, /380 ADR, /136 as the JSON says.
+    let code = identity.and_then(|i| i["mode_3a"]["value"].as_str());
+    assert_eq!(
+        rec.mode_3a.map(|m| m.3),
+        code.map(|c| u16::from_str_radix(c, 8).unwrap()),
+        "{rec:?}"
+    );
+    let address = identity.and_then(|i| i["mode_s_address"]["value"].as_str());
+    assert_eq!(
+        rec.address,
+        address.map(|a| u32::from_str_radix(a, 16).unwrap()),
+        "{rec:?}"
+    );
+    let fl = identity.and_then(|i| i["pressure_altitude"]["measured_flight_level"].as_f64());
+    match fl {
+        Some(fl) => assert!(near(rec.measured_fl.unwrap(), fl, 0.25), "{rec:?}"),
+        None => assert_eq!(rec.measured_fl, None),
+    }
     if let Some(start) = track["start_t"].as_f64() {
         let trk = (f("t") - start).min(63.75);
         assert!(near(rec.track_age.unwrap(), trk, 0.25), "{rec:?}");

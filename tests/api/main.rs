@@ -22,4 +22,5 @@ mod ops;
 mod plot_fusion;
 mod rules;
 mod sessions;
+mod ssr;
 mod tls;

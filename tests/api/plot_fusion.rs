@@ -573,7 +573,7 @@ async fn bad_motion_options_are_named_by_field_on_both_transports() {
 // ------------------------------------------------------------ sessions
 
 /// The create request of a plot_fusion session for a batch request.
-fn session_create(req: &Value) -> Value {
+pub(crate) fn session_create(req: &Value) -> Value {
     json!({
         "kind": "plot_fusion",
         "origin": req["origin"],

@@ -185,6 +185,21 @@ pub fn plots(
     false_per_scan: f64,
     seed: u64,
 ) -> Vec<Value> {
+    plots_tagged(radars, targets, duration, false_per_scan, seed, &|_, _| {
+        None
+    })
+}
+
+/// [`plots`], each target's plot given the fields `tag(target index, t)`
+/// says (SSR and Mode S), merged in; the same noise and detections.
+pub fn plots_tagged(
+    radars: &[SceneRadar],
+    targets: &[Target],
+    duration: f64,
+    false_per_scan: f64,
+    seed: u64,
+    tag: &dyn Fn(usize, f64) -> Option<Value>,
+) -> Vec<Value> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let fusion = origin_frame();
     let mut out: Vec<(f64, Value)> = Vec::new();
@@ -198,7 +213,11 @@ pub fn plots(
         .unwrap();
         let mut t = r.phase;
         while t <= duration {
-            for target in targets.iter().filter(|g| g.start <= t && t <= g.end) {
+            for (index, target) in targets
+                .iter()
+                .enumerate()
+                .filter(|(_, g)| g.start <= t && t <= g.end)
+            {
                 if rng.random::<f64>() >= P_D {
                     continue;
                 }
@@ -225,6 +244,9 @@ pub fn plots(
                 }
                 if r.doppler {
                     plot["radial_velocity_mps"] = json!(rv + SIGMA_RV * n(&mut rng));
+                }
+                if let Some(Value::Object(fields)) = tag(index, t) {
+                    plot.as_object_mut().unwrap().extend(fields);
                 }
                 out.push((t, plot));
             }

@@ -260,7 +260,16 @@ function track(t, key, dpr) {
   const sel = S.selected === key, r = (sel ? 6 : 4) * dpr;
   ctx.fillStyle = c; ctx.fillRect(x - r, y - r, 2 * r, 2 * r);
   if (sel) { ctx.strokeStyle = "#58a6ff"; ctx.lineWidth = 2 * dpr; ctx.strokeRect(x - r - 3 * dpr, y - r - 3 * dpr, 2 * r + 6 * dpr, 2 * r + 6 * dpr); }
-  ctx.fillStyle = "#e6edf3"; ctx.fillText(String(t.id), x + 7 * dpr, y - 6 * dpr);
+  ctx.fillStyle = t.identity?.emergency ? "#f85149" : "#e6edf3"; ctx.fillText(label(t), x + 7 * dpr, y - 6 * dpr);
+}
+// A track's label: its callsign, else its Mode 3/A code, else its id; the
+// flight level after it when known (as a radar display shows them).
+function label(t) {
+  const id = t.identity;
+  if (!id) return String(t.id);
+  const name = id.callsign?.value ?? (id.mode_3a ? "A" + id.mode_3a.value : String(t.id));
+  const fl = id.pressure_altitude ? " FL" + Math.round(id.pressure_altitude.flight_level).toString().padStart(3, "0") : "";
+  return name + fl + (id.emergency ? " " + id.emergency : "") + (id.spi ? " SPI" : "");
 }
 function scaleBar(W, H, dpr) {
   const m = niceStep(120 * dpr / view.scale), px = m * view.scale, x = W - px - 20 * dpr, y = H - 24 * dpr;
@@ -298,6 +307,14 @@ function details() {
     o["σ vx, vy (m/s)"] = `${fmt(sig("vx"))}, ${fmt(sig("vy"))}`;
     if (t.lat_deg != null) o["lat, lon (°)"] = `${t.lat_deg.toFixed(5)}, ${t.lon_deg.toFixed(5)}`;
     if (t.height_m != null) o["height (m, WGS84)"] = fmt(t.height_m, 0);
+    const id = t.identity;
+    if (id) {
+      if (id.callsign) o.callsign = id.callsign.value;
+      if (id.mode_3a) o["Mode 3/A"] = id.mode_3a.value + (id.pending_mode_3a ? ` (→ ${id.pending_mode_3a.value})` : "");
+      if (id.mode_s_address) o["Mode S address"] = `${id.mode_s_address.value} (${id.mode_s_address.plots} plots)`;
+      if (id.pressure_altitude) { const a = id.pressure_altitude; o["flight level"] = `${fmt(a.flight_level, 2)} ± ${fmt(a.flight_level_sigma, 2)}`; o["climb (ft/min)"] = fmt(a.rate_of_climb_ftpm, 0); }
+      if (id.emergency) o.emergency = id.emergency;
+    }
     Object.assign(o, { radars: t.radars.join(", ") || "–", "hits / misses": `${t.hits} / ${t.misses}`, "consecutive misses": t.consecutive_misses, age: t.age });
     if (t.modes && t.modes.length) o.modes = t.modes.map(m => `${m.model} ${(100 * m.probability).toFixed(0)}%`).join(", ");
     if (t.turn_rate_dps != null) o["turn rate (°/s)"] = fmt(t.turn_rate_dps, 2);

@@ -40,8 +40,10 @@ pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
 /// so the test is conservative). Of such a pair the track with fewer hits
 /// (then the higher id) is the duplicate. JPDA feeds both tracks of a
 /// target from its plots, so neither would ever miss; without this they
-/// live on side by side. `probability` 0 disables the rule. Returns the
-/// duplicates' indices.
+/// live on side by side. Two tracks that share their best plot and carry
+/// the same Mode S address are duplicates whatever their states (one
+/// aircraft). `probability` 0 disables the rule. Returns the duplicates'
+/// indices.
 pub(super) fn duplicates<T: std::borrow::Borrow<Track>>(
     tracks: &[T],
     hits: &[(usize, usize)],
@@ -75,9 +77,14 @@ pub(super) fn duplicates<T: std::borrow::Borrow<Track>>(
                 if duplicate[m] {
                     continue;
                 }
+                // One Mode S address: one aircraft, whatever the states.
+                let same_address = matches!(
+                    (tracks(i).identity.address, tracks(keeper).identity.address),
+                    (Some(a), Some(b)) if a.value == b.value
+                );
                 let d = &tracks(i).x - &tracks(keeper).x;
                 let s = &tracks(i).p + &tracks(keeper).p;
-                if mahalanobis_sq(&d, &s)? <= threshold {
+                if same_address || mahalanobis_sq(&d, &s)? <= threshold {
                     duplicate[k] = true;
                     out.push(i);
                     break;
@@ -104,6 +111,40 @@ mod tests {
             t.record(h.then(Vec::new));
         }
         t
+    }
+
+    #[test]
+    fn two_tracks_of_one_mode_s_address_on_one_plot_are_one_aircraft() {
+        // States 2 km apart (d² = 4·10⁶/200 = 20,000: never alike), the
+        // same best plot: duplicates only when they carry one address.
+        use crate::tracking::identity::Evidence;
+        let p = DMatrix::<f64>::identity(4, 4) * 100.0;
+        let mut a = Track::fresh(1, dvector![0.0, 100.0, 0.0, 0.0], p.clone());
+        a.hits = 10;
+        let mut b = Track::fresh(2, dvector![2000.0, 100.0, 0.0, 0.0], p);
+        b.hits = 4;
+        let none: Vec<usize> = Vec::new();
+        let hits = [(0, 3), (1, 3)];
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            none
+        );
+        let address = |v: u32| {
+            Some(Evidence {
+                value: v,
+                plots: 5,
+                first_t: 0.0,
+                last_t: 1.0,
+            })
+        };
+        a.identity.address = address(0x4CA2D1);
+        b.identity.address = address(0x4CA2D1);
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            vec![1]
+        );
+        b.identity.address = address(0x4CA2D2);
+        assert_eq!(duplicates(&[a, b], &hits, 0.99).unwrap(), none);
     }
 
     #[test]

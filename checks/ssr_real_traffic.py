@@ -1,0 +1,301 @@
+#!/usr/bin/env python3
+"""SSR and Mode S on real flights: identity and pressure altitude in our tracker.
+
+The scene is checks/real_traffic_vs_stonesoup.py's (real ADS-B flights of
+the ``traffic`` package's collections under simulated beam-timed 3D
+radars, pyproj geometry, clutter), with what secondary radars add:
+
+  * radars A and B are Mode S radars: each of their plots carries the
+    flight's recorded ICAO address, callsign and squawk (the ``squawk``
+    column at the plot's time) and its Mode C flight level, the recorded
+    barometric altitude quantised to 25 ft; radar C (with three radars) is
+    primary only (no SSR field);
+  * 2 % of the Mode S radars' replies have a garbled code (a random bit of
+    the 12 flipped): half flagged (G = 1), half not;
+  * every third flight changes its code at the middle of the window (a
+    sector handover: a new discrete code from then on);
+  * two more aircraft fly side by side, 1.5 km apart, a copy of the first
+    flight shifted east and west, both squawking 7000 without Mode S (SSR
+    Mode A/C only) at the same flight level: identity cannot tell them
+    apart, position must.
+
+The same plots go to our service with their SSR fields and without them
+(position only, as today's Stone Soup and MATLAB trackers use them), and,
+unless ``--ours-only``, to Stone Soup's JPDA tracker (position only) over
+``--q-grid``. Scored as the parent script scores (horizontal and 3D
+errors, ID swaps: a truth's state sequence changing track), plus for our
+tracker with SSR: the states whose track carries the right Mode S address
+(of the truth it is assigned to), the wrong one, none; the flight level
+error against the recorded barometric altitude (states with a pressure
+altitude): share within 50 ft, median, 95th percentile.
+
+Usage (a server on --url; checks/.venv from checks/setup_traffic.sh):
+    checks/.venv/bin/python checks/ssr_real_traffic.py --flights 10 --minutes 6
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import real_traffic_vs_stonesoup as rt  # noqa: E402
+
+GARBLE_RATE = 0.02
+SIDE_BY_SIDE_M = 1500.0
+FT = 0.3048
+
+
+def side_by_side(truths: list) -> list:
+    """Two copies of the first flight, 1.5 km east and west of it."""
+    import copy
+
+    base = truths[0]
+    t = np.linspace(base.t0, base.t1, 5)
+    ecef = base.ecef(t).mean(axis=0)
+    lat, lon, _ = rt.ecef_to_geodetic(ecef[None, :])
+    la, lo = math.radians(float(lat[0])), math.radians(float(lon[0]))
+    east = np.array([-math.sin(lo), math.cos(lo), 0.0])
+    out = []
+    for sign, tag in ((1.0, "E"), (-1.0, "W")):
+        twin = copy.copy(base)
+        twin.name = f"VFR{tag}/7000"
+        twin.mean = base.mean + sign * SIDE_BY_SIDE_M * east
+        out.append(twin)
+    _ = la
+    return out
+
+
+def squawk_table(collection: str, truths: list, w0: float) -> dict:
+    """Per flight name: (scene times, codes) of its recorded squawks."""
+    import importlib
+
+    import pandas as pd
+
+    samples = importlib.import_module("traffic.data.samples")
+    wanted = {t.name for t in truths}
+    out = {}
+    for f in getattr(samples, collection):
+        name = f"{f.callsign or '?'}/{f.icao24}"
+        if name not in wanted or "squawk" not in f.data.columns:
+            continue
+        d = f.data.dropna(subset=["squawk"])
+        if len(d) == 0:
+            continue
+        ts = pd.to_datetime(d["timestamp"]).astype("int64").to_numpy() / 1e9 - w0
+        codes = [str(s).zfill(4) for s in d["squawk"]]
+        ok = [all(c in "01234567" for c in code) and len(code) == 4 for code in codes]
+        if any(ok):
+            order = np.argsort(ts)
+            out[name] = (ts[order][np.array(ok)[order]],
+                         [codes[i] for i in order if ok[i]])
+    return out
+
+
+def add_ssr(scene, body: dict, args) -> dict:
+    """The request's plots with the Mode S radars' SSR fields."""
+    rng = np.random.default_rng(args.seed + 1000)
+    mode_s = {r.id for r in scene.radars[:2]}
+    squawks = scene.info["squawks"]
+    changed = {j for j in range(0, len(scene.truths), 3) if j < scene.info["real_flights"]}
+    mid = scene.duration_s / 2.0
+    for plot, p in zip(body["plots"], scene.plots):
+        if p.truth is None or p.radar not in mode_s:
+            continue
+        truth = scene.truths[p.truth]
+        callsign, icao = truth.name.split("/")
+        h_ft = float(rt.ecef_to_geodetic(truth.ecef(np.array([p.t])))[2][0]) / FT
+        fields = {"flight_level": round(h_ft / 25.0) * 25.0 / 100.0, "detection": "combined"}
+        if icao == "7000":
+            fields["mode_3a"] = "7000"
+        else:
+            fields["mode_s_address"] = icao.upper()
+            cs = callsign.strip().upper()
+            if cs and cs != "?" and len(cs) <= 8 and all(c.isalnum() for c in cs):
+                fields["callsign"] = cs
+            code = None
+            if truth.name in squawks:
+                ts, codes = squawks[truth.name]
+                k = int(np.searchsorted(ts, p.t, side="right")) - 1
+                code = codes[max(k, 0)]
+            if code is None:
+                code = f"{(p.truth * 97 + 0o1000) % 0o7777:04o}"
+            if p.truth in changed and p.t >= mid:
+                code = f"{(int(code, 8) + 0o123) % 0o7777:04o}"
+            fields["mode_3a"] = code
+        if "mode_3a" in fields and rng.uniform() < GARBLE_RATE:
+            bad = int(fields["mode_3a"], 8) ^ (1 << int(rng.integers(12)))
+            fields["mode_3a"] = f"{bad:04o}"
+            if rng.uniform() < 0.5:
+                fields["mode_3a_garbled"] = True
+        plot.update(fields)
+    return body
+
+
+def run(scene, body: dict, url: str, name: str, timeout: float) -> tuple:
+    import requests
+
+    t0 = time.perf_counter()
+    resp = requests.post(url.rstrip("/") + "/v1/plot-fusion/track", json=body, timeout=timeout)
+    if resp.status_code != 200:
+        raise RuntimeError(f"HTTP {resp.status_code}: {resp.text[:2000]}")
+    out = resp.json()
+    wall = time.perf_counter() - t0
+    layout = out["state_layout"]
+    ip = [layout.index(k) for k in ("x", "y", "z")]
+    rows, times, seen, ident = [], [], set(), {}
+    for entry in out["history"]:
+        times.append(entry["t"])
+        for tr in entry["tracks"]:
+            if tr["status"] != "confirmed" or (tr["id"], tr["t"]) in seen:
+                continue
+            seen.add((tr["id"], tr["t"]))
+            s = np.asarray(tr["state"], float)
+            c = np.asarray(tr["covariance"], float)
+            rows.append((tr["t"], tr["id"], s[ip], c[np.ix_(ip, ip)],
+                         abs(tr["last_update_t"] - tr["t"]) < 1e-9))
+            i = tr.get("identity") or {}
+            pa = i.get("pressure_altitude")
+            ident[(tr["id"], tr["t"])] = (
+                (i.get("mode_s_address") or {}).get("value"),
+                None if pa is None else pa["flight_level"])
+    extra = {"counters": out.get("counters"), "warnings": out.get("warnings"),
+             "mode": out.get("mode")}
+    res = rt.result_from_rows(name, times, rows, wall,
+                              (out.get("timing") or {}).get("compute_us", 0) / 1e6, extra)
+    return res, ident
+
+
+def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
+    """Per confirmed state assigned to a truth (Hungarian per instant, as
+    the parent's score): right / wrong / no address, flight level error."""
+    from scipy.optimize import linear_sum_assignment
+
+    right = wrong = none = no_address_truth = 0
+    fl_err = []
+    for tk in np.unique(res.t):
+        states = np.flatnonzero(res.t == tk)
+        live = [j for j, tr in enumerate(scene.truths) if scene.covered(tr, np.array([tk]))[0]]
+        if not live:
+            continue
+        pos = np.array([scene.origin_frame.enu(scene.truths[j].ecef(np.array([tk])))[0]
+                        for j in live])
+        d = np.linalg.norm(pos[:, None, :] - res.pos[states][None, :, :], axis=2)
+        r, c = linear_sum_assignment(np.where(d < cutoff, d, 10 * cutoff))
+        for a, b in zip(r, c):
+            if d[a, b] >= cutoff:
+                continue
+            truth = scene.truths[live[a]]
+            s = states[b]
+            address, fl = ident.get((int(res.ids[s]), float(res.t[s])), (None, None))
+            icao = truth.name.split("/")[1].upper()
+            if icao == "7000":
+                no_address_truth += 1
+                wrong += address is not None
+            elif address is None:
+                none += 1
+            elif address == icao:
+                right += 1
+            else:
+                wrong += 1
+            if fl is not None:
+                h_ft = float(rt.ecef_to_geodetic(truth.ecef(np.array([tk])))[2][0]) / FT
+                fl_err.append(abs(fl * 100.0 - h_ft))
+    fl_err = np.asarray(fl_err)
+    n = right + wrong + none
+    return {
+        "states_with_address_truth": n,
+        "right_address": right, "wrong_address": wrong, "no_address": none,
+        "right_share": right / n if n else float("nan"),
+        "states_of_7000_pair": no_address_truth,
+        "fl_states": int(len(fl_err)),
+        "fl_within_50ft": float(np.mean(fl_err <= 50.0)) if len(fl_err) else float("nan"),
+        "fl_median_ft": float(np.median(fl_err)) if len(fl_err) else float("nan"),
+        "fl_p95_ft": float(np.percentile(fl_err, 95)) if len(fl_err) else float("nan"),
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--url", default="http://127.0.0.1:18080")
+    ap.add_argument("--collection", default="quickstart", choices=sorted(rt.SCENES))
+    ap.add_argument("--flights", type=int, default=10)
+    ap.add_argument("--minutes", type=float, default=6.0)
+    ap.add_argument("--radars", type=int, default=3, choices=(2, 3))
+    ap.add_argument("--clutter", type=float, default=2.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--max-range-km", type=float, default=200.0)
+    ap.add_argument("--cutoff-m", type=float, default=2000.0)
+    ap.add_argument("--q-grid", default="1,5")
+    ap.add_argument("--ours-only", action="store_true")
+    ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--json-out")
+    args = ap.parse_args()
+
+    load = rt.load_truths
+    holder = {}
+
+    def with_pair(collection, n, minutes, start):
+        truths, w0, info = load(collection, n, minutes, start)
+        info["real_flights"] = len(truths)
+        info["squawks"] = squawk_table(collection, truths, w0)
+        holder["info"] = info
+        return truths + side_by_side(truths), w0, info
+
+    rt.load_truths = with_pair
+    ns = argparse.Namespace(collection=args.collection, radars=args.radars,
+                            flights=args.flights, minutes=args.minutes, start=None,
+                            max_range_km=args.max_range_km, seed=args.seed,
+                            doppler=False, clutter=args.clutter)
+    scene = rt.make_scene(ns)
+    print(f"scene: {scene.info['collection']} from {scene.info['window_start_utc']}, "
+          f"{scene.info['real_flights']} real flights + 2 side by side (7000), "
+          f"{len(scene.radars)} radars (Mode S: "
+          f"{', '.join(r.id for r in scene.radars[:2])}; primary: "
+          f"{', '.join(r.id for r in scene.radars[2:]) or 'none'}), {len(scene.plots)} plots, "
+          f"recorded squawks for {len(scene.info['squawks'])} flights")
+    body = rt.build_request(scene, None)
+    plain = json.loads(json.dumps(body))
+    ssr = add_ssr(scene, body, args)
+    results = []
+    ours_ssr, ident = run(scene, ssr, args.url, "ours, SSR and Mode S (defaults)", args.timeout)
+    ours_plain, _ = run(scene, plain, args.url, "ours, position only (defaults)", args.timeout)
+    results += [ours_ssr, ours_plain]
+    if not args.ours_only:
+        models = rt.stonesoup_models(scene)
+        longest = max(r.period_s for r in scene.radars)
+        rt._WORK.update(scene=scene, models=models, delete_after=2.0 * longest,
+                        hold=longest + 1.0)
+        for q in [float(x) for x in args.q_grid.split(",")]:
+            res = rt._stonesoup_job((q, "jpda"))
+            print(f"{res.name}: {res.wall_s:.1f} s", flush=True)
+            results.append(res)
+    figures = [rt.score(scene, r, args.cutoff_m) for r in results]
+    idf = identity_figures(scene, ours_ssr, ident, args.cutoff_m)
+    print()
+    print("| tracker | median / p90 horiz. (m) | median / p90 3D (m) | confirmed tracks | "
+          "false tracks | missed aircraft | ID swaps | mean GOSPA (m) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for f in figures:
+        print(f"| {f['name']} | {f['median_h_m']:.1f} / {f['p90_h_m']:.1f} | "
+              f"{f['median_3d_m']:.1f} / {f['p90_3d_m']:.1f} | {f['confirmed_tracks']} | "
+              f"{f['false_tracks']} | {f['missed']} | {f['id_swaps']} | "
+              f"{f['mean_gospa_m']:.1f} |")
+    print()
+    print(f"identity (ours, SSR): {json.dumps(idf)}")
+    for w in ours_ssr.extra.get("warnings") or []:
+        print(f"  warning: {w}")
+    if args.json_out:
+        with open(args.json_out, "w") as fh:
+            json.dump({"scene": {k: v for k, v in scene.info.items() if k != "squawks"},
+                       "trackers": figures, "identity": idf}, fh, indent=1, default=str)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

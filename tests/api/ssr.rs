@@ -1,0 +1,205 @@
+//! SSR and Mode S through the real servers: identity and pressure altitude
+//! from JSON plots to the tracks on REST, gRPC and a session, warnings for
+//! emergency codes, bad fields named on both transports.
+
+use serde_json::{Value, json};
+use tonic::Code;
+
+use crate::helpers::{assert_problem, grpc_fields, problem_fields, spawn_app};
+use crate::plot_fusion::plot_scene::{ORIGIN, plots_tagged, radars_json, targets, two_radars};
+use crate::plot_fusion::proto_request;
+use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
+
+const PATH: &str = "/v1/plot-fusion/track";
+const ADDRESSES: [&str; 3] = ["4CA2D1", "3C6586", "A1B2C3"];
+const CODES: [&str; 3] = ["1234", "5670", "7700"];
+const CALLSIGNS: [&str; 3] = ["EZY12AB", "DLH4K", "N123AB"];
+
+/// The scene's targets fly at 8,000 m: FL 262.47, which Mode S gives to
+/// 25 ft as FL 262.5.
+const FL: f64 = 262.5;
+
+/// The default scene (two 2D radars, three targets, clutter) with every
+/// target plot carrying its aircraft's Mode S reply.
+fn request() -> Value {
+    let radars = two_radars(false);
+    let tag = |i: usize, _t: f64| {
+        Some(json!({
+            "mode_s_address": ADDRESSES[i], "mode_3a": CODES[i], "callsign": CALLSIGNS[i],
+            "flight_level": FL, "detection": "combined",
+        }))
+    };
+    json!({
+        "origin": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
+        "radars": radars_json(&radars, 1e-7),
+        "plots": plots_tagged(&radars, &targets(), 150.0, 1.0, 11, &tag),
+    })
+}
+
+/// Each confirmed track carries the identity of the target it lies
+/// nearest: its address, code, callsign and flight level.
+fn check_identities(tracks: &Value) {
+    let confirmed: Vec<&Value> = tracks
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .collect();
+    assert_eq!(confirmed.len(), 2, "{tracks}");
+    for t in confirmed {
+        let at = t["t"].as_f64().unwrap();
+        let s = &t["state"];
+        let nearest = targets()
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| g.start <= at && at <= g.end)
+            .min_by(|a, b| {
+                let d = |g: &crate::plot_fusion::plot_scene::Target| {
+                    let p = g.at(at);
+                    (s[0].as_f64().unwrap() - p[0]).hypot(s[2].as_f64().unwrap() - p[1])
+                };
+                d(a.1).total_cmp(&d(b.1))
+            })
+            .unwrap()
+            .0;
+        let id = &t["identity"];
+        assert_eq!(id["mode_s_address"]["value"], ADDRESSES[nearest], "{t}");
+        assert_eq!(id["mode_3a"]["value"], CODES[nearest], "{t}");
+        assert_eq!(id["callsign"]["value"], CALLSIGNS[nearest], "{t}");
+        assert!(id["mode_s_address"]["plots"].as_u64().unwrap() >= 3, "{t}");
+        let fl = id["pressure_altitude"]["flight_level"].as_f64().unwrap();
+        // Every reply says FL 262.5: the filter holds it (within 0.1 FL).
+        assert!((fl - FL).abs() < 0.1, "{fl}");
+        assert!(id["last_mode_s_t"].as_f64().unwrap() <= at);
+    }
+}
+
+#[tokio::test]
+async fn identity_flows_to_the_tracks_on_rest_grpc_and_a_session() {
+    let app = spawn_app().await;
+    let req = request();
+    let out = app.post_ok(PATH, &req).await;
+    check_identities(&out["tracks"]);
+    // Target 2 squawks 7700 while it lives (30–100 s); it has ended by
+    // 150 s, so no warning at the end; the other two do not squawk it.
+    let warnings = out["warnings"].to_string();
+    assert!(!warnings.contains("7700"), "{warnings}");
+
+    // gRPC: the same identities.
+    let mut client = PlotFusionServiceClient::new(app.channel().await);
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    let g = client.track(p).await.unwrap().into_inner();
+    let rest: Vec<(u64, String, String)> = out["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|t| {
+            let id = t.get("identity")?;
+            Some((
+                t["id"].as_u64().unwrap(),
+                id["mode_s_address"]["value"].as_str()?.to_string(),
+                id["mode_3a"]["value"].as_str()?.to_string(),
+            ))
+        })
+        .collect();
+    let grpc: Vec<(u64, String, String)> = g
+        .tracks
+        .iter()
+        .filter_map(|t| {
+            let id = t.identity.as_ref()?;
+            Some((
+                t.id,
+                id.mode_s_address.as_ref()?.value.clone(),
+                id.mode_3a.as_ref()?.value.clone(),
+            ))
+        })
+        .collect();
+    assert!(!rest.is_empty());
+    assert_eq!(rest, grpc);
+
+    // A session fed in batches (the log carries the SSR fields) ends with
+    // the batch call's tracks, identities included.
+    let created = app
+        .post_json(
+            "/v1/sessions",
+            &json!({"kind": "plot_fusion", "origin": req["origin"], "radars": req["radars"]}),
+        )
+        .await;
+    assert_eq!(created.status(), 201);
+    let created: Value = created.json().await.unwrap();
+    let id = created["id"].as_str().unwrap();
+    for (i, chunk) in req["plots"].as_array().unwrap().chunks(17).enumerate() {
+        let body = json!({"sequence": i + 1, "plots": chunk});
+        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(state["plot_fusion"]["tracks"], out["tracks"]);
+}
+
+#[tokio::test]
+async fn an_emergency_code_is_a_track_flag_and_a_warning() {
+    let app = spawn_app().await;
+    let radars = two_radars(false);
+    // Target 0 squawks 7700 throughout.
+    let tag = |i: usize, _t: f64| {
+        Some(json!({"mode_3a": if i == 0 { "7700" } else { CODES[1] }, "flight_level": FL}))
+    };
+    let req = json!({
+        "origin": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
+        "radars": radars_json(&radars, 1e-7),
+        "plots": plots_tagged(&radars, &targets()[..2], 100.0, 0.0, 3, &tag),
+    });
+    let out = app.post_ok(PATH, &req).await;
+    let flagged: Vec<&Value> = out["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["identity"]["emergency"] == "emergency")
+        .collect();
+    assert_eq!(flagged.len(), 1, "{}", out["tracks"]);
+    let warnings = out["warnings"].to_string();
+    assert!(
+        warnings.contains(&format!("track {} squawks 7700", flagged[0]["id"])),
+        "{warnings}"
+    );
+}
+
+#[tokio::test]
+async fn bad_ssr_fields_are_named_on_both_transports() {
+    let app = spawn_app().await;
+    let mut req = request();
+    let bad = [
+        ("mode_3a", json!("8000")),
+        ("flight_level", json!(2000.0)),
+        ("mode_s_address", json!("1000000")),
+        ("callsign", json!("bad-1")),
+        ("detection", json!("psr")),
+    ];
+    let plots = req["plots"].as_array_mut().unwrap();
+    for (i, (field, value)) in bad.iter().enumerate() {
+        plots[i][*field] = value.clone();
+    }
+    plots[5] = json!({"radar_id": plots[5]["radar_id"], "t": plots[5]["t"],
+                      "range_m": plots[5]["range_m"], "azimuth_deg": plots[5]["azimuth_deg"],
+                      "mode_3a_garbled": true});
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    let want = vec![
+        "plots[0].mode_3a",
+        "plots[1].flight_level",
+        "plots[2].mode_s_address",
+        "plots[3].callsign",
+        "plots[4].detection",
+        "plots[5].mode_3a_garbled",
+    ];
+    assert_eq!(problem_fields(&body), want);
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    let status = PlotFusionServiceClient::new(app.channel().await)
+        .track(p)
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), Code::InvalidArgument);
+    assert_eq!(grpc_fields(&status), want);
+}
