@@ -90,9 +90,8 @@ struct BearerAuth;
 
 impl utoipa::Modify for BearerAuth {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        use utoipa::openapi::{
-            ContentBuilder, HeaderBuilder, ObjectBuilder, Ref, ResponseBuilder, Type,
-            security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme},
+        use utoipa::openapi::security::{
+            HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme,
         };
         openapi
             .components
@@ -110,82 +109,8 @@ impl utoipa::Modify for BearerAuth {
                         .build(),
                 ),
             );
-        let unauthorized = ResponseBuilder::new()
-            .description("Missing, malformed or unknown API key")
-            .content(
-                problem::PROBLEM_JSON,
-                ContentBuilder::new()
-                    .schema(Some(Ref::from_schema_name("Problem")))
-                    .build(),
-            )
-            .header(
-                "WWW-Authenticate",
-                HeaderBuilder::new()
-                    .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
-                    .description(Some(
-                        "`Bearer realm=\"radar-fusion\"`, with `error` for a bad key",
-                    ))
-                    .build(),
-            )
-            .build();
-        // The answers every API operation can give besides its own, each
-        // with an example of its problem body.
-        let problem = |status: u16, description: &str| {
-            let code = StatusCode::from_u16(status).expect("a status");
-            let body = Problem::for_status(code);
-            let example = serde_json::to_value(&body).expect("a problem serialises");
-            ResponseBuilder::new()
-                .description(description)
-                .content(
-                    problem::PROBLEM_JSON,
-                    ContentBuilder::new()
-                        .schema(Some(Ref::from_schema_name("Problem")))
-                        .example(Some(example))
-                        .build(),
-                )
-                .build()
-        };
-        let common = [
-            (
-                "503",
-                problem(
-                    503,
-                    "Shed (too many requests in flight, or the request bodies being read hold \
-                     FUSION_MAX_BUFFERED_BODY_BYTES; `Retry-After`), or a session store that \
-                     does not answer (`Retry-After`; for a session write the outcome is unknown: \
-                     retry with the same sequence number)",
-                ),
-            ),
-            (
-                "504",
-                problem(504, "The request ran past FUSION_REQUEST_TIMEOUT_S"),
-            ),
-        ];
-        let with_body = [
-            (
-                "400",
-                problem(400, "The body is not JSON, or not the expected JSON object"),
-            ),
-            (
-                "408",
-                problem(
-                    408,
-                    "The body did not arrive within FUSION_BODY_READ_TIMEOUT_S (the connection \
-                     is closed)",
-                ),
-            ),
-            (
-                "413",
-                problem(
-                    413,
-                    "The body exceeds FUSION_MAX_BODY_BYTES, or a count limit",
-                ),
-            ),
-            (
-                "415",
-                problem(415, "The Content-Type is not application/json"),
-            ),
-        ];
+        let unauthorized = unauthorized_response();
+        let (common, with_body) = problem_responses();
         for (path, item) in &mut openapi.paths.paths {
             if !path.starts_with("/v1/") {
                 continue;
@@ -222,6 +147,97 @@ impl utoipa::Modify for BearerAuth {
             }
         }
     }
+}
+
+/// The 401 of every API operation: a problem body and the challenge.
+fn unauthorized_response() -> utoipa::openapi::Response {
+    use utoipa::openapi::{
+        ContentBuilder, HeaderBuilder, ObjectBuilder, Ref, ResponseBuilder, Type,
+    };
+    ResponseBuilder::new()
+        .description("Missing, malformed or unknown API key")
+        .content(
+            problem::PROBLEM_JSON,
+            ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("Problem")))
+                .build(),
+        )
+        .header(
+            "WWW-Authenticate",
+            HeaderBuilder::new()
+                .schema(Some(ObjectBuilder::new().schema_type(Type::String)))
+                .description(Some(
+                    "`Bearer realm=\"radar-fusion\"`, with `error` for a bad key",
+                ))
+                .build(),
+        )
+        .build()
+}
+
+/// A status and the response documented for it.
+type Answer = (&'static str, utoipa::openapi::Response);
+
+/// The answers every API operation can give besides its own, and those of
+/// every operation with a body, each with an example of its problem body.
+fn problem_responses() -> ([Answer; 2], [Answer; 4]) {
+    use utoipa::openapi::{ContentBuilder, Ref, ResponseBuilder};
+    let problem = |status: u16, description: &str| {
+        let code = StatusCode::from_u16(status).expect("a status");
+        let body = Problem::for_status(code);
+        let example = serde_json::to_value(&body).expect("a problem serialises");
+        ResponseBuilder::new()
+            .description(description)
+            .content(
+                problem::PROBLEM_JSON,
+                ContentBuilder::new()
+                    .schema(Some(Ref::from_schema_name("Problem")))
+                    .example(Some(example))
+                    .build(),
+            )
+            .build()
+    };
+    let common = [
+        (
+            "503",
+            problem(
+                503,
+                "Shed (too many requests in flight, or the request bodies being read hold \
+                     FUSION_MAX_BUFFERED_BODY_BYTES; `Retry-After`), or a session store that \
+                     does not answer (`Retry-After`; for a session write the outcome is unknown: \
+                     retry with the same sequence number)",
+            ),
+        ),
+        (
+            "504",
+            problem(504, "The request ran past FUSION_REQUEST_TIMEOUT_S"),
+        ),
+    ];
+    let with_body = [
+        (
+            "400",
+            problem(400, "The body is not JSON, or not the expected JSON object"),
+        ),
+        (
+            "408",
+            problem(
+                408,
+                "The body did not arrive within FUSION_BODY_READ_TIMEOUT_S (the connection \
+                     is closed)",
+            ),
+        ),
+        (
+            "413",
+            problem(
+                413,
+                "The body exceeds FUSION_MAX_BODY_BYTES, or a count limit",
+            ),
+        ),
+        (
+            "415",
+            problem(415, "The Content-Type is not application/json"),
+        ),
+    ];
+    (common, with_body)
 }
 
 /// A working request for each POST operation ("Try it out" on the docs
