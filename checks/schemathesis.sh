@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Property-based API check of the served OpenAPI document with schemathesis
 # (PyPI): starts a release server on loopback with an API key, runs
-# schemathesis against /openapi.json with every check, prints its summary.
+# schemathesis against /openapi.json with every check, prints its summary,
+# then checks a real event stream against the document (sse_contract.py).
 #   checks/schemathesis.sh [MAX_EXAMPLES]      (default 100 per operation)
 # The venv is checks/.venv-schemathesis (created on first use, gitignored).
 set -euo pipefail
@@ -24,6 +25,9 @@ FUSION_LOG=error FUSION_HTTP_ADDR="127.0.0.1:$port" FUSION_GRPC_ADDR="127.0.0.1:
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
 for _ in $(seq 1 100); do (exec 3<>/dev/tcp/127.0.0.1/"$port") 2>/dev/null && break; sleep 0.1; done
+status=0
 "$venv/bin/schemathesis" run "http://127.0.0.1:$port/openapi.json" \
   --checks all --max-examples "$examples" --seed 18 --no-color \
-  -H "Authorization: Bearer $key" "${@:2}"
+  -H "Authorization: Bearer $key" "${@:2}" || status=$?
+"$venv/bin/python" "$here/sse_contract.py" "http://127.0.0.1:$port" "$key" || status=$?
+exit "$status"

@@ -48,6 +48,98 @@ pub struct WatchEnd {
     pub version: u64,
 }
 
+/// One event of the stream, as the OpenAPI document describes it (the
+/// `itemSchema` of `text/event-stream`, OpenAPI 3.2's form for a sequence of
+/// items): `event` names it, `id` is the session's version after it and
+/// `data` is JSON whose shape the event name fixes. Only the schema is
+/// used; the events themselves are written by [`json_event`].
+pub struct SessionStreamEvent;
+
+impl SessionStreamEvent {
+    /// The events: their names, their `data`'s schema, and what each is.
+    const EVENTS: [(&'static str, &'static str, &'static str); 3] = [
+        (
+            "snapshot",
+            "SessionState",
+            "The whole session, as `GET /v1/sessions/{id}` answers: first (unless \
+             `Last-Event-ID` resumed the stream), and again whenever a gap in the versions \
+             had to be filled from the store",
+        ),
+        (
+            "update",
+            "BatchUpdate",
+            "One batch update, as the push answered it (plot-fusion updates also carry \
+             `plots`), in version order",
+        ),
+        (
+            "end",
+            "WatchEnd",
+            "The last event: the session was deleted or expired, the watcher fell behind \
+             (`slow`) or the server shuts down",
+        ),
+    ];
+}
+
+impl utoipa::PartialSchema for SessionStreamEvent {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::{ObjectBuilder, OneOfBuilder, Ref, Type};
+        let mut one_of = OneOfBuilder::new();
+        for (name, data, description) in Self::EVENTS {
+            one_of = one_of.item(
+                ObjectBuilder::new()
+                    .title(Some(name))
+                    .description(Some(description))
+                    .property(
+                        "event",
+                        ObjectBuilder::new()
+                            .schema_type(Type::String)
+                            .enum_values(Some([name])),
+                    )
+                    .required("event")
+                    .property(
+                        "id",
+                        ObjectBuilder::new()
+                            .schema_type(Type::String)
+                            .pattern(Some("^[0-9]+$"))
+                            .description(Some(
+                                "The session's version after the event (resume with \
+                                 `Last-Event-ID`)",
+                            )),
+                    )
+                    .required("id")
+                    .property(
+                        "data",
+                        ObjectBuilder::new()
+                            .schema_type(Type::String)
+                            .content_media_type("application/json")
+                            .content_schema(Some(Ref::from_schema_name(data))),
+                    )
+                    .required("data"),
+            );
+        }
+        utoipa::openapi::RefOr::T(utoipa::openapi::schema::Schema::OneOf(one_of.build()))
+    }
+}
+
+impl ToSchema for SessionStreamEvent {
+    fn schemas(
+        schemas: &mut Vec<(
+            String,
+            utoipa::openapi::RefOr<utoipa::openapi::schema::Schema>,
+        )>,
+    ) {
+        use utoipa::PartialSchema;
+        schemas.push((WatchEnd::name().into(), WatchEnd::schema()));
+        schemas.push((BatchUpdate::name().into(), BatchUpdate::schema()));
+        <BatchUpdate as ToSchema>::schemas(schemas);
+        schemas.push((
+            super::sessions::SessionState::name().into(),
+            super::sessions::SessionState::schema(),
+        ));
+        <super::sessions::SessionState as ToSchema>::schemas(schemas);
+    }
+}
+
 /// The REST form of an update event.
 pub fn update_dto(e: &SessionEvent) -> Option<BatchUpdate> {
     match &e.body {
@@ -110,7 +202,7 @@ fn last_event_id(headers: &HeaderMap) -> Result<Option<u64>, Problem> {
         ("Last-Event-ID" = Option<u64>, Header, description = "Resume after this version: the events after it when this replica still holds them, else a fresh snapshot"),
     ),
     responses(
-        (status = 200, description = "`text/event-stream`: `snapshot` (a SessionState), `update` (a BatchUpdate, version order) and a last `end` (a WatchEnd) events, `id` the session's version; `: heartbeat` comments on a quiet session", content_type = "text/event-stream", body = String),
+        (status = 200, description = "`text/event-stream`: `snapshot` (a SessionState), `update` (a BatchUpdate, version order) and a last `end` (a WatchEnd) events, `id` the session's version; `: heartbeat` comments on a quiet session", content_type = "text/event-stream", item_schema = SessionStreamEvent),
         (status = 404, description = "No such session for this tenant", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Last-Event-ID is not a version", body = Problem, content_type = "application/problem+json"),
         (status = 429, description = "Too many watchers of the session or of the tenant on this replica", body = Problem, content_type = "application/problem+json"),

@@ -273,11 +273,8 @@ fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Option<Config> {
             ("search", Seeding::Search),
         ],
     );
-    let positive = |v: &mut Violations, name: &str, x: Option<f64>, default: f64| -> Option<f64> {
-        v.number_or(format!("options.{name}"), x, default, Interval::POSITIVE)
-    };
-    let max_gap = positive(v, "max_gap_s", o.max_gap_s, d.max_gap);
-    let gate = positive(v, "gate_m", o.gate_m, d.gate);
+    let max_gap = positive_option(v, "max_gap_s", o.max_gap_s, d.max_gap);
+    let gate = positive_option(v, "gate_m", o.gate_m, d.gate);
     let max_iterations = v.count_or(
         "options.max_iterations",
         o.max_iterations,
@@ -297,13 +294,13 @@ fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Option<Config> {
         d.max_azimuth_bias.to_degrees(),
         Interval::closed(0.0, 180.0),
     );
-    let sigma_range = positive(
+    let sigma_range = positive_option(
         v,
         "radar_sigma_range_m",
         o.radar_sigma_range_m,
         d.sigma_range,
     );
-    let sigma_azimuth = positive(
+    let sigma_azimuth = positive_option(
         v,
         "radar_sigma_azimuth_deg",
         o.radar_sigma_azimuth_deg,
@@ -315,30 +312,7 @@ fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Option<Config> {
         d.sigma_ais,
         Interval::NON_NEGATIVE,
     );
-    let window = v.count_or(
-        "options.cfar_window",
-        o.cfar_window,
-        d.cfar.window as u32,
-        1,
-        1000,
-    );
-    let guard = v.count_or(
-        "options.cfar_guard",
-        o.cfar_guard,
-        d.cfar.guard as u32,
-        0,
-        100,
-    );
-    let k = positive(v, "cfar_k", o.cfar_k, d.cfar.k);
-    let h = v.number_or(
-        "options.cfar_h",
-        o.cfar_h,
-        d.cfar.h,
-        Interval {
-            lo: Bound::Closed(1.0),
-            hi: Bound::Unbounded,
-        },
-    );
+    let cfar = cfar_config(v, &o, &d.cfar);
     // Given values keep their exact radians; a default is the core's own.
     let radians = |given: Option<f64>, checked: Option<f64>, default: f64| {
         checked.map(|_| given.map_or(default, f64::to_radians))
@@ -354,27 +328,60 @@ fn config(v: &mut Violations, o: &Option<OptionsInput>) -> Option<Config> {
         sigma_range: sigma_range?,
         sigma_azimuth: radians(o.radar_sigma_azimuth_deg, sigma_azimuth, d.sigma_azimuth)?,
         sigma_ais: sigma_ais?,
-        cfar: CfarConfig {
-            window: window? as usize,
-            guard: guard? as usize,
-            k: k?,
-            h: h?,
-        },
+        cfar: cfar?,
         ..d
     })
 }
 
-/// Validates, decodes, projects and associates.
-pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError> {
+/// `options.{name}`, positive, or the core's default.
+fn positive_option(v: &mut Violations, name: &str, x: Option<f64>, default: f64) -> Option<f64> {
+    v.number_or(format!("options.{name}"), x, default, Interval::POSITIVE)
+}
+
+/// The CA-CFAR options (`options.cfar_*`).
+fn cfar_config(v: &mut Violations, o: &OptionsInput, d: &CfarConfig) -> Option<CfarConfig> {
+    let window = v.count_or(
+        "options.cfar_window",
+        o.cfar_window,
+        d.window as u32,
+        1,
+        1000,
+    );
+    let guard = v.count_or("options.cfar_guard", o.cfar_guard, d.guard as u32, 0, 100);
+    let k = positive_option(v, "cfar_k", o.cfar_k, d.k);
+    let h = v.number_or(
+        "options.cfar_h",
+        o.cfar_h,
+        d.h,
+        Interval {
+            lo: Bound::Closed(1.0),
+            hi: Bound::Unbounded,
+        },
+    );
+    Some(CfarConfig {
+        window: window? as usize,
+        guard: guard? as usize,
+        k: k?,
+        h: h?,
+    })
+}
+
+/// A request parsed into the numerical core's terms: the radar's plane,
+/// the options, the radar tracks in polar form (with their ids), the
+/// decoded AIS reports and the NMEA lines decoded.
+struct Parsed {
+    plane: LocalPlane,
+    cfg: Config,
+    ids: Vec<String>,
+    tracks: Vec<Vec<RadarSample>>,
+    reports: Vec<Report>,
+    decoded: nmea::Decoded,
+}
+
+/// Validates the whole request: every violation, each at its field.
+fn parse(input: AssociateInput) -> Result<Parsed, ServiceError> {
     let mut v = Violations::new();
-    let site = v.required("site", input.site);
-    let (lat0, lon0) = match site {
-        Some(s) => (
-            v.number("site.lat_deg", s.lat_deg, LATITUDE),
-            v.number("site.lon_deg", s.lon_deg, LONGITUDE),
-        ),
-        None => (None, None),
-    };
+    let site = parse_site(&mut v, input.site);
     let ellipsoid = v.one_of(
         "ellipsoid",
         input.ellipsoid.as_deref(),
@@ -407,14 +414,52 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         "samples and AIS reports",
     );
     v.at_most("nmea", input.nmea.len(), MAX_NMEA_LINES, "lines");
-    // Radar tracks.
+    let (ids, tracks) = parse_tracks(&mut v, &input.radar_tracks);
+    let decoded = nmea::decode(&input.nmea);
+    let reports = parse_reports(&mut v, &input.ais_reports, ais_time_sigma);
+    let ais_total = reports.len() + decoded.positions.len();
+    if tracks.len().saturating_mul(ais_total) > MAX_PAIR_SAMPLES {
+        v.add(
+            "radar_tracks",
+            format!(
+                "{} tracks × {ais_total} AIS reports exceed {MAX_PAIR_SAMPLES}; split the request by area or time",
+                tracks.len()
+            ),
+        );
+    }
+    let parsed = (|| Some((site?, ellipsoid?, cfg?)))();
+    let ((lat0, lon0), ellipsoid, cfg) = v.finish_with(parsed)?;
+    // The core checks its own ranges too; every one of them is parsed
+    // above, so this only catches a core whose ranges changed.
+    associate::validate_config(&cfg).map_err(|e| ServiceError::Internal(e.to_string()))?;
+    let plane = LocalPlane::new(ellipsoid, lat0.to_radians(), lon0.to_radians())
+        .map_err(|e| Violations::from_param("site.", e))?;
+    Ok(Parsed {
+        plane,
+        cfg,
+        ids,
+        tracks,
+        reports,
+        decoded,
+    })
+}
+
+/// `site`: the radar's latitude and longitude, in degrees.
+fn parse_site(v: &mut Violations, site: Option<SiteInput>) -> Option<(f64, f64)> {
+    let s = v.required("site", site)?;
+    let lat = v.number("site.lat_deg", s.lat_deg, LATITUDE);
+    let lon = v.number("site.lon_deg", s.lon_deg, LONGITUDE);
+    lat.zip(lon)
+}
+
+/// `radar_tracks`: their ids (an invalid one as "") and their samples in
+/// polar form (the valid ones).
+fn parse_tracks(v: &mut Violations, input: &[TrackInput]) -> (Vec<String>, Vec<Vec<RadarSample>>) {
     let mut track_ids = Ids::new();
-    let mut ids = Vec::with_capacity(input.radar_tracks.len());
-    let mut tracks = Vec::with_capacity(input.radar_tracks.len());
-    for (i, t) in input.radar_tracks.iter().enumerate() {
-        let id = track_ids.check(&mut v, t.id.as_deref(), i, |j| {
-            format!("radar_tracks[{j}].id")
-        });
+    let mut ids = Vec::with_capacity(input.len());
+    let mut tracks = Vec::with_capacity(input.len());
+    for (i, t) in input.iter().enumerate() {
+        let id = track_ids.check(v, t.id.as_deref(), i, |j| format!("radar_tracks[{j}].id"));
         ids.push(id.unwrap_or_default().to_string());
         if t.samples.len() < 2 {
             v.add(
@@ -425,42 +470,58 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         let mut samples = Vec::with_capacity(t.samples.len());
         let mut times = Increasing::new();
         for (k, s) in t.samples.iter().enumerate() {
-            // Field paths are built only for a violation (this loop runs
-            // per sample).
-            let sf = |name: &str| format!("radar_tracks[{i}].samples[{k}]{name}");
-            let time = times.next(&mut v, at(|| sf(".t")), s.t, TIME);
-            let polar = s.range_m.is_some() || s.azimuth_deg.is_some();
-            let cart = s.east_m.is_some() || s.north_m.is_some();
-            let pos = match (polar, cart) {
-                (true, false) => {
-                    let r = v.number_in(at(|| sf(".range_m")), s.range_m, 0.0, 1e7);
-                    let a = v.number_in(at(|| sf(".azimuth_deg")), s.azimuth_deg, -360.0, 360.0);
-                    r.zip(a)
-                        .map(|(r, a)| (r, a.to_radians().rem_euclid(std::f64::consts::TAU)))
-                }
-                (false, true) => {
-                    let e = v.number(at(|| sf(".east_m")), s.east_m, PLANE);
-                    let n = v.number(at(|| sf(".north_m")), s.north_m, PLANE);
-                    e.zip(n).map(|(e, n)| associate::plane_to_polar([e, n]))
-                }
-                _ => {
-                    v.add(
-                        sf(""),
-                        "give either range_m and azimuth_deg, or east_m and north_m",
-                    );
-                    None
-                }
-            };
-            if let (Some(t), Some((range, azimuth))) = (time, pos) {
-                samples.push(RadarSample { t, range, azimuth });
+            if let Some(sample) = parse_sample(v, &mut times, i, k, s) {
+                samples.push(sample);
             }
         }
         tracks.push(samples);
     }
-    // AIS reports (decoded and from NMEA), grouped by MMSI.
-    let decoded = nmea::decode(&input.nmea);
-    let mut reports: Vec<Report> = Vec::new();
-    for (k, r) in input.ais_reports.iter().enumerate() {
+    (ids, tracks)
+}
+
+/// `radar_tracks[i].samples[k]`: a time after the previous one and either
+/// a polar (range, azimuth) or a plane (east, north) position.
+fn parse_sample(
+    v: &mut Violations,
+    times: &mut Increasing,
+    i: usize,
+    k: usize,
+    s: &SampleInput,
+) -> Option<RadarSample> {
+    // Field paths are built only for a violation (this runs per sample).
+    let sf = |name: &str| format!("radar_tracks[{i}].samples[{k}]{name}");
+    let time = times.next(v, at(|| sf(".t")), s.t, TIME);
+    let polar = s.range_m.is_some() || s.azimuth_deg.is_some();
+    let cart = s.east_m.is_some() || s.north_m.is_some();
+    let pos = match (polar, cart) {
+        (true, false) => {
+            let r = v.number_in(at(|| sf(".range_m")), s.range_m, 0.0, 1e7);
+            let a = v.number_in(at(|| sf(".azimuth_deg")), s.azimuth_deg, -360.0, 360.0);
+            r.zip(a)
+                .map(|(r, a)| (r, a.to_radians().rem_euclid(std::f64::consts::TAU)))
+        }
+        (false, true) => {
+            let e = v.number(at(|| sf(".east_m")), s.east_m, PLANE);
+            let n = v.number(at(|| sf(".north_m")), s.north_m, PLANE);
+            e.zip(n).map(|(e, n)| associate::plane_to_polar([e, n]))
+        }
+        _ => {
+            v.add(
+                sf(""),
+                "give either range_m and azimuth_deg, or east_m and north_m",
+            );
+            None
+        }
+    };
+    let (t, (range, azimuth)) = time.zip(pos)?;
+    Some(RadarSample { t, range, azimuth })
+}
+
+/// `ais_reports`: the decoded reports (the valid ones), each with the
+/// request's time σ.
+fn parse_reports(v: &mut Violations, input: &[AisReportInput], time_sigma: f64) -> Vec<Report> {
+    let mut reports = Vec::with_capacity(input.len());
+    for (k, r) in input.iter().enumerate() {
         let f = |name: &str| format!("ais_reports[{k}].{name}");
         let mmsi = v.required(at(|| f("mmsi")), r.mmsi);
         let t = v.number(at(|| f("t")), r.t, TIME);
@@ -473,28 +534,66 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
                 lat,
                 lon,
                 rank: 0,
-                time_sigma: ais_time_sigma,
+                time_sigma,
             });
         }
     }
-    let ais_total = reports.len() + decoded.positions.len();
-    if tracks.len().saturating_mul(ais_total) > MAX_PAIR_SAMPLES {
-        v.add(
-            "radar_tracks",
-            format!(
-                "{} tracks × {ais_total} AIS reports exceed {MAX_PAIR_SAMPLES}; split the request by area or time",
-                tracks.len()
-            ),
-        );
-    }
-    let parsed = (|| Some((lat0?, lon0?, ellipsoid?, cfg?)))();
-    let (lat0, lon0, ellipsoid, cfg) = v.finish_with(parsed)?;
-    // The core checks its own ranges too; every one of them is parsed
-    // above, so this only catches a core whose ranges changed.
-    associate::validate_config(&cfg).map_err(|e| ServiceError::Internal(e.to_string()))?;
+    reports
+}
 
+/// Validates, decodes, projects and associates.
+pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError> {
+    let Parsed {
+        plane,
+        cfg,
+        ids,
+        tracks,
+        mut reports,
+        decoded,
+    } = parse(input)?;
     let start = Instant::now();
     let mut warnings = Vec::new();
+    let nmea_errors = add_nmea_reports(&decoded, &mut reports, &mut warnings);
+    let (mmsis, ships) = ships(&plane, &reports, &mut warnings);
+    if ships.is_empty() {
+        warnings.push("no AIS positions: nothing to associate, the bias is not estimated".into());
+    }
+    if tracks.is_empty() {
+        warnings.push("no radar tracks: nothing to associate".into());
+    }
+    let out = associate::associate(&tracks, &ships, &cfg);
+    if out.path == Path::None && !ships.is_empty() && !tracks.is_empty() {
+        warnings.push("no radar track could be associated with an AIS ship; the bias is not estimated and the tracks are returned uncompensated".into());
+    }
+    let unassociable_mmsis: Vec<u32> = out.unassociable_ais.iter().map(|&j| mmsis[j]).collect();
+    warn_about_result(&out, &cfg, &ships, &mut warnings);
+    let bias = out.estimate.map(|e| e.bias).unwrap_or_default();
+    let compensated_tracks = compensated_tracks(&plane, &tracks, &ids, bias);
+    let nmea = NmeaSummary {
+        lines: decoded.lines,
+        sentences: decoded.sentences,
+        messages: decoded.messages,
+        positions: decoded.positions.len(),
+        skipped_by_type: decoded.skipped_by_type.into_iter().collect(),
+        errors: nmea_errors,
+    };
+    Ok(AssociateOutput {
+        unassociable_mmsis,
+        compensated_tracks,
+        nmea,
+        warnings,
+        ..output(&out, &ids, &mmsis, start)
+    })
+}
+
+/// Adds the NMEA position reports that carry a receive time to `reports`;
+/// returns the NMEA lines that could not be used (decoding errors and
+/// untimed reports), in line order.
+fn add_nmea_reports(
+    decoded: &nmea::Decoded,
+    reports: &mut Vec<Report>,
+    warnings: &mut Vec<String>,
+) -> Vec<(usize, String)> {
     let mut nmea_errors: Vec<(usize, String)> = decoded
         .errors
         .iter()
@@ -537,10 +636,18 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             nmea_errors.len()
         ));
     }
-    let plane = LocalPlane::new(ellipsoid, lat0.to_radians(), lon0.to_radians())
-        .map_err(|e| Violations::from_param("site.", e))?;
+    nmea_errors
+}
+
+/// The reports projected onto the radar's plane and grouped by MMSI (in
+/// MMSI order), one report per time (`best_per_time`).
+fn ships(
+    plane: &LocalPlane,
+    reports: &[Report],
+    warnings: &mut Vec<String>,
+) -> (Vec<u32>, Vec<Vec<AisPoint>>) {
     let mut by_mmsi: BTreeMap<u32, Vec<(AisPoint, u8)>> = BTreeMap::new();
-    for r in &reports {
+    for r in reports {
         let position = plane.forward(r.lat.to_radians(), r.lon.to_radians());
         by_mmsi.entry(r.mmsi).or_default().push((
             AisPoint {
@@ -568,19 +675,20 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
              coarse type 27) and equally good ones averaged"
         ));
     }
-    let mmsis: Vec<u32> = by_mmsi.keys().copied().collect();
-    let ships: Vec<Vec<AisPoint>> = by_mmsi.into_values().collect();
-    if ships.is_empty() {
-        warnings.push("no AIS positions: nothing to associate, the bias is not estimated".into());
-    }
-    if tracks.is_empty() {
-        warnings.push("no radar tracks: nothing to associate".into());
-    }
+    (
+        by_mmsi.keys().copied().collect(),
+        by_mmsi.into_values().collect(),
+    )
+}
 
-    let out = associate::associate(&tracks, &ships, &cfg);
-    if out.path == Path::None && !ships.is_empty() && !tracks.is_empty() {
-        warnings.push("no radar track could be associated with an AIS ship; the bias is not estimated and the tracks are returned uncompensated".into());
-    }
+/// The warnings a client reads before trusting the association's result.
+fn warn_about_result(
+    out: &associate::Outcome,
+    cfg: &Config,
+    ships: &[Vec<AisPoint>],
+    warnings: &mut Vec<String>,
+) {
+    let deg = 180.0 / std::f64::consts::PI;
     if !out.converged {
         warnings.push(format!(
             "the association still changed after {} iterations",
@@ -594,9 +702,7 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             "CA-CFAR credible pairs led to {c} associations, the bias search to {s}; the search result is reported"
         ));
     }
-    let deg = 180.0 / std::f64::consts::PI;
-    let unassociable_mmsis: Vec<u32> = out.unassociable_ais.iter().map(|&j| mmsis[j]).collect();
-    if !unassociable_mmsis.is_empty() {
+    if !out.unassociable_ais.is_empty() {
         let single = out
             .unassociable_ais
             .iter()
@@ -606,7 +712,7 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             "{} AIS ship(s) can never be associated ({single} with a single report): a pair needs \
              at least 2 instants in common with a radar track; send more reports or a longer \
              window (unassociable_mmsis)",
-            unassociable_mmsis.len()
+            out.unassociable_ais.len()
         ));
     }
     if let Some((there, within)) = out.widened {
@@ -660,10 +766,19 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             e.pairs
         ));
     }
-    let bias = out.estimate.map(|e| e.bias).unwrap_or_default();
-    let compensated_tracks = tracks
+}
+
+/// Every radar track with the bias taken out, in polar, plane and
+/// geodetic form.
+fn compensated_tracks(
+    plane: &LocalPlane,
+    tracks: &[Vec<RadarSample>],
+    ids: &[String],
+    bias: associate::Bias,
+) -> Vec<CompensatedTrack> {
+    tracks
         .iter()
-        .zip(&ids)
+        .zip(ids)
         .map(|(t, id)| CompensatedTrack {
             id: id.clone(),
             samples: t
@@ -684,10 +799,13 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
                 })
                 .collect(),
         })
-        .collect();
-    let associated_r: Vec<usize> = out.associations.iter().map(|a| a.radar).collect();
-    let associated_a: Vec<usize> = out.associations.iter().map(|a| a.ais).collect();
-    let quality = QualityOut {
+        .collect()
+}
+
+/// What a client tests before trusting the result.
+fn quality(out: &associate::Outcome) -> QualityOut {
+    let deg = 180.0 / std::f64::consts::PI;
+    QualityOut {
         reliable: out
             .estimate
             .is_some_and(|e| e.pairs >= MIN_PAIRS_FOR_A_SEPARABLE_BIAS)
@@ -709,8 +827,22 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
         }),
         hypotheses_ranked: out.hypotheses,
         hypotheses_scored: out.evaluated,
-    };
-    Ok(AssociateOutput {
+    }
+}
+
+/// The association's result under the request's ids and MMSIs; the
+/// caller fills in the compensated tracks, the NMEA summary and the
+/// warnings.
+fn output(
+    out: &associate::Outcome,
+    ids: &[String],
+    mmsis: &[u32],
+    start: Instant,
+) -> AssociateOutput {
+    let deg = 180.0 / std::f64::consts::PI;
+    let associated_r: Vec<usize> = out.associations.iter().map(|a| a.radar).collect();
+    let associated_a: Vec<usize> = out.associations.iter().map(|a| a.ais).collect();
+    AssociateOutput {
         path: path_name(out.path),
         s1_m: out.thresholds.map(|t| t.s1),
         s2_m: out.thresholds.map(|t| t.s2),
@@ -755,22 +887,15 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
             .filter(|j| !associated_a.contains(j))
             .map(|j| mmsis[j])
             .collect(),
-        unassociable_mmsis,
-        quality,
-        compensated_tracks,
+        unassociable_mmsis: Vec::new(),
+        quality: quality(out),
+        compensated_tracks: Vec::new(),
         mean_error_before_m: out.mean_error_before,
         mean_error_after_m: out.mean_error_after,
-        nmea: NmeaSummary {
-            lines: decoded.lines,
-            sentences: decoded.sentences,
-            messages: decoded.messages,
-            positions: decoded.positions.len(),
-            skipped_by_type: decoded.skipped_by_type.into_iter().collect(),
-            errors: nmea_errors,
-        },
+        nmea: NmeaSummary::default(),
         compute_us: micros_since(start),
-        warnings,
-    })
+        warnings: Vec::new(),
+    }
 }
 
 #[cfg(test)]

@@ -223,94 +223,7 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     )
     .map_err(computation_error)?;
     for (&method, out) in plan.methods.iter().zip(outs) {
-        let t0 = Instant::now();
-        let r = |i: usize| plan.refs[i].clone();
-        // A pair that never hit, was never checked nor revoked says only
-        // that two tracks are apart: counted, listed on request.
-        let listed = |p: &&dimension::PairReport| {
-            all_pairs
-                || p.state.hits > 0
-                || p.state.check_tests > 0
-                || p.state.revocations > 0
-                || p.state.correlated()
-        };
-        let pairs: Vec<PairOutput> = out
-            .pairs
-            .iter()
-            .filter(listed)
-            .map(|p| PairOutput {
-                a: r(p.a),
-                b: r(p.b),
-                period: period_name(p.state.period),
-                correlated: p.state.correlated(),
-                tests: p.state.tests,
-                hits: p.state.hits,
-                misses: p.state.misses,
-                check_counter: p.state.counter,
-                check_tests: p.state.check_tests,
-                revocations: p.state.revocations,
-                mean_statistic: p.mean_statistic.is_finite().then_some(p.mean_statistic),
-            })
-            .collect();
-        let mut uncorrelated = Vec::new();
-        let mut system_tracks = Vec::new();
-        for (n, st) in out.system_tracks.iter().enumerate() {
-            if st.members.len() == 1 {
-                uncorrelated.push(r(st.members[0]));
-            }
-            // Without history only the latest sample is answered (and
-            // converted): the answer stays small against the request.
-            let shown = if history {
-                &st.samples[..]
-            } else {
-                &st.samples[st.samples.len().saturating_sub(1)..]
-            };
-            let mut samples = Vec::with_capacity(shown.len());
-            for s in shown {
-                let (lat, lon, h) = plan
-                    .centre
-                    .enu_to_geodetic([s.x[0], s.x[2], s.x[4]])
-                    .map_err(computation_error)?;
-                samples.push(SystemSample {
-                    t: s.t,
-                    state: s.x.iter().copied().collect(),
-                    covariance: (0..6)
-                        .map(|i| s.p.row(i).iter().copied().collect())
-                        .collect(),
-                    lat_deg: lat.to_degrees(),
-                    lon_deg: lon.to_degrees(),
-                    height_m: (method == Method::Mapping || s.altitude != AltitudeSource::Assumed)
-                        .then_some(h),
-                    altitude: altitude_name(s.altitude),
-                });
-            }
-            system_tracks.push(SystemTrackOutput {
-                id: format!("S{}", n + 1),
-                members: st.members.iter().map(|&i| r(i)).collect(),
-                altitude_known: st.altitude_known,
-                samples,
-            });
-        }
-        let mut warnings_here = Vec::new();
-        if out.conflicts > 0 {
-            warnings_here.push(format!(
-                "{}: {} correlated link(s) dropped because they would put two tracks of one radar \
-                 in one system track",
-                method_name(method),
-                out.conflicts
-            ));
-        }
-        results.push((
-            MethodOutput {
-                method: method_name(method),
-                omitted_pairs: (out.pairs.len() - pairs.len()) as u64,
-                pairs,
-                uncorrelated,
-                system_tracks,
-                compute_us: out.compute_us + micros_since(t0),
-            },
-            warnings_here,
-        ));
+        results.push(method_output(&plan, method, &out, history, all_pairs)?);
     }
     let compute_us = micros_since(start);
     let mut warnings = plan.warnings;
@@ -326,6 +239,115 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
         compute_us,
         warnings,
     })
+}
+
+/// One method's answer, under the request's ids, with its own warnings.
+fn method_output(
+    plan: &Plan,
+    method: Method,
+    out: &dimension::Outcome,
+    history: bool,
+    all_pairs: bool,
+) -> Result<(MethodOutput, Vec<String>), ServiceError> {
+    let t0 = Instant::now();
+    let r = |i: usize| plan.refs[i].clone();
+    // A pair that never hit, was never checked nor revoked says only
+    // that two tracks are apart: counted, listed on request.
+    let listed = |p: &&dimension::PairReport| {
+        all_pairs
+            || p.state.hits > 0
+            || p.state.check_tests > 0
+            || p.state.revocations > 0
+            || p.state.correlated()
+    };
+    let pairs: Vec<PairOutput> = out
+        .pairs
+        .iter()
+        .filter(listed)
+        .map(|p| PairOutput {
+            a: r(p.a),
+            b: r(p.b),
+            period: period_name(p.state.period),
+            correlated: p.state.correlated(),
+            tests: p.state.tests,
+            hits: p.state.hits,
+            misses: p.state.misses,
+            check_counter: p.state.counter,
+            check_tests: p.state.check_tests,
+            revocations: p.state.revocations,
+            mean_statistic: p.mean_statistic.is_finite().then_some(p.mean_statistic),
+        })
+        .collect();
+    let mut uncorrelated = Vec::new();
+    let mut system_tracks = Vec::new();
+    for (n, st) in out.system_tracks.iter().enumerate() {
+        if st.members.len() == 1 {
+            uncorrelated.push(r(st.members[0]));
+        }
+        // Without history only the latest sample is answered (and
+        // converted): the answer stays small against the request.
+        let shown = if history {
+            &st.samples[..]
+        } else {
+            &st.samples[st.samples.len().saturating_sub(1)..]
+        };
+        let samples = system_samples(plan, method, shown)?;
+        system_tracks.push(SystemTrackOutput {
+            id: format!("S{}", n + 1),
+            members: st.members.iter().map(|&i| r(i)).collect(),
+            altitude_known: st.altitude_known,
+            samples,
+        });
+    }
+    let mut warnings_here = Vec::new();
+    if out.conflicts > 0 {
+        warnings_here.push(format!(
+            "{}: {} correlated link(s) dropped because they would put two tracks of one radar \
+             in one system track",
+            method_name(method),
+            out.conflicts
+        ));
+    }
+    Ok((
+        MethodOutput {
+            method: method_name(method),
+            omitted_pairs: (out.pairs.len() - pairs.len()) as u64,
+            pairs,
+            uncorrelated,
+            system_tracks,
+            compute_us: out.compute_us + micros_since(t0),
+        },
+        warnings_here,
+    ))
+}
+
+/// A system track's samples as answered: state, covariance and the
+/// geodetic position (its height where it is known, or mapped).
+fn system_samples(
+    plan: &Plan,
+    method: Method,
+    shown: &[dimension::Sample],
+) -> Result<Vec<SystemSample>, ServiceError> {
+    let mut samples = Vec::with_capacity(shown.len());
+    for s in shown {
+        let (lat, lon, h) = plan
+            .centre
+            .enu_to_geodetic([s.x[0], s.x[2], s.x[4]])
+            .map_err(computation_error)?;
+        samples.push(SystemSample {
+            t: s.t,
+            state: s.x.iter().copied().collect(),
+            covariance: (0..6)
+                .map(|i| s.p.row(i).iter().copied().collect())
+                .collect(),
+            lat_deg: lat.to_degrees(),
+            lon_deg: lon.to_degrees(),
+            height_m: (method == Method::Mapping || s.altitude != AltitudeSource::Assumed)
+                .then_some(h),
+            altitude: altitude_name(s.altitude),
+        });
+    }
+    Ok(samples)
 }
 
 /// A failure of the numerical core after validation: the geometry of the data
@@ -358,14 +380,71 @@ enum FilterName {
 fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
     let mut v = Violations::new();
     let mut warnings = Vec::new();
+    let methods = parse_methods(&mut v, &input.methods);
+    let config = parse_config(&mut v, input);
+    check_sizes(&mut v, &input.radars, &mut warnings);
+    let mut radars = Vec::new();
+    let mut tracks = Vec::new();
+    let mut refs = Vec::new();
+    let mut radar_ids = Ids::new();
+    for (ri, r) in input.radars.iter().enumerate().take(MAX_RADARS) {
+        let id = radar_ids
+            .check(&mut v, r.id.as_deref(), ri, |i| format!("radars[{i}].id"))
+            .unwrap_or_default();
+        let (three_d, radar) = parse_radar(&mut v, ri, r);
+        let mut track_ids = Ids::new();
+        for (ti, t) in r.tracks.iter().enumerate() {
+            let tid = track_ids
+                .check(&mut v, t.id.as_deref(), ti, |i| {
+                    format!("radars[{ri}].tracks[{i}].id")
+                })
+                .unwrap_or_default();
+            if t.plots.is_empty() {
+                v.add(
+                    format!("radars[{ri}].tracks[{ti}].plots"),
+                    "must hold at least one plot",
+                );
+            } else if t.plots.len() < 3 {
+                warnings.push(format!(
+                    "radar '{id}' track '{tid}': fewer than 3 plots, too short to be tested"
+                ));
+            }
+            let plots = parse_plots(&mut v, &format!("radars[{ri}].tracks[{ti}]"), three_d, t);
+            tracks.push(LocalTrack { radar: ri, plots });
+            refs.push(TrackRef {
+                radar: id.to_string(),
+                track: tid.to_string(),
+            });
+        }
+        radars.extend(radar);
+    }
+    let centre = match &input.origin {
+        Some(o) => site(&mut v, "origin", o),
+        None => radars.first().map(|r| r.frame),
+    };
+    let parsed = (|| {
+        Some(Plan {
+            centre: centre?,
+            methods,
+            config: config?,
+            radars,
+            tracks,
+            refs,
+            warnings,
+        })
+    })();
+    v.finish_with(parsed)
+}
 
+/// `methods`: each named once; none named means all three.
+fn parse_methods(v: &mut Violations, input: &[String]) -> Vec<Method> {
     let choices = [
         ("mapping", Method::Mapping),
         ("lifting", Method::Lifting),
         ("splitting", Method::Splitting),
     ];
     let mut methods: Vec<(usize, Method)> = Vec::new();
-    for (i, m) in input.methods.iter().enumerate() {
+    for (i, m) in input.iter().enumerate() {
         let Some(method) = v.one_of(format!("methods[{i}]"), Some(m), None, &choices) else {
             continue;
         };
@@ -377,32 +456,16 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             None => methods.push((i, method)),
         }
     }
-    let mut methods: Vec<Method> = methods.into_iter().map(|(_, m)| m).collect();
-    if input.methods.is_empty() {
-        methods = vec![Method::Mapping, Method::Lifting, Method::Splitting];
+    if input.is_empty() {
+        return vec![Method::Mapping, Method::Lifting, Method::Splitting];
     }
+    methods.into_iter().map(|(_, m)| m).collect()
+}
 
-    let window = v.count_or("window", input.window, DEFAULT_WINDOW, 3, 5);
-    let sigma_a = v.number_or(
-        "sigma_a_mps2",
-        input.sigma_a_mps2,
-        DEFAULT_SIGMA_A_MPS2,
-        Interval::POSITIVE,
-    );
-    let filters = [
-        ("alpha_beta", FilterName::AlphaBeta),
-        ("kalman", FilterName::Kalman),
-    ];
-    let filter = match v.one_of(
-        "filter",
-        input.filter.as_deref(),
-        Some(FilterName::AlphaBeta),
-        &filters,
-    ) {
-        Some(FilterName::AlphaBeta) => window.map(|w| Filter::AlphaBeta { window: w as usize }),
-        Some(FilterName::Kalman) => sigma_a.map(|sigma_a| Filter::Kalman { sigma_a }),
-        None => None,
-    };
+/// The fusion's options: the local filter, the K-NN test, the altitude
+/// and the gates.
+fn parse_config(v: &mut Violations, input: &FuseInput) -> Option<Config> {
+    let filter = parse_filter(v, input);
     let n0 = v.count_or("n0", input.n0, DEFAULT_N0, 2, 1000);
     let k = n0.and_then(|n0| v.count_or("k", input.k, DEFAULT_K, n0.div_ceil(2), n0));
     let preset = v.number_or(
@@ -437,27 +500,64 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
                     .and_then(|a| Ok((a, chi2_threshold(3, significance)?))),
             )
         });
+    let (chi2_2, chi2_3) = chi2?;
+    Some(Config {
+        filter: filter?,
+        knn: KnnParams { n0: n0?, k: k? },
+        preset_altitude: preset?,
+        altitude_sigma: altitude_sigma?,
+        gate_sigmas: gate_sigmas?,
+        chi2_2,
+        chi2_3,
+    })
+}
 
-    // Radars and tracks.
-    v.count_within("radars", input.radars.len(), MAX_RADARS, "radar");
-    let n_tracks: usize = input.radars.iter().map(|r| r.tracks.len()).sum();
-    if n_tracks == 0 && !input.radars.is_empty() {
+/// `filter` with its `window` (α-β) or `sigma_a_mps2` (Kalman); both are
+/// checked whichever filter is named.
+fn parse_filter(v: &mut Violations, input: &FuseInput) -> Option<Filter> {
+    let window = v.count_or("window", input.window, DEFAULT_WINDOW, 3, 5);
+    let sigma_a = v.number_or(
+        "sigma_a_mps2",
+        input.sigma_a_mps2,
+        DEFAULT_SIGMA_A_MPS2,
+        Interval::POSITIVE,
+    );
+    let filters = [
+        ("alpha_beta", FilterName::AlphaBeta),
+        ("kalman", FilterName::Kalman),
+    ];
+    match v.one_of(
+        "filter",
+        input.filter.as_deref(),
+        Some(FilterName::AlphaBeta),
+        &filters,
+    ) {
+        Some(FilterName::AlphaBeta) => window.map(|w| Filter::AlphaBeta { window: w as usize }),
+        Some(FilterName::Kalman) => sigma_a.map(|sigma_a| Filter::Kalman { sigma_a }),
+        None => None,
+    }
+}
+
+/// The request's size: radars, tracks, plots and the plots the pairs of
+/// tracks of different radars test.
+fn check_sizes(v: &mut Violations, radars: &[RadarInput], warnings: &mut Vec<String>) {
+    v.count_within("radars", radars.len(), MAX_RADARS, "radar");
+    let n_tracks: usize = radars.iter().map(|r| r.tracks.len()).sum();
+    if n_tracks == 0 && !radars.is_empty() {
         warnings.push(format!(
             "none of the {} radar(s) holds a track: there is nothing to fuse",
-            input.radars.len()
+            radars.len()
         ));
     }
     v.at_most("radars", n_tracks, MAX_TRACKS, "tracks");
-    let n_plots: usize = input
-        .radars
+    let n_plots: usize = radars
         .iter()
         .flat_map(|r| &r.tracks)
         .map(|t| t.plots.len())
         .sum();
     v.at_most("radars", n_plots, MAX_PLOTS, "plots");
     if n_tracks <= MAX_TRACKS {
-        let lens: Vec<(usize, usize)> = input
-            .radars
+        let lens: Vec<(usize, usize)> = radars
             .iter()
             .enumerate()
             .flat_map(|(ri, r)| r.tracks.iter().map(move |t| (ri, t.plots.len())))
@@ -477,140 +577,95 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
             "plots to test in the pairs of tracks of different radars",
         );
     }
-    let mut radars = Vec::new();
-    let mut tracks = Vec::new();
-    let mut refs = Vec::new();
-    let mut radar_ids = Ids::new();
-    for (ri, r) in input.radars.iter().enumerate().take(MAX_RADARS) {
-        let f = format!("radars[{ri}]");
-        let id = radar_ids
-            .check(&mut v, r.id.as_deref(), ri, |i| format!("radars[{i}].id"))
-            .unwrap_or_default();
-        let three_d = v.one_of(
-            format!("{f}.kind"),
-            r.kind.as_deref(),
-            None,
-            &[("2d", false), ("3d", true)],
+}
+
+/// `radars[ri]` but its id and tracks: kind, site and accuracies. The
+/// kind (whether 3D) comes back on its own too: the plots need it when
+/// something else of the radar is invalid.
+fn parse_radar(v: &mut Violations, ri: usize, r: &RadarInput) -> (Option<bool>, Option<Radar>) {
+    let f = format!("radars[{ri}]");
+    let three_d = v.one_of(
+        format!("{f}.kind"),
+        r.kind.as_deref(),
+        None,
+        &[("2d", false), ("3d", true)],
+    );
+    let frame = match &r.site {
+        None => {
+            v.add(format!("{f}.site"), "is required");
+            None
+        }
+        Some(s) => site(v, &format!("{f}.site"), s),
+    };
+    let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
+    let sa = v.positive(format!("{f}.sigma_azimuth_deg"), r.sigma_azimuth_deg);
+    let se = match (three_d, r.sigma_elevation_deg) {
+        (Some(true), s) => v.positive(format!("{f}.sigma_elevation_deg"), s),
+        (Some(false), Some(_)) => {
+            v.add(
+                format!("{f}.sigma_elevation_deg"),
+                "a 2D radar measures no elevation",
+            );
+            None
+        }
+        _ => Some(0.0),
+    };
+    let scan = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
+    let radar = (|| {
+        Some(Radar {
+            frame: frame?,
+            three_d: three_d?,
+            sigma_range: sr?,
+            sigma_azimuth: sa?.to_radians(),
+            sigma_elevation: se?.to_radians(),
+            scan_period: scan?,
+        })
+    })();
+    (three_d, radar)
+}
+
+/// `{ft}.plots` of one track (`ft` its field path): the valid plots.
+fn parse_plots(v: &mut Violations, ft: &str, three_d: Option<bool>, t: &TrackInput) -> Vec<Plot> {
+    let mut plots = Vec::with_capacity(t.plots.len());
+    let mut times = Increasing::new();
+    for (pi, p) in t.plots.iter().enumerate() {
+        let fp = || format!("{ft}.plots[{pi}]");
+        let time = times.next(v, at(|| format!("{}.t", fp())), p.t, Interval::FINITE);
+        let range = v.number(
+            at(|| format!("{}.range_m", fp())),
+            p.range_m,
+            Interval::open_closed(0.0, 1e7),
         );
-        let frame = match &r.site {
-            None => {
-                v.add(format!("{f}.site"), "is required");
-                None
-            }
-            Some(s) => site(&mut v, &format!("{f}.site"), s),
-        };
-        let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = v.positive(format!("{f}.sigma_azimuth_deg"), r.sigma_azimuth_deg);
-        let se = match (three_d, r.sigma_elevation_deg) {
-            (Some(true), s) => v.positive(format!("{f}.sigma_elevation_deg"), s),
+        let az = v.number(
+            at(|| format!("{}.azimuth_deg", fp())),
+            p.azimuth_deg,
+            Interval::closed(-360.0, 360.0),
+        );
+        let el = match (three_d, p.elevation_deg) {
             (Some(false), Some(_)) => {
                 v.add(
-                    format!("{f}.sigma_elevation_deg"),
+                    format!("{}.elevation_deg", fp()),
                     "a 2D radar measures no elevation",
                 );
                 None
             }
-            _ => Some(0.0),
+            (Some(true), e) => v
+                .number(
+                    at(|| format!("{}.elevation_deg", fp())),
+                    e,
+                    Interval::closed(-90.0, 90.0),
+                )
+                .map(Some),
+            _ => Some(None),
         };
-        let scan = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
-        let mut track_ids = Ids::new();
-        for (ti, t) in r.tracks.iter().enumerate() {
-            let ft = format!("{f}.tracks[{ti}]");
-            let tid = track_ids
-                .check(&mut v, t.id.as_deref(), ti, |i| {
-                    format!("{f}.tracks[{i}].id")
-                })
-                .unwrap_or_default();
-            if t.plots.is_empty() {
-                v.add(format!("{ft}.plots"), "must hold at least one plot");
-            } else if t.plots.len() < 3 {
-                warnings.push(format!(
-                    "radar '{id}' track '{tid}': fewer than 3 plots, too short to be tested"
-                ));
-            }
-            let mut plots = Vec::with_capacity(t.plots.len());
-            let mut times = Increasing::new();
-            for (pi, p) in t.plots.iter().enumerate() {
-                let fp = || format!("{ft}.plots[{pi}]");
-                let time = times.next(&mut v, at(|| format!("{}.t", fp())), p.t, Interval::FINITE);
-                let range = v.number(
-                    at(|| format!("{}.range_m", fp())),
-                    p.range_m,
-                    Interval::open_closed(0.0, 1e7),
-                );
-                let az = v.number(
-                    at(|| format!("{}.azimuth_deg", fp())),
-                    p.azimuth_deg,
-                    Interval::closed(-360.0, 360.0),
-                );
-                let el = match (three_d, p.elevation_deg) {
-                    (Some(false), Some(_)) => {
-                        v.add(
-                            format!("{}.elevation_deg", fp()),
-                            "a 2D radar measures no elevation",
-                        );
-                        None
-                    }
-                    (Some(true), e) => v
-                        .number(
-                            at(|| format!("{}.elevation_deg", fp())),
-                            e,
-                            Interval::closed(-90.0, 90.0),
-                        )
-                        .map(Some),
-                    _ => Some(None),
-                };
-                if let (Some(time), Some(range), Some(az), Some(el)) = (time, range, az, el) {
-                    plots.push(Plot {
-                        t: time,
-                        range,
-                        azimuth: az.to_radians(),
-                        elevation: el.map(f64::to_radians),
-                    });
-                }
-            }
-            tracks.push(LocalTrack { radar: ri, plots });
-            refs.push(TrackRef {
-                radar: id.to_string(),
-                track: tid.to_string(),
-            });
-        }
-        if let (Some(frame), Some(three_d), Some(sr), Some(sa), Some(se), Some(scan)) =
-            (frame, three_d, sr, sa, se, scan)
-        {
-            radars.push(Radar {
-                frame,
-                three_d,
-                sigma_range: sr,
-                sigma_azimuth: sa.to_radians(),
-                sigma_elevation: se.to_radians(),
-                scan_period: scan,
+        if let (Some(time), Some(range), Some(az), Some(el)) = (time, range, az, el) {
+            plots.push(Plot {
+                t: time,
+                range,
+                azimuth: az.to_radians(),
+                elevation: el.map(f64::to_radians),
             });
         }
     }
-    let centre = match &input.origin {
-        Some(o) => site(&mut v, "origin", o),
-        None => radars.first().map(|r| r.frame),
-    };
-    let parsed = (|| {
-        let (chi2_2, chi2_3) = chi2?;
-        Some(Plan {
-            centre: centre?,
-            methods,
-            config: Config {
-                filter: filter?,
-                knn: KnnParams { n0: n0?, k: k? },
-                preset_altitude: preset?,
-                altitude_sigma: altitude_sigma?,
-                gate_sigmas: gate_sigmas?,
-                chi2_2,
-                chi2_3,
-            },
-            radars,
-            tracks,
-            refs,
-            warnings,
-        })
-    })();
-    v.finish_with(parsed)
+    plots
 }

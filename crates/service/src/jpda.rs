@@ -309,69 +309,107 @@ fn validate(mut input: JpdaInput) -> Result<Plan, ServiceError> {
         1,
         MAX_EXACT_CLUSTER_TRACKS,
     );
-
-    // Tracks.
     v.count_within("tracks", input.tracks.len(), MAX_TRACKS, "track");
     let n = input.tracks.first().map_or(0, |t| t.state.len());
     let n_tracks = input.tracks.len();
+    let (tracks, track_ids) = parse_tracks(&mut v, std::mem::take(&mut input.tracks), n);
+    let (layout_names, position) = parse_layout(&mut v, &input.state_layout, n);
+    let prediction = input
+        .prediction
+        .as_ref()
+        .and_then(|p| parse_prediction(&mut v, p, &layout_names));
+    let (sensor_ids, scans) = parse_sensors(&mut v, &mut input.sensors, n_tracks, n, position);
+    let parsed = method.zip(max_exact).map(|(method, max_exact)| Plan {
+        tracks,
+        track_ids,
+        sensor_ids,
+        scans,
+        config: Config {
+            method,
+            max_exact_tracks: max_exact as usize,
+            max_hypotheses: MAX_HYPOTHESES,
+        },
+        prediction,
+    });
+    v.finish_with(parsed)
+}
+
+/// `tracks`: their ids (checked first, as they borrow the request) and
+/// each state with its covariance, `n` components like the first one's.
+fn parse_tracks(
+    v: &mut Violations,
+    input: Vec<TrackInput>,
+    n: usize,
+) -> (Vec<TrackEstimate>, Vec<String>) {
     {
-        // The ids first, as they borrow the request; then the tracks are
-        // moved out of it.
-        let mut ids = Ids::with_capacity(n_tracks.min(MAX_TRACKS));
-        for (i, t) in input.tracks.iter().enumerate().take(MAX_TRACKS) {
-            ids.check(&mut v, t.id.as_deref(), i, |j| format!("tracks[{j}].id"));
+        let mut ids = Ids::with_capacity(input.len().min(MAX_TRACKS));
+        for (i, t) in input.iter().enumerate().take(MAX_TRACKS) {
+            ids.check(v, t.id.as_deref(), i, |j| format!("tracks[{j}].id"));
         }
     }
-    let mut tracks = Vec::with_capacity(n_tracks.min(MAX_TRACKS));
+    let mut tracks = Vec::with_capacity(input.len().min(MAX_TRACKS));
     let mut track_ids = Vec::with_capacity(tracks.capacity());
-    let track_inputs = std::mem::take(&mut input.tracks);
-    for (i, t) in track_inputs.into_iter().enumerate().take(MAX_TRACKS) {
-        // Paths are formatted only for a violation: this loop runs per track.
-        let f = |rest: &str| format!("tracks[{i}].{rest}");
+    for (i, mut t) in input.into_iter().enumerate().take(MAX_TRACKS) {
         // A missing or repeated id is a violation above: the request then
         // fails whatever is kept here.
-        track_ids.push(t.id.unwrap_or_default());
-        if t.state.is_empty() || t.state.len() > MAX_DIM {
-            v.add(f("state"), format!("must have 1 to {MAX_DIM} components"));
-            continue;
+        track_ids.push(t.id.take().unwrap_or_default());
+        if let Some(track) = parse_track(v, i, t, n) {
+            tracks.push(track);
         }
-        if t.state.len() != n {
-            v.add(
-                f("state"),
-                format!("has {} components, tracks[0].state has {n}", t.state.len()),
-            );
-            continue;
-        }
-        if t.state.iter().any(|x| !x.is_finite()) {
-            v.add(f("state"), "contains a non-finite value");
-            continue;
-        }
-        let Some(p) = matrix(&mut v, || f("covariance"), &t.covariance, n, n) else {
-            continue;
-        };
-        if let Err(e) = small::check_covariance("covariance", p.as_slice(), n) {
-            v.add(f("covariance"), covariance_message(&e));
-            continue;
-        }
-        tracks.push(TrackEstimate {
-            x: DVector::from_vec(t.state),
-            p,
-        });
     }
+    (tracks, track_ids)
+}
 
-    // Layout.
-    let layout_names: Vec<String> = if input.state_layout.is_empty() {
+/// `tracks[i]`: its state and covariance.
+fn parse_track(v: &mut Violations, i: usize, t: TrackInput, n: usize) -> Option<TrackEstimate> {
+    // Paths are formatted only for a violation: this runs per track.
+    let f = |rest: &str| format!("tracks[{i}].{rest}");
+    if t.state.is_empty() || t.state.len() > MAX_DIM {
+        v.add(f("state"), format!("must have 1 to {MAX_DIM} components"));
+        return None;
+    }
+    if t.state.len() != n {
+        v.add(
+            f("state"),
+            format!("has {} components, tracks[0].state has {n}", t.state.len()),
+        );
+        return None;
+    }
+    if t.state.iter().any(|x| !x.is_finite()) {
+        v.add(f("state"), "contains a non-finite value");
+        return None;
+    }
+    let p = matrix(v, || f("covariance"), &t.covariance, n, n)?;
+    if let Err(e) = small::check_covariance("covariance", p.as_slice(), n) {
+        v.add(f("covariance"), covariance_message(&e));
+        return None;
+    }
+    Some(TrackEstimate {
+        x: DVector::from_vec(t.state),
+        p,
+    })
+}
+
+/// `state_layout`: the names of the state's components (the canonical
+/// constant-velocity ones for 4 or 6 when absent) and where the position
+/// lies in it.
+fn parse_layout(
+    v: &mut Violations,
+    state_layout: &[String],
+    n: usize,
+) -> (Vec<String>, Option<PositionLayout>) {
+    let layout_names: Vec<String> = if state_layout.is_empty() {
         match n {
             4 => CV_2D.iter().map(|s| s.to_string()).collect(),
             6 => CV_3D.iter().map(|s| s.to_string()).collect(),
             _ => Vec::new(),
         }
     } else {
-        input.state_layout.clone()
+        state_layout.to_vec()
     };
-    if !input.state_layout.is_empty() {
+    if !state_layout.is_empty() {
         let mut names = std::collections::HashSet::new();
-        for (i, name) in input.state_layout.iter().enumerate() {
+        for (i, name) in state_layout.iter().enumerate() {
             if !NAMES.contains(&name.as_str()) {
                 v.add(
                     format!("state_layout[{i}]"),
@@ -388,12 +426,12 @@ fn validate(mut input: JpdaInput) -> Result<Plan, ServiceError> {
                 );
             }
         }
-        if n > 0 && input.state_layout.len() != n {
+        if n > 0 && state_layout.len() != n {
             v.add(
                 "state_layout",
                 format!(
                     "names {} components, the states have {n}",
-                    input.state_layout.len()
+                    state_layout.len()
                 ),
             );
         }
@@ -407,83 +445,86 @@ fn validate(mut input: JpdaInput) -> Result<Plan, ServiceError> {
         }),
         _ => None,
     };
+    (layout_names, position)
+}
 
-    // Prediction.
-    let prediction = input.prediction.as_ref().and_then(|p| {
-        let dt = v.required("prediction.dt_s", p.dt_s);
-        let sigma_a = v.required("prediction.sigma_a_mps2", p.sigma_a_mps2);
-        if dt.is_some_and(|dt| !(dt.is_finite() && dt >= 0.0)) {
-            // A negative step would predict backwards (retrodiction needs a
-            // smoother, not F(−dt) with process noise added).
-            v.add(
-                "prediction.dt_s",
-                "must be a finite number of seconds ≥ 0 (a prediction goes forward)",
-            );
-        }
-        let axes = if layout_names == CV_2D {
-            Some(2)
-        } else if layout_names == CV_3D {
-            Some(3)
-        } else {
-            v.add(
-                "prediction",
-                "a constant-velocity prediction needs state_layout [x, vx, y, vy] or \
-                 [x, vx, y, vy, z, vz]",
-            );
-            None
-        };
-        let sigma_a = sigma_a?;
-        if !(sigma_a >= 0.0 && sigma_a.is_finite()) {
-            v.add(
-                "prediction.sigma_a_mps2",
-                format!("must be finite and ≥ 0, got {sigma_a}"),
-            );
-            return None;
-        }
-        let model = v.param(
-            "prediction.",
-            ConstantVelocity::new(axes?, ProcessNoise::Dwna { sigma_a }),
+/// `prediction`: a constant-velocity step of `dt_s` with white
+/// acceleration noise, on a canonical layout.
+fn parse_prediction(
+    v: &mut Violations,
+    p: &PredictionInput,
+    layout_names: &[String],
+) -> Option<(ConstantVelocity, f64)> {
+    let dt = v.required("prediction.dt_s", p.dt_s);
+    let sigma_a = v.required("prediction.sigma_a_mps2", p.sigma_a_mps2);
+    if dt.is_some_and(|dt| !(dt.is_finite() && dt >= 0.0)) {
+        // A negative step would predict backwards (retrodiction needs a
+        // smoother, not F(−dt) with process noise added).
+        v.add(
+            "prediction.dt_s",
+            "must be a finite number of seconds ≥ 0 (a prediction goes forward)",
         );
-        Some((model?, dt.filter(|d| d.is_finite())?))
-    });
+    }
+    let axes = if layout_names == CV_2D {
+        Some(2)
+    } else if layout_names == CV_3D {
+        Some(3)
+    } else {
+        v.add(
+            "prediction",
+            "a constant-velocity prediction needs state_layout [x, vx, y, vy] or \
+             [x, vx, y, vy, z, vz]",
+        );
+        None
+    };
+    let sigma_a = sigma_a?;
+    if !(sigma_a >= 0.0 && sigma_a.is_finite()) {
+        v.add(
+            "prediction.sigma_a_mps2",
+            format!("must be finite and ≥ 0, got {sigma_a}"),
+        );
+        return None;
+    }
+    let model = v.param(
+        "prediction.",
+        ConstantVelocity::new(axes?, ProcessNoise::Dwna { sigma_a }),
+    );
+    Some((model?, dt.filter(|d| d.is_finite())?))
+}
 
-    // Sensors.
-    v.at_most("sensors", input.sensors.len(), MAX_SENSORS, "sensors");
-    let total: usize = input.sensors.iter().map(|s| s.measurements.len()).sum();
+/// `sensors`: their ids (the index when absent) and their scans.
+fn parse_sensors(
+    v: &mut Violations,
+    sensors: &mut [SensorInput],
+    n_tracks: usize,
+    n: usize,
+    position: Option<PositionLayout>,
+) -> (Vec<String>, Vec<Scan>) {
+    v.at_most("sensors", sensors.len(), MAX_SENSORS, "sensors");
+    let total: usize = sensors.iter().map(|s| s.measurements.len()).sum();
     v.at_most("sensors", total, MAX_MEASUREMENTS, "measurements");
     if total.saturating_mul(n_tracks) > MAX_PAIRS {
         v.add(
             "sensors",
             format!(
-                "{} tracks × {total} measurements exceed {MAX_PAIRS} pairs to gate per request",
-                input.tracks.len()
+                "{n_tracks} tracks × {total} measurements exceed {MAX_PAIRS} pairs to gate per request"
             ),
         );
     }
     let mut scans = Vec::new();
     let mut sensor_ids = Vec::new();
-    for (si, s) in input.sensors.iter_mut().enumerate().take(MAX_SENSORS) {
+    for (si, s) in sensors.iter_mut().enumerate().take(MAX_SENSORS) {
         let f = format!("sensors[{si}]");
         sensor_ids.push(s.id.take().unwrap_or_else(|| si.to_string()));
-        if let Some(scan) = sensor(&mut v, &f, s, n, position) {
+        if let Some(scan) = sensor(v, &f, s, n, position) {
             scans.push(scan);
         }
     }
-    let parsed = method.zip(max_exact).map(|(method, max_exact)| Plan {
-        tracks,
-        track_ids,
-        sensor_ids,
-        scans,
-        config: Config {
-            method,
-            max_exact_tracks: max_exact as usize,
-            max_hypotheses: MAX_HYPOTHESES,
-        },
-        prediction,
-    });
-    v.finish_with(parsed)
+    (sensor_ids, scans)
 }
 
+/// `sensors[si]` (`f`): its model, detection probability, clutter, gate
+/// and measurements.
 fn sensor(
     v: &mut Violations,
     f: &str,
@@ -515,93 +556,8 @@ fn sensor(
         );
     }
     let model = match s.kind.as_deref() {
-        Some("linear") => {
-            let h_rows = v.required(format!("{f}.h"), s.h.as_ref());
-            let m = h_rows.map_or(0, Rows::nrows);
-            if h_rows.is_some() && !(1..=MAX_DIM).contains(&m) {
-                v.add(format!("{f}.h"), format!("must have 1 to {MAX_DIM} rows"));
-            }
-            let h = h_rows
-                .filter(|_| (1..=MAX_DIM).contains(&m) && n > 0)
-                .and_then(|rows| matrix(v, || format!("{f}.h"), rows, m, n));
-            let r = v
-                .required(format!("{f}.r"), s.r.as_ref())
-                .filter(|_| (1..=MAX_DIM).contains(&m))
-                .and_then(|rows| matrix(v, || format!("{f}.r"), rows, m, m));
-            if let Some(r) = &r
-                && let Err(e) = small::check_covariance("r", r.as_slice(), m)
-            {
-                v.add(format!("{f}.r"), covariance_message(&e));
-            }
-            for (k, field) in [
-                ("site_m", s.site_m.is_some()),
-                ("sigma_range_m", s.sigma_range_m.is_some()),
-                ("sigma_azimuth_deg", s.sigma_azimuth_deg.is_some()),
-                ("sigma_elevation_deg", s.sigma_elevation_deg.is_some()),
-            ] {
-                if field {
-                    v.add(format!("{f}.{k}"), "only for polar sensors");
-                }
-            }
-            Some(SensorModel::Linear { h: h?, r: r? })
-        }
-        Some("polar") => {
-            let site = v.required(format!("{f}.site_m"), s.site_m.as_ref());
-            if let Some(site) = site
-                && (site.len() != 3 || site.iter().any(|x| !x.is_finite()))
-            {
-                v.add(
-                    format!("{f}.site_m"),
-                    "must be three finite numbers [east, north, up]",
-                );
-            }
-            let positive = |v: &mut Violations, name: &str, x: Option<f64>| {
-                let x = v.required(format!("{f}.{name}"), x)?;
-                if !(x > 0.0 && x.is_finite()) {
-                    v.add(
-                        format!("{f}.{name}"),
-                        format!("must be finite and > 0, got {x}"),
-                    );
-                    return None;
-                }
-                Some(x)
-            };
-            let sr = positive(v, "sigma_range_m", s.sigma_range_m);
-            let sa = positive(v, "sigma_azimuth_deg", s.sigma_azimuth_deg);
-            let se = match s.sigma_elevation_deg {
-                None => Some(None),
-                Some(x) => positive(v, "sigma_elevation_deg", Some(x)).map(Some),
-            };
-            if s.h.is_some() || s.r.is_some() {
-                v.add(format!("{f}.h"), "only for linear sensors");
-            }
-            let layout = match position {
-                None => {
-                    v.add(
-                        "state_layout",
-                        "a polar sensor needs x and y in state_layout",
-                    );
-                    None
-                }
-                Some(l) if se.flatten().is_some() && l.z.is_none() => {
-                    v.add(
-                        format!("{f}.sigma_elevation_deg"),
-                        "a 3D radar needs z in state_layout",
-                    );
-                    None
-                }
-                Some(l) => Some(l),
-            };
-            let site = site.filter(|s| s.len() == 3 && s.iter().all(|x| x.is_finite()))?;
-            Some(SensorModel::Polar {
-                site: [site[0], site[1], site[2]],
-                layout: layout?,
-                sigma_range: sr?,
-                sigma_azimuth: sa?.to_radians(),
-                sigma_elevation: se?.map(f64::to_radians),
-                sigma_range_rate: None,
-            })
-        }
+        Some("linear") => linear_model(v, f, s, n),
+        Some("polar") => polar_model(v, f, s, position),
         Some(other) => {
             v.add(
                 format!("{f}.kind"),
@@ -618,6 +574,139 @@ fn sensor(
         }
     };
     let dim = model.as_ref().map(SensorModel::dim);
+    let gate = gate(v, f, s, dim, p_d);
+    let mut measurements = Vec::with_capacity(s.measurements.len());
+    for (j, z) in s.measurements.iter_mut().enumerate() {
+        // Formatted only for a violation: this loop runs per measurement.
+        let mf = |rest: &str| format!("{f}.measurements[{j}].{rest}");
+        let value = match (&model, dim) {
+            (Some(SensorModel::Linear { .. }), Some(dim)) => linear_measurement(v, mf, z, dim),
+            (Some(SensorModel::Polar { .. }), Some(dim)) => polar_measurement(v, mf, z, dim),
+            _ => None,
+        };
+        measurements.extend(value);
+    }
+    Some(Scan {
+        model: model?,
+        measurements,
+        detection_probability: p_d.filter(|p| *p > 0.0 && *p <= 1.0)?,
+        gate: gate?,
+        clutter: match s.clutter_density {
+            Some(l) => Clutter::Density(l),
+            None => Clutter::GateVolume,
+        },
+    })
+}
+
+/// A linear sensor: `h` (m × n) and `r` (m × m); none of the polar fields.
+fn linear_model(v: &mut Violations, f: &str, s: &SensorInput, n: usize) -> Option<SensorModel> {
+    let h_rows = v.required(format!("{f}.h"), s.h.as_ref());
+    let m = h_rows.map_or(0, Rows::nrows);
+    if h_rows.is_some() && !(1..=MAX_DIM).contains(&m) {
+        v.add(format!("{f}.h"), format!("must have 1 to {MAX_DIM} rows"));
+    }
+    let h = h_rows
+        .filter(|_| (1..=MAX_DIM).contains(&m) && n > 0)
+        .and_then(|rows| matrix(v, || format!("{f}.h"), rows, m, n));
+    let r = v
+        .required(format!("{f}.r"), s.r.as_ref())
+        .filter(|_| (1..=MAX_DIM).contains(&m))
+        .and_then(|rows| matrix(v, || format!("{f}.r"), rows, m, m));
+    if let Some(r) = &r
+        && let Err(e) = small::check_covariance("r", r.as_slice(), m)
+    {
+        v.add(format!("{f}.r"), covariance_message(&e));
+    }
+    for (k, field) in [
+        ("site_m", s.site_m.is_some()),
+        ("sigma_range_m", s.sigma_range_m.is_some()),
+        ("sigma_azimuth_deg", s.sigma_azimuth_deg.is_some()),
+        ("sigma_elevation_deg", s.sigma_elevation_deg.is_some()),
+    ] {
+        if field {
+            v.add(format!("{f}.{k}"), "only for polar sensors");
+        }
+    }
+    Some(SensorModel::Linear { h: h?, r: r? })
+}
+
+/// `{f}.{name}`, required, finite and > 0.
+fn positive_sigma(v: &mut Violations, f: &str, name: &str, x: Option<f64>) -> Option<f64> {
+    let x = v.required(format!("{f}.{name}"), x)?;
+    if !(x > 0.0 && x.is_finite()) {
+        v.add(
+            format!("{f}.{name}"),
+            format!("must be finite and > 0, got {x}"),
+        );
+        return None;
+    }
+    Some(x)
+}
+
+/// A polar radar: its site and accuracies; 3D when it has an elevation σ,
+/// which needs z in the state layout.
+fn polar_model(
+    v: &mut Violations,
+    f: &str,
+    s: &SensorInput,
+    position: Option<PositionLayout>,
+) -> Option<SensorModel> {
+    let site = v.required(format!("{f}.site_m"), s.site_m.as_ref());
+    if let Some(site) = site
+        && (site.len() != 3 || site.iter().any(|x| !x.is_finite()))
+    {
+        v.add(
+            format!("{f}.site_m"),
+            "must be three finite numbers [east, north, up]",
+        );
+    }
+    let sr = positive_sigma(v, f, "sigma_range_m", s.sigma_range_m);
+    let sa = positive_sigma(v, f, "sigma_azimuth_deg", s.sigma_azimuth_deg);
+    let se = match s.sigma_elevation_deg {
+        None => Some(None),
+        Some(x) => positive_sigma(v, f, "sigma_elevation_deg", Some(x)).map(Some),
+    };
+    if s.h.is_some() || s.r.is_some() {
+        v.add(format!("{f}.h"), "only for linear sensors");
+    }
+    let layout = match position {
+        None => {
+            v.add(
+                "state_layout",
+                "a polar sensor needs x and y in state_layout",
+            );
+            None
+        }
+        Some(l) if se.flatten().is_some() && l.z.is_none() => {
+            v.add(
+                format!("{f}.sigma_elevation_deg"),
+                "a 3D radar needs z in state_layout",
+            );
+            None
+        }
+        Some(l) => Some(l),
+    };
+    let site = site.filter(|s| s.len() == 3 && s.iter().all(|x| x.is_finite()))?;
+    Some(SensorModel::Polar {
+        site: [site[0], site[1], site[2]],
+        layout: layout?,
+        sigma_range: sr?,
+        sigma_azimuth: sa?.to_radians(),
+        sigma_elevation: se?.map(f64::to_radians),
+        sigma_range_rate: None,
+    })
+}
+
+/// The sensor's gate, from `gate_probability` (default P_G) or
+/// `gate_threshold`, and what it needs of the detection probability and
+/// the clutter.
+fn gate(
+    v: &mut Violations,
+    f: &str,
+    s: &SensorInput,
+    dim: Option<usize>,
+    p_d: Option<f64>,
+) -> Option<Gate> {
     let gate = match (s.gate_probability, s.gate_threshold, dim) {
         (Some(_), Some(_), _) => {
             v.add(
@@ -654,86 +743,79 @@ fn sensor(
              gate_probability < 1",
         );
     }
-    let mut measurements = Vec::with_capacity(s.measurements.len());
-    for (j, z) in s.measurements.iter_mut().enumerate() {
-        // Formatted only for a violation: this loop runs per measurement.
-        let mf = |rest: &str| format!("{f}.measurements[{j}].{rest}");
-        match (&model, dim) {
-            (Some(SensorModel::Linear { .. }), Some(dim)) => {
-                let Some(values) = v.required_at(z.z.take(), || mf("z")) else {
-                    continue;
-                };
-                if values.len() != dim {
-                    v.add(
-                        mf("z"),
-                        format!("has {} components, h has {dim} rows", values.len()),
-                    );
-                } else if values.iter().any(|x| !x.is_finite()) {
-                    v.add(mf("z"), "contains a non-finite value");
-                } else {
-                    measurements.push(DVector::from_vec(values));
-                }
-            }
-            (Some(SensorModel::Polar { .. }), Some(dim)) => {
-                let range = v.required_at(z.range_m, || mf("range_m"));
-                let az = v.required_at(z.azimuth_deg, || mf("azimuth_deg"));
-                if let Some(r) = range
-                    && !(r >= 0.0 && r.is_finite())
-                {
-                    v.add(mf("range_m"), format!("must be finite and ≥ 0, got {r}"));
-                }
-                if let Some(a) = az
-                    && !a.is_finite()
-                {
-                    v.add(mf("azimuth_deg"), format!("must be finite, got {a}"));
-                }
-                let el = match (dim, z.elevation_deg) {
-                    (3, None) => {
-                        v.add(mf("elevation_deg"), "is required for a 3D radar");
-                        None
-                    }
-                    (3, Some(e)) if !(-90.0..=90.0).contains(&e) => {
-                        v.add(
-                            mf("elevation_deg"),
-                            format!("must lie in [-90, 90], got {e}"),
-                        );
-                        None
-                    }
-                    (3, Some(e)) => Some(e),
-                    (_, Some(_)) => {
-                        v.add(
-                            mf("elevation_deg"),
-                            "a 2D radar (no sigma_elevation_deg) gives no elevation",
-                        );
-                        None
-                    }
-                    (_, None) => None,
-                };
-                if let (Some(r), Some(a)) = (range, az)
-                    && r.is_finite()
-                    && r >= 0.0
-                    && a.is_finite()
-                {
-                    let mut values = vec![r, a.to_radians()];
-                    values.extend(el.map(f64::to_radians));
-                    if values.len() == dim {
-                        measurements.push(DVector::from_vec(values));
-                    }
-                }
-            }
-            _ => {}
-        }
+    gate
+}
+
+/// A linear sensor's measurement: `z`, `dim` finite values.
+fn linear_measurement(
+    v: &mut Violations,
+    mf: impl Fn(&str) -> String,
+    z: &mut MeasurementInput,
+    dim: usize,
+) -> Option<DVector<f64>> {
+    let values = v.required_at(z.z.take(), || mf("z"))?;
+    if values.len() != dim {
+        v.add(
+            mf("z"),
+            format!("has {} components, h has {dim} rows", values.len()),
+        );
+    } else if values.iter().any(|x| !x.is_finite()) {
+        v.add(mf("z"), "contains a non-finite value");
+    } else {
+        return Some(DVector::from_vec(values));
     }
-    Some(Scan {
-        model: model?,
-        measurements,
-        detection_probability: p_d.filter(|p| *p > 0.0 && *p <= 1.0)?,
-        gate: gate?,
-        clutter: match s.clutter_density {
-            Some(l) => Clutter::Density(l),
-            None => Clutter::GateVolume,
-        },
-    })
+    None
+}
+
+/// A polar sensor's measurement: range, azimuth and, for a 3D radar
+/// (`dim` 3), elevation.
+fn polar_measurement(
+    v: &mut Violations,
+    mf: impl Fn(&str) -> String,
+    z: &MeasurementInput,
+    dim: usize,
+) -> Option<DVector<f64>> {
+    let range = v.required_at(z.range_m, || mf("range_m"));
+    let az = v.required_at(z.azimuth_deg, || mf("azimuth_deg"));
+    if let Some(r) = range
+        && !(r >= 0.0 && r.is_finite())
+    {
+        v.add(mf("range_m"), format!("must be finite and ≥ 0, got {r}"));
+    }
+    if let Some(a) = az
+        && !a.is_finite()
+    {
+        v.add(mf("azimuth_deg"), format!("must be finite, got {a}"));
+    }
+    let el = match (dim, z.elevation_deg) {
+        (3, None) => {
+            v.add(mf("elevation_deg"), "is required for a 3D radar");
+            None
+        }
+        (3, Some(e)) if !(-90.0..=90.0).contains(&e) => {
+            v.add(
+                mf("elevation_deg"),
+                format!("must lie in [-90, 90], got {e}"),
+            );
+            None
+        }
+        (3, Some(e)) => Some(e),
+        (_, Some(_)) => {
+            v.add(
+                mf("elevation_deg"),
+                "a 2D radar (no sigma_elevation_deg) gives no elevation",
+            );
+            None
+        }
+        (_, None) => None,
+    };
+    let (r, a) = range.zip(az)?;
+    if !(r.is_finite() && r >= 0.0 && a.is_finite()) {
+        return None;
+    }
+    let mut values = vec![r, a.to_radians()];
+    values.extend(el.map(f64::to_radians));
+    (values.len() == dim).then(|| DVector::from_vec(values))
 }
 
 /// Request rows as an `rows × cols` matrix, or a violation naming `field`.
