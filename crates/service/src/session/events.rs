@@ -179,13 +179,15 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
             }
         }
         match KindName::from_tag(tag) {
-            Some(KindName::Correlation) => EventBody::Correlation(update(
-                &id,
-                sequence,
-                version,
-                warnings,
-                CorrelationSession::decode_update(&mut r)?,
-            )),
+            Some(KindName::Correlation) => {
+                let body = CorrelationSession::decode_update(&mut r)?;
+                // `encode_update` writes the plot marks of every kind: a
+                // correlation session has none.
+                if r.len(36)? != 0 {
+                    return Err(formats::wire::corrupt("plot marks in a correlation event"));
+                }
+                EventBody::Correlation(update(&id, sequence, version, warnings, body))
+            }
             Some(KindName::PlotFusion) => {
                 let body = PlotFusionSession::decode_update(&mut r)?;
                 let n = r.len(36)?;
@@ -536,4 +538,44 @@ pub(super) struct Joined {
     pub shutdown: watch::Receiver<bool>,
     /// Keeps the watcher counted until dropped.
     pub guard: Guard,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::correlation::BatchUpdate;
+
+    /// A correlation session's update event reads back (it once failed
+    /// with "trailing bytes": the plot marks written for every kind were
+    /// read for plot fusion only, so watchers of correlation sessions got
+    /// no updates).
+    #[test]
+    fn a_correlation_update_event_round_trips() {
+        let update = Update {
+            session_id: "s1".to_string(),
+            sequence: Some(3),
+            version: 4,
+            duplicate: false,
+            body: BatchUpdate {
+                instants: vec![1.5, 2.5],
+                pending_reports: 2,
+                changes: Vec::new(),
+                pairs: Vec::new(),
+                system_tracks: Vec::new(),
+                retired: Vec::new(),
+            },
+            warnings: vec!["w".to_string()],
+        };
+        let bytes = encode_update::<CorrelationSession>("t", &update, &[]);
+        let event = decode(&bytes).unwrap();
+        assert_eq!((event.tenant.as_str(), event.version), ("t", 4));
+        match event.body {
+            EventBody::Correlation(u) => {
+                assert_eq!(u.body, update.body);
+                assert_eq!(u.sequence, Some(3));
+                assert_eq!(u.warnings, update.warnings);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
 }
