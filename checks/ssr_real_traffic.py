@@ -177,7 +177,9 @@ def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
     from scipy.optimize import linear_sum_assignment
 
     right = wrong = none = no_address_truth = 0
-    fl_err = []
+    fl_err, fl_updated = [], []
+    last_track: dict = {}
+    swaps = {"mode_s": 0, "pair_7000": 0}
     for tk in np.unique(res.t):
         states = np.flatnonzero(res.t == tk)
         live = [j for j, tr in enumerate(scene.truths) if scene.covered(tr, np.array([tk]))[0]]
@@ -192,6 +194,16 @@ def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
                 continue
             truth = scene.truths[live[a]]
             s = states[b]
+            # A swap: the truth's states move from one track to another
+            # (a restart counts too).
+            kind = "pair_7000" if truth.name.endswith("/7000") else "mode_s"
+            tid = int(res.ids[s])
+            if last_track.get(live[a], tid) != tid:
+                swaps[kind] += 1
+                address = ident.get((tid, float(res.t[s])), (None, None))[0]
+                print(f"  t {tk:.1f} s: {truth.name} moves from track {last_track[live[a]]} "
+                      f"to track {tid} (its address {address})")
+            last_track[live[a]] = tid
             address, fl = ident.get((int(res.ids[s]), float(res.t[s])), (None, None))
             icao = truth.name.split("/")[1].upper()
             if icao == "7000":
@@ -206,17 +218,24 @@ def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
             if fl is not None:
                 h_ft = float(rt.ecef_to_geodetic(truth.ecef(np.array([tk])))[2][0]) / FT
                 fl_err.append(abs(fl * 100.0 - h_ft))
+                fl_updated.append(bool(res.updated[s]))
     fl_err = np.asarray(fl_err)
+    upd = np.asarray(fl_updated, bool)
     n = right + wrong + none
     return {
         "states_with_address_truth": n,
         "right_address": right, "wrong_address": wrong, "no_address": none,
         "right_share": right / n if n else float("nan"),
+        "track_changes_mode_s_truths": swaps["mode_s"],
+        "track_changes_7000_pair": swaps["pair_7000"],
         "states_of_7000_pair": no_address_truth,
         "fl_states": int(len(fl_err)),
         "fl_within_50ft": float(np.mean(fl_err <= 50.0)) if len(fl_err) else float("nan"),
         "fl_median_ft": float(np.median(fl_err)) if len(fl_err) else float("nan"),
         "fl_p95_ft": float(np.percentile(fl_err, 95)) if len(fl_err) else float("nan"),
+        "fl_updated_states": int(upd.sum()),
+        "fl_updated_within_50ft": float(np.mean(fl_err[upd] <= 50.0)) if upd.any() else float("nan"),
+        "fl_updated_p95_ft": float(np.percentile(fl_err[upd], 95)) if upd.any() else float("nan"),
     }
 
 

@@ -26,7 +26,8 @@ pub struct IdentityItem {
 /// climb, apart from the geometric height (`height_m`, `state`).
 #[derive(Debug, Serialize, ToSchema)]
 pub struct PressureAltitude {
-    /// Time of the estimate (the last Mode C used).
+    /// Time of the estimate: the track's, predicted from the last Mode C
+    /// used (`measured_t`).
     pub t: f64,
     /// Flight level (hundreds of feet above the 1013.25 hPa isobar).
     pub flight_level: f64,

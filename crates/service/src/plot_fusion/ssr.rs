@@ -254,7 +254,8 @@ pub struct IdentityItem {
 /// geometric height).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PressureAltitudeView {
-    /// Time of the estimate (the last Mode C used).
+    /// Time of the estimate: the track's (predicted from the last Mode C
+    /// used).
     pub t: f64,
     /// Filtered flight level (hundreds of feet).
     pub flight_level: f64,
@@ -309,14 +310,19 @@ pub fn view(id: &TrackIdentity, t: f64) -> Option<IdentityView> {
         mode_3a: item(id.mode_3a, code),
         pending_mode_3a: item(id.pending_3a, code),
         callsign: item(id.callsign, |c| callsign_text(&c)),
-        pressure_altitude: id.altitude.map(|a| PressureAltitudeView {
-            t: a.t,
-            flight_level: a.x[0] / 100.0,
-            flight_level_sigma: a.p[0].max(0.0).sqrt() / 100.0,
-            rate_of_climb_ftpm: a.x[1] * 60.0,
-            rate_of_climb_sigma_ftpm: a.p[2].max(0.0).sqrt() * 60.0,
-            measured_flight_level: a.measured.0 / 100.0,
-            measured_t: a.measured.1,
+        // At the track's time, like its position (the filter's own time
+        // is its last Mode C: seconds earlier when later plots had none).
+        pressure_altitude: id.altitude.map(|a| {
+            let (x, p) = a.predicted(t.max(a.t));
+            PressureAltitudeView {
+                t: t.max(a.t),
+                flight_level: x[0] / 100.0,
+                flight_level_sigma: p[0].max(0.0).sqrt() / 100.0,
+                rate_of_climb_ftpm: x[1] * 60.0,
+                rate_of_climb_sigma_ftpm: p[2].max(0.0).sqrt() * 60.0,
+                measured_flight_level: a.measured.0 / 100.0,
+                measured_t: a.measured.1,
+            }
         }),
         emergency: id.emergency().map(Emergency::name),
         spi: id.spi(t),
