@@ -170,13 +170,32 @@ pub(crate) fn read_track_identity(r: &mut Reader<'_>) -> Result<TrackIdentity, F
         pending_3a: read_evidence(r, code)?,
         callsign: read_evidence(r, callsign)?,
         altitude: r.opt(|r| {
-            Ok(PressureAltitude {
+            let a = PressureAltitude {
                 t: r.f64()?,
                 x: [r.f64()?, r.f64()?],
                 p: [r.f64()?, r.f64()?, r.f64()?],
                 measured: (r.f64()?, r.f64()?),
                 rejected: r.u32()?,
-            })
+            };
+            // A filter the tracker could not have made: not finite, or a
+            // covariance that is not positive semi-definite.
+            let values = [
+                a.t,
+                a.x[0],
+                a.x[1],
+                a.p[0],
+                a.p[1],
+                a.p[2],
+                a.measured.0,
+                a.measured.1,
+            ];
+            let psd =
+                a.p[0] >= 0.0 && a.p[2] >= 0.0 && a.p[1] * a.p[1] <= a.p[0] * a.p[2] * (1.0 + 1e-9);
+            if values.iter().all(|v| v.is_finite()) && psd {
+                Ok(a)
+            } else {
+                Err(corrupt("pressure altitude"))
+            }
         })?,
         spi_t: r.opt(Reader::f64)?,
         last_secondary: r.opt(Reader::f64)?,

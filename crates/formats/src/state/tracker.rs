@@ -751,6 +751,56 @@ mod tests {
         out
     }
 
+    /// Format 6: plots and tracks with their SSR and Mode S identity
+    /// (address, code with flags, Mode C, callsign, detection, SPI; the
+    /// tracks' evidence and pressure altitude) round-trip bit for bit, and
+    /// the decoded tracker continues as the original.
+    #[test]
+    fn identities_round_trip_and_continue() {
+        use algo::tracking::{Detection, Mode3A, ModeC};
+        let cfg = config(false);
+        let mut all = plots(&cfg, 100.0);
+        for (k, p) in all.iter_mut().enumerate() {
+            // The scene lists each scan's two targets in order.
+            let i = k % 2;
+            p.identity = Identity {
+                address: Some([0x4CA2D1, 0x3C6586][i]),
+                mode_3a: Some(Mode3A {
+                    code: [0o1234, 0o7000][i],
+                    validated: k % 5 != 0,
+                    garbled: k % 11 == 0,
+                }),
+                mode_c: Some(ModeC {
+                    flight_level: [300.0, 310.25][i],
+                    validated: true,
+                    garbled: false,
+                }),
+                callsign: (i == 0).then_some(*b"EZY12AB "),
+                detection: Some([Detection::Combined, Detection::Secondary][i]),
+                spi: k % 13 == 0,
+            };
+        }
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        assert!(
+            a.state()
+                .tracks
+                .iter()
+                .any(|t| t.identity.altitude.is_some())
+        );
+        let bytes = encode_tracker(&a);
+        let mut b = decode_tracker(&bytes).unwrap();
+        assert_eq!(b, a);
+        a.process(rest).unwrap();
+        b.process(rest).unwrap();
+        assert_eq!(encode_tracker(&a), encode_tracker(&b));
+        // Every truncation is an error, never a panic.
+        for cut in 0..bytes.len() {
+            assert!(decode_tracker(&bytes[..cut]).is_err(), "cut at {cut}");
+        }
+    }
+
     /// Chunks fed to a tracker that is encoded and decoded between them
     /// give the bytes of one call with every plot (cuts inside a radar's
     /// scan group included); the fixtures of earlier sessions are decoded
