@@ -289,45 +289,15 @@ pub fn system_track(
         polar: Some((p.range_m, p.azimuth_deg)),
         height: None,
     });
-    let identity = t.identity.as_ref();
-    let pressure = identity.and_then(|i| i.pressure_altitude.as_ref());
+    let id = SecondaryItems::of(t);
     // The rate of climb of the pressure altitude when the track has one
     // (Mode C: what ATC reads), else the geometric one of a 3D track.
-    let vertical_rate = pressure
-        .map(|a| a.rate_of_climb_ftpm * FT_M / 60.0)
-        .or(vertical_rate);
-    let stale_after = AGED_AFTER_S;
-    let age = |last: Option<f64>| last.map(|l| t.t - l);
-    let (ssr_age, mds_age) = (
-        age(identity.and_then(|i| i.last_secondary_t)),
-        age(identity.and_then(|i| i.last_mode_s_t)),
-    );
-    let psr_age = match identity {
-        // A track that has heard secondary replies knows whether its
-        // updates were primary; one that never has was updated by primary
-        // plots only.
-        Some(i) => age(i.last_primary_t),
-        None => Some(t.t - t.last_update_t),
-    };
+    let vertical_rate = id.vertical_rate.or(vertical_rate);
     SystemTrack {
-        mode_3a: identity.and_then(|i| i.mode_3a.as_ref()).and_then(|c| {
-            Some(TrackMode3A {
-                code: super::ssr::parse_code(&c.value)?,
-                validated: true,
-                garbled: false,
-                // CH: adopted within the last two scans.
-                changed: identity.is_some_and(|i| i.pending_mode_3a.is_some())
-                    || (c.first_t > t.start_t.unwrap_or(f64::NEG_INFINITY)
-                        && t.t - c.first_t <= stale_after),
-            })
-        }),
-        callsign: identity
-            .and_then(|i| i.callsign.as_ref())
-            .and_then(|c| super::ssr::parse_callsign(&c.value)),
-        address: identity
-            .and_then(|i| i.mode_s_address.as_ref())
-            .and_then(|a| super::ssr::parse_address(&a.value)),
-        measured_flight_level: pressure.map(|a| a.measured_flight_level),
+        mode_3a: id.mode_3a,
+        callsign: id.callsign,
+        address: id.address,
+        measured_flight_level: id.measured_flight_level,
         track_number: (t.id % 65_536) as u16,
         time_of_day: cat062::time_of_day(t.t - options.day_start_t),
         wgs84: t.lat_deg.zip(t.lon_deg),
@@ -344,22 +314,79 @@ pub fn system_track(
             first_message: life == Life::First,
             last_message: life == Life::End,
             coasting: t.consecutive_misses > 0,
-            spi: identity.is_some_and(|i| i.spi),
-            psr_aged: psr_age.is_some_and(|a| a > stale_after),
-            ssr_aged: ssr_age.is_some_and(|a| a > stale_after),
-            mode_s_aged: mds_age.is_some_and(|a| a > stale_after),
+            spi: id.spi,
+            psr_aged: id.psr_age.is_some_and(|a| a > AGED_AFTER_S),
+            ssr_aged: id.ssr_age.is_some_and(|a| a > AGED_AFTER_S),
+            mode_s_aged: id.mds_age.is_some_and(|a| a > AGED_AFTER_S),
             ..TrackStatusFlags::default()
         },
         ages: UpdateAges {
             track: t.start_t.map(|s| t.t - s),
-            psr: psr_age,
-            ssr: ssr_age,
-            mode_s: mds_age,
+            psr: id.psr_age,
+            ssr: id.ssr_age,
+            mode_s: id.mds_age,
         },
         accuracy: Some(accuracy),
         height,
         vertical_rate,
         last_measurement,
+    }
+}
+
+/// What a track's identity puts in its record: I062/060, /245 and /380,
+/// /136, the pressure altitude's rate for /220, SPI and the PSR, SSR and
+/// Mode S ages of /290 and /080.
+struct SecondaryItems {
+    mode_3a: Option<TrackMode3A>,
+    callsign: Option<[u8; 8]>,
+    address: Option<u32>,
+    measured_flight_level: Option<f64>,
+    /// m/s.
+    vertical_rate: Option<f64>,
+    spi: bool,
+    psr_age: Option<f64>,
+    ssr_age: Option<f64>,
+    mds_age: Option<f64>,
+}
+
+impl SecondaryItems {
+    fn of(t: &TrackView) -> Self {
+        let identity = t.identity.as_ref();
+        let pressure = identity.and_then(|i| i.pressure_altitude.as_ref());
+        let age = |last: Option<f64>| last.map(|l| t.t - l);
+        Self {
+            mode_3a: identity.and_then(|i| {
+                let c = i.mode_3a.as_ref()?;
+                Some(TrackMode3A {
+                    code: super::ssr::parse_code(&c.value)?,
+                    validated: true,
+                    garbled: false,
+                    // CH: a new code pending, or adopted within the aged
+                    // threshold by a track that had another.
+                    changed: i.pending_mode_3a.is_some()
+                        || (c.first_t > t.start_t.unwrap_or(f64::NEG_INFINITY)
+                            && t.t - c.first_t <= AGED_AFTER_S),
+                })
+            }),
+            callsign: identity
+                .and_then(|i| i.callsign.as_ref())
+                .and_then(|c| super::ssr::parse_callsign(&c.value)),
+            address: identity
+                .and_then(|i| i.mode_s_address.as_ref())
+                .and_then(|a| super::ssr::parse_address(&a.value)),
+            measured_flight_level: pressure.map(|a| a.measured_flight_level),
+            vertical_rate: pressure.map(|a| a.rate_of_climb_ftpm * FT_M / 60.0),
+            spi: identity.is_some_and(|i| i.spi),
+            // A track that has heard secondary replies knows whether its
+            // updates were primary; one that never has was updated by
+            // primary plots only.
+            psr_age: match identity {
+                Some(i) => age(i.last_primary_t),
+                None => Some(t.t - t.last_update_t),
+            },
+            ssr_age: age(identity.and_then(|i| i.last_secondary_t)),
+            mds_age: age(identity.and_then(|i| i.last_mode_s_t)),
+        }
     }
 }
 

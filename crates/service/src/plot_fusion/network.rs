@@ -196,7 +196,10 @@ enum Site {
 }
 
 /// Validates a network and the tracker's options; the warnings say what
-/// was decided for the caller (the mode, a missing origin).
+/// was decided for the caller (the mode, a missing origin). Each nested
+/// input has its parser ([`parse_radar`], [`parse_site`], the tracker's
+/// choices, initiation, deletion), combined here in the order the
+/// violations are reported.
 pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
     max_lag(spec)?;
     late_policy(spec)?;
@@ -206,119 +209,191 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     {
         return v.finish_with(None);
     }
-    let mut ids = Vec::new();
     let mut radar_ids = Ids::new();
-    let mut sites = Vec::new();
-    let mut specs = Vec::new();
-    let mut sources = Vec::new();
     let mut source_of: HashMap<(u8, u8), usize> = HashMap::new();
+    let mut parsed_radars = Vec::with_capacity(spec.radars.len());
     for (i, r) in spec.radars.iter().enumerate() {
-        let f = format!("radars[{i}]");
-        sources.push(source(&mut v, &f, r.sac, r.sic, i, &mut source_of));
-        let id = radar_ids.check(&mut v, r.id.as_deref(), i, |j| format!("radars[{j}].id"));
-        ids.push(id.unwrap_or_default().to_string());
-        let three_d = v.one_of(
-            format!("{f}.kind"),
-            r.kind.as_deref(),
-            None,
-            &[("2d", false), ("3d", true)],
-        );
-        let site = match &r.site {
-            None => {
-                v.add(format!("{f}.site"), "is required");
-                None
-            }
-            Some(s) => match (&s.geodetic, &s.position_m) {
-                (Some(g), None) => geodetic(&mut v, &format!("{f}.site"), g).map(Site::Geodetic),
-                (None, Some(p)) => {
-                    let field = format!("{f}.site.position_m");
-                    if !(p.len() == 2 || p.len() == 3) || p.iter().any(|x| !x.is_finite()) {
-                        v.add(
-                            field,
-                            "must be 2 or 3 finite numbers [east, north(, up)] in m",
-                        );
-                        None
-                    } else {
-                        Some(Site::Local([p[0], p[1], p.get(2).copied().unwrap_or(0.0)]))
-                    }
-                }
-                _ => {
-                    v.add(
-                        format!("{f}.site"),
-                        "give either lat_deg/lon_deg/height_m or position_m",
-                    );
-                    None
-                }
-            },
-        };
-        sites.push(site);
-        let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
-        let sa = v.number(
-            format!("{f}.sigma_azimuth_deg"),
-            r.sigma_azimuth_deg,
-            Interval::open_closed(0.0, 90.0),
-        );
-        let se = match (three_d, r.sigma_elevation_deg) {
-            (Some(true), s) => v.number(
-                format!("{f}.sigma_elevation_deg"),
-                s,
-                Interval::open_closed(0.0, 90.0),
-            ),
-            (Some(false), Some(_)) => {
-                v.add(
-                    format!("{f}.sigma_elevation_deg"),
-                    "a 2d radar has no elevation; declare kind 3d",
-                );
-                None
-            }
-            _ => None,
-        };
-        let sv = r
-            .sigma_radial_velocity_mps
-            .and_then(|s| v.positive(format!("{f}.sigma_radial_velocity_mps"), Some(s)));
-        let period = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
-        let pd = v.number_or(
-            format!("{f}.p_detection"),
-            r.p_detection,
-            DEFAULT_P_DETECTION,
-            Interval::open_closed(0.0, 1.0),
-        );
-        // False plots per m·rad.
-        let clutter = v.number_or(
-            format!("{f}.clutter_density"),
-            r.clutter_density,
-            DEFAULT_CLUTTER_DENSITY,
-            Interval::POSITIVE,
-        );
-        if let (Some(three_d), Some(sr), Some(sa), Some(period), Some(pd), Some(clutter)) =
-            (three_d, sr, sa, period, pd, clutter)
-        {
-            specs.push(RadarSpec {
-                site: [0.0; 3],
-                sigma_range: sr,
-                sigma_azimuth: sa.to_radians(),
-                sigma_elevation: if three_d {
-                    se.map(f64::to_radians)
-                } else {
-                    None
-                },
-                sigma_radial_velocity: sv,
-                scan_period: period,
-                detection_probability: pd,
-                clutter_density: clutter,
-            });
-        }
+        parsed_radars.push(parse_radar(&mut v, i, r, &mut radar_ids, &mut source_of));
     }
+    let ids: Vec<String> = parsed_radars.iter().map(|r| r.id.clone()).collect();
+    let sources: Vec<Option<(u8, u8)>> = parsed_radars.iter().map(|r| r.source).collect();
     let frame = match &spec.origin {
         Some(o) => geodetic(&mut v, "origin", o),
-        None => sites.iter().find_map(|s| match s {
+        None => parsed_radars.iter().find_map(|r| match &r.site {
             Some(Site::Geodetic(f)) => Some(*f),
             _ => None,
         }),
     };
     let any_3d = spec.radars.iter().any(|r| r.kind.as_deref() == Some("3d"));
     let tracker = &spec.tracker;
-    let axes = match tracker.dimensions {
+    let axes = parse_axes(&mut v, tracker, any_3d);
+    let (mode, noise, method) = parse_choices(&mut v, tracker);
+    let mut specs = Vec::with_capacity(parsed_radars.len());
+    let mut sites = Vec::with_capacity(parsed_radars.len());
+    for r in parsed_radars {
+        specs.extend(r.spec);
+        sites.push(r.site);
+    }
+    // Every radar's site, when each parsed.
+    let sites: Option<Vec<Site>> = sites.into_iter().collect();
+    let parsed = (|| Some((axes?, mode?, method?, noise?, sites?)))();
+    let (axes, mode, method, noise, sites) = v.finish_with(parsed)?;
+
+    let radar_sites = place_sites(&mut specs, &sites, frame)?;
+    if frame.is_none() {
+        warnings.push(
+            "no origin: every site is a local position_m, so tracks carry no lat_deg/lon_deg; \
+             give origin (WGS84) to have them"
+                .into(),
+        );
+    }
+
+    let mut config = TrackerConfig::new(axes, specs);
+    config.set_mode(mode);
+    config.noise = noise;
+    config.association.method = method;
+    apply_scalars(&mut config, tracker);
+    if let Some(i) = &tracker.initiation {
+        apply_initiation(&mut config.initiation, i)?;
+    }
+    if let Some(d) = &tracker.deletion {
+        config.deletion = parse_deletion(d)?;
+    }
+    config.motion = motion(tracker, &mut warnings)?;
+    config.registration = registration(spec, &ids, &config)?;
+    config.validate().map_err(|e| config_error(&e))?;
+    warnings.extend(fusion_period_warnings(&config, &ids));
+    Ok((
+        Network::from_parts(frame, ids, radar_sites, config.default_height).with_sources(sources),
+        config,
+        warnings,
+    ))
+}
+
+/// One radar as parsed: its id (empty when bad), ASTERIX source, site and
+/// core specification (each `None` when a violation was recorded).
+struct ParsedRadar {
+    id: String,
+    source: Option<(u8, u8)>,
+    site: Option<Site>,
+    spec: Option<RadarSpec>,
+}
+
+/// `radars[i]`: id, kind, site, sigmas, scan period, P_D, clutter, SAC/SIC.
+fn parse_radar<'a>(
+    v: &mut Violations,
+    i: usize,
+    r: &'a super::RadarInput,
+    radar_ids: &mut Ids<'a>,
+    source_of: &mut HashMap<(u8, u8), usize>,
+) -> ParsedRadar {
+    let f = format!("radars[{i}]");
+    let source = source(v, &f, r.sac, r.sic, i, source_of);
+    let id = radar_ids.check(v, r.id.as_deref(), i, |j| format!("radars[{j}].id"));
+    let id = id.unwrap_or_default().to_string();
+    let three_d = v.one_of(
+        format!("{f}.kind"),
+        r.kind.as_deref(),
+        None,
+        &[("2d", false), ("3d", true)],
+    );
+    let site = parse_site(v, &f, r.site.as_ref());
+    let sr = v.positive(format!("{f}.sigma_range_m"), r.sigma_range_m);
+    let sa = v.number(
+        format!("{f}.sigma_azimuth_deg"),
+        r.sigma_azimuth_deg,
+        Interval::open_closed(0.0, 90.0),
+    );
+    let se = match (three_d, r.sigma_elevation_deg) {
+        (Some(true), s) => v.number(
+            format!("{f}.sigma_elevation_deg"),
+            s,
+            Interval::open_closed(0.0, 90.0),
+        ),
+        (Some(false), Some(_)) => {
+            v.add(
+                format!("{f}.sigma_elevation_deg"),
+                "a 2d radar has no elevation; declare kind 3d",
+            );
+            None
+        }
+        _ => None,
+    };
+    let sv = r
+        .sigma_radial_velocity_mps
+        .and_then(|s| v.positive(format!("{f}.sigma_radial_velocity_mps"), Some(s)));
+    let period = v.positive(format!("{f}.scan_period_s"), r.scan_period_s);
+    let pd = v.number_or(
+        format!("{f}.p_detection"),
+        r.p_detection,
+        DEFAULT_P_DETECTION,
+        Interval::open_closed(0.0, 1.0),
+    );
+    // False plots per m·rad.
+    let clutter = v.number_or(
+        format!("{f}.clutter_density"),
+        r.clutter_density,
+        DEFAULT_CLUTTER_DENSITY,
+        Interval::POSITIVE,
+    );
+    let spec = (|| {
+        let three_d = three_d?;
+        Some(RadarSpec {
+            site: [0.0; 3],
+            sigma_range: sr?,
+            sigma_azimuth: sa?.to_radians(),
+            sigma_elevation: if three_d {
+                se.map(f64::to_radians)
+            } else {
+                None
+            },
+            sigma_radial_velocity: sv,
+            scan_period: period?,
+            detection_probability: pd?,
+            clutter_density: clutter?,
+        })
+    })();
+    ParsedRadar {
+        id,
+        source,
+        site,
+        spec,
+    }
+}
+
+/// `{f}.site`: WGS84 or a local `position_m`, exactly one.
+fn parse_site(v: &mut Violations, f: &str, site: Option<&super::SiteInput>) -> Option<Site> {
+    let Some(s) = site else {
+        v.add(format!("{f}.site"), "is required");
+        return None;
+    };
+    match (&s.geodetic, &s.position_m) {
+        (Some(g), None) => geodetic(v, &format!("{f}.site"), g).map(Site::Geodetic),
+        (None, Some(p)) => {
+            if !(p.len() == 2 || p.len() == 3) || p.iter().any(|x| !x.is_finite()) {
+                v.add(
+                    format!("{f}.site.position_m"),
+                    "must be 2 or 3 finite numbers [east, north(, up)] in m",
+                );
+                None
+            } else {
+                Some(Site::Local([p[0], p[1], p.get(2).copied().unwrap_or(0.0)]))
+            }
+        }
+        _ => {
+            v.add(
+                format!("{f}.site"),
+                "give either lat_deg/lon_deg/height_m or position_m",
+            );
+            None
+        }
+    }
+}
+
+/// `tracker.dimensions`: 3 when any radar is 3D, else 2; a 2D tracker
+/// takes 2d radars only.
+fn parse_axes(v: &mut Violations, tracker: &super::TrackerInput, any_3d: bool) -> Option<usize> {
+    match tracker.dimensions {
         None => Some(if any_3d { 3 } else { 2 }),
         Some(d) => {
             let d = v.count_or("tracker.dimensions", Some(d), 3, 2, 3);
@@ -330,7 +405,14 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             }
             d.map(|d| d as usize)
         }
-    };
+    }
+}
+
+/// `tracker.mode`, `tracker.process_noise`, `tracker.association`.
+fn parse_choices(
+    v: &mut Violations,
+    tracker: &super::TrackerInput,
+) -> (Option<Mode>, Option<NoiseModel>, Option<Method>) {
     let mode = v.one_of(
         "tracker.mode",
         tracker.mode.as_deref(),
@@ -363,14 +445,18 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         Some(Method::Exact),
         &choices,
     );
-    // Every radar's site, when each parsed.
-    let sites: Option<Vec<Site>> = sites.into_iter().collect();
-    let parsed = (|| Some((axes?, mode?, method?, noise?, sites?)))();
-    let (axes, mode, method, noise, sites) = v.finish_with(parsed)?;
+    (mode, noise, method)
+}
 
-    // Sites in the fusion frame.
+/// Each radar's site in the fusion frame (written into its spec), with its
+/// rotation to the fusion axes and its height.
+fn place_sites(
+    specs: &mut [RadarSpec],
+    sites: &[Site],
+    frame: Option<LocalFrame>,
+) -> Result<Vec<RadarSite>, ServiceError> {
     let mut radar_sites = Vec::with_capacity(specs.len());
-    for (spec, site) in specs.iter_mut().zip(&sites) {
+    for (spec, site) in specs.iter_mut().zip(sites) {
         match site {
             Site::Local(p) => {
                 spec.site = *p;
@@ -398,18 +484,12 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
             }
         }
     }
-    if frame.is_none() {
-        warnings.push(
-            "no origin: every site is a local position_m, so tracks carry no lat_deg/lon_deg; \
-             give origin (WGS84) to have them"
-                .into(),
-        );
-    }
+    Ok(radar_sites)
+}
 
-    let mut config = TrackerConfig::new(axes, specs);
-    config.set_mode(mode);
-    config.noise = noise;
-    config.association.method = method;
+/// The tracker's scalar options over the defaults (checked by
+/// `TrackerConfig::validate` afterwards).
+fn apply_scalars(config: &mut TrackerConfig, tracker: &super::TrackerInput) {
     if let Some(n) = tracker.max_exact_cluster_tracks {
         config.association.max_exact_tracks = n as usize;
     }
@@ -429,9 +509,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
         config.track_gate_probability = p;
     }
     if let Some(s) = tracker.sigma_a_mps2 {
-        config.sigma_a[0] = s;
-        config.sigma_a[1] = s;
-        config.sigma_a[2] = s;
+        config.sigma_a = [s; 3];
     }
     if let Some(s) = tracker.sigma_a_vertical_mps2 {
         config.sigma_a[2] = s;
@@ -448,132 +526,142 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     if let Some(p) = tracker.duplicate_gate_probability {
         config.duplicate_probability = p;
     }
-    if let Some(i) = &tracker.initiation {
-        let init = &mut config.initiation;
-        if let Some(m) = i.m {
-            init.confirm_m = m;
-        }
-        if let Some(n) = i.n {
-            init.confirm_n = n;
-        }
-        if let Some(p) = i.gate_probability {
-            init.gate_probability = p;
-        }
-        if let Some(d) = i.min_dt_s {
-            init.min_dt = d;
-        }
-        if let Some(d) = i.max_dt_s {
-            init.max_dt = d;
-        }
-        match (&i.v_min_axis_mps, &i.v_max_axis_mps) {
-            (None, None) => {
-                if let VelocityGate::Speed { v_min, v_max } = &mut init.velocity {
-                    if let Some(x) = i.v_min_mps {
-                        *v_min = x;
-                    }
-                    if let Some(x) = i.v_max_mps {
-                        *v_max = x;
-                    }
-                }
-            }
-            (Some(lo), Some(hi)) => {
-                let axis = |field: &str, x: &[f64]| -> Result<[f64; 3], ServiceError> {
-                    match x {
-                        [e, n] => Ok([*e, *n, f64::NAN]),
-                        [e, n, u] => Ok([*e, *n, *u]),
-                        _ => Err(Violations::single(
-                            field,
-                            "must be 2 or 3 numbers [east, north(, up)] in m/s",
-                        )),
-                    }
-                };
-                let mut lo = axis("tracker.initiation.v_min_axis_mps", lo)?;
-                let mut hi = axis("tracker.initiation.v_max_axis_mps", hi)?;
-                if lo[2].is_nan() {
-                    // Vertical band not given: wide open.
-                    lo[2] = -1.0e6;
-                    hi[2] = 1.0e6;
-                }
-                if i.v_min_mps.is_some() || i.v_max_mps.is_some() {
-                    return Err(Violations::single(
-                        "tracker.initiation",
-                        "give either the speed band (v_min_mps, v_max_mps) or the per-axis \
-                         band (v_min_axis_mps, v_max_axis_mps), not both",
-                    ));
-                }
-                init.velocity = VelocityGate::PerAxis {
-                    v_min: lo,
-                    v_max: hi,
-                };
-            }
-            (Some(_), None) => {
-                return Err(Violations::single(
-                    "tracker.initiation.v_max_axis_mps",
-                    "is required with v_min_axis_mps",
-                ));
-            }
-            (None, Some(_)) => {
-                return Err(Violations::single(
-                    "tracker.initiation.v_min_axis_mps",
-                    "is required with v_max_axis_mps",
-                ));
-            }
-        }
+}
+
+/// `tracker.initiation` over the defaults: M-of-N, gate, Δt band, and the
+/// speed band or the per-axis band (not both).
+fn apply_initiation(
+    init: &mut algo::tracking::Initiation,
+    i: &super::InitiationInput,
+) -> Result<(), ServiceError> {
+    if let Some(m) = i.m {
+        init.confirm_m = m;
     }
-    if let Some(d) = &tracker.deletion {
-        let rule = Deletion {
-            max_consecutive_misses: d.max_consecutive_misses,
-            misses_m_of_n: match (d.m, d.n) {
-                (Some(m), Some(n)) => Some((m, n)),
-                (None, None) => None,
-                (Some(_), None) => {
-                    return Err(Violations::single(
-                        "tracker.deletion.n",
-                        "is required with deletion.m",
-                    ));
+    if let Some(n) = i.n {
+        init.confirm_n = n;
+    }
+    if let Some(p) = i.gate_probability {
+        init.gate_probability = p;
+    }
+    if let Some(d) = i.min_dt_s {
+        init.min_dt = d;
+    }
+    if let Some(d) = i.max_dt_s {
+        init.max_dt = d;
+    }
+    match (&i.v_min_axis_mps, &i.v_max_axis_mps) {
+        (None, None) => {
+            if let VelocityGate::Speed { v_min, v_max } = &mut init.velocity {
+                if let Some(x) = i.v_min_mps {
+                    *v_min = x;
                 }
-                (None, Some(_)) => {
-                    return Err(Violations::single(
-                        "tracker.deletion.m",
-                        "is required with deletion.n",
-                    ));
+                if let Some(x) = i.v_max_mps {
+                    *v_max = x;
                 }
-            },
-            max_position_sigma: d.max_position_sigma_m,
-        };
-        if rule.max_consecutive_misses.is_none()
-            && rule.misses_m_of_n.is_none()
-            && rule.max_position_sigma.is_none()
-        {
+            }
+        }
+        (Some(lo), Some(hi)) => {
+            let axis = |field: &str, x: &[f64]| -> Result<[f64; 3], ServiceError> {
+                match x {
+                    [e, n] => Ok([*e, *n, f64::NAN]),
+                    [e, n, u] => Ok([*e, *n, *u]),
+                    _ => Err(Violations::single(
+                        field,
+                        "must be 2 or 3 numbers [east, north(, up)] in m/s",
+                    )),
+                }
+            };
+            let mut lo = axis("tracker.initiation.v_min_axis_mps", lo)?;
+            let mut hi = axis("tracker.initiation.v_max_axis_mps", hi)?;
+            if lo[2].is_nan() {
+                // Vertical band not given: wide open.
+                lo[2] = -1.0e6;
+                hi[2] = 1.0e6;
+            }
+            if i.v_min_mps.is_some() || i.v_max_mps.is_some() {
+                return Err(Violations::single(
+                    "tracker.initiation",
+                    "give either the speed band (v_min_mps, v_max_mps) or the per-axis \
+                     band (v_min_axis_mps, v_max_axis_mps), not both",
+                ));
+            }
+            init.velocity = VelocityGate::PerAxis {
+                v_min: lo,
+                v_max: hi,
+            };
+        }
+        (Some(_), None) => {
             return Err(Violations::single(
-                "tracker.deletion",
-                "set at least one rule (max_consecutive_misses, m and n, or \
-                 max_position_sigma_m): a track that is never deleted coasts forever",
+                "tracker.initiation.v_max_axis_mps",
+                "is required with v_min_axis_mps",
             ));
         }
-        config.deletion = rule;
-    }
-    config.motion = motion(tracker, &mut warnings)?;
-    config.registration = registration(spec, &ids, &config)?;
-    config.validate().map_err(|e| config_error(&e))?;
-
-    if config.is_parallel() {
-        for (r, id) in config.radars.iter().zip(&ids) {
-            if config.fusion_period > r.scan_period {
-                warnings.push(format!(
-                    "tracker.fusion_period_s = {} exceeds radar {id}'s scan period {} s: two \
-                     plots of one target from that radar can fall in one fusion instant and \
-                     are then fused as if from two radars; use a period of at most {} s",
-                    config.fusion_period, r.scan_period, r.scan_period
-                ));
-            }
+        (None, Some(_)) => {
+            return Err(Violations::single(
+                "tracker.initiation.v_min_axis_mps",
+                "is required with v_max_axis_mps",
+            ));
         }
     }
-    Ok((
-        Network::from_parts(frame, ids, radar_sites, config.default_height).with_sources(sources),
-        config,
-        warnings,
-    ))
+    Ok(())
+}
+
+/// `tracker.deletion`: at least one rule; m and n together.
+fn parse_deletion(d: &super::DeletionInput) -> Result<Deletion, ServiceError> {
+    let misses_m_of_n = match (d.m, d.n) {
+        (Some(m), Some(n)) => Some((m, n)),
+        (None, None) => None,
+        (Some(_), None) => {
+            return Err(Violations::single(
+                "tracker.deletion.n",
+                "is required with deletion.m",
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(Violations::single(
+                "tracker.deletion.m",
+                "is required with deletion.n",
+            ));
+        }
+    };
+    let rule = Deletion {
+        max_consecutive_misses: d.max_consecutive_misses,
+        misses_m_of_n,
+        max_position_sigma: d.max_position_sigma_m,
+    };
+    if rule.max_consecutive_misses.is_none()
+        && rule.misses_m_of_n.is_none()
+        && rule.max_position_sigma.is_none()
+    {
+        return Err(Violations::single(
+            "tracker.deletion",
+            "set at least one rule (max_consecutive_misses, m and n, or \
+             max_position_sigma_m): a track that is never deleted coasts forever",
+        ));
+    }
+    Ok(rule)
+}
+
+/// Parallel mode: a fusion period longer than a radar's scan fuses two
+/// plots of one target from that radar.
+fn fusion_period_warnings(config: &TrackerConfig, ids: &[String]) -> Vec<String> {
+    if !config.is_parallel() {
+        return Vec::new();
+    }
+    config
+        .radars
+        .iter()
+        .zip(ids)
+        .filter(|(r, _)| config.fusion_period > r.scan_period)
+        .map(|(r, id)| {
+            format!(
+                "tracker.fusion_period_s = {} exceeds radar {id}'s scan period {} s: two \
+                 plots of one target from that radar can fall in one fusion instant and \
+                 are then fused as if from two radars; use a period of at most {} s",
+                config.fusion_period, r.scan_period, r.scan_period
+            )
+        })
+        .collect()
 }
 
 /// `tracker.registration` and each radar's `bias`, checked and named.
@@ -998,97 +1086,25 @@ impl Network {
                 format!("must be finite, in [-720, 720], got {az}"),
             ));
         }
-        let elevation = match (spec.is_3d(), p.elevation_deg) {
-            (true, None) => {
-                return Err(("elevation_deg", format!("radar '{id}' is 3d: required")));
-            }
-            (true, Some(el)) => {
-                if !(el.is_finite() && el.abs() < 90.0) {
-                    return Err(("elevation_deg", format!("must lie in (-90, 90), got {el}")));
-                }
-                Some(el.to_radians())
-            }
-            (false, Some(_)) => {
-                return Err((
-                    "elevation_deg",
-                    format!("radar '{id}' is 2d and gives no elevation"),
-                ));
-            }
-            (false, None) => None,
-        };
-        let radial_velocity = match (spec.has_doppler(), p.radial_velocity_mps) {
-            (false, Some(_)) => {
-                return Err((
-                    "radial_velocity_mps",
-                    format!(
-                        "radar '{id}' is declared without Doppler (give its \
-                         sigma_radial_velocity_mps)"
-                    ),
-                ));
-            }
-            (true, Some(v)) => {
-                if !(v.is_finite() && v.abs() < 1.0e5) {
-                    return Err(("radial_velocity_mps", format!("must be finite, got {v}")));
-                }
-                Some(v)
-            }
-            (_, None) if parallel => {
-                return Err((
-                    "radial_velocity_mps",
-                    "required in parallel mode (time registration)".to_string(),
-                ));
-            }
-            (_, None) => None,
-        };
+        let (elevation, radial_velocity) = elevation_and_doppler(p, spec, id, parallel)?;
         let identity = p.ssr.parse()?;
-        let site = &self.sites[radar];
         let (range, azimuth, elevation, radial_velocity) = if spec.is_3d() {
-            let (azimuth, elevation) = match &site.rotation {
+            let (azimuth, elevation) = match &self.sites[radar].rotation {
                 None => (az.to_radians(), elevation),
                 Some(m) => rotate(m, az.to_radians(), elevation),
             };
             (range, azimuth, elevation, radial_velocity)
         } else {
-            // A 2D radar measures the slant range ρ to a target of unknown
-            // height: with the target at `target_height` its elevation is
-            // sin ε = Δh/ρ (flat, local sites) or, on a sphere of radius R
-            // through the site, ((R + H)² − (R + h)² − ρ²) / (2 (R + h) ρ).
-            // The line of sight at that elevation is re-expressed in the
-            // fusion axes and its horizontal part kept: the horizontal range
-            // ρ cos ε_f and azimuth in the fusion frame. In level flight the
-            // horizontal radial velocity is ṙ / cos ε.
             // A validated Mode C altitude is the target's height (pressure
             // altitude for geometric: within a few hundred feet, against
             // `target_height`'s guess of thousands).
-            let big_h = identity
+            let height = identity
                 .mode_c
                 .filter(|c| c.validated && !c.garbled)
                 .map_or(self.target_height, |c| c.flight_level * 100.0 * FT_M);
-            let h = site.height;
-            let sin_el = match site.rotation {
-                None => (big_h - h) / range,
-                Some(_) => {
-                    let (rh, rt) = (EARTH_RADIUS_M + h, EARTH_RADIUS_M + big_h);
-                    (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
-                }
-            };
-            let el = sin_el
-                .clamp(-1.0, 1.0)
-                .asin()
-                .clamp(-MAX_2D_ELEVATION_RAD, MAX_2D_ELEVATION_RAD);
-            let (azimuth, el_f) = match &site.rotation {
-                None => (az.to_radians(), el),
-                Some(m) => {
-                    let (a, e) = rotate(m, az.to_radians(), Some(el));
-                    (a, e.expect("an elevation in, one out"))
-                }
-            };
-            (
-                range * el_f.cos(),
-                azimuth,
-                None,
-                radial_velocity.map(|v| v / el.cos()),
-            )
+            let (range, azimuth, radial_velocity) =
+                self.horizontal(radar, range, az.to_radians(), radial_velocity, height);
+            (range, azimuth, None, radial_velocity)
         };
         Ok(Plot {
             radar,
@@ -1099,6 +1115,48 @@ impl Network {
             radial_velocity,
             identity,
         })
+    }
+
+    /// A 2D radar's plot made horizontal: it measures the slant range ρ to
+    /// a target at `height`, so its elevation is sin ε = Δh/ρ (flat, local
+    /// sites) or, on a sphere of radius R through the site, ((R + H)² −
+    /// (R + h)² − ρ²) / (2 (R + h) ρ). The line of sight at that elevation
+    /// is re-expressed in the fusion axes and its horizontal part kept: the
+    /// horizontal range ρ cos ε_f and azimuth in the fusion frame. In level
+    /// flight the horizontal radial velocity is ṙ / cos ε.
+    fn horizontal(
+        &self,
+        radar: usize,
+        range: f64,
+        azimuth: f64,
+        radial_velocity: Option<f64>,
+        height: f64,
+    ) -> (f64, f64, Option<f64>) {
+        let site = &self.sites[radar];
+        let (h, big_h) = (site.height, height);
+        let sin_el = match site.rotation {
+            None => (big_h - h) / range,
+            Some(_) => {
+                let (rh, rt) = (EARTH_RADIUS_M + h, EARTH_RADIUS_M + big_h);
+                (rt * rt - rh * rh - range * range) / (2.0 * rh * range)
+            }
+        };
+        let el = sin_el
+            .clamp(-1.0, 1.0)
+            .asin()
+            .clamp(-MAX_2D_ELEVATION_RAD, MAX_2D_ELEVATION_RAD);
+        let (azimuth, el_f) = match &site.rotation {
+            None => (azimuth, el),
+            Some(m) => {
+                let (a, e) = rotate(m, azimuth, Some(el));
+                (a, e.expect("an elevation in, one out"))
+            }
+        };
+        (
+            range * el_f.cos(),
+            azimuth,
+            radial_velocity.map(|v| v / el.cos()),
+        )
     }
 
     /// A core track as a wire track (ids, and lat/lon from the frame).
@@ -1237,6 +1295,60 @@ fn source(
 /// Azimuth (and elevation) of a line of sight re-expressed through `m`.
 /// A 2D plot's line of sight is horizontal in its radar's frame; only the
 /// azimuth of its rotated direction is kept.
+/// A plot's elevation (required from a 3D radar, refused from a 2D one;
+/// radians) and radial velocity (only from a Doppler radar, required in
+/// parallel mode), or the bad field and why.
+fn elevation_and_doppler(
+    p: &PlotInput,
+    spec: &RadarSpec,
+    id: &str,
+    parallel: bool,
+) -> Result<(Option<f64>, Option<f64>), (&'static str, String)> {
+    let elevation = match (spec.is_3d(), p.elevation_deg) {
+        (true, None) => {
+            return Err(("elevation_deg", format!("radar '{id}' is 3d: required")));
+        }
+        (true, Some(el)) => {
+            if !(el.is_finite() && el.abs() < 90.0) {
+                return Err(("elevation_deg", format!("must lie in (-90, 90), got {el}")));
+            }
+            Some(el.to_radians())
+        }
+        (false, Some(_)) => {
+            return Err((
+                "elevation_deg",
+                format!("radar '{id}' is 2d and gives no elevation"),
+            ));
+        }
+        (false, None) => None,
+    };
+    let radial_velocity = match (spec.has_doppler(), p.radial_velocity_mps) {
+        (false, Some(_)) => {
+            return Err((
+                "radial_velocity_mps",
+                format!(
+                    "radar '{id}' is declared without Doppler (give its \
+                         sigma_radial_velocity_mps)"
+                ),
+            ));
+        }
+        (true, Some(v)) => {
+            if !(v.is_finite() && v.abs() < 1.0e5) {
+                return Err(("radial_velocity_mps", format!("must be finite, got {v}")));
+            }
+            Some(v)
+        }
+        (_, None) if parallel => {
+            return Err((
+                "radial_velocity_mps",
+                "required in parallel mode (time registration)".to_string(),
+            ));
+        }
+        (_, None) => None,
+    };
+    Ok((elevation, radial_velocity))
+}
+
 fn rotate(m: &Matrix3<f64>, azimuth: f64, elevation: Option<f64>) -> (f64, Option<f64>) {
     let u = polar_to_enu_3d(1.0, azimuth, elevation.unwrap_or(0.0))
         .expect("unit range and finite angles");
