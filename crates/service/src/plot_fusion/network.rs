@@ -1295,6 +1295,9 @@ fn source(
 /// Azimuth (and elevation) of a line of sight re-expressed through `m`.
 /// A 2D plot's line of sight is horizontal in its radar's frame; only the
 /// azimuth of its rotated direction is kept.
+/// A bad plot field and why.
+type FieldError = (&'static str, String);
+
 /// A plot's elevation (required from a 3D radar, refused from a 2D one;
 /// radians) and radial velocity (only from a Doppler radar, required in
 /// parallel mode), or the bad field and why.
@@ -1303,7 +1306,7 @@ fn elevation_and_doppler(
     spec: &RadarSpec,
     id: &str,
     parallel: bool,
-) -> Result<(Option<f64>, Option<f64>), (&'static str, String)> {
+) -> Result<(Option<f64>, Option<f64>), FieldError> {
     let elevation = match (spec.is_3d(), p.elevation_deg) {
         (true, None) => {
             return Err(("elevation_deg", format!("radar '{id}' is 3d: required")));
