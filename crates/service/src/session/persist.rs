@@ -1113,7 +1113,9 @@ async fn any_view(id: &str, stored: Stored) -> Result<AnyView, ServiceError> {
     .await
 }
 
-/// A decoded session of any kind this release serves.
+/// A decoded session of any kind this release serves (one at a time, on
+/// its way into the cache: the variants' sizes do not matter).
+#[allow(clippy::large_enum_variant)]
 enum AnyHot {
     Correlation(Hot<CorrelationSession>),
     PlotFusion(Hot<PlotFusionSession>),
