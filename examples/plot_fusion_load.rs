@@ -30,16 +30,18 @@
 //!   plots interleave out of order; `both` the two at once. `--store`
 //!   picks the session store, `--snapshot-batches` the server's
 //!   `--session-snapshot-batches` (1: a snapshot every batch, as before
-//!   the session log). The line also gives the bytes written to the store
-//!   per batch (snapshots and log entries, from the server's counters)
-//!   and the session's stored bytes at the end.
+//!   the session log). The line also gives the three slowest batches,
+//!   the bytes written to the store per batch (snapshots, written in the
+//!   background, and log entries, from the server's counters) and the
+//!   session's stored bytes at the end.
 //! - takeover (`--takeover-at f`, Redis only): the stream again on a new
 //!   session, with a second replica on the same store; after the fraction
 //!   f of the batches the serving replica is stopped and the stream
 //!   attaches to the other, which reads the session (snapshot and log)
 //!   from the store. Reports the time from the stop to the first batch the
-//!   other replica accepted, and whether the final tracks equal the
-//!   uninterrupted run's.
+//!   other replica accepted, what its read of the session took (fetch,
+//!   decode of the snapshot, replay of the log), and whether the final
+//!   tracks equal the uninterrupted run's.
 //!
 //! The allocator is the server binary's (mimalloc, `src/main.rs`), so both
 //! figures are what the shipped server does.

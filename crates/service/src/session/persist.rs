@@ -836,7 +836,8 @@ impl Sessions {
     }
 
     /// Waits until every snapshot this replica is writing in the
-    /// background has landed or failed (tests; a graceful stop).
+    /// background has landed or failed (the tests, and the load example
+    /// before it reads the bytes written).
     pub async fn snapshots_settled(&self) {
         self.background.settled().await;
     }
