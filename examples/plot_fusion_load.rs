@@ -30,16 +30,18 @@
 //!   plots interleave out of order; `both` the two at once. `--store`
 //!   picks the session store, `--snapshot-batches` the server's
 //!   `--session-snapshot-batches` (1: a snapshot every batch, as before
-//!   the session log). The line also gives the bytes written to the store
-//!   per batch (snapshots and log entries, from the server's counters)
-//!   and the session's stored bytes at the end.
+//!   the session log). The line also gives the three slowest batches,
+//!   the bytes written to the store per batch (snapshots, written in the
+//!   background, and log entries, from the server's counters) and the
+//!   session's stored bytes at the end.
 //! - takeover (`--takeover-at f`, Redis only): the stream again on a new
 //!   session, with a second replica on the same store; after the fraction
 //!   f of the batches the serving replica is stopped and the stream
 //!   attaches to the other, which reads the session (snapshot and log)
 //!   from the store. Reports the time from the stop to the first batch the
-//!   other replica accepted, and whether the final tracks equal the
-//!   uninterrupted run's.
+//!   other replica accepted, what its read of the session took (fetch,
+//!   decode of the snapshot, replay of the log), and whether the final
+//!   tracks equal the uninterrupted run's.
 //!
 //! The allocator is the server binary's (mimalloc, `src/main.rs`), so both
 //! figures are what the shipped server does.
@@ -344,8 +346,8 @@ async fn main() -> anyhow::Result<()> {
     println!(
         "end to end (gRPC stream, {} batches of {} s, late {}, store {}, snapshot every {} \
          batches): {:.0} plots/s, {:.1} batches/s; per-batch latency p50 {:.2} ms, p99 {:.2} \
-         ms; written to the store per batch {:.3} MB ({} snapshots, {} log entries); final \
-         counters {:?}; stored session {} bytes",
+         ms (slowest: {}); written to the store per batch {:.3} MB ({} snapshots, {} log \
+         entries); final counters {:?}; stored session {} bytes",
         batches.len(),
         args.batch_s,
         args.late,
@@ -356,6 +358,7 @@ async fn main() -> anyhow::Result<()> {
         batches.len() as f64 / run.seconds,
         run.pct(0.5),
         run.pct(0.99),
+        run.worst,
         run.written_bytes / batches.len() as f64 / 1e6,
         run.snapshots,
         run.entries,
@@ -371,10 +374,11 @@ async fn main() -> anyhow::Result<()> {
         let again = stream(&args, &spec, &batches, n, Some(cut)).await?;
         println!(
             "takeover after batch {cut} of {}: the other replica accepted its first batch {:.0} \
-             ms after the serving one stopped; final tracks {} the uninterrupted run's ({} \
-             tracks)",
+             ms after the serving one stopped (its reads of the session: {}); final tracks {} \
+             the uninterrupted run's ({} tracks)",
             batches.len(),
             again.takeover_ms.unwrap_or(f64::NAN),
+            again.reads,
             if again.tracks == run.tracks {
                 "equal"
             } else {
@@ -390,6 +394,8 @@ async fn main() -> anyhow::Result<()> {
 struct Run {
     seconds: f64,
     latencies: Vec<Duration>,
+    /// The three slowest batches (1-based) and their latencies.
+    worst: String,
     written_bytes: f64,
     snapshots: f64,
     entries: f64,
@@ -400,6 +406,9 @@ struct Run {
     /// With a takeover: from the stop of the serving replica to the first
     /// batch the other accepted.
     takeover_ms: Option<f64>,
+    /// With a takeover: what the other replica's reads of the session
+    /// took (fetch, decode of the snapshot, replay of the log).
+    reads: String,
 }
 
 impl Run {
@@ -518,12 +527,15 @@ async fn stream(
     let started = Instant::now();
     let mut last = None;
     let mut takeover_ms = None;
+    let mut reads = String::new();
+    let mut reads_before = [0.0; 4];
     let mut stopped_at = None;
     let (mut written, mut snapshots, mut entries) = (0.0, 0.0, 0.0);
     for (k, batch) in batches.iter().enumerate() {
         if takeover == Some(k) {
             // Stop the serving replica (its counters first), then attach
             // to the session on the other.
+            reads_before = read_sums(&r.state);
             written += counter(&r.state, "fusion_session_written_bytes_total", None);
             snapshots += counter(&r.state, "fusion_session_writes_total", Some("snapshot"));
             entries += counter(&r.state, "fusion_session_writes_total", Some("\"log\""));
@@ -546,12 +558,28 @@ async fn stream(
         latencies.push(t.elapsed());
         if let Some(s) = stopped_at.take() {
             takeover_ms = Some(s.elapsed().as_secs_f64() * 1e3);
+            reads = reads_of(&r.state, reads_before);
         }
         last = update.plot_fusion;
     }
     let seconds = started.elapsed().as_secs_f64();
     drop(tx);
+    let mut worst: Vec<(Duration, usize)> = latencies
+        .iter()
+        .enumerate()
+        .map(|(k, &l)| (l, k + 1))
+        .collect();
+    worst.sort();
+    let worst = worst
+        .iter()
+        .rev()
+        .take(3)
+        .map(|(l, k)| format!("batch {k}: {:.0} ms", l.as_secs_f64() * 1e3))
+        .collect::<Vec<_>>()
+        .join(", ");
     latencies.sort();
+    // Snapshots written in the background after the last batch count too.
+    r.state.sessions().snapshots_settled().await;
     written += counter(&r.state, "fusion_session_written_bytes_total", None);
     snapshots += counter(&r.state, "fusion_session_writes_total", Some("snapshot"));
     entries += counter(&r.state, "fusion_session_writes_total", Some("\"log\""));
@@ -575,6 +603,7 @@ async fn stream(
     Ok(Run {
         seconds,
         latencies,
+        worst,
         written_bytes: written,
         snapshots,
         entries,
@@ -582,5 +611,39 @@ async fn stream(
         stored_bytes: state_now.encoded_bytes,
         tracks,
         takeover_ms,
+        reads,
     })
+}
+
+/// The replica's reads of stored sessions so far (the metrics may be one
+/// recorder for both replicas): the seconds of each step
+/// (`fusion_session_read_seconds`: fetch, decode of the snapshot, replay of
+/// the log) and the log entries replayed.
+fn read_sums(state: &radar_fusion::state::AppState) -> [f64; 4] {
+    let text = state.metrics().render();
+    let sum = |step: &str| -> f64 {
+        text.lines()
+            .filter(|l| l.starts_with("fusion_session_read_seconds_sum") && l.contains(step))
+            .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+            .sum()
+    };
+    [
+        sum("\"fetch\""),
+        sum("\"decode\""),
+        sum("\"replay\""),
+        counter(state, "fusion_session_replayed_batches_total", None),
+    ]
+}
+
+/// What the reads since `before` ([`read_sums`]) took.
+fn reads_of(state: &radar_fusion::state::AppState, before: [f64; 4]) -> String {
+    let now = read_sums(state);
+    let d = |i: usize| now[i] - before[i];
+    format!(
+        "fetch {:.0} ms, decode {:.0} ms, replay {:.0} ms of {} entries",
+        d(0) * 1e3,
+        d(1) * 1e3,
+        d(2) * 1e3,
+        d(3)
+    )
 }

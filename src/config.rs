@@ -253,11 +253,20 @@ pub struct Settings {
     /// A session is stored as a snapshot and the batches applied since (a
     /// log), so a batch writes what it carries, not the whole session:
     /// after this many batches (or once the log is as large as the
-    /// snapshot) a push stores a new snapshot and drops the log. A replica
-    /// that takes a session over replays at most this many batches. 1: a
-    /// snapshot every batch.
+    /// snapshot) a new snapshot replaces the log. It is encoded and
+    /// written in the background, never on a batch's path. A replica that
+    /// takes a session over replays at most this many batches. 1: a
+    /// snapshot after every batch.
     #[arg(long, env = "FUSION_SESSION_SNAPSHOT_BATCHES", default_value_t = service::session::persist::DEFAULT_SNAPSHOT_BATCHES)]
     pub session_snapshot_batches: usize,
+    /// A snapshot is also due once replaying the log would take this long
+    /// (s, as this replica took to apply its batches), so that a replica
+    /// taking a session over replays about this much; but not before the
+    /// log holds a third of the snapshot's bytes (snapshots then add at
+    /// most three times the batches' own bytes to the writes). 0: no bound
+    /// by time.
+    #[arg(long, env = "FUSION_SESSION_SNAPSHOT_REPLAY_S", default_value_t = service::session::persist::DEFAULT_SNAPSHOT_REPLAY_S)]
+    pub session_snapshot_replay_s: f64,
     /// Most watchers (`GET /v1/sessions/{id}/events`, gRPC `Watch`) of one
     /// session on one replica; 429 beyond.
     #[arg(long, env = "FUSION_WATCHERS_PER_SESSION", default_value_t = 32)]
@@ -540,6 +549,13 @@ impl Settings {
         if self.session_snapshot_batches == 0 {
             return Err(
                 "--session-snapshot-batches must be at least 1 (1: a snapshot every batch)".into(),
+            );
+        }
+        if !(self.session_snapshot_replay_s.is_finite() && self.session_snapshot_replay_s >= 0.0) {
+            return Err(
+                "--session-snapshot-replay-s must be a number of seconds, at least 0 (0: no bound \
+                 by time)"
+                    .into(),
             );
         }
         if self.max_tracks_per_session == 0 {
@@ -873,6 +889,14 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(err.starts_with("--session-snapshot-batches"), "{err}");
+        assert_eq!(with(&[]).session_snapshot_replay_s, 0.5);
+        with(&["--session-snapshot-replay-s", "0"])
+            .validate()
+            .unwrap();
+        let err = with(&["--session-snapshot-replay-s=-1"])
+            .validate()
+            .unwrap_err();
+        assert!(err.starts_with("--session-snapshot-replay-s"), "{err}");
     }
 
     #[test]

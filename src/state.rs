@@ -44,6 +44,8 @@ impl AppState {
         )
         .with_snapshots(SnapshotPolicy {
             max_entries: settings.session_snapshot_batches,
+            max_replay_s: settings.session_snapshot_replay_s,
+            ..SnapshotPolicy::default()
         });
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         let body_budget = BodyBudget::new(settings.max_buffered_body_bytes);

@@ -10,7 +10,9 @@ use std::{
     time::{Duration, Instant},
 };
 
-use store::{CasOutcome, Expected, SessionStore, StoreError, StoreSettings, Stored, Write};
+use store::{
+    CasOutcome, Compacted, Expected, SessionStore, StoreError, StoreSettings, Stored, Write,
+};
 
 #[path = "common/redis.rs"]
 mod redis_harness;
@@ -91,6 +93,7 @@ both_backends!(
     |s: &mut StoreSettings| s.max_sessions_per_tenant = 3
 );
 both_backends!(log_and_snapshots, log_memory, log_redis);
+both_backends!(compaction, compact_memory, compact_redis);
 both_backends!(
     concurrent_cas_loses_no_update,
     concurrent_memory,
@@ -340,6 +343,118 @@ async fn log_and_snapshots(store: &Arc<SessionStore>) {
             .write(t, "s", at(6, 16), 17, append(b"e7"), LONG)
             .await,
         Ok(CasOutcome::Missing)
+    );
+}
+
+/// A snapshot lands behind later writes: it replaces the snapshot and the
+/// entries up to its version, the later ones stay; only a version the log
+/// holds, made by the token given, is compacted.
+async fn compaction(store: &Arc<SessionStore>) {
+    let t = "compact";
+    store
+        .create(t, "s", "plot_fusion", b"snap1".to_vec(), LONG)
+        .await
+        .unwrap();
+    let at = |version: u64, token: u64| Expected {
+        version,
+        token: Some(token),
+    };
+    // Version v + 1 made by token v + 11 (a created session's token is 0).
+    for v in 1..=4u64 {
+        let expected = at(v, if v == 1 { 0 } else { v + 10 });
+        let entry = Write::Append(format!("e{}", v + 1).into_bytes());
+        assert_eq!(
+            store.write(t, "s", expected, v + 11, entry, LONG).await,
+            Ok(CasOutcome::Stored { version: v + 1 })
+        );
+    }
+    // Versions 2..=5 were made by tokens 12, 13, 14, 15.
+    let log =
+        |from: u64| -> Vec<Vec<u8>> { (from..=5).map(|v| format!("e{v}").into_bytes()).collect() };
+    // Version 3 under another token (made again elsewhere): stale, nothing
+    // changes; so is a version the log does not hold (the snapshot's own,
+    // or one not written yet), and the unknown token `None`.
+    for (version, token) in [(3, 99), (1, 0), (6, 16)] {
+        assert_eq!(
+            store
+                .compact(t, "s", at(version, token), b"x".to_vec())
+                .await,
+            Ok(Compacted::Stale)
+        );
+    }
+    let none = Expected {
+        version: 3,
+        token: None,
+    };
+    assert_eq!(
+        store.compact(t, "s", none, b"x".to_vec()).await,
+        Ok(Compacted::Stale)
+    );
+    assert_eq!(
+        store.get(t, "s").await.unwrap().unwrap().log,
+        log(2),
+        "unchanged"
+    );
+    // The state at 3: entries 4 and 5 stay, the version and token too.
+    assert_eq!(
+        store.compact(t, "s", at(3, 13), b"snap3".to_vec()).await,
+        Ok(Compacted::Stored)
+    );
+    assert_eq!(
+        store.get(t, "s").await.unwrap(),
+        Some(Stored {
+            version: 5,
+            token: 15,
+            data: b"snap3".to_vec(),
+            log: log(4),
+        })
+    );
+    assert_eq!(store.list(t).await.unwrap()[0].bytes, 5 + 2 + 2);
+    // An older snapshot landing late is stale.
+    assert_eq!(
+        store.compact(t, "s", at(2, 12), b"snap2".to_vec()).await,
+        Ok(Compacted::Stale)
+    );
+    // Writes go on from the version and token as they were.
+    assert_eq!(
+        store
+            .write(t, "s", at(5, 15), 16, Write::Append(b"e6".to_vec()), LONG)
+            .await,
+        Ok(CasOutcome::Stored { version: 6 })
+    );
+    // The newest version itself: the log becomes empty.
+    assert_eq!(
+        store.compact(t, "s", at(6, 16), b"snap6".to_vec()).await,
+        Ok(Compacted::Stored)
+    );
+    let s = store.get(t, "s").await.unwrap().unwrap();
+    assert_eq!(
+        (s.version, s.token, s.data, s.log),
+        (6, 16, b"snap6".to_vec(), vec![])
+    );
+    // After a snapshot written in place of an entry (a new version), no
+    // entry is left to compact.
+    assert_eq!(
+        store
+            .write(
+                t,
+                "s",
+                at(6, 16),
+                17,
+                Write::Snapshot(b"snap7".to_vec()),
+                LONG
+            )
+            .await,
+        Ok(CasOutcome::Stored { version: 7 })
+    );
+    assert_eq!(
+        store.compact(t, "s", at(7, 17), b"x".to_vec()).await,
+        Ok(Compacted::Stale)
+    );
+    assert!(store.delete(t, "s").await.unwrap());
+    assert_eq!(
+        store.compact(t, "s", at(7, 17), b"x".to_vec()).await,
+        Ok(Compacted::Missing)
     );
 }
 

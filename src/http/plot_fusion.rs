@@ -302,10 +302,10 @@ pub struct TrackerOptions {
     /// out-of-sequence update, per IMM model), nothing is replayed: about
     /// a sixth of the compute, but approximate (docs/RESULTS.md). `auto`
     /// (default): `reprocess` while the lag window holds at most
-    /// `max_replay_plots` plots, `retrodict` beyond (the update's
-    /// `warnings` say so, the session's `approximate_from` since when its
-    /// tracks are approximate). Serial mode only (parallel mode
-    /// reprocesses).
+    /// `max_replay_plots` plots, `retrodict` from the first late plot
+    /// beyond it on (the update's `warnings` say so, the session's
+    /// `approximate_from` since when its tracks are approximate). Serial
+    /// mode only (parallel mode reprocesses).
     #[schema(example = "auto")]
     pub late_plots: Option<String>,
     /// `late_plots: "auto"`: most plots the lag window may hold for late

@@ -281,7 +281,8 @@ pub struct PlotFusionSessionState {
     pub late_plots: String,
     /// Under `auto`: the tracks are approximate from this time (a late
     /// plot was taken by retrodiction because replaying it would have
-    /// exceeded `tracker.max_replay_plots`); null when exact.
+    /// exceeded `tracker.max_replay_plots`; late plots are retrodicted
+    /// from then on); null when exact.
     pub approximate_from: Option<f64>,
     /// Plots older than this are late beyond the lag (dropped); null
     /// before the first plot.

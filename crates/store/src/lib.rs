@@ -142,6 +142,21 @@ pub struct SessionMeta {
     pub ttl_remaining: Duration,
 }
 
+/// The result of [`SessionStore::compact`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compacted {
+    /// The snapshot replaced the snapshot and the log entries up to its
+    /// version; the entries after it are kept.
+    Stored,
+    /// Not written: the session's log no longer holds the version the
+    /// snapshot is of, made by that write (a newer snapshot landed, or the
+    /// version was lost in a failover and made again by another write).
+    /// Nothing is lost: the log still holds every write.
+    Stale,
+    /// Not written: no such live session.
+    Missing,
+}
+
 /// The result of [`SessionStore::compare_and_set`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CasOutcome {
@@ -270,6 +285,31 @@ impl SessionStore {
         match self {
             Self::Memory(s) => s.write(tenant, id, expected, token, write, ttl),
             Self::Redis(s) => s.write(tenant, id, expected, token, write, ttl).await,
+        }
+    }
+
+    /// Replaces the snapshot and the log entries up to `at.version` by
+    /// `data`, the state at that version, when the log holds that version
+    /// as made by the write with token `at.token` (required); the entries
+    /// after it stay, so the session's version, token and time-to-live are
+    /// unchanged and a reader finds a snapshot and a contiguous log before
+    /// and after (the change is atomic). This is how a snapshot encoded off
+    /// the request path lands while later batches are appended: a
+    /// compaction, never a write of a new version. `Stale` when the log no
+    /// longer holds that version made by that token.
+    pub async fn compact(
+        &self,
+        tenant: &str,
+        id: &str,
+        at: Expected,
+        data: Vec<u8>,
+    ) -> Result<Compacted, StoreError> {
+        let Some(token) = at.token else {
+            return Ok(Compacted::Stale);
+        };
+        match self {
+            Self::Memory(s) => s.compact(tenant, id, at.version, token, data),
+            Self::Redis(s) => s.compact(tenant, id, at.version, token, data).await,
         }
     }
 

@@ -13,7 +13,9 @@ use std::{
     time::{Duration, Instant},
 };
 
-use super::{CasOutcome, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write};
+use super::{
+    CasOutcome, Compacted, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write,
+};
 
 /// How often, at most, a write sweeps the expired sessions of every tenant.
 const SWEEP_EVERY: Duration = Duration::from_secs(1);
@@ -47,6 +49,8 @@ struct Entry {
     /// The snapshot, at `version - log.len()`.
     data: Vec<u8>,
     log: Vec<Vec<u8>>,
+    /// The token of the write that appended each log entry.
+    log_tokens: Vec<u64>,
     expires_at: Instant,
 }
 
@@ -113,6 +117,7 @@ impl MemoryStore {
                 kind: kind.to_string(),
                 data,
                 log: Vec::new(),
+                log_tokens: Vec::new(),
                 expires_at: expiry(now, ttl),
             },
         );
@@ -183,11 +188,53 @@ impl MemoryStore {
             Write::Snapshot(d) => {
                 entry.data = d;
                 entry.log.clear();
+                entry.log_tokens.clear();
             }
-            Write::Append(e) => entry.log.push(e),
+            Write::Append(e) => {
+                entry.log.push(e);
+                entry.log_tokens.push(token);
+            }
         }
         entry.expires_at = expiry(now, ttl);
         Ok(CasOutcome::Stored { version })
+    }
+
+    /// See [`crate::SessionStore::compact`].
+    pub fn compact(
+        &self,
+        tenant: &str,
+        id: &str,
+        at: u64,
+        token: u64,
+        data: Vec<u8>,
+    ) -> Result<Compacted, StoreError> {
+        let now = Instant::now();
+        let mut inner = self.lock();
+        inner.prune_tenant(tenant, now);
+        let Some(entry) = inner.tenants.get(tenant).and_then(|t| t.sessions.get(id)) else {
+            return Ok(Compacted::Missing);
+        };
+        let base = entry.version - entry.log.len() as u64;
+        if at <= base || at > entry.version || entry.log_tokens[(at - base - 1) as usize] != token {
+            return Ok(Compacted::Stale);
+        }
+        let folded = (at - base) as usize;
+        let old_len = entry.bytes();
+        let new_len = data.len() + entry.log[folded..].iter().map(Vec::len).sum::<usize>();
+        self.reserve(&mut inner, tenant, now, old_len, new_len)?;
+        let held = inner
+            .tenants
+            .get_mut(tenant)
+            .expect("the tenant's entry was live a moment ago under the same lock");
+        held.bytes = held.bytes - old_len + new_len;
+        let entry = held
+            .sessions
+            .get_mut(id)
+            .expect("the entry was live a moment ago under the same lock");
+        entry.data = data;
+        entry.log.drain(..folded);
+        entry.log_tokens.drain(..folded);
+        Ok(Compacted::Stored)
     }
 
     pub fn delete(&self, tenant: &str, id: &str) -> bool {

@@ -29,7 +29,8 @@ use redis::{
 };
 
 use super::{
-    CasOutcome, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write, access, ttl_ms,
+    CasOutcome, Compacted, Expected, SessionMeta, StoreError, StoreSettings, Stored, Write, access,
+    ttl_ms,
 };
 
 pub struct RedisStore {
@@ -50,6 +51,7 @@ pub struct RedisStore {
     timeout: Duration,
     create: Script,
     write: Script,
+    compact: Script,
     delete: Script,
     list: Script,
 }
@@ -85,8 +87,9 @@ redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
 ///
 /// A session is a hash: `v` its version, `t` the token of the write that
 /// made it (absent: 0), `k` its kind, `d` a snapshot, `b` the snapshot's
-/// version (absent: `v`, no log) and `e<n>` the log entry that made
-/// version n, for n in b+1..=v. A snapshot deletes the entries.
+/// version (absent: `v`, no log), `e<n>` the log entry that made
+/// version n, for n in b+1..=v, and `w<n>` the token of the write that
+/// appended it (for [`COMPACT`]). A snapshot deletes the entries.
 const WRITE: &str = r"
 local f = redis.call('HMGET', KEYS[1], 'v', 't', 'b')
 local v = f[1]
@@ -95,15 +98,36 @@ if v ~= ARGV[4] then return {2, v} end
 if ARGV[6] ~= '' and (f[2] or '0') ~= ARGV[6] then return {2, v} end
 if ARGV[8] == 's' then
   for n = tonumber(f[3] or v) + 1, tonumber(v) do
-    redis.call('HDEL', KEYS[1], 'e' .. n)
+    redis.call('HDEL', KEYS[1], 'e' .. n, 'w' .. n)
   end
   redis.call('HSET', KEYS[1], 'v', ARGV[5], 'd', ARGV[2], 't', ARGV[7], 'b', ARGV[5])
 else
   if not f[3] then redis.call('HSET', KEYS[1], 'b', v) end
-  redis.call('HSET', KEYS[1], 'v', ARGV[5], 'e' .. ARGV[5], ARGV[2], 't', ARGV[7])
+  redis.call('HSET', KEYS[1], 'v', ARGV[5], 'e' .. ARGV[5], ARGV[2], 't', ARGV[7],
+    'w' .. ARGV[5], ARGV[7])
 end
 redis.call('PEXPIRE', KEYS[1], ARGV[3])
 redis.call('ZADD', KEYS[2], now + tonumber(ARGV[3]), ARGV[1])
+";
+
+/// KEYS: session. ARGV: the snapshot's version, the token of the write
+/// that made it, the snapshot. Returns 0 missing, 1 stored, 2 stale (the
+/// log does not hold that version made by that token). The snapshot
+/// replaces `d` and the entries up to its version; `v`, `t`, the later
+/// entries and the TTL stay.
+const COMPACT: &str = r"
+local f = redis.call('HMGET', KEYS[1], 'v', 'b')
+if not f[1] then return 0 end
+local v = tonumber(f[1])
+local b = tonumber(f[2] or f[1])
+local at = tonumber(ARGV[1])
+if at <= b or at > v then return 2 end
+if redis.call('HGET', KEYS[1], 'w' .. ARGV[1]) ~= ARGV[2] then return 2 end
+for n = b + 1, at do
+  redis.call('HDEL', KEYS[1], 'e' .. n, 'w' .. n)
+end
+redis.call('HSET', KEYS[1], 'd', ARGV[3], 'b', ARGV[1])
+return 1
 ";
 
 /// KEYS: session, index. ARGV: escaped id. Returns the number of keys deleted.
@@ -208,6 +232,7 @@ impl RedisStore {
             write: Script::new(&format!(
                 "{NOW_MS}{WRITE}{EXTEND_INDEX}return {{1, ARGV[5]}}"
             )),
+            compact: Script::new(COMPACT),
             delete: Script::new(DELETE),
             list: Script::new(&format!("{NOW_MS}{LIST}")),
         }
@@ -331,6 +356,27 @@ impl RedisStore {
                 current: parse_version(&version)?,
             }),
             other => Err(corrupt(format!("write script answered {other}"))),
+        }
+    }
+
+    /// See [`crate::SessionStore::compact`]; waits for the replicas as a
+    /// write does.
+    pub async fn compact(
+        &self,
+        tenant: &str,
+        id: &str,
+        at: u64,
+        token: u64,
+        data: Vec<u8>,
+    ) -> Result<Compacted, StoreError> {
+        let mut conn = self.connection().await?;
+        let mut call = self.compact.key(self.session_key(tenant, id));
+        call.arg(at.to_string()).arg(token.to_string()).arg(data);
+        match self.bounded(call.invoke_async::<i64>(&mut conn)).await? {
+            0 => Ok(Compacted::Missing),
+            1 => self.replicated(&mut conn).await.map(|()| Compacted::Stored),
+            2 => Ok(Compacted::Stale),
+            other => Err(corrupt(format!("compact script answered {other}"))),
         }
     }
 
@@ -729,6 +775,9 @@ fn stored_of(key: &str, fields: Vec<(String, Vec<u8>)>) -> Result<Stored, StoreE
             "b" => base = Some(parse_version(&text(&value))?),
             "d" => data = Some(value),
             "k" => {}
+            w if w.len() > 1
+                && w.starts_with('w')
+                && w[1..].bytes().all(|b| b.is_ascii_digit()) => {}
             e => {
                 let n = e
                     .strip_prefix('e')

@@ -1210,8 +1210,11 @@ fn delayed_by_radar(plots: &[Plot], links: &[f64], held: f64, rng: &mut Lcg) -> 
 
 /// Auto with a bound of 1 replayed plot on the retrodiction test's
 /// arrivals: pushes whose replay exceeds it retrodict (the head then
-/// approximate from the earliest such plot), the others replay, from
-/// before any retrodicted plot, and are exact again. After every push a
+/// approximate from the earliest such plot), the others replay while the
+/// window is within its bound (once a push leaves it holding more plots
+/// than the bound, it keeps none and retrodicts from then on: it does not
+/// become exact again; `exact_again` counts the pushes that did before
+/// that). After every push a
 /// window rebuilt from its stored parts continues like the original
 /// (the decisions depend on stored data only), and the end is within
 /// the retrodiction test's worst bound (2 σ) of the batch call.

@@ -84,8 +84,12 @@ pub struct LagWindow {
     /// How plots older than the newest are taken.
     policy: LatePolicy,
     /// [`LatePolicy::Auto`]: the time of the earliest plot taken by
-    /// retrodiction since the head was last exact (stored).
+    /// retrodiction (stored).
     approximate_from: Option<f64>,
+    /// [`LatePolicy::Auto`]: the window has held more than its bound of
+    /// plots; it keeps no plots and no base since, and late plots are
+    /// retrodicted (stored).
+    past_bound: bool,
 }
 
 /// How a [`LagWindow`] takes a plot older than the newest it has received
@@ -109,10 +113,16 @@ pub enum LatePolicy {
     /// (what a replay from `base` costs at most), retrodiction beyond
     /// (the default, with [`DEFAULT_MAX_REPLAY_PLOTS`]): exact for
     /// networks whose lag holds few plots, bounded for those where a replay
-    /// would cost more. The window keeps its plots; a late plot taken by
-    /// retrodiction leaves the head approximate from its time
-    /// ([`LagWindow::approximate_from`]) until a push with late plots finds
-    /// the window within the bound again (a replay from `base`: exact).
+    /// would cost more. Once a push leaves the window holding more than
+    /// `max_replay` plots, it keeps no plots and no base from then on, as
+    /// under `Retrodict` ([`LagWindow::past_bound`], stored): every late
+    /// plot after is taken by retrodiction, and the head is approximate
+    /// from the first one's time ([`LagWindow::approximate_from`]). (The
+    /// plots and base could serve an exact replay again only once the lag
+    /// held fewer plots than the bound; at the rates that pass it that is
+    /// rare, and keeping them cost a tracker clone a push, a `base` fed
+    /// every plot once approximate, and twice the stored state: issue 49,
+    /// docs/RESULTS.md.)
     Auto {
         /// Most plots a push replays.
         max_replay: u32,
@@ -200,6 +210,9 @@ pub struct LagWindowParts {
     pub late: u64,
     /// The head is approximate from this time ([`LatePolicy::Auto`]).
     pub approximate_from: Option<f64>,
+    /// [`LatePolicy::Auto`] past its bound: no plots and no base kept,
+    /// late plots retrodicted.
+    pub past_bound: bool,
 }
 
 /// What a [`LagWindow`] stores, borrowed.
@@ -223,6 +236,9 @@ pub struct LagWindowState<'a> {
     pub late: u64,
     /// The head is approximate from this time ([`LatePolicy::Auto`]).
     pub approximate_from: Option<f64>,
+    /// [`LatePolicy::Auto`] past its bound: no plots and no base kept,
+    /// late plots retrodicted.
+    pub past_bound: bool,
 }
 
 /// Checks a lag (s): finite, in [0, [`MAX_LAG_LIMIT_S`]].
@@ -274,6 +290,7 @@ impl LagWindow {
             max_plots: DEFAULT_MAX_WINDOW_PLOTS,
             policy,
             approximate_from: None,
+            past_bound: false,
         })
     }
 
@@ -282,9 +299,15 @@ impl LagWindow {
         self.policy
     }
 
+    /// [`LatePolicy::Auto`]: the window has held more plots than its bound,
+    /// so it keeps none and no base, and late plots are retrodicted.
+    pub fn past_bound(&self) -> bool {
+        self.past_bound
+    }
+
     /// [`LatePolicy::Auto`]: the head (and the picture) is approximate from
-    /// this time, a late plot having been taken by retrodiction; `None`
-    /// when exact.
+    /// this time, a late plot having been taken by retrodiction (and every
+    /// late plot since); `None` when exact.
     pub fn approximate_from(&self) -> Option<f64> {
         self.approximate_from
     }
@@ -315,19 +338,35 @@ impl LagWindow {
         if policy == LatePolicy::Retrodict && !parts.window.is_empty() {
             return Err(bad("a retrodicting window holds no plots"));
         }
+        let auto = matches!(policy, LatePolicy::Auto { .. });
+        if (parts.approximate_from.is_some() || parts.past_bound) && !auto {
+            return Err(bad("only an auto window is approximate or past its bound"));
+        }
+        // An approximate auto window, or one holding more plots than its
+        // bound, is past it (an earlier release's kept its plots and base:
+        // dropped here).
+        let past_bound = parts.past_bound
+            || parts.approximate_from.is_some()
+            || matches!(policy, LatePolicy::Auto { max_replay } if parts.window.len() > max_replay as usize);
+        if parts.past_bound && !parts.window.is_empty() {
+            return Err(bad("a window past its bound holds no plots"));
+        }
         let mut head = parts.head;
-        head.set_out_of_sequence(policy == LatePolicy::Retrodict);
+        head.set_out_of_sequence(policy == LatePolicy::Retrodict || past_bound);
         let mut picture = head.clone();
         picture.flush()?;
-        if parts.approximate_from.is_some() && !matches!(policy, LatePolicy::Auto { .. }) {
-            return Err(bad("only an auto window's head is approximate"));
-        }
+        let (base, window) = if past_bound {
+            (Tracker::new(head.config().clone())?, Vec::new())
+        } else {
+            (parts.base, parts.window)
+        };
         Ok(Self {
             policy,
+            past_bound,
             approximate_from: parts.approximate_from,
             max_lag: parts.max_lag,
-            base: parts.base,
-            window: parts.window,
+            base,
+            window,
             head,
             picture,
             horizon: parts.horizon,
@@ -365,6 +404,7 @@ impl LagWindow {
         LagWindowParts {
             policy: self.policy,
             approximate_from: self.approximate_from,
+            past_bound: self.past_bound,
             max_lag: self.max_lag,
             base: self.base.clone(),
             window: self.window.clone(),
@@ -375,11 +415,35 @@ impl LagWindow {
         }
     }
 
+    /// A copy of what the window stores and its picture, without the
+    /// in-memory snapshots of `head`: for encoding off the caller's path
+    /// while the window goes on. The trackers share their tracks
+    /// copy-on-write, so this costs the window's plots and the trackers'
+    /// indices, not the tracks.
+    pub fn stored_copy(&self) -> Self {
+        Self {
+            max_lag: self.max_lag,
+            base: self.base.clone(),
+            window: self.window.clone(),
+            head: self.head.clone(),
+            picture: self.picture.clone(),
+            horizon: self.horizon,
+            newest: self.newest,
+            late: self.late,
+            snapshots: Vec::new(),
+            max_plots: self.max_plots,
+            policy: self.policy,
+            approximate_from: self.approximate_from,
+            past_bound: self.past_bound,
+        }
+    }
+
     /// The stored parts, borrowed (for an encoder).
     pub fn state(&self) -> LagWindowState<'_> {
         LagWindowState {
             policy: self.policy,
             approximate_from: self.approximate_from,
+            past_bound: self.past_bound,
             max_lag: self.max_lag,
             base: &self.base,
             window: &self.window,
@@ -463,6 +527,15 @@ impl LagWindow {
         if self.policy == LatePolicy::Retrodict {
             return self.push_retrodicting(&accepted, out);
         }
+        if self.past_bound {
+            // Auto past its bound: retrodiction.
+            out.retrodicted = out.within_lag;
+            if let Some(earliest) = out.earliest_within_lag {
+                self.approximate_from =
+                    Some(self.approximate_from.map_or(earliest, |a| a.min(earliest)));
+            }
+            return self.push_retrodicting(&accepted, out);
+        }
         let at = self.window.partition_point(|p| p.t <= accepted[0].t);
         if at == self.window.len() {
             // The picture is the head with its open frame closed; when the
@@ -477,52 +550,49 @@ impl LagWindow {
             self.window.extend_from_slice(&accepted);
             self.feed(start, &mut out)?;
         } else {
-            // Auto judges by the window's plots: the replay of a replica
-            // that read the store starts at `base` (it has no snapshots),
-            // and so may the serving replica's (a late plot inserted before
-            // a snapshot makes it useless: with per-radar delays every
-            // snapshot newer than the slowest link's delay goes).
-            let retrodict = match self.policy {
-                LatePolicy::Auto { max_replay } => self.window.len() > max_replay as usize,
-                _ => false,
-            };
+            // A late plot: replay from the newest snapshot before it, or
+            // from `base`. (Under auto the window holds at most its bound
+            // here: past it, it keeps none.)
             let tail = merge(&self.window[at..], &accepted);
             self.window.truncate(at);
             self.window.extend(tail);
-            if retrodict {
-                // The head takes them where its tracks stand; the window
-                // keeps them in order (for `base` and a later replay).
-                self.snapshots.retain(|(n, _)| *n <= at);
-                self.head.set_out_of_sequence(true);
-                let report = self.head.process(&accepted);
-                self.head.set_out_of_sequence(false);
-                let report = report?;
-                out.add(report);
-                out.retrodicted = out.within_lag;
-                let earliest = accepted[0].t;
-                self.approximate_from =
-                    Some(self.approximate_from.map_or(earliest, |a| a.min(earliest)));
-            } else {
-                self.snapshots.retain(|(n, _)| *n <= at);
-                let (start, from) = match self.snapshots.last() {
-                    Some((n, tr)) => (*n, tr.clone()),
-                    None => (0, self.base.clone()),
-                };
-                self.head = from;
-                self.feed(start, &mut out)?;
-                out.replayed = self.window.len() - start - accepted.len();
-                self.approximate_from = None;
-            }
+            self.snapshots.retain(|(n, _)| *n <= at);
+            let (start, from) = match self.snapshots.last() {
+                Some((n, tr)) => (*n, tr.clone()),
+                None => (0, self.base.clone()),
+            };
+            self.head = from;
+            self.feed(start, &mut out)?;
+            out.replayed = self.window.len() - start - accepted.len();
         }
         self.advance(accepted[accepted.len() - 1].t);
-        if self.approximate_from.is_none() {
-            self.snapshots.push((self.window.len(), self.head.clone()));
-        }
+        self.snapshots.push((self.window.len(), self.head.clone()));
         self.commit()?;
         out.bounded_horizon = self.bound()?;
+        if let LatePolicy::Auto { max_replay } = self.policy
+            && self.window.len() > max_replay as usize
+        {
+            // No late plot can be replayed within the bound now: the next
+            // one is retrodicted, and so is every one after it.
+            self.drop_window()?;
+            self.refresh_picture(&mut out)?;
+            return Ok(out);
+        }
         self.thin();
         self.refresh_picture(&mut out)?;
         Ok(out)
+    }
+
+    /// Keeps no plots and no base from here on (as under
+    /// [`LatePolicy::Retrodict`]: `base` a tracker of the configuration
+    /// without frames); the head takes late plots by retrodiction.
+    fn drop_window(&mut self) -> Result<(), AlgoError> {
+        self.past_bound = true;
+        self.window = Vec::new();
+        self.snapshots = Vec::new();
+        self.base = Tracker::new(self.head.config().clone())?;
+        self.head.set_out_of_sequence(true);
+        Ok(())
     }
 
     /// [`LagWindow::push`] under [`LatePolicy::Retrodict`]: the accepted
@@ -565,7 +635,7 @@ impl LagWindow {
         let cut =
             start + self.window[start..].partition_point(|p| p.t <= newest - RECENT_SNAPSHOT_S);
         let mut from = start;
-        if cut > start && cut < self.window.len() && self.approximate_from.is_none() {
+        if cut > start && cut < self.window.len() {
             let report = self.head.process(&self.window[start..cut])?;
             out.add(report);
             self.snapshots.push((cut, self.head.clone()));
@@ -593,15 +663,7 @@ impl LagWindow {
             self.window.drain(..n);
             self.snapshots = kept.into_iter().map(|(m, t)| (m - n, t)).collect();
         }
-        // Without snapshots to adopt (an approximate head takes none) the
-        // base follows the horizon push by push, not a lag at a time (a
-        // lag's plots at once is a spike of a replay's size).
-        let behind = if self.approximate_from.is_some() {
-            h
-        } else {
-            h - self.max_lag
-        };
-        if self.window.first().is_some_and(|p| p.t < behind) {
+        if self.window.first().is_some_and(|p| p.t < h - self.max_lag) {
             self.feed_base_before(h)?;
         }
         Ok(())

@@ -2,8 +2,11 @@
 //! within a lag (`algo::tracking::window`).
 //!
 //! Layout (after the magic `RFLW` and a `u32` format version):
-//! - format 3 (this release): format 2 with each plot's identity (Mode S,
-//!   Mode 3/A, Mode C, callsign: tracker format 6's plots);
+//! - format 3 (this release): format 2 with, under auto, whether the
+//!   window is past its bound (bool, after the bound) and then, past it,
+//!   no base and no plots (as under retrodiction), the approximate time
+//!   under reprocessing and auto either way; each plot with its identity
+//!   (Mode S, Mode 3/A, Mode C, callsign: tracker format 6's plots);
 //! - format 2: the policy (u8: 0 reprocessing, 1
 //!   retrodiction, 2 auto followed by its bound of replayed plots, u32),
 //!   then under reprocessing and auto format 1's fields and the time from
@@ -18,8 +21,9 @@
 //!
 //! The in-memory snapshots are not stored: a reprocessing window decoded
 //! elsewhere replays a late plot from its base. So the bytes grow with the
-//! lag (two trackers and the plots of the window) under reprocessing, and
-//! are one tracker's under retrodiction.
+//! lag (two trackers and the plots of the window) under reprocessing and
+//! auto within its bound, and are one tracker's under retrodiction and
+//! auto past its bound.
 
 use algo::tracking::{LagWindow, LagWindowParts, LatePolicy, Tracker};
 
@@ -42,9 +46,10 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
         LatePolicy::Auto { max_replay } => {
             w.u8(2);
             w.u32(max_replay);
+            w.bool(s.past_bound);
         }
     }
-    let plots = s.policy != LatePolicy::Retrodict;
+    let plots = s.policy != LatePolicy::Retrodict && !s.past_bound;
     w.f64(s.max_lag);
     if plots {
         w.bytes(&encode_tracker(s.base));
@@ -59,7 +64,7 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     w.opt(s.horizon, Writer::f64);
     w.opt(s.newest, Writer::f64);
     w.u64(s.late);
-    if plots {
+    if s.policy != LatePolicy::Retrodict {
         w.opt(s.approximate_from, Writer::f64);
     }
     w.buf
@@ -74,14 +79,16 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     }
     let mut r = Reader::new(&bytes[4..]);
     let version = r.u32()?;
-    let policy = match version {
-        1 => LatePolicy::Reprocess,
+    let (policy, past_bound) = match version {
+        1 => (LatePolicy::Reprocess, false),
         2 | 3 => match r.u8()? {
-            0 => LatePolicy::Reprocess,
-            1 => LatePolicy::Retrodict,
-            2 => LatePolicy::Auto {
-                max_replay: r.u32()?,
-            },
+            0 => (LatePolicy::Reprocess, false),
+            1 => (LatePolicy::Retrodict, false),
+            2 => {
+                let max_replay = r.u32()?;
+                let past_bound = version >= 3 && r.bool()?;
+                (LatePolicy::Auto { max_replay }, past_bound)
+            }
             other => return Err(corrupt(&format!("unknown late-plot policy {other}"))),
         },
         _ => return Err(corrupt(&format!("unknown lag window format {version}"))),
@@ -89,7 +96,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     // Format 3 stores plots with their identity (tracker format 6).
     let plot_format = if version >= 3 { 6 } else { 5 };
     let max_lag = r.f64()?;
-    let plots = policy != LatePolicy::Retrodict;
+    let plots = policy != LatePolicy::Retrodict && !past_bound;
     let (base, head, window) = if plots {
         let base = decode_tracker(&r.bytes()?)?;
         let head = decode_tracker(&r.bytes()?)?;
@@ -106,16 +113,17 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let horizon = r.opt(Reader::f64)?;
     let newest = r.opt(Reader::f64)?;
     let late = r.u64()?;
-    let approximate_from = if plots && version >= 2 {
-        r.opt(Reader::f64)?
-    } else {
-        None
+    let approximate_from = match version {
+        3 if policy != LatePolicy::Retrodict => r.opt(Reader::f64)?,
+        2 if plots => r.opt(Reader::f64)?,
+        _ => None,
     };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
     Ok(LagWindow::from_parts(LagWindowParts {
         policy,
+        past_bound,
         approximate_from,
         max_lag,
         base,
@@ -200,6 +208,40 @@ mod tests {
         assert_eq!(a.picture(), b.picture());
         // Smaller than a reprocessing window of the same plots (two
         // trackers and the plots).
+        let mut c = window();
+        c.push(first).unwrap();
+        c.push(&[late]).unwrap();
+        assert!(bytes.len() < encode_lag_window(&c).len());
+        a.push(rest).unwrap();
+        b.push(rest).unwrap();
+        assert_eq!(a.picture(), b.picture());
+        assert_eq!(a.counters(), b.counters());
+    }
+
+    /// Auto past its bound stores no plots and no base, and decodes to a
+    /// window that goes on as the original.
+    #[test]
+    fn an_auto_window_past_its_bound_round_trips_without_plots() {
+        let all = plots();
+        let (first, rest) = all.split_at(all.len() / 2);
+        assert!(first.len() > 4);
+        let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        let auto = LatePolicy::Auto { max_replay: 4 };
+        let mut a = LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, auto).unwrap();
+        a.push(first).unwrap();
+        assert!(a.past_bound());
+        assert_eq!((a.window_len(), a.approximate_from()), (0, None));
+        let mut late = first[first.len() - 4];
+        late.t -= 2.0;
+        a.push(&[late]).unwrap();
+        assert_eq!(a.approximate_from(), Some(late.t));
+        let bytes = encode_lag_window(&a);
+        let mut b = decode_lag_window(&bytes).unwrap();
+        assert_eq!(b.policy(), auto);
+        assert!(b.past_bound());
+        assert_eq!(a.to_parts(), b.to_parts());
+        assert_eq!(a.picture(), b.picture());
+        // Smaller than a reprocessing window of the same plots.
         let mut c = window();
         c.push(first).unwrap();
         c.push(&[late]).unwrap();

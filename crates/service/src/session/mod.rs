@@ -104,6 +104,26 @@ pub trait SessionKind: Sized + Send + 'static {
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<Self::Update, ServiceError>;
+    /// [`SessionKind::apply`] of a batch replayed from the log whose update
+    /// nobody reads (a later entry's replaces it): the same state after it,
+    /// bit for bit, but the update may leave out what only a client reads
+    /// (plot fusion: the tracks' views). The default applies it.
+    fn apply_unread(
+        &mut self,
+        batch: &Self::Batch,
+        limits: &Limits,
+        warnings: &mut Vec<String>,
+    ) -> Result<Self::Update, ServiceError> {
+        self.apply(batch, limits, warnings)
+    }
+    /// A copy of the stored state (what [`SessionKind::encode`] writes),
+    /// cheap enough to take on the request path (shared copy-on-write where
+    /// the state allows), so that a snapshot is encoded and written off it.
+    /// `None` (the default): the kind has none, and its snapshots are
+    /// encoded and written inline.
+    fn stored_copy(&self) -> Option<Self> {
+        None
+    }
     /// The update of a batch that changed nothing (the acknowledgement of an
     /// old duplicate): empty, but with the state's current counters.
     fn acknowledgement(&self) -> Self::Update;
@@ -504,9 +524,27 @@ impl<K: SessionKind> Envelope<K> {
         batch: &Batch<K::Batch>,
         limits: &Limits,
     ) -> Result<Update<K::Update>, ServiceError> {
+        self.apply_as(id, batch, limits, true)
+    }
+
+    /// [`Envelope::apply`]; with `read` false the update (and so the kept
+    /// one) may lack what only a client reads ([`SessionKind::apply_unread`]):
+    /// for log entries a later one follows.
+    fn apply_as(
+        &mut self,
+        id: &str,
+        batch: &Batch<K::Batch>,
+        limits: &Limits,
+        read: bool,
+    ) -> Result<Update<K::Update>, ServiceError> {
         K::check_size(&batch.body, limits)?;
         let mut warnings = Vec::new();
-        let body = self.state.apply(&batch.body, limits, &mut warnings)?;
+        let body = if read {
+            self.state.apply(&batch.body, limits, &mut warnings)?
+        } else {
+            self.state
+                .apply_unread(&batch.body, limits, &mut warnings)?
+        };
         if batch.sequence.is_some() {
             self.last_sequence = batch.sequence;
         } else if let Some(f) = K::fingerprint(&batch.body) {
@@ -590,10 +628,27 @@ impl<K: SessionKind> Envelope<K> {
         })
     }
 
+    /// A copy of the session as stored ([`SessionKind::stored_copy`]), to
+    /// encode off the request path; `None` when the kind has none.
+    pub fn stored_copy(&self) -> Option<Self> {
+        Some(Self {
+            state: self.state.stored_copy()?,
+            created_unix_ms: self.created_unix_ms,
+            idle_expiry_s: self.idle_expiry_s,
+            last_sequence: self.last_sequence,
+            batches: self.batches,
+            last_update: self.last_update.clone(),
+            recent: self.recent.clone(),
+        })
+    }
+
     /// Applies a log entry (a batch the serving replica applied to this
     /// state, with its limits): the same state as that replica's after it.
     /// An entry that does not read or apply is a corrupt stored session.
-    pub fn replay(&mut self, id: &str, entry: &[u8]) -> Result<(), ServiceError> {
+    /// `last`: no later entry follows, so the kept update is built whole
+    /// (for the others it is replaced, and what only a client reads of it
+    /// is not built).
+    pub fn replay(&mut self, id: &str, entry: &[u8], last: bool) -> Result<(), ServiceError> {
         let bad = |e: String| ServiceError::Internal(format!("stored session: log entry: {e}"));
         let mut r = Reader::new(entry);
         let format = r.u8().map_err(|e| bad(e.to_string()))?;
@@ -615,7 +670,7 @@ impl<K: SessionKind> Envelope<K> {
         if !r.is_empty() {
             return Err(bad("trailing bytes".into()));
         }
-        self.apply(id, &batch, &limits)
+        self.apply_as(id, &batch, &limits, last)
             .map_err(|e| bad(format!("did not apply again: {e}")))?;
         // What a batch marks for watchers went out when it was applied.
         self.state.take_marks();

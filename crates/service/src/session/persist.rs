@@ -10,7 +10,10 @@
 
 use std::{
     collections::{BTreeMap, VecDeque},
-    sync::Arc,
+    sync::{
+        Arc, Mutex,
+        atomic::{AtomicUsize, Ordering},
+    },
     time::{Duration, Instant, SystemTime, UNIX_EPOCH},
 };
 
@@ -29,7 +32,9 @@ use super::{
     stored_kind, tag_name,
 };
 use crate::{ServiceError, offload};
-use store::{CasOutcome, Expected, SessionMeta, SessionStore, StoreError, Stored, Write};
+use store::{
+    CasOutcome, Compacted, Expected, SessionMeta, SessionStore, StoreError, Stored, Write,
+};
 
 /// How many times a push re-reads the session after losing a race.
 const MAX_ATTEMPTS: usize = 32;
@@ -41,41 +46,131 @@ pub struct Sessions {
     events: Arc<EventHub>,
     gauges: RadarGauges,
     snapshots: SnapshotPolicy,
+    background: Arc<InFlight>,
+    #[cfg(test)]
+    faults: Arc<tests::Faults>,
 }
 
-/// When a push stores the whole session (a snapshot) rather than its batch
-/// (a log entry): a session is stored as a snapshot and the batches applied
-/// since, so a write costs what the batch carries, and a replica that
-/// reads the session replays at most `max_entries` batches.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Background snapshots in flight.
+#[derive(Default)]
+struct InFlight {
+    running: AtomicUsize,
+    done: tokio::sync::Notify,
+}
+
+/// One background snapshot in flight, until dropped.
+struct InFlightGuard(Arc<InFlight>);
+
+impl InFlight {
+    fn enter(self: &Arc<Self>) -> InFlightGuard {
+        self.running.fetch_add(1, Ordering::SeqCst);
+        InFlightGuard(Arc::clone(self))
+    }
+
+    async fn settled(&self) {
+        loop {
+            let done = self.done.notified();
+            tokio::pin!(done);
+            done.as_mut().enable();
+            if self.running.load(Ordering::SeqCst) == 0 {
+                return;
+            }
+            done.await;
+        }
+    }
+}
+
+impl Drop for InFlightGuard {
+    fn drop(&mut self) {
+        if self.0.running.fetch_sub(1, Ordering::SeqCst) == 1 {
+            self.0.done.notify_waiters();
+        }
+    }
+}
+
+/// When a push also stores the whole session (a snapshot): a session is
+/// stored as a snapshot and the batches applied since, so a write costs
+/// what the batch carries, and a replica that reads the session replays
+/// the log. A batch's entry is always written inline; a snapshot that
+/// falls due is encoded from a copy of the state and written off the
+/// request path, in place of the entries up to its version
+/// ([`SessionStore::compact`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SnapshotPolicy {
     /// Most log entries after a snapshot (`--session-snapshot-batches`);
-    /// 1 stores a snapshot every batch. A snapshot is also written once the
+    /// 1: a snapshot after every batch. A snapshot is also due once the
     /// log holds as many bytes as the snapshot.
     pub max_entries: usize,
+    /// A snapshot is also due once replaying the log would take this long
+    /// (s; the time this replica took to apply its batches)
+    /// (`--session-snapshot-replay-s`), so that a replica taking the
+    /// session over replays about this much at most; 0: no such bound...
+    pub max_replay_s: f64,
+    /// ...but a snapshot due by replay time waits until the log holds at
+    /// least the snapshot's bytes divided by this, so that snapshots add
+    /// at most this many times the log's own bytes to what is written.
+    pub max_write_amplification: f64,
 }
 
 impl Default for SnapshotPolicy {
     fn default() -> Self {
         Self {
             max_entries: DEFAULT_SNAPSHOT_BATCHES,
+            max_replay_s: DEFAULT_SNAPSHOT_REPLAY_S,
+            max_write_amplification: DEFAULT_SNAPSHOT_AMPLIFICATION,
         }
     }
 }
 
 /// Default [`SnapshotPolicy::max_entries`]: at 4,000 aircraft under four
-/// radars in 1-s batches (a 11.5 MB snapshot, 0.25 MB of plots a batch)
-/// about 0.6 MB written a batch on average, and at most 32 batches (128k
-/// plots, about a second) to replay on a takeover.
+/// radars in 1-s batches (a 6–12 MB snapshot, 0.25 MB of plots a batch)
+/// the bytes bound (the log as large as the snapshot) acts first.
 pub const DEFAULT_SNAPSHOT_BATCHES: usize = 32;
 
+/// Default [`SnapshotPolicy::max_replay_s`]: with the fetch and decode of
+/// the snapshot, a takeover within about a second.
+pub const DEFAULT_SNAPSHOT_REPLAY_S: f64 = 0.5;
+
+/// Default [`SnapshotPolicy::max_write_amplification`]: snapshots due by
+/// replay time add at most three times the log's bytes (at 4,000 aircraft,
+/// 0.25 MB of plots a batch: at most 1 MB written a batch on average).
+pub const DEFAULT_SNAPSHOT_AMPLIFICATION: f64 = 3.0;
+
 /// The shape of a session as stored: its snapshot's bytes and the log after
-/// it.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// it, with what replaying the log costs, and the snapshot being written
+/// off the request path, if any.
+#[derive(Debug, Clone, Default)]
 struct LogShape {
     snapshot_bytes: usize,
     entries: usize,
     log_bytes: usize,
+    /// Seconds this replica took to apply the log's batches.
+    replay_s: f64,
+    /// A snapshot encoded and written in the background.
+    pending: Option<Pending>,
+}
+
+/// A snapshot on its way to the store: the log as it was at its version
+/// (what it replaces when it lands) and where its outcome arrives.
+#[derive(Debug, Clone)]
+struct Pending {
+    entries: usize,
+    log_bytes: usize,
+    replay_s: f64,
+    landing: Arc<Mutex<Landing>>,
+}
+
+/// The outcome of a background snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Landing {
+    Writing,
+    /// In the store, `bytes` long, in place of the log up to its version.
+    Landed {
+        bytes: usize,
+    },
+    /// Not written (an error, or the log no longer holds its version):
+    /// the log still holds every batch; the next batch may try again.
+    Failed,
 }
 
 impl LogShape {
@@ -84,6 +179,8 @@ impl LogShape {
             snapshot_bytes: stored.data.len(),
             entries: stored.log.len(),
             log_bytes: stored.log_bytes(),
+            replay_s: 0.0,
+            pending: None,
         }
     }
 
@@ -91,12 +188,40 @@ impl LogShape {
         self.snapshot_bytes + self.log_bytes
     }
 
-    /// Whether an entry of `len` bytes goes to the log (else a snapshot).
-    fn takes(&self, len: usize, policy: SnapshotPolicy) -> bool {
-        self.entries + 1 < policy.max_entries.max(1) && self.log_bytes + len < self.snapshot_bytes
+    /// Takes in the outcome of a background snapshot that has one.
+    fn settle(&mut self) {
+        let Some(p) = &self.pending else { return };
+        let landing = *p.landing.lock().unwrap_or_else(|e| e.into_inner());
+        match landing {
+            Landing::Writing => {}
+            Landing::Landed { bytes } => {
+                self.snapshot_bytes = bytes;
+                self.entries -= p.entries;
+                self.log_bytes -= p.log_bytes;
+                self.replay_s = (self.replay_s - p.replay_s).max(0.0);
+                self.pending = None;
+            }
+            Landing::Failed => self.pending = None,
+        }
     }
 
-    fn wrote(&mut self, write: &Write) {
+    /// Whether a snapshot is due after the log has grown (none being
+    /// written already).
+    fn snapshot_due(&self, policy: SnapshotPolicy) -> bool {
+        if self.pending.is_some() || self.entries == 0 {
+            return false;
+        }
+        let by_replay = policy.max_replay_s > 0.0
+            && self.replay_s >= policy.max_replay_s
+            && self.log_bytes as f64 * policy.max_write_amplification.max(0.0)
+                >= self.snapshot_bytes as f64;
+        self.entries >= policy.max_entries.max(1)
+            || self.log_bytes >= self.snapshot_bytes
+            || by_replay
+    }
+
+    /// Counts a write made inline.
+    fn wrote(&mut self, write: &Write, replay_s: f64) {
         match write {
             Write::Snapshot(d) => {
                 *self = Self {
@@ -107,8 +232,22 @@ impl LogShape {
             Write::Append(e) => {
                 self.entries += 1;
                 self.log_bytes += e.len();
+                self.replay_s += replay_s;
             }
         }
+    }
+
+    /// Marks a background snapshot of the session as it is now (the log
+    /// as it is now is what it replaces).
+    fn snapshot_now(&mut self) -> Arc<Mutex<Landing>> {
+        let landing = Arc::new(Mutex::new(Landing::Writing));
+        self.pending = Some(Pending {
+            entries: self.entries,
+            log_bytes: self.log_bytes,
+            replay_s: self.replay_s,
+            landing: Arc::clone(&landing),
+        });
+        landing
     }
 }
 
@@ -124,18 +263,35 @@ impl<K: SessionKind> Hot<K> {
     /// The stored session, decoded: its snapshot, then every log entry
     /// applied again (exactly the state of the replica that wrote them).
     fn read(id: &str, stored: &Stored) -> Result<Self, DecodeError> {
+        let started = Instant::now();
         let mut session = Envelope::<K>::decode(&stored.data)?;
-        for entry in &stored.log {
-            session.replay(id, entry)?;
+        let decoded = started.elapsed();
+        for (i, entry) in stored.log.iter().enumerate() {
+            session.replay(id, entry, i + 1 == stored.log.len())?;
         }
+        let replayed = started.elapsed() - decoded;
+        metrics::histogram!("fusion_session_read_seconds", "step" => "decode")
+            .record(decoded.as_secs_f64());
         if !stored.log.is_empty() {
             metrics::counter!("fusion_session_replayed_batches_total")
                 .increment(stored.log.len() as u64);
+            metrics::histogram!("fusion_session_read_seconds", "step" => "replay")
+                .record(replayed.as_secs_f64());
         }
+        tracing::debug!(
+            session = id,
+            snapshot_bytes = stored.data.len(),
+            entries = stored.log.len(),
+            decode_ms = decoded.as_secs_f64() * 1e3,
+            replay_ms = replayed.as_secs_f64() * 1e3,
+            "read a stored session"
+        );
+        let mut shape = LogShape::of(stored);
+        shape.replay_s = replayed.as_secs_f64();
         Ok(Self {
             session,
             token: stored.token,
-            shape: LogShape::of(stored),
+            shape,
         })
     }
 }
@@ -255,6 +411,9 @@ impl Sessions {
             events,
             gauges: RadarGauges::default(),
             snapshots: SnapshotPolicy::default(),
+            background: Arc::default(),
+            #[cfg(test)]
+            faults: Arc::default(),
         }
     }
 
@@ -332,9 +491,37 @@ impl Sessions {
     }
 
     /// A session of any kind.
+    ///
+    /// The decoded session is kept in the cache (as a push keeps it): a
+    /// replica that attaches a stream to a session another replica served
+    /// reads and replays it once, not again for the first batch.
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
         let stored = self.read(tenant, id).await?;
-        any_view(id, stored).await
+        let (version, bytes) = (stored.version, stored.bytes());
+        let id2 = id.to_string();
+        let (view, hot) = offload(move || {
+            let tag = stored_kind(&stored.data)?;
+            match KindName::from_tag(tag) {
+                Some(KindName::Correlation) => {
+                    let (v, hot) = view_and_hot::<CorrelationSession>(&id2, &stored)?;
+                    Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
+                }
+                Some(KindName::PlotFusion) => {
+                    let (v, hot) = view_and_hot::<PlotFusionSession>(&id2, &stored)?;
+                    Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
+                }
+                None => Err(ServiceError::Internal(format!(
+                    "stored session: {} is not served by this release",
+                    tag_name(tag)
+                ))),
+            }
+        })
+        .await?;
+        match hot {
+            AnyHot::Correlation(h) => self.cache.put(tenant, id, version, bytes, h),
+            AnyHot::PlotFusion(h) => self.cache.put(tenant, id, version, bytes, h),
+        }
+        Ok(view)
     }
 
     /// A session known to be of kind `K`; another kind is an error naming it.
@@ -364,10 +551,11 @@ impl Sessions {
     /// The stored session `id`, or 404.
     async fn read(&self, tenant: &str, id: &str) -> Result<Stored, ServiceError> {
         check_id(id)?;
-        self.store
-            .get(tenant, id)
-            .await?
-            .ok_or_else(|| not_found(id))
+        let started = Instant::now();
+        let stored = self.store.get(tenant, id).await?;
+        metrics::histogram!("fusion_session_read_seconds", "step" => "fetch")
+            .record(started.elapsed().as_secs_f64());
+        stored.ok_or_else(|| not_found(id))
     }
 
     pub async fn list(&self, tenant: &str) -> Result<Vec<SessionMeta>, ServiceError> {
@@ -434,20 +622,39 @@ impl Sessions {
                 {
                     Admission::Duplicate(ack) => Ok(Err((ack, hot))),
                     Admission::Apply => {
+                        let started = Instant::now();
                         let update = hot.session.apply(&id2, &batch2, &limits)?;
+                        let cost = started.elapsed().as_secs_f64();
                         let marks = hot.session.state.take_marks();
-                        let write = match Envelope::<K>::encode_entry(&batch2, &limits)
-                            .filter(|e| hot.shape.takes(e.len(), policy))
-                        {
-                            Some(entry) => Write::Append(entry),
-                            None => Write::Snapshot(hot.session.encode()),
+                        hot.shape.settle();
+                        // The batch's entry inline; a snapshot that falls
+                        // due after it is encoded from a copy and written
+                        // in the background, once the entry is stored. A
+                        // kind without entries or copies stores snapshots
+                        // inline, as before the log.
+                        let entry = Envelope::<K>::encode_entry(&batch2, &limits);
+                        let (write, copy) = match entry {
+                            Some(entry) => {
+                                let mut after = hot.shape.clone();
+                                after.wrote(&Write::Append(Vec::new()), cost);
+                                after.log_bytes += entry.len();
+                                if after.snapshot_due(policy) {
+                                    match hot.session.stored_copy() {
+                                        Some(copy) => (Write::Append(entry), Some(copy)),
+                                        None => (Write::Snapshot(hot.session.encode()), None),
+                                    }
+                                } else {
+                                    (Write::Append(entry), None)
+                                }
+                            }
+                            None => (Write::Snapshot(hot.session.encode()), None),
                         };
-                        Ok(Ok((update, write, hot, marks)))
+                        Ok(Ok((update, write, hot, marks, copy, cost)))
                     }
                 }
             })
             .await;
-            let (mut update, write, mut hot, marks) = match worked {
+            let (mut update, write, mut hot, marks, copy, cost) = match worked {
                 // A cached copy may be behind the store: only a successful
                 // compare-and-set proves it current, so anything else it
                 // says (a duplicate, a gap, an error) is asked again of a
@@ -481,7 +688,7 @@ impl Sessions {
                 Write::Append(_) => "log",
             };
             let written = write.len();
-            hot.shape.wrote(&write);
+            hot.shape.wrote(&write, cost);
             let expected = Expected {
                 version,
                 token: Some(hot.token),
@@ -499,6 +706,11 @@ impl Sessions {
                         .increment(written as u64);
                     update.version = version;
                     hot.token = token;
+                    if let Some(copy) = copy {
+                        let landing = hot.shape.snapshot_now();
+                        self.snapshot_in_background(tenant, id, version, token, copy, landing)
+                            .await;
+                    }
                     let bytes = hot.shape.bytes();
                     self.cache.put(tenant, id, version, bytes, hot);
                     self.gauges
@@ -527,6 +739,107 @@ impl Sessions {
         Err(ServiceError::Unavailable(format!(
             "session '{id}' is being changed by too many writers at once; retry shortly"
         )))
+    }
+
+    /// Encodes `copy` (the session at `version`, made by the write with
+    /// `token`) and writes it in place of the log up to that version, off
+    /// the request path; the outcome goes to `landing`, where the next
+    /// batch finds it. A snapshot that fails loses nothing (the log holds
+    /// every batch) and is counted and logged
+    /// (`fusion_session_snapshots_total{outcome}`).
+    async fn snapshot_in_background<K: SessionKind>(
+        &self,
+        tenant: &str,
+        id: &str,
+        version: u64,
+        token: u64,
+        copy: Envelope<K>,
+        landing: Arc<Mutex<Landing>>,
+    ) {
+        let store = Arc::clone(&self.store);
+        let guard = self.background.enter();
+        #[cfg(test)]
+        let faults = Arc::clone(&self.faults);
+        let (tenant, id) = (tenant.to_string(), id.to_string());
+        let work = async move {
+            let _guard = guard;
+            let encoded = match tokio::runtime::Handle::try_current() {
+                Ok(h) => h.spawn_blocking(move || copy.encode()).await,
+                Err(_) => Ok(copy.encode()),
+            };
+            let outcome = match encoded {
+                Ok(data) => {
+                    let bytes = data.len();
+                    let at = Expected {
+                        version,
+                        token: Some(token),
+                    };
+                    #[cfg(test)]
+                    let injected = faults.before_write().await;
+                    #[cfg(not(test))]
+                    let injected: Result<(), String> = Ok(());
+                    match injected {
+                        Ok(()) => store
+                            .compact(&tenant, &id, at, data)
+                            .await
+                            .map(|c| (c, bytes))
+                            .map_err(|e| e.to_string()),
+                        Err(e) => Err(e),
+                    }
+                }
+                Err(e) => Err(format!("the encoding task failed: {e}")),
+            };
+            let result = match outcome {
+                Ok((Compacted::Stored, bytes)) => {
+                    metrics::counter!("fusion_session_snapshots_total", "outcome" => "stored")
+                        .increment(1);
+                    metrics::counter!("fusion_session_writes_total", "write" => "snapshot")
+                        .increment(1);
+                    metrics::counter!("fusion_session_written_bytes_total", "write" => "snapshot")
+                        .increment(bytes as u64);
+                    Landing::Landed { bytes }
+                }
+                Ok((Compacted::Stale | Compacted::Missing, _)) => {
+                    metrics::counter!("fusion_session_snapshots_total", "outcome" => "stale")
+                        .increment(1);
+                    tracing::debug!(
+                        session = %id,
+                        version,
+                        "a background snapshot was not written: the log no longer holds its \
+                         version"
+                    );
+                    Landing::Failed
+                }
+                Err(e) => {
+                    metrics::counter!("fusion_session_snapshots_total", "outcome" => "failed")
+                        .increment(1);
+                    tracing::warn!(
+                        session = %id,
+                        version,
+                        error = %e,
+                        "a background snapshot failed; the session's log still holds every \
+                         batch, and a later batch writes another"
+                    );
+                    Landing::Failed
+                }
+            };
+            *landing.lock().unwrap_or_else(|e| e.into_inner()) = result;
+        };
+        match tokio::runtime::Handle::try_current() {
+            Ok(handle) => {
+                handle.spawn(work);
+            }
+            // Outside tokio (a lane's `block_on`; not a path of the
+            // service's sessions): before the reply.
+            Err(_) => work.await,
+        }
+    }
+
+    /// Waits until every snapshot this replica is writing in the
+    /// background has landed or failed (the tests, and the load example
+    /// before it reads the bytes written).
+    pub async fn snapshots_settled(&self) {
+        self.background.settled().await;
     }
 
     /// Whether a committed change of the session is announced: always over
@@ -801,6 +1114,30 @@ async fn any_view(id: &str, stored: Stored) -> Result<AnyView, ServiceError> {
     .await
 }
 
+/// A decoded session of any kind this release serves (one at a time, on
+/// its way into the cache: the variants' sizes do not matter).
+#[allow(clippy::large_enum_variant)]
+enum AnyHot {
+    Correlation(Hot<CorrelationSession>),
+    PlotFusion(Hot<PlotFusionSession>),
+}
+
+fn view_and_hot<K: SessionKind>(
+    id: &str,
+    stored: &Stored,
+) -> Result<(View<K::View>, Hot<K>), ServiceError> {
+    let hot = Hot::<K>::read(id, stored).map_err(|e| match e {
+        DecodeError::WrongKind { stored } => ServiceError::NotFound(format!(
+            "session '{id}' is a {} session, not {}",
+            tag_name(stored),
+            K::NAME
+        )),
+        DecodeError::Other(e) => e,
+    })?;
+    let view = hot.session.view(id, stored.version, stored.bytes())?;
+    Ok((view, hot))
+}
+
 fn view_of<K: SessionKind>(id: &str, stored: &Stored) -> Result<View<K::View>, ServiceError> {
     let hot = Hot::<K>::read(id, stored).map_err(|e| match e {
         DecodeError::WrongKind { stored } => ServiceError::NotFound(format!(
@@ -828,6 +1165,52 @@ mod tests {
 
     const TENANT: &str = "t";
 
+    /// Faults a test puts in the way of background snapshots: a gate they
+    /// wait at before writing (open unless a test closes it), and a
+    /// failure in place of the write.
+    pub(super) struct Faults {
+        gate: tokio::sync::Semaphore,
+        fail: std::sync::atomic::AtomicBool,
+    }
+
+    impl Default for Faults {
+        fn default() -> Self {
+            Self {
+                gate: tokio::sync::Semaphore::new(tokio::sync::Semaphore::MAX_PERMITS),
+                fail: Default::default(),
+            }
+        }
+    }
+
+    impl Faults {
+        pub(super) async fn before_write(&self) -> Result<(), String> {
+            let _pass = self.gate.acquire().await.map_err(|e| e.to_string())?;
+            if self.fail.load(Ordering::SeqCst) {
+                Err("a write failure put in by the test".into())
+            } else {
+                Ok(())
+            }
+        }
+    }
+
+    /// Sessions whose background snapshots wait at a closed gate until
+    /// [`open`] (and fail there when `fail`).
+    async fn gated(max_entries: usize, fail: bool) -> Sessions {
+        let mut sessions = memory(max_entries).await;
+        sessions.faults = Arc::new(Faults {
+            gate: tokio::sync::Semaphore::new(0),
+            fail: fail.into(),
+        });
+        sessions
+    }
+
+    fn open(sessions: &Sessions) {
+        sessions
+            .faults
+            .gate
+            .add_permits(tokio::sync::Semaphore::MAX_PERMITS >> 4);
+    }
+
     async fn memory(max_entries: usize) -> Sessions {
         let store = SessionStore::connect(&StoreSettings {
             url: "memory".into(),
@@ -841,7 +1224,13 @@ mod tests {
         })
         .await
         .unwrap();
-        Sessions::new(store, 1 << 26).with_snapshots(SnapshotPolicy { max_entries })
+        // No bound by replay time: the cadence is by entries and bytes
+        // only, so the tests' logs are known in advance.
+        Sessions::new(store, 1 << 26).with_snapshots(SnapshotPolicy {
+            max_entries,
+            max_replay_s: 0.0,
+            ..SnapshotPolicy::default()
+        })
     }
 
     /// Pushes `chunks` of plots in turn; after each, a replica that reads
@@ -860,10 +1249,25 @@ mod tests {
         late_plots: Option<&str>,
         max_replay_plots: Option<u32>,
     ) -> Vec<usize> {
+        let id = new_session(sessions, late_plots, max_replay_plots).await;
+        let mut logs = Vec::new();
+        for (i, chunk) in chunks.iter().enumerate() {
+            push_chunk(sessions, &id, i, chunk).await;
+            sessions.snapshots_settled().await;
+            logs.push(check_replica(sessions, &id, i).await);
+        }
+        logs
+    }
+
+    async fn new_session(
+        sessions: &Sessions,
+        late_plots: Option<&str>,
+        max_replay_plots: Option<u32>,
+    ) -> String {
         let mut body = spec();
         body.tracker.late_plots = late_plots.map(str::to_string);
         body.tracker.max_replay_plots = max_replay_plots;
-        let created = sessions
+        sessions
             .create::<PlotFusionSession>(
                 TENANT,
                 Spec {
@@ -872,60 +1276,80 @@ mod tests {
                 },
             )
             .await
-            .unwrap();
-        let id = created.id;
+            .unwrap()
+            .id
+    }
+
+    /// Pushes `chunk` as batch `i + 1`; its version.
+    async fn push_chunk(sessions: &Sessions, id: &str, i: usize, chunk: &[PlotInput]) -> u64 {
         let limits = Limits {
             max_tracks: 100,
             max_batch_reports: 1000,
         };
-        let mut logs = Vec::new();
-        for (i, chunk) in chunks.iter().enumerate() {
-            let batch = Batch {
-                sequence: Some(i as u64 + 1),
-                body: BatchInput {
-                    plots: chunk.clone(),
-                    ..Default::default()
-                },
+        let batch = Batch {
+            sequence: Some(i as u64 + 1),
+            body: BatchInput {
+                plots: chunk.to_vec(),
+                ..Default::default()
+            },
+        };
+        sessions
+            .push::<PlotFusionSession>(TENANT, id, batch, limits)
+            .await
+            .unwrap()
+            .version
+    }
+
+    /// A replica that reads the store now (the snapshot, then the log
+    /// replayed) must hold the state of the replica that served the
+    /// batches, byte for byte, and know the store's shape as it does
+    /// (once it has taken in a snapshot that landed). The log's length.
+    async fn check_replica(sessions: &Sessions, id: &str, i: usize) -> usize {
+        let stored = sessions.store().get(TENANT, id).await.unwrap().unwrap();
+        let (version, mut serving) = sessions
+            .cache
+            .take::<Hot<PlotFusionSession>>(TENANT, id)
+            .unwrap();
+        assert_eq!(version, stored.version);
+        let rebuilt = Hot::<PlotFusionSession>::read(id, &stored).unwrap();
+        // The same picture, tracks, covariances, counters and kept
+        // update, bit for bit. The stored bytes may differ in where
+        // the lag window's base lies: the serving replica moves it to
+        // checkpoints it keeps in memory only, a rebuilt one by
+        // processing the plots, which by the tracker's streaming rule
+        // gives the same tracker (the window then holds more plots).
+        // So may the work a late plot costs: an update's `frames`
+        // counts the frames processed again, from the nearest
+        // checkpoint.
+        let view = |h: &Hot<PlotFusionSession>| h.session.view(id, 0, 0).unwrap();
+        assert_eq!(view(&rebuilt), view(&serving), "batch {i}");
+        let kept = |h: &Hot<PlotFusionSession>| {
+            h.session.last_update.clone().map(|mut k| {
+                k.body.frames = 0;
+                k
+            })
+        };
+        assert_eq!(kept(&rebuilt), kept(&serving), "batch {i}");
+        let settled = serving
+            .shape
+            .pending
+            .as_ref()
+            .is_none_or(|p| *p.landing.lock().unwrap() != Landing::Writing);
+        serving.shape.settle();
+        if settled {
+            let shape = |h: &Hot<PlotFusionSession>| {
+                (
+                    h.token,
+                    h.shape.snapshot_bytes,
+                    h.shape.entries,
+                    h.shape.log_bytes,
+                )
             };
-            let update = sessions
-                .push::<PlotFusionSession>(TENANT, &id, batch, limits)
-                .await
-                .unwrap();
-            let stored = sessions.store().get(TENANT, &id).await.unwrap().unwrap();
-            assert_eq!(stored.version, update.version);
-            let (version, serving) = sessions
-                .cache
-                .take::<Hot<PlotFusionSession>>(TENANT, &id)
-                .unwrap();
-            assert_eq!(version, stored.version);
-            let rebuilt = Hot::<PlotFusionSession>::read(&id, &stored).unwrap();
-            // The same picture, tracks, covariances, counters and kept
-            // update, bit for bit. The stored bytes may differ in where
-            // the lag window's base lies: the serving replica moves it to
-            // checkpoints it keeps in memory only, a rebuilt one by
-            // processing the plots, which by the tracker's streaming rule
-            // gives the same tracker (the window then holds more plots).
-            // So may the work a late plot costs: an update's `frames`
-            // counts the frames processed again, from the nearest
-            // checkpoint.
-            let view = |h: &Hot<PlotFusionSession>| h.session.view(&id, 0, 0).unwrap();
-            assert_eq!(view(&rebuilt), view(&serving), "batch {i}");
-            let kept = |h: &Hot<PlotFusionSession>| {
-                h.session.last_update.clone().map(|mut k| {
-                    k.body.frames = 0;
-                    k
-                })
-            };
-            assert_eq!(kept(&rebuilt), kept(&serving), "batch {i}");
-            assert_eq!(
-                (rebuilt.token, rebuilt.shape),
-                (serving.token, serving.shape)
-            );
-            logs.push(stored.log.len());
-            let bytes = serving.shape.bytes();
-            sessions.cache.put(TENANT, &id, version, bytes, serving);
+            assert_eq!(shape(&rebuilt), shape(&serving), "batch {i}");
         }
-        logs
+        let bytes = serving.shape.bytes();
+        sessions.cache.put(TENANT, id, version, bytes, serving);
+        stored.log.len()
     }
 
     #[tokio::test]
@@ -976,5 +1400,122 @@ mod tests {
         // others replay; the decisions are the stored state's, so the
         // replicas agree.
         serve_and_rebuild_with(&memory(4).await, &swapped, None, Some(2)).await;
+    }
+
+    /// While a snapshot is being written a reader finds the snapshot
+    /// before it and the whole log, and after it lands the new snapshot
+    /// and the entries after its version: the serving replica's state
+    /// either way. A snapshot every 4 batches (4 entries): version k + 1
+    /// is batch k's.
+    #[tokio::test]
+    async fn a_reader_during_a_background_snapshot_finds_the_state_whole() {
+        let chunks: Vec<Vec<PlotInput>> = plots().chunks(4).map(<[_]>::to_vec).collect();
+        assert!(chunks.len() >= 7);
+        let sessions = gated(4, false).await;
+        let id = new_session(&sessions, None, None).await;
+        // Batches 1–4: the fourth entry makes a snapshot due; it waits at
+        // the gate, so the store holds the creation's snapshot and 4
+        // entries.
+        for (i, chunk) in chunks[..4].iter().enumerate() {
+            push_chunk(&sessions, &id, i, chunk).await;
+            assert_eq!(check_replica(&sessions, &id, i).await, i + 1);
+        }
+        // Batch 5 while it waits: one snapshot at a time, the log grows.
+        push_chunk(&sessions, &id, 4, &chunks[4]).await;
+        assert_eq!(check_replica(&sessions, &id, 4).await, 5);
+        // It lands: the state at version 5 (batch 4), entry 6 (batch 5)
+        // kept.
+        open(&sessions);
+        sessions.snapshots_settled().await;
+        assert_eq!(check_replica(&sessions, &id, 4).await, 1);
+        // Batches 6 and 7 follow it: 2 and 3 entries, no snapshot due.
+        for (i, chunk) in chunks.iter().enumerate().skip(5).take(2) {
+            push_chunk(&sessions, &id, i, chunk).await;
+            sessions.snapshots_settled().await;
+            assert_eq!(check_replica(&sessions, &id, i).await, i - 3);
+        }
+    }
+
+    /// A background snapshot that fails loses nothing: the log still
+    /// holds every batch, a replica reads the whole state from it, and the
+    /// next batch writes another snapshot.
+    #[tokio::test]
+    async fn a_failed_background_snapshot_leaves_the_session_whole() {
+        let chunks: Vec<Vec<PlotInput>> = plots().chunks(4).map(<[_]>::to_vec).collect();
+        assert!(chunks.len() >= 5);
+        let sessions = gated(4, true).await;
+        let id = new_session(&sessions, None, None).await;
+        for (i, chunk) in chunks[..4].iter().enumerate() {
+            push_chunk(&sessions, &id, i, chunk).await;
+        }
+        open(&sessions);
+        sessions.snapshots_settled().await;
+        // Failed: the creation's snapshot and the 4 entries.
+        assert_eq!(check_replica(&sessions, &id, 3).await, 4);
+        // Batch 5: 5 entries, a snapshot due again, and this one lands
+        // (at batch 5's version: no entry after it).
+        sessions.faults.fail.store(false, Ordering::SeqCst);
+        push_chunk(&sessions, &id, 4, &chunks[4]).await;
+        sessions.snapshots_settled().await;
+        assert_eq!(check_replica(&sessions, &id, 4).await, 0);
+    }
+
+    /// The cadence: a snapshot is due at `max_entries` entries, or once the
+    /// log holds the snapshot's bytes, or once its replay takes
+    /// `max_replay_s` provided the log holds a share (1 /
+    /// `max_write_amplification`) of the snapshot's bytes; never while one
+    /// is being written, nor with an empty log.
+    #[test]
+    fn a_snapshot_falls_due_by_entries_bytes_or_replay_time() {
+        let policy = SnapshotPolicy {
+            max_entries: 32,
+            max_replay_s: 0.5,
+            max_write_amplification: 3.0,
+        };
+        let shape = |entries: usize, log_bytes: usize, replay_s: f64| LogShape {
+            snapshot_bytes: 6_000,
+            entries,
+            log_bytes,
+            replay_s,
+            pending: None,
+        };
+        assert!(!shape(0, 0, 0.0).snapshot_due(policy));
+        assert!(!shape(31, 1_000, 0.1).snapshot_due(policy));
+        assert!(shape(32, 1_000, 0.1).snapshot_due(policy));
+        assert!(!shape(10, 5_999, 0.1).snapshot_due(policy));
+        assert!(shape(10, 6_000, 0.1).snapshot_due(policy));
+        // Replay time with a third of the snapshot's bytes: due; with
+        // less: not yet (snapshots would add more than 3× the log).
+        assert!(shape(4, 2_000, 0.5).snapshot_due(policy));
+        assert!(!shape(4, 1_999, 0.5).snapshot_due(policy));
+        assert!(!shape(4, 2_000, 0.49).snapshot_due(policy));
+        // No bound by time.
+        let untimed = SnapshotPolicy {
+            max_replay_s: 0.0,
+            ..policy
+        };
+        assert!(!shape(4, 2_000, 100.0).snapshot_due(untimed));
+        // One being written: none more.
+        let mut writing = shape(32, 6_000, 1.0);
+        let landing = writing.snapshot_now();
+        assert!(!writing.snapshot_due(policy));
+        // It lands at 4,000 bytes while 2 more entries (1,000 bytes,
+        // 0.2 s) were appended: they are the log now.
+        writing.wrote(&Write::Append(vec![0; 1_000]), 0.2);
+        writing.wrote(&Write::Append(Vec::new()), 0.0);
+        *landing.lock().unwrap() = Landing::Landed { bytes: 4_000 };
+        writing.settle();
+        assert!(writing.pending.is_none());
+        assert_eq!(
+            (writing.snapshot_bytes, writing.entries, writing.log_bytes),
+            (4_000, 2, 1_000)
+        );
+        assert!((writing.replay_s - 0.2).abs() < 1e-12);
+        // A failed one leaves the log as it is, and may be tried again.
+        let landing = writing.snapshot_now();
+        *landing.lock().unwrap() = Landing::Failed;
+        writing.settle();
+        assert!(writing.pending.is_none());
+        assert_eq!((writing.entries, writing.log_bytes), (2, 1_000));
     }
 }

@@ -259,6 +259,170 @@ impl PlotFusionSession {
     fn tracker(&self) -> &Tracker {
         self.window.picture()
     }
+
+    /// One batch; `views`: the update's track views are built (else it
+    /// carries none: [`SessionKind::apply_unread`]).
+    fn apply_with(
+        &mut self,
+        batch: &BatchInput,
+        limits: &Limits,
+        warnings: &mut Vec<String>,
+        views: bool,
+    ) -> Result<BatchUpdate, ServiceError> {
+        let config = self.tracker().config().clone();
+        let mut plots = self.network.plots(&batch.plots, &config, "plots")?;
+        let json_plots = plots.len();
+        let mut summary = None;
+        let mut offsets = Vec::new();
+        if let Some(a) = &batch.asterix {
+            let reference = self.window.newest().or(a.reference_t);
+            let clock = asterix::clock(a, "asterix", reference)?;
+            let from = asterix::plots(&self.network, &config, &a.data, clock, a.reception);
+            plots.extend(from.plots);
+            offsets = from.offsets;
+            warnings.extend(from.warnings);
+            summary = Some(from.summary);
+        }
+        let before: Vec<TrackOutput> = self
+            .last_tracks
+            .take()
+            .unwrap_or_else(|| self.tracker().tracks());
+        let biases_before = self.network.bias_views(self.tracker());
+        let horizon = self.window.horizon();
+        self.window.set_max_tracks(Some(limits.max_tracks));
+        let push = self.window.push(&plots).map_err(computation_error)?;
+        let late_json: Vec<usize> = push
+            .late
+            .iter()
+            .copied()
+            .filter(|&i| i < json_plots)
+            .collect();
+        if let Some(s) = summary.as_mut() {
+            s.late_offsets = push
+                .late
+                .iter()
+                .filter(|&&i| i >= json_plots)
+                .map(|&i| offsets[i - json_plots])
+                .collect();
+            s.late = s.late_offsets.len();
+        }
+        let late: HashSet<usize> = push.late.iter().copied().collect();
+        let sites: Vec<[f64; 3]> = config.radars.iter().map(|r| r.site).collect();
+        self.marks = plots
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !late.contains(i))
+            .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
+            .collect();
+        let live = self.tracker().tracks();
+        if push.refused > 0 {
+            warnings.push(format!(
+                "the session holds its limit of {} tracks (confirmed and tentative): {} \
+                 track start(s) refused in this batch's frames; the tracks held go on, and \
+                 new ones start as others end (lower the clutter's effect with \
+                 tracker.initiation, or split the radars over more sessions)",
+                limits.max_tracks, push.refused
+            ));
+        }
+        if !push.late.is_empty() {
+            let first = match (late_json.first(), &summary) {
+                (Some(i), _) => format!("plots[{i}]"),
+                (None, Some(s)) => format!(
+                    "the ASTERIX record at offset {}",
+                    s.late_offsets.first().copied().unwrap_or(0)
+                ),
+                (None, None) => "plots".into(),
+            };
+            warnings.push(format!(
+                "{} late plot(s) dropped: older than t = {} (the newest plot received minus \
+                 tracker.max_lag_s = {} s; first {first}): a larger tracker.max_lag_s (at \
+                 most {} s) keeps plots that arrive later",
+                push.late.len(),
+                horizon.unwrap_or(f64::NAN),
+                self.window.max_lag(),
+                algo::tracking::window::MAX_LAG_LIMIT_S,
+            ));
+        }
+        if let (true, algo::tracking::LatePolicy::Auto { max_replay }) =
+            (push.retrodicted > 0, self.window.policy())
+        {
+            warnings.push(format!(
+                "{} late plot(s) taken by retrodiction, not replayed: the lag window held \
+                 more than tracker.max_replay_plots = {max_replay} plots, and the session \
+                 retrodicts late plots from then on; the tracks are approximate from t = {} \
+                 (a larger tracker.max_replay_plots, or tracker.late_plots \"reprocess\", \
+                 keeps them exact at the cost of a replay)",
+                push.retrodicted,
+                self.window.approximate_from().unwrap_or(f64::NAN),
+            ));
+        }
+        if let Some(h) = push.bounded_horizon {
+            warnings.push(format!(
+                "the lag window reached its bound of {} plots: plots older than t = {h} are \
+                 now late, though within tracker.max_lag_s = {} s (the feed brings more plots \
+                 than the lag can hold: a smaller tracker.max_lag_s, or the radars split over \
+                 more sessions)",
+                self.window.max_plots(),
+                self.window.max_lag(),
+            ));
+        }
+        let registration = self.network.bias_views(self.tracker());
+        warnings.extend(network::registration_warnings(&config, &registration));
+        warnings.extend(realigned(&biases_before, &registration));
+        warnings.extend(crate::plot_fusion::ssr::warnings(&live));
+        let changes = if views {
+            diff(&before, &live, &push)
+        } else {
+            Changes::default()
+        };
+        let view = |t: &TrackOutput| self.network.track_view(&config.motion, t);
+        let tracks: Vec<ChangedTrack> = if push.frames == 0 || !views {
+            Vec::new()
+        } else {
+            live.iter()
+                .zip(&changes.live)
+                .map(|(t, &change)| ChangedTrack {
+                    change,
+                    track: view(t),
+                })
+                .collect()
+        };
+        let deleted: Vec<TrackView> = changes.deleted.iter().map(view).collect();
+        let known: HashSet<u64> = before.iter().map(|t| t.id).collect();
+        let cat062 = self.cat062.as_ref().filter(|_| views).map(|o| {
+            let items: Vec<(&TrackView, Life)> = tracks
+                .iter()
+                .map(|c| {
+                    // A track's first record (TSB) is the first one sent:
+                    // a new track, even one confirmed in the batch that
+                    // started it.
+                    let life = if known.contains(&c.track.id) {
+                        Life::Continuing
+                    } else {
+                        Life::First
+                    };
+                    (&c.track, life)
+                })
+                .chain(deleted.iter().map(|t| (t, Life::End)))
+                .collect();
+            cat062::encode(o, &self.network, &items, warnings)
+        });
+        self.last_tracks = Some(live);
+        Ok(BatchUpdate {
+            frames: push.frames as u32,
+            pending_plots: self.window.pending() as u32,
+            late_plots: late_json.into_iter().map(|i| i as u32).collect(),
+            late_within_lag: push.within_lag as u32,
+            corrected_from_t: push.earliest_within_lag,
+            tracks,
+            deleted,
+            dropped: changes.dropped,
+            counters: self.window.counters().into(),
+            asterix: summary,
+            cat062,
+            registration,
+        })
+    }
 }
 
 fn status_code(s: &str) -> u8 {
@@ -464,154 +628,29 @@ impl SessionKind for PlotFusionSession {
         limits: &Limits,
         warnings: &mut Vec<String>,
     ) -> Result<BatchUpdate, ServiceError> {
-        let config = self.tracker().config().clone();
-        let mut plots = self.network.plots(&batch.plots, &config, "plots")?;
-        let json_plots = plots.len();
-        let mut summary = None;
-        let mut offsets = Vec::new();
-        if let Some(a) = &batch.asterix {
-            let reference = self.window.newest().or(a.reference_t);
-            let clock = asterix::clock(a, "asterix", reference)?;
-            let from = asterix::plots(&self.network, &config, &a.data, clock, a.reception);
-            plots.extend(from.plots);
-            offsets = from.offsets;
-            warnings.extend(from.warnings);
-            summary = Some(from.summary);
-        }
-        let before: Vec<TrackOutput> = self
-            .last_tracks
-            .take()
-            .unwrap_or_else(|| self.tracker().tracks());
-        let biases_before = self.network.bias_views(self.tracker());
-        let horizon = self.window.horizon();
-        self.window.set_max_tracks(Some(limits.max_tracks));
-        let push = self.window.push(&plots).map_err(computation_error)?;
-        let late_json: Vec<usize> = push
-            .late
-            .iter()
-            .copied()
-            .filter(|&i| i < json_plots)
-            .collect();
-        if let Some(s) = summary.as_mut() {
-            s.late_offsets = push
-                .late
-                .iter()
-                .filter(|&&i| i >= json_plots)
-                .map(|&i| offsets[i - json_plots])
-                .collect();
-            s.late = s.late_offsets.len();
-        }
-        let late: HashSet<usize> = push.late.iter().copied().collect();
-        let sites: Vec<[f64; 3]> = config.radars.iter().map(|r| r.site).collect();
-        self.marks = plots
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !late.contains(i))
-            .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
-            .collect();
-        let live = self.tracker().tracks();
-        if push.refused > 0 {
-            warnings.push(format!(
-                "the session holds its limit of {} tracks (confirmed and tentative): {} \
-                 track start(s) refused in this batch's frames; the tracks held go on, and \
-                 new ones start as others end (lower the clutter's effect with \
-                 tracker.initiation, or split the radars over more sessions)",
-                limits.max_tracks, push.refused
-            ));
-        }
-        if !push.late.is_empty() {
-            let first = match (late_json.first(), &summary) {
-                (Some(i), _) => format!("plots[{i}]"),
-                (None, Some(s)) => format!(
-                    "the ASTERIX record at offset {}",
-                    s.late_offsets.first().copied().unwrap_or(0)
-                ),
-                (None, None) => "plots".into(),
-            };
-            warnings.push(format!(
-                "{} late plot(s) dropped: older than t = {} (the newest plot received minus \
-                 tracker.max_lag_s = {} s; first {first}): a larger tracker.max_lag_s (at \
-                 most {} s) keeps plots that arrive later",
-                push.late.len(),
-                horizon.unwrap_or(f64::NAN),
-                self.window.max_lag(),
-                algo::tracking::window::MAX_LAG_LIMIT_S,
-            ));
-        }
-        if let (true, algo::tracking::LatePolicy::Auto { max_replay }) =
-            (push.retrodicted > 0, self.window.policy())
-        {
-            warnings.push(format!(
-                "{} late plot(s) taken by retrodiction, not replayed: the lag window holds \
-                 more than tracker.max_replay_plots = {max_replay} plots; the tracks are \
-                 approximate from t = {} until a batch's late plots find it within the bound \
-                 (a larger tracker.max_replay_plots, or tracker.late_plots \"reprocess\", \
-                 keeps them exact at the cost of a replay)",
-                push.retrodicted,
-                self.window.approximate_from().unwrap_or(f64::NAN),
-            ));
-        }
-        if let Some(h) = push.bounded_horizon {
-            warnings.push(format!(
-                "the lag window reached its bound of {} plots: plots older than t = {h} are \
-                 now late, though within tracker.max_lag_s = {} s (the feed brings more plots \
-                 than the lag can hold: a smaller tracker.max_lag_s, or the radars split over \
-                 more sessions)",
-                self.window.max_plots(),
-                self.window.max_lag(),
-            ));
-        }
-        let registration = self.network.bias_views(self.tracker());
-        warnings.extend(network::registration_warnings(&config, &registration));
-        warnings.extend(crate::plot_fusion::ssr::warnings(&live));
-        warnings.extend(realigned(&biases_before, &registration));
-        let changes = diff(&before, &live, &push);
-        let view = |t: &TrackOutput| self.network.track_view(&config.motion, t);
-        let tracks: Vec<ChangedTrack> = if push.frames == 0 {
-            Vec::new()
-        } else {
-            live.iter()
-                .zip(&changes.live)
-                .map(|(t, &change)| ChangedTrack {
-                    change,
-                    track: view(t),
-                })
-                .collect()
-        };
-        let deleted: Vec<TrackView> = changes.deleted.iter().map(view).collect();
-        let known: HashSet<u64> = before.iter().map(|t| t.id).collect();
-        let cat062 = self.cat062.as_ref().map(|o| {
-            let items: Vec<(&TrackView, Life)> = tracks
-                .iter()
-                .map(|c| {
-                    // A track's first record (TSB) is the first one sent:
-                    // a new track, even one confirmed in the batch that
-                    // started it.
-                    let life = if known.contains(&c.track.id) {
-                        Life::Continuing
-                    } else {
-                        Life::First
-                    };
-                    (&c.track, life)
-                })
-                .chain(deleted.iter().map(|t| (t, Life::End)))
-                .collect();
-            cat062::encode(o, &self.network, &items, warnings)
-        });
-        self.last_tracks = Some(live);
-        Ok(BatchUpdate {
-            frames: push.frames as u32,
-            pending_plots: self.window.pending() as u32,
-            late_plots: late_json.into_iter().map(|i| i as u32).collect(),
-            late_within_lag: push.within_lag as u32,
-            corrected_from_t: push.earliest_within_lag,
-            tracks,
-            deleted,
-            dropped: changes.dropped,
-            counters: self.window.counters().into(),
-            asterix: summary,
-            cat062,
-            registration,
+        self.apply_with(batch, limits, warnings, true)
+    }
+
+    /// A replayed batch's update is not read: the state after it is the
+    /// same, but the update has no track views (`tracks`, `deleted`,
+    /// `dropped`, `cat062` empty), which at 4,000 tracks cost a replay
+    /// more than the batch's own tracking.
+    fn apply_unread(
+        &mut self,
+        batch: &BatchInput,
+        limits: &Limits,
+        warnings: &mut Vec<String>,
+    ) -> Result<BatchUpdate, ServiceError> {
+        self.apply_with(batch, limits, warnings, false)
+    }
+
+    fn stored_copy(&self) -> Option<Self> {
+        Some(Self {
+            marks: Vec::new(),
+            last_tracks: None,
+            network: self.network.clone(),
+            window: self.window.stored_copy(),
+            cat062: self.cat062,
         })
     }
 
@@ -1044,6 +1083,7 @@ fn realigned(before: &[RadarBiasView], after: &[RadarBiasView]) -> Vec<String> {
 }
 
 /// What changed between the picture before a batch and after it.
+#[derive(Default)]
 struct Changes {
     /// Per live track after the batch, in order.
     live: Vec<TrackChange>,
