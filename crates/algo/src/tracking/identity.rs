@@ -403,8 +403,13 @@ impl TrackIdentity {
     /// (out of sequence) adds its evidence but does not move the filter.
     pub fn observe(&mut self, plot: &Identity, t: f64) {
         if plot.is_empty() {
-            // A plot that says nothing of itself (a primary radar's, or
-            // one whose detection type is unknown): nothing to learn.
+            // A plot that says nothing of itself is a primary radar's: it
+            // dates the track's last primary update once the track has
+            // heard a secondary reply (a track that never has keeps an
+            // empty identity: a primary-only tracker's state is as before).
+            if !self.is_empty() {
+                self.last_primary = Some(self.last_primary.map_or(t, |s| s.max(t)));
+            }
             return;
         }
         if plot.is_secondary() {
@@ -562,6 +567,19 @@ mod tests {
         assert!((c - (0.98f64 / 0.25).ln()).abs() < 1e-12, "{c}");
         // A primary plot says nothing.
         assert_eq!(track.ln_ratio(&Identity::default(), 1.0), Some(0.0));
+    }
+
+    #[test]
+    fn a_plain_plot_dates_the_last_primary_update_of_a_secondary_track_only() {
+        let mut t = TrackIdentity::default();
+        t.observe(&Identity::default(), 1.0);
+        assert!(t.is_empty());
+        let mut ssr = reply(Some(1), Some(0o1234), None);
+        ssr.detection = Some(Detection::Secondary);
+        t.observe(&ssr, 2.0);
+        assert_eq!((t.last_secondary, t.last_primary), (Some(2.0), None));
+        t.observe(&Identity::default(), 3.0);
+        assert_eq!(t.last_primary, Some(3.0));
     }
 
     #[test]
