@@ -1435,3 +1435,50 @@ async fn bad_registration_options_are_named_and_a_session_keeps_its_estimates() 
         None
     );
 }
+
+/// An aircraft flying straight over a 3D radar (the tracker's
+/// `an_overflight_of_a_radar_site_does_not_stop_the_tracker` through the
+/// server): the answer is a 200 with both aircraft tracked and a warning
+/// naming the track that coasted over the site, not an error that would
+/// refuse the whole batch (and, in a session, every batch after it).
+#[tokio::test]
+async fn an_overflight_of_a_radar_site_is_a_warning_not_an_error() {
+    let app = spawn_app().await;
+    let mut plots = Vec::new();
+    for k in 0..=20 {
+        let t = 4.0 * f64::from(k);
+        for north in [0.0, 40.0] {
+            let (e, n, u) = (-4_000.0 + 100.0 * t, north, 3_000.0f64);
+            let horizontal = f64::hypot(e, n);
+            if horizontal < 1.0 {
+                continue; // nothing seen overhead
+            }
+            plots.push(json!({
+                "radar_id": "r", "t": t, "range_m": horizontal.hypot(u),
+                "azimuth_deg": e.atan2(n).to_degrees(),
+                "elevation_deg": u.atan2(horizontal).to_degrees(),
+            }));
+        }
+    }
+    let req = json!({
+        "radars": [{"id": "r", "kind": "3d", "site": {"position_m": [0.0, 0.0, 0.0]},
+                    "sigma_range_m": 5.0, "sigma_azimuth_deg": 0.0057,
+                    "sigma_elevation_deg": 0.0057, "scan_period_s": 4.0,
+                    "p_detection": 1.0, "clutter_density": 1e-9}],
+        "plots": plots,
+        "tracker": {"motion": "cv", "sigma_a_mps2": 0.05},
+    });
+    let out = app.post_ok(PATH, &req).await;
+    let warnings = out["warnings"].to_string();
+    assert!(
+        warnings.contains("could not associate track"),
+        "{warnings}"
+    );
+    let confirmed = out["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .count();
+    assert_eq!(confirmed, 2, "{}", out["tracks"]);
+}

@@ -223,6 +223,11 @@ pub struct ScanReport {
     pub clusters: Vec<ClusterReport>,
     /// Per track.
     pub associations: Vec<Association>,
+    /// Tracks whose polar measurement model is undefined at their
+    /// prediction (within [`crate::polar::MIN_HORIZONTAL_RANGE`] of the
+    /// site horizontally: azimuth undefined), ascending: they gated nothing
+    /// ([`associate`] and [`associate_with`] only; [`scan`] fails).
+    pub undefined: Vec<usize>,
 }
 
 /// Sequential multi-sensor JPDA (eqs. 8–10): X̂_0 = the prediction, sensor i
@@ -287,17 +292,48 @@ struct Prepared {
     lin: Vec<Linearised>,
     hits: Vec<Vec<Hit>>,
     clusters: Vec<(Vec<usize>, Vec<usize>)>,
+    /// Tracks whose measurement model is undefined at their prediction
+    /// (tolerant scans only; see [`ScanReport::undefined`]).
+    undefined: Vec<usize>,
+}
+
+impl Linearised {
+    /// The stand-in of a track that gates nothing (its model undefined).
+    fn inert(dim: usize, n: usize) -> Self {
+        Self {
+            z_pred: DVector::zeros(dim),
+            h: DMatrix::zeros(dim, n),
+            r: DMatrix::zeros(dim, dim),
+            s_inv: vec![0.0; dim * dim],
+            s00: 0.0,
+            gain: DMatrix::zeros(n, dim),
+            ln_norm: 0.0,
+            sqrt_det: 0.0,
+        }
+    }
 }
 
 fn prepare(
     tracks: &[TrackEstimate],
     scan: &Scan,
     evidence: Option<Evidence<'_>>,
+    tolerant: bool,
 ) -> Result<Prepared, AlgoError> {
     let dim = scan.model.dim();
+    let mut undefined = Vec::new();
     let lin: Vec<Linearised> = tracks
         .iter()
-        .map(|t| linearise(t, &scan.model))
+        .enumerate()
+        .map(|(t, track)| match linearise(track, &scan.model) {
+            // A polar sensor's azimuth is undefined for a prediction at
+            // (or straight above) its site: that track gates nothing in
+            // this scan, the others go on.
+            Err(AlgoError::DegenerateGeometry { .. }) if tolerant => {
+                undefined.push(t);
+                Ok(Linearised::inert(dim, track.x.len()))
+            }
+            other => other,
+        })
         .collect::<Result<_, _>>()?;
     let polar = matches!(scan.model, SensorModel::Polar { .. });
     for z in &scan.measurements {
@@ -320,6 +356,9 @@ fn prepare(
         .iter()
         .enumerate()
         .map(|(t, l)| {
+            if undefined.binary_search(&t).is_ok() {
+                return Vec::new();
+            }
             let reach = (scan.gate.threshold * l.s00).sqrt() * (1.0 + 1e-9);
             by_first.within(l.z_pred[0], reach, &mut candidates);
             let mut row = Vec::new();
@@ -349,6 +388,7 @@ fn prepare(
         lin,
         hits,
         clusters,
+        undefined,
     })
 }
 
@@ -363,7 +403,8 @@ pub fn cluster_problems(
         lin,
         hits,
         clusters,
-    } = prepare(tracks, scan, None)?;
+        ..
+    } = prepare(tracks, scan, None, false)?;
     let miss_weight = 1.0 - scan.detection_probability * scan.gate.probability;
     Ok(clusters
         .iter()
@@ -377,7 +418,7 @@ pub fn scan(
     scan: &Scan,
     config: &Config,
 ) -> Result<ScanReport, AlgoError> {
-    let (report, lin) = weigh(tracks, scan, config, None)?;
+    let (report, lin) = weigh(tracks, scan, config, None, false)?;
     for (t, track) in tracks.iter_mut().enumerate() {
         combined_update(
             track,
@@ -392,13 +433,16 @@ pub fn scan(
 
 /// The association of [`scan`] without its update: each track's β_0 and
 /// β_j of its gated measurements, the tracks left as they are (for an
-/// updater of its own, such as the tracker's IMM).
+/// updater of its own, such as the tracker's IMM). A track whose polar
+/// model is undefined at its prediction (at the sensor's site) gates
+/// nothing and is listed in [`ScanReport::undefined`] (where [`scan`]
+/// fails).
 pub fn associate(
     tracks: &[TrackEstimate],
     scan: &Scan,
     config: &Config,
 ) -> Result<ScanReport, AlgoError> {
-    weigh(tracks, scan, config, None).map(|(report, _)| report)
+    weigh(tracks, scan, config, None, true).map(|(report, _)| report)
 }
 
 /// [`associate`] with evidence beside the position ([`Evidence`]): each
@@ -410,7 +454,7 @@ pub fn associate_with(
     config: &Config,
     evidence: Evidence<'_>,
 ) -> Result<ScanReport, AlgoError> {
-    weigh(tracks, scan, config, Some(evidence)).map(|(report, _)| report)
+    weigh(tracks, scan, config, Some(evidence), true).map(|(report, _)| report)
 }
 
 /// The association of [`scan`] and each track's linearisation.
@@ -419,13 +463,15 @@ fn weigh(
     scan: &Scan,
     config: &Config,
     evidence: Option<Evidence<'_>>,
+    tolerant: bool,
 ) -> Result<(ScanReport, Vec<Linearised>), AlgoError> {
     let dim = scan.model.dim();
     let Prepared {
         lin,
         hits,
         clusters,
-    } = prepare(tracks, scan, evidence)?;
+        undefined,
+    } = prepare(tracks, scan, evidence, tolerant)?;
     let mut associations: Vec<Association> = hits
         .iter()
         .map(|_| Association {
@@ -538,6 +584,7 @@ fn weigh(
         ScanReport {
             clusters: reports,
             associations,
+            undefined,
         },
         lin,
     ))

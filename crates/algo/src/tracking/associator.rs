@@ -53,6 +53,9 @@ pub struct Outcome {
     /// Per track: β_0 and β_m of its gated measurements, for the updater of
     /// IMM tracks.
     pub associations: Vec<jpda::Association>,
+    /// Tracks whose polar model is undefined at their prediction (at the
+    /// radar's site): they gated nothing ([`jpda::ScanReport::undefined`]).
+    pub undefined: Vec<usize>,
 }
 
 /// Serial mode: the JPDA weights of the polar plots of one radar for
@@ -114,6 +117,7 @@ pub fn associate_polar(
         hit,
         used,
         associations: report.associations,
+        undefined: report.undefined,
     })
 }
 
@@ -247,6 +251,7 @@ pub fn associate_cartesian(
         hit,
         used,
         associations,
+        undefined: Vec::new(),
     })
 }
 

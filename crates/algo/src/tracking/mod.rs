@@ -133,6 +133,12 @@ pub struct StepReport {
     /// Tentative tracks not started because the tracker held its bound
     /// of tracks ([`Tracker::set_max_tracks`]).
     pub refused: usize,
+    /// Ids of confirmed tracks a frame could not associate: their
+    /// prediction lay at (or straight above) the radar's site, where its
+    /// azimuth is undefined (an overflight within
+    /// [`crate::polar::MIN_HORIZONTAL_RANGE`]); they coast through that
+    /// frame, the rest of the frame applies. One entry per such frame.
+    pub undefined: Vec<u64>,
 }
 
 /// The tracker: configuration plus everything carried between calls.
@@ -737,6 +743,9 @@ impl Tracker {
                 Box::new(CartesianUpdater { plots: &plots }),
             ),
         };
+        report
+            .undefined
+            .extend(outcome.undefined.iter().map(|&c| self.tracks[slots[c]].id));
         let (hits, touched) = self.update(t, &slots, &mut scratch, &outcome, &*updater, &plots)?;
         drop(updater);
         self.scratch.0 = scratch;

@@ -1337,3 +1337,76 @@ fn mode_s_keeps_crossing_aircraft_apart() {
         }
     }
 }
+
+/// An overflight: aircraft A flies straight over a 3D radar's site (at
+/// t = 40 s, 3 km up; the radar sees nothing overhead, so no plot of A
+/// then), B parallel 40 m north of it. At t = 40 s B's plot makes A a
+/// candidate (the hypothesiser's pre-test reaches 50 m and more, the gate
+/// of these metre-sized sigmas a few metres), and A's predicted position
+/// is the site's (noise-free plots: to 10⁻¹³ m), where
+/// the radar's azimuth is undefined: the frame must not fail. A gates
+/// nothing in that frame (listed in `StepReport::undefined`), coasts, and
+/// both aircraft keep their tracks.
+#[test]
+fn an_overflight_of_a_radar_site_does_not_stop_the_tracker() {
+    let radar = RadarSpec {
+        site: [0.0; 3],
+        sigma_range: 5.0,
+        sigma_azimuth: 1e-4,
+        sigma_elevation: Some(1e-4),
+        sigma_radial_velocity: None,
+        scan_period: 4.0,
+        detection_probability: 1.0,
+        clutter_density: 1e-9,
+    };
+    let mut cfg = TrackerConfig::new(3, vec![radar.clone()]);
+    cfg.motion = Motion::ConstantVelocity;
+    cfg.sigma_a = [0.05; 3];
+    let targets = [
+        Target {
+            p0: [-4_000.0, 0.0, 3_000.0],
+            v: [100.0, 0.0, 0.0],
+        },
+        Target {
+            p0: [-4_000.0, 40.0, 3_000.0],
+            v: [100.0, 0.0, 0.0],
+        },
+    ];
+    let mut plots = Vec::new();
+    for k in 0..=20 {
+        let t = 4.0 * k as f64;
+        for target in &targets {
+            let p = target.at(t);
+            let horizontal = p[0].hypot(p[1]);
+            if horizontal < 1.0 {
+                continue; // the cone of silence
+            }
+            plots.push(Plot {
+                radar: 0,
+                t,
+                range: horizontal.hypot(p[2]),
+                azimuth: p[0].atan2(p[1]),
+                elevation: Some(p[2].atan2(horizontal)),
+                radial_velocity: None,
+                identity: Identity::default(),
+            });
+        }
+    }
+    let mut tracker = Tracker::new(cfg).unwrap();
+    let mut report = tracker.process(&plots).expect("an overflight is no error");
+    let flushed = tracker.flush().unwrap();
+    report.undefined.extend(flushed.undefined);
+    assert!(
+        !report.undefined.is_empty(),
+        "A was not predicted at the site"
+    );
+    let end = 80.0;
+    for target in &targets {
+        let p = target.at(end);
+        let near = tracker.tracks().iter().any(|t| {
+            t.status == TrackStatus::Confirmed
+                && (t.state[0] - p[0]).hypot(t.state[2] - p[1]) < 20.0
+        });
+        assert!(near, "no track within 20 m of {p:?}");
+    }
+}

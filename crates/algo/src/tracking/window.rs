@@ -175,6 +175,9 @@ pub struct Push {
     /// [`LatePolicy::Auto`]: late plots taken by retrodiction because
     /// their replay would have exceeded the bound.
     pub retrodicted: usize,
+    /// Ids of tracks a frame could not associate (at a radar's site:
+    /// [`super::StepReport::undefined`]), replayed frames included.
+    pub undefined: Vec<u64>,
 }
 
 impl Push {
@@ -184,6 +187,7 @@ impl Push {
         self.frames += report.frames;
         self.refused += report.refused;
         self.deleted.extend(report.deleted);
+        self.undefined.extend(report.undefined);
     }
 }
 

@@ -353,6 +353,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &tracks,
     ));
     warnings.extend(ssr::warnings(&tracks));
+    warnings.extend(undefined_warning(&report.undefined));
     let motion = &tracker.config().motion;
     let tracks: Vec<TrackView> = tracks
         .iter()
@@ -392,6 +393,27 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         compute_us,
         warnings,
     })
+}
+
+/// The tracks a frame could not associate because their prediction lay at
+/// a radar's site (an overflight: the azimuth is undefined there); they
+/// coasted through those frames and the rest applied.
+pub fn undefined_warning(ids: &[u64]) -> Option<String> {
+    if ids.is_empty() {
+        return None;
+    }
+    let mut unique = ids.to_vec();
+    unique.sort_unstable();
+    unique.dedup();
+    let shown: Vec<String> = unique.iter().take(10).map(u64::to_string).collect();
+    Some(format!(
+        "{} frame(s) could not associate track(s) {}{} (predicted at a radar's site, \
+         where its azimuth is undefined: an overflight): those tracks coasted through \
+         those frames, the rest of the data applied",
+        ids.len(),
+        shown.join(", "),
+        if unique.len() > 10 { ", …" } else { "" }
+    ))
 }
 
 /// The error of a `history` larger than [`MAX_HISTORY_TRACK_STATES`].

@@ -370,6 +370,7 @@ impl PlotFusionSession {
         warnings.extend(network::registration_warnings(&config, &registration));
         warnings.extend(realigned(&biases_before, &registration));
         warnings.extend(crate::plot_fusion::ssr::warnings(&live));
+        warnings.extend(crate::plot_fusion::undefined_warning(&push.undefined));
         let changes = if views {
             diff(&before, &live, &push)
         } else {
