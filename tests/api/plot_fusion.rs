@@ -1470,10 +1470,7 @@ async fn an_overflight_of_a_radar_site_is_a_warning_not_an_error() {
     });
     let out = app.post_ok(PATH, &req).await;
     let warnings = out["warnings"].to_string();
-    assert!(
-        warnings.contains("could not associate track"),
-        "{warnings}"
-    );
+    assert!(warnings.contains("could not associate track"), "{warnings}");
     let confirmed = out["tracks"]
         .as_array()
         .unwrap()
