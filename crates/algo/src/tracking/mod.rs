@@ -931,6 +931,12 @@ impl Tracker {
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {
+            if self.has_its_address(&track) {
+                // A second track of an aircraft already tracked under its
+                // Mode S address: merged into that track (not confirmed).
+                self.counters.dropped += 1;
+                continue;
+            }
             if let Motion::Imm(imm) = &self.config.motion {
                 track.start_modes(imm);
             }
@@ -942,6 +948,41 @@ impl Tracker {
         Ok(())
     }
 }
+
+impl Tracker {
+    /// Whether a confirmed track already carries `new`'s Mode S address
+    /// where `new` is: their horizontal positions (the old one extrapolated
+    /// to `new`'s time) within the χ²₂ gate at 0.999 of their summed
+    /// covariances (13.8: one aircraft tracked twice). Elsewhere both are
+    /// kept and named by the duplicate-address warning (one of them may
+    /// have lost its aircraft, or a transponder is misconfigured).
+    fn has_its_address(&self, new: &Track) -> bool {
+        let Some(address) = new.identity.address.map(|a| a.value) else {
+            return false;
+        };
+        self.tracks.iter().any(|old| {
+            old.identity.address.is_some_and(|a| a.value == address) && {
+                let dt = new.t - old.t;
+                let d = [
+                    new.x[0] - (old.x[0] + old.x[1] * dt),
+                    new.x[2] - (old.x[2] + old.x[3] * dt),
+                ];
+                let s = [
+                    old.p[(0, 0)] + new.p[(0, 0)],
+                    old.p[(0, 2)] + new.p[(0, 2)],
+                    old.p[(2, 2)] + new.p[(2, 2)],
+                ];
+                let det = s[0] * s[2] - s[1] * s[1];
+                det > 0.0
+                    && (d[0] * d[0] * s[2] - 2.0 * d[0] * d[1] * s[1] + d[1] * d[1] * s[0]) / det
+                        <= SAME_AIRCRAFT_CHI2
+            }
+        })
+    }
+}
+
+/// χ²₂ at 0.999 (−2 ln 0.001 = 13.8155): see [`Tracker::has_its_address`].
+const SAME_AIRCRAFT_CHI2: f64 = 13.815_510_557_964_274;
 
 /// A serial radar's sweep is judged for misses every 1/`JUDGE_SLICES` of
 /// its scan period (a 4-s scan: every 0.25 s): often enough that a track's
