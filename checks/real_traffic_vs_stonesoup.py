@@ -630,6 +630,8 @@ class Result:
     wall_s: float
     compute_s: float | None = None
     extra: dict = field(default_factory=dict)
+    # Our service only: (track id, t) -> (Mode S address, flight level).
+    identity: dict = field(default_factory=dict)
 
 
 def result_from_rows(name, times, rows, wall_s, compute_s=None, extra=None) -> Result:
@@ -843,10 +845,14 @@ def build_request(scene: Scene, tracker: dict | None) -> dict:
 
 
 def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s: float,
-             api_key: str | None) -> Result:
+             api_key: str | None, body: dict | None = None) -> Result:
+    """``body``: the request to send instead of ``build_request(scene, tracker)``
+    (checks/ssr_real_traffic.py adds SSR fields). ``Result.identity``
+    maps (track id, t) to the track's (Mode S address, flight level)."""
     import requests
 
-    body = build_request(scene, tracker)
+    if body is None:
+        body = build_request(scene, tracker)
     endpoint = url.rstrip("/") + "/v1/plot-fusion/track"
     headers = {"authorization": f"Bearer {api_key}"} if api_key else {}
     t0 = time.perf_counter()
@@ -862,6 +868,7 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
     ip = [layout.index(k) for k in ("x", "y", "z")]
     rows, times, ids = [], [], set()
     seen = set()
+    identity = {}
     for entry in out.get("history") or []:
         times.append(entry["t"])
         for tr in entry["tracks"]:
@@ -876,6 +883,10 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
             rows.append((tr["t"], tr["id"], s[ip], c[np.ix_(ip, ip)],
                          abs(tr["last_update_t"] - tr["t"]) < 1e-9))
             ids.add(tr["id"])
+            i = tr.get("identity") or {}
+            pa = i.get("pressure_altitude")
+            identity[key] = ((i.get("mode_s_address") or {}).get("value"),
+                             None if pa is None else pa["flight_level"])
     if not times:
         raise RuntimeError("the response has no history: was \"history\": true ignored?")
     compute_us = (out.get("timing") or {}).get("compute_us")
@@ -884,8 +895,10 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
              "tracks_total": len(ids), "tracker": tracker or {},
              "request_bytes": len(resp.request.body or b""),
              "response_bytes": len(resp.content)}
-    return result_from_rows(name, times, rows, wall,
-                            None if compute_us is None else compute_us / 1e6, extra)
+    res = result_from_rows(name, times, rows, wall,
+                           None if compute_us is None else compute_us / 1e6, extra)
+    res.identity = identity
+    return res
 
 
 # --------------------------------------------------------------------------

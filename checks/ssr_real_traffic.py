@@ -39,7 +39,6 @@ import json
 import math
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -135,40 +134,6 @@ def add_ssr(scene, body: dict, args) -> dict:
                 fields["mode_3a_garbled"] = True
         plot.update(fields)
     return body
-
-
-def run(scene, body: dict, url: str, name: str, timeout: float) -> tuple:
-    import requests
-
-    t0 = time.perf_counter()
-    resp = requests.post(url.rstrip("/") + "/v1/plot-fusion/track", json=body, timeout=timeout)
-    if resp.status_code != 200:
-        raise RuntimeError(f"HTTP {resp.status_code}: {resp.text[:2000]}")
-    out = resp.json()
-    wall = time.perf_counter() - t0
-    layout = out["state_layout"]
-    ip = [layout.index(k) for k in ("x", "y", "z")]
-    rows, times, seen, ident = [], [], set(), {}
-    for entry in out["history"]:
-        times.append(entry["t"])
-        for tr in entry["tracks"]:
-            if tr["status"] != "confirmed" or (tr["id"], tr["t"]) in seen:
-                continue
-            seen.add((tr["id"], tr["t"]))
-            s = np.asarray(tr["state"], float)
-            c = np.asarray(tr["covariance"], float)
-            rows.append((tr["t"], tr["id"], s[ip], c[np.ix_(ip, ip)],
-                         abs(tr["last_update_t"] - tr["t"]) < 1e-9))
-            i = tr.get("identity") or {}
-            pa = i.get("pressure_altitude")
-            ident[(tr["id"], tr["t"])] = (
-                (i.get("mode_s_address") or {}).get("value"),
-                None if pa is None else pa["flight_level"])
-    extra = {"counters": out.get("counters"), "warnings": out.get("warnings"),
-             "mode": out.get("mode")}
-    res = rt.result_from_rows(name, times, rows, wall,
-                              (out.get("timing") or {}).get("compute_us", 0) / 1e6, extra)
-    return res, ident
 
 
 def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
@@ -282,8 +247,11 @@ def main() -> int:
     plain = json.loads(json.dumps(body))
     ssr = add_ssr(scene, body, args)
     results = []
-    ours_ssr, ident = run(scene, ssr, args.url, "ours, SSR and Mode S (defaults)", args.timeout)
-    ours_plain, _ = run(scene, plain, args.url, "ours, position only (defaults)", args.timeout)
+    ours_ssr = rt.run_ours(scene, args.url, None, "ours, SSR and Mode S (defaults)",
+                           args.timeout, None, body=ssr)
+    ours_plain = rt.run_ours(scene, args.url, None, "ours, position only (defaults)",
+                             args.timeout, None, body=plain)
+    ident = ours_ssr.identity
     results += [ours_ssr, ours_plain]
     if not args.ours_only:
         models = rt.stonesoup_models(scene)

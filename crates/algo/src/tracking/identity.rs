@@ -450,6 +450,14 @@ impl TrackIdentity {
         }
     }
 
+    /// [`TrackIdentity::observe`] with the radar plot a Cartesian plot was
+    /// converted from, when it is one radar's (a fused plot says nothing).
+    pub(crate) fn observe_measured(&mut self, measured: Option<&super::Plot>) {
+        if let Some(m) = measured {
+            self.observe(&m.identity, m.t);
+        }
+    }
+
     fn observe_code(&mut self, code: u16, t: f64) {
         match (&mut self.mode_3a, &mut self.pending_3a) {
             (None, _) => self.mode_3a = Some(Evidence::new(code, t)),

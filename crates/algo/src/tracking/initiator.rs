@@ -252,9 +252,7 @@ impl Initiator {
                     let track = &mut self.tentatives[i];
                     carry(track, &retro, &up)?;
                     track.record_late_hit(false);
-                    if let Some(m) = &plot.measured {
-                        track.identity.observe(&m.identity, m.t);
-                    }
+                    track.identity.observe_measured(plot.measured.as_ref());
                     self.index.moved(i, track);
                     touched.push(i);
                 }
@@ -276,9 +274,7 @@ impl Initiator {
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
                     track.last_plot = plot.measured;
-                    if let Some(m) = &plot.measured {
-                        track.identity.observe(&m.identity, m.t);
-                    }
+                    track.identity.observe_measured(plot.measured.as_ref());
                 }
                 None => {
                     if let Misses::Judge(view) = misses {
@@ -616,9 +612,8 @@ fn new_tentative(
         last_plot: plot.measured,
         identity: {
             let mut identity = TrackIdentity::default();
-            for m in [root, plot].into_iter().filter_map(|p| p.measured.as_ref()) {
-                identity.observe(&m.identity, m.t);
-            }
+            identity.observe_measured(root.measured.as_ref());
+            identity.observe_measured(plot.measured.as_ref());
             identity
         },
     }

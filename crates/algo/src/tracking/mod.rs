@@ -809,9 +809,7 @@ impl Tracker {
                 }
                 if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
-                    if let Some(m) = &plots[j].measured {
-                        track.identity.observe(&m.identity, m.t);
-                    }
+                    track.identity.observe_measured(plots[j].measured.as_ref());
                 }
                 self.index.moved(k, track);
                 touched.push(k);
@@ -844,9 +842,7 @@ impl Tracker {
                         track.record(Some(plots[j].radars.clone()));
                     }
                     track.last_plot = plots[j].measured;
-                    if let Some(m) = &plots[j].measured {
-                        track.identity.observe(&m.identity, m.t);
-                    }
+                    track.identity.observe_measured(plots[j].measured.as_ref());
                 }
                 None if !lazy => track.record(None),
                 None => {}

@@ -201,13 +201,24 @@ mod tests {
         let mut late = first[first.len() - 4];
         late.t -= 2.0;
         a.push(&[late]).unwrap();
+        let b = round_trips_smaller_and_continues(a, first, late, rest);
+        assert_eq!(b.policy(), LatePolicy::Retrodict);
+    }
+
+    /// `a` (fed `first`, then `late`) decodes to its parts and picture, in
+    /// fewer bytes than a reprocessing window of the same plots (two
+    /// trackers and the plots), and goes on with `rest` as the original;
+    /// returns the decoded window.
+    fn round_trips_smaller_and_continues(
+        mut a: LagWindow,
+        first: &[Plot],
+        late: Plot,
+        rest: &[Plot],
+    ) -> LagWindow {
         let bytes = encode_lag_window(&a);
         let mut b = decode_lag_window(&bytes).unwrap();
-        assert_eq!(b.policy(), LatePolicy::Retrodict);
         assert_eq!(a.to_parts(), b.to_parts());
         assert_eq!(a.picture(), b.picture());
-        // Smaller than a reprocessing window of the same plots (two
-        // trackers and the plots).
         let mut c = window();
         c.push(first).unwrap();
         c.push(&[late]).unwrap();
@@ -216,6 +227,7 @@ mod tests {
         b.push(rest).unwrap();
         assert_eq!(a.picture(), b.picture());
         assert_eq!(a.counters(), b.counters());
+        b
     }
 
     /// Auto past its bound stores no plots and no base, and decodes to a
@@ -235,21 +247,9 @@ mod tests {
         late.t -= 2.0;
         a.push(&[late]).unwrap();
         assert_eq!(a.approximate_from(), Some(late.t));
-        let bytes = encode_lag_window(&a);
-        let mut b = decode_lag_window(&bytes).unwrap();
+        let b = round_trips_smaller_and_continues(a, first, late, rest);
         assert_eq!(b.policy(), auto);
         assert!(b.past_bound());
-        assert_eq!(a.to_parts(), b.to_parts());
-        assert_eq!(a.picture(), b.picture());
-        // Smaller than a reprocessing window of the same plots.
-        let mut c = window();
-        c.push(first).unwrap();
-        c.push(&[late]).unwrap();
-        assert!(bytes.len() < encode_lag_window(&c).len());
-        a.push(rest).unwrap();
-        b.push(rest).unwrap();
-        assert_eq!(a.picture(), b.picture());
-        assert_eq!(a.counters(), b.counters());
     }
 
     /// Format 1 (earlier releases): a reprocessing window.
