@@ -892,6 +892,7 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
     compute_us = (out.get("timing") or {}).get("compute_us")
     extra = {"mode": out.get("mode"), "counters": out.get("counters"), "warnings": warnings,
              "registration": out.get("registration"),
+             "pressure_offset": out.get("pressure_offset"),
              "tracks_total": len(ids), "tracker": tracker or {},
              "request_bytes": len(resp.request.body or b""),
              "response_bytes": len(resp.content)}

@@ -96,6 +96,16 @@ def squawk_table(collection: str, truths: list, w0: float) -> dict:
     return out
 
 
+def pressure_altitude_ft(truth, t: float, args) -> float:
+    """The pressure altitude (ft) a transponder reports at time t: the
+    truth's geometric height H with the atmosphere of --pressure-offset-m A
+    and --pressure-slope B taken out, h_p = (H - A) / (1 + B) (the tracker
+    models H = h_p + a + b h_p; A = B = 0 by default: the recorded
+    barometric altitude is the truth's height)."""
+    h = float(rt.ecef_to_geodetic(truth.ecef(np.array([t])))[2][0])
+    return (h - args.pressure_offset_m) / (1.0 + args.pressure_slope) / FT
+
+
 def add_ssr(scene, body: dict, args) -> dict:
     """The request's plots with the Mode S radars' SSR fields."""
     rng = np.random.default_rng(args.seed + 1000)
@@ -108,7 +118,7 @@ def add_ssr(scene, body: dict, args) -> dict:
             continue
         truth = scene.truths[p.truth]
         callsign, icao = truth.name.split("/")
-        h_ft = float(rt.ecef_to_geodetic(truth.ecef(np.array([p.t])))[2][0]) / FT
+        h_ft = pressure_altitude_ft(truth, p.t, args)
         fields = {"flight_level": round(h_ft / 25.0) * 25.0 / 100.0, "detection": "combined"}
         if icao == "7000":
             fields["mode_3a"] = "7000"
@@ -136,7 +146,7 @@ def add_ssr(scene, body: dict, args) -> dict:
     return body
 
 
-def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
+def identity_figures(scene, res, ident: dict, cutoff: float, args) -> dict:
     """Per confirmed state assigned to a truth (Hungarian per instant, as
     the parent's score): right / wrong / no address, flight level error."""
     from scipy.optimize import linear_sum_assignment
@@ -181,7 +191,7 @@ def identity_figures(scene, res, ident: dict, cutoff: float) -> dict:
             else:
                 wrong += 1
             if fl is not None:
-                h_ft = float(rt.ecef_to_geodetic(truth.ecef(np.array([tk])))[2][0]) / FT
+                h_ft = pressure_altitude_ft(truth, float(tk), args)
                 fl_err.append(abs(fl * 100.0 - h_ft))
                 fl_updated.append(bool(res.updated[s]))
     fl_err = np.asarray(fl_err)
@@ -218,6 +228,10 @@ def main() -> int:
     ap.add_argument("--q-grid", default="1,5")
     ap.add_argument("--ours-only", action="store_true")
     ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--pressure-offset-m", type=float, default=0.0,
+                    help="geometric minus pressure altitude at h_p = 0 (m)")
+    ap.add_argument("--pressure-slope", type=float, default=0.0,
+                    help="geometric height per pressure altitude beyond 1 (ISA+dT: dT/288)")
     ap.add_argument("--json-out")
     args = ap.parse_args()
 
@@ -249,10 +263,15 @@ def main() -> int:
     results = []
     ours_ssr = rt.run_ours(scene, args.url, None, "ours, SSR and Mode S (defaults)",
                            args.timeout, None, body=ssr)
+    no_height = json.loads(json.dumps(ssr))
+    no_height.setdefault("tracker", {})["mode_c_height"] = {"enabled": False}
+    ours_no_height = rt.run_ours(scene, args.url, None,
+                                 "ours, SSR and Mode S, Mode C not in the height",
+                                 args.timeout, None, body=no_height)
     ours_plain = rt.run_ours(scene, args.url, None, "ours, position only (defaults)",
                              args.timeout, None, body=plain)
     ident = ours_ssr.identity
-    results += [ours_ssr, ours_plain]
+    results += [ours_ssr, ours_no_height, ours_plain]
     if not args.ours_only:
         models = rt.stonesoup_models(scene)
         longest = max(r.period_s for r in scene.radars)
@@ -263,7 +282,7 @@ def main() -> int:
             print(f"{res.name}: {res.wall_s:.1f} s", flush=True)
             results.append(res)
     figures = [rt.score(scene, r, args.cutoff_m) for r in results]
-    idf = identity_figures(scene, ours_ssr, ident, args.cutoff_m)
+    idf = identity_figures(scene, ours_ssr, ident, args.cutoff_m, args)
     print()
     print("| tracker | median / p90 horiz. (m) | median / p90 3D (m) | confirmed tracks | "
           "false tracks | missed aircraft | ID swaps | mean GOSPA (m) |")
@@ -275,6 +294,10 @@ def main() -> int:
               f"{f['mean_gospa_m']:.1f} |")
     print()
     print(f"identity (ours, SSR): {json.dumps(idf)}")
+    po = ours_ssr.extra.get("pressure_offset")
+    if po:
+        print(f"pressure offset learnt: {json.dumps(po)} (simulated: offset "
+              f"{args.pressure_offset_m} m, slope {args.pressure_slope})")
     for w in ours_ssr.extra.get("warnings") or []:
         print(f"  warning: {w}")
     if args.json_out:

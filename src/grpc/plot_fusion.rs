@@ -45,6 +45,7 @@ impl PlotFusionService for PlotFusionGrpc {
             asterix: out.asterix.map(asterix_out),
             cat062: out.cat062.map(|c| c.data),
             registration: out.registration.into_iter().map(bias_out).collect(),
+            pressure_offset: out.pressure_offset.map(pressure_offset_out),
             timing: Some(pb::Timing {
                 compute_us: out.compute_us,
             }),
@@ -187,7 +188,27 @@ pub(crate) fn spec_in(
                     time_constant_s: r.time_constant_s,
                 })
             }),
+            mode_c_height: t.mode_c_height.map(|m| svc::ModeCHeightInput {
+                enabled: m.enabled,
+                learn: m.learn,
+                offset_m: m.offset_m,
+                sigma_offset_m: m.sigma_offset_m,
+                slope: m.slope,
+                sigma_slope: m.sigma_slope,
+            }),
         },
+    }
+}
+
+pub(crate) fn pressure_offset_out(o: svc::PressureOffsetView) -> pb::PressureOffsetState {
+    pb::PressureOffsetState {
+        offset_m: o.offset_m,
+        slope: o.slope,
+        sigma_offset_m: o.sigma_offset_m,
+        sigma_slope: o.sigma_slope,
+        correlation: o.correlation,
+        plots: o.plots,
+        rejected: o.rejected,
     }
 }
 

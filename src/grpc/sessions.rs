@@ -251,6 +251,9 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             approximate_from: b.approximate_from,
             late_before_t: b.late_before_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
+            pressure_offset: b
+                .pressure_offset
+                .map(|o| super::plot_fusion::pressure_offset_out(*o)),
             counters: Some(counters_out(b.counters)),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             origin: b.origin.map(|[lat, lon, h]| pb::GeoPoint {

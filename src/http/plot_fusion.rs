@@ -106,6 +106,61 @@ pub struct RegistrationOptions {
     pub time_constant_s: Option<f64>,
 }
 
+/// `tracker.mode_c_height`: a plot's validated Mode C as a measurement of
+/// its track's geometric height (3D trackers), through the
+/// pressure-to-geometric offset geometric = h_p + offset_m + slope·h_p,
+/// learnt online from the 3D radars' plots that carry Mode C, from this
+/// prior (docs/plot-fusion.md#mode-c-and-geometric-height).
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ModeCHeightOptions {
+    /// Default true.
+    pub enabled: Option<bool>,
+    /// Learn the offset from 3D radars' plots (default true); false keeps
+    /// the prior.
+    pub learn: Option<bool>,
+    /// Prior offset at pressure altitude 0 (m, default 0; from QNH: about
+    /// 8.3 m per hPa above 1013.25).
+    pub offset_m: Option<f64>,
+    /// Its σ (m, default 150).
+    pub sigma_offset_m: Option<f64>,
+    /// Prior slope: metres of geometric height per metre of pressure
+    /// altitude beyond 1 (default 0; ISA + ΔT: about ΔT / 288 K).
+    pub slope: Option<f64>,
+    /// Its σ (default 0.04).
+    pub sigma_slope: Option<f64>,
+}
+
+/// The pressure-to-geometric offset a 3D tracker applies to Mode C:
+/// geometric height = h_p + offset_m + slope·h_p.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PressureOffsetOut {
+    pub offset_m: f64,
+    pub slope: f64,
+    pub sigma_offset_m: f64,
+    pub sigma_slope: f64,
+    /// Correlation of the offset's and the slope's errors (σ at pressure
+    /// altitude h: √(σ_o² + 2ρ σ_o σ_s h + σ_s² h²)).
+    pub correlation: f64,
+    /// 3D radar plots with Mode C learnt from.
+    pub plots: u64,
+    /// Plots refused by the offset's gate (false replies, wrong
+    /// associations).
+    pub rejected: u64,
+}
+
+pub(crate) fn pressure_offset_out(o: svc::PressureOffsetView) -> PressureOffsetOut {
+    PressureOffsetOut {
+        offset_m: o.offset_m,
+        slope: o.slope,
+        sigma_offset_m: o.sigma_offset_m,
+        sigma_slope: o.sigma_slope,
+        correlation: o.correlation,
+        plots: o.plots,
+        rejected: o.rejected,
+    }
+}
+
 /// A radar's bias as the tracker applies it (subtracted from its plots).
 #[derive(Debug, Serialize, ToSchema)]
 pub struct RadarBiasOut {
@@ -314,6 +369,8 @@ pub struct TrackerOptions {
     pub max_replay_plots: Option<u32>,
     /// Radar registration: on by default with two radars or more.
     pub registration: Option<RegistrationOptions>,
+    /// Mode C as geometric height: on by default in 3D.
+    pub mode_c_height: Option<ModeCHeightOptions>,
 }
 
 /// One model of the IMM.
@@ -638,6 +695,10 @@ pub struct PlotFusionResponse {
     /// Each radar's bias as applied at the end of the data (estimated by
     /// registration, or the radar's known bias).
     pub registration: Vec<RadarBiasOut>,
+    /// The pressure offset a 3D tracker applies to Mode C (absent: Mode C
+    /// heights off, or a 2D tracker).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pressure_offset: Option<PressureOffsetOut>,
     pub timing: Timing,
     pub warnings: Vec<String>,
 }
@@ -745,6 +806,14 @@ pub(crate) fn spec_in(
                     max_pair_dt_s: r.max_pair_dt_s,
                     time_constant_s: r.time_constant_s,
                 })
+            }),
+            mode_c_height: t.mode_c_height.map(|m| svc::ModeCHeightInput {
+                enabled: m.enabled,
+                learn: m.learn,
+                offset_m: m.offset_m,
+                sigma_offset_m: m.sigma_offset_m,
+                slope: m.slope,
+                sigma_slope: m.sigma_slope,
             }),
         },
     }
@@ -883,6 +952,7 @@ fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> 
         asterix: out.asterix.map(asterix_out),
         cat062: cat062_out(out.cat062),
         registration: out.registration.into_iter().map(bias_out).collect(),
+        pressure_offset: out.pressure_offset.map(pressure_offset_out),
         timing: Timing {
             compute_us: out.compute_us,
         },

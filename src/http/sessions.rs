@@ -292,6 +292,9 @@ pub struct PlotFusionSessionState {
     pub tracks: Vec<FusedTrack>,
     /// Each radar's bias as applied now.
     pub registration: Vec<RadarBiasOut>,
+    /// The pressure offset a 3D tracker applies to Mode C.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pressure_offset: Option<super::plot_fusion::PressureOffsetOut>,
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -619,6 +622,9 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             registration: b.registration.into_iter().map(bias_out).collect(),
+            pressure_offset: b
+                .pressure_offset
+                .map(|o| super::plot_fusion::pressure_offset_out(*o)),
         }),
     }
 }

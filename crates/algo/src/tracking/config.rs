@@ -347,6 +347,13 @@ pub struct TrackerConfig {
     /// Radar registration: online bias estimation and compensation
     /// ([`crate::tracking::registration`]); on with two radars or more.
     pub registration: crate::tracking::registration::RegistrationConfig,
+    /// Mode C as a measurement of the geometric height (3D tracker), with
+    /// the prior of the pressure-to-geometric offset
+    /// ([`crate::tracking::height`]).
+    pub mode_c_height: crate::tracking::height::ModeCHeight,
+    /// How the frame's `up` relates to the height above the ellipsoid
+    /// (flat for local sites; the caller that knows the frame sets it).
+    pub height_datum: crate::tracking::height::HeightDatum,
 }
 
 impl TrackerConfig {
@@ -407,6 +414,8 @@ impl TrackerConfig {
             sigma_tangential_speed: 300.0,
             duplicate_probability: 0.99,
             registration: crate::tracking::registration::RegistrationConfig::for_radars(radars_len),
+            mode_c_height: Default::default(),
+            height_datum: crate::tracking::height::HeightDatum::Flat,
         }
     }
 
@@ -488,6 +497,8 @@ impl TrackerConfig {
                 format!("must lie in [0, 1), got {p}"),
             ));
         }
+        self.mode_c_height.validate()?;
+        self.height_datum.validate()?;
         Ok(())
     }
 

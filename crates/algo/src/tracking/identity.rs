@@ -346,12 +346,21 @@ impl TrackIdentity {
 
     /// ln Λ of pairing a plot of identity `plot` at `t` with this track
     /// (see the module's documentation); `None` rules the pairing out.
-    pub fn ln_ratio(&self, plot: &Identity, t: f64) -> Option<f64> {
+    /// `mode_s_radar`: the plot's radar gives Mode S addresses, so a
+    /// secondary plot of it without one is a Mode A/C transponder's
+    /// ([`without_mode_s`]): against a track with an address it weighs
+    /// [`NO_ADDRESS_FROM_MODE_S`].
+    pub fn ln_ratio(&self, plot: &Identity, t: f64, mode_s_radar: bool) -> Option<f64> {
         let mut ln = 0.0;
         match (self.address, plot.address) {
             (Some(a), Some(b)) if a.value != b => return None,
             (Some(_), Some(_)) => ln += ((1.0 - ADDRESS_ERROR) / ADDRESS_ERROR).ln(),
-            _ => ln += self.code_ln_ratio(plot),
+            (address, _) => {
+                ln += self.code_ln_ratio(plot);
+                if address.is_some() && without_mode_s(plot, mode_s_radar) {
+                    ln += NO_ADDRESS_FROM_MODE_S.ln();
+                }
+            }
         }
         ln += self.altitude_ln_ratio(plot, t);
         Some(ln)
@@ -482,6 +491,20 @@ impl TrackIdentity {
     }
 }
 
+/// Likelihood ratio of a Mode S radar's secondary plot without an address
+/// against a track with one: a Mode S transponder answers a Mode S radar
+/// with its address (roll-call or all-call), so such a plot is nearly
+/// always a Mode A/C-only aircraft's (1 in 20 allowed for a radar's
+/// fallback to Mode A/C).
+pub const NO_ADDRESS_FROM_MODE_S: f64 = 0.05;
+
+/// Whether a plot says its aircraft has no Mode S transponder: a secondary
+/// plot without an address from a radar that gives addresses
+/// (`mode_s_radar`: the tracker has seen an address from it).
+pub fn without_mode_s(plot: &Identity, mode_s_radar: bool) -> bool {
+    mode_s_radar && plot.address.is_none() && plot.is_secondary()
+}
+
 /// Variance of a plot's Mode C value (ft²): its quantisation, q²/12.
 fn altitude_variance(plot: &Identity) -> f64 {
     let q = plot.altitude_quantum_ft();
@@ -544,37 +567,56 @@ mod tests {
         // A different address: ruled out; the same: ln((1 − 1e-4)/1e-4)
         // = ln 9999 = 9.2102.
         assert_eq!(
-            track.ln_ratio(&reply(Some(0x4CA2D2), None, None), 1.0),
+            track.ln_ratio(&reply(Some(0x4CA2D2), None, None), 1.0, false),
             None
         );
         let same = track
-            .ln_ratio(&reply(Some(0x4CA2D1), None, None), 1.0)
+            .ln_ratio(&reply(Some(0x4CA2D1), None, None), 1.0, false)
             .unwrap();
         assert!((same - 9999f64.ln()).abs() < 1e-12, "{same}");
         // Without an address on the plot, the code: a discrete match is
         // ln(0.98 / 0.001) = ln 980 = 6.8876; a mismatch ln(0.02 / 0.999)
         // = −3.9110; unvalidated, half; garbled, nothing.
         let m = track
-            .ln_ratio(&reply(None, Some(0o1234), None), 1.0)
+            .ln_ratio(&reply(None, Some(0o1234), None), 1.0, false)
             .unwrap();
         assert!((m - 980f64.ln()).abs() < 1e-12, "{m}");
         let x = track
-            .ln_ratio(&reply(None, Some(0o4321), None), 1.0)
+            .ln_ratio(&reply(None, Some(0o4321), None), 1.0, false)
             .unwrap();
         assert!((x - (0.02f64 / 0.999).ln()).abs() < 1e-12, "{x}");
         let mut half = reply(None, Some(0o1234), None);
         half.mode_3a.as_mut().unwrap().validated = false;
-        let h = track.ln_ratio(&half, 1.0).unwrap();
+        let h = track.ln_ratio(&half, 1.0, false).unwrap();
         assert!((h - 980f64.ln() / 2.0).abs() < 1e-12);
         half.mode_3a.as_mut().unwrap().garbled = true;
-        assert_eq!(track.ln_ratio(&half, 1.0), Some(0.0));
+        assert_eq!(track.ln_ratio(&half, 1.0, false), Some(0.0));
         // A conspicuity code matches weakly: ln(0.98 / 0.25) = 1.3661.
         let mut vfr = TrackIdentity::default();
         vfr.observe(&reply(None, Some(0o7000), None), 0.0);
-        let c = vfr.ln_ratio(&reply(None, Some(0o7000), None), 1.0).unwrap();
+        let c = vfr
+            .ln_ratio(&reply(None, Some(0o7000), None), 1.0, false)
+            .unwrap();
         assert!((c - (0.98f64 / 0.25).ln()).abs() < 1e-12, "{c}");
         // A primary plot says nothing.
-        assert_eq!(track.ln_ratio(&Identity::default(), 1.0), Some(0.0));
+        assert_eq!(track.ln_ratio(&Identity::default(), 1.0, false), Some(0.0));
+    }
+
+    /// A Mode S radar's secondary plot without an address is a Mode A/C
+    /// transponder's: against a track with an address it weighs 0.05
+    /// (ln = −3.0), beside the code's own ratio; from a radar that gives
+    /// no addresses, or a primary plot, it weighs nothing.
+    #[test]
+    fn a_mode_s_radars_reply_without_address_is_another_aircraft() {
+        let mut track = TrackIdentity::default();
+        track.observe(&reply(Some(0x4CA2D1), None, None), 0.0);
+        let mode_a = reply(None, Some(0o7000), None);
+        let ln = track.ln_ratio(&mode_a, 1.0, true).unwrap();
+        assert!((ln - 0.05f64.ln()).abs() < 1e-12, "{ln}");
+        assert_eq!(track.ln_ratio(&mode_a, 1.0, false), Some(0.0));
+        let primary = Identity::default();
+        assert_eq!(track.ln_ratio(&primary, 1.0, true), Some(0.0));
+        assert!(without_mode_s(&mode_a, true) && !without_mode_s(&primary, true));
     }
 
     #[test]
@@ -603,7 +645,11 @@ mod tests {
         assert_eq!(t.mode_3a.unwrap().value, 0o1234);
         assert_eq!(t.pending_3a.unwrap().value, 0o5501);
         // The pending code counts as a match meanwhile (no new aircraft).
-        assert!(t.ln_ratio(&reply(None, Some(0o5501), None), 3.0).unwrap() > 6.0);
+        assert!(
+            t.ln_ratio(&reply(None, Some(0o5501), None), 3.0, false)
+                .unwrap()
+                > 6.0
+        );
         t.observe(&reply(None, Some(0o5501), None), 3.0);
         let code = t.mode_3a.unwrap();
         assert_eq!((code.value, code.plots, code.first_t), (0o5501, 2, 2.0));
@@ -631,7 +677,10 @@ mod tests {
         // A reply 1,000 ft away is evidence against (ln(0.05) = −3.0);
         // one at the predicted level for (the density at the peak
         // times the 60,000-ft span, well above 1).
-        let at = |fl: f64| t.ln_ratio(&reply(None, None, Some(fl)), 120.0).unwrap();
+        let at = |fl: f64| {
+            t.ln_ratio(&reply(None, None, Some(fl)), 120.0, false)
+                .unwrap()
+        };
         let level = (truth + 50.0) / 100.0;
         assert!(at(level) > 4.0, "{}", at(level));
         assert!(

@@ -36,10 +36,11 @@ use crate::assignment;
 use crate::error::AlgoError;
 use crate::gaussian::{mahalanobis_sq, symmetrize};
 use crate::kalman;
+use crate::tracking::config::Plot;
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
-use crate::tracking::identity::TrackIdentity;
+use crate::tracking::identity::{TrackIdentity, without_mode_s};
 use crate::tracking::predictor::ModeState;
 use crate::tracking::retrodiction::{Retro, carry, retrodict};
 use crate::tracking::sweep::View;
@@ -168,7 +169,10 @@ impl Initiator {
         self.dead.get(i).copied().unwrap_or(false)
     }
 
-    /// One frame at time `t` with the plots no confirmed track used.
+    /// One frame at time `t` with the plots no confirmed track used;
+    /// `room`: most tracks it may start; `mode_s`: per radar, whether it
+    /// gives Mode S addresses (the tracker's frame context, passed whole).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn step(
         &mut self,
         t: f64,
@@ -177,6 +181,7 @@ impl Initiator {
         misses: Misses,
         next_id: &mut u64,
         room: usize,
+        mode_s: &[bool],
     ) -> Result<Initiated, AlgoError> {
         let init = &cfg.initiation;
         let gates = chi2_gates(init.gate_probability)?;
@@ -211,7 +216,7 @@ impl Initiator {
                 predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?
             };
             for (j, plot) in plots.iter().enumerate() {
-                if !identity_fits(&track.identity, plot) {
+                if !identity_fits(&track.identity, plot, mode_s) {
                     continue;
                 }
                 let k = plot.z.len();
@@ -332,7 +337,7 @@ impl Initiator {
                 (&plots[j], &self.roots[i], self.roots[i].t)
             };
             let dt = if at == t { t - early.t } else { at - t };
-            if dt < init.min_dt || dt > init.max_dt || !roots_fit(early, late, dt) {
+            if dt < init.min_dt || dt > init.max_dt || !roots_fit(early, late, dt, mode_s) {
                 continue;
             }
             let k = early.z.len().min(late.z.len());
@@ -621,24 +626,38 @@ fn new_tentative(
 
 /// Whether a plot may extend a tentative track: not another Mode S
 /// address than the track's.
-fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot) -> bool {
-    match (
-        track.address,
-        plot.measured.and_then(|m| m.identity.address),
-    ) {
+fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot, mode_s: &[bool]) -> bool {
+    let Some(m) = plot.measured else {
+        return true;
+    };
+    match (track.address, m.identity.address) {
         (Some(a), Some(b)) => a.value == b,
+        (Some(_), None) => !without_mode_s(&m.identity, is_mode_s(mode_s, m.radar)),
         _ => true,
     }
+}
+
+/// Whether radar `i` has given a Mode S address.
+fn is_mode_s(mode_s: &[bool], i: usize) -> bool {
+    mode_s.get(i).copied().unwrap_or(false)
 }
 
 /// Whether two plots `dt` apart may be one aircraft's by what they say of
 /// it: not two Mode S addresses, and not a climb or descent faster than
 /// [`MAX_VERTICAL_RATE_FTPS`] between two validated Mode C values.
-fn roots_fit(a: &CartesianPlot, b: &CartesianPlot, dt: f64) -> bool {
+fn roots_fit(a: &CartesianPlot, b: &CartesianPlot, dt: f64, mode_s: &[bool]) -> bool {
     let (Some(a), Some(b)) = (a.measured, b.measured) else {
         return true;
     };
     if !TrackIdentity::compatible(&a.identity, &b.identity) {
+        return false;
+    }
+    // A Mode S address and a Mode S radar's reply without one: two
+    // aircraft.
+    let no_address = |p: &Plot| without_mode_s(&p.identity, is_mode_s(mode_s, p.radar));
+    if (a.identity.address.is_some() && no_address(&b))
+        || (b.identity.address.is_some() && no_address(&a))
+    {
         return false;
     }
     let valid =
@@ -715,6 +734,7 @@ mod tests {
                     Misses::Judge(View::All),
                     &mut id,
                     usize::MAX,
+                    &[],
                 )
                 .unwrap();
             if k == 1 {
@@ -749,6 +769,7 @@ mod tests {
             Misses::Judge(View::All),
             &mut id,
             usize::MAX,
+            &[],
         )
         .unwrap();
         ini.step(
@@ -758,6 +779,7 @@ mod tests {
             Misses::Judge(View::All),
             &mut id,
             usize::MAX,
+            &[],
         )
         .unwrap();
         let a = ini
@@ -768,6 +790,7 @@ mod tests {
                 Misses::Judge(View::All),
                 &mut id,
                 usize::MAX,
+                &[],
             )
             .unwrap();
         assert_eq!((a.dropped, ini.tentatives.len()), (0, 1));
@@ -779,6 +802,7 @@ mod tests {
                 Misses::Judge(View::All),
                 &mut id,
                 usize::MAX,
+                &[],
             )
             .unwrap();
         assert_eq!((b.dropped, ini.tentatives.len()), (1, 0));
@@ -827,6 +851,7 @@ mod tests {
             Misses::Judge(View::All),
             &mut id,
             usize::MAX,
+            &[],
         )
         .unwrap();
         let out = ini
@@ -837,6 +862,7 @@ mod tests {
                 Misses::Judge(View::All),
                 &mut id,
                 usize::MAX,
+                &[],
             )
             .unwrap();
         assert_eq!(out.started, 0);
@@ -894,7 +920,15 @@ mod tests {
                 })
                 .collect();
             let out = ini
-                .step(t, plots, &c, Misses::Judge(View::All), &mut id, usize::MAX)
+                .step(
+                    t,
+                    plots,
+                    &c,
+                    Misses::Judge(View::All),
+                    &mut id,
+                    usize::MAX,
+                    &[],
+                )
                 .unwrap();
             started += out.started;
             confirmed += out.confirmed.len();

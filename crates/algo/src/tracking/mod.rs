@@ -47,6 +47,7 @@ pub mod associator;
 pub mod config;
 pub mod conversion;
 mod deleter;
+pub mod height;
 mod hypothesiser;
 pub mod identity;
 pub mod initiator;
@@ -172,6 +173,13 @@ pub struct Tracker {
     predictor: TrackPredictor,
     /// The registrar: the radars' biases learnt online.
     registrar: Registrar,
+    /// The pressure-to-geometric offset learnt online
+    /// ([`height`]).
+    pressure_offset: height::PressureOffset,
+    /// Per radar: it has given a Mode S address (so a secondary plot of
+    /// it without one is a Mode A/C transponder's,
+    /// [`identity::without_mode_s`]).
+    mode_s_radars: Vec<bool>,
     /// Buffers a frame reuses (derived, never stored).
     scratch: Derived<Scratch>,
     /// Most live tracks, confirmed and tentative: no tentative track is
@@ -204,6 +212,8 @@ impl Tracker {
         let registrar = Registrar::new(&config, RegistrationState::new(&config.radars))?;
         Ok(Self {
             registrar,
+            pressure_offset: height::PressureOffset::default(),
+            mode_s_radars: vec![false; config.radars.len()],
             predictor: TrackPredictor::of(&config),
             parallel: config.is_parallel(),
             config,
@@ -251,6 +261,14 @@ impl Tracker {
     /// once converged, else the prior).
     pub fn biases(&self) -> &[RadarBias] {
         &self.registrar.biases
+    }
+
+    /// The pressure-to-geometric offset a 3D tracker applies to Mode C
+    /// ([`height`]), with its data; `None` when Mode C heights are off or
+    /// the tracker is 2D.
+    pub fn pressure_offset(&self) -> Option<(height::OffsetEstimate, &height::PressureOffset)> {
+        self.height_measurement()
+            .map(|m| (m.offset, &self.pressure_offset))
     }
 
     /// Number of buffered plots.
@@ -495,6 +513,9 @@ impl Tracker {
     /// the misses of the sector its beam swept, when due.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
+        if frame.iter().any(|p| p.identity.address.is_some()) {
+            self.mode_s_radars[index] = true;
+        }
         let bias = self.registrar.biases[index];
         let spec = registration::inflated(&self.config.radars[index], &bias);
         let corrected: Vec<Plot> = frame
@@ -508,7 +529,7 @@ impl Tracker {
         }
         // The measured plot a track reports (and registration pairs) is
         // the raw one.
-        let plots = corrected
+        let mut plots = corrected
             .iter()
             .zip(&frame)
             .map(|(p, raw)| {
@@ -518,6 +539,10 @@ impl Tracker {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        // A 3D radar's plot with Mode C: what it says of the pressure
+        // offset (learnt from the plots that update a track), and its
+        // height made the Mode C one (for the initiator and the index).
+        let offset_observations = self.mode_c_plots(&corrected, &mut plots)?;
         let source = Source::Radar {
             spec: spec.clone(),
             plots: corrected,
@@ -533,7 +558,70 @@ impl Tracker {
             self.registrar
                 .learn_serial(&self.config, &self.tracks, index, &hits)?;
         }
+        if !offset_observations.is_empty() {
+            let prior = self.config.mode_c_height;
+            for hit in &hits {
+                if let Some((t, h_p, h_r, var)) = offset_observations[hit.plot] {
+                    self.pressure_offset.learn(&prior, t, h_p, h_r, var);
+                }
+            }
+        }
         self.judge_sweep(index, &spec, t, last.azimuth, report)
+    }
+
+    /// The Mode C height measurement of this tracker's frames: a 3D
+    /// tracker's with Mode C heights on ([`height`]).
+    fn height_measurement(&self) -> Option<height::HeightMeasurement> {
+        let c = &self.config;
+        (c.axes == 3 && c.mode_c_height.enabled).then(|| height::HeightMeasurement {
+            datum: c.height_datum,
+            offset: self.pressure_offset.estimate(&c.mode_c_height),
+        })
+    }
+
+    /// Per plot of a serial frame (radar plots `raw`, converted `plots`):
+    /// for a 3D radar's plot with a validated Mode C, the offset
+    /// observation (t, h_p, H_r, var) its converted position gives (when
+    /// learning; empty otherwise), and the converted position updated
+    /// with the Mode C height.
+    #[allow(clippy::type_complexity)]
+    fn mode_c_plots(
+        &self,
+        raw: &[Plot],
+        plots: &mut [CartesianPlot],
+    ) -> Result<Vec<Option<(f64, f64, f64, f64)>>, AlgoError> {
+        let Some(m) = self.height_measurement() else {
+            return Ok(Vec::new());
+        };
+        let learn = self.config.mode_c_height.learn;
+        let mut out = Vec::new();
+        for (k, (p, c)) in raw.iter().zip(plots.iter_mut()).enumerate() {
+            let Some(h_p) = height::pressure_altitude_m(&p.identity) else {
+                continue;
+            };
+            if c.z.len() != 3 {
+                continue;
+            }
+            if learn {
+                let (h_r, g) = m.datum.height(c.z[0], c.z[1], c.z[2]);
+                let var: f64 = (0..3)
+                    .map(|i| (0..3).map(|j| g[i] * c.r[(i, j)] * g[j]).sum::<f64>())
+                    .sum();
+                if out.is_empty() {
+                    out = vec![None; raw.len()];
+                }
+                out[k] = Some((p.t, h_p, h_r, var));
+            }
+            let var_q = height::quantisation_variance_m2(&p.identity);
+            m.update(
+                c.z.as_mut_slice(),
+                c.r.as_mut_slice(),
+                [0, 1, 2],
+                h_p,
+                var_q,
+            )?;
+        }
+        Ok(out)
     }
 
     /// Misses from the beam of radar `index` (serial mode), judged in
@@ -705,10 +793,11 @@ impl Tracker {
                     // Identity beside the position, when a plot carries
                     // one (identity::TrackIdentity::ln_ratio).
                     let tracks = &self.tracks;
+                    let mode_s = self.mode_s_radars[raw[0].radar];
                     let evidence = |c: usize, j: usize| {
                         tracks[slots[c]]
                             .identity
-                            .ln_ratio(&raw[j].identity, raw[j].t)
+                            .ln_ratio(&raw[j].identity, raw[j].t, mode_s)
                     };
                     let any = raw.iter().any(|p| !p.identity.is_empty());
                     associate_polar(
@@ -726,6 +815,7 @@ impl Tracker {
                     layout: polar_layout(spec, cfg.axes),
                     plots: raw,
                     range_rate: range_rate_sigma(spec, raw),
+                    height: self.height_measurement(),
                 }),
             ),
             Source::Fused {
@@ -920,18 +1010,38 @@ impl Tracker {
             .max_tracks
             .0
             .map_or(usize::MAX, |m| m.saturating_sub(live));
-        let initiated =
-            self.initiator
-                .step(t, leftovers, &self.config, misses, &mut self.next_id, room)?;
+        let initiated = self.initiator.step(
+            t,
+            leftovers,
+            &self.config,
+            misses,
+            &mut self.next_id,
+            room,
+            &self.mode_s_radars,
+        )?;
         report.refused += initiated.refused;
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {
-            if self.has_its_address(&track) {
-                // A second track of an aircraft already tracked under its
-                // Mode S address: merged into that track (not confirmed).
-                self.counters.dropped += 1;
-                continue;
+            match self.same_aircraft(&track) {
+                Some(SameAircraft::Here) => {
+                    // A second track of an aircraft already tracked under
+                    // its Mode S address: merged into that track (not
+                    // confirmed).
+                    self.counters.dropped += 1;
+                    continue;
+                }
+                Some(SameAircraft::Lost(slot)) => {
+                    // The track of its address lost the aircraft (no
+                    // update since this one's first plot): it takes this
+                    // one's state and goes on under its own id.
+                    self.counters.dropped += 1;
+                    let old = Arc::make_mut(&mut self.tracks[slot]);
+                    old.reacquire(track, &self.config.motion);
+                    self.index.moved(slot, old);
+                    continue;
+                }
+                None => {}
             }
             if let Motion::Imm(imm) = &self.config.motion {
                 track.start_modes(imm);
@@ -947,34 +1057,54 @@ impl Tracker {
 
 impl Tracker {
     /// Whether a confirmed track already carries `new`'s Mode S address
-    /// where `new` is: their horizontal positions (the old one extrapolated
-    /// to `new`'s time) within the χ²₂ gate at 0.999 of their summed
-    /// covariances (13.8: one aircraft tracked twice). Elsewhere both are
-    /// kept and named by the duplicate-address warning (one of them may
-    /// have lost its aircraft, or a transponder is misconfigured).
-    fn has_its_address(&self, new: &Track) -> bool {
-        let Some(address) = new.identity.address.map(|a| a.value) else {
-            return false;
-        };
-        self.tracks.iter().any(|old| {
-            old.identity.address.is_some_and(|a| a.value == address) && {
-                let dt = new.t - old.t;
-                let d = [
-                    new.x[0] - (old.x[0] + old.x[1] * dt),
-                    new.x[2] - (old.x[2] + old.x[3] * dt),
-                ];
-                let s = [
-                    old.p[(0, 0)] + new.p[(0, 0)],
-                    old.p[(0, 2)] + new.p[(0, 2)],
-                    old.p[(2, 2)] + new.p[(2, 2)],
-                ];
-                let det = s[0] * s[2] - s[1] * s[1];
-                det > 0.0
-                    && (d[0] * d[0] * s[2] - 2.0 * d[0] * d[1] * s[1] + d[1] * d[1] * s[0]) / det
-                        <= SAME_AIRCRAFT_CHI2
+    /// (one address, one aircraft): [`SameAircraft::Here`] where `new` is
+    /// (their horizontal positions, the old one extrapolated to `new`'s
+    /// time, within the χ²₂ gate at 0.999 of their summed covariances,
+    /// 13.8: one aircraft tracked twice); [`SameAircraft::Lost`] where the
+    /// old track had no update since `new`'s first plot (it lost the
+    /// aircraft, which `new` found again: a manoeuvre it did not follow,
+    /// a gap in coverage). Otherwise both are kept and named by the
+    /// duplicate-address warning (both updated at once: a misconfigured
+    /// transponder, or two aircraft on one address).
+    fn same_aircraft(&self, new: &Track) -> Option<SameAircraft> {
+        let address = new.identity.address.map(|a| a.value)?;
+        let mut lost = None;
+        for (slot, old) in self.tracks.iter().enumerate() {
+            if old.identity.address.is_none_or(|a| a.value != address) {
+                continue;
             }
-        })
+            let dt = new.t - old.t;
+            let d = [
+                new.x[0] - (old.x[0] + old.x[1] * dt),
+                new.x[2] - (old.x[2] + old.x[3] * dt),
+            ];
+            let s = [
+                old.p[(0, 0)] + new.p[(0, 0)],
+                old.p[(0, 2)] + new.p[(0, 2)],
+                old.p[(2, 2)] + new.p[(2, 2)],
+            ];
+            let det = s[0] * s[2] - s[1] * s[1];
+            if det > 0.0
+                && (d[0] * d[0] * s[2] - 2.0 * d[0] * d[1] * s[1] + d[1] * d[1] * s[0]) / det
+                    <= SAME_AIRCRAFT_CHI2
+            {
+                return Some(SameAircraft::Here);
+            }
+            if new.started.is_some_and(|t0| old.last_update < t0) && lost.is_none() {
+                lost = Some(SameAircraft::Lost(slot));
+            }
+        }
+        lost
     }
+}
+
+/// A newly confirmed track's aircraft already has a track
+/// ([`Tracker::same_aircraft`]).
+enum SameAircraft {
+    /// Where the new track is: the new one is merged away.
+    Here,
+    /// At this slot, lost: it takes the new track's state.
+    Lost(usize),
 }
 
 /// χ²₂ at 0.999 (−2 ln 0.001 = 13.8155): see [`Tracker::has_its_address`].

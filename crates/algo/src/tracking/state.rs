@@ -12,6 +12,7 @@ use super::registration::RegistrationState;
 use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
+use crate::tracking::height::PressureOffset;
 use crate::tracking::initiator::Initiator;
 
 /// Everything a tracker carries between calls, borrowed.
@@ -43,6 +44,10 @@ pub struct TrackerState<'a> {
     pub judged: &'a [Option<(f64, f64)>],
     /// The registration estimator's data.
     pub registration: &'a RegistrationState,
+    /// The pressure-to-geometric offset's data.
+    pub pressure_offset: &'a PressureOffset,
+    /// Per radar: it has given a Mode S address.
+    pub mode_s_radars: &'a [bool],
 }
 
 /// Everything a tracker carries between calls, owned: what
@@ -75,6 +80,10 @@ pub struct TrackerParts {
     pub judged: Vec<Option<(f64, f64)>>,
     /// The registration estimator's data (`None`: none yet).
     pub registration: Option<RegistrationState>,
+    /// The pressure-to-geometric offset's data (default: none yet).
+    pub pressure_offset: PressureOffset,
+    /// Per radar: it has given a Mode S address (empty: none has).
+    pub mode_s_radars: Vec<bool>,
 }
 
 impl TrackerState<'_> {
@@ -93,6 +102,8 @@ impl TrackerState<'_> {
             beams: self.beams.to_vec(),
             judged: self.judged.to_vec(),
             registration: Some(self.registration.clone()),
+            pressure_offset: *self.pressure_offset,
+            mode_s_radars: self.mode_s_radars.to_vec(),
         }
     }
 }
@@ -178,6 +189,8 @@ impl Tracker {
             beams: &self.beams,
             judged: &self.judged,
             registration: &self.registrar.state,
+            pressure_offset: &self.pressure_offset,
+            mode_s_radars: &self.mode_s_radars,
         }
     }
 
@@ -276,6 +289,32 @@ impl Tracker {
             )?;
             parts.judged
         };
+        let po = &parts.pressure_offset;
+        if po
+            .information
+            .iter()
+            .chain(&po.vector)
+            .chain(po.t.as_ref())
+            .any(|v| !v.is_finite())
+            || po.information[0] < 0.0
+            || po.information[2] < 0.0
+            || po.information[1].powi(2) > po.information[0] * po.information[2] * (1.0 + 1e-9)
+        {
+            return Err(bad(
+                "pressure offset data not finite or not positive semi-definite",
+            ));
+        }
+        tr.pressure_offset = parts.pressure_offset;
+        if !parts.mode_s_radars.is_empty() {
+            if parts.mode_s_radars.len() != tr.config.radars.len() {
+                return Err(bad(format!(
+                    "{} Mode S flags for {} radars",
+                    parts.mode_s_radars.len(),
+                    tr.config.radars.len()
+                )));
+            }
+            tr.mode_s_radars = parts.mode_s_radars;
+        }
         if let Some(state) = parts.registration {
             state.check(&tr.config.radars)?;
             tr.registrar = Registrar::new(&tr.config, state)?;

@@ -212,6 +212,39 @@ impl Track {
 
     /// Starts the modes of a track just confirmed under an IMM: every model
     /// at the track's estimate, with the prior mode split.
+    /// A confirmed track that lost its aircraft takes the state of the
+    /// newly confirmed track that found it again (same Mode S address):
+    /// its id, age, counts and identity stay, with the newer track's
+    /// state, recent history, radars, last plot and pressure altitude
+    /// (the IMM restarted from the new state).
+    pub(crate) fn reacquire(&mut self, new: Track, motion: &super::Motion) {
+        self.x = new.x;
+        self.p = new.p;
+        self.t = new.t;
+        self.history = new.history;
+        self.hits += new.hits;
+        self.consecutive_misses = 0;
+        self.radars = new.radars;
+        self.last_update = new.last_update;
+        self.last_plot = new.last_plot;
+        let (mine, theirs) = (&mut self.identity, new.identity);
+        if theirs.altitude.is_some() {
+            mine.altitude = theirs.altitude;
+        }
+        let later = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(x), Some(y)) => Some(x.max(y)),
+            (x, y) => x.or(y),
+        };
+        mine.last_secondary = later(mine.last_secondary, theirs.last_secondary);
+        mine.last_mode_s = later(mine.last_mode_s, theirs.last_mode_s);
+        mine.last_primary = later(mine.last_primary, theirs.last_primary);
+        mine.spi_t = later(mine.spi_t, theirs.spi_t);
+        match motion {
+            super::Motion::Imm(imm) => self.start_modes(imm),
+            super::Motion::ConstantVelocity => self.modes.clear(),
+        }
+    }
+
     pub(crate) fn start_modes(&mut self, imm: &Imm) {
         self.modes = imm
             .initial_probabilities

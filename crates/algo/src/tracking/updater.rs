@@ -26,6 +26,7 @@ use crate::kalman::{self, PositionLayout};
 use crate::polar::{MIN_HORIZONTAL_RANGE, PolarMeasurement, azimuth_of, wrap_angle};
 use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::conversion::{CartesianPlot, polar_measurement};
+use crate::tracking::height::{HeightMeasurement, pressure_altitude_m, quantisation_variance_m2};
 use crate::tracking::predictor::{MIN_PROBABILITY, ModeState};
 
 /// An updater (Stone Soup's `Updater`): a frame's measurements of one
@@ -69,6 +70,33 @@ pub struct PolarUpdater<'a> {
     /// ([`crate::tracking::associator::range_rate_sigma`], as the
     /// association decided).
     pub range_rate: Option<f64>,
+    /// The Mode C height measurement of a 3D tracker: a plot with a
+    /// validated Mode C also updates the track's height (after its polar
+    /// update; the two are independent, so the likelihoods multiply).
+    pub height: Option<HeightMeasurement>,
+}
+
+impl PolarUpdater<'_> {
+    /// Plot `j`'s Mode C update of a state of `n` (6: a 3D tracker's) in
+    /// place: (x, P column-major, ln L) → with the height's term added.
+    fn height_update(
+        &self,
+        j: usize,
+        n: usize,
+        x: &mut [f64],
+        p: &mut [f64],
+    ) -> Result<f64, AlgoError> {
+        let Some(m) = &self.height else {
+            return Ok(0.0);
+        };
+        let identity = &self.plots[j].identity;
+        match pressure_altitude_m(identity) {
+            Some(h_p) if n == 6 => {
+                m.update(x, p, [0, 2, 4], h_p, quantisation_variance_m2(identity))
+            }
+            _ => Ok(0.0),
+        }
+    }
 }
 
 /// Fused Cartesian plots with their own covariance (and the range rates of
@@ -112,14 +140,17 @@ impl Updater for PolarUpdater<'_> {
         // The IMM's model states are positive definite by construction
         // (predicted from updated ones): no Cholesky checks of P and P⁺
         // per model and plot.
-        Ok(updated(kalman::update_polar_trusted(
+        let mut out = updated(kalman::update_polar_trusted(
             x,
             p,
             &meas,
             range_rate,
             self.layout,
             self.radar.site,
-        )?))
+        )?);
+        out.ln_likelihood +=
+            self.height_update(j, x.len(), out.x.as_mut_slice(), out.p.as_mut_slice())?;
+        Ok(out)
     }
 
     /// On the stack for states of 4 and 6 ([`fixed`]), else on the heap.
@@ -281,6 +312,7 @@ mod fixed {
             layout,
             plots,
             range_rate,
+            ..
         } = measurements;
         if modes
             .iter()
@@ -319,8 +351,15 @@ mod fixed {
             for (k, &(plot, _)) in detected.iter().enumerate() {
                 let meas = polar_measurement(radar, &plots[plot]);
                 let rr = plots[plot].radial_velocity.zip(*range_rate);
-                ups[j][k] =
+                let mut up =
                     polar::<N, M>(&xs[j], &ps[j], &meas, rr, layout.z.is_some(), radar.site)?;
+                up.2 += measurements.height_update(
+                    plot,
+                    N,
+                    up.0.as_mut_slice(),
+                    up.1.as_mut_slice(),
+                )?;
+                ups[j][k] = up;
             }
         }
         // w_jm = β_m exp(ln c_j + ln L_jm − ln Σ_i c_i L_im).
@@ -574,6 +613,7 @@ mod fixed {
                     layout,
                     plots: &plots,
                     range_rate: radar.sigma_radial_velocity,
+                    height: None,
                 };
                 for assoc in [
                     Association {

@@ -25,7 +25,14 @@
 //! plot's identity (Mode S address, Mode 3/A, Mode C, callsign, detection
 //! type, SPI) after its radial velocity and each track's identity after
 //! its last plot ([`super::identity`]); formats 1 to 5 read primary plots
-//! and tracks that have learnt no identity.
+//! and tracks that have learnt no identity. Format 7 adds, at the end,
+//! the Mode C height's configuration (on, learning, prior offset and
+//! slope with their σ), the height datum (flat, or the tangent frame's
+//! origin height and radii of curvature) and the pressure offset's data
+//! ([`algo::tracking::height`]), then per radar whether it has given a
+//! Mode S address; formats 1 to 6 read Mode C heights off (so such a
+//! tracker continues as it would have, but for the Mode S radars, which
+//! it learns again), a flat datum and no data.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -36,6 +43,7 @@ use algo::tracking::{
     CartesianPlot, Counters, Deletion, Identity, Imm, Initiation, Mode, Motion, MotionModel,
     NoiseModel, Plot, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig, TrackerParts,
     VelocityGate,
+    height::{HeightDatum, ModeCHeight, PressureOffset},
     predictor::ModeState,
     registration::{BiasPrior, RegistrationConfig, RegistrationState},
 };
@@ -48,15 +56,16 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     encode_tracker_as(tr, FORMAT_VERSION)
 }
 
-/// The tracker in format 5 or 6 (5: without identities, as the previous
-/// release wrote it; for the tests of older formats).
+/// The tracker in format 5, 6 or 7 (5: without identities, 6: without
+/// Mode C heights, as earlier releases wrote them; for the tests of older
+/// formats).
 pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     assert!((5..=FORMAT_VERSION).contains(&version));
     let ids = version >= TRACKER_FORMAT;
@@ -88,7 +97,99 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     beams(&mut w, s.beams);
     registration(&mut w, &s.config.registration, s.registration);
     beams(&mut w, s.judged);
+    if version >= 7 {
+        mode_c_height(&mut w, s.config, s.pressure_offset);
+        flags(&mut w, s.mode_s_radars);
+    }
     w.buf
+}
+
+fn mode_c_height(w: &mut Writer, c: &TrackerConfig, data: &PressureOffset) {
+    let m = &c.mode_c_height;
+    w.u8(u8::from(m.enabled) | (u8::from(m.learn) << 1));
+    w.f64_run(&[m.offset, m.sigma_offset, m.slope, m.sigma_slope]);
+    match c.height_datum {
+        HeightDatum::Flat => w.u8(0),
+        HeightDatum::Tangent {
+            origin_height,
+            meridian,
+            prime_vertical,
+        } => {
+            w.u8(1);
+            w.f64_run(&[origin_height, meridian, prime_vertical]);
+        }
+    }
+    w.f64_run(&data.information);
+    w.f64_run(&data.vector);
+    w.opt(data.t, Writer::f64);
+    w.u64(data.plots);
+    w.u64(data.rejected);
+}
+
+fn flags(w: &mut Writer, v: &[bool]) {
+    w.usize(v.len());
+    for &b in v {
+        w.u8(u8::from(b));
+    }
+}
+
+fn read_flags(r: &mut Reader<'_>) -> Result<Vec<bool>, FormatError> {
+    let n = r.len(1)?;
+    (0..n)
+        .map(|_| match r.u8()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            _ => Err(corrupt("a flag not 0 or 1")),
+        })
+        .collect()
+}
+
+fn read_mode_c_height(
+    r: &mut Reader<'_>,
+) -> Result<(ModeCHeight, HeightDatum, PressureOffset), FormatError> {
+    let flags = r.u8()?;
+    if flags > 3 {
+        return Err(corrupt("Mode C height flags"));
+    }
+    let [offset, sigma_offset, slope, sigma_slope] = read_run(r)?;
+    let config = ModeCHeight {
+        enabled: flags & 1 != 0,
+        learn: flags & 2 != 0,
+        offset,
+        sigma_offset,
+        slope,
+        sigma_slope,
+    };
+    let datum = match r.u8()? {
+        0 => HeightDatum::Flat,
+        1 => {
+            let [origin_height, meridian, prime_vertical] = read_run(r)?;
+            HeightDatum::Tangent {
+                origin_height,
+                meridian,
+                prime_vertical,
+            }
+        }
+        _ => return Err(corrupt("height datum")),
+    };
+    let information = read_run(r)?;
+    let vector = read_run(r)?;
+    let data = PressureOffset {
+        information,
+        vector,
+        t: r.opt(Reader::f64)?,
+        plots: r.u64()?,
+        rejected: r.u64()?,
+    };
+    Ok((config, datum, data))
+}
+
+fn read_run<const K: usize>(r: &mut Reader<'_>) -> Result<[f64; K], FormatError> {
+    let mut out = [0.0; K];
+    for v in &mut out {
+        *v = r.f64()?;
+    }
+    Ok(out)
 }
 
 fn beams(w: &mut Writer, beams: &[Option<(f64, f64)>]) {
@@ -269,6 +370,17 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     } else {
         Vec::new()
     };
+    let (pressure_offset, mode_s_radars) = if version >= 7 {
+        let (c, datum, data) = read_mode_c_height(&mut r)?;
+        config.mode_c_height = c;
+        config.height_datum = datum;
+        (data, read_flags(&mut r)?)
+    } else {
+        // A 3D tracker of an earlier release took no height from Mode C
+        // (in 2D the option changes nothing).
+        config.mode_c_height.enabled = config.axes != 3;
+        (PressureOffset::default(), Vec::new())
+    };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
@@ -285,6 +397,8 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         counters,
         beams,
         judged,
+        pressure_offset,
+        mode_s_radars,
     })?)
 }
 
@@ -521,6 +635,9 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
         duplicate_probability,
         // Formats 1 to 3: the default; format 4 reads its own at the end.
         registration: RegistrationConfig::for_radars(radars_len),
+        // Read from format 7's end, else off (decode_tracker).
+        mode_c_height: ModeCHeight::default(),
+        height_datum: HeightDatum::Flat,
     })
 }
 
@@ -801,6 +918,63 @@ mod tests {
         }
     }
 
+    /// Format 7: a 3D tracker of Mode S plots (3D radars, so it learns the
+    /// pressure offset; a tangent datum) round-trips bit for bit with its
+    /// Mode C height options, offset data and Mode S radars, and continues
+    /// as the original; written as format 6 it reads back with Mode C
+    /// heights off (what a tracker of that release did).
+    #[test]
+    fn mode_c_heights_round_trip_and_continue() {
+        use algo::tracking::ModeC;
+        use algo::tracking::height::HeightDatum;
+        let mut cfg = config(false);
+        cfg.axes = 3;
+        for r in &mut cfg.radars {
+            r.sigma_elevation = Some(0.2f64.to_radians());
+        }
+        cfg.mode_c_height.sigma_offset = 120.0;
+        cfg.height_datum = HeightDatum::Tangent {
+            origin_height: 400.0,
+            meridian: 6_367_000.0,
+            prime_vertical: 6_389_000.0,
+        };
+        let mut all = plots(&cfg, 100.0);
+        for (k, p) in all.iter_mut().enumerate() {
+            let i = k % 2;
+            let h = [9144.0, 9449.0][i];
+            let ground = p.range;
+            p.range = ground.hypot(h);
+            p.elevation = Some(h.atan2(ground));
+            p.identity = Identity {
+                address: Some([0x4CA2D1, 0x3C6586][i]),
+                mode_c: Some(ModeC {
+                    flight_level: h / 30.48,
+                    validated: true,
+                    garbled: false,
+                }),
+                ..Identity::default()
+            };
+        }
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        assert!(a.state().pressure_offset.plots > 0);
+        assert!(a.state().mode_s_radars.iter().all(|&m| m));
+        let bytes = encode_tracker(&a);
+        let mut b = decode_tracker(&bytes).unwrap();
+        assert_eq!(b, a);
+        a.process(rest).unwrap();
+        b.process(rest).unwrap();
+        assert_eq!(encode_tracker(&a), encode_tracker(&b));
+        for cut in 0..bytes.len() {
+            assert!(decode_tracker(&bytes[..cut]).is_err(), "cut at {cut}");
+        }
+        let v6 = decode_tracker(&encode_tracker_as(&a, 6)).unwrap();
+        assert!(!v6.config().mode_c_height.enabled);
+        assert_eq!(v6.state().pressure_offset.plots, 0);
+        assert!(v6.pressure_offset().is_none());
+    }
+
     /// Chunks fed to a tracker that is encoded and decoded between them
     /// give the bytes of one call with every plot (cuts inside a radar's
     /// scan group included); the fixtures of earlier sessions are decoded
@@ -917,9 +1091,12 @@ mod tests {
             assert!(d < 5.0, "track {}: {d} m", a.id);
         }
         assert_eq!(t.counters().confirmed, 2);
-        // Written again it is format 6 and reads back the same.
+        // Written again it is the current format and reads back the same.
         let bytes = encode_tracker(&t);
-        assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 6);
+        assert_eq!(
+            u32::from_le_bytes(bytes[4..8].try_into().unwrap()),
+            FORMAT_VERSION
+        );
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
     }
 
@@ -932,7 +1109,7 @@ mod tests {
         assert_eq!(cfg.mode, Mode::Auto);
         let fresh = Tracker::new(cfg).unwrap();
         assert_eq!(fresh.mode(), Mode::Serial);
-        let mut bytes = encode_tracker(&fresh);
+        let mut bytes = encode_tracker_as(&fresh, 6);
         // Format 5's judged beams go first (a count and two absent
         // options), then format 4's registration block.
         bytes.truncate(bytes.len() - 10);
@@ -1008,9 +1185,12 @@ mod tests {
             decode_tracker(b"nope"),
             Err(FormatError::Corrupt(_))
         ));
-        let mut v7 = bytes.clone();
-        v7[4] = 7;
-        assert!(matches!(decode_tracker(&v7), Err(FormatError::Corrupt(_))));
+        let mut next = bytes.clone();
+        next[4] = 8;
+        assert!(matches!(
+            decode_tracker(&next),
+            Err(FormatError::Corrupt(_))
+        ));
         // Every single-byte flip decodes to an error or to some tracker:
         // never a panic.
         for i in 0..bytes.len() {

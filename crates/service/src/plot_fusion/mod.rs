@@ -100,6 +100,36 @@ pub struct RegistrationInput {
     pub time_constant_s: Option<f64>,
 }
 
+/// `tracker.mode_c_height`: Mode C as a measurement of the geometric
+/// height, and the prior of the pressure-to-geometric offset
+/// (`algo::tracking::height`).
+#[derive(Debug, Clone, Default)]
+pub struct ModeCHeightInput {
+    /// Default true (3D trackers).
+    pub enabled: Option<bool>,
+    /// Learn the offset from 3D radars' plots (default true).
+    pub learn: Option<bool>,
+    pub offset_m: Option<f64>,
+    pub sigma_offset_m: Option<f64>,
+    pub slope: Option<f64>,
+    pub sigma_slope: Option<f64>,
+}
+
+/// The pressure-to-geometric offset as a 3D tracker applies it to Mode C
+/// (geometric height = h_p + offset_m + slope·h_p).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PressureOffsetView {
+    pub offset_m: f64,
+    pub slope: f64,
+    pub sigma_offset_m: f64,
+    pub sigma_slope: f64,
+    /// Correlation of the offset's and the slope's errors.
+    pub correlation: f64,
+    /// 3D radar plots with Mode C learnt from, and refused by the gate.
+    pub plots: u64,
+    pub rejected: u64,
+}
+
 /// A radar's bias as the tracker applies it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RadarBiasView {
@@ -186,6 +216,7 @@ pub struct TrackerInput {
     pub max_replay_plots: Option<u32>,
     /// Radar registration (bias estimation); default on with two radars.
     pub registration: Option<Box<RegistrationInput>>,
+    pub mode_c_height: Option<ModeCHeightInput>,
 }
 
 /// One model of the IMM.
@@ -258,6 +289,8 @@ pub struct TrackOutput {
     pub cat062: Option<cat062::Cat062Data>,
     /// Each radar's bias as applied at the end of the data.
     pub registration: Vec<RadarBiasView>,
+    /// The pressure offset a 3D tracker applies to Mode C.
+    pub pressure_offset: Option<PressureOffsetView>,
     pub compute_us: f64,
     pub warnings: Vec<String>,
 }
@@ -353,6 +386,8 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &tracks,
     ));
     warnings.extend(ssr::warnings(&tracks));
+    let pressure_offset = network.pressure_offset_view(&tracker);
+    warnings.extend(ssr::height_warnings(pressure_offset.as_ref(), &tracks));
     warnings.extend(undefined_warning(&report.undefined));
     let motion = &tracker.config().motion;
     let tracks: Vec<TrackView> = tracks
@@ -390,6 +425,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         asterix: summary,
         cat062,
         registration,
+        pressure_offset,
         compute_us,
         warnings,
     })

@@ -46,6 +46,7 @@ use algo::{
     tracking::{
         Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Tracker,
         TrackerConfig, VelocityGate,
+        height::{HeightDatum, ModeCHeight, radii_of_curvature},
         registration::{BiasPrior, RegistrationConfig},
     },
 };
@@ -129,6 +130,10 @@ fn wire_name(what: &str) -> &'static str {
         "registration_max_pair_dt" => "tracker.registration.max_pair_dt_s",
         "registration_time_constant" => "tracker.registration.time_constant_s",
         "models" | "turn_rate" | "mean_sojourn" | "initial_probabilities" => "tracker.imm_models",
+        "mode_c_height.offset" => "tracker.mode_c_height.offset_m",
+        "mode_c_height.sigma_offset" => "tracker.mode_c_height.sigma_offset_m",
+        "mode_c_height.slope" => "tracker.mode_c_height.slope",
+        "mode_c_height.sigma_slope" => "tracker.mode_c_height.sigma_slope",
         _ => "tracker",
     }
 }
@@ -261,6 +266,10 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     }
     config.motion = motion(tracker, &mut warnings)?;
     config.registration = registration(spec, &ids, &config)?;
+    config.height_datum = height_datum(frame.as_ref());
+    if let Some(m) = &tracker.mode_c_height {
+        apply_mode_c_height(&mut config.mode_c_height, m);
+    }
     config.validate().map_err(|e| config_error(&e))?;
     warnings.extend(fusion_period_warnings(&config, &ids));
     Ok((
@@ -525,6 +534,49 @@ fn apply_scalars(config: &mut TrackerConfig, tracker: &super::TrackerInput) {
     }
     if let Some(p) = tracker.duplicate_gate_probability {
         config.duplicate_probability = p;
+    }
+}
+
+/// How the fusion frame's `up` relates to the ellipsoidal height: the
+/// tangent plane at the frame's origin, or flat for local sites (`up` is
+/// the height; a constant difference of datum is part of the pressure
+/// offset the tracker learns).
+fn height_datum(frame: Option<&LocalFrame>) -> HeightDatum {
+    match frame {
+        None => HeightDatum::Flat,
+        Some(f) => {
+            let (lat, _, h) = f.origin_geodetic();
+            let ell = f.ellipsoid();
+            let (meridian, prime_vertical) = radii_of_curvature(ell.a(), ell.e2(), lat);
+            HeightDatum::Tangent {
+                origin_height: h,
+                meridian,
+                prime_vertical,
+            }
+        }
+    }
+}
+
+/// `tracker.mode_c_height` over the defaults (checked by
+/// `TrackerConfig::validate`).
+fn apply_mode_c_height(m: &mut ModeCHeight, input: &super::ModeCHeightInput) {
+    if let Some(v) = input.enabled {
+        m.enabled = v;
+    }
+    if let Some(v) = input.learn {
+        m.learn = v;
+    }
+    if let Some(v) = input.offset_m {
+        m.offset = v;
+    }
+    if let Some(v) = input.sigma_offset_m {
+        m.sigma_offset = v;
+    }
+    if let Some(v) = input.slope {
+        m.slope = v;
+    }
+    if let Some(v) = input.sigma_slope {
+        m.sigma_slope = v;
     }
 }
 
@@ -1180,6 +1232,21 @@ impl Network {
                 reference: b.reference,
             })
             .collect()
+    }
+
+    /// The pressure offset a 3D tracker applies to Mode C, if it does.
+    pub fn pressure_offset_view(&self, tracker: &Tracker) -> Option<super::PressureOffsetView> {
+        tracker
+            .pressure_offset()
+            .map(|(e, data)| super::PressureOffsetView {
+                offset_m: e.offset,
+                slope: e.slope,
+                sigma_offset_m: e.sigma_offset(),
+                sigma_slope: e.sigma_slope(),
+                correlation: e.covariance[1] / (e.covariance[0] * e.covariance[2]).sqrt(),
+                plots: data.plots,
+                rejected: data.rejected,
+            })
     }
 
     pub fn track_view(

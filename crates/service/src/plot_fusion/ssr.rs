@@ -15,7 +15,10 @@
 
 use algo::tracking::identity::{Evidence, FLIGHT_LEVEL_RANGE, MAX_ADDRESS};
 use algo::tracking::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentity, TrackOutput};
+use formats::asterix::FT_M;
 use formats::wire::{FormatError, Reader, Writer};
+
+use super::PressureOffsetView;
 
 /// A plot's secondary fields as received (every one optional).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -455,6 +458,46 @@ pub fn warnings(tracks: &[TrackOutput]) -> Vec<String> {
         }
     }
     out
+}
+
+/// Largest σ (m) of the pressure offset at which a track's geometric
+/// height from Mode C passes without a warning.
+pub const OFFSET_SIGMA_WARN_M: f64 = 100.0;
+
+/// When Mode C sets the geometric heights of tracks through an offset the
+/// tracker could not learn (no 3D radar plot with Mode C yet), a warning
+/// with the offset's σ at the highest track's level and the options that
+/// fix it.
+pub fn height_warnings(
+    offset: Option<&PressureOffsetView>,
+    tracks: &[TrackOutput],
+) -> Option<String> {
+    let o = offset?;
+    let top = tracks
+        .iter()
+        .filter_map(|t| t.identity.altitude.as_ref())
+        .map(|p| p.x[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return None;
+    }
+    let h = top * FT_M;
+    let sigma = (o.sigma_offset_m.powi(2)
+        + 2.0 * o.correlation * o.sigma_offset_m * o.sigma_slope * h
+        + (h * o.sigma_slope).powi(2))
+    .max(0.0)
+    .sqrt();
+    (sigma > OFFSET_SIGMA_WARN_M).then(|| {
+        format!(
+            "tracks' geometric heights come from Mode C through a pressure-to-geometric offset \
+             known to σ {sigma:.0} m at FL{:.0} ({} 3D radar plots with Mode C learnt from): \
+             give tracker.mode_c_height.offset_m and slope (from QNH and temperature) with \
+             smaller sigma_offset_m / sigma_slope, add a 3D radar, or set \
+             tracker.mode_c_height.enabled false",
+            top / 100.0,
+            o.plots
+        )
+    })
 }
 
 #[cfg(test)]

@@ -209,6 +209,8 @@ pub struct SessionView {
     pub tracks: Vec<TrackView>,
     /// Each radar's bias as applied now.
     pub registration: Vec<RadarBiasView>,
+    /// The pressure offset a 3D tracker applies to Mode C.
+    pub pressure_offset: Option<Box<crate::plot_fusion::PressureOffsetView>>,
 }
 
 /// Where a plot is, for display: its ENU position from its radar's site; a
@@ -370,6 +372,10 @@ impl PlotFusionSession {
         warnings.extend(network::registration_warnings(&config, &registration));
         warnings.extend(realigned(&biases_before, &registration));
         warnings.extend(crate::plot_fusion::ssr::warnings(&live));
+        warnings.extend(crate::plot_fusion::ssr::height_warnings(
+            self.network.pressure_offset_view(self.tracker()).as_ref(),
+            &live,
+        ));
         warnings.extend(crate::plot_fusion::undefined_warning(&push.undefined));
         let changes = if views {
             diff(&before, &live, &push)
@@ -749,6 +755,7 @@ impl SessionKind for PlotFusionSession {
                 .map(|t| self.network.track_view(&tracker.config().motion, t))
                 .collect(),
             registration: self.network.bias_views(tracker),
+            pressure_offset: self.network.pressure_offset_view(tracker).map(Box::new),
         })
     }
 
