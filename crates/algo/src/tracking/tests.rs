@@ -1410,3 +1410,69 @@ fn an_overflight_of_a_radar_site_does_not_stop_the_tracker() {
         assert!(near, "no track within 20 m of {p:?}");
     }
 }
+
+/// One address, one aircraft: an aircraft's plots jump 5 km north at
+/// t = 100 s (its track cannot follow: it coasts, missing, while a new
+/// track confirms on the plots). With a Mode S address on every plot the
+/// coasting track, not updated since the new one's first plot, takes the
+/// new one's state and goes on under its own id: one confirmed track
+/// ever, near the aircraft at the end. Primary plots (no address) give a
+/// second track, the first deleted: the restart the rule removes.
+#[test]
+fn a_track_that_lost_its_mode_s_aircraft_takes_the_new_track_of_its_address() {
+    let before = Target {
+        p0: [-20_000.0, 30_000.0, 0.0],
+        v: [100.0, 0.0, 0.0],
+    };
+    let after = Target {
+        p0: [-20_000.0, 35_000.0, 0.0],
+        ..before
+    };
+    let cfg = fig5_config(false);
+    for seed in 0..4 {
+        for mode_s in [true, false] {
+            let mut rng = Lcg(seed);
+            let mut plots: Vec<Plot> = scene(&cfg.radars, &[0.0, 3.0], &[before], 200.0, &mut rng)
+                .into_iter()
+                .filter(|p| p.t < 100.0)
+                .chain(
+                    scene(&cfg.radars, &[0.0, 3.0], &[after], 200.0, &mut rng)
+                        .into_iter()
+                        .filter(|p| p.t >= 100.0),
+                )
+                .collect();
+            plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+            if mode_s {
+                for p in &mut plots {
+                    p.identity = Identity {
+                        address: Some(0x4CA2D1),
+                        detection: Some(Detection::Combined),
+                        ..Identity::default()
+                    };
+                }
+            }
+            let mut tracker = Tracker::new(cfg.clone()).unwrap();
+            let (early, late): (Vec<Plot>, Vec<Plot>) = plots.iter().partition(|p| p.t < 100.0);
+            tracker.process(&early).unwrap();
+            let first: Vec<u64> = tracker.confirmed_tracks().iter().map(|t| t.id).collect();
+            assert_eq!(first.len(), 1, "seed {seed}");
+            tracker.process(&late).unwrap();
+            tracker.flush().unwrap();
+            let last: Vec<TrackOutput> = tracker
+                .tracks()
+                .into_iter()
+                .filter(|t| t.status == TrackStatus::Confirmed)
+                .collect();
+            assert_eq!(last.len(), 1, "seed {seed}, Mode S {mode_s}");
+            let truth = after.at(last[0].t);
+            let d = (last[0].state[0] - truth[0]).hypot(last[0].state[2] - truth[1]);
+            assert!(d < 500.0, "seed {seed}: {d} m");
+            if mode_s {
+                assert_eq!(last[0].id, first[0], "seed {seed}: restarted");
+                assert_eq!(tracker.counters().confirmed, 1, "seed {seed}");
+            } else {
+                assert_ne!(last[0].id, first[0], "seed {seed}");
+            }
+        }
+    }
+}
