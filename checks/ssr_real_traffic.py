@@ -284,12 +284,15 @@ def main() -> int:
     figures = [rt.score(scene, r, args.cutoff_m) for r in results]
     idf = identity_figures(scene, ours_ssr, ident, args.cutoff_m, args)
     print()
-    print("| tracker | median / p90 horiz. (m) | median / p90 3D (m) | confirmed tracks | "
-          "false tracks | missed aircraft | ID swaps | mean GOSPA (m) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| tracker | median / p90 horiz. (m) | median / p90 3D (m) | median vertical (m) | "
+          "NEES mean / in 95 % band | confirmed tracks | false tracks | missed aircraft | "
+          "ID swaps | mean GOSPA (m) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for f in figures:
         print(f"| {f['name']} | {f['median_h_m']:.1f} / {f['p90_h_m']:.1f} | "
-              f"{f['median_3d_m']:.1f} / {f['p90_3d_m']:.1f} | {f['confirmed_tracks']} | "
+              f"{f['median_3d_m']:.1f} / {f['p90_3d_m']:.1f} | {f['median_v_m']:.1f} | "
+              f"{f['nees_mean']:.1f} / {100 * f['nees_in_band']:.0f} % | "
+              f"{f['confirmed_tracks']} | "
               f"{f['false_tracks']} | {f['missed']} | {f['id_swaps']} | "
               f"{f['mean_gospa_m']:.1f} |")
     print()

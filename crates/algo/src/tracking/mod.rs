@@ -1061,9 +1061,10 @@ impl Tracker {
     /// (their horizontal positions, the old one extrapolated to `new`'s
     /// time, within the χ²₂ gate at 0.999 of their summed covariances,
     /// 13.8: one aircraft tracked twice); [`SameAircraft::Lost`] where the
-    /// old track had no update since `new`'s first plot (it lost the
-    /// aircraft, which `new` found again: a manoeuvre it did not follow,
-    /// a gap in coverage). Otherwise both are kept and named by the
+    /// old track had no update by a plot of its address since `new`'s
+    /// first plot (it lost the aircraft, which `new` found again: a
+    /// manoeuvre it did not follow, a gap in coverage; primary plots may
+    /// have kept it going elsewhere). Otherwise both are kept and named by the
     /// duplicate-address warning (both updated at once: a misconfigured
     /// transponder, or two aircraft on one address).
     fn same_aircraft(&self, new: &Track) -> Option<SameAircraft> {
@@ -1090,7 +1091,14 @@ impl Tracker {
             {
                 return Some(SameAircraft::Here);
             }
-            if new.started.is_some_and(|t0| old.last_update < t0) && lost.is_none() {
+            // Lost: no update by a plot of its address since the new
+            // track's first plot (primary plots may have kept it going,
+            // on another target or on clutter).
+            let since = old
+                .identity
+                .last_mode_s
+                .map_or(old.last_update, |t| t.min(old.last_update));
+            if new.started.is_some_and(|t0| since < t0) && lost.is_none() {
                 lost = Some(SameAircraft::Lost(slot));
             }
         }
