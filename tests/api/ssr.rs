@@ -280,6 +280,43 @@ async fn mode_c_gives_the_tracks_their_geometric_height() {
         out["warnings"]
     );
 
+    // A session fed the same plots in batches (its stored tracker carries
+    // the offset's data) ends with the batch call's offset and tracks; over
+    // gRPC the session's state says the same.
+    let created = app
+        .post_json(
+            "/v1/sessions",
+            &json!({"kind": "plot_fusion", "origin": req["origin"], "radars": req["radars"]}),
+        )
+        .await;
+    assert_eq!(created.status(), 201);
+    let created: Value = created.json().await.unwrap();
+    let id = created["id"].as_str().unwrap();
+    for (i, chunk) in req["plots"].as_array().unwrap().chunks(23).enumerate() {
+        let body = json!({"sequence": i + 1, "plots": chunk});
+        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(
+        state["plot_fusion"]["pressure_offset"],
+        out["pressure_offset"]
+    );
+    assert_eq!(state["plot_fusion"]["tracks"], out["tracks"]);
+    let g =
+        radar_fusion::proto::session_service_client::SessionServiceClient::new(app.channel().await)
+            .get_session(radar_fusion::proto::GetSessionRequest {
+                session_id: id.to_string(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+    let offset = g
+        .plot_fusion
+        .and_then(|p| p.pressure_offset)
+        .expect("the gRPC session state's pressure offset");
+    assert_eq!(offset.plots, po["plots"].as_u64().unwrap());
+
     let mut off = req.clone();
     off["tracker"] = json!({"mode_c_height": {"enabled": false}});
     let out = app.post_ok(PATH, &off).await;
