@@ -288,3 +288,32 @@ async fn a_tenant_over_its_share_of_the_memory_store_gets_a_429_naming_the_limit
     // The other tenant's share is its own.
     assert_eq!(create(GLOBEX).await.unwrap().status(), 201);
 }
+
+#[tokio::test]
+async fn co_located_tracks_over_the_candidate_pair_budget_are_a_422_naming_it() {
+    let app = spawn_app().await;
+    // Two nodes of 1,001 tracks, all at the origin: every one of the
+    // 1,001² = 1,002,001 pairs is inside the gate, one more than a request
+    // may hold (1,000,000). Before, each became a pair with its state (a
+    // few hundred bytes): the product of the nodes grew without a bound.
+    let node = |id: &str| {
+        let tracks: Vec<Value> = (0..1001)
+            .map(|i| {
+                json!({"id": format!("{id}{i}"), "samples": [
+                    {"t": 0.0, "state": [0.0, 0.0], "covariance": [[1.0, 0.0], [0.0, 1.0]]}
+                ]})
+            })
+            .collect();
+        json!({"id": id, "tracks": tracks})
+    };
+    let method = json!({"kind": "independent_double_threshold", "rule": {"l": 1, "r": 1}});
+    let req =
+        json!({"state_layout": ["x", "y"], "method": method, "nodes": [node("a"), node("b")]});
+    let p = small_422(&app, "/v1/correlation/tracks", &req, 2_000).await;
+    assert_eq!(problem_fields(&p), ["nodes"]);
+    let m = message(&p, "nodes");
+    assert!(
+        m.contains("more than 1000000 candidate pairs") && m.contains("method.alpha"),
+        "{m}"
+    );
+}

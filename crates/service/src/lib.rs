@@ -87,7 +87,8 @@ pub(crate) fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
         | AlgoError::NonFinite { .. }
         | AlgoError::NotSymmetric { .. }
         | AlgoError::NotPositiveDefinite { .. }
-        | AlgoError::DegenerateGeometry { .. }) => FieldViolation {
+        | AlgoError::DegenerateGeometry { .. }
+        | AlgoError::BudgetExceeded { .. }) => FieldViolation {
             field: prefix.trim_end_matches('.').to_string(),
             message: other.to_string(),
         },
