@@ -192,6 +192,12 @@ pub struct Settings {
     /// shed at once with 503 / UNAVAILABLE instead of queueing.
     #[arg(long, env = "FUSION_MAX_IN_FLIGHT", default_value_t = 512)]
     pub max_in_flight: usize,
+    /// Most computations on tokio's blocking pool at once (running or waiting
+    /// for a thread): the pool takes work only when every compute lane is
+    /// busy with a long request; beyond it a request is shed with 503 /
+    /// UNAVAILABLE naming this limit (0: never use the pool).
+    #[arg(long, env = "FUSION_MAX_BLOCKING_JOBS", default_value_t = 64)]
+    pub max_blocking_jobs: usize,
     /// Longest time a graceful shutdown waits for in-flight requests.
     #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,

@@ -74,7 +74,7 @@ pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 
-use std::sync::Arc;
+use std::{ops::ControlFlow, sync::Arc};
 
 use crate::error::AlgoError;
 use crate::jpda::{self, TrackEstimate};
@@ -278,17 +278,20 @@ impl Tracker {
     /// Accepts plots (any order; sorted by time inside, stably), processes
     /// every frame that is complete, and buffers the rest.
     pub fn process(&mut self, plots: &[Plot]) -> Result<StepReport, AlgoError> {
-        self.process_with(plots, false, &mut |_| {})
+        self.process_with(plots, false, &mut |_| ControlFlow::Continue(()))
     }
 
     /// [`Tracker::process`], then [`Tracker::flush`] when `flush`, calling
     /// `after_frame` with the tracker after every processed frame (for a
     /// track history). Plots already sorted by time are inserted in O(1).
+    /// `after_frame` answering `Break` stops there: the plots of the later
+    /// frames stay buffered, as if they had not come yet (a caller that was
+    /// abandoned stops its work).
     pub fn process_with(
         &mut self,
         plots: &[Plot],
         flush: bool,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<StepReport, AlgoError> {
         for plot in plots {
             self.config.validate_plot(plot)?;
@@ -356,7 +359,7 @@ impl Tracker {
     /// Processes every buffered plot, closing the last frame. Plots that
     /// arrive later for that frame will be late.
     pub fn flush(&mut self) -> Result<StepReport, AlgoError> {
-        self.process_with(&[], true, &mut |_| {})
+        self.process_with(&[], true, &mut |_| ControlFlow::Continue(()))
     }
 
     /// The ids of every live track, confirmed and tentative (no copies of
@@ -434,7 +437,7 @@ impl Tracker {
         &mut self,
         flush: bool,
         report: &mut StepReport,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<(), AlgoError> {
         // Frames are taken from the front by a cursor, the buffer cut
         // once at the end (draining each frame from the front would move
@@ -458,7 +461,7 @@ impl Tracker {
         head: &mut usize,
         flush: bool,
         report: &mut StepReport,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<(), AlgoError> {
         while *head < pending.len() {
             let rest = &pending[*head..];
@@ -486,7 +489,9 @@ impl Tracker {
             } else {
                 self.serial_frame(frame, report)?;
             }
-            after_frame(self);
+            if after_frame(self).is_break() {
+                break;
+            }
         }
         Ok(())
     }

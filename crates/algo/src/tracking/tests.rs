@@ -1056,6 +1056,7 @@ fn a_dense_frame_learns_from_at_most_the_bound_of_pairs() {
             let pairs = tr.biases()[0].pairs;
             largest_step = largest_step.max(pairs - previous);
             previous = pairs;
+            std::ops::ControlFlow::Continue(())
         })
         .unwrap();
     let bound = registration::MAX_PAIRS_PER_FRAME as f64;

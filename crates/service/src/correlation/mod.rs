@@ -204,10 +204,14 @@ fn correlate_pairs(
                 .map_err(|e| Violations::from_param("method.", e))?
                 .with_pair_budget(MAX_CANDIDATE_PAIRS - held);
             out.delta = correlator.delta();
-            correlator.run().map_err(|e| match e {
-                AlgoError::BudgetExceeded { .. } => pair_budget_error("nodes", "one request"),
-                other => Violations::from_param("method.", other),
-            })?;
+            // Instant by instant, so that an abandoned request stops.
+            while {
+                crate::lanes::checkpoint()?;
+                correlator.step().map_err(|e| match e {
+                    AlgoError::BudgetExceeded { .. } => pair_budget_error("nodes", "one request"),
+                    other => Violations::from_param("method.", other),
+                })?
+            } {}
             held += correlator.pair_count();
             singular += correlator.singular_tests;
             let total = (scene.nodes()[na].len() * scene.nodes()[nb].len()) as u64;
