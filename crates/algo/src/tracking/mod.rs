@@ -751,7 +751,14 @@ impl Tracker {
         report
             .undefined
             .extend(outcome.undefined.iter().map(|&c| self.tracks[slots[c]].id));
-        let (hits, touched) = self.update(t, &slots, &mut scratch, &outcome, &*updater, &plots)?;
+        let (hits, touched) = self.update(
+            t,
+            &slots,
+            &mut scratch,
+            (&outcome, &*updater),
+            &plots,
+            &mut report.undefined,
+        )?;
         drop(updater);
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, report)?;
@@ -778,15 +785,19 @@ impl Tracker {
     /// gated (every one in parallel mode) taken and updated with the
     /// association's weights, one update path for single-model and IMM
     /// tracks; hits and misses recorded. Returns the hits and every track
-    /// whose life this frame recorded.
+    /// whose life this frame recorded. A track one of whose IMM models is
+    /// predicted at a radar's site (its polar model undefined there, while
+    /// the combined prediction the association used was not) is left as it
+    /// was, as if it had gated nothing, and listed in `undefined`: it
+    /// coasts, and the rest of the frame applies.
     fn update(
         &mut self,
         t: f64,
         slots: &[usize],
         scratch: &mut Scratch,
-        outcome: &Outcome,
-        updater: &dyn Updater,
+        (outcome, updater): (&Outcome, &dyn Updater),
         plots: &[CartesianPlot],
+        undefined: &mut Vec<u64>,
     ) -> Result<(Vec<Hit>, Vec<usize>), AlgoError> {
         let lazy = !self.parallel;
         let mut hits = Vec::new();
@@ -802,15 +813,19 @@ impl Tracker {
                 // the track's time; the hit recorded, the track's time and
                 // last update kept; no registration pair.
                 let pred = &mut scratch.predictions[c];
-                if pred.modes.is_empty() {
+                let carried = if pred.modes.is_empty() {
                     let single = single_mode(&mut scratch.single);
                     std::mem::swap(&mut single[0].x, &mut pred.x);
                     std::mem::swap(&mut single[0].p, &mut pred.p);
-                    updater.update(single, assoc)?;
-                    retrodiction::carry(track, &retro, single)?;
+                    coasts(updater.update(single, assoc))?
+                        .map(|_| retrodiction::carry(track, &retro, single))
                 } else {
-                    updater.update(&mut pred.modes, assoc)?;
-                    retrodiction::carry(track, &retro, &pred.modes)?;
+                    coasts(updater.update(&mut pred.modes, assoc))?
+                        .map(|_| retrodiction::carry(track, &retro, &pred.modes))
+                };
+                if carried.transpose()?.is_none() {
+                    undefined.push(track.id);
+                    continue;
                 }
                 if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
@@ -820,14 +835,28 @@ impl Tracker {
                 touched.push(k);
                 continue;
             }
+            let before = track.t;
             track.commit_swap(t, &mut scratch.predictions[c]);
-            let (x, p) = if track.modes.is_empty() {
+            let updated = if track.modes.is_empty() {
                 let single = single_mode(&mut scratch.single);
                 std::mem::swap(&mut single[0].x, &mut track.x);
                 std::mem::swap(&mut single[0].p, &mut track.p);
-                updater.update(single, assoc)?
+                let updated = coasts(updater.update(single, assoc))?;
+                if updated.is_none() {
+                    // The update failed before it changed the mode.
+                    std::mem::swap(&mut single[0].x, &mut track.x);
+                    std::mem::swap(&mut single[0].p, &mut track.p);
+                }
+                updated
             } else {
-                updater.update(&mut track.modes, assoc)?
+                coasts(updater.update(&mut track.modes, assoc))?
+            };
+            let Some((x, p)) = updated else {
+                // Back to the track as it was (the updaters fail before they
+                // change a mode): it coasts, predicted when needed.
+                track.commit_swap(before, &mut scratch.predictions[c]);
+                undefined.push(track.id);
+                continue;
             };
             track.x = x;
             track.p = p;
@@ -1068,5 +1097,16 @@ impl Scratch {
             track::copy_matrix(&mut self.estimates[c].p, &pred.p);
         }
         Ok(())
+    }
+}
+
+/// `Ok(None)` for an update that failed because a model's polar
+/// measurement model is undefined where that model predicts the target (at
+/// a radar's site): the track coasts. Any other error is an error.
+fn coasts<T>(updated: Result<T, AlgoError>) -> Result<Option<T>, AlgoError> {
+    match updated {
+        Ok(v) => Ok(Some(v)),
+        Err(AlgoError::DegenerateGeometry { .. }) => Ok(None),
+        Err(e) => Err(e),
     }
 }
