@@ -192,6 +192,12 @@ pub struct Settings {
     /// shed at once with 503 / UNAVAILABLE instead of queueing.
     #[arg(long, env = "FUSION_MAX_IN_FLIGHT", default_value_t = 512)]
     pub max_in_flight: usize,
+    /// Most computations on tokio's blocking pool at once (running or waiting
+    /// for a thread): the pool takes work only when every compute lane is
+    /// busy with a long request; beyond it a request is shed with 503 /
+    /// UNAVAILABLE naming this limit (0: never use the pool).
+    #[arg(long, env = "FUSION_MAX_BLOCKING_JOBS", default_value_t = 64)]
+    pub max_blocking_jobs: usize,
     /// Longest time a graceful shutdown waits for in-flight requests.
     #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,
@@ -397,6 +403,20 @@ pub struct Settings {
     /// tenant's API key.
     #[arg(long, env = "FUSION_TLS_CLIENT_TENANTS")]
     pub tls_client_tenants: Option<PathBuf>,
+    /// Certificate revocation lists of the client CAs (needs
+    /// `--tls-client-ca`): a file of PEM CRLs (one or more) or one DER CRL,
+    /// read again with the other TLS files. A client certificate a CRL
+    /// revokes is refused at the handshake, and so is one whose revocation
+    /// status no CRL gives.
+    #[arg(long, env = "FUSION_TLS_CRL")]
+    pub tls_crl: Option<PathBuf>,
+    /// Longest a connection stays open, in seconds: then it is closed
+    /// gracefully (HTTP/2 GOAWAY; requests in progress finish, and streams
+    /// still open are cut 30 s later), so that a changed or revoked
+    /// certificate, or a changed tenant mapping, takes effect on clients
+    /// that keep their connections. 0: no limit.
+    #[arg(long, env = "FUSION_MAX_CONNECTION_AGE_S", default_value_t = 3600.0)]
+    pub max_connection_age_s: f64,
     /// How often the TLS files are read again, in seconds; a change is
     /// loaded for new connections (SIGHUP reloads at once). 0: on SIGHUP only.
     #[arg(long, env = "FUSION_TLS_RELOAD_S", default_value_t = 10.0)]
@@ -485,6 +505,8 @@ impl Settings {
             max_per_client: self.max_connections_per_client,
             h2_keepalive: Duration::from_secs_f64(self.h2_keepalive_s),
             h2_max_concurrent_streams: self.h2_max_concurrent_streams,
+            max_age: (self.max_connection_age_s > 0.0)
+                .then(|| Duration::from_secs_f64(self.max_connection_age_s)),
         }
     }
 
@@ -685,6 +707,20 @@ impl Settings {
         if self.tls_client_tenants.is_some() && self.tls_client_ca.is_none() {
             return Err(
                 "--tls-client-tenants (FUSION_TLS_CLIENT_TENANTS) needs --tls-client-ca (FUSION_TLS_CLIENT_CA)"
+                    .into(),
+            );
+        }
+        if self.tls_crl.is_some() && self.tls_client_ca.is_none() {
+            return Err(
+                "--tls-crl (FUSION_TLS_CRL) needs --tls-client-ca (FUSION_TLS_CLIENT_CA)".into(),
+            );
+        }
+        if !(self.max_connection_age_s.is_finite()
+            && (0.0..1e9).contains(&self.max_connection_age_s))
+        {
+            return Err(
+                "--max-connection-age-s (FUSION_MAX_CONNECTION_AGE_S) must be a number of \
+                 seconds, 0 (no limit) or more"
                     .into(),
             );
         }

@@ -86,7 +86,14 @@ pub struct ConnectionLimits {
     pub h2_keepalive: Duration,
     /// Most concurrent streams on one HTTP/2 connection.
     pub h2_max_concurrent_streams: u32,
+    /// Longest a connection stays open before it is closed gracefully
+    /// (`None`: no limit); streams still open are cut [`AGE_GRACE`] later.
+    pub max_age: Option<Duration>,
 }
+
+/// How long a connection closed for its age may take to finish the
+/// requests and streams it has open before it is cut.
+pub const AGE_GRACE: Duration = Duration::from_secs(30);
 
 /// Serves `router` on `listener` under `limits` until `shutdown` completes,
 /// then drains (see the module documentation). `server` names the server
@@ -224,6 +231,10 @@ async fn serve_connection<I>(
         builder.serve_connection_with_upgrades(TokioIo::new(io), TowerToHyperService::new(service));
     let mut conn = std::pin::pin!(conn);
     let mut stopping = false;
+    // The connection's age limit, then the grace after it.
+    let mut aged = false;
+    let age = tokio::time::sleep(limits.max_age.unwrap_or(Duration::MAX / 4));
+    let mut age = std::pin::pin!(age);
     loop {
         tokio::select! {
             result = conn.as_mut() => {
@@ -235,6 +246,21 @@ async fn serve_connection<I>(
             _ = stop_rx.changed(), if !stopping => {
                 stopping = true;
                 conn.as_mut().graceful_shutdown();
+            }
+            () = &mut age, if limits.max_age.is_some() => {
+                if aged {
+                    metrics::counter!("connections_aged_out_total", "server" => server, "how" => "cut")
+                        .increment(1);
+                    break;
+                }
+                aged = true;
+                metrics::counter!("connections_aged_out_total", "server" => server, "how" => "graceful")
+                    .increment(1);
+                if !stopping {
+                    stopping = true;
+                    conn.as_mut().graceful_shutdown();
+                }
+                age.as_mut().reset(Instant::now() + AGE_GRACE);
             }
         }
     }

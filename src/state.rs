@@ -9,6 +9,7 @@ use std::sync::{
 };
 
 use metrics_exporter_prometheus::PrometheusHandle;
+use service::lanes::{Admitted, BlockingBound};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
 use crate::{auth::ApiKeys, config::Settings};
@@ -25,6 +26,7 @@ struct Inner {
     api_keys: ApiKeys,
     ready: AtomicBool,
     in_flight: Arc<Semaphore>,
+    blocking: Arc<BlockingBound>,
     body_budget: BodyBudget,
     metrics: PrometheusHandle,
     sessions: Sessions,
@@ -49,12 +51,17 @@ impl AppState {
         });
         let in_flight = Arc::new(Semaphore::new(settings.max_in_flight));
         let body_budget = BodyBudget::new(settings.max_buffered_body_bytes);
+        let blocking = Arc::new(BlockingBound::new(
+            settings.max_blocking_jobs,
+            "FUSION_MAX_BLOCKING_JOBS",
+        ));
         Self {
             inner: Arc::new(Inner {
                 settings,
                 api_keys,
                 ready: AtomicBool::new(false),
                 in_flight,
+                blocking,
                 body_budget,
                 metrics,
                 sessions,
@@ -98,8 +105,19 @@ impl AppState {
 
     /// A slot for one API request, or `None` when `max_in_flight` requests are
     /// being served already: the caller sheds the request instead of queueing it.
-    pub fn try_admit(&self) -> Option<OwnedSemaphorePermit> {
-        self.inner.in_flight.clone().try_acquire_owned().ok()
+    /// The caller serves the request under [`service::lanes::admitted`], so
+    /// that the slot is given back only once the request and every
+    /// computation it queued have finished (a request that timed out keeps
+    /// it until its computation has stopped), and its computations on the
+    /// blocking pool are bounded by `max_blocking_jobs`.
+    pub fn try_admit(&self) -> Option<Admitted> {
+        let permit = self.inner.in_flight.clone().try_acquire_owned().ok()?;
+        Some(Admitted::new(permit, Arc::clone(&self.inner.blocking)))
+    }
+
+    /// Computations of this service on tokio's blocking pool now.
+    pub fn blocking_jobs(&self) -> usize {
+        self.inner.blocking.running()
     }
 
     /// Reads a request body whole, within `limit` bytes (after any

@@ -32,6 +32,11 @@ pub fn to_status(e: ServiceError) -> Status {
         ServiceError::QuotaExceeded(detail) | ServiceError::TooLarge(detail) => {
             Status::resource_exhausted(detail)
         }
-        ServiceError::Unavailable(detail) => Status::unavailable(detail),
+        ServiceError::Unavailable(detail) | ServiceError::Overloaded(detail) => {
+            Status::unavailable(detail)
+        }
+        ServiceError::Cancelled => Status::deadline_exceeded(
+            "the call was abandoned (FUSION_REQUEST_TIMEOUT_S passed) and its computation stopped",
+        ),
     }
 }

@@ -201,12 +201,13 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
             Err(status) => return status.into_http(),
         }
     };
-    let Some(_permit) = state.try_admit() else {
+    let Some(admission) = state.try_admit() else {
         metrics::counter!("requests_shed_total", "transport" => "grpc").increment(1);
         return Status::unavailable("too many requests in flight; retry shortly").into_http();
     };
     let timeout = state.settings().request_timeout();
-    match tokio::time::timeout(timeout, next.run(req)).await {
+    let call = service::lanes::admitted(admission, next.run(req));
+    match tokio::time::timeout(timeout, call).await {
         Ok(response) => remap_client_error_statuses(response),
         Err(_) => Status::deadline_exceeded(format!(
             "the call took longer than the configured limit of {} s (FUSION_REQUEST_TIMEOUT_S)",

@@ -641,14 +641,15 @@ async fn stream_batch(
         error: Some(stream_error(&status)),
         ..Default::default()
     };
-    let Some(_permit) = state.try_admit() else {
+    let Some(admission) = state.try_admit() else {
         metrics::counter!("requests_shed_total", "transport" => "grpc").increment(1);
         return failed(Status::unavailable(
             "too many requests in flight; retry this batch shortly",
         ));
     };
     let timeout = state.settings().request_timeout();
-    match tokio::time::timeout(timeout, push(state, tenant, id, req)).await {
+    let batch = service::lanes::admitted(admission, push(state, tenant, id, req));
+    match tokio::time::timeout(timeout, batch).await {
         Ok(Ok(update)) => update,
         Ok(Err(e)) => failed(to_status(e)),
         Err(_) => failed(Status::deadline_exceeded(format!(

@@ -202,15 +202,21 @@ fn problem_responses() -> ([Answer; 2], [Answer; 4]) {
             "503",
             problem(
                 503,
-                "Shed (too many requests in flight, or the request bodies being read hold \
-                     FUSION_MAX_BUFFERED_BODY_BYTES; `Retry-After`), or a session store that \
+                "Shed (too many requests in flight, the request bodies being read hold \
+                     FUSION_MAX_BUFFERED_BODY_BYTES, or every compute lane is busy and \
+                     FUSION_MAX_BLOCKING_JOBS computations wait for the blocking pool; \
+                     `Retry-After`), or a session store that \
                      does not answer (`Retry-After`; for a session write the outcome is unknown: \
                      retry with the same sequence number)",
             ),
         ),
         (
             "504",
-            problem(504, "The request ran past FUSION_REQUEST_TIMEOUT_S"),
+            problem(
+                504,
+                "The request ran past FUSION_REQUEST_TIMEOUT_S (its computation stops at its \
+                 next checkpoint)",
+            ),
         ),
     ];
     let with_body = [
@@ -420,7 +426,7 @@ async fn admit(State(state): State<AppState>, req: Request, next: Next) -> Respo
     };
     let req = Request::from_parts(parts, axum::body::Body::from(bytes));
     match state.try_admit() {
-        Some(_permit) => next.run(req).await,
+        Some(admission) => service::lanes::admitted(admission, next.run(req)).await,
         None => {
             metrics::counter!("requests_shed_total", "transport" => "http").increment(1);
             Problem::for_status(StatusCode::SERVICE_UNAVAILABLE).into_response()

@@ -203,6 +203,13 @@ impl From<ServiceError> for Problem {
                 "Session store unavailable",
                 detail,
             ),
+            ServiceError::Overloaded(detail) => Problem::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "overloaded",
+                "Service overloaded",
+                detail,
+            ),
+            ServiceError::Cancelled => Problem::for_status(StatusCode::GATEWAY_TIMEOUT),
         }
     }
 }

@@ -40,7 +40,9 @@ use std::{
 use rustls::{
     ClientConfig, RootCertStore, ServerConfig, ServerConnection,
     crypto::CryptoProvider,
-    pki_types::{CertificateDer, PrivateKeyDer, ServerName, pem::PemObject},
+    pki_types::{
+        CertificateDer, CertificateRevocationListDer, PrivateKeyDer, ServerName, pem::PemObject,
+    },
     server::{WebPkiClientVerifier, danger::ClientCertVerifier},
     sign::{CertifiedKey, SingleCertAndKey},
 };
@@ -140,6 +142,7 @@ impl Tls {
             client_ca: settings.tls_client_ca.clone(),
             client_auth: settings.tls_client_auth.unwrap_or(ClientAuth::Required),
             tenants: settings.tls_client_tenants.clone(),
+            crl: settings.tls_crl.clone(),
         };
         let contents = files.read()?;
         let loaded = files.load(&contents)?;
@@ -161,6 +164,10 @@ impl Tls {
             (None, _) => "no client certificates".to_string(),
             (Some(_), ClientAuth::Required) => "client certificates required".to_string(),
             (Some(_), ClientAuth::Optional) => "client certificates optional".to_string(),
+        };
+        let clients = match &self.files.crl {
+            Some(path) => format!("{clients}, revocation lists {}", path.display()),
+            None => clients,
         };
         let tenants = if loaded.tenants.is_empty() {
             String::new()
@@ -392,6 +399,7 @@ struct Files {
     client_ca: Option<PathBuf>,
     client_auth: ClientAuth,
     tenants: Option<PathBuf>,
+    crl: Option<PathBuf>,
 }
 
 /// The bytes of the files, read together.
@@ -401,6 +409,7 @@ struct Contents {
     key: Vec<u8>,
     client_ca: Option<Vec<u8>>,
     tenants: Option<Vec<u8>>,
+    crl: Option<Vec<u8>>,
 }
 
 impl Contents {
@@ -424,6 +433,7 @@ const CERT: &str = "--tls-cert (FUSION_TLS_CERT)";
 const KEY: &str = "--tls-key (FUSION_TLS_KEY)";
 const CLIENT_CA: &str = "--tls-client-ca (FUSION_TLS_CLIENT_CA)";
 const TENANTS: &str = "--tls-client-tenants (FUSION_TLS_CLIENT_TENANTS)";
+const CRL: &str = "--tls-crl (FUSION_TLS_CRL)";
 
 impl Files {
     fn read(&self) -> Result<Contents, String> {
@@ -440,6 +450,7 @@ impl Files {
                 .as_deref()
                 .map(|p| read_file(p, TENANTS))
                 .transpose()?,
+            crl: self.crl.as_deref().map(|p| read_file(p, CRL)).transpose()?,
         })
     }
 
@@ -488,11 +499,18 @@ impl Files {
                         ClientAuth::Required => builder,
                         ClientAuth::Optional => builder.allow_unauthenticated(),
                     };
-                    Some(
-                        builder
-                            .build()
-                            .map_err(|e| format!("{CLIENT_CA}: {}: {e}", path.display()))?,
-                    )
+                    let builder = match (&self.crl, &contents.crl) {
+                        (Some(crl_path), Some(crl)) => {
+                            builder.with_crls(revocation_lists(crl, crl_path)?)
+                        }
+                        _ => builder,
+                    };
+                    Some(builder.build().map_err(|e| match (e, &self.crl) {
+                        (rustls::server::VerifierBuilderError::InvalidCrl(e), Some(crl)) => {
+                            format!("{CRL}: {}: not a usable CRL ({e:?})", crl.display())
+                        }
+                        (e, _) => format!("{CLIENT_CA}: {}: {e}", path.display()),
+                    })?)
                 }
                 _ => None,
             };
@@ -579,6 +597,29 @@ fn root_store(pem: &[u8], path: &Path, option: &str) -> Result<RootCertStore, St
         })?;
     }
     Ok(roots)
+}
+
+/// The revocation lists of a `--tls-crl` file: every `X509 CRL` block of a
+/// PEM file, or the file itself as one DER list.
+fn revocation_lists(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<Vec<CertificateRevocationListDer<'static>>, String> {
+    let pem = bytes.trim_ascii_start().starts_with(b"-----BEGIN");
+    let crls = if pem {
+        CertificateRevocationListDer::pem_slice_iter(bytes)
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| format!("{CRL}: {}: not a PEM CRL file ({e})", path.display()))?
+    } else {
+        vec![CertificateRevocationListDer::from(bytes.to_vec())]
+    };
+    if crls.is_empty() {
+        return Err(format!(
+            "{CRL}: {}: no `BEGIN X509 CRL` block found",
+            path.display()
+        ));
+    }
+    Ok(crls)
 }
 
 fn record_not_after(not_after: Option<i64>) {

@@ -288,3 +288,144 @@ async fn a_tenant_over_its_share_of_the_memory_store_gets_a_429_naming_the_limit
     // The other tenant's share is its own.
     assert_eq!(create(GLOBEX).await.unwrap().status(), 201);
 }
+
+#[tokio::test]
+async fn co_located_tracks_over_the_candidate_pair_budget_are_a_422_naming_it() {
+    let app = spawn_app().await;
+    // Two nodes of 1,001 tracks, all at the origin: every one of the
+    // 1,001² = 1,002,001 pairs is inside the gate, one more than a request
+    // may hold (1,000,000). Before, each became a pair with its state (a
+    // few hundred bytes): the product of the nodes grew without a bound.
+    let node = |id: &str| {
+        let tracks: Vec<Value> = (0..1001)
+            .map(|i| {
+                json!({"id": format!("{id}{i}"), "samples": [
+                    {"t": 0.0, "state": [0.0, 0.0], "covariance": [[1.0, 0.0], [0.0, 1.0]]}
+                ]})
+            })
+            .collect();
+        json!({"id": id, "tracks": tracks})
+    };
+    let method = json!({"kind": "independent_double_threshold", "rule": {"l": 1, "r": 1}});
+    let req =
+        json!({"state_layout": ["x", "y"], "method": method, "nodes": [node("a"), node("b")]});
+    let p = small_422(&app, "/v1/correlation/tracks", &req, 2_000).await;
+    assert_eq!(problem_fields(&p), ["nodes"]);
+    let m = message(&p, "nodes");
+    assert!(
+        m.contains("more than 1000000 candidate pairs") && m.contains("method.alpha"),
+        "{m}"
+    );
+}
+
+/// A JPDA update that computes for long: 24 scalar tracks at 0 and
+/// `scans` sensors of 24 measurements near 0, so every scan is one cluster
+/// of 24 tracks whose exact hypothesis tree runs into its 2·10⁶-edge budget
+/// before it falls back to AMSJPDA.
+fn slow_jpda(scans: usize) -> Value {
+    let tracks: Vec<Value> = (0..24)
+        .map(|i| json!({"id": format!("t{i}"), "state": [0.0], "covariance": [[1.0]]}))
+        .collect();
+    let sensor = |s: usize| {
+        let z: Vec<Value> = (0..24)
+            .map(|j| json!({"z": [(j as f64 - 12.0) * 0.01]}))
+            .collect();
+        json!({"id": format!("s{s}"), "kind": "linear", "h": [[1.0]], "r": [[1.0]],
+               "detection_probability": 0.9, "clutter_density": 0.1, "measurements": z})
+    };
+    json!({"tracks": tracks, "sensors": (0..scans).map(sensor).collect::<Vec<_>>()})
+}
+
+/// The value of the counter `name` with `label` in a `/metrics` text (0
+/// when absent).
+fn counter(metrics: &str, name: &str, label: &str) -> f64 {
+    metrics
+        .lines()
+        .find(|l| l.starts_with(name) && l.contains(label))
+        .and_then(|l| l.rsplit(' ').next())
+        .map_or(0.0, |v| v.parse().unwrap())
+}
+
+#[tokio::test]
+async fn a_request_that_times_out_stops_its_computation_and_frees_its_slot() {
+    let app = spawn_app_with(|s| {
+        s.max_in_flight = 1;
+        s.request_timeout_s = 1.0;
+    })
+    .await;
+    let name = "compute_jobs_cancelled_total";
+    let stopped_before = counter(&app.metrics_text().await, name, "stage=\"running\"");
+    let r = app.post_json("/v1/jpda/update", &slow_jpda(32)).await;
+    assert_eq!(r.status(), 504);
+    // The computation holds the only in-flight slot until it stops: before
+    // the change it kept computing (for minutes) with its slot given back
+    // at the 504; now it stops at the next scan, and the slot with it.
+    let small = json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]});
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let r = app
+            .post_json("/v1/correlation/rules/evaluate", &small)
+            .await;
+        if r.status() == 200 {
+            break;
+        }
+        assert_eq!(r.status(), 503, "shed while the slot is held");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the slot was never given back"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    let stopped = counter(&app.metrics_text().await, name, "stage=\"running\"");
+    assert!(
+        stopped > stopped_before,
+        "no computation stopped at a checkpoint ({stopped_before} → {stopped})"
+    );
+}
+
+#[tokio::test]
+async fn with_every_lane_busy_a_request_past_the_blocking_bound_is_a_503_naming_it() {
+    // No computation of this service may go to the blocking pool: once
+    // every compute lane is held by a long request, the next is shed.
+    let app = spawn_app_with(|s| s.max_blocking_jobs = 0).await;
+    let lanes = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let slow = slow_jpda(32);
+    // One long request per lane (sent again if it was itself shed because
+    // other tests' jobs held the lanes at that moment).
+    let held: Vec<_> = (0..lanes)
+        .map(|_| {
+            let (client, url, body) =
+                (app.client.clone(), app.url("/v1/jpda/update"), slow.clone());
+            tokio::spawn(async move {
+                while client.post(&url).json(&body).send().await.unwrap().status() == 503 {
+                    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                }
+            })
+        })
+        .collect();
+    let small = json!({"alpha": 0.05, "rules": [{"l": 1, "r": 1}]});
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let response = loop {
+        let r = app
+            .post_json("/v1/correlation/rules/evaluate", &small)
+            .await;
+        if r.status() == 503 {
+            break r;
+        }
+        assert_eq!(r.status(), 200);
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the lanes were never all held"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    };
+    assert_eq!(response.headers()["retry-after"], "1");
+    let problem = assert_problem(response, 503).await;
+    assert_eq!(problem["type"], "urn:radar-fusion:problem:overloaded");
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(detail.contains("FUSION_MAX_BLOCKING_JOBS"), "{detail}");
+    // The long requests' clients leave; their computations stop.
+    for h in held {
+        h.abort();
+    }
+}

@@ -21,8 +21,9 @@ use radar_fusion::{
     },
 };
 use rcgen::{
-    BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair,
-    KeyUsagePurpose, SanType,
+    BasicConstraints, CertificateParams, CertificateRevocationListParams, DnType,
+    ExtendedKeyUsagePurpose, IsCa, Issuer, KeyIdMethod, KeyPair, KeyUsagePurpose, RevocationReason,
+    RevokedCertParams, SanType, SerialNumber, date_time_ymd,
 };
 use rustls::{
     ClientConfig, RootCertStore,
@@ -99,6 +100,40 @@ impl Pki {
         }
         params.extended_key_usages = vec![ExtendedKeyUsagePurpose::ClientAuth];
         self.sign(params)
+    }
+
+    /// A client certificate with this common name and serial number.
+    fn client_numbered(&self, cn: &str, serial: u64) -> Pair {
+        let mut params = CertificateParams::new(Vec::<String>::new()).unwrap();
+        params.distinguished_name.push(DnType::CommonName, cn);
+        params.serial_number = Some(SerialNumber::from(serial));
+        params.extended_key_usages = vec![ExtendedKeyUsagePurpose::ClientAuth];
+        self.sign(params)
+    }
+
+    /// A revocation list of this CA revoking the certificates of `serials`,
+    /// DER.
+    fn crl(&self, serials: &[u64]) -> Vec<u8> {
+        CertificateRevocationListParams {
+            this_update: date_time_ymd(2025, 1, 1),
+            next_update: date_time_ymd(2100, 1, 1),
+            crl_number: SerialNumber::from(serials.len() as u64 + 1),
+            issuing_distribution_point: None,
+            revoked_certs: serials
+                .iter()
+                .map(|&s| RevokedCertParams {
+                    serial_number: SerialNumber::from(s),
+                    revocation_time: date_time_ymd(2025, 6, 1),
+                    reason_code: Some(RevocationReason::KeyCompromise),
+                    invalidity_date: None,
+                })
+                .collect(),
+            key_identifier_method: KeyIdMethod::Sha256,
+        }
+        .signed_by(&self.issuer)
+        .unwrap()
+        .der()
+        .to_vec()
     }
 
     fn sign(&self, params: CertificateParams) -> Pair {
@@ -1018,5 +1053,151 @@ async fn bad_tls_files_stop_the_start_naming_the_file() {
     assert!(
         !stderr.contains("panicked") && !stderr.contains("PRIVATE KEY"),
         "{stderr}"
+    );
+}
+
+/// PEM text of a DER revocation list.
+fn crl_pem(der: &[u8]) -> String {
+    use base64::Engine as _;
+    let b64 = base64::engine::general_purpose::STANDARD.encode(der);
+    let lines: Vec<&str> = b64
+        .as_bytes()
+        .chunks(64)
+        .map(|c| std::str::from_utf8(c).unwrap())
+        .collect();
+    format!(
+        "-----BEGIN X509 CRL-----\n{}\n-----END X509 CRL-----\n",
+        lines.join("\n")
+    )
+}
+
+/// Issue 53: certificate revocation lists and a maximum connection age. A
+/// client keeps a connection open while its certificate is revoked: the
+/// reloaded CRL refuses its new connections at once, and the open one is
+/// closed at its age limit, so the revoked certificate stops acting.
+#[tokio::test]
+async fn a_revoked_client_certificate_is_refused_and_its_open_connection_ends_at_its_age() {
+    let pki = Pki::new("crl");
+    let server = pki.server();
+    let crl = pki.write("crl.pem", &crl_pem(&pki.crl(&[])));
+    let app = spawn_app_with(|s| {
+        pki.serve(s, &server);
+        pki.verify_clients(s, None);
+        s.tls_crl = Some(crl.clone());
+        s.tls_reload_s = 0.1;
+        s.max_connection_age_s = 1.0;
+    })
+    .await;
+    let acme = pki.client_numbered("acme-ingest", 7);
+    let globex = pki.client_numbered("globex-ingest", 8);
+    let acme_h2 = client_config(&pki.ca_pem, Some(&acme), &[b"h2"]);
+    let globex_h2 = client_config(&pki.ca_pem, Some(&globex), &[b"h2"]);
+    let stream = tls_connect(app.http_addr, acme_h2.clone()).await.unwrap();
+    let mut open = Sender::over(stream).await.unwrap();
+    let (status, _) = open
+        .send("POST", EVALUATE, Some(&evaluate_body()), None)
+        .await
+        .unwrap();
+    assert_eq!(status, 200);
+
+    // Certificate 7 revoked: new connections with it are refused once the
+    // list is read again (every 0.1 s here), 8 is still served.
+    pki.replace("crl.pem", &crl_pem(&pki.crl(&[7])));
+    let deadline = tokio::time::Instant::now() + BOUND;
+    loop {
+        let r = request(
+            app.http_addr,
+            acme_h2.clone(),
+            "POST",
+            EVALUATE,
+            Some(&evaluate_body()),
+            None,
+        )
+        .await;
+        if r.is_err() {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the revoked certificate was still served"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let (status, _) = request(
+        app.http_addr,
+        globex_h2.clone(),
+        "POST",
+        EVALUATE,
+        Some(&evaluate_body()),
+        None,
+    )
+    .await
+    .unwrap();
+    assert_eq!(status, 200);
+
+    // The connection opened before the revocation is closed at its age
+    // (1 s): before, it served its client for as long as it kept it open.
+    let deadline = tokio::time::Instant::now() + BOUND;
+    loop {
+        if open
+            .send("POST", EVALUATE, Some(&evaluate_body()), None)
+            .await
+            .is_err()
+        {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the connection of the revoked certificate stayed open"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let globex_h1 = client_config(&pki.ca_pem, Some(&globex), &[b"http/1.1"]);
+    let aged = counter(
+        &app,
+        &globex_h1,
+        r#"connections_aged_out_total{server="http",how="graceful"}"#,
+    )
+    .await;
+    assert!(aged >= 1.0, "{aged}");
+}
+
+#[tokio::test]
+async fn a_der_revocation_list_is_read_and_a_bad_one_stops_the_start_naming_it() {
+    let pki = Pki::new("crl-der");
+    let server = pki.server();
+    let der = pki.crl(&[7]);
+    let path = pki.dir.join("crl.der");
+    std::fs::write(&path, &der).unwrap();
+    let app = spawn_app_with(|s| {
+        pki.serve(s, &server);
+        pki.verify_clients(s, None);
+        s.tls_crl = Some(path.clone());
+    })
+    .await;
+    let revoked = client_config(&pki.ca_pem, Some(&pki.client_numbered("a", 7)), &[b"h2"]);
+    let kept = client_config(&pki.ca_pem, Some(&pki.client_numbered("b", 8)), &[b"h2"]);
+    let body = evaluate_body();
+    let refused = request(app.http_addr, revoked, "POST", EVALUATE, Some(&body), None).await;
+    assert!(
+        refused.is_err(),
+        "served a revoked certificate: {refused:?}"
+    );
+    let (status, _) = request(app.http_addr, kept, "POST", EVALUATE, Some(&body), None)
+        .await
+        .unwrap();
+    assert_eq!(status, 200);
+
+    // A file that is no CRL stops the start, naming the option and file.
+    let mut settings = Settings::for_tests();
+    pki.serve(&mut settings, &server);
+    pki.verify_clients(&mut settings, None);
+    settings.tls_crl = Some(pki.write("not-a-crl.der", "not a revocation list"));
+    let Err(e) = radar_fusion::tls::Tls::from_settings(&settings) else {
+        panic!("a bad CRL file loaded");
+    };
+    assert!(
+        e.contains("FUSION_TLS_CRL") && e.contains("not-a-crl.der"),
+        "{e}"
     );
 }

@@ -1,8 +1,9 @@
 //! The single error type of the numerical core.
 //!
 //! Every variant is numeric: a shape that does not fit, a value that is not
-//! finite, a matrix that is not a covariance, a parameter outside its domain or
-//! a geometry where the measurement model is undefined. Each variant names the
+//! finite, a matrix that is not a covariance, a parameter outside its domain,
+//! a geometry where the measurement model is undefined, or a budget of work
+//! or memory a computation would exceed. Each variant names the
 //! offending quantity in `what` so that the service layer can map it to a
 //! field path and a message such as "covariance is not positive definite".
 //! A failed gate is a result, never an error.
@@ -60,6 +61,15 @@ pub enum AlgoError {
         /// Why the geometry is singular.
         reason: &'static str,
     },
+    /// A computation would exceed its budget (candidate pairs): refused
+    /// before the memory it would take is allocated.
+    #[error("{what}: more than {limit}")]
+    BudgetExceeded {
+        /// Name of what is counted.
+        what: &'static str,
+        /// The budget.
+        limit: u64,
+    },
     /// A scalar parameter is outside its domain.
     #[error("invalid {what}: {reason}")]
     InvalidParameter {
@@ -80,6 +90,7 @@ impl AlgoError {
             | AlgoError::NotSymmetric { what, .. }
             | AlgoError::NotPositiveDefinite { what }
             | AlgoError::DegenerateGeometry { what, .. }
+            | AlgoError::BudgetExceeded { what, .. }
             | AlgoError::InvalidParameter { what, .. } => what,
         }
     }

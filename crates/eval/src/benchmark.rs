@@ -401,7 +401,7 @@ pub struct EngineOutcome {
 pub fn correlate_scene(s: &RealisticScene, cfg: &Config) -> EngineOutcome {
     let model = realistic_model();
     let mut c = PairCorrelator::new(&s.scene, 0, 1, cfg, Some(&model)).expect("valid config");
-    c.run();
+    c.run().expect("no pair budget");
     let reports = c.reports();
     let links: Vec<Link> = reports
         .iter()

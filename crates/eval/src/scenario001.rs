@@ -126,7 +126,10 @@ pub fn run_tracker(
 ) -> Result<(Vec<Frame>, Counters), SimError> {
     let mut tracker = Tracker::new(config)?;
     let mut frames = Vec::new();
-    tracker.process_with(plots, true, &mut |tr: &Tracker| frames.push(frame_of(tr)))?;
+    tracker.process_with(plots, true, &mut |tr: &Tracker| {
+        frames.push(frame_of(tr));
+        std::ops::ControlFlow::Continue(())
+    })?;
     Ok((frames, tracker.counters()))
 }
 

@@ -154,8 +154,13 @@ pub fn update(input: JpdaInput) -> Result<JpdaOutput, ServiceError> {
             t.p = p;
         }
     }
-    let reports =
-        jpda::update(&mut tracks, &plan.scans, &plan.config).map_err(computation_error)?;
+    // Sequential multi-sensor JPDA (`jpda::update`) scan by scan, so that
+    // an abandoned request stops between scans.
+    let mut reports = Vec::with_capacity(plan.scans.len());
+    for scan in &plan.scans {
+        crate::lanes::checkpoint()?;
+        reports.push(jpda::scan(&mut tracks, scan, &plan.config).map_err(computation_error)?);
+    }
     let compute_us = micros_since(start);
     let mut warnings = Vec::new();
     if plan.sensor_ids.is_empty() {

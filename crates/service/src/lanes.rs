@@ -23,13 +23,25 @@
 //! before, where the operating system shares the cores among all of it.
 //! So a 10 s request delays nobody by more than [`LONG_JOB`] per lane, and
 //! small requests never wait behind large ones.
+//!
+//! A request the adapters admitted runs its jobs under [`admitted`]: its
+//! in-flight slot travels with them and is given back only when the
+//! request and every job it queued have finished, and jobs that would go to
+//! the blocking pool beyond the service's bound ([`BlockingBound`]) are
+//! refused ([`ServiceError::Overloaded`], 503) instead of queueing there
+//! without bound. A request abandoned before its job ends (its timeout
+//! passed: 504, or its client left) cancels the job: one still queued never
+//! runs, and one running stops at its next [`checkpoint`], which the long
+//! loops of the computations call (between instants of a correlation, scans
+//! of a JPDA update, frames of the tracker). `/metrics` counts both in
+//! `compute_jobs_cancelled_total{stage="queued"|"running"}`.
 
 use std::{
     collections::VecDeque,
     panic::{AssertUnwindSafe, catch_unwind},
     sync::{
         Arc, Condvar, Mutex, OnceLock,
-        atomic::{AtomicU64, Ordering},
+        atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering},
     },
     time::{Duration, Instant},
 };
@@ -44,6 +56,113 @@ type Job = Box<dyn FnOnce() + Send>;
 
 /// The `started` mark of a lane whose thread could not be started.
 const NEVER_STARTED: u64 = u64::MAX;
+
+/// A request's admission, which its jobs carry: the in-flight slot (any
+/// value whose drop gives it back, such as a semaphore permit), held until
+/// the request and its jobs have all finished, and the bound on jobs on the
+/// blocking pool of the service that admitted it.
+#[derive(Clone)]
+pub struct Admitted {
+    _slot: Arc<dyn Send + Sync>,
+    blocking: Arc<BlockingBound>,
+}
+
+impl Admitted {
+    /// The admission of a request holding `slot`, under `blocking`.
+    pub fn new(slot: impl Send + Sync + 'static, blocking: Arc<BlockingBound>) -> Self {
+        Self {
+            _slot: Arc::new(slot),
+            blocking,
+        }
+    }
+}
+
+/// The most jobs of one service that may run on (or wait for) tokio's
+/// blocking pool at once: the pool takes work only when every lane is held
+/// by a long job, and its own queue has no bound.
+#[derive(Debug)]
+pub struct BlockingBound {
+    running: AtomicUsize,
+    max: usize,
+    /// The setting that raises `max`, named in the refusal.
+    setting: &'static str,
+}
+
+impl BlockingBound {
+    /// A bound of `max` jobs, raised by `setting` (named in the 503).
+    pub fn new(max: usize, setting: &'static str) -> Self {
+        Self {
+            running: AtomicUsize::new(0),
+            max,
+            setting,
+        }
+    }
+
+    /// Jobs on the blocking pool now.
+    pub fn running(&self) -> usize {
+        self.running.load(Ordering::Relaxed)
+    }
+
+    /// A place on the blocking pool, given back when dropped, or the 503
+    /// naming the bound.
+    fn take(self: &Arc<Self>) -> Result<BlockingSeat, ServiceError> {
+        self.running
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < self.max).then_some(n + 1)
+            })
+            .map_err(|_| {
+                metrics::counter!("compute_jobs_refused_total").increment(1);
+                ServiceError::Overloaded(format!(
+                    "every compute lane is busy with a long request and {} computations are \
+                     running on or waiting for the blocking pool, the limit ({}); retry shortly",
+                    self.max, self.setting
+                ))
+            })?;
+        Ok(BlockingSeat(Arc::clone(self)))
+    }
+}
+
+struct BlockingSeat(Arc<BlockingBound>);
+
+impl Drop for BlockingSeat {
+    fn drop(&mut self) {
+        self.0.running.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+tokio::task_local! {
+    static ADMITTED: Admitted;
+}
+
+/// Runs `request` (an admitted request's handling) with its admission, so
+/// that the jobs it queues through [`run`] carry the slot and the bound.
+pub async fn admitted<F: std::future::Future>(admission: Admitted, request: F) -> F::Output {
+    ADMITTED.scope(admission, request).await
+}
+
+/// `Err(ServiceError::Cancelled)` when the request whose job runs on this
+/// thread was abandoned (timed out, or its client left): long loops call it
+/// and stop. `Ok` outside a job of [`run`].
+pub fn checkpoint() -> Result<(), ServiceError> {
+    let cancelled = CANCEL.with_borrow(|c| c.as_ref().is_some_and(|c| c.load(Ordering::Relaxed)));
+    if cancelled {
+        if !CANCEL_SEEN.replace(true) {
+            metrics::counter!("compute_jobs_cancelled_total", "stage" => "running").increment(1);
+        }
+        return Err(ServiceError::Cancelled);
+    }
+    Ok(())
+}
+
+/// Sets a job's cancellation flag when the request awaiting it goes away
+/// before the job answered.
+struct Abandon(Arc<AtomicBool>);
+
+impl Drop for Abandon {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
 
 /// Runs CPU-bound work on a compute lane (or, when every lane is held by a
 /// long job, on tokio's blocking pool) and awaits its result. A panic in the
@@ -73,18 +192,43 @@ where
     if IN_JOB.get() {
         return Ok(work());
     }
-    let context = Context::current();
+    let admission = ADMITTED.try_with(Admitted::clone).ok();
+    let cancel = Arc::new(AtomicBool::new(false));
+    // Dropped with this future: when it goes before the answer came, the
+    // request was abandoned and the job stops.
+    let _abandon = Abandon(Arc::clone(&cancel));
+    let context = Context::current(cancel);
     let lanes = Lanes::global();
     if lanes.all_held() {
+        let seat = match &admission {
+            Some(a) => Some(a.blocking.take()?),
+            None => None,
+        };
         metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
-        return tokio::task::spawn_blocking(move || context.in_job(work))
-            .await
-            .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")));
+        let ran = tokio::task::spawn_blocking(move || {
+            let _held = (admission, seat);
+            if context.cancel.load(Ordering::Relaxed) {
+                metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued").increment(1);
+                return None;
+            }
+            Some(context.in_job(work))
+        })
+        .await
+        .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")))?;
+        return ran.ok_or(ServiceError::Cancelled);
     }
     metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
     let (tx, rx) = tokio::sync::oneshot::channel();
     lanes.push(Box::new(move || {
-        let _ = tx.send(context.in_job(work));
+        if context.cancel.load(Ordering::Relaxed) {
+            metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued").increment(1);
+            return;
+        }
+        let out = context.in_job(work);
+        // The slot goes back before the answer does, so that a client
+        // that sends its next request on the answer finds it free.
+        drop(admission);
+        let _ = tx.send(out);
     }));
     rx.await
         .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
@@ -93,37 +237,49 @@ where
 thread_local! {
     /// Whether this thread is running a job of [`run`].
     static IN_JOB: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// The cancellation flag of the job running on this thread.
+    static CANCEL: std::cell::RefCell<Option<Arc<AtomicBool>>> =
+        const { std::cell::RefCell::new(None) };
+    /// Whether [`checkpoint`] has reported this job's cancellation (counted once).
+    static CANCEL_SEEN: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
 /// What a job takes along from the request that queued it: the log
 /// subscriber and the request's span (its `request_id`), so that a line
 /// logged on a lane names the request as one logged on the async worker
-/// does.
+/// does, and the flag that says the request was abandoned.
 struct Context {
     dispatch: tracing::Dispatch,
     span: tracing::Span,
+    cancel: Arc<AtomicBool>,
 }
 
 impl Context {
-    fn current() -> Self {
+    fn current(cancel: Arc<AtomicBool>) -> Self {
         Self {
             dispatch: tracing::dispatcher::get_default(Clone::clone),
             span: tracing::Span::current(),
+            cancel,
         }
     }
 
-    /// Runs `work` in the request's span, marked as a job of [`run`] (the
-    /// mark is cleared again on the way out, by unwinding too).
+    /// Runs `work` in the request's span, marked as a job of [`run`] with
+    /// its cancellation flag (both cleared again on the way out, by
+    /// unwinding too).
     fn in_job<T>(self, work: impl FnOnce() -> T) -> T {
         struct Clear;
         impl Drop for Clear {
             fn drop(&mut self) {
                 IN_JOB.set(false);
+                CANCEL.set(None);
+                CANCEL_SEEN.set(false);
             }
         }
         tracing::dispatcher::with_default(&self.dispatch, || {
             let _entered = self.span.enter();
             IN_JOB.set(true);
+            CANCEL.set(Some(self.cancel));
+            CANCEL_SEEN.set(false);
             let _clear = Clear;
             work()
         })
@@ -304,7 +460,7 @@ mod tests {
 
     #[test]
     fn the_job_mark_is_cleared_by_a_panic() {
-        let r = catch_unwind(|| Context::current().in_job::<()>(|| panic!("boom")));
+        let r = catch_unwind(|| Context::current(Arc::default()).in_job::<()>(|| panic!("boom")));
         assert!(r.is_err());
         assert!(!IN_JOB.get());
     }
@@ -366,6 +522,139 @@ mod tests {
             std::thread::sleep(Duration::from_millis(1));
         }
         assert!(!lanes.all_held());
+    }
+
+    /// Polls `request` until its job says it started, then drops it (the
+    /// request is abandoned while its job runs).
+    async fn abandon_once_started<F: std::future::Future>(
+        request: F,
+        started: &std::sync::mpsc::Receiver<()>,
+    ) {
+        let mut request = std::pin::pin!(request);
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            tokio::select! {
+                _ = &mut request => panic!("the request was answered before it was abandoned"),
+                () = tokio::time::sleep(Duration::from_millis(1)) => {}
+            }
+            if started.try_recv().is_ok() {
+                return;
+            }
+            assert!(Instant::now() < deadline, "the job never started");
+        }
+    }
+
+    #[tokio::test]
+    async fn an_abandoned_request_stops_its_job_at_the_next_checkpoint() {
+        // A job that would run for 100 s checks for cancellation every
+        // millisecond; the request awaiting it gives up after 50 ms.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (started_tx, started_rx) = std::sync::mpsc::channel();
+        let job = run(move || {
+            started_tx.send(()).unwrap();
+            for i in 0..100_000 {
+                if let Err(e) = checkpoint() {
+                    let _ = tx.send((i, e));
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        });
+        abandon_once_started(job, &started_rx).await;
+        // A generous bound against a hang, not a measure of speed.
+        let (i, e) = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the job stopped at a checkpoint");
+        assert!(i < 100_000);
+        assert!(matches!(e, ServiceError::Cancelled));
+        // Outside a job, and in a job nobody abandoned, a checkpoint passes.
+        assert!(checkpoint().is_ok());
+        assert!(run(checkpoint).await.unwrap().is_ok());
+    }
+
+    #[test]
+    fn the_blocking_bound_refuses_past_its_limit_naming_the_setting() {
+        let bound = Arc::new(BlockingBound::new(2, "FUSION_MAX_BLOCKING_JOBS"));
+        let first = bound.take().unwrap();
+        let _second = bound.take().unwrap();
+        assert_eq!(bound.running(), 2);
+        let Err(ServiceError::Overloaded(message)) = bound.take() else {
+            panic!("a third job was taken");
+        };
+        assert!(
+            message.contains("2 computations") && message.contains("FUSION_MAX_BLOCKING_JOBS"),
+            "{message}"
+        );
+        drop(first);
+        assert_eq!(bound.running(), 1);
+        assert!(bound.take().is_ok());
+    }
+
+    #[tokio::test]
+    async fn with_every_lane_held_an_admitted_job_over_the_bound_is_refused() {
+        // Hold every lane of the process with a job that waits on a gate
+        // (other tests' jobs go to the blocking pool meanwhile).
+        let lanes = Lanes::global();
+        let gate = Arc::new((Mutex::new(false), Condvar::new()));
+        for _ in 0..lanes.started.len() {
+            let gate = Arc::clone(&gate);
+            lanes.push(Box::new(move || {
+                let (open, cv) = &*gate;
+                let mut o = open.lock().unwrap();
+                while !*o {
+                    o = cv.wait(o).unwrap();
+                }
+            }));
+        }
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while !lanes.all_held() {
+            assert!(Instant::now() < deadline, "the lanes never counted as held");
+            tokio::time::sleep(LONG_JOB).await;
+        }
+        // Admitted under a bound of none on the blocking pool: refused.
+        let bound = Arc::new(BlockingBound::new(0, "FUSION_MAX_BLOCKING_JOBS"));
+        let refused = admitted(Admitted::new((), Arc::clone(&bound)), run(|| 1)).await;
+        // Under a bound of one: it runs there, and gives its place back.
+        let one = Arc::new(BlockingBound::new(1, "FUSION_MAX_BLOCKING_JOBS"));
+        let ran = admitted(Admitted::new((), Arc::clone(&one)), run(|| 2)).await;
+        *gate.0.lock().unwrap() = true;
+        gate.1.notify_all();
+        assert!(
+            matches!(&refused, Err(ServiceError::Overloaded(m)) if m.contains("FUSION_MAX_BLOCKING_JOBS")),
+            "{refused:?}"
+        );
+        assert_eq!(ran.unwrap(), 2);
+        assert_eq!(one.running(), 0);
+    }
+
+    #[tokio::test]
+    async fn an_admitted_request_holds_its_slot_until_its_job_ends() {
+        // The slot is a semaphore permit: the request's future is dropped
+        // at once, its job still runs and keeps the slot until it ends.
+        let slots = Arc::new(tokio::sync::Semaphore::new(1));
+        let permit = Arc::clone(&slots).try_acquire_owned().unwrap();
+        let bound = Arc::new(BlockingBound::new(8, "FUSION_MAX_BLOCKING_JOBS"));
+        let (started_tx, started_rx) = std::sync::mpsc::channel();
+        let (finish_tx, finish_rx) = std::sync::mpsc::channel::<()>();
+        let request = admitted(
+            Admitted::new(permit, bound),
+            run(move || {
+                started_tx.send(()).unwrap();
+                let _ = finish_rx.recv_timeout(Duration::from_secs(60));
+            }),
+        );
+        abandon_once_started(request, &started_rx).await;
+        assert_eq!(
+            slots.available_permits(),
+            0,
+            "the running job holds the slot"
+        );
+        finish_tx.send(()).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while slots.available_permits() == 0 {
+            assert!(Instant::now() < deadline, "the slot was never given back");
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
     }
 
     #[test]

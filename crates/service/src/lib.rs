@@ -59,6 +59,14 @@ pub enum ServiceError {
     /// client may retry after the given number of seconds.
     #[error("unavailable: {0}")]
     Unavailable(String),
+    /// The service is too busy to take the request's computation now (a
+    /// bound of the compute lanes, named in the message); retry shortly.
+    #[error("overloaded: {0}")]
+    Overloaded(String),
+    /// The request was abandoned (its timeout passed, or its client left)
+    /// and its computation stopped at a checkpoint: nobody reads the answer.
+    #[error("cancelled: the request was abandoned")]
+    Cancelled,
 }
 
 /// The message for a matrix that is not a covariance, without the
@@ -87,7 +95,8 @@ pub(crate) fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
         | AlgoError::NonFinite { .. }
         | AlgoError::NotSymmetric { .. }
         | AlgoError::NotPositiveDefinite { .. }
-        | AlgoError::DegenerateGeometry { .. }) => FieldViolation {
+        | AlgoError::DegenerateGeometry { .. }
+        | AlgoError::BudgetExceeded { .. }) => FieldViolation {
             field: prefix.trim_end_matches('.').to_string(),
             message: other.to_string(),
         },

@@ -60,7 +60,8 @@ pub struct Marginals {
 pub enum ExactLimit {
     /// More than 128 measurements are relevant at once to the partial hypotheses.
     Frontier,
-    /// The merged hypothesis tree would exceed the edge budget.
+    /// The merged hypothesis tree would exceed the edge budget (found
+    /// before the edge over the budget is stored).
     Hypotheses,
 }
 
@@ -155,8 +156,17 @@ pub fn exact_marginals(p: &ClusterProblem, max_edges: u64) -> Result<Marginals, 
         let mut step_edges = Vec::new();
         let prev_keys = &layers[step];
         let prev_f = &forward[step];
+        // The budget is checked before each edge (and the node it may make)
+        // is stored, so that one step never holds more than the budget: a
+        // layer of many nodes times many gated measurements could otherwise
+        // allocate gigabytes before a check between steps saw it.
+        let mut budget_left = max_edges.saturating_sub(total_edges);
         for (parent, &(mask, d)) in prev_keys.iter().enumerate() {
             let mut visit = |child_key: Key, option: u32, w: f64| {
+                if budget_left == 0 {
+                    return Err(ExactLimit::Hypotheses);
+                }
+                budget_left -= 1;
                 let child = *index.entry(child_key).or_insert_with(|| {
                     keys.push(child_key);
                     f_next.push(0.0);
@@ -164,19 +174,17 @@ pub fn exact_marginals(p: &ClusterProblem, max_edges: u64) -> Result<Marginals, 
                 });
                 f_next[child as usize] += prev_f[parent] * w;
                 step_edges.push((parent as u32, child, option));
+                Ok(())
             };
-            visit((mask & dead, d), 0, p.miss[t]);
+            visit((mask & dead, d), 0, p.miss[t])?;
             for (k, &(j, a)) in p.gates[t].iter().enumerate() {
                 let bit = 1u128 << slot[j];
                 if mask & bit == 0 {
-                    visit(((mask | bit) & dead, d + 1), 1 + k as u32, a);
+                    visit(((mask | bit) & dead, d + 1), 1 + k as u32, a)?;
                 }
             }
         }
         total_edges += step_edges.len() as u64;
-        if total_edges > max_edges {
-            return Err(ExactLimit::Hypotheses);
-        }
         rescale(&mut f_next);
         layers.push(keys);
         forward.push(f_next);

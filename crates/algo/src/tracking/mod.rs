@@ -75,7 +75,7 @@ pub use state::{TrackerParts, TrackerState};
 pub use track::{Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 
-use std::sync::Arc;
+use std::{ops::ControlFlow, sync::Arc};
 
 use crate::error::AlgoError;
 use crate::jpda::{self, TrackEstimate};
@@ -296,17 +296,20 @@ impl Tracker {
     /// Accepts plots (any order; sorted by time inside, stably), processes
     /// every frame that is complete, and buffers the rest.
     pub fn process(&mut self, plots: &[Plot]) -> Result<StepReport, AlgoError> {
-        self.process_with(plots, false, &mut |_| {})
+        self.process_with(plots, false, &mut |_| ControlFlow::Continue(()))
     }
 
     /// [`Tracker::process`], then [`Tracker::flush`] when `flush`, calling
     /// `after_frame` with the tracker after every processed frame (for a
     /// track history). Plots already sorted by time are inserted in O(1).
+    /// `after_frame` answering `Break` stops there: the plots of the later
+    /// frames stay buffered, as if they had not come yet (a caller that was
+    /// abandoned stops its work).
     pub fn process_with(
         &mut self,
         plots: &[Plot],
         flush: bool,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<StepReport, AlgoError> {
         for plot in plots {
             self.config.validate_plot(plot)?;
@@ -374,7 +377,7 @@ impl Tracker {
     /// Processes every buffered plot, closing the last frame. Plots that
     /// arrive later for that frame will be late.
     pub fn flush(&mut self) -> Result<StepReport, AlgoError> {
-        self.process_with(&[], true, &mut |_| {})
+        self.process_with(&[], true, &mut |_| ControlFlow::Continue(()))
     }
 
     /// The ids of every live track, confirmed and tentative (no copies of
@@ -452,7 +455,7 @@ impl Tracker {
         &mut self,
         flush: bool,
         report: &mut StepReport,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<(), AlgoError> {
         // Frames are taken from the front by a cursor, the buffer cut
         // once at the end (draining each frame from the front would move
@@ -476,7 +479,7 @@ impl Tracker {
         head: &mut usize,
         flush: bool,
         report: &mut StepReport,
-        after_frame: &mut dyn FnMut(&Self),
+        after_frame: &mut dyn FnMut(&Self) -> ControlFlow<()>,
     ) -> Result<(), AlgoError> {
         while *head < pending.len() {
             let rest = &pending[*head..];
@@ -504,7 +507,9 @@ impl Tracker {
             } else {
                 self.serial_frame(frame, report)?;
             }
-            after_frame(self);
+            if after_frame(self).is_break() {
+                break;
+            }
         }
         Ok(())
     }
@@ -836,7 +841,14 @@ impl Tracker {
         report
             .undefined
             .extend(outcome.undefined.iter().map(|&c| self.tracks[slots[c]].id));
-        let (hits, touched) = self.update(t, &slots, &mut scratch, &outcome, &*updater, &plots)?;
+        let (hits, touched) = self.update(
+            t,
+            &slots,
+            &mut scratch,
+            (&outcome, &*updater),
+            &plots,
+            &mut report.undefined,
+        )?;
         drop(updater);
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, report)?;
@@ -863,15 +875,19 @@ impl Tracker {
     /// gated (every one in parallel mode) taken and updated with the
     /// association's weights, one update path for single-model and IMM
     /// tracks; hits and misses recorded. Returns the hits and every track
-    /// whose life this frame recorded.
+    /// whose life this frame recorded. A track one of whose IMM models is
+    /// predicted at a radar's site (its polar model undefined there, while
+    /// the combined prediction the association used was not) is left as it
+    /// was, as if it had gated nothing, and listed in `undefined`: it
+    /// coasts, and the rest of the frame applies.
     fn update(
         &mut self,
         t: f64,
         slots: &[usize],
         scratch: &mut Scratch,
-        outcome: &Outcome,
-        updater: &dyn Updater,
+        (outcome, updater): (&Outcome, &dyn Updater),
         plots: &[CartesianPlot],
+        undefined: &mut Vec<u64>,
     ) -> Result<(Vec<Hit>, Vec<usize>), AlgoError> {
         let lazy = !self.parallel;
         let mut hits = Vec::new();
@@ -887,15 +903,19 @@ impl Tracker {
                 // the track's time; the hit recorded, the track's time and
                 // last update kept; no registration pair.
                 let pred = &mut scratch.predictions[c];
-                if pred.modes.is_empty() {
+                let carried = if pred.modes.is_empty() {
                     let single = single_mode(&mut scratch.single);
                     std::mem::swap(&mut single[0].x, &mut pred.x);
                     std::mem::swap(&mut single[0].p, &mut pred.p);
-                    updater.update(single, assoc)?;
-                    retrodiction::carry(track, &retro, single)?;
+                    coasts(updater.update(single, assoc))?
+                        .map(|_| retrodiction::carry(track, &retro, single))
                 } else {
-                    updater.update(&mut pred.modes, assoc)?;
-                    retrodiction::carry(track, &retro, &pred.modes)?;
+                    coasts(updater.update(&mut pred.modes, assoc))?
+                        .map(|_| retrodiction::carry(track, &retro, &pred.modes))
+                };
+                if carried.transpose()?.is_none() {
+                    undefined.push(track.id);
+                    continue;
                 }
                 if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
@@ -905,14 +925,28 @@ impl Tracker {
                 touched.push(k);
                 continue;
             }
+            let before = track.t;
             track.commit_swap(t, &mut scratch.predictions[c]);
-            let (x, p) = if track.modes.is_empty() {
+            let updated = if track.modes.is_empty() {
                 let single = single_mode(&mut scratch.single);
                 std::mem::swap(&mut single[0].x, &mut track.x);
                 std::mem::swap(&mut single[0].p, &mut track.p);
-                updater.update(single, assoc)?
+                let updated = coasts(updater.update(single, assoc))?;
+                if updated.is_none() {
+                    // The update failed before it changed the mode.
+                    std::mem::swap(&mut single[0].x, &mut track.x);
+                    std::mem::swap(&mut single[0].p, &mut track.p);
+                }
+                updated
             } else {
-                updater.update(&mut track.modes, assoc)?
+                coasts(updater.update(&mut track.modes, assoc))?
+            };
+            let Some((x, p)) = updated else {
+                // Back to the track as it was (the updaters fail before they
+                // change a mode): it coasts, predicted when needed.
+                track.commit_swap(before, &mut scratch.predictions[c]);
+                undefined.push(track.id);
+                continue;
             };
             track.x = x;
             track.p = p;
@@ -1201,5 +1235,16 @@ impl Scratch {
             track::copy_matrix(&mut self.estimates[c].p, &pred.p);
         }
         Ok(())
+    }
+}
+
+/// `Ok(None)` for an update that failed because a model's polar
+/// measurement model is undefined where that model predicts the target (at
+/// a radar's site): the track coasts. Any other error is an error.
+fn coasts<T>(updated: Result<T, AlgoError>) -> Result<Option<T>, AlgoError> {
+    match updated {
+        Ok(v) => Ok(Some(v)),
+        Err(AlgoError::DegenerateGeometry { .. }) => Ok(None),
+        Err(e) => Err(e),
     }
 }

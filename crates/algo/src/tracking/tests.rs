@@ -1056,6 +1056,7 @@ fn a_dense_frame_learns_from_at_most_the_bound_of_pairs() {
             let pairs = tr.biases()[0].pairs;
             largest_step = largest_step.max(pairs - previous);
             previous = pairs;
+            std::ops::ControlFlow::Continue(())
         })
         .unwrap();
     let bound = registration::MAX_PAIRS_PER_FRAME as f64;
@@ -1474,5 +1475,88 @@ fn a_track_that_lost_its_mode_s_aircraft_takes_the_new_track_of_its_address() {
                 assert_ne!(last[0].id, first[0], "seed {seed}");
             }
         }
+    }
+}
+
+/// The overflight of `an_overflight_of_a_radar_site_does_not_stop_the_tracker`
+/// with an IMM tracker of a constant-velocity model (left at a rate of
+/// 1/20 s) and a 0.05 rad/s turn (left at 1/10⁹ s, so it hardly mixes into
+/// the first): A's constant-velocity model predicts it at the site at
+/// t = 40 s (noise-free plots: 1.6·10⁻⁶ m), its turn model some 40 m
+/// aside, and the combined prediction the association uses is not at the
+/// site, so B's plot, 40 m north, is gated and weighed. The update of A's
+/// first model with it is undefined there: before, the frame, and with it
+/// the whole call, failed with DegenerateGeometry; now A coasts that frame,
+/// listed in `StepReport::undefined`, and both aircraft keep their tracks.
+#[test]
+fn an_imm_models_own_overflight_coasts_the_track() {
+    let radar = RadarSpec {
+        site: [0.0; 3],
+        sigma_range: 5.0,
+        sigma_azimuth: 1e-4,
+        sigma_elevation: Some(1e-4),
+        sigma_radial_velocity: None,
+        scan_period: 4.0,
+        detection_probability: 1.0,
+        clutter_density: 1e-9,
+    };
+    let mut cfg = TrackerConfig::new(3, vec![radar.clone()]);
+    cfg.motion = Motion::Imm(Imm {
+        models: vec![
+            MotionModel::ConstantVelocity { sigma_a: [0.05; 3] },
+            MotionModel::CoordinatedTurn {
+                turn_rate: 0.05,
+                sigma_a: [0.05; 3],
+            },
+        ],
+        mean_sojourn: vec![20.0, 1e9],
+        initial_probabilities: vec![0.5, 0.5],
+    });
+    let targets = [
+        Target {
+            p0: [-4_000.0, 0.0, 3_000.0],
+            v: [100.0, 0.0, 0.0],
+        },
+        Target {
+            p0: [-4_000.0, 40.0, 3_000.0],
+            v: [100.0, 0.0, 0.0],
+        },
+    ];
+    let mut plots = Vec::new();
+    for k in 0..=20 {
+        let t = 4.0 * k as f64;
+        for target in &targets {
+            let p = target.at(t);
+            let horizontal = p[0].hypot(p[1]);
+            if horizontal < 1.0 {
+                continue; // the cone of silence
+            }
+            plots.push(Plot {
+                radar: 0,
+                t,
+                range: horizontal.hypot(p[2]),
+                azimuth: p[0].atan2(p[1]),
+                elevation: Some(p[2].atan2(horizontal)),
+                radial_velocity: None,
+                identity: Identity::default(),
+            });
+        }
+    }
+    let mut tracker = Tracker::new(cfg).unwrap();
+    let mut report = tracker.process(&plots).expect("an overflight is no error");
+    let flushed = tracker.flush().unwrap();
+    report.undefined.extend(flushed.undefined);
+    assert!(
+        !report.undefined.is_empty(),
+        "no model of A was predicted at the site"
+    );
+    let end = 80.0;
+    for target in &targets {
+        let p = target.at(end);
+        let near = tracker.tracks().iter().any(|t| {
+            t.status == TrackStatus::Confirmed
+                && (t.state[0] - p[0]).hypot(t.state[2] - p[1]) < 20.0
+        });
+        assert!(near, "no track within 20 m of {p:?}");
     }
 }

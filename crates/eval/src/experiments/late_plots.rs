@@ -218,7 +218,8 @@ fn one_run(
         let plots: Vec<Plot> = batch.iter().map(|(_, p)| *p).collect();
         let last = i + 1 == batches.len();
         let started = Instant::now();
-        let report = before.process_with(&plots, last, &mut |_| {})?;
+        let report =
+            before.process_with(&plots, last, &mut |_| std::ops::ControlFlow::Continue(()))?;
         seconds_before += started.elapsed().as_secs_f64();
         let late: std::collections::HashSet<usize> = report.late.iter().copied().collect();
         waiting.extend(

@@ -109,6 +109,7 @@ fn run_frames(
             *converged_at = Some(t);
         }
         frames.push(frame_of(tr));
+        std::ops::ControlFlow::Continue(())
     })?;
     Ok((frames, tracker))
 }

@@ -193,7 +193,10 @@ fn drive(
     let mut engine = PairCorrelator::new(&scene, 0, 1, &cfg, model_ref)
         .map_err(|e| SimError::InvalidConfig(e.to_string()))?;
     let mut out = Vec::with_capacity(run.times.len());
-    while engine.step() {
+    while engine
+        .step()
+        .map_err(|e| SimError::InvalidConfig(e.to_string()))?
+    {
         let mut pairs: Vec<(u32, u32)> = engine
             .correlated()
             .chain(engine.trials())

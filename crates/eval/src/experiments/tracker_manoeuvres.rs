@@ -622,6 +622,7 @@ fn track(
             })
             .collect();
         frames.push((tr.last_time().unwrap_or(f64::NAN), tracks));
+        std::ops::ControlFlow::Continue(())
     })?;
     let seconds = started.elapsed().as_secs_f64();
     let mut classes = [ClassSums::default(); 4];

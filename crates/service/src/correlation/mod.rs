@@ -23,6 +23,7 @@ use std::time::Instant;
 
 use super::{ServiceError, Violations, micros_since};
 use algo::{
+    AlgoError,
     correlation::{
         engine::{Decision, Method, PairCorrelator, RuleSpec, Statistic},
         grouping::Grouping,
@@ -66,6 +67,28 @@ pub const MAX_SAMPLES: usize = 4_000_000;
 pub const DEFAULT_ALPHA: f64 = 0.05;
 /// Default alignment tolerance.
 pub const DEFAULT_TOLERANCE_S: f64 = 0.5;
+/// Most candidate pairs (pairs of tracks of two nodes inside the spatial
+/// gate at some instant) one request, or one session, holds over all its
+/// node pairs: each costs a few hundred bytes of state, so a million is a
+/// few hundred MB. Real scenes hold a few per track (218 for 120 tracks a
+/// node); co-located tracks would otherwise hold the product of the nodes'
+/// track counts.
+pub const MAX_CANDIDATE_PAIRS: usize = 1_000_000;
+
+/// The invalid-input error of tracks that would form more than
+/// [`MAX_CANDIDATE_PAIRS`] candidate pairs, against `field`; `scope` says
+/// whose limit it is (`one request`, `one session`).
+pub(crate) fn pair_budget_error(field: &str, scope: &str) -> ServiceError {
+    ServiceError::InvalidInput(vec![crate::FieldViolation {
+        field: field.into(),
+        message: format!(
+            "the tracks would form more than {MAX_CANDIDATE_PAIRS} candidate pairs (pairs of \
+             tracks of two nodes inside the spatial gate), the limit of {scope} \
+             (MAX_CANDIDATE_PAIRS): a smaller method.alpha narrows the gate, or send fewer \
+             tracks at once"
+        ),
+    }])
+}
 
 /// Correlates the request's nodes.
 pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError> {
@@ -173,13 +196,23 @@ fn correlate_pairs(
         delta: f64::NAN,
     };
     let mut singular = 0usize;
+    let mut held = 0usize;
     let n_nodes = scene.nodes().len();
     for na in 0..n_nodes {
         for nb in na + 1..n_nodes {
             let mut correlator = PairCorrelator::new(scene, na, nb, &plan.config, model_ref)
-                .map_err(|e| Violations::from_param("method.", e))?;
+                .map_err(|e| Violations::from_param("method.", e))?
+                .with_pair_budget(MAX_CANDIDATE_PAIRS - held);
             out.delta = correlator.delta();
-            correlator.run();
+            // Instant by instant, so that an abandoned request stops.
+            while {
+                crate::lanes::checkpoint()?;
+                correlator.step().map_err(|e| match e {
+                    AlgoError::BudgetExceeded { .. } => pair_budget_error("nodes", "one request"),
+                    other => Violations::from_param("method.", other),
+                })?
+            } {}
+            held += correlator.pair_count();
             singular += correlator.singular_tests;
             let total = (scene.nodes()[na].len() * scene.nodes()[nb].len()) as u64;
             let reports = correlator.reports();

@@ -16,7 +16,7 @@ pub mod network;
 pub mod output;
 pub mod ssr;
 
-use std::time::Instant;
+use std::{ops::ControlFlow, time::Instant};
 
 use super::{ServiceError, micros_since};
 use algo::{
@@ -353,20 +353,28 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     let mut tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
     let mut history = input.history.then(Vec::new);
     let mut states = 0usize;
+    let mut cancelled = Ok(());
     let report = tracker
         .process_with(&plots, true, &mut |t: &Tracker| {
+            // An abandoned request stops after the frame.
+            cancelled = crate::lanes::checkpoint();
+            if cancelled.is_err() {
+                return ControlFlow::Break(());
+            }
             if let Some(h) = history.as_mut() {
                 let confirmed = t.confirmed_count();
                 states += confirmed;
                 if states > MAX_HISTORY_TRACK_STATES {
                     // Refused below: keep counting, stop collecting.
                     h.clear();
-                    return;
+                    return ControlFlow::Continue(());
                 }
                 h.push((t.last_time().unwrap_or(f64::NAN), t.confirmed_tracks()));
             }
+            ControlFlow::Continue(())
         })
         .map_err(computation_error)?;
+    cancelled?;
     if states > MAX_HISTORY_TRACK_STATES {
         return Err(history_too_large(states, report.frames));
     }

@@ -23,7 +23,7 @@
 //!   of reason `expired` (or `deleted`, when the delete event arrived).
 
 use std::{
-    collections::{BTreeMap, HashMap},
+    collections::{BTreeMap, HashMap, VecDeque},
     sync::{Arc, Mutex, MutexGuard},
     time::{Duration, Instant},
 };
@@ -247,6 +247,42 @@ type Key = (String, String);
 struct HubState {
     channels: HashMap<Key, Channel>,
     tenants: HashMap<String, usize>,
+    /// Channels whose last watcher left, oldest first, with the time it
+    /// left: the purge of channels idle past [`HISTORY_GRACE`] pops them
+    /// from the front, so it costs what it removes, not the number of
+    /// channels (it scanned every channel at every join). An entry whose
+    /// channel has gone or has watchers again, or went idle again later
+    /// (its `idle_since` differs), is dropped as it comes out.
+    idle: VecDeque<(Instant, Key)>,
+}
+
+impl HubState {
+    /// Removes the channels idle past [`HISTORY_GRACE`] at `now`, and
+    /// hands back their Redis channels to unsubscribe from; returns the
+    /// number of idle entries it looked at.
+    fn purge_idle(&mut self, now: Instant, unsubscribe: &mut Vec<String>) -> usize {
+        let mut examined = 0;
+        while let Some((since, _)) = self.idle.front() {
+            if now.saturating_duration_since(*since) <= HISTORY_GRACE {
+                break;
+            }
+            examined += 1;
+            let Some((since, key)) = self.idle.pop_front() else {
+                break;
+            };
+            let idle_then = self
+                .channels
+                .get(&key)
+                .is_some_and(|c| c.watchers == 0 && c.idle_since == Some(since));
+            if idle_then
+                && let Some(c) = self.channels.remove(&key)
+                && let Some(name) = c.subscribed
+            {
+                unsubscribe.push(name);
+            }
+        }
+        examined
+    }
 }
 
 /// This replica's side of session events: channels per watched session and
@@ -329,6 +365,7 @@ impl EventHub {
             state: Mutex::new(HubState {
                 channels: HashMap::new(),
                 tenants: HashMap::new(),
+                idle: VecDeque::new(),
             }),
             limits,
             listener,
@@ -414,20 +451,11 @@ impl EventHub {
         channel: Option<String>,
     ) -> Result<Joined, String> {
         let mut state = self.lock();
-        let now = Instant::now();
         // Channels idle past the grace period go, with their subscription.
-        let stale: Vec<Key> = state
-            .channels
-            .iter()
-            .filter(|(_, c)| {
-                c.watchers == 0 && c.idle_since.is_some_and(|t| now - t > HISTORY_GRACE)
-            })
-            .map(|(k, _)| k.clone())
-            .collect();
-        for k in stale {
-            if let Some(c) = state.channels.remove(&k)
-                && let (Some(l), Some(name)) = (&self.listener, c.subscribed)
-            {
+        let mut stale = Vec::new();
+        state.purge_idle(Instant::now(), &mut stale);
+        if let Some(l) = &self.listener {
+            for name in stale {
                 l.unsubscribe(name);
             }
         }
@@ -486,11 +514,14 @@ impl EventHub {
     /// without history goes at once, with its subscription, instead of
     /// after [`HISTORY_GRACE`] (a watch that failed as it started).
     fn leave(&self, key: &Key, forget: bool) {
-        let mut state = self.lock();
+        let mut guard = self.lock();
+        let state = &mut *guard;
         if let Some(c) = state.channels.get_mut(key) {
             c.watchers = c.watchers.saturating_sub(1);
             if c.watchers == 0 {
-                c.idle_since = Some(Instant::now());
+                let now = Instant::now();
+                c.idle_since = Some(now);
+                state.idle.push_back((now, key.clone()));
                 if forget
                     && c.history.is_empty()
                     && let Some(c) = state.channels.remove(key)
@@ -544,6 +575,69 @@ pub(super) struct Joined {
 mod tests {
     use super::*;
     use crate::session::correlation::BatchUpdate;
+
+    /// The purge of idle channels looks at the entries past the grace
+    /// period only (before, every join scanned every channel), and removes
+    /// only a channel still idle since the time of its entry.
+    #[test]
+    fn the_purge_of_idle_channels_costs_what_it_removes() {
+        let t0 = Instant::now();
+        let second = Duration::from_secs(1);
+        let channel = |name: &str, watchers: usize, idle_since: Option<Instant>| Channel {
+            tx: broadcast::channel(1).0,
+            history: BTreeMap::new(),
+            watchers,
+            idle_since,
+            subscribed: Some(format!("ch:{name}")),
+        };
+        let key = |name: &str| ("t".to_string(), name.to_string());
+        let mut state = HubState {
+            channels: HashMap::new(),
+            tenants: HashMap::new(),
+            idle: VecDeque::new(),
+        };
+        // Left at t0: "gone" still idle, "back" watched again, "again"
+        // watched again and left at t0 + 2 s.
+        state
+            .channels
+            .insert(key("gone"), channel("gone", 0, Some(t0)));
+        state.channels.insert(key("back"), channel("back", 1, None));
+        state
+            .channels
+            .insert(key("again"), channel("again", 0, Some(t0 + 2 * second)));
+        for name in ["gone", "back", "again"] {
+            state.idle.push_back((t0, key(name)));
+        }
+        // 10,000 channels left at t0 + 1 s.
+        for i in 0..10_000 {
+            let name = format!("many{i}");
+            state
+                .channels
+                .insert(key(&name), channel(&name, 0, Some(t0 + second)));
+            state.idle.push_back((t0 + second, key(&name)));
+        }
+        state.idle.push_back((t0 + 2 * second, key("again")));
+
+        let mut names = Vec::new();
+        let half = Duration::from_millis(500);
+        assert_eq!(state.purge_idle(t0 + HISTORY_GRACE + half, &mut names), 3);
+        assert_eq!(names, ["ch:gone"]);
+        assert_eq!(state.channels.len(), 10_002);
+        // Nothing else is due: nothing is looked at.
+        assert_eq!(state.purge_idle(t0 + HISTORY_GRACE + half, &mut names), 0);
+        assert_eq!(
+            state.purge_idle(t0 + HISTORY_GRACE + second + half, &mut names),
+            10_000
+        );
+        assert_eq!(state.channels.len(), 2);
+        assert_eq!(
+            state.purge_idle(t0 + HISTORY_GRACE + 2 * second + half, &mut names),
+            1
+        );
+        assert_eq!(names.last().map(String::as_str), Some("ch:again"));
+        assert_eq!(state.channels.keys().collect::<Vec<_>>(), [&key("back")]);
+        assert!(state.idle.is_empty());
+    }
 
     /// A correlation session's update event reads back (it once failed
     /// with "trailing bytes": the plot marks written for every kind were

@@ -2,29 +2,66 @@
 //! positions) or brute force, and the materialisation of a pair the first
 //! time it may pass the χ² test, with the exact replay of its earlier common
 //! instants.
+//!
+//! The pair budget ([`PairCorrelator::with_pair_budget`]) is checked where
+//! pairs are collected and where they are stored, so a scene of many
+//! co-located tracks is refused before it allocates more than the budget.
 
 use std::collections::VecDeque;
 
 use super::{Pair, PairCorrelator, PairStatus, Pruning, Reason, Statistic};
-use crate::{correlation::scene::Track, small};
+use crate::{AlgoError, correlation::scene::Track, small};
+
+/// The candidates of one instant, at most `cap` of them: more means the
+/// pairs would exceed the budget whatever was materialised before (the
+/// pairs already held are at most the budget), so collecting stops there.
+pub(super) struct Collected {
+    pairs: Vec<(u32, u32)>,
+    cap: usize,
+}
+
+impl Collected {
+    fn push(&mut self, pair: (u32, u32)) -> Result<(), AlgoError> {
+        if self.pairs.len() >= self.cap {
+            return Err(over_budget(self.cap));
+        }
+        self.pairs.push(pair);
+        Ok(())
+    }
+}
+
+/// The error of a correlator whose candidate pairs would exceed `cap`.
+fn over_budget(cap: usize) -> AlgoError {
+    AlgoError::BudgetExceeded {
+        what: "candidate pairs",
+        limit: cap as u64,
+    }
+}
 
 impl PairCorrelator<'_> {
     /// Creates the pairs that pass the spatial gate at instant `k` for the
     /// first time, replaying their earlier common instants.
-    pub(super) fn materialise(&mut self, k: usize) {
+    pub(super) fn materialise(&mut self, k: usize) -> Result<(), AlgoError> {
         let present_a: Vec<u32> = (0..self.adj_a.len() as u32)
             .filter(|&t| self.track_a(t).is_present(k))
             .collect();
         let present_b: Vec<u32> = (0..self.adj_b.len() as u32)
             .filter(|&t| self.track_b(t).is_present(k))
             .collect();
-        let candidates = match self.cfg.pruning {
-            Pruning::None => self.all_pairs_candidates(k, &present_a, &present_b),
-            Pruning::Grid => self.spatial_candidates(k, &present_a, &present_b),
+        let mut candidates = Collected {
+            pairs: Vec::new(),
+            cap: self.max_pairs,
         };
-        for (a, b) in candidates {
+        match self.cfg.pruning {
+            Pruning::None => self.all_pairs_candidates(k, &present_a, &present_b, &mut candidates),
+            Pruning::Grid => self.spatial_candidates(k, &present_a, &present_b, &mut candidates),
+        }?;
+        for (a, b) in candidates.pairs {
             if self.pair_of(a, b).is_some() {
                 continue;
+            }
+            if self.pairs.len() >= self.max_pairs {
+                return Err(over_budget(self.max_pairs));
             }
             let pi = self.pairs.len() as u32;
             self.pairs.push(Pair {
@@ -56,6 +93,7 @@ impl PairCorrelator<'_> {
                 }
             }
         }
+        Ok(())
     }
 
     /// How far the weighted bound may be exceeded by a pair that can still
@@ -76,19 +114,19 @@ impl PairCorrelator<'_> {
         k: usize,
         present_a: &[u32],
         present_b: &[u32],
-    ) -> Vec<(u32, u32)> {
+        out: &mut Collected,
+    ) -> Result<(), AlgoError> {
         let dim = self.dim;
         let limit = self.gate_factor() * self.delta;
-        let mut out = Vec::new();
         for &a in present_a {
             for &b in present_b {
                 let (d, s) = self.difference(a, b, k);
                 if small::quad_form_inv(&s, &d, dim).is_some_and(|q| q <= limit) {
-                    out.push((a, b));
+                    out.push((a, b))?;
                 }
             }
         }
-        out
+        Ok(())
     }
 
     /// The pairs (a, b) present at `k` that may pass the χ² test: those
@@ -101,7 +139,8 @@ impl PairCorrelator<'_> {
         k: usize,
         present_a: &[u32],
         present_b: &[u32],
-    ) -> Vec<(u32, u32)> {
+        out: &mut Collected,
+    ) -> Result<(), AlgoError> {
         let dim = self.dim;
         let pos = self.scene.position_indices();
         let dims_used = pos.len();
@@ -119,25 +158,26 @@ impl PairCorrelator<'_> {
             present_b.iter().map(|&t| point(self.track_b(t))).collect();
         let a_pts: Vec<([f64; 3], f64)> =
             present_a.iter().map(|&t| point(self.track_a(t))).collect();
-        let mut out = Vec::new();
         if b_pts.is_empty() || a_pts.is_empty() {
-            return out;
+            return Ok(());
         }
         let max_rb = b_pts.iter().map(|p| p.1.sqrt()).fold(0.0, f64::max);
         let max_ra = a_pts.iter().map(|p| p.1.sqrt()).fold(0.0, f64::max);
-        let test = |ia: usize, ib: usize, out: &mut Vec<(u32, u32)>| {
+        let test = |ia: usize, ib: usize, out: &mut Collected| {
             let ((ca, ra2), (cb, rb2)) = (a_pts[ia], b_pts[ib]);
             let d2: f64 = (0..3).map(|j| (ca[j] - cb[j]).powi(2)).sum();
             if d2 <= ra2 + rb2 {
-                out.push((present_a[ia], present_b[ib]));
+                out.push((present_a[ia], present_b[ib]))?;
             }
+            Ok(())
         };
-        let all_pairs = |out: &mut Vec<(u32, u32)>| {
+        let all_pairs = |out: &mut Collected| {
             for ia in 0..a_pts.len() {
                 for ib in 0..b_pts.len() {
-                    test(ia, ib, out);
+                    test(ia, ib, out)?;
                 }
             }
+            Ok(())
         };
         // A cell as wide as the largest reach: a typical query then spans
         // 3 cells per axis.
@@ -147,8 +187,7 @@ impl PairCorrelator<'_> {
         let limit = (4 * b_pts.len() + 1024) as f64;
         loop {
             if !cell.is_finite() {
-                all_pairs(&mut out);
-                return out;
+                return all_pairs(out);
             }
             let mut cells = 1.0;
             for d in 0..dims_used {
@@ -204,7 +243,7 @@ impl PairCorrelator<'_> {
             let visits = (2.0 * span + 1.0).powi(dims_used as i32);
             if !span.is_finite() || visits > b_pts.len() as f64 {
                 for ib in 0..b_pts.len() {
-                    test(ia, ib, &mut out);
+                    test(ia, ib, out)?;
                 }
                 continue;
             }
@@ -232,11 +271,11 @@ impl PairCorrelator<'_> {
                     let row = (z * n[1] + y) * n[0];
                     let (c0, c1) = (row + range[0].0, row + range[0].1);
                     for &ib in &order[start[c0] as usize..start[c1 + 1] as usize] {
-                        test(ia, ib as usize, &mut out);
+                        test(ia, ib as usize, out)?;
                     }
                 }
             }
         }
-        out
+        Ok(())
     }
 }

@@ -216,6 +216,8 @@ pub struct PairCorrelator<'a> {
     /// F and Q per step length (modified statistic).
     steps: Steps,
     next: usize,
+    /// Most candidate pairs this correlator may hold ([`Self::with_pair_budget`]).
+    max_pairs: usize,
     /// Tests whose modified S was not positive definite: the weighted
     /// statistic was used for them instead.
     pub singular_tests: usize,
@@ -410,6 +412,7 @@ impl<'a> PairCorrelator<'a> {
             factors_b: Factors::default(),
             steps: Steps::default(),
             next: 0,
+            max_pairs: usize::MAX,
             singular_tests: 0,
         };
         if cfg.statistic == Statistic::Modified {
@@ -452,6 +455,20 @@ impl<'a> PairCorrelator<'a> {
         Ok(me)
     }
 
+    /// Bounds the candidate pairs this correlator holds (those it resumed
+    /// with included) to `max_pairs`: an instant whose pairs would exceed
+    /// it is an [`AlgoError::BudgetExceeded`], found while they are
+    /// collected, before they are stored. Unbounded by default.
+    pub fn with_pair_budget(mut self, max_pairs: usize) -> Self {
+        self.max_pairs = max_pairs;
+        self
+    }
+
+    /// Candidate pairs held so far.
+    pub fn pair_count(&self) -> usize {
+        self.pairs.len()
+    }
+
     /// The state to resume from later.
     pub fn into_state(self) -> CorrelatorState {
         CorrelatorState {
@@ -474,22 +491,26 @@ impl<'a> PairCorrelator<'a> {
     }
 
     /// Processes every remaining instant.
-    pub fn run(&mut self) {
-        while self.step() {}
+    pub fn run(&mut self) -> Result<(), AlgoError> {
+        while self.step()? {}
+        Ok(())
     }
 
     /// Processes the instants before global index `end`.
-    pub fn run_until(&mut self, end: usize) {
-        while self.next < end && self.step() {}
+    pub fn run_until(&mut self, end: usize) -> Result<(), AlgoError> {
+        while self.next < end && self.step()? {}
+        Ok(())
     }
 
-    /// Processes the next instant; false when there is none.
-    pub fn step(&mut self) -> bool {
+    /// Processes the next instant; false when there is none. An instant
+    /// whose candidate pairs would exceed the pair budget is an error, and
+    /// the correlator is then left in the middle of that instant (discard it).
+    pub fn step(&mut self) -> Result<bool, AlgoError> {
         let k = self.next;
         if k >= self.scene.end() {
-            return false;
+            return Ok(false);
         }
-        self.materialise(k);
+        self.materialise(k)?;
         let active: Vec<u32> = (0..self.pairs.len() as u32)
             .filter(|&i| self.both_present(i, k))
             .collect();
@@ -508,7 +529,7 @@ impl<'a> PairCorrelator<'a> {
             }
         }
         self.next += 1;
-        true
+        Ok(true)
     }
 
     /// Pairs currently decided correlated, as (track in a, track in b).

@@ -44,7 +44,7 @@ fn dt(l: u32, r: u32) -> Config {
 
 fn run(s: &Scene, cfg: &Config) -> Vec<PairReport> {
     let mut c = PairCorrelator::new(s, 0, 1, cfg, None).unwrap();
-    c.run();
+    c.run().unwrap();
     c.reports()
 }
 
@@ -65,17 +65,17 @@ fn counting_and_early_stop_step_by_step() {
     let s = scene(3, &[vec![ORIGIN; 3]], &[vec![NEAR, FAR, FAR]]);
     let cfg = dt(3, 4);
     let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None).unwrap();
-    c.step();
+    c.step().unwrap();
     let r = c.reports();
     assert_eq!((r[0].m, r[0].c, r[0].reason), (1, 0, Reason::Testing));
     assert!(
         r[0].trial,
         "the only pair with m ≥ 1 is a trial system track"
     );
-    c.step();
+    c.step().unwrap();
     let r = c.reports();
     assert_eq!((r[0].m, r[0].c, r[0].decision), (1, 1, Decision::Undecided));
-    c.step();
+    c.step().unwrap();
     let r = c.reports();
     assert_eq!((r[0].m, r[0].c, r[0].samples), (1, 2, 3));
     assert_eq!(
@@ -183,9 +183,9 @@ fn classic_test_is_one_of_one_and_revokes_at_the_first_failure() {
     let s = scene(2, &[vec![ORIGIN; 2]], &[vec![NEAR, FAR]]);
     let cfg = dt(1, 1);
     let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None).unwrap();
-    c.step();
+    c.step().unwrap();
     assert_eq!(c.correlated().collect::<Vec<_>>(), vec![(0, 0)]);
-    c.step();
+    c.step().unwrap();
     assert!(c.correlated().next().is_none());
     assert_eq!(c.reports()[0].reason, Reason::Revoked);
 }
@@ -232,9 +232,9 @@ fn modified_statistic_uses_the_cross_covariance_recursion() {
         ..dt(2, 2)
     };
     let mut c = PairCorrelator::new(&s, 0, 1, &cfg, Some(&model)).unwrap();
-    c.step();
+    c.step().unwrap();
     assert!((c.reports()[0].last_statistic - 0.05).abs() < 1e-15);
-    c.step();
+    c.step().unwrap();
     let r = &c.reports()[0];
     assert!(
         (r.last_statistic - 0.15).abs() < 1e-14,
@@ -261,7 +261,7 @@ fn baselines_pick_the_closest_consistent_pairs() {
     ] {
         let cfg = Config { method, ..dt(1, 1) };
         let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None).unwrap();
-        c.run();
+        c.run().unwrap();
         let mut got: Vec<_> = c.correlated().collect();
         got.sort();
         assert_eq!(got, vec![(0, 0), (1, 1)], "{:?}", cfg.method);
@@ -285,23 +285,83 @@ fn global_assignment_beats_greedy_when_greedy_is_trapped() {
         ..dt(1, 1)
     };
     let mut c = PairCorrelator::new(&s, 0, 1, &greedy, None).unwrap();
-    c.run();
+    c.run().unwrap();
     assert_eq!(c.correlated().collect::<Vec<_>>(), vec![(0, 0)]);
     let optimal = Config {
         method: Method::GlobalAssignment { window: 1 },
         ..dt(1, 1)
     };
     let mut c = PairCorrelator::new(&s, 0, 1, &optimal, None).unwrap();
-    c.run();
+    c.run().unwrap();
     let mut got: Vec<_> = c.correlated().collect();
     got.sort();
     assert_eq!(got, vec![(0, 1), (1, 0)]);
 }
 
+#[test]
+fn the_pair_budget_refuses_co_located_tracks_while_they_are_collected() {
+    // Three tracks a node, all at the origin: every one of the 3 × 3 = 9
+    // pairs is inside the gate (d = 0) at the one instant.
+    let node = vec![vec![ORIGIN]; 3];
+    let s = scene(1, &node, &node);
+    for pruning in [Pruning::Grid, Pruning::None] {
+        let cfg = Config {
+            pruning,
+            ..dt(1, 1)
+        };
+        let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None)
+            .unwrap()
+            .with_pair_budget(8);
+        assert_eq!(
+            c.step(),
+            Err(AlgoError::BudgetExceeded {
+                what: "candidate pairs",
+                limit: 8
+            })
+        );
+        assert_eq!(c.pair_count(), 0, "refused before any pair was stored");
+        let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None)
+            .unwrap()
+            .with_pair_budget(9);
+        c.run().unwrap();
+        assert_eq!(c.pair_count(), 9);
+    }
+}
+
+#[test]
+fn the_pair_budget_counts_the_pairs_of_earlier_instants() {
+    // Instant 0: a0 at the origin and b0 at (1, 0) form the one candidate
+    // (a1 at (100, 0) and b1 at (200, 0) are far from everything). Instant
+    // 1: a0 and b0 are gone, b1 has come to (101, 0): (a1, b1) is the one
+    // candidate of that instant, the second pair of the correlator.
+    let a = [vec![ORIGIN, None], vec![Some([100.0, 0.0]); 2]];
+    let b = [
+        vec![NEAR, None],
+        vec![Some([200.0, 0.0]), Some([101.0, 0.0])],
+    ];
+    let s = scene(2, &a, &b);
+    let cfg = dt(1, 1);
+    let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None)
+        .unwrap()
+        .with_pair_budget(1);
+    assert_eq!(c.step(), Ok(true));
+    assert_eq!(c.pair_count(), 1);
+    assert!(matches!(
+        c.step(),
+        Err(AlgoError::BudgetExceeded { limit: 1, .. })
+    ));
+    assert_eq!(c.pair_count(), 1);
+    let mut c = PairCorrelator::new(&s, 0, 1, &cfg, None)
+        .unwrap()
+        .with_pair_budget(2);
+    c.run().unwrap();
+    assert_eq!(c.pair_count(), 2);
+}
+
 fn decisions(s: &Scene, cfg: &Config) -> Vec<Vec<(usize, usize)>> {
     let mut c = PairCorrelator::new(s, 0, 1, cfg, None).unwrap();
     let mut out = Vec::new();
-    while c.step() {
+    while c.step().unwrap() {
         let mut d: Vec<_> = c.correlated().collect();
         d.sort();
         out.push(d);

@@ -17,6 +17,7 @@ use crate::{
     validate::Listed,
 };
 use algo::{
+    AlgoError,
     correlation::{
         align,
         engine::{PairCorrelator, Side, Statistic},
@@ -106,8 +107,12 @@ impl CorrelationSession {
         let mut reports_out = Vec::new();
         let mut links = Links::default();
         let mut singular = 0usize;
+        // The pair budget is the session's: what the other node pairs hold
+        // is taken from it.
+        let mut held: usize = self.correlators.iter().map(|c| c.pair_count()).sum();
         for (ci, (na, nb)) in self.node_pairs().into_iter().enumerate() {
             let mut state = std::mem::take(&mut self.correlators[ci]);
+            held -= state.pair_count();
             let mut cuts: Vec<usize> = retire_at
                 .iter()
                 .filter(|r| r.1 == na || r.1 == nb)
@@ -124,8 +129,14 @@ impl CorrelationSession {
                     model_ref,
                     state,
                 )
-                .map_err(|e| Violations::from_param("method.", e))?;
-                c.run_until(cut);
+                .map_err(|e| Violations::from_param("method.", e))?
+                .with_pair_budget(correlation::MAX_CANDIDATE_PAIRS.saturating_sub(held));
+                c.run_until(cut).map_err(|e| match e {
+                    AlgoError::BudgetExceeded { .. } => {
+                        correlation::pair_budget_error("reports", "one session")
+                    }
+                    other => Violations::from_param("method.", other),
+                })?;
                 state = c.into_state();
                 for &(k, node, slot) in &retire_at {
                     if k == cut && (node == na || node == nb) {
@@ -144,6 +155,7 @@ impl CorrelationSession {
                 }
             }
             self.correlators[ci] = c.into_state();
+            held += self.correlators[ci].pair_count();
         }
         if singular > 0 && self.plan.config.statistic == Statistic::Modified {
             warnings.push(format!(
