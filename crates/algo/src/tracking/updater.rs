@@ -71,31 +71,36 @@ pub struct PolarUpdater<'a> {
     /// association decided).
     pub range_rate: Option<f64>,
     /// The Mode C height measurement of a 3D tracker: a plot with a
-    /// validated Mode C also updates the track's height (after its polar
-    /// update; the two are independent, so the likelihoods multiply).
+    /// validated Mode C also updates the track's height, after its polar
+    /// update, in every IMM model. Its likelihood does not weigh the
+    /// models: they differ vertically only by the noise their horizontal
+    /// manoeuvre brings along (the turns' √q = 3 against the straight
+    /// model's 1), so a height known to metres would vote for the quietest
+    /// vertical model at every update, also in a horizontal turn (seen on
+    /// real flights: worse p90 horizontal errors, a track losing a turning
+    /// aircraft). Climbs are followed by the state's vertical velocity.
     pub height: Option<HeightMeasurement>,
 }
 
 impl PolarUpdater<'_> {
     /// Plot `j`'s Mode C update of a state of `n` (6: a 3D tracker's) in
-    /// place: (x, P column-major, ln L) → with the height's term added.
+    /// place (x, P column-major); its likelihood is not used
+    /// ([`PolarUpdater::height`]).
     fn height_update(
         &self,
         j: usize,
         n: usize,
         x: &mut [f64],
         p: &mut [f64],
-    ) -> Result<f64, AlgoError> {
+    ) -> Result<(), AlgoError> {
         let Some(m) = &self.height else {
-            return Ok(0.0);
+            return Ok(());
         };
         let identity = &self.plots[j].identity;
-        match pressure_altitude_m(identity) {
-            Some(h_p) if n == 6 => {
-                m.update(x, p, [0, 2, 4], h_p, quantisation_variance_m2(identity))
-            }
-            _ => Ok(0.0),
+        if let (Some(h_p), 6) = (pressure_altitude_m(identity), n) {
+            m.update(x, p, [0, 2, 4], h_p, quantisation_variance_m2(identity))?;
         }
+        Ok(())
     }
 }
 
@@ -148,8 +153,7 @@ impl Updater for PolarUpdater<'_> {
             self.layout,
             self.radar.site,
         )?);
-        out.ln_likelihood +=
-            self.height_update(j, x.len(), out.x.as_mut_slice(), out.p.as_mut_slice())?;
+        self.height_update(j, x.len(), out.x.as_mut_slice(), out.p.as_mut_slice())?;
         Ok(out)
     }
 
@@ -353,12 +357,7 @@ mod fixed {
                 let rr = plots[plot].radial_velocity.zip(*range_rate);
                 let mut up =
                     polar::<N, M>(&xs[j], &ps[j], &meas, rr, layout.z.is_some(), radar.site)?;
-                up.2 += measurements.height_update(
-                    plot,
-                    N,
-                    up.0.as_mut_slice(),
-                    up.1.as_mut_slice(),
-                )?;
+                measurements.height_update(plot, N, up.0.as_mut_slice(), up.1.as_mut_slice())?;
                 ups[j][k] = up;
             }
         }
