@@ -390,14 +390,16 @@ async fn with_every_lane_busy_a_request_past_the_blocking_bound_is_a_503_naming_
     let app = spawn_app_with(|s| s.max_blocking_jobs = 0).await;
     let lanes = std::thread::available_parallelism().map_or(1, |n| n.get());
     let slow = slow_jpda(32);
-    // One long request per lane (sent again if it was itself shed because
-    // other tests' jobs held the lanes at that moment).
+    // One long request per lane, sent again whenever it ends (shed because
+    // other tests' jobs held the lanes at that moment, or stopped by its
+    // timeout), so that the lanes stay held until the test ends.
     let held: Vec<_> = (0..lanes)
         .map(|_| {
             let (client, url, body) =
                 (app.client.clone(), app.url("/v1/jpda/update"), slow.clone());
             tokio::spawn(async move {
-                while client.post(&url).json(&body).send().await.unwrap().status() == 503 {
+                loop {
+                    let _ = client.post(&url).json(&body).send().await;
                     tokio::time::sleep(std::time::Duration::from_millis(10)).await;
                 }
             })
@@ -412,7 +414,11 @@ async fn with_every_lane_busy_a_request_past_the_blocking_bound_is_a_503_naming_
         if r.status() == 503 {
             break r;
         }
-        assert_eq!(r.status(), 200);
+        // 504: the small job was queued to a lane that a long job (this
+        // test's, or another test's in this process: the lanes are
+        // process-wide) then held, and waited there past the timeout; the
+        // shedding this test looks for comes once every lane is held.
+        assert!(r.status() == 200 || r.status() == 504, "{}", r.status());
         assert!(
             std::time::Instant::now() < deadline,
             "the lanes were never all held"
