@@ -582,10 +582,28 @@ pub(crate) fn session_create(req: &Value) -> Value {
     })
 }
 
-async fn create_session(app: &TestApp, body: &Value) -> Value {
+pub(crate) async fn create_session(app: &TestApp, body: &Value) -> Value {
     let response = app.post_json("/v1/sessions", body).await;
     assert_eq!(response.status(), 201);
     response.json().await.unwrap()
+}
+
+/// A plot_fusion session of `req`'s network fed `req`'s plots in batches
+/// of `size` (in order, no flush): its id and its state at the end.
+pub(crate) async fn session_fed_in_batches(
+    app: &TestApp,
+    req: &Value,
+    size: usize,
+) -> (String, Value) {
+    let created = create_session(app, &session_create(req)).await;
+    let id = created["id"].as_str().unwrap().to_string();
+    for (i, plots) in batches(req, size).into_iter().enumerate() {
+        let body = json!({"sequence": i + 1, "plots": plots});
+        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    (id, state)
 }
 
 /// The plots in time order, cut into batches of `size`.

@@ -9,7 +9,7 @@ use crate::helpers::{assert_problem, grpc_fields, problem_fields, spawn_app};
 use crate::plot_fusion::plot_scene::{
     ORIGIN, origin_frame, plots_tagged, radars_json, targets, two_radars,
 };
-use crate::plot_fusion::proto_request;
+use crate::plot_fusion::{proto_request, session_fed_in_batches};
 use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
 
 const PATH: &str = "/v1/plot-fusion/track";
@@ -122,21 +122,7 @@ async fn identity_flows_to_the_tracks_on_rest_grpc_and_a_session() {
 
     // A session fed in batches (the log carries the SSR fields) ends with
     // the batch call's tracks, identities included.
-    let created = app
-        .post_json(
-            "/v1/sessions",
-            &json!({"kind": "plot_fusion", "origin": req["origin"], "radars": req["radars"]}),
-        )
-        .await;
-    assert_eq!(created.status(), 201);
-    let created: Value = created.json().await.unwrap();
-    let id = created["id"].as_str().unwrap();
-    for (i, chunk) in req["plots"].as_array().unwrap().chunks(17).enumerate() {
-        let body = json!({"sequence": i + 1, "plots": chunk});
-        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
-            .await;
-    }
-    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let (_, state) = session_fed_in_batches(&app, &req, 17).await;
     assert_eq!(state["plot_fusion"]["tracks"], out["tracks"]);
 }
 
@@ -283,21 +269,7 @@ async fn mode_c_gives_the_tracks_their_geometric_height() {
     // A session fed the same plots in batches (its stored tracker carries
     // the offset's data) ends with the batch call's offset and tracks; over
     // gRPC the session's state says the same.
-    let created = app
-        .post_json(
-            "/v1/sessions",
-            &json!({"kind": "plot_fusion", "origin": req["origin"], "radars": req["radars"]}),
-        )
-        .await;
-    assert_eq!(created.status(), 201);
-    let created: Value = created.json().await.unwrap();
-    let id = created["id"].as_str().unwrap();
-    for (i, chunk) in req["plots"].as_array().unwrap().chunks(23).enumerate() {
-        let body = json!({"sequence": i + 1, "plots": chunk});
-        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
-            .await;
-    }
-    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let (id, state) = session_fed_in_batches(&app, &req, 23).await;
     assert_eq!(
         state["plot_fusion"]["pressure_offset"],
         out["pressure_offset"]
@@ -305,9 +277,7 @@ async fn mode_c_gives_the_tracks_their_geometric_height() {
     assert_eq!(state["plot_fusion"]["tracks"], out["tracks"]);
     let g =
         radar_fusion::proto::session_service_client::SessionServiceClient::new(app.channel().await)
-            .get_session(radar_fusion::proto::GetSessionRequest {
-                session_id: id.to_string(),
-            })
+            .get_session(radar_fusion::proto::GetSessionRequest { session_id: id })
             .await
             .unwrap()
             .into_inner();

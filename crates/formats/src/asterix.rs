@@ -46,7 +46,7 @@
 /// One nautical mile in metres (exact, by definition).
 pub const NM_M: f64 = 1852.0;
 /// One foot in metres (exact, by definition).
-pub const FT_M: f64 = 0.3048;
+pub const FT_M: f64 = algo::tracking::height::FT_M;
 
 /// The categories this decoder reads.
 pub const CAT_TARGET_REPORTS: u8 = 48;

@@ -173,6 +173,15 @@ impl<'a> Reader<'a> {
         Ok(f64::from_le_bytes(b.try_into().expect("8 bytes")))
     }
 
+    /// `K` values [`Writer::f64_run`] wrote.
+    pub fn f64_run<const K: usize>(&mut self) -> Result<[f64; K], FormatError> {
+        let mut out = [0.0; K];
+        for v in &mut out {
+            *v = self.f64()?;
+        }
+        Ok(out)
+    }
+
     /// What [`Writer::f64s`] wrote.
     pub fn f64s(&mut self) -> Result<Vec<f64>, FormatError> {
         let n = self.len(8)?;

@@ -375,8 +375,7 @@ pub fn pressure_altitude_m(identity: &super::identity::Identity) -> Option<f64> 
 
 /// A plot's Mode C quantisation variance (m²): q²/12 with q its quantum.
 pub fn quantisation_variance_m2(identity: &super::identity::Identity) -> f64 {
-    let q = identity.altitude_quantum_ft() * FT_M;
-    q * q / 12.0
+    super::identity::altitude_variance(identity) * FT_M * FT_M
 }
 
 /// The ellipsoid's radii of curvature (M, N) at geodetic latitude `lat`

@@ -506,7 +506,7 @@ pub fn without_mode_s(plot: &Identity, mode_s_radar: bool) -> bool {
 }
 
 /// Variance of a plot's Mode C value (ft²): its quantisation, q²/12.
-fn altitude_variance(plot: &Identity) -> f64 {
+pub(crate) fn altitude_variance(plot: &Identity) -> f64 {
     let q = plot.altitude_quantum_ft();
     q * q / 12.0
 }

@@ -195,8 +195,13 @@ pub struct Tracker {
 /// A frame's plots as the associator needs them.
 enum Source {
     /// Serial mode: one radar's plots, corrected for its bias, with the
-    /// radar as the update sees it (variances grown by the bias's).
-    Radar { spec: RadarSpec, plots: Vec<Plot> },
+    /// radar as the update sees it (variances grown by the bias's) and the
+    /// Mode C height measurement of a 3D tracker ([`height`]).
+    Radar {
+        spec: RadarSpec,
+        plots: Vec<Plot>,
+        height: Option<height::HeightMeasurement>,
+    },
     /// Parallel mode: fused Cartesian plots with their clutter densities.
     Fused {
         clutter: Vec<f64>,
@@ -547,10 +552,12 @@ impl Tracker {
         // A 3D radar's plot with Mode C: what it says of the pressure
         // offset (learnt from the plots that update a track), and its
         // height made the Mode C one (for the initiator and the index).
-        let offset_observations = self.mode_c_plots(&corrected, &mut plots)?;
+        let height = self.height_measurement();
+        let offset_observations = self.mode_c_plots(height.as_ref(), &corrected, &mut plots)?;
         let source = Source::Radar {
             spec: spec.clone(),
             plots: corrected,
+            height,
         };
         // Out of sequence, a frame at or before its radar's last judged
         // sweep: its hits replace the misses that sweep judged (in
@@ -584,18 +591,19 @@ impl Tracker {
         })
     }
 
-    /// Per plot of a serial frame (radar plots `raw`, converted `plots`):
-    /// for a 3D radar's plot with a validated Mode C, the offset
-    /// observation (t, h_p, H_r, var) its converted position gives (when
-    /// learning; empty otherwise), and the converted position updated
-    /// with the Mode C height.
+    /// Per plot of a serial frame (radar plots `raw`, converted `plots`),
+    /// with the frame's height measurement `m`: for a 3D radar's plot with
+    /// a validated Mode C, the offset observation (t, h_p, H_r, var) its
+    /// converted position gives (when learning; empty otherwise), and the
+    /// converted position updated with the Mode C height.
     #[allow(clippy::type_complexity)]
     fn mode_c_plots(
         &self,
+        m: Option<&height::HeightMeasurement>,
         raw: &[Plot],
         plots: &mut [CartesianPlot],
     ) -> Result<Vec<Option<(f64, f64, f64, f64)>>, AlgoError> {
-        let Some(m) = self.height_measurement() else {
+        let Some(m) = m else {
             return Ok(Vec::new());
         };
         let learn = self.config.mode_c_height.learn;
@@ -793,7 +801,11 @@ impl Tracker {
         let estimates = &scratch.estimates[..slots.len()];
         let cfg = &self.config;
         let (outcome, updater): (Outcome, Box<dyn Updater + '_>) = match &source {
-            Source::Radar { spec, plots: raw } => (
+            Source::Radar {
+                spec,
+                plots: raw,
+                height,
+            } => (
                 {
                     // Identity beside the position, when a plot carries
                     // one (identity::TrackIdentity::ln_ratio).
@@ -820,7 +832,7 @@ impl Tracker {
                     layout: polar_layout(spec, cfg.axes),
                     plots: raw,
                     range_rate: range_rate_sigma(spec, raw),
-                    height: self.height_measurement(),
+                    height: *height,
                 }),
             ),
             Source::Fused {

@@ -1350,66 +1350,13 @@ fn mode_s_keeps_crossing_aircraft_apart() {
 /// both aircraft keep their tracks.
 #[test]
 fn an_overflight_of_a_radar_site_does_not_stop_the_tracker() {
-    let radar = RadarSpec {
-        site: [0.0; 3],
-        sigma_range: 5.0,
-        sigma_azimuth: 1e-4,
-        sigma_elevation: Some(1e-4),
-        sigma_radial_velocity: None,
-        scan_period: 4.0,
-        detection_probability: 1.0,
-        clutter_density: 1e-9,
-    };
-    let mut cfg = TrackerConfig::new(3, vec![radar.clone()]);
-    cfg.motion = Motion::ConstantVelocity;
-    cfg.sigma_a = [0.05; 3];
-    let targets = [
-        Target {
-            p0: [-4_000.0, 0.0, 3_000.0],
-            v: [100.0, 0.0, 0.0],
+    overflight(
+        |cfg| {
+            cfg.motion = Motion::ConstantVelocity;
+            cfg.sigma_a = [0.05; 3];
         },
-        Target {
-            p0: [-4_000.0, 40.0, 3_000.0],
-            v: [100.0, 0.0, 0.0],
-        },
-    ];
-    let mut plots = Vec::new();
-    for k in 0..=20 {
-        let t = 4.0 * k as f64;
-        for target in &targets {
-            let p = target.at(t);
-            let horizontal = p[0].hypot(p[1]);
-            if horizontal < 1.0 {
-                continue; // the cone of silence
-            }
-            plots.push(Plot {
-                radar: 0,
-                t,
-                range: horizontal.hypot(p[2]),
-                azimuth: p[0].atan2(p[1]),
-                elevation: Some(p[2].atan2(horizontal)),
-                radial_velocity: None,
-                identity: Identity::default(),
-            });
-        }
-    }
-    let mut tracker = Tracker::new(cfg).unwrap();
-    let mut report = tracker.process(&plots).expect("an overflight is no error");
-    let flushed = tracker.flush().unwrap();
-    report.undefined.extend(flushed.undefined);
-    assert!(
-        !report.undefined.is_empty(),
-        "A was not predicted at the site"
+        "A was not predicted at the site",
     );
-    let end = 80.0;
-    for target in &targets {
-        let p = target.at(end);
-        let near = tracker.tracks().iter().any(|t| {
-            t.status == TrackStatus::Confirmed
-                && (t.state[0] - p[0]).hypot(t.state[2] - p[1]) < 20.0
-        });
-        assert!(near, "no track within 20 m of {p:?}");
-    }
 }
 
 /// One address, one aircraft: an aircraft's plots jump 5 km north at
@@ -1490,6 +1437,31 @@ fn a_track_that_lost_its_mode_s_aircraft_takes_the_new_track_of_its_address() {
 /// listed in `StepReport::undefined`, and both aircraft keep their tracks.
 #[test]
 fn an_imm_models_own_overflight_coasts_the_track() {
+    overflight(
+        |cfg| {
+            cfg.motion = Motion::Imm(Imm {
+                models: vec![
+                    MotionModel::ConstantVelocity { sigma_a: [0.05; 3] },
+                    MotionModel::CoordinatedTurn {
+                        turn_rate: 0.05,
+                        sigma_a: [0.05; 3],
+                    },
+                ],
+                mean_sojourn: vec![20.0, 1e9],
+                initial_probabilities: vec![0.5, 0.5],
+            });
+        },
+        "no model of A was predicted at the site",
+    );
+}
+
+/// The scene of the overflight tests: a noise-free 3D radar at the
+/// origin (σ of metres), A flying over its site at t = 40 s, 3 km up (no
+/// plot of A within 1 m of the vertical: the cone of silence), B
+/// parallel 40 m north; `motion` sets the tracker's motion. A must be
+/// listed in `undefined` (`why` names what was undefined) and both
+/// aircraft keep their tracks.
+fn overflight(motion: impl FnOnce(&mut TrackerConfig), why: &str) {
     let radar = RadarSpec {
         site: [0.0; 3],
         sigma_range: 5.0,
@@ -1501,17 +1473,7 @@ fn an_imm_models_own_overflight_coasts_the_track() {
         clutter_density: 1e-9,
     };
     let mut cfg = TrackerConfig::new(3, vec![radar.clone()]);
-    cfg.motion = Motion::Imm(Imm {
-        models: vec![
-            MotionModel::ConstantVelocity { sigma_a: [0.05; 3] },
-            MotionModel::CoordinatedTurn {
-                turn_rate: 0.05,
-                sigma_a: [0.05; 3],
-            },
-        ],
-        mean_sojourn: vec![20.0, 1e9],
-        initial_probabilities: vec![0.5, 0.5],
-    });
+    motion(&mut cfg);
     let targets = [
         Target {
             p0: [-4_000.0, 0.0, 3_000.0],
@@ -1546,10 +1508,7 @@ fn an_imm_models_own_overflight_coasts_the_track() {
     let mut report = tracker.process(&plots).expect("an overflight is no error");
     let flushed = tracker.flush().unwrap();
     report.undefined.extend(flushed.undefined);
-    assert!(
-        !report.undefined.is_empty(),
-        "no model of A was predicted at the site"
-    );
+    assert!(!report.undefined.is_empty(), "{why}");
     let end = 80.0;
     for target in &targets {
         let p = target.at(end);

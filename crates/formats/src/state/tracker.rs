@@ -151,7 +151,7 @@ fn read_mode_c_height(
     if flags > 3 {
         return Err(corrupt("Mode C height flags"));
     }
-    let [offset, sigma_offset, slope, sigma_slope] = read_run(r)?;
+    let [offset, sigma_offset, slope, sigma_slope] = r.f64_run()?;
     let config = ModeCHeight {
         enabled: flags & 1 != 0,
         learn: flags & 2 != 0,
@@ -163,7 +163,7 @@ fn read_mode_c_height(
     let datum = match r.u8()? {
         0 => HeightDatum::Flat,
         1 => {
-            let [origin_height, meridian, prime_vertical] = read_run(r)?;
+            let [origin_height, meridian, prime_vertical] = r.f64_run()?;
             HeightDatum::Tangent {
                 origin_height,
                 meridian,
@@ -172,8 +172,8 @@ fn read_mode_c_height(
         }
         _ => return Err(corrupt("height datum")),
     };
-    let information = read_run(r)?;
-    let vector = read_run(r)?;
+    let information = r.f64_run()?;
+    let vector = r.f64_run()?;
     let data = PressureOffset {
         information,
         vector,
@@ -182,14 +182,6 @@ fn read_mode_c_height(
         rejected: r.u64()?,
     };
     Ok((config, datum, data))
-}
-
-fn read_run<const K: usize>(r: &mut Reader<'_>) -> Result<[f64; K], FormatError> {
-    let mut out = [0.0; K];
-    for v in &mut out {
-        *v = r.f64()?;
-    }
-    Ok(out)
 }
 
 fn beams(w: &mut Writer, beams: &[Option<(f64, f64)>]) {
@@ -906,13 +898,19 @@ mod tests {
                 .iter()
                 .any(|t| t.identity.altitude.is_some())
         );
-        let bytes = encode_tracker(&a);
+        round_trips_and_continues(&mut a, rest);
+    }
+
+    /// `a` encoded and decoded is `a` bit for bit and, fed `rest`, goes on
+    /// as `a` does; every truncation of its bytes is an error, never a
+    /// panic.
+    fn round_trips_and_continues(a: &mut Tracker, rest: &[Plot]) {
+        let bytes = encode_tracker(a);
         let mut b = decode_tracker(&bytes).unwrap();
-        assert_eq!(b, a);
+        assert_eq!(&b, a);
         a.process(rest).unwrap();
         b.process(rest).unwrap();
-        assert_eq!(encode_tracker(&a), encode_tracker(&b));
-        // Every truncation is an error, never a panic.
+        assert_eq!(encode_tracker(a), encode_tracker(&b));
         for cut in 0..bytes.len() {
             assert!(decode_tracker(&bytes[..cut]).is_err(), "cut at {cut}");
         }
@@ -960,15 +958,7 @@ mod tests {
         a.process(first).unwrap();
         assert!(a.state().pressure_offset.plots > 0);
         assert!(a.state().mode_s_radars.iter().all(|&m| m));
-        let bytes = encode_tracker(&a);
-        let mut b = decode_tracker(&bytes).unwrap();
-        assert_eq!(b, a);
-        a.process(rest).unwrap();
-        b.process(rest).unwrap();
-        assert_eq!(encode_tracker(&a), encode_tracker(&b));
-        for cut in 0..bytes.len() {
-            assert!(decode_tracker(&bytes[..cut]).is_err(), "cut at {cut}");
-        }
+        round_trips_and_continues(&mut a, rest);
         let v6 = decode_tracker(&encode_tracker_as(&a, 6)).unwrap();
         assert!(!v6.config().mode_c_height.enabled);
         assert_eq!(v6.state().pressure_offset.plots, 0);

@@ -395,7 +395,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     ));
     warnings.extend(ssr::warnings(&tracks));
     let pressure_offset = network.pressure_offset_view(&tracker);
-    warnings.extend(ssr::height_warnings(pressure_offset.as_ref(), &tracks));
+    warnings.extend(ssr::height_warnings(&tracker, &tracks));
     warnings.extend(undefined_warning(&report.undefined));
     let motion = &tracker.config().motion;
     let tracks: Vec<TrackView> = tracks

@@ -18,8 +18,6 @@ use algo::tracking::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentit
 use formats::asterix::FT_M;
 use formats::wire::{FormatError, Reader, Writer};
 
-use super::PressureOffsetView;
-
 /// A plot's secondary fields as received (every one optional).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SsrInput {
@@ -469,10 +467,10 @@ pub const OFFSET_SIGMA_WARN_M: f64 = 100.0;
 /// with the offset's σ at the highest track's level and the options that
 /// fix it.
 pub fn height_warnings(
-    offset: Option<&PressureOffsetView>,
+    tracker: &algo::tracking::Tracker,
     tracks: &[TrackOutput],
 ) -> Option<String> {
-    let o = offset?;
+    let (estimate, data) = tracker.pressure_offset()?;
     let top = tracks
         .iter()
         .filter_map(|t| t.identity.altitude.as_ref())
@@ -481,12 +479,7 @@ pub fn height_warnings(
     if !top.is_finite() {
         return None;
     }
-    let h = top * FT_M;
-    let sigma = (o.sigma_offset_m.powi(2)
-        + 2.0 * o.correlation * o.sigma_offset_m * o.sigma_slope * h
-        + (h * o.sigma_slope).powi(2))
-    .max(0.0)
-    .sqrt();
+    let sigma = estimate.at(top * FT_M).1.sqrt();
     (sigma > OFFSET_SIGMA_WARN_M).then(|| {
         format!(
             "tracks' geometric heights come from Mode C through a pressure-to-geometric offset \
@@ -495,7 +488,7 @@ pub fn height_warnings(
              smaller sigma_offset_m / sigma_slope, add a 3D radar, or set \
              tracker.mode_c_height.enabled false",
             top / 100.0,
-            o.plots
+            data.plots
         )
     })
 }

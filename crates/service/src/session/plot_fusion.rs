@@ -373,7 +373,7 @@ impl PlotFusionSession {
         warnings.extend(realigned(&biases_before, &registration));
         warnings.extend(crate::plot_fusion::ssr::warnings(&live));
         warnings.extend(crate::plot_fusion::ssr::height_warnings(
-            self.network.pressure_offset_view(self.tracker()).as_ref(),
+            self.tracker(),
             &live,
         ));
         warnings.extend(crate::plot_fusion::undefined_warning(&push.undefined));
