@@ -354,6 +354,9 @@ pub struct TrackerConfig {
     /// How the frame's `up` relates to the height above the ellipsoid
     /// (flat for local sites; the caller that knows the frame sets it).
     pub height_datum: crate::tracking::height::HeightDatum,
+    /// Each radar's σ learnt online and applied once converged
+    /// ([`crate::tracking::accuracy`]); on by default.
+    pub accuracy: crate::tracking::accuracy::AccuracyConfig,
 }
 
 impl TrackerConfig {
@@ -416,6 +419,7 @@ impl TrackerConfig {
             registration: crate::tracking::registration::RegistrationConfig::for_radars(radars_len),
             mode_c_height: Default::default(),
             height_datum: crate::tracking::height::HeightDatum::Flat,
+            accuracy: Default::default(),
         }
     }
 
@@ -498,6 +502,7 @@ impl TrackerConfig {
             ));
         }
         self.mode_c_height.validate()?;
+        self.accuracy.validate(self.radars.len())?;
         self.height_datum.validate()?;
         Ok(())
     }

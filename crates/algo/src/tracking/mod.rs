@@ -43,6 +43,7 @@
 //! a caller that must stay consistent keeps the stored state and retries
 //! from it.
 
+pub mod accuracy;
 pub mod associator;
 pub mod config;
 pub mod conversion;
@@ -180,6 +181,11 @@ pub struct Tracker {
     /// it without one is a Mode A/C transponder's,
     /// [`identity::without_mode_s`]).
     mode_s_radars: Vec<bool>,
+    /// Each radar's accuracy learnt online ([`accuracy`]).
+    accuracy: accuracy::AccuracyState,
+    /// Each radar as the tracker applies it: the declared radar with the
+    /// σ of [`accuracy`] (derived from `accuracy`, never stored).
+    applied: Vec<RadarSpec>,
     /// Buffers a frame reuses (derived, never stored).
     scratch: Derived<Scratch>,
     /// Most live tracks, confirmed and tentative: no tentative track is
@@ -219,6 +225,8 @@ impl Tracker {
             registrar,
             pressure_offset: height::PressureOffset::default(),
             mode_s_radars: vec![false; config.radars.len()],
+            accuracy: accuracy::AccuracyState::new(config.radars.len()),
+            applied: config.radars.clone(),
             predictor: TrackPredictor::of(&config),
             parallel: config.is_parallel(),
             config,
@@ -274,6 +282,23 @@ impl Tracker {
     pub fn pressure_offset(&self) -> Option<(height::OffsetEstimate, &height::PressureOffset)> {
         self.height_measurement()
             .map(|m| (m.offset, &self.pressure_offset))
+    }
+
+    /// Each radar's accuracy: declared, estimated and applied σ
+    /// ([`accuracy`]), by radar index.
+    pub fn accuracy(&self) -> Vec<accuracy::RadarAccuracy> {
+        let c = &self.config;
+        (0..c.radars.len())
+            .map(|r| self.accuracy.radar(&c.accuracy, r, &c.radars[r]))
+            .collect()
+    }
+
+    /// Every radar as applied recomputed from the accuracy data.
+    fn refresh_applied(&mut self) {
+        let c = &self.config;
+        self.applied = (0..c.radars.len())
+            .map(|r| self.accuracy.applied(&c.accuracy, r, &c.radars[r]))
+            .collect();
     }
 
     /// Number of buffered plots.
@@ -527,7 +552,7 @@ impl Tracker {
             self.mode_s_radars[index] = true;
         }
         let bias = self.registrar.biases[index];
-        let spec = registration::inflated(&self.config.radars[index], &bias);
+        let spec = registration::inflated(&self.applied[index], &bias);
         let corrected: Vec<Plot> = frame
             .iter()
             .map(|p| registration::correct(p, &bias))
@@ -568,7 +593,20 @@ impl Tracker {
         self.scratch.0.behind_sweep = false;
         if Registrar::learns(&self.config) {
             self.registrar
-                .learn_serial(&self.config, &self.tracks, index, &hits)?;
+                .learn_serial(&self.config, &self.applied, &self.tracks, index, &hits)?;
+        }
+        if !self.scratch.0.innovations.is_empty() {
+            let cfg = &self.config;
+            self.accuracy.learn(
+                &cfg.accuracy,
+                index,
+                &cfg.radars[index],
+                t,
+                &self.scratch.0.innovations,
+            );
+            self.applied[index] = self
+                .accuracy
+                .applied(&cfg.accuracy, index, &cfg.radars[index]);
         }
         if !offset_observations.is_empty() {
             let prior = self.config.mode_c_height;
@@ -734,8 +772,7 @@ impl Tracker {
         let t = self.instant_time(k);
         let manoeuvre_q = self.config.largest_process_noise();
         let specs: Vec<RadarSpec> = self
-            .config
-            .radars
+            .applied
             .iter()
             .zip(&self.registrar.biases)
             .map(|(r, b)| registration::inflated(r, b))
@@ -758,7 +795,7 @@ impl Tracker {
         let mut radars: Vec<usize> = frame.iter().map(|p| p.radar).collect();
         radars.sort_unstable();
         radars.dedup();
-        let specs: Vec<&RadarSpec> = radars.iter().map(|&i| &self.config.radars[i]).collect();
+        let specs: Vec<&RadarSpec> = radars.iter().map(|&i| &self.applied[i]).collect();
         let miss: f64 = specs
             .iter()
             .map(|r| 1.0 - r.detection_probability)
@@ -772,8 +809,14 @@ impl Tracker {
         let hits = self.run_frame(t, source, fused, report)?;
         self.last_instant = Some(k);
         if Registrar::learns(&self.config) {
-            self.registrar
-                .learn_parallel(&self.config, &self.tracks, &frame, &members, &hits)?;
+            self.registrar.learn_parallel(
+                &self.config,
+                &self.applied,
+                &self.tracks,
+                &frame,
+                &members,
+                &hits,
+            )?;
         }
         Ok(())
     }
@@ -853,6 +896,23 @@ impl Tracker {
         report
             .undefined
             .extend(outcome.undefined.iter().map(|&c| self.tracks[slots[c]].id));
+        scratch.innovations.clear();
+        if let (
+            Source::Radar {
+                spec, plots: raw, ..
+            },
+            true,
+        ) = (&source, cfg.accuracy.enabled)
+        {
+            innovations(
+                spec,
+                raw,
+                cfg.axes,
+                &outcome,
+                &scratch.predictions[..slots.len()],
+                &mut scratch.innovations,
+            );
+        }
         let (hits, touched) = self.update(
             t,
             &slots,
@@ -1197,6 +1257,57 @@ struct Scratch {
     /// sequence within the radar): a hit replaces the miss that sweep
     /// judged.
     behind_sweep: bool,
+    /// Serial mode: the frame's innovations the accuracy estimator learns
+    /// from (plots that updated a confirmed track without ambiguity).
+    innovations: Vec<accuracy::Innovation>,
+}
+
+/// Serial mode: the innovations of the radar's plots (`spec`, corrected
+/// plots `raw`) that updated a confirmed track without ambiguity
+/// (association weight at least [`accuracy::MIN_ASSOCIATION_WEIGHT`]), for
+/// the accuracy estimator, against the track's prediction
+/// (`predictions`): an IMM track's most probable model's when its
+/// predicted probability is at least [`accuracy::MIN_MODE_PROBABILITY`]
+/// (else the plot is not learnt from: the motion is in transition).
+fn innovations(
+    spec: &RadarSpec,
+    raw: &[Plot],
+    axes: usize,
+    outcome: &Outcome,
+    predictions: &[Prediction],
+    out: &mut Vec<accuracy::Innovation>,
+) {
+    let layout = polar_layout(spec, axes);
+    let with_range_rate = range_rate_sigma(spec, raw).is_some();
+    for (c, hit) in outcome.hit.iter().enumerate() {
+        let Some(j) = *hit else { continue };
+        let beta = outcome.associations[c]
+            .measurements
+            .iter()
+            .find(|m| m.0 == j)
+            .map_or(0.0, |m| m.1);
+        if beta < accuracy::MIN_ASSOCIATION_WEIGHT {
+            continue;
+        }
+        let pred = &predictions[c];
+        let (x, p) = match pred
+            .modes
+            .iter()
+            .max_by(|a, b| a.probability.total_cmp(&b.probability))
+        {
+            None => (&pred.x, &pred.p),
+            Some(m) if m.probability >= accuracy::MIN_MODE_PROBABILITY => (&m.x, &m.p),
+            Some(_) => continue,
+        };
+        out.extend(accuracy::innovation(
+            spec,
+            &raw[j],
+            x,
+            p,
+            layout,
+            with_range_rate,
+        ));
+    }
 }
 
 /// The one mode of a single-model track's update in `single` (a

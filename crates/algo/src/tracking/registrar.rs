@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
-use crate::tracking::config::{Plot, TrackerConfig};
+use crate::tracking::config::{Plot, RadarSpec, TrackerConfig};
 use crate::tracking::registration::{self, RadarBias, RegistrationState};
 use crate::tracking::track::Track;
 
@@ -70,6 +70,7 @@ impl Registrar {
     pub(crate) fn learn_serial(
         &mut self,
         cfg: &TrackerConfig,
+        radars: &[RadarSpec],
         tracks: &[std::sync::Arc<Track>],
         radar: usize,
         hits: &[Hit],
@@ -82,16 +83,18 @@ impl Registrar {
                 Some((h.slot, newer, older, true))
             })
             .collect();
-        self.learn(cfg, tracks, &pairs)
+        self.learn(cfg, radars, tracks, &pairs)
     }
 
     /// Parallel mode: every cluster of several radars' plots (`members`,
     /// indices in `frame`) that updated a confirmed track (`hits`) gives a
     /// pair per two of its plots consecutive in time; then the estimate is
     /// solved again.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn learn_parallel(
         &mut self,
         cfg: &TrackerConfig,
+        radars: &[RadarSpec],
         tracks: &[std::sync::Arc<Track>],
         frame: &[Plot],
         members: &[Vec<usize>],
@@ -110,11 +113,12 @@ impl Registrar {
                 pairs.push((h.slot, w[1], w[0], shares_plots));
             }
         }
-        self.learn(cfg, tracks, &pairs)
+        self.learn(cfg, radars, tracks, &pairs)
     }
 
     /// Adds the pairs (track index, newer plot, older plot, whether the
-    /// plots are in other pairs too; raw plots) to the registration, the
+    /// plots are in other pairs too; raw plots; their noise that of
+    /// `radars`, the radars as the tracker applies them) to the registration, the
     /// motion between them from the track's velocity, and solves again
     /// when any was used. Of a frame's pairs at most
     /// [`registration::MAX_PAIRS_PER_FRAME`] are used, every k-th when
@@ -123,6 +127,7 @@ impl Registrar {
     fn learn(
         &mut self,
         cfg: &TrackerConfig,
+        radars: &[RadarSpec],
         tracks: &[std::sync::Arc<Track>],
         pairs: &[(usize, Plot, Plot, bool)],
     ) -> Result<(), AlgoError> {
@@ -132,7 +137,7 @@ impl Registrar {
         let stride = pairs.len().div_ceil(registration::MAX_PAIRS_PER_FRAME);
         let mut solved = match self.solved.take() {
             Some(s) => s,
-            None => registration::solve(&cfg.registration, &cfg.radars, &self.state)?,
+            None => registration::solve(&cfg.registration, radars, &self.state)?,
         };
         let q = cfg.largest_process_noise();
         let axes = cfg.axes;
@@ -149,20 +154,13 @@ impl Registrar {
                 q,
                 shares_plots: *shares_plots,
             };
-            if registration::add_pair(
-                &cfg.registration,
-                &cfg.radars,
-                &mut self.state,
-                &solved,
-                &pair,
-            )? {
+            if registration::add_pair(&cfg.registration, radars, &mut self.state, &solved, &pair)? {
                 added = true;
             }
         }
         if added {
-            solved = registration::solve(&cfg.registration, &cfg.radars, &self.state)?;
-            self.biases =
-                registration::applied(&cfg.registration, &cfg.radars, &self.state, &solved);
+            solved = registration::solve(&cfg.registration, radars, &self.state)?;
+            self.biases = registration::applied(&cfg.registration, radars, &self.state, &solved);
         }
         self.solved = Some(solved);
         Ok(())

@@ -12,6 +12,7 @@ use super::registration::RegistrationState;
 use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
+use crate::tracking::accuracy::AccuracyState;
 use crate::tracking::height::PressureOffset;
 use crate::tracking::initiator::Initiator;
 
@@ -48,6 +49,8 @@ pub struct TrackerState<'a> {
     pub pressure_offset: &'a PressureOffset,
     /// Per radar: it has given a Mode S address.
     pub mode_s_radars: &'a [bool],
+    /// The accuracy estimator's data.
+    pub accuracy: &'a AccuracyState,
 }
 
 /// Everything a tracker carries between calls, owned: what
@@ -84,6 +87,9 @@ pub struct TrackerParts {
     pub pressure_offset: PressureOffset,
     /// Per radar: it has given a Mode S address (empty: none has).
     pub mode_s_radars: Vec<bool>,
+    /// The accuracy estimator's data (`None`: none yet, as a tracker of
+    /// an earlier release).
+    pub accuracy: Option<AccuracyState>,
 }
 
 impl TrackerState<'_> {
@@ -104,6 +110,7 @@ impl TrackerState<'_> {
             registration: Some(self.registration.clone()),
             pressure_offset: *self.pressure_offset,
             mode_s_radars: self.mode_s_radars.to_vec(),
+            accuracy: Some(self.accuracy.clone()),
         }
     }
 }
@@ -191,6 +198,7 @@ impl Tracker {
             registration: &self.registrar.state,
             pressure_offset: &self.pressure_offset,
             mode_s_radars: &self.mode_s_radars,
+            accuracy: &self.accuracy,
         }
     }
 
@@ -314,6 +322,11 @@ impl Tracker {
                 )));
             }
             tr.mode_s_radars = parts.mode_s_radars;
+        }
+        if let Some(state) = parts.accuracy {
+            state.check(tr.config.radars.len())?;
+            tr.accuracy = state;
+            tr.refresh_applied();
         }
         if let Some(state) = parts.registration {
             state.check(&tr.config.radars)?;

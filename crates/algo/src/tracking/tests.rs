@@ -28,13 +28,13 @@ impl Lcg {
 }
 
 #[derive(Clone, Copy)]
-struct Target {
-    p0: [f64; 3],
-    v: [f64; 3],
+pub(super) struct Target {
+    pub(super) p0: [f64; 3],
+    pub(super) v: [f64; 3],
 }
 
 impl Target {
-    fn at(&self, t: f64) -> [f64; 3] {
+    pub(super) fn at(&self, t: f64) -> [f64; 3] {
         [0, 1, 2].map(|i| self.p0[i] + self.v[i] * t)
     }
 }
@@ -42,7 +42,7 @@ impl Target {
 /// Plots of every radar scan `offset + k·period ≤ duration` of every
 /// target, with Gaussian polar noise, sorted by time (stable: radar order,
 /// then target order, at equal times).
-fn scene(
+pub(super) fn scene(
     radars: &[RadarSpec],
     offsets: &[f64],
     targets: &[Target],

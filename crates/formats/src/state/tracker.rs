@@ -3,7 +3,7 @@
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
-//! Layout: magic `RFTK`, format version (u32, currently 6), the
+//! Layout: magic `RFTK`, format version (u32, currently 8), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
 //! Format 2 adds the predictor (`motion`) after the configuration, each
@@ -32,7 +32,12 @@
 //! ([`algo::tracking::height`]), then per radar whether it has given a
 //! Mode S address; formats 1 to 6 read Mode C heights off (so such a
 //! tracker continues as it would have, but for the Mode S radars, which
-//! it learns again), a flat datum and no data.
+//! it learns again), a flat datum and no data. Format 8 adds, at the
+//! end, the accuracy estimator's configuration (on, time constant, pinned
+//! radars) and per radar its data (last time; per component the decayed
+//! count, sum, excess and information, and the refused count;
+//! [`algo::tracking::accuracy`]); formats 1 to 7 read it off (the
+//! declared σ applied, as that release did) without data.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -43,6 +48,7 @@ use algo::tracking::{
     CartesianPlot, Counters, Deletion, Identity, Imm, Initiation, Mode, Motion, MotionModel,
     NoiseModel, Plot, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig, TrackerParts,
     VelocityGate,
+    accuracy::{AccuracyConfig, AccuracyState, ComponentData, RadarAccuracyData},
     height::{HeightDatum, ModeCHeight, PressureOffset},
     predictor::ModeState,
     registration::{BiasPrior, RegistrationConfig, RegistrationState},
@@ -56,16 +62,16 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     encode_tracker_as(tr, FORMAT_VERSION)
 }
 
-/// The tracker in format 5, 6 or 7 (5: without identities, 6: without
-/// Mode C heights, as earlier releases wrote them; for the tests of older
-/// formats).
+/// The tracker in format 5 to 8 (5: without identities, 6: without
+/// Mode C heights, 7: without the accuracy estimator, as earlier releases
+/// wrote them; for the tests of older formats).
 pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     assert!((5..=FORMAT_VERSION).contains(&version));
     let ids = version >= TRACKER_FORMAT;
@@ -101,7 +107,65 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
         mode_c_height(&mut w, s.config, s.pressure_offset);
         flags(&mut w, s.mode_s_radars);
     }
+    if version >= 8 {
+        accuracy(&mut w, &s.config.accuracy, s.accuracy);
+    }
     w.buf
+}
+
+fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
+    w.u8(u8::from(c.enabled));
+    w.f64(c.time_constant);
+    w.usize(c.pinned.len());
+    for &r in &c.pinned {
+        w.usize(r);
+    }
+    w.usize(data.radars.len());
+    for d in &data.radars {
+        w.opt(d.t, Writer::f64);
+        for k in &d.components {
+            w.f64_run(&[k.weight, k.sum, k.excess, k.information]);
+            w.u64(k.rejected);
+        }
+    }
+}
+
+fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), FormatError> {
+    let enabled = match r.u8()? {
+        0 => false,
+        1 => true,
+        _ => return Err(corrupt("a flag not 0 or 1")),
+    };
+    let time_constant = r.f64()?;
+    let n = r.len(8)?;
+    let pinned = (0..n).map(|_| r.usize()).collect::<Result<_, _>>()?;
+    let n = r.len(8)?;
+    let radars = (0..n)
+        .map(|_| {
+            let t = r.opt(Reader::f64)?;
+            let mut d = RadarAccuracyData {
+                t,
+                ..Default::default()
+            };
+            for k in &mut d.components {
+                let [weight, sum, excess, information] = r.f64_run::<4>()?;
+                *k = ComponentData {
+                    weight,
+                    sum,
+                    excess,
+                    information,
+                    rejected: r.u64()?,
+                };
+            }
+            Ok(d)
+        })
+        .collect::<Result<_, FormatError>>()?;
+    let config = AccuracyConfig {
+        enabled,
+        time_constant,
+        pinned,
+    };
+    Ok((config, AccuracyState { radars }))
 }
 
 fn mode_c_height(w: &mut Writer, c: &TrackerConfig, data: &PressureOffset) {
@@ -373,10 +437,20 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         config.mode_c_height.enabled = config.axes != 3;
         (PressureOffset::default(), Vec::new())
     };
+    let accuracy = if version >= 8 {
+        let (c, data) = read_accuracy(&mut r)?;
+        config.accuracy = c;
+        Some(data)
+    } else {
+        // A tracker of an earlier release applied the declared σ.
+        config.accuracy.enabled = false;
+        None
+    };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
     Ok(Tracker::from_parts(TrackerParts {
+        accuracy,
         config,
         registration,
         tracks,
@@ -630,6 +704,8 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
         // Read from format 7's end, else off (decode_tracker).
         mode_c_height: ModeCHeight::default(),
         height_datum: HeightDatum::Flat,
+        // Read from format 8's end, else off (decode_tracker).
+        accuracy: AccuracyConfig::default(),
     })
 }
 
@@ -965,6 +1041,30 @@ mod tests {
         assert!(v6.pressure_offset().is_none());
     }
 
+    /// Format 8: a tracker with accuracy data and a pinned radar
+    /// round-trips bit for bit and continues as the original; written as
+    /// format 7 it reads back with the estimator off and no data (the
+    /// declared σ applied, as that release did).
+    #[test]
+    fn accuracy_round_trips_and_continues() {
+        let mut cfg = config(true);
+        cfg.accuracy.pinned = vec![1];
+        cfg.accuracy.time_constant = 600.0;
+        let all = plots(&cfg, 100.0);
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        let learnt = &a.state().accuracy.radars;
+        assert!(
+            learnt.iter().all(|d| d.components[0].weight > 0.0),
+            "{learnt:?}"
+        );
+        round_trips_and_continues(&mut a, rest);
+        let v7 = decode_tracker(&encode_tracker_as(&a, 7)).unwrap();
+        assert!(!v7.config().accuracy.enabled);
+        assert!(v7.state().accuracy.radars.iter().all(|d| d.t.is_none()));
+    }
+
     /// Chunks fed to a tracker that is encoded and decoded between them
     /// give the bytes of one call with every plot (cuts inside a radar's
     /// scan group included); the fixtures of earlier sessions are decoded
@@ -1126,7 +1226,10 @@ mod tests {
 
     #[test]
     fn imm_trackers_round_trip() {
-        let cfg = config(false);
+        let mut cfg = config(false);
+        // As a release before the accuracy estimator (format 7 and
+        // earlier read it off).
+        cfg.accuracy.enabled = false;
         assert!(matches!(cfg.motion, Motion::Imm(_)));
         let mut t = Tracker::new(cfg.clone()).unwrap();
         t.process(&plots(&cfg, 100.0)).unwrap();
@@ -1176,7 +1279,7 @@ mod tests {
             Err(FormatError::Corrupt(_))
         ));
         let mut next = bytes.clone();
-        next[4] = 8;
+        next[4] = FORMAT_VERSION as u8 + 1;
         assert!(matches!(
             decode_tracker(&next),
             Err(FormatError::Corrupt(_))

@@ -255,7 +255,10 @@ mod tests {
     /// Format 1 (earlier releases): a reprocessing window.
     #[test]
     fn a_window_of_format_1_decodes_as_reprocessing() {
-        let config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        let mut config = TrackerConfig::new(2, vec![radar([0.0; 3]), radar([30_000.0, 0.0, 0.0])]);
+        // As that release: the declared σ (format 7 and earlier read the
+        // accuracy estimator off).
+        config.accuracy.enabled = false;
         let mut a =
             LagWindow::with_policy(Tracker::new(config).unwrap(), 10.0, LatePolicy::Reprocess)
                 .unwrap();

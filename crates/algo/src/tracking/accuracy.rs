@@ -1,0 +1,848 @@
+//! Each radar's measurement accuracy learnt online: σ of the range, the
+//! azimuth, the elevation and the radial velocity, estimated from the
+//! innovations of the confirmed tracks its plots update, so that a radar
+//! declared with a datasheet's optimistic (or pessimistic) σ still gives
+//! consistent tracks.
+//!
+//! # The estimator: covariance matching by Fisher scoring
+//!
+//! A plot of radar r that updates a confirmed track has, per polar
+//! component k, the innovation ν = z_k − h_k(x̄) against the track's
+//! combined prediction (x̄, P̄), whose variance is
+//! E[ν²] = c + σ_k² with c = (H P̄ Hᵀ)_kk when the prediction is
+//! consistent. Over many plots the maximum-likelihood σ_k² (ν ~ N(0,
+//! c_i + σ²), independent) solves Σ g_i (ν_i² − c_i − σ²) = 0 with
+//! g_i = 1/(c_i + σ²)²; one Fisher-scoring step per plot, the weights g_i
+//! taken at the estimate of the moment, gives the running estimate
+//!
+//!   σ̂² = Σ w_i g_i (ν_i² − c_i) / Σ w_i g_i,
+//!
+//! with Fisher information I = ½ Σ w_i g_i, so σ(σ̂²) = √(2 / Σ w_i g_i)
+//! and σ(σ̂) = σ(σ̂²) / (2σ̂). The weights w_i = exp(−(t − t_i)/τ) forget
+//! with the time constant τ ([`AccuracyConfig::time_constant`]), so a
+//! radar that degrades is followed.
+//!
+//! Why this estimator: it is the innovation-based covariance matching of
+//! Mehra (1970) made maximum likelihood, it needs four running sums per
+//! component (stored with the tracker), it gives its own σ from the Fisher
+//! information, and it says when the data cannot identify σ: where the
+//! tracks' own uncertainty c dominates σ² the information stays small and
+//! the estimate is not used. Variational Bayes (Särkkä and Nummenmaa
+//! 2009) estimates the same quantity per track with an inner iteration per
+//! update; ML over residuals (post-update) needs the updated covariance,
+//! which an IMM mixture does not give per plot.
+//!
+//! **Bias and noise.** The registrar removes each radar's estimated bias
+//! before the update; what bias remains is constant over the time
+//! constant, so the innovations are centred on their own running mean
+//! before they are squared: the estimate is the noise about the bias,
+//! never the bias. (The registration's own σ is added to the update's
+//! variance separately, [`super::registration::inflated`].)
+//!
+//! **Noise and process noise.** c comes from the IMM's combined
+//! prediction, which carries the motion models' spread: the manoeuvre
+//! part of an innovation is in c, not in σ². A manoeuvre the IMM does
+//! not model would inflate σ̂; only plots associated without ambiguity
+//! (weight ≥ [`MIN_ASSOCIATION_WEIGHT`]) are used and, once converged, an
+//! innovation beyond [`OUTLIER_SIGMAS`] σ is refused (counted).
+//!
+//! **Feedback.** A converged estimate replaces the declared σ in the
+//! gate, the association and the update. With σ too small the filter
+//! trusts the plots too much, its c is too small and σ̂² too large, and
+//! the other way round, so the estimate moves toward the true σ; at the
+//! true σ the prediction is consistent and σ̂² is unbiased.
+//!
+//! The detection probability and the clutter density are not estimated:
+//! the tracker judges misses from the beam's sweep without a coverage
+//! map, so a miss outside a radar's real coverage would read as a low
+//! detection probability.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::error::AlgoError;
+use crate::kalman::PositionLayout;
+use crate::polar::{MIN_HORIZONTAL_RANGE, azimuth_of, wrap_angle};
+use crate::tracking::config::{Plot, RadarSpec};
+
+/// The components: range (m), azimuth (rad), elevation (rad), radial
+/// velocity (m/s).
+pub const COMPONENTS: usize = 4;
+/// Index of the range in [`RadarAccuracyData::components`].
+pub const RANGE: usize = 0;
+/// Index of the azimuth.
+pub const AZIMUTH: usize = 1;
+/// Index of the elevation.
+pub const ELEVATION: usize = 2;
+/// Index of the radial velocity.
+pub const RADIAL_VELOCITY: usize = 3;
+
+/// Default forgetting time constant τ (s): a quarter of an hour holds
+/// thousands of plots per radar in traffic and follows a radar that
+/// degrades within the hour.
+pub const DEFAULT_TIME_CONSTANT_S: f64 = 900.0;
+/// Plots (decayed count) a component needs before its estimate is used.
+pub const MIN_SAMPLES: f64 = 30.0;
+/// The estimate is used once σ(σ̂) ≤ this share of σ̂.
+pub const CONVERGED_RELATIVE_SIGMA: f64 = 0.1;
+/// A plot's association weight (β) must be at least this to be learnt
+/// from.
+pub const MIN_ASSOCIATION_WEIGHT: f64 = 0.9;
+/// An IMM track's plot is learnt from when its most probable model's
+/// predicted probability is at least this, against that model's
+/// prediction.
+pub const MIN_MODE_PROBABILITY: f64 = 0.5;
+/// Once converged, an innovation beyond this many σ of √(c + σ̂²) is
+/// refused (a wrong association; for a Gaussian 6·10⁻⁷ of the plots).
+pub const OUTLIER_SIGMAS: f64 = 5.0;
+/// The applied σ stays within [declared / LIMIT, declared × LIMIT]: an
+/// estimate at the bound says so in a warning.
+pub const LIMIT: f64 = 10.0;
+
+/// The accuracy estimator's options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AccuracyConfig {
+    /// Learn the radars' σ and apply them once converged (default true).
+    pub enabled: bool,
+    /// Forgetting time constant τ (s), > 0.
+    pub time_constant: f64,
+    /// Radars (indices) whose declared σ are applied whatever the data
+    /// say (their estimates are still reported).
+    pub pinned: Vec<usize>,
+}
+
+impl Default for AccuracyConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            time_constant: DEFAULT_TIME_CONSTANT_S,
+            pinned: Vec::new(),
+        }
+    }
+}
+
+impl AccuracyConfig {
+    /// Checks τ and the pinned radars' indices.
+    pub fn validate(&self, radars: usize) -> Result<(), AlgoError> {
+        let tau = self.time_constant;
+        if !(tau.is_finite() && tau > 0.0) {
+            return Err(AlgoError::InvalidParameter {
+                what: "accuracy.time_constant",
+                reason: format!("must be finite and > 0, got {tau}"),
+            });
+        }
+        if let Some(&r) = self.pinned.iter().find(|&&r| r >= radars) {
+            return Err(AlgoError::InvalidParameter {
+                what: "accuracy.pinned",
+                reason: format!("radar index {r} but {radars} radars"),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One component's running sums (each decayed by exp(−Δt/τ)).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ComponentData {
+    /// Σ w: the decayed count of plots learnt from.
+    pub weight: f64,
+    /// Σ w ν: the innovations' running mean times the count.
+    pub sum: f64,
+    /// Σ w g (ν_c² − c), ν_c the centred innovation.
+    pub excess: f64,
+    /// Σ w g, g = 1/(c + σ̂²)²: twice the Fisher information of σ².
+    pub information: f64,
+    /// Innovations refused as outliers (ever).
+    pub rejected: u64,
+}
+
+/// One radar's data: the four components and the time of its last plot
+/// learnt from (the decay's reference).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RadarAccuracyData {
+    /// Range, azimuth, elevation, radial velocity ([`RANGE`] …).
+    pub components: [ComponentData; COMPONENTS],
+    /// Time of the last plot learnt from.
+    pub t: Option<f64>,
+}
+
+/// A component's σ: declared, estimated, and the one applied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SigmaEstimate {
+    /// The declared σ.
+    pub declared: f64,
+    /// The estimate σ̂ (the declared σ before any plot).
+    pub estimate: f64,
+    /// Its standard deviation σ(σ̂) (infinite before any plot).
+    pub sigma: f64,
+    /// Plots behind it (decayed count).
+    pub samples: f64,
+    /// Enough data: σ̂ is applied (unless pinned or disabled).
+    pub converged: bool,
+    /// Innovations refused as outliers.
+    pub rejected: u64,
+    /// The σ the tracker applies: σ̂ within [declared / [`LIMIT`],
+    /// declared × LIMIT] once converged and not pinned, else the declared.
+    pub applied: f64,
+}
+
+/// A radar's accuracy as learnt: `None` for a component the radar does not
+/// measure (or the tracker does not use: the elevation in a 2D tracker).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadarAccuracy {
+    /// Range σ (m).
+    pub range: SigmaEstimate,
+    /// Azimuth σ (rad).
+    pub azimuth: SigmaEstimate,
+    /// Elevation σ (rad).
+    pub elevation: Option<SigmaEstimate>,
+    /// Radial-velocity σ (m/s).
+    pub radial_velocity: Option<SigmaEstimate>,
+    /// The declared σ are applied whatever the data say.
+    pub pinned: bool,
+}
+
+impl ComponentData {
+    /// σ̂² and Σ w g, or `None` before any plot.
+    fn variance(&self) -> Option<f64> {
+        (self.information > 0.0).then(|| self.excess / self.information)
+    }
+
+    /// The estimate against the declared σ (`applies`: learning on and the
+    /// radar not pinned).
+    fn estimate(&self, declared: f64, applies: bool) -> SigmaEstimate {
+        let (estimate, sigma) = match self.variance() {
+            Some(var) => {
+                // A variance at or below 0 (the tracks' own uncertainty
+                // explains the innovations): σ not identified.
+                let s = var.max(0.0).sqrt();
+                let sd_var = (2.0 / self.information).sqrt();
+                let sd = if s > 0.0 {
+                    sd_var / (2.0 * s)
+                } else {
+                    f64::INFINITY
+                };
+                (s, sd)
+            }
+            None => (declared, f64::INFINITY),
+        };
+        let converged = self.weight >= MIN_SAMPLES && sigma <= CONVERGED_RELATIVE_SIGMA * estimate;
+        let applied = if converged && applies {
+            estimate.clamp(declared / LIMIT, declared * LIMIT)
+        } else {
+            declared
+        };
+        SigmaEstimate {
+            declared,
+            estimate,
+            sigma,
+            samples: self.weight,
+            converged,
+            rejected: self.rejected,
+            applied,
+        }
+    }
+
+    /// Learns from one innovation ν of prediction variance c, at the
+    /// current σ̂² (`var`); `converged`: refuse outliers.
+    fn learn(&mut self, nu: f64, c: f64, var: f64, converged: bool) {
+        let mean = if self.weight > 0.0 {
+            self.sum / self.weight
+        } else {
+            0.0
+        };
+        let centred = nu - mean;
+        let total = c + var;
+        if converged && centred * centred > OUTLIER_SIGMAS * OUTLIER_SIGMAS * total {
+            self.rejected += 1;
+            return;
+        }
+        let g = 1.0 / (total * total);
+        self.weight += 1.0;
+        self.sum += nu;
+        self.excess += g * (centred * centred - c);
+        self.information += g;
+    }
+
+    fn decay(&mut self, factor: f64) {
+        self.weight *= factor;
+        self.sum *= factor;
+        self.excess *= factor;
+        self.information *= factor;
+    }
+}
+
+/// A plot's innovation against a track's prediction, per component: ν and
+/// c = (H P̄ Hᵀ)_kk; `None` for a component not measured.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Innovation {
+    /// Per component: (ν, c).
+    pub components: [Option<(f64, f64)>; COMPONENTS],
+}
+
+/// The innovation of `plot` (bias-corrected) of radar `radar` against the
+/// prediction (`x`, `p`, interleaved layout `[x, vx, y, vy(, z, vz)]`),
+/// seen as the updater sees it: with the elevation when `layout` has a
+/// height and the plot one, the range horizontal otherwise, and the
+/// radial velocity when `with_range_rate` and the plot has one. `None`
+/// where the geometry is degenerate (at the site).
+pub fn innovation(
+    radar: &RadarSpec,
+    plot: &Plot,
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    layout: PositionLayout,
+    with_range_rate: bool,
+) -> Option<Innovation> {
+    let site = radar.site;
+    let cols = [Some(layout.x), Some(layout.y), layout.z];
+    let rel = [
+        x[layout.x] - site[0],
+        x[layout.y] - site[1],
+        layout.z.map_or(0.0, |k| x[k] - site[2]),
+    ];
+    let [e, n, u] = rel;
+    let rho2 = e * e + n * n;
+    let rho = rho2.sqrt();
+    if !(rho >= MIN_HORIZONTAL_RANGE) {
+        return None;
+    }
+    let r2 = rho2 + u * u;
+    let r = r2.sqrt();
+    // Rows of H over the state (sparse: position and velocity columns).
+    let quad = |row: &[(usize, f64)]| -> f64 {
+        row.iter()
+            .map(|&(i, hi)| row.iter().map(|&(k, hk)| hi * p[(i, k)] * hk).sum::<f64>())
+            .sum()
+    };
+    let mut out = Innovation::default();
+    let mut row = Vec::with_capacity(6);
+    let positions = || {
+        cols.iter()
+            .enumerate()
+            .filter_map(|(k, c)| c.map(|c| (k, c)))
+    };
+    row.extend(positions().map(|(k, c)| (c, rel[k] / r)));
+    out.components[RANGE] = Some((plot.range - r, quad(&row)));
+    row.clear();
+    let ja = [n / rho2, -e / rho2, 0.0];
+    row.extend(positions().map(|(k, c)| (c, ja[k])));
+    out.components[AZIMUTH] = Some((wrap_angle(plot.azimuth - azimuth_of(e, n)), quad(&row)));
+    if let (Some(el), Some(_), Some(_)) = (plot.elevation, radar.sigma_elevation, layout.z) {
+        row.clear();
+        let je = [-e * u / (r2 * rho), -n * u / (r2 * rho), rho / r2];
+        row.extend(positions().map(|(k, c)| (c, je[k])));
+        out.components[ELEVATION] = Some((el - u.atan2(rho), quad(&row)));
+    }
+    if let (Some(v), Some(_), true) = (
+        plot.radial_velocity,
+        radar.sigma_radial_velocity,
+        with_range_rate,
+    ) {
+        let vel = [
+            x[layout.x + 1],
+            x[layout.y + 1],
+            layout.z.map_or(0.0, |k| x[k + 1]),
+        ];
+        let rdot = (0..3).map(|k| rel[k] * vel[k]).sum::<f64>() / r;
+        row.clear();
+        for (k, c) in positions() {
+            row.push((c, vel[k] / r - rdot * rel[k] / r2));
+            row.push((c + 1, rel[k] / r));
+        }
+        out.components[RADIAL_VELOCITY] = Some((v - rdot, quad(&row)));
+    }
+    out.components
+        .iter()
+        .flatten()
+        .all(|(nu, c)| nu.is_finite() && c.is_finite())
+        .then_some(out)
+}
+
+/// The estimator's data for every radar (stored with the tracker).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct AccuracyState {
+    /// Per radar.
+    pub radars: Vec<RadarAccuracyData>,
+}
+
+impl AccuracyState {
+    /// No data, for `radars` radars.
+    pub fn new(radars: usize) -> Self {
+        Self {
+            radars: vec![RadarAccuracyData::default(); radars],
+        }
+    }
+
+    /// Checks the parts read from storage: one entry per radar, finite
+    /// sums, counts and information ≥ 0.
+    pub fn check(&self, radars: usize) -> Result<(), AlgoError> {
+        let bad = |reason: String| AlgoError::InvalidParameter {
+            what: "tracker state",
+            reason,
+        };
+        if self.radars.len() != radars {
+            return Err(bad(format!(
+                "accuracy data for {} radars but {radars} radars",
+                self.radars.len()
+            )));
+        }
+        for (r, d) in self.radars.iter().enumerate() {
+            let ok = d.t.is_none_or(f64::is_finite)
+                && d.components.iter().all(|c| {
+                    c.weight.is_finite()
+                        && c.weight >= 0.0
+                        && c.sum.is_finite()
+                        && c.excess.is_finite()
+                        && c.information.is_finite()
+                        && c.information >= 0.0
+                });
+            if !ok {
+                return Err(bad(format!("accuracy data of radar {r} not finite")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Radar `r`'s accuracy against its declared σ (`declared`).
+    pub fn radar(&self, cfg: &AccuracyConfig, r: usize, declared: &RadarSpec) -> RadarAccuracy {
+        let pinned = cfg.pinned.contains(&r);
+        let applies = cfg.enabled && !pinned;
+        let d = &self.radars[r].components;
+        RadarAccuracy {
+            range: d[RANGE].estimate(declared.sigma_range, applies),
+            azimuth: d[AZIMUTH].estimate(declared.sigma_azimuth, applies),
+            elevation: declared
+                .sigma_elevation
+                .map(|s| d[ELEVATION].estimate(s, applies)),
+            radial_velocity: declared
+                .sigma_radial_velocity
+                .map(|s| d[RADIAL_VELOCITY].estimate(s, applies)),
+            pinned,
+        }
+    }
+
+    /// Radar `r` as the tracker applies it: `declared` with the applied σ.
+    pub fn applied(&self, cfg: &AccuracyConfig, r: usize, declared: &RadarSpec) -> RadarSpec {
+        let a = self.radar(cfg, r, declared);
+        let mut spec = declared.clone();
+        spec.sigma_range = a.range.applied;
+        spec.sigma_azimuth = a.azimuth.applied;
+        spec.sigma_elevation = a.elevation.map(|s| s.applied);
+        spec.sigma_radial_velocity = a.radial_velocity.map(|s| s.applied);
+        spec
+    }
+
+    /// Learns from radar `r`'s innovations at time `t` (the data decayed
+    /// to `t` first); `declared` gives the σ² of a component not yet
+    /// estimated.
+    pub fn learn(
+        &mut self,
+        cfg: &AccuracyConfig,
+        r: usize,
+        declared: &RadarSpec,
+        t: f64,
+        innovations: &[Innovation],
+    ) {
+        if innovations.is_empty() {
+            return;
+        }
+        let current = self.radar(cfg, r, declared);
+        let data = &mut self.radars[r];
+        if let Some(t0) = data.t {
+            if t > t0 {
+                let factor = (-(t - t0) / cfg.time_constant).exp();
+                for c in &mut data.components {
+                    c.decay(factor);
+                }
+            }
+        }
+        data.t = Some(data.t.map_or(t, |t0| t0.max(t)));
+        let estimates = [
+            Some(current.range),
+            Some(current.azimuth),
+            current.elevation,
+            current.radial_velocity,
+        ];
+        for innovation in innovations {
+            for (k, est) in estimates.iter().enumerate() {
+                let (Some((nu, c)), Some(est)) = (innovation.components[k], est) else {
+                    continue;
+                };
+                // The weights g at the estimate of the moment (the
+                // declared σ before any data, and at least declared /
+                // LIMIT): weights of one scale from the second plot on, so
+                // that no early plot outweighs the later ones.
+                let s = if est.samples > 0.0 {
+                    est.estimate.max(est.declared / LIMIT)
+                } else {
+                    est.declared
+                };
+                data.components[k].learn(nu, c, s * s, est.converged);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kalman;
+    use crate::tracking::conversion::polar_measurement;
+    use crate::tracking::tests::Lcg;
+
+    fn radar() -> RadarSpec {
+        RadarSpec {
+            site: [1000.0, -2000.0, 50.0],
+            sigma_range: 50.0,
+            sigma_azimuth: 0.1f64.to_radians(),
+            sigma_elevation: Some(0.2f64.to_radians()),
+            sigma_radial_velocity: Some(1.5),
+            scan_period: 4.0,
+            detection_probability: 0.9,
+            clutter_density: 1e-9,
+        }
+    }
+
+    /// ν and diag(H P Hᵀ) equal the EKF's: kalman's innovation and S − R
+    /// (an independent computation through dense matrices).
+    #[test]
+    fn the_innovation_is_the_ekfs() {
+        let radar = radar();
+        let x = DVector::from_vec(vec![30_000.0, -150.0, 40_000.0, 90.0, 8000.0, 2.0]);
+        let p = DMatrix::from_fn(6, 6, |i, k| {
+            if i == k {
+                [400.0, 100.0][i % 2]
+            } else if i / 2 == k / 2 {
+                60.0
+            } else {
+                5.0 * ((i + k) % 3) as f64
+            }
+        });
+        let p = (&p + p.transpose()) * 0.5;
+        let plot = Plot {
+            radar: 0,
+            t: 0.0,
+            range: 50_100.0,
+            azimuth: 0.6,
+            elevation: Some(0.16),
+            radial_velocity: Some(-30.0),
+            identity: Default::default(),
+        };
+        let meas = polar_measurement(&radar, &plot);
+        let u = kalman::update_polar_doppler(
+            &x,
+            &p,
+            &meas,
+            -30.0,
+            1.5,
+            PositionLayout::CV_3D,
+            radar.site,
+        )
+        .unwrap();
+        let got = innovation(&radar, &plot, &x, &p, PositionLayout::CV_3D, true).unwrap();
+        let r = [
+            50.0f64.powi(2),
+            0.1f64.to_radians().powi(2),
+            0.2f64.to_radians().powi(2),
+            1.5f64.powi(2),
+        ];
+        for k in 0..4 {
+            let (nu, c) = got.components[k].unwrap();
+            assert!(
+                (nu - u.innovation[k]).abs() <= 1e-9 * nu.abs().max(1e-6),
+                "{k}"
+            );
+            let expect = u.s[(k, k)] - r[k];
+            assert!(
+                (c - expect).abs() <= 1e-9 * expect.abs(),
+                "{k}: {c} {expect}"
+            );
+        }
+        // A 2D view: horizontal range, no elevation, no range rate.
+        let got = innovation(&radar, &plot, &x, &p, PositionLayout::CV_2D, false);
+        let got = got.unwrap();
+        assert!(got.components[ELEVATION].is_none() && got.components[RADIAL_VELOCITY].is_none());
+        let rho = (29_000.0f64).hypot(42_000.0);
+        assert!((got.components[RANGE].unwrap().0 - (50_100.0 - rho)).abs() < 1e-6);
+    }
+
+    /// Innovations drawn with c known and σ² = 40² around a mean 7 (a
+    /// residual bias): the estimate is within 3 of its own σ of 40, its σ
+    /// is the closed form √(2/Σg)/(2σ̂) with g = 1/(c+σ̂²)², and it
+    /// converges; the mean is not taken for noise.
+    #[test]
+    fn the_estimate_is_the_variance_about_the_bias() {
+        let mut rng = Lcg(7);
+        let mut d = ComponentData::default();
+        let truth = 40.0f64;
+        let c = 30.0f64.powi(2);
+        // Weights at the truth from the start (the fixed point).
+        for _ in 0..4000 {
+            let nu = 7.0 + (c + truth * truth).sqrt() * rng.normal();
+            d.learn(nu, c, truth * truth, true);
+        }
+        let e = d.estimate(50.0, true);
+        assert!(e.converged);
+        assert!((e.estimate - truth).abs() < 3.0 * e.sigma, "{e:?}");
+        // Closed form: Σg = n/(c+σ²)² at the truth (every g equal).
+        let g = 4000.0 / (c + truth * truth).powi(2);
+        let sd = (2.0 / g).sqrt() / (2.0 * e.estimate);
+        assert!((e.sigma - sd).abs() < 1e-9 * sd);
+        // About 2·σ / √(2·4000)·(1 + c/σ²) ≈ 0.7 m.
+        assert!(e.sigma < 1.0);
+        assert_eq!(e.applied, e.estimate);
+    }
+
+    /// Where the prediction's own variance dwarfs σ² the estimate is not
+    /// identified: not converged, the declared σ applied.
+    #[test]
+    fn an_unidentified_sigma_keeps_the_declared_one() {
+        let mut rng = Lcg(11);
+        let mut d = ComponentData::default();
+        let c = 500.0f64.powi(2);
+        for _ in 0..200 {
+            let nu = (c + 20.0f64.powi(2)).sqrt() * rng.normal();
+            d.learn(nu, c, 20.0 * 20.0, false);
+        }
+        let e = d.estimate(20.0, true);
+        assert!(!e.converged, "{e:?}");
+        assert_eq!(e.applied, 20.0);
+    }
+
+    /// Pinned or disabled: estimated and reported, the declared σ applied;
+    /// outliers refused once converged; the decay halves the count after
+    /// τ ln 2.
+    #[test]
+    fn pinned_radars_keep_their_declared_sigma_and_old_data_fade() {
+        let declared = radar();
+        let mut cfg = AccuracyConfig::default();
+        let mut state = AccuracyState::new(1);
+        let mut rng = Lcg(3);
+        let c = 10.0f64.powi(2);
+        let draw = |rng: &mut Lcg| Innovation {
+            components: [
+                Some(((c + 150.0f64.powi(2)).sqrt() * rng.normal(), c)),
+                None,
+                None,
+                None,
+            ],
+        };
+        for i in 0..400 {
+            let batch: Vec<Innovation> = (0..5).map(|_| draw(&mut rng)).collect();
+            state.learn(&cfg, 0, &declared, f64::from(i), &batch);
+        }
+        let a = state.radar(&cfg, 0, &declared);
+        assert!(a.range.converged);
+        assert!(
+            (a.range.estimate - 150.0).abs() < 3.0 * a.range.sigma,
+            "{a:?}"
+        );
+        assert_eq!(a.range.applied, a.range.estimate);
+        assert_eq!(
+            state.applied(&cfg, 0, &declared).sigma_range,
+            a.range.estimate
+        );
+        cfg.pinned = vec![0];
+        let p = state.radar(&cfg, 0, &declared);
+        assert!(p.pinned && p.range.converged);
+        assert_eq!(p.range.applied, 50.0);
+        cfg.pinned.clear();
+        cfg.enabled = false;
+        assert_eq!(state.applied(&cfg, 0, &declared).sigma_range, 50.0);
+        cfg.enabled = true;
+        // An innovation at 10 σ is refused.
+        let before = state.radars[0].components[RANGE];
+        let far = Innovation {
+            components: [
+                Some((10.0 * (c + 150.0f64.powi(2)).sqrt(), c)),
+                None,
+                None,
+                None,
+            ],
+        };
+        state.learn(&cfg, 0, &declared, 399.0, &[far]);
+        assert_eq!(
+            state.radars[0].components[RANGE].rejected,
+            before.rejected + 1
+        );
+        assert_eq!(state.radars[0].components[RANGE].weight, before.weight);
+        // Decay: τ ln 2 later the count is half (plus the one plot).
+        let w = state.radars[0].components[RANGE].weight;
+        let later = 399.0 + cfg.time_constant * std::f64::consts::LN_2;
+        state.learn(&cfg, 0, &declared, later, &[draw(&mut rng)]);
+        let w2 = state.radars[0].components[RANGE].weight;
+        assert!((w2 - (w / 2.0 + 1.0)).abs() < 1e-9 * w, "{w} {w2}");
+    }
+
+    /// From σ declared three times too small, with c following the σ the
+    /// filter applies (a steady-state filter of one scalar position: P⁻ as
+    /// the Riccati recursion gives it for the applied R, the innovation's
+    /// true variance from the true R), the estimate goes to the truth.
+    #[test]
+    fn the_feedback_converges_from_three_times_too_small() {
+        let truth = 60.0f64;
+        let q = 25.0f64; // position process noise per step (m²)
+        let declared = RadarSpec {
+            sigma_range: truth / 3.0,
+            ..radar()
+        };
+        let cfg = AccuracyConfig::default();
+        let mut state = AccuracyState::new(1);
+        let mut rng = Lcg(5);
+        // Random walk x_k = x_{k−1} + w, z = x + v: with gain K from the
+        // applied R the filter's P⁻ and the true error variance differ.
+        let (mut p_filter, mut p_true) = (1e4f64, 1e4f64);
+        for step in 0..6000 {
+            let r_applied = state.applied(&cfg, 0, &declared).sigma_range.powi(2);
+            let (pm, pt) = (p_filter + q, p_true + q);
+            let k = pm / (pm + r_applied);
+            p_filter = (1.0 - k) * pm;
+            p_true = (1.0 - k).powi(2) * pt + k * k * truth * truth;
+            let nu = (pt + truth * truth).sqrt() * rng.normal();
+            let inn = Innovation {
+                components: [Some((nu, pm)), None, None, None],
+            };
+            state.learn(&cfg, 0, &declared, f64::from(step), &[inn]);
+        }
+        let a = state.radar(&cfg, 0, &declared);
+        assert!(a.range.converged, "{a:?}");
+        assert!(
+            (a.range.estimate - truth).abs() < 0.05 * truth,
+            "{} against {truth}",
+            a.range.estimate
+        );
+    }
+
+    /// Position NEES (2 dof) of the confirmed tracks at the end against
+    /// the nearest target, and the trackers' accuracy, for radars whose
+    /// true σ are `truth` and declared `declared`.
+    fn misdeclared_run(
+        truth: &[(f64, f64)],
+        declared: &[(f64, f64)],
+        enabled: bool,
+    ) -> (Vec<RadarAccuracy>, f64, usize, usize) {
+        use crate::tracking::tests::{Target, scene};
+        use crate::tracking::{Tracker, TrackerConfig};
+        let sites = [
+            [-30_000.0, 0.0, 0.0],
+            [30_000.0, 0.0, 0.0],
+            [0.0, 40_000.0, 0.0],
+        ];
+        let spec = |k: usize, (sr, sa): (f64, f64)| RadarSpec {
+            site: sites[k],
+            sigma_range: sr,
+            sigma_azimuth: sa.to_radians(),
+            sigma_elevation: None,
+            sigma_radial_velocity: None,
+            scan_period: [4.0, 4.5, 5.0][k],
+            detection_probability: 0.95,
+            clutter_density: 1e-9,
+        };
+        let real: Vec<RadarSpec> = truth.iter().enumerate().map(|(k, &s)| spec(k, s)).collect();
+        // Twelve aircraft at 150–240 m/s on headings 30° apart, 8 km
+        // apart, crossing the 60 × 80 km area in 600 s.
+        let targets: Vec<Target> = (0..12)
+            .map(|i| {
+                let h = (30.0 * i as f64).to_radians();
+                let speed = 150.0 + 7.5 * i as f64;
+                let v = [speed * h.sin(), speed * h.cos(), 0.0];
+                let start = [
+                    -0.5 * v[0] * 600.0 + 8_000.0 * (i % 4) as f64,
+                    -0.5 * v[1] * 600.0 + 20_000.0 - 8_000.0 * (i / 4) as f64,
+                    0.0,
+                ];
+                Target { p0: start, v }
+            })
+            .collect();
+        let plots = scene(&real, &[0.0, 1.3, 2.9], &targets, 600.0, &mut Lcg(52));
+        let mut cfg = TrackerConfig::new(
+            2,
+            declared
+                .iter()
+                .enumerate()
+                .map(|(k, &s)| spec(k, s))
+                .collect(),
+        );
+        cfg.accuracy.enabled = enabled;
+        cfg.registration.enabled = false;
+        let mut tracker = Tracker::new(cfg).unwrap();
+        // The last two minutes: NEES of every confirmed track after each
+        // scan group.
+        let (mut nees, mut n) = (0.0, 0usize);
+        let mut start = 0;
+        while start < plots.len() {
+            let end = start
+                + plots[start..]
+                    .iter()
+                    .take_while(|p| p.t == plots[start].t)
+                    .count();
+            tracker.process(&plots[start..end]).unwrap();
+            start = end;
+            if plots[end - 1].t < 480.0 {
+                continue;
+            }
+            for tr in tracker.confirmed_tracks() {
+                let (k, _) = targets
+                    .iter()
+                    .map(|g| {
+                        let p = g.at(tr.t);
+                        (tr.state[0] - p[0]).hypot(tr.state[2] - p[1])
+                    })
+                    .enumerate()
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .unwrap();
+                let p = targets[k].at(tr.t);
+                let e = nalgebra::Vector2::new(tr.state[0] - p[0], tr.state[2] - p[1]);
+                let cov = nalgebra::Matrix2::new(
+                    tr.covariance[(0, 0)],
+                    tr.covariance[(0, 2)],
+                    tr.covariance[(2, 0)],
+                    tr.covariance[(2, 2)],
+                );
+                nees += (e.transpose() * cov.try_inverse().unwrap() * e)[0];
+                n += 1;
+            }
+        }
+        let tracks = tracker.confirmed_count();
+        (tracker.accuracy(), nees / n as f64, n, tracks)
+    }
+
+    /// Three radars: one declared three times too accurate, one three times
+    /// too poor, one right. Learning, each estimate is within 15 % of the
+    /// truth and the tracks' position NEES (2 dof) is near 2; with the
+    /// declared σ it is far from it (the first radar's plots overweighted).
+    #[test]
+    fn misdeclared_radars_are_learnt_and_the_tracks_stay_consistent() {
+        let truth = [(120.0, 0.15), (60.0, 0.10), (80.0, 0.12)];
+        let declared = [(40.0, 0.05), (180.0, 0.30), (80.0, 0.12)];
+        let (learnt, nees, n, tracks) = misdeclared_run(&truth, &declared, true);
+        for a in &learnt {
+            eprintln!(
+                "range {:.1} ± {:.1}, azimuth {:.4} ± {:.4}",
+                a.range.estimate,
+                a.range.sigma,
+                a.azimuth.estimate.to_degrees(),
+                a.azimuth.sigma.to_degrees()
+            );
+        }
+        for (k, a) in learnt.iter().enumerate() {
+            assert!(a.range.converged && a.azimuth.converged, "radar {k}: {a:?}");
+            let (sr, sa) = truth[k];
+            assert!(
+                (a.range.estimate / sr - 1.0).abs() < 0.15,
+                "radar {k}: {a:?}"
+            );
+            assert!(
+                (a.azimuth.estimate / sa.to_radians() - 1.0).abs() < 0.15,
+                "radar {k}: {a:?}"
+            );
+        }
+        let (_, nees_declared, _, tracks_declared) = misdeclared_run(&truth, &declared, false);
+        eprintln!(
+            "NEES learnt {nees} ({n} samples, {tracks} tracks), declared {nees_declared} ({tracks_declared} tracks)"
+        );
+        assert_eq!(tracks, 12);
+        assert!(nees < 3.0, "{nees}");
+        assert!(nees_declared > nees);
+    }
+}
