@@ -124,6 +124,14 @@ SIGMA_RANGE_M = 50.0
 SIGMA_AZIMUTH_DEG = 0.1
 SIGMA_ELEVATION_DEG = 0.2
 SIGMA_RADIAL_VELOCITY_MPS = 1.0
+# Per radar (index in the scene): what its declared sigmas are multiplied
+# by, for our service and Stone Soup alike (--declared-factors); the plots
+# keep the true sigmas above.
+DECLARED_FACTORS: list[float] = []
+
+
+def declared_factor(index: int) -> float:
+    return DECLARED_FACTORS[index] if index < len(DECLARED_FACTORS) else 1.0
 P_DETECTION = 0.9
 RANGE_MIN_M = 1_000.0
 ELEVATION_MIN_DEG = -0.5
@@ -667,17 +675,18 @@ def stonesoup_models(scene: Scene) -> dict:
     from stonesoup.types.array import StateVector
 
     models = {}
-    for radar in scene.radars:
+    for k, radar in enumerate(scene.radars):
         angles = stonesoup_rotation_offset(radar.fusion_to_radar)
         common = dict(ndim_state=6, mapping=(0, 2, 4),
                       translation_offset=StateVector(radar.site_fusion_enu.tolist()),
                       rotation_offset=StateVector(angles.tolist()))
-        sig = [math.radians(SIGMA_ELEVATION_DEG) ** 2, math.radians(SIGMA_AZIMUTH_DEG) ** 2,
-               SIGMA_RANGE_M ** 2]
+        f2 = declared_factor(k) ** 2
+        sig = [f2 * math.radians(SIGMA_ELEVATION_DEG) ** 2,
+               f2 * math.radians(SIGMA_AZIMUTH_DEG) ** 2, f2 * SIGMA_RANGE_M ** 2]
         if scene.doppler:
             models[radar.id] = CartesianToElevationBearingRangeRate(
                 velocity_mapping=(1, 3, 5),
-                noise_covar=np.diag(sig + [SIGMA_RADIAL_VELOCITY_MPS ** 2]), **common)
+                noise_covar=np.diag(sig + [f2 * SIGMA_RADIAL_VELOCITY_MPS ** 2]), **common)
         else:
             models[radar.id] = CartesianToElevationBearingRange(noise_covar=np.diag(sig), **common)
     return models
@@ -819,15 +828,16 @@ def run_stonesoup(scene: Scene, q: float, associator: str, models: dict,
 # --------------------------------------------------------------------------
 def build_request(scene: Scene, tracker: dict | None) -> dict:
     radars = []
-    for r in scene.radars:
+    for k, r in enumerate(scene.radars):
+        f = declared_factor(k)
         radar = {"id": r.id, "kind": "3d",
                  "site": {"lat_deg": r.site.lat_deg, "lon_deg": r.site.lon_deg,
                           "height_m": r.site.height_m},
-                 "sigma_range_m": SIGMA_RANGE_M, "sigma_azimuth_deg": SIGMA_AZIMUTH_DEG,
-                 "sigma_elevation_deg": SIGMA_ELEVATION_DEG, "scan_period_s": r.period_s,
+                 "sigma_range_m": f * SIGMA_RANGE_M, "sigma_azimuth_deg": f * SIGMA_AZIMUTH_DEG,
+                 "sigma_elevation_deg": f * SIGMA_ELEVATION_DEG, "scan_period_s": r.period_s,
                  "p_detection": P_DETECTION, "clutter_density": scene.clutter_density()}
         if scene.doppler:
-            radar["sigma_radial_velocity_mps"] = SIGMA_RADIAL_VELOCITY_MPS
+            radar["sigma_radial_velocity_mps"] = f * SIGMA_RADIAL_VELOCITY_MPS
         radars.append(radar)
     plots = []
     for p in scene.plots:
@@ -891,7 +901,7 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
         raise RuntimeError("the response has no history: was \"history\": true ignored?")
     compute_us = (out.get("timing") or {}).get("compute_us")
     extra = {"mode": out.get("mode"), "counters": out.get("counters"), "warnings": warnings,
-             "registration": out.get("registration"),
+             "registration": out.get("registration"), "accuracy": out.get("accuracy"),
              "pressure_offset": out.get("pressure_offset"),
              "tracks_total": len(ids), "tracker": tracker or {},
              "request_bytes": len(resp.request.body or b""),
@@ -1108,9 +1118,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="one radar's systematic error on its target plots (e.g. B:300:0.3)")
     ap.add_argument("--settle-s", type=float, default=None,
                     help="also score every tracker from this time on (s)")
+    ap.add_argument("--declared-factors", metavar="F1,F2,...",
+                    help="per radar, what its declared sigmas are multiplied by (ours and "
+                         "Stone Soup alike; the plots keep the true sigmas), e.g. 0.3,3,1")
     ap.add_argument("--json-out", metavar="FILE")
     ap.add_argument("--truth-csv", metavar="FILE", help="write the 1-s truth table")
     args = ap.parse_args(argv)
+    if args.declared_factors:
+        DECLARED_FACTORS[:] = [float(x) for x in args.declared_factors.split(",")]
     trackers = [json.loads(s) for s in args.tracker_json]
     for s, t in zip(args.tracker_json, trackers):
         if not isinstance(t, dict):
@@ -1157,6 +1172,17 @@ def main(argv: list[str] | None = None) -> int:
                       f"{b['sigma_azimuth_deg']:.4f} deg{el}, {b['pairs']:.0f} pairs, "
                       f"{'converged' if b['converged'] else 'not converged'}"
                       f"{', reference' if b['reference'] else ''}")
+            for a in res.extra.get("accuracy") or []:
+                parts = []
+                for key in ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps"):
+                    c = a.get(key)
+                    if c is None:
+                        continue
+                    est = ("–" if c.get("estimated") is None else
+                           f"{c['estimated']:.4g} ± {c['sigma']:.2g}")
+                    parts.append(f"{key} declared {c['declared']:.4g}, learnt {est}"
+                                 f"{' (applied)' if c['converged'] and not a['pinned'] else ''}")
+                print(f"  accuracy {a['radar']}: " + "; ".join(parts))
             results.append(res)
     grid = [float(q) for q in args.q_grid.split(",") if q.strip()]
     if not args.ours_only:

@@ -45,12 +45,36 @@ impl PlotFusionService for PlotFusionGrpc {
             asterix: out.asterix.map(asterix_out),
             cat062: out.cat062.map(|c| c.data),
             registration: out.registration.into_iter().map(bias_out).collect(),
+            accuracy: out.accuracy.into_iter().map(accuracy_out).collect(),
             pressure_offset: out.pressure_offset.map(pressure_offset_out),
             timing: Some(pb::Timing {
                 compute_us: out.compute_us,
             }),
             warnings: out.warnings,
         }))
+    }
+}
+
+fn sigma_out(s: svc::SigmaView) -> pb::SigmaState {
+    pb::SigmaState {
+        declared: s.declared,
+        estimated: s.estimated,
+        sigma: s.sigma,
+        plots: s.plots,
+        converged: s.converged,
+        applied: s.applied,
+        clipped: s.clipped,
+    }
+}
+
+pub(crate) fn accuracy_out(a: svc::RadarAccuracyView) -> pb::RadarAccuracyState {
+    pb::RadarAccuracyState {
+        radar: a.radar,
+        range_m: Some(sigma_out(a.range_m)),
+        azimuth_deg: Some(sigma_out(a.azimuth_deg)),
+        elevation_deg: a.elevation_deg.map(sigma_out),
+        radial_velocity_mps: a.radial_velocity_mps.map(sigma_out),
+        pinned: a.pinned,
     }
 }
 
@@ -195,6 +219,11 @@ pub(crate) fn spec_in(
                 sigma_offset_m: m.sigma_offset_m,
                 slope: m.slope,
                 sigma_slope: m.sigma_slope,
+            }),
+            accuracy: t.accuracy.map(|a| svc::AccuracyInput {
+                enabled: a.enabled,
+                time_constant_s: a.time_constant_s,
+                pinned: (!a.pinned.is_empty()).then_some(a.pinned),
             }),
         },
     }

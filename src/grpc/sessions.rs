@@ -174,6 +174,11 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             late_within_lag: b.late_within_lag,
             corrected_from_t: b.corrected_from_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
+            accuracy: b
+                .accuracy
+                .into_iter()
+                .map(super::plot_fusion::accuracy_out)
+                .collect(),
             tracks: b
                 .tracks
                 .into_iter()
@@ -251,6 +256,11 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             approximate_from: b.approximate_from,
             late_before_t: b.late_before_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
+            accuracy: b
+                .accuracy
+                .into_iter()
+                .map(super::plot_fusion::accuracy_out)
+                .collect(),
             pressure_offset: b
                 .pressure_offset
                 .map(|o| super::plot_fusion::pressure_offset_out(*o)),
@@ -381,15 +391,15 @@ async fn push(
         (true, false) => KindName::PlotFusion,
         (true, true) => sessions.kind_of(tenant, id).await?,
     };
+    // The stores' pushes boxed: inline, their state (tens of kB each)
+    // was copied into every layer above (admission, timeout, lanes).
     Ok(match kind {
         KindName::Correlation => update_out(
-            sessions
-                .push::<CorrelationSession>(tenant, id, batch_in(req)?, limits)
+            Box::pin(sessions.push::<CorrelationSession>(tenant, id, batch_in(req)?, limits))
                 .await?,
         ),
         KindName::PlotFusion => plot_update_out(
-            sessions
-                .push::<PlotFusionSession>(tenant, id, plot_batch_in(req), limits)
+            Box::pin(sessions.push::<PlotFusionSession>(tenant, id, plot_batch_in(req), limits))
                 .await?,
         ),
     })
@@ -602,19 +612,26 @@ async fn handle(
     session: &mut Option<String>,
     m: pb::StreamRequest,
 ) -> Result<pb::BatchUpdate, Status> {
+    // Each arm's future boxed: held inline they made this function's
+    // state machine (and, unoptimised, its poll frame) the sum of all
+    // three, some 400 kB of stack in a debug build.
     match (m.kind, session.as_ref()) {
         (Some(Kind::Open(req)), None) => {
             let spec = spec_in(req).map_err(to_status)?;
-            let ack = opened(&create(state, tenant, spec).await.map_err(to_status)?);
+            let created = Box::pin(create(state, tenant, spec)).await;
+            let ack = opened(&created.map_err(to_status)?);
             *session = Some(ack.session_id.clone());
             Ok(ack)
         }
         (Some(Kind::Attach(id)), None) => {
-            let ack = opened(&state.sessions().get(tenant, &id).await.map_err(to_status)?);
+            let view = Box::pin(state.sessions().get(tenant, &id)).await;
+            let ack = opened(&view.map_err(to_status)?);
             *session = Some(ack.session_id.clone());
             Ok(ack)
         }
-        (Some(Kind::Batch(req)), Some(id)) => Ok(stream_batch(state, tenant, id, req).await),
+        (Some(Kind::Batch(req)), Some(id)) => {
+            Ok(Box::pin(stream_batch(state, tenant, id, req)).await)
+        }
         (Some(Kind::Batch(_)), None) => Err(Status::failed_precondition(
             "the stream's first message must open or attach a session",
         )),

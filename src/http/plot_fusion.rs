@@ -161,6 +161,85 @@ pub(crate) fn pressure_offset_out(o: svc::PressureOffsetView) -> PressureOffsetO
     }
 }
 
+/// `tracker.accuracy`: each radar's σ (range, azimuth, elevation, radial
+/// velocity) learnt online from the innovations of the confirmed tracks
+/// its plots update, and applied once converged instead of the declared
+/// one (docs/plot-fusion.md#accuracy-learnt-online).
+#[derive(Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AccuracyOptions {
+    /// Default true.
+    pub enabled: Option<bool>,
+    /// Time constant of the estimates' memory (s, default 900).
+    pub time_constant_s: Option<f64>,
+    /// Radar ids whose declared σ are applied whatever the data say
+    /// (still estimated and reported).
+    pub pinned: Option<Vec<String>>,
+}
+
+/// One σ of a radar: declared, learnt online, applied.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct SigmaOut {
+    pub declared: f64,
+    /// The estimate (absent before any plot, or while the tracks' own
+    /// uncertainty hides the radar's noise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimated: Option<f64>,
+    /// σ of the estimate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
+    /// Plots behind the estimate (decayed count).
+    pub plots: f64,
+    /// Enough plots: the estimate is applied (unless pinned).
+    pub converged: bool,
+    /// The σ the tracker applies now.
+    pub applied: f64,
+    /// Innovations winsorised: counted at 3σ of the estimate (a
+    /// Gaussian has 0.27 % beyond; a manoeuvre's onset, a wrong
+    /// association more).
+    pub clipped: u64,
+}
+
+/// A radar's accuracy: each σ declared, learnt and applied, in m, ° and
+/// m/s.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct RadarAccuracyOut {
+    pub radar: String,
+    pub range_m: SigmaOut,
+    pub azimuth_deg: SigmaOut,
+    /// 3D radars in a 3D tracker.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub elevation_deg: Option<SigmaOut>,
+    /// Doppler radars.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radial_velocity_mps: Option<SigmaOut>,
+    /// `tracker.accuracy.pinned`: the declared σ are applied.
+    pub pinned: bool,
+}
+
+fn sigma_out(s: svc::SigmaView) -> SigmaOut {
+    SigmaOut {
+        declared: s.declared,
+        estimated: s.estimated,
+        sigma: s.sigma,
+        plots: s.plots,
+        converged: s.converged,
+        applied: s.applied,
+        clipped: s.clipped,
+    }
+}
+
+pub(crate) fn accuracy_out(a: svc::RadarAccuracyView) -> RadarAccuracyOut {
+    RadarAccuracyOut {
+        radar: a.radar,
+        range_m: sigma_out(a.range_m),
+        azimuth_deg: sigma_out(a.azimuth_deg),
+        elevation_deg: a.elevation_deg.map(sigma_out),
+        radial_velocity_mps: a.radial_velocity_mps.map(sigma_out),
+        pinned: a.pinned,
+    }
+}
+
 /// A radar's bias as the tracker applies it (subtracted from its plots).
 #[derive(Debug, Serialize, ToSchema)]
 pub struct RadarBiasOut {
@@ -371,6 +450,8 @@ pub struct TrackerOptions {
     pub registration: Option<RegistrationOptions>,
     /// Mode C as geometric height: on by default in 3D.
     pub mode_c_height: Option<ModeCHeightOptions>,
+    /// Each radar's σ learnt online: on by default.
+    pub accuracy: Option<AccuracyOptions>,
 }
 
 /// One model of the IMM.
@@ -695,6 +776,8 @@ pub struct PlotFusionResponse {
     /// Each radar's bias as applied at the end of the data (estimated by
     /// registration, or the radar's known bias).
     pub registration: Vec<RadarBiasOut>,
+    /// Each radar's σ at the end of the data: declared, learnt, applied.
+    pub accuracy: Vec<RadarAccuracyOut>,
     /// The pressure offset a 3D tracker applies to Mode C (absent: Mode C
     /// heights off, or a 2D tracker).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -814,6 +897,11 @@ pub(crate) fn spec_in(
                 sigma_offset_m: m.sigma_offset_m,
                 slope: m.slope,
                 sigma_slope: m.sigma_slope,
+            }),
+            accuracy: t.accuracy.map(|a| svc::AccuracyInput {
+                enabled: a.enabled,
+                time_constant_s: a.time_constant_s,
+                pinned: a.pinned,
             }),
         },
     }
@@ -952,6 +1040,7 @@ fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> 
         asterix: out.asterix.map(asterix_out),
         cat062: cat062_out(out.cat062),
         registration: out.registration.into_iter().map(bias_out).collect(),
+        accuracy: out.accuracy.into_iter().map(accuracy_out).collect(),
         pressure_offset: out.pressure_offset.map(pressure_offset_out),
         timing: Timing {
             compute_us: out.compute_us,

@@ -214,6 +214,8 @@ pub struct PlotFusionBatchUpdate {
     pub cat062: Option<String>,
     /// Each radar's bias as applied after the batch.
     pub registration: Vec<RadarBiasOut>,
+    /// Each radar's σ after the batch: declared, learnt, applied.
+    pub accuracy: Vec<super::plot_fusion::RadarAccuracyOut>,
     /// Events only (`GET /v1/sessions/{id}/events`): where the batch's
     /// plots are (late plots left out), for display.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -292,6 +294,8 @@ pub struct PlotFusionSessionState {
     pub tracks: Vec<FusedTrack>,
     /// Each radar's bias as applied now.
     pub registration: Vec<RadarBiasOut>,
+    /// Each radar's σ now: declared, learnt, applied.
+    pub accuracy: Vec<super::plot_fusion::RadarAccuracyOut>,
     /// The pressure offset a 3D tracker applies to Mode C.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pressure_offset: Option<super::plot_fusion::PressureOffsetOut>,
@@ -555,6 +559,7 @@ pub(super) fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             asterix: b.asterix.map(asterix_out),
             cat062: cat062_out(b.cat062),
             registration: b.registration.into_iter().map(bias_out).collect(),
+            accuracy: accuracy_out(b.accuracy),
             plots: None,
         }),
         warnings: u.warnings,
@@ -622,6 +627,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             registration: b.registration.into_iter().map(bias_out).collect(),
+            accuracy: accuracy_out(b.accuracy),
             pressure_offset: b
                 .pressure_offset
                 .map(|o| super::plot_fusion::pressure_offset_out(*o)),
@@ -820,4 +826,12 @@ pub async fn push(
                 .await?,
         ),
     }))
+}
+
+fn accuracy_out(
+    a: Vec<service::plot_fusion::RadarAccuracyView>,
+) -> Vec<super::plot_fusion::RadarAccuracyOut> {
+    a.into_iter()
+        .map(super::plot_fusion::accuracy_out)
+        .collect()
 }

@@ -1,6 +1,7 @@
 //! Black-box tests through the real servers: one test binary, one
 //! `spawn_app` helper that starts REST and gRPC on port 0.
 
+mod accuracy;
 mod ais_radar;
 mod asterix;
 mod auth;

@@ -258,6 +258,14 @@ pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
             .collect(),
         tracker: Some(pb::TrackerOptions {
             default_height_m: o(&req["tracker"]["default_height_m"]),
+            accuracy: req["tracker"].get("accuracy").map(|a| pb::AccuracyOptions {
+                enabled: a["enabled"].as_bool(),
+                time_constant_s: o(&a["time_constant_s"]),
+                pinned: a["pinned"]
+                    .as_array()
+                    .map(|v| v.iter().map(|s| s.as_str().unwrap().to_string()).collect())
+                    .unwrap_or_default(),
+            }),
             ..Default::default()
         }),
         history: false,

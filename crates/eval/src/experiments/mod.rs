@@ -155,6 +155,11 @@ pub const REGISTRY: &[Experiment] = &[
         summary: "plot-fusion tracker per kind of segment (level, turning, speed change, climb) on 3D Doppler radars: default IMM vs CV, with and without range rate, serial vs parallel; RMSE and 3-dof NEES",
         run: tracker_manoeuvres::run,
     },
+    Experiment {
+        name: "accuracy",
+        summary: "each radar's σ learnt online: the tracker-manoeuvres scene with every radar's σ declared ×0.3/×1/×3 at random per radar, learnt vs estimator off vs declared right; RMSE and NEES per segment, false tracks, breaks, the learnt σ against the truth and their time to converge",
+        run: tracker_manoeuvres::run_accuracy,
+    },
 ];
 
 /// The experiment called `name`.

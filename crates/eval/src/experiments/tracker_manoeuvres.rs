@@ -137,6 +137,14 @@ enum Method {
     Biased,
     /// The same biased plots, registration off.
     BiasedUnregistered,
+    /// The default with the accuracy estimator off (every radar declared
+    /// right).
+    AccuracyOff,
+    /// Every radar declared with its σ (all four) times 0.3, 1 or 3, drawn
+    /// per radar; the defaults (accuracy learnt).
+    Misdeclared,
+    /// The same misdeclared radars, the accuracy estimator off.
+    MisdeclaredFixed,
 }
 
 const METHODS: [Method; 8] = [
@@ -150,6 +158,17 @@ const METHODS: [Method; 8] = [
     Method::BiasedUnregistered,
 ];
 
+/// The methods of the `accuracy` experiment.
+const ACCURACY_METHODS: [Method; 4] = [
+    Method::Default,
+    Method::AccuracyOff,
+    Method::Misdeclared,
+    Method::MisdeclaredFixed,
+];
+
+/// The factors a radar's declared σ are drawn from (`accuracy`).
+const MISDECLARED: [f64; 3] = [0.3, 1.0, 3.0];
+
 impl Method {
     fn name(self) -> &'static str {
         match self {
@@ -161,19 +180,33 @@ impl Method {
             Method::FormerVertical => "default IMM with its CV model's vertical √q 0.5 (before)",
             Method::Biased => "default, every radar biased (±500 m, ±0.5°, ±0.2° el.), registered",
             Method::BiasedUnregistered => "the same biased plots, registration off",
+            Method::AccuracyOff => "default, declared right, accuracy estimator off",
+            Method::Misdeclared => "σ declared ×0.3/×1/×3 per radar, accuracy learnt (default)",
+            Method::MisdeclaredFixed => "σ declared ×0.3/×1/×3 per radar, accuracy estimator off",
         }
     }
 
-    fn config(self, specs: &[RadarSpec]) -> TrackerConfig {
+    /// The configuration from the true radars `specs`; `factors`: per
+    /// radar, what its declared σ are multiplied by when misdeclared.
+    fn config(self, specs: &[RadarSpec], factors: &[f64]) -> TrackerConfig {
         let mut specs = specs.to_vec();
         if matches!(self, Method::NoRangeRate) {
             for s in &mut specs {
                 s.sigma_radial_velocity = None;
             }
         }
+        if matches!(self, Method::Misdeclared | Method::MisdeclaredFixed) {
+            for (s, &f) in specs.iter_mut().zip(factors) {
+                s.sigma_range *= f;
+                s.sigma_azimuth *= f;
+                s.sigma_elevation = s.sigma_elevation.map(|v| v * f);
+                s.sigma_radial_velocity = s.sigma_radial_velocity.map(|v| v * f);
+            }
+        }
         let mut c = TrackerConfig::new(3, specs);
         match self {
-            Method::Default | Method::NoRangeRate | Method::Biased => {}
+            Method::Default | Method::NoRangeRate | Method::Biased | Method::Misdeclared => {}
+            Method::AccuracyOff | Method::MisdeclaredFixed => c.accuracy.enabled = false,
             Method::BiasedUnregistered => c.registration.enabled = false,
             Method::Parallel => c.set_mode(Mode::Parallel),
             Method::FormerVertical => {
@@ -216,7 +249,28 @@ struct MethodRun {
     classes: [ClassSums; 4],
     /// The same sums over the frames from [`SETTLED_S`] on.
     settled: [ClassSums; 4],
+    /// The summary of the frames from [`SETTLED_S`] on.
+    settled_summary: Summary,
     seconds: f64,
+    /// Per radar and component (range, azimuth, elevation, radial
+    /// velocity): the learnt σ at the end and its σ, with the time it
+    /// first converged (when converged at the end).
+    learnt: Vec<[Option<Learnt>; 4]>,
+    /// The same against the truth ([`score_estimates`]).
+    estimates: Vec<[Option<EstimateScore>; 4]>,
+}
+
+/// A learnt σ: the estimate, its σ, and when it first converged (if it
+/// is converged at the end).
+type Learnt = (f64, f64, Option<f64>);
+
+/// A learnt σ against the radar's true one.
+#[derive(Debug, Clone, Copy)]
+struct EstimateScore {
+    relative_error: f64,
+    normalised_error: f64,
+    converged_at: Option<f64>,
+    factor: f64,
 }
 
 /// Frames from this time on are also scored apart ("settled"): the
@@ -231,6 +285,18 @@ struct Chi2 {
 
 /// Runs the experiment.
 pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
+    run_with(opts, "tracker-manoeuvres", &METHODS)
+}
+
+/// `accuracy`: the same scene with every radar's σ declared ×0.3, ×1 or
+/// ×3 at random per radar, learnt online against declared right and
+/// against the estimator off; with the learnt σ's errors against their
+/// own σ and the time they took to converge.
+pub fn run_accuracy(opts: &EvalOptions) -> Result<Report, SimError> {
+    run_with(opts, "accuracy", &ACCURACY_METHODS)
+}
+
+fn run_with(opts: &EvalOptions, name: &str, methods: &[Method]) -> Result<Report, SimError> {
     let targets = opts.targets.unwrap_or(DEFAULT_TARGETS).max(1);
     let scans = opts.scans.unwrap_or(DEFAULT_SCANS).max(2);
     let duration = SCAN_UNIT_S * scans as f64;
@@ -240,8 +306,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         q99: chi2_threshold(3, 0.01)?,
     };
     let started = Instant::now();
-    let per_run = run_batch(&opts.runner, "tracker-manoeuvres", |_, rng| {
-        one_run(targets, duration, &chi2, rng)
+    let per_run = run_batch(&opts.runner, name, |_, rng| {
+        one_run(targets, duration, &chi2, methods, rng)
     });
     let per_run: Vec<Vec<MethodRun>> = per_run.into_iter().collect::<Result<_, _>>()?;
     let wall = started.elapsed().as_secs_f64();
@@ -253,7 +319,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
     let mut overall_rows = Vec::new();
     let mut rmse_series = Vec::new();
     let mut nees_series = Vec::new();
-    for (m, method) in METHODS.iter().enumerate() {
+    for (m, method) in methods.iter().enumerate() {
         let mut pooled = [ClassSums::default(); 4];
         for (r, run) in per_run.iter().enumerate() {
             for c in CLASSES {
@@ -316,7 +382,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
                 add(&mut late, c);
             }
         }
-        let [e3_late, eh_late, ..] = figures(&late);
+        let [e3_late, eh_late, _, _, nees_late, band_late, _] = figures(&late);
         overall_rows.push(vec![
             method.name().into(),
             format!("{e3:.1}"),
@@ -328,6 +394,10 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             per(&|r| r.summary.switches as f64 / hours),
             per(&|r| r.summary.breaks as f64 / hours),
             per(&|r| r.summary.false_tracks as f64 / hours),
+            format!("{nees_late:.2} / {:.1} %", 100.0 * band_late),
+            per(&|r| {
+                r.settled_summary.false_tracks as f64 / (hours - SETTLED_S / 3600.0).max(1e-9)
+            }),
             format!("{:.3}", delays.len() as f64 / delay_slots.max(1) as f64),
             format!("{:.1}", mean_se(&delays).0),
             format!(
@@ -337,7 +407,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         ]);
     }
 
-    let mut md = String::from("# tracker-manoeuvres\n\n");
+    let mut md = format!("# {name}\n\n");
     let _ = writeln!(
         md,
         "{targets} aircraft over {duration} s ({:.0} % straight and level throughout, the others \
@@ -385,6 +455,8 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             "ID switches per hour",
             "track breaks per hour",
             "false tracks per hour",
+            "after 100 s: NEES / in band",
+            "after 100 s: false tracks per hour",
             "targets confirmed",
             "time to confirm (s)",
             "tracker time per run (ms)",
@@ -395,6 +467,9 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
         "\nRates per hour are per hour of simulated time for the whole scene. GOSPA (p = 1, \
          α = 2, c = 1 km, 3D) is a sum over the targets alive at a frame.\n",
     );
+    if methods.iter().any(|m| matches!(m, Method::Misdeclared)) {
+        md.push_str(&estimate_table(methods, &per_run));
+    }
     let plot = |title: &str, y_label: &str, series| LinePlot {
         title: title.into(),
         x_label: "segment: 1 level, 2 turning, 3 changing speed, 4 climbing".into(),
@@ -409,7 +484,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             (
                 "rmse".into(),
                 plot(
-                    "tracker-manoeuvres: 3D RMSE per segment",
+                    &format!("{name}: 3D RMSE per segment"),
                     "RMSE (m)",
                     rmse_series,
                 )
@@ -418,7 +493,7 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             (
                 "nees".into(),
                 plot(
-                    "tracker-manoeuvres: mean NEES (3 dof) per segment",
+                    &format!("{name}: mean NEES (3 dof) per segment"),
                     "NEES",
                     nees_series,
                 )
@@ -426,6 +501,72 @@ pub fn run(opts: &EvalOptions) -> Result<Report, SimError> {
             ),
         ],
     })
+}
+
+/// The learnt σ of the misdeclared radars, per component and declared
+/// factor: how many converged, their relative error, their error in their
+/// own σ (mean and RMS: 0 and 1 when honest), and the time to converge.
+fn estimate_table(methods: &[Method], per_run: &[Vec<MethodRun>]) -> String {
+    let Some(m) = methods
+        .iter()
+        .position(|m| matches!(m, Method::Misdeclared))
+    else {
+        return String::new();
+    };
+    let names = ["range", "azimuth", "elevation", "radial velocity"];
+    let mut rows = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        for factor in MISDECLARED {
+            let scores: Vec<EstimateScore> = per_run
+                .iter()
+                .flat_map(|r| r[m].estimates.iter().filter_map(|e| e[k]))
+                .filter(|e| e.factor == factor)
+                .collect();
+            let converged: Vec<&EstimateScore> =
+                scores.iter().filter(|e| e.converged_at.is_some()).collect();
+            let rel: Vec<f64> = converged.iter().map(|e| e.relative_error).collect();
+            let z: Vec<f64> = converged.iter().map(|e| e.normalised_error).collect();
+            let mut times: Vec<f64> = converged.iter().filter_map(|e| e.converged_at).collect();
+            times.sort_by(f64::total_cmp);
+            let rms =
+                |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            rows.push(vec![
+                (*name).into(),
+                format!("×{factor}"),
+                format!("{}/{}", converged.len(), scores.len()),
+                format!("{:+.1} %", 100.0 * mean(&rel)),
+                format!("{:.1} %", 100.0 * rms(&rel)),
+                format!("{:+.2}", mean(&z)),
+                format!("{:.2}", rms(&z)),
+                times
+                    .get(times.len() / 2)
+                    .map_or("–".into(), |t| format!("{t:.0}")),
+                times
+                    .get((times.len() * 9) / 10)
+                    .map_or("–".into(), |t| format!("{t:.0}")),
+            ]);
+        }
+    }
+    let mut md = String::from(
+        "\nThe learnt σ at the end of each run (misdeclared radars, accuracy learnt), against \
+         the true σ, per component and declared factor:\n\n",
+    );
+    md.push_str(&markdown_table(
+        &[
+            "component",
+            "declared",
+            "converged",
+            "mean error",
+            "RMS error",
+            "mean error / its σ",
+            "RMS error / its σ",
+            "converged at, median (s)",
+            "90th percentile (s)",
+        ],
+        &rows,
+    ));
+    md
 }
 
 fn add(into: &mut ClassSums, s: &ClassSums) {
@@ -610,7 +751,25 @@ fn track(
     let started = Instant::now();
     let mut tracker = Tracker::new(config)?;
     let mut frames: Vec<(f64, Vec<Scored>)> = Vec::new();
+    let learns = tracker.config().accuracy.enabled;
+    let mut converged_at = vec![[None::<f64>; 4]; tracker.config().radars.len()];
     tracker.process_with(plots, true, &mut |tr: &Tracker| {
+        if learns {
+            let t = tr.last_time().unwrap_or(f64::NAN);
+            for (at, a) in converged_at.iter_mut().zip(tr.accuracy()) {
+                let c = [
+                    Some(a.range),
+                    Some(a.azimuth),
+                    a.elevation,
+                    a.radial_velocity,
+                ];
+                for k in 0..4 {
+                    if at[k].is_none() && c[k].is_some_and(|e| e.converged) {
+                        at[k] = Some(t);
+                    }
+                }
+            }
+        }
         let tracks = tr
             .confirmed_tracks()
             .into_iter()
@@ -635,11 +794,39 @@ fn track(
         }
     }
     let truth: Vec<Trajectory> = targets.iter().map(|t| t.truth.clone()).collect();
+    let first_settled = frames
+        .iter()
+        .position(|(t, _)| *t >= SETTLED_S)
+        .unwrap_or(frames.len());
+    let settled_summary = summarise(&scores[first_settled..], &truth);
+    let learnt = if learns {
+        tracker
+            .accuracy()
+            .iter()
+            .zip(&converged_at)
+            .map(|(a, at)| {
+                let c = [
+                    Some(a.range),
+                    Some(a.azimuth),
+                    a.elevation,
+                    a.radial_velocity,
+                ];
+                std::array::from_fn(|k| {
+                    c[k].map(|e| (e.estimate, e.sigma, at[k].filter(|_| e.converged)))
+                })
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     Ok(MethodRun {
         summary: summarise(&scores, &truth),
         classes,
         settled,
+        settled_summary,
         seconds,
+        learnt,
+        estimates: Vec::new(),
     })
 }
 
@@ -730,6 +917,7 @@ fn one_run(
     n_targets: usize,
     duration: f64,
     chi2: &Chi2,
+    methods: &[Method],
     rng: &mut SimRng,
 ) -> Result<Vec<MethodRun>, SimError> {
     let radars = radars(rng);
@@ -767,7 +955,11 @@ fn one_run(
             }
         })
         .collect();
-    METHODS
+    // Drawn last, for the same reason.
+    let factors: Vec<f64> = (0..radars.len())
+        .map(|_| MISDECLARED[rng.random_range(0..MISDECLARED.len())])
+        .collect();
+    methods
         .iter()
         .map(|m| {
             let p = match m {
@@ -775,9 +967,43 @@ fn one_run(
                 Method::Biased | Method::BiasedUnregistered => &biased,
                 _ => &plots,
             };
-            track(m.config(&specs), p, &targets, chi2)
+            let mut run = track(m.config(&specs, &factors), p, &targets, chi2)?;
+            let declared = if matches!(m, Method::Misdeclared | Method::MisdeclaredFixed) {
+                factors.clone()
+            } else {
+                vec![1.0; specs.len()]
+            };
+            score_estimates(&mut run, &specs, &declared);
+            Ok(run)
         })
         .collect()
+}
+
+/// The learnt σ of `run` against the true radars `specs`, each declared
+/// with σ × `factors`.
+fn score_estimates(run: &mut MethodRun, specs: &[RadarSpec], factors: &[f64]) {
+    run.estimates = run
+        .learnt
+        .iter()
+        .zip(specs.iter().zip(factors))
+        .map(|(learnt, (spec, &factor))| {
+            let truth = [
+                Some(spec.sigma_range),
+                Some(spec.sigma_azimuth),
+                spec.sigma_elevation,
+                spec.sigma_radial_velocity,
+            ];
+            std::array::from_fn(|k| {
+                let ((estimate, sigma, converged_at), t) = learnt[k].zip(truth[k])?;
+                Some(EstimateScore {
+                    relative_error: estimate / t - 1.0,
+                    normalised_error: (estimate - t) / sigma,
+                    converged_at,
+                    factor,
+                })
+            })
+        })
+        .collect();
 }
 
 #[cfg(test)]

@@ -35,7 +35,8 @@
 //! it learns again), a flat datum and no data. Format 8 adds, at the
 //! end, the accuracy estimator's configuration (on, time constant, pinned
 //! radars) and per radar its data (last time; per component the decayed
-//! count, sum, excess and information, and the refused count;
+//! count, sums of the innovation, the information and the excess, and
+//! the winsorised count;
 //! [`algo::tracking::accuracy`]); formats 1 to 7 read it off (the
 //! declared σ applied, as that release did) without data.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
@@ -124,8 +125,8 @@ fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
     for d in &data.radars {
         w.opt(d.t, Writer::f64);
         for k in &d.components {
-            w.f64_run(&[k.weight, k.sum, k.excess, k.information]);
-            w.u64(k.rejected);
+            w.f64_run(&[k.weight, k.sum, k.information, k.excess]);
+            w.u64(k.clipped);
         }
     }
 }
@@ -148,13 +149,13 @@ fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), 
                 ..Default::default()
             };
             for k in &mut d.components {
-                let [weight, sum, excess, information] = r.f64_run::<4>()?;
+                let [weight, sum, information, excess] = r.f64_run::<4>()?;
                 *k = ComponentData {
                     weight,
                     sum,
-                    excess,
                     information,
-                    rejected: r.u64()?,
+                    excess,
+                    clipped: r.u64()?,
                 };
             }
             Ok(d)

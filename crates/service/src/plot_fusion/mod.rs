@@ -115,6 +115,50 @@ pub struct ModeCHeightInput {
     pub sigma_slope: Option<f64>,
 }
 
+/// `tracker.accuracy`: each radar's σ learnt online
+/// (`algo::tracking::accuracy`).
+#[derive(Debug, Clone, Default)]
+pub struct AccuracyInput {
+    /// Default true.
+    pub enabled: Option<bool>,
+    /// Forgetting time constant (s); default 900.
+    pub time_constant_s: Option<f64>,
+    /// Radar ids whose declared σ are applied whatever the data say.
+    pub pinned: Option<Vec<String>>,
+}
+
+/// One σ of a radar: declared, estimated online and applied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SigmaView {
+    pub declared: f64,
+    /// `None` before any plot, or when the data do not identify it.
+    pub estimated: Option<f64>,
+    /// σ of the estimate; `None` with it.
+    pub sigma: Option<f64>,
+    /// Plots behind the estimate (decayed count).
+    pub plots: f64,
+    pub converged: bool,
+    /// The σ the tracker applies now.
+    pub applied: f64,
+    /// Innovations winsorised (beyond 3σ).
+    pub clipped: u64,
+}
+
+/// A radar's accuracy as the tracker learnt and applies it (σ in the wire
+/// units: m, °, m/s).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RadarAccuracyView {
+    pub radar: String,
+    pub range_m: SigmaView,
+    pub azimuth_deg: SigmaView,
+    /// 3D radars in a 3D tracker.
+    pub elevation_deg: Option<SigmaView>,
+    /// Doppler radars.
+    pub radial_velocity_mps: Option<SigmaView>,
+    /// Declared σ applied whatever the data say.
+    pub pinned: bool,
+}
+
 /// The pressure-to-geometric offset as a 3D tracker applies it to Mode C
 /// (geometric height = h_p + offset_m + slope·h_p).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -217,6 +261,8 @@ pub struct TrackerInput {
     /// Radar registration (bias estimation); default on with two radars.
     pub registration: Option<Box<RegistrationInput>>,
     pub mode_c_height: Option<ModeCHeightInput>,
+    /// Each radar's σ learnt online; default on.
+    pub accuracy: Option<AccuracyInput>,
 }
 
 /// One model of the IMM.
@@ -289,6 +335,9 @@ pub struct TrackOutput {
     pub cat062: Option<cat062::Cat062Data>,
     /// Each radar's bias as applied at the end of the data.
     pub registration: Vec<RadarBiasView>,
+    /// Each radar's σ, declared, learnt and applied, at the end of the
+    /// data.
+    pub accuracy: Vec<RadarAccuracyView>,
     /// The pressure offset a 3D tracker applies to Mode C.
     pub pressure_offset: Option<PressureOffsetView>,
     pub compute_us: f64,
@@ -395,6 +444,8 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     ));
     warnings.extend(ssr::warnings(&tracks));
     let pressure_offset = network.pressure_offset_view(&tracker);
+    let accuracy = network.accuracy_views(&tracker);
+    warnings.extend(network::accuracy_warnings(tracker.config(), &accuracy));
     warnings.extend(ssr::height_warnings(&tracker, &tracks));
     warnings.extend(undefined_warning(&report.undefined));
     let motion = &tracker.config().motion;
@@ -433,6 +484,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         asterix: summary,
         cat062,
         registration,
+        accuracy,
         pressure_offset,
         compute_us,
         warnings,

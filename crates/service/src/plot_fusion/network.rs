@@ -33,8 +33,8 @@ use std::collections::HashMap;
 use nalgebra::Matrix3;
 
 use super::{
-    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput, RadarBiasView,
-    SpecInput, TrackView,
+    DEFAULT_CLUTTER_DENSITY, DEFAULT_P_DETECTION, GeoInput, MAX_RADARS, PlotInput,
+    RadarAccuracyView, RadarBiasView, SigmaView, SpecInput, TrackView,
 };
 use crate::validate::{Listed, id_problem};
 use crate::{Ids, Interval, ServiceError, Violations};
@@ -46,6 +46,7 @@ use algo::{
     tracking::{
         Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Tracker,
         TrackerConfig, VelocityGate,
+        accuracy::AccuracyConfig,
         height::{HeightDatum, ModeCHeight, radii_of_curvature},
         registration::{BiasPrior, RegistrationConfig},
     },
@@ -134,6 +135,8 @@ fn wire_name(what: &str) -> &'static str {
         "mode_c_height.sigma_offset" => "tracker.mode_c_height.sigma_offset_m",
         "mode_c_height.slope" => "tracker.mode_c_height.slope",
         "mode_c_height.sigma_slope" => "tracker.mode_c_height.sigma_slope",
+        "accuracy.time_constant" => "tracker.accuracy.time_constant_s",
+        "accuracy.pinned" => "tracker.accuracy.pinned",
         _ => "tracker",
     }
 }
@@ -269,6 +272,9 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     config.height_datum = height_datum(frame.as_ref());
     if let Some(m) = &tracker.mode_c_height {
         apply_mode_c_height(&mut config.mode_c_height, m);
+    }
+    if let Some(a) = &tracker.accuracy {
+        config.accuracy = accuracy(a, &ids)?;
     }
     config.validate().map_err(|e| config_error(&e))?;
     warnings.extend(fusion_period_warnings(&config, &ids));
@@ -825,6 +831,89 @@ fn registration(
     v.finish_with(Some(out))
 }
 
+/// `tracker.accuracy` over the defaults: pinned radars by id, the time
+/// constant in (0, 10⁷] s.
+fn accuracy(input: &super::AccuracyInput, ids: &[String]) -> Result<AccuracyConfig, ServiceError> {
+    let mut out = AccuracyConfig::default();
+    let mut v = Violations::new();
+    if let Some(e) = input.enabled {
+        out.enabled = e;
+    }
+    if let Some(t) = input.time_constant_s {
+        if let Some(t) = v.within(
+            "tracker.accuracy.time_constant_s",
+            t,
+            Interval::open_closed(0.0, 1e7),
+        ) {
+            out.time_constant = t;
+        }
+    }
+    for (k, id) in input.pinned.iter().flatten().enumerate() {
+        match ids.iter().position(|x| x == id) {
+            Some(i) => out.pinned.push(i),
+            None => v.add(
+                format!("tracker.accuracy.pinned[{k}]"),
+                format!("no radar has the id {id:?}"),
+            ),
+        }
+    }
+    v.finish_with(Some(out))
+}
+
+/// A learnt σ differs from the declared one by more than this factor (up
+/// or down): the warning names the radar's option to change.
+pub const ACCURACY_WARNING_FACTOR: f64 = 1.5;
+
+/// Warnings about the learnt accuracy: a converged σ more than
+/// [`ACCURACY_WARNING_FACTOR`] from the declared one (naming the radar's
+/// option), and one at the applied bound
+/// (`algo::tracking::accuracy::LIMIT`).
+pub fn accuracy_warnings(config: &TrackerConfig, views: &[RadarAccuracyView]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (r, a) in views.iter().enumerate() {
+        let named = [
+            ("range", "sigma_range_m", " m", Some(a.range_m)),
+            ("azimuth", "sigma_azimuth_deg", "°", Some(a.azimuth_deg)),
+            ("elevation", "sigma_elevation_deg", "°", a.elevation_deg),
+            (
+                "radial velocity",
+                "sigma_radial_velocity_mps",
+                " m/s",
+                a.radial_velocity_mps,
+            ),
+        ];
+        for (what, option, unit, s) in named {
+            let Some(s) = s else { continue };
+            let (Some(est), true) = (s.estimated, s.converged) else {
+                continue;
+            };
+            let ratio = est / s.declared;
+            if !(1.0 / ACCURACY_WARNING_FACTOR..=ACCURACY_WARNING_FACTOR).contains(&ratio) {
+                let use_ = if a.pinned || !config.accuracy.enabled {
+                    "the declared σ is applied (pinned or tracker.accuracy.enabled false)"
+                } else {
+                    "the learnt σ is applied"
+                };
+                out.push(format!(
+                    "radar {}'s {what} σ is {est:.3}{unit} ± {:.3} from {:.0} plots, {ratio:.2}× the declared {:.3}{unit}: {use_}; set radars[{r}].{option} to the radar's real accuracy",
+                    a.radar,
+                    s.sigma.unwrap_or(f64::NAN),
+                    s.plots,
+                    s.declared,
+                ));
+            }
+            let limit = algo::tracking::accuracy::LIMIT;
+            if s.converged && !(s.declared / limit..=s.declared * limit).contains(&est) {
+                out.push(format!(
+                    "radar {}'s {what} σ estimate {est:.3}{unit} is beyond {limit}× the declared {:.3}{unit}: {:.3}{unit} is applied; check radars[{r}].{option} and the radar",
+                    a.radar, s.declared, s.applied
+                ));
+            }
+        }
+    }
+    out
+}
+
 /// Warnings about the registration's estimates: a bias beyond what a radar
 /// usually has (1 km, 1°: its configuration or alignment is wrong), and a
 /// converged bias the geometry leaves unobservable (its σ still above half
@@ -1230,6 +1319,39 @@ impl Network {
                 pairs: b.pairs,
                 converged: b.converged,
                 reference: b.reference,
+            })
+            .collect()
+    }
+
+    /// Each radar's accuracy (σ in the wire units).
+    pub fn accuracy_views(&self, tracker: &Tracker) -> Vec<RadarAccuracyView> {
+        let view = |s: algo::tracking::accuracy::SigmaEstimate, unit: f64| {
+            let known = s.samples > 0.0 && s.sigma.is_finite();
+            SigmaView {
+                declared: s.declared * unit,
+                estimated: known.then_some(s.estimate * unit),
+                sigma: known.then_some(s.sigma * unit),
+                plots: s.samples,
+                converged: s.converged,
+                applied: s.applied * unit,
+                clipped: s.clipped,
+            }
+        };
+        let deg = 1f64.to_degrees();
+        tracker
+            .accuracy()
+            .into_iter()
+            .zip(&self.radar_ids)
+            .map(|(a, id)| RadarAccuracyView {
+                radar: id.clone(),
+                range_m: view(a.range, 1.0),
+                azimuth_deg: view(a.azimuth, deg),
+                elevation_deg: a
+                    .elevation
+                    .filter(|_| tracker.config().axes == 3)
+                    .map(|s| view(s, deg)),
+                radial_velocity_mps: a.radial_velocity.map(|s| view(s, 1.0)),
+                pinned: a.pinned,
             })
             .collect()
     }

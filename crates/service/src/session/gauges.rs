@@ -1,5 +1,6 @@
 //! Per-session gauges for `/metrics`: each plot-fusion session's radar
-//! registration (bias, σ, pairs, converged), as this replica last saw it.
+//! registration (bias, σ, pairs, converged) and accuracy (each σ declared,
+//! learnt and applied), as this replica last saw it.
 //!
 //! The `metrics` recorder cannot forget a label set, and a session's labels
 //! must go when the session does; so these gauges are kept here and
@@ -16,13 +17,14 @@ use std::fmt::Write as _;
 use std::sync::Mutex;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use crate::plot_fusion::RadarBiasView;
+use crate::plot_fusion::{RadarAccuracyView, RadarBiasView, SigmaView};
 
 /// (tenant, session id).
 type SessionKey = (String, String);
 
-/// When a session's gauges were set (unix seconds), and its radars.
-type Entry = (f64, Vec<RadarBiasView>);
+/// When a session's gauges were set (unix seconds), and its radars'
+/// registration and accuracy.
+type Entry = (f64, Vec<RadarBiasView>, Vec<RadarAccuracyView>);
 
 /// The registration gauges of the sessions this replica pushed to.
 #[derive(Debug, Default)]
@@ -86,24 +88,91 @@ const FAMILIES: &[Family] = &[
     },
 ];
 
+/// One accuracy gauge family (labelled by the σ's `component`): its name,
+/// help and the value of a σ (none: not shown).
+struct SigmaFamily {
+    name: &'static str,
+    help: &'static str,
+    value: fn(&SigmaView) -> Option<f64>,
+}
+
+const SIGMA_FAMILIES: &[SigmaFamily] = &[
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_declared",
+        help: "A session's radar's declared measurement σ (component: range_m, azimuth_deg, elevation_deg, radial_velocity_mps)",
+        value: |s| Some(s.declared),
+    },
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_estimated",
+        help: "The radar's measurement σ learnt online from its plots' innovations",
+        value: |s| s.estimated,
+    },
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_estimate_sigma",
+        help: "Standard deviation of the learnt σ",
+        value: |s| s.sigma,
+    },
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_applied",
+        help: "The measurement σ the tracker applies (the learnt one once converged, unless pinned)",
+        value: |s| Some(s.applied),
+    },
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_converged",
+        help: "1 when the learnt σ has converged",
+        value: |s| Some(if s.converged { 1.0 } else { 0.0 }),
+    },
+    SigmaFamily {
+        name: "fusion_session_radar_sigma_plots",
+        help: "Plots behind the learnt σ (decayed count)",
+        value: |s| Some(s.plots),
+    },
+];
+
+/// A radar's σ by component name.
+fn components(a: &RadarAccuracyView) -> [(&'static str, Option<&SigmaView>); 4] {
+    [
+        ("range_m", Some(&a.range_m)),
+        ("azimuth_deg", Some(&a.azimuth_deg)),
+        ("elevation_deg", a.elevation_deg.as_ref()),
+        ("radial_velocity_mps", a.radial_velocity_mps.as_ref()),
+    ]
+}
+
 impl RadarGauges {
     /// How long a session's gauges stay without a batch applied here.
     pub const RETAIN: Duration = Duration::from_secs(15 * 60);
 
-    /// Sets a session's gauges from a batch's update; a session without
-    /// radar registration (none configured, or off) has none.
-    pub fn record(&self, tenant: &str, id: &str, radars: &[RadarBiasView]) {
-        self.record_at(tenant, id, radars, unix_now());
+    /// Sets a session's gauges from a batch's update (its radars'
+    /// registration and accuracy); a session with neither has none.
+    pub fn record(
+        &self,
+        tenant: &str,
+        id: &str,
+        radars: &[RadarBiasView],
+        accuracy: &[RadarAccuracyView],
+    ) {
+        self.record_at(tenant, id, radars, accuracy, unix_now());
     }
 
-    fn record_at(&self, tenant: &str, id: &str, radars: &[RadarBiasView], now: f64) {
+    fn record_at(
+        &self,
+        tenant: &str,
+        id: &str,
+        radars: &[RadarBiasView],
+        accuracy: &[RadarAccuracyView],
+        now: f64,
+    ) {
         let mut sessions = self.sessions.lock().unwrap_or_else(|p| p.into_inner());
-        if radars.is_empty() {
+        if radars.is_empty() && accuracy.is_empty() {
             if !sessions.is_empty() {
                 sessions.remove(&(tenant.to_string(), id.to_string()));
             }
         } else {
-            sessions.insert((tenant.to_string(), id.to_string()), (now, radars.to_vec()));
+            sessions.insert(
+                (tenant.to_string(), id.to_string()),
+                (now, radars.to_vec(), accuracy.to_vec()),
+            );
         }
     }
 
@@ -122,7 +191,7 @@ impl RadarGauges {
 
     fn render_at(&self, now: f64) -> String {
         let mut sessions = self.sessions.lock().unwrap_or_else(|p| p.into_inner());
-        sessions.retain(|_, (at, _)| now - *at <= Self::RETAIN.as_secs_f64());
+        sessions.retain(|_, (at, _, _)| now - *at <= Self::RETAIN.as_secs_f64());
         if sessions.is_empty() {
             return String::new();
         }
@@ -133,7 +202,7 @@ impl RadarGauges {
             let _ = writeln!(out, "# HELP {} {}", f.name, f.help);
             let _ = writeln!(out, "# TYPE {} gauge", f.name);
             for key in &keys {
-                let (_, radars) = &sessions[*key];
+                let (_, radars, _) = &sessions[*key];
                 for b in radars {
                     if let Some(v) = (f.value)(b) {
                         let _ =
@@ -149,9 +218,29 @@ impl RadarGauges {
         );
         let _ = writeln!(out, "# TYPE {name} gauge");
         for key in &keys {
-            let (at, radars) = &sessions[*key];
+            let (at, radars, _) = &sessions[*key];
             for b in radars {
                 let _ = writeln!(out, "{name}{{{}}} {}", labels(key, &b.radar), number(*at));
+            }
+        }
+        for f in SIGMA_FAMILIES {
+            let _ = writeln!(out, "# HELP {} {}", f.name, f.help);
+            let _ = writeln!(out, "# TYPE {} gauge", f.name);
+            for key in &keys {
+                let (_, _, accuracy) = &sessions[*key];
+                for a in accuracy {
+                    for (component, s) in components(a) {
+                        if let Some(v) = s.and_then(|s| (f.value)(s)) {
+                            let _ = writeln!(
+                                out,
+                                "{}{{{},component=\"{component}\"}} {}",
+                                f.name,
+                                labels(key, &a.radar),
+                                number(v)
+                            );
+                        }
+                    }
+                }
             }
         }
         out
@@ -225,10 +314,28 @@ mod tests {
     #[test]
     fn renders_each_radar_under_its_session_and_tenant() {
         let g = RadarGauges::default();
+        let sigma = |declared: f64, estimated: Option<f64>| SigmaView {
+            declared,
+            estimated,
+            sigma: estimated.map(|e| e / 20.0),
+            plots: 512.0,
+            converged: estimated.is_some(),
+            applied: estimated.unwrap_or(declared),
+            clipped: 0,
+        };
+        let accuracy = RadarAccuracyView {
+            radar: "r2".into(),
+            range_m: sigma(50.0, Some(120.0)),
+            azimuth_deg: sigma(0.1, None),
+            elevation_deg: None,
+            radial_velocity_mps: Some(sigma(1.0, Some(2.5))),
+            pinned: false,
+        };
         g.record_at(
             "acme",
             "s1",
             &[bias("r\"1", None), bias("r2", Some(0.1))],
+            &[accuracy],
             1000.0,
         );
         let text = g.render_at(1000.0);
@@ -237,6 +344,19 @@ mod tests {
         ));
         assert!(text.contains(
             "fusion_session_radar_azimuth_bias_sigma_degrees{tenant=\"acme\",session=\"s1\",radar=\"r2\"} 0.01"
+        ));
+        // Each σ under its component; no estimate, no sample.
+        for line in [
+            "fusion_session_radar_sigma_estimated{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"range_m\"} 120",
+            "fusion_session_radar_sigma_applied{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"radial_velocity_mps\"} 2.5",
+            "fusion_session_radar_sigma_declared{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"azimuth_deg\"} 0.1",
+            "fusion_session_radar_sigma_converged{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"azimuth_deg\"} 0",
+        ] {
+            assert!(text.contains(line), "{line}");
+        }
+        assert!(!text.contains("component=\"elevation_deg\""));
+        assert!(!text.contains(
+            "fusion_session_radar_sigma_estimated{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"azimuth_deg\"}"
         ));
         // A 2D radar has no elevation sample; the 3D one has.
         let elevation: Vec<_> = text
@@ -264,11 +384,11 @@ mod tests {
     #[test]
     fn a_deleted_idle_or_unregistered_session_shows_nothing() {
         let g = RadarGauges::default();
-        g.record_at("t", "a", &[bias("r1", None)], 0.0);
-        g.record_at("t", "b", &[bias("r1", None)], 0.0);
-        g.record_at("t", "c", &[bias("r1", None)], 100.0);
+        g.record_at("t", "a", &[bias("r1", None)], &[], 0.0);
+        g.record_at("t", "b", &[bias("r1", None)], &[], 0.0);
+        g.record_at("t", "c", &[bias("r1", None)], &[], 100.0);
         g.forget("t", "a");
-        g.record_at("t", "c", &[], 200.0);
+        g.record_at("t", "c", &[], &[], 200.0);
         assert!(!g.render_at(1.0).contains("session=\"a\""));
         assert!(g.render_at(1.0).contains("session=\"b\""));
         let retain = RadarGauges::RETAIN.as_secs_f64();

@@ -150,6 +150,12 @@ pub trait SessionKind: Sized + Send + 'static {
         let _ = update;
         &[]
     }
+    /// The radars' accuracy after a batch, for `/metrics` ([`gauges`]);
+    /// none by default.
+    fn radar_accuracy(update: &Self::Update) -> &[crate::plot_fusion::RadarAccuracyView] {
+        let _ = update;
+        &[]
+    }
     /// Appends the kind's state; it writes its own format byte first.
     fn encode(&self, w: &mut Writer);
     /// Reads what [`SessionKind::encode`] wrote (any format this release knows).

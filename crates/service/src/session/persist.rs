@@ -713,8 +713,12 @@ impl Sessions {
                     }
                     let bytes = hot.shape.bytes();
                     self.cache.put(tenant, id, version, bytes, hot);
-                    self.gauges
-                        .record(tenant, id, K::radar_biases(&update.body));
+                    self.gauges.record(
+                        tenant,
+                        id,
+                        K::radar_biases(&update.body),
+                        K::radar_accuracy(&update.body),
+                    );
                     if self.announces(tenant, id) {
                         let event = events::encode_update::<K>(tenant, &update, &marks);
                         self.publish(tenant, id, event).await;

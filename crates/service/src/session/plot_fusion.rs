@@ -42,8 +42,8 @@ use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
-        LastPlotView, ModeView, Network, PlotInput, RadarBiasView, SpecInput, SsrInput, TrackView,
-        TrackerCounters,
+        LastPlotView, ModeView, Network, PlotInput, RadarAccuracyView, RadarBiasView, SigmaView,
+        SpecInput, SsrInput, TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
         computation_error, mode_name, network, output,
@@ -89,7 +89,11 @@ const REGISTRATION_FLAG: u32 = 1 << 26;
 /// Set in the frame count of a kept update whose tracks carry their
 /// identity (SSR and Mode S).
 const IDENTITY_FLAG: u32 = 1 << 25;
+/// Set in the frame count of a kept update that carries the radars'
+/// accuracy (after the biases).
+const ACCURACY_FLAG: u32 = 1 << 24;
 const FLAGS: u32 = ASTERIX_FLAG
+    | ACCURACY_FLAG
     | MODES_FLAG
     | PROVENANCE_FLAG
     | CAT062_FLAG
@@ -175,6 +179,8 @@ pub struct BatchUpdate {
     pub cat062: Option<Cat062Data>,
     /// Each radar's bias as applied after the batch.
     pub registration: Vec<RadarBiasView>,
+    /// Each radar's σ, declared, learnt and applied, after the batch.
+    pub accuracy: Vec<RadarAccuracyView>,
 }
 
 /// The session as a client reads it.
@@ -209,6 +215,8 @@ pub struct SessionView {
     pub tracks: Vec<TrackView>,
     /// Each radar's bias as applied now.
     pub registration: Vec<RadarBiasView>,
+    /// Each radar's σ, declared, learnt and applied now.
+    pub accuracy: Vec<RadarAccuracyView>,
     /// The pressure offset a 3D tracker applies to Mode C.
     pub pressure_offset: Option<Box<crate::plot_fusion::PressureOffsetView>>,
 }
@@ -370,6 +378,8 @@ impl PlotFusionSession {
         }
         let registration = self.network.bias_views(self.tracker());
         warnings.extend(network::registration_warnings(&config, &registration));
+        let accuracy = self.network.accuracy_views(self.tracker());
+        warnings.extend(network::accuracy_warnings(&config, &accuracy));
         warnings.extend(realigned(&biases_before, &registration));
         warnings.extend(crate::plot_fusion::ssr::warnings(&live));
         warnings.extend(crate::plot_fusion::ssr::height_warnings(
@@ -428,6 +438,7 @@ impl PlotFusionSession {
             asterix: summary,
             cat062,
             registration,
+            accuracy,
         })
     }
 }
@@ -669,6 +680,10 @@ impl SessionKind for PlotFusionSession {
         &update.registration
     }
 
+    fn radar_accuracy(update: &BatchUpdate) -> &[RadarAccuracyView] {
+        &update.accuracy
+    }
+
     fn acknowledgement(&self) -> BatchUpdate {
         BatchUpdate {
             frames: 0,
@@ -683,6 +698,7 @@ impl SessionKind for PlotFusionSession {
             asterix: None,
             cat062: self.cat062.map(|_| Cat062Data::default()),
             registration: self.network.bias_views(self.tracker()),
+            accuracy: self.network.accuracy_views(self.tracker()),
         }
     }
 
@@ -755,6 +771,7 @@ impl SessionKind for PlotFusionSession {
                 .map(|t| self.network.track_view(&tracker.config().motion, t))
                 .collect(),
             registration: self.network.bias_views(tracker),
+            accuracy: self.network.accuracy_views(tracker),
             pressure_offset: self.network.pressure_offset_view(tracker).map(Box::new),
         })
     }
@@ -913,6 +930,7 @@ impl SessionKind for PlotFusionSession {
                 | LATE_FLAG
                 | REGISTRATION_FLAG
                 | IDENTITY_FLAG
+                | ACCURACY_FLAG
                 | optional,
         );
         w.u32(u.pending_plots);
@@ -962,6 +980,16 @@ impl SessionKind for PlotFusionSession {
             w.opt(b.sigma_elevation_deg, Writer::f64);
             w.u8(u8::from(b.converged) | u8::from(b.reference) << 1);
         }
+        w.usize(u.accuracy.len());
+        for a in &u.accuracy {
+            w.str(&a.radar);
+            w.u8(u8::from(a.pinned));
+            for s in [Some(a.range_m), Some(a.azimuth_deg)] {
+                encode_sigma(w, s);
+            }
+            encode_sigma(w, a.elevation_deg);
+            encode_sigma(w, a.radial_velocity_mps);
+        }
     }
 
     fn decode_update(r: &mut Reader<'_>) -> Result<BatchUpdate, FormatError> {
@@ -970,6 +998,7 @@ impl SessionKind for PlotFusionSession {
         let has_cat062 = frames & CAT062_FLAG != 0;
         let has_late = frames & LATE_FLAG != 0;
         let has_registration = frames & REGISTRATION_FLAG != 0;
+        let has_accuracy = frames & ACCURACY_FLAG != 0;
         let fields = TrackFields {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
@@ -1052,6 +1081,26 @@ impl SessionKind for PlotFusionSession {
         } else {
             Vec::new()
         };
+        let accuracy = if has_accuracy {
+            let n = r.len(8)?;
+            (0..n)
+                .map(|_| {
+                    let radar = r.str()?;
+                    let pinned = r.u8()? != 0;
+                    let missing = || corrupt("a radar's range or azimuth accuracy");
+                    Ok(RadarAccuracyView {
+                        radar,
+                        range_m: decode_sigma(r)?.ok_or_else(missing)?,
+                        azimuth_deg: decode_sigma(r)?.ok_or_else(missing)?,
+                        elevation_deg: decode_sigma(r)?,
+                        radial_velocity_mps: decode_sigma(r)?,
+                        pinned,
+                    })
+                })
+                .collect::<Result<_, FormatError>>()?
+        } else {
+            Vec::new()
+        };
         Ok(BatchUpdate {
             frames,
             pending_plots,
@@ -1065,8 +1114,35 @@ impl SessionKind for PlotFusionSession {
             asterix,
             cat062,
             registration,
+            accuracy,
         })
     }
+}
+
+/// One σ of a radar's accuracy in an update (or none).
+fn encode_sigma(w: &mut Writer, s: Option<SigmaView>) {
+    w.opt(s, |w, s| {
+        w.f64_run(&[s.declared, s.plots, s.applied]);
+        w.opt(s.estimated, Writer::f64);
+        w.opt(s.sigma, Writer::f64);
+        w.u8(u8::from(s.converged));
+        w.u64(s.clipped);
+    });
+}
+
+fn decode_sigma(r: &mut Reader<'_>) -> Result<Option<SigmaView>, FormatError> {
+    r.opt(|r| {
+        let [declared, plots, applied] = r.f64_run::<3>()?;
+        Ok(SigmaView {
+            declared,
+            plots,
+            applied,
+            estimated: r.opt(Reader::f64)?,
+            sigma: r.opt(Reader::f64)?,
+            converged: r.u8()? != 0,
+            clipped: r.u64()?,
+        })
+    })
 }
 
 /// A warning for each radar whose applied bias moved by more than 3σ
@@ -1469,7 +1545,13 @@ pub(crate) mod tests {
         PlotFusionSession::encode_update(&update, &mut plain);
         assert_eq!(
             plain.buf[..4],
-            (3u32 | MODES_FLAG | PROVENANCE_FLAG | LATE_FLAG | REGISTRATION_FLAG | IDENTITY_FLAG)
+            (3u32
+                | MODES_FLAG
+                | PROVENANCE_FLAG
+                | LATE_FLAG
+                | REGISTRATION_FLAG
+                | IDENTITY_FLAG
+                | ACCURACY_FLAG)
                 .to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
