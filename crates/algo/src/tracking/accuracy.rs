@@ -96,8 +96,10 @@ pub const RADIAL_VELOCITY: usize = 3;
 pub const DEFAULT_TIME_CONSTANT_S: f64 = 900.0;
 /// Plots (decayed count) a component needs before its estimate is used.
 pub const MIN_SAMPLES: f64 = 30.0;
-/// The estimate is used once σ(σ̂) ≤ this share of σ̂.
+/// The estimate is used once σ(σ̂) ≤ this share of σ̂ …
 pub const CONVERGED_RELATIVE_SIGMA: f64 = 0.1;
+/// … or once it lies more than this many σ(σ̂) from the declared σ.
+pub const DECLARED_SIGMAS: f64 = 4.0;
 /// A plot's association weight (β) must be at least this to be learnt
 /// from.
 pub const MIN_ASSOCIATION_WEIGHT: f64 = 0.9;
@@ -242,7 +244,13 @@ impl ComponentData {
             }
             None => (declared, f64::INFINITY),
         };
-        let converged = self.weight >= MIN_SAMPLES && sigma <= CONVERGED_RELATIVE_SIGMA * estimate;
+        // Precise enough, or already far (beyond DECLARED_SIGMAS of its
+        // σ) from the declared σ: a radar declared three times too
+        // accurate is known to be wrong long before its σ is known to
+        // 10 %, and every scan with the declared σ starts false tracks.
+        let converged = self.weight >= MIN_SAMPLES
+            && (sigma <= CONVERGED_RELATIVE_SIGMA * estimate
+                || (estimate - declared).abs() > DECLARED_SIGMAS * sigma);
         let applied = if converged && applies {
             estimate.clamp(declared / LIMIT, declared * LIMIT)
         } else {
