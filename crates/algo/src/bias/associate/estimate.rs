@@ -190,10 +190,10 @@ impl<'a> Problem<'a> {
             last = Some(pairs);
         }
         let pairs = last.unwrap_or_default();
-        let mut pos = self.positions(bias);
+        let pos = self.positions(bias);
         let total: f64 = pairs
             .iter()
-            .map(|&(i, j)| self.distance(&mut pos, i * self.cols + j))
+            .map(|&(i, j)| self.distance(&pos, i * self.cols + j))
             .sum();
         Refined {
             estimate,

@@ -471,7 +471,7 @@ pub fn associate(radar: &[Vec<RadarSample>], ais: &[Vec<AisPoint>], cfg: &Config
                     mean_distance: alt.mean(),
                 })
         });
-    let mut comp = problem.positions(estimate.bias);
+    let comp = problem.positions(estimate.bias);
     let associations: Vec<Association> = r
         .pairs
         .iter()
@@ -479,7 +479,7 @@ pub fn associate(radar: &[Vec<RadarSample>], ais: &[Vec<AisPoint>], cfg: &Config
             radar: i,
             ais: j,
             distance_before: raw_matrix[i * cols + j],
-            distance_after: problem.distance(&mut comp, i * cols + j),
+            distance_after: problem.distance(&comp, i * cols + j),
             common: problem.summary[i * cols + j].n,
         })
         .collect();

@@ -198,34 +198,39 @@ pub(super) struct Problem<'a> {
     pub(super) estimates: RefCell<HashMap<Pairs, Option<BiasEstimate>>>,
 }
 
-/// The tracks' plane positions under one bias, each track's compensated on
-/// first use: the raw unit vector turned back by the azimuth bias, times
-/// the corrected range (at no bias, the raw positions).
+/// The tracks' plane positions under one bias, each sample compensated
+/// where it is read: the raw unit vector turned back by the azimuth bias,
+/// times the corrected range (at no bias, the raw positions). A bias's
+/// candidate pairs mostly pass or fail the gate within a few of their
+/// common instants, so compensating whole tracks for them was most of the
+/// work of an assignment.
 pub(super) struct Positions<'p, 'a> {
     problem: &'p Problem<'a>,
     bias: Bias,
     sin_cos: (f64, f64),
-    tracks: Vec<Option<Vec<[f64; 2]>>>,
 }
 
-impl<'p> Positions<'p, '_> {
-    /// Track i's positions.
-    pub(super) fn track(&mut self, i: usize) -> &[[f64; 2]] {
-        let p: &'p Problem<'_> = self.problem;
+impl Positions<'_, '_> {
+    /// Sample `a` of track `i`.
+    fn point(&self, i: usize, a: usize) -> [f64; 2] {
+        let p = self.problem;
         if self.bias == Bias::default() {
-            return &p.raw[i];
+            return p.raw[i][a];
         }
-        let (bias, (s, c)) = (self.bias, self.sin_cos);
-        self.tracks[i].get_or_insert_with(|| {
-            p.radar[i]
-                .iter()
-                .zip(&p.unit[i])
-                .map(|(x, u)| {
-                    let r = x.range - bias.range;
-                    [r * (u[0] * c - u[1] * s), r * (u[1] * c + u[0] * s)]
-                })
-                .collect()
-        })
+        let ((s, c), u) = (self.sin_cos, p.unit[i][a]);
+        let r = p.radar[i][a].range - self.bias.range;
+        [r * (u[0] * c - u[1] * s), r * (u[1] * c + u[0] * s)]
+    }
+
+    /// Track i's interpolated position at bracket (a, w): [`at`] of its
+    /// compensated samples.
+    pub(super) fn at(&self, i: usize, a: usize, w: f64) -> [f64; 2] {
+        let p = self.point(i, a);
+        if w == 0.0 {
+            return p;
+        }
+        let q = self.point(i, a + 1);
+        [p[0] + w * (q[0] - p[0]), p[1] + w * (q[1] - p[1])]
     }
 }
 
@@ -391,33 +396,31 @@ impl<'a> Problem<'a> {
             .get_or_init(|| walk_brackets(&self.radar[i], &self.ais[j], self.cfg.max_gap))
     }
 
-    /// Plane positions of the tracks compensated by `bias`, each track's
-    /// computed when first read ([`Positions::track`]): the pairs a bias
-    /// gates read a few tracks, and each assignment of the search and the
-    /// refinements used to compensate all of them (34,632 samples on the
-    /// harbour, a fresh 0.5 MB each time).
+    /// Plane positions of the tracks compensated by `bias`, each sample
+    /// where it is read ([`Positions::at`]): each assignment of the search
+    /// and the refinements used to compensate all 34,632 samples of the
+    /// harbour into a fresh 0.5 MB, though a bias's candidate pairs read
+    /// few of them.
     pub(super) fn positions(&self, bias: Bias) -> Positions<'_, 'a> {
         Positions {
             problem: self,
             bias,
             sin_cos: bias.azimuth.sin_cos(),
-            tracks: (0..self.rows).map(|_| None).collect(),
         }
     }
 
     /// Eq. 6 for pair ij at positions `pos`.
-    pub(super) fn distance(&self, pos: &mut Positions<'_, '_>, ij: usize) -> f64 {
+    pub(super) fn distance(&self, pos: &Positions<'_, '_>, ij: usize) -> f64 {
         let br = self.brackets(ij);
         if br.is_empty() {
             return f64::INFINITY;
         }
         let (i, j) = (ij / self.cols, ij % self.cols);
-        let pos = pos.track(i);
         let sum: f64 = br
             .iter()
             .map(|b| {
                 dist(
-                    at(pos, b.a as usize, b.w),
+                    pos.at(i, b.a as usize, b.w),
                     self.ais[j][b.k as usize].position,
                 )
             })
@@ -508,18 +511,17 @@ impl<'a> Problem<'a> {
     /// Pairs under the gate at `bias`: (i, j, eq. 6 distance). A pair's sum
     /// stops once it reaches gate × n: its mean cannot fall below the gate.
     pub(super) fn edges(&self, bias: Bias) -> Vec<(usize, usize, f64)> {
-        let mut pos = self.positions(bias);
+        let pos = self.positions(bias);
         let gate = self.cfg.gate;
         self.candidates(bias)
             .filter_map(|ij| {
                 let br = self.brackets(ij);
                 let (i, j) = (ij / self.cols, ij % self.cols);
-                let pos = pos.track(i);
                 let limit = gate * br.len() as f64;
                 let mut sum = 0.0;
                 for b in br {
                     sum += dist(
-                        at(pos, b.a as usize, b.w),
+                        pos.at(i, b.a as usize, b.w),
                         self.ais[j][b.k as usize].position,
                     );
                     if sum >= limit {
