@@ -779,15 +779,22 @@ fn compensated_tracks(
     tracks
         .iter()
         .zip(ids)
-        .map(|(t, id)| CompensatedTrack {
-            id: id.clone(),
-            samples: t
+        .map(|(t, id)| {
+            let compensated: Vec<RadarSample> =
+                t.iter().map(|s| associate::compensate(s, bias)).collect();
+            let plane_points: Vec<[f64; 2]> = compensated
                 .iter()
-                .map(|s| {
-                    let c = associate::compensate(s, bias);
-                    let p = associate::polar_to_plane(c.range, c.azimuth);
-                    let (la, lo) = plane.inverse(p);
-                    CompensatedSample {
+                .map(|c| associate::polar_to_plane(c.range, c.azimuth))
+                .collect();
+            // The track's samples at once: the local inverse vectorises.
+            let geodetic = plane.inverse_many(&plane_points);
+            CompensatedTrack {
+                id: id.clone(),
+                samples: compensated
+                    .iter()
+                    .zip(&plane_points)
+                    .zip(geodetic)
+                    .map(|((c, p), (la, lo))| CompensatedSample {
                         t: c.t,
                         range_m: c.range,
                         azimuth_deg: c.azimuth.to_degrees(),
@@ -795,9 +802,9 @@ fn compensated_tracks(
                         north_m: p[1],
                         lat_deg: la.to_degrees(),
                         lon_deg: lo.to_degrees(),
-                    }
-                })
-                .collect(),
+                    })
+                    .collect(),
+            }
         })
         .collect()
 }
