@@ -432,6 +432,8 @@ fn run_server(env: &[(&str, String)], http: u16, wait: std::time::Duration) -> (
         }
         if std::net::TcpStream::connect(("127.0.0.1", http)).is_ok() {
             served = true;
+            // Time for this server to say so (below) before it is killed.
+            std::thread::sleep(std::time::Duration::from_millis(1500));
             break;
         }
         std::thread::sleep(std::time::Duration::from_millis(50));
@@ -440,6 +442,10 @@ fn run_server(env: &[(&str, String)], http: u16, wait: std::time::Duration) -> (
     let out = child.wait_with_output().unwrap();
     let text =
         String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    // The port answered, and it was this server: another test's server can
+    // have been given the port between `free_port` and the bind (seen on
+    // a full run: "started with a wrong password" from a foreign server).
+    let served = served && text.contains("serving REST");
     (served, text)
 }
 
