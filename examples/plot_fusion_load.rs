@@ -5,7 +5,7 @@
 //! cargo run --release --example plot_fusion_load -- \
 //!     [--targets 1000] [--radars 4] [--duration 60] [--clutter 20] \
 //!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
-//!     [--motion imm|cv] [--late-plots reprocess|retrodict] [--no-registration] [--timing beam|scan] \
+//!     [--motion imm|cv] [--late-plots reprocess|retrodict] [--no-registration] [--no-accuracy] [--timing beam|scan] \
 //!     [--late none|held|radars|both] [--store memory|redis://…] \
 //!     [--snapshot-batches 32] [--takeover-at 0.5]
 //! ```
@@ -77,6 +77,8 @@ struct Args {
     late_plots: Option<String>,
     /// `tracker.registration.enabled = false` (its cost is the difference).
     no_registration: bool,
+    /// `tracker.accuracy.enabled = false` (its cost is the difference).
+    no_accuracy: bool,
     late: String,
     store: String,
     timing: PlotTiming,
@@ -97,6 +99,7 @@ fn parse_args() -> anyhow::Result<Args> {
         motion: None,
         late_plots: None,
         no_registration: false,
+        no_accuracy: false,
         late: "none".into(),
         snapshot_batches: None,
         takeover_at: None,
@@ -110,6 +113,7 @@ fn parse_args() -> anyhow::Result<Args> {
             "--skip-compute" => args.skip_compute = true,
             "--skip-end-to-end" => args.skip_end_to_end = true,
             "--no-registration" => args.no_registration = true,
+            "--no-accuracy" => args.no_accuracy = true,
             _ => {
                 let value = it.next().context("a flag needs a value")?;
                 match flag.as_str() {
@@ -180,6 +184,10 @@ fn pb_config(spec: &svc::SpecInput) -> pb::PlotFusionConfig {
                     enabled: r.enabled,
                     ..Default::default()
                 }),
+            accuracy: spec.tracker.accuracy.as_ref().map(|a| pb::AccuracyOptions {
+                enabled: a.enabled,
+                ..Default::default()
+            }),
             ..Default::default()
         }),
     }
@@ -282,6 +290,12 @@ async fn main() -> anyhow::Result<()> {
             enabled: Some(false),
             ..Default::default()
         }));
+    }
+    if args.no_accuracy {
+        spec.tracker.accuracy = Some(svc::AccuracyInput {
+            enabled: Some(false),
+            ..Default::default()
+        });
     }
     let n = plots.len();
     println!(

@@ -41,6 +41,9 @@ fn misdeclared() -> Value {
         "origin": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
         "radars": spec,
         "plots": plots(&radars, &fleet, 400.0, 1.0, 5),
+        // The 2D radars' slant ranges made horizontal at the aircraft's
+        // height.
+        "tracker": {"default_height_m": 8000.0},
     })
 }
 
@@ -103,7 +106,7 @@ async fn a_radar_declared_too_accurate_is_learnt_and_said() {
 
     // Pinned: estimated and reported, the declared σ applied.
     let mut pinned = req.clone();
-    pinned["tracker"] = json!({"accuracy": {"pinned": [req["radars"][0]["id"]]}});
+    pinned["tracker"]["accuracy"] = json!({"pinned": [req["radars"][0]["id"]]});
     let out = app.post_ok(PATH, &pinned).await;
     let r = &out["accuracy"][0];
     assert_eq!(r["pinned"], true);
@@ -112,7 +115,7 @@ async fn a_radar_declared_too_accurate_is_learnt_and_said() {
 
     // Off: nothing learnt.
     let mut off = req.clone();
-    off["tracker"] = json!({"accuracy": {"enabled": false}});
+    off["tracker"]["accuracy"] = json!({"enabled": false});
     let out = app.post_ok(PATH, &off).await;
     assert!(out["accuracy"][0]["range_m"].get("estimated").is_none());
     assert_eq!(f(&out["accuracy"][0]["range_m"]["plots"]), 0.0);
@@ -123,7 +126,7 @@ async fn bad_accuracy_options_are_named_on_both_transports() {
     let app = spawn_app().await;
     let mut req = misdeclared();
     req["plots"] = json!(req["plots"].as_array().unwrap()[..40].to_vec());
-    req["tracker"] = json!({"accuracy": {"time_constant_s": -1.0, "pinned": ["nowhere"]}});
+    req["tracker"]["accuracy"] = json!({"time_constant_s": -1.0, "pinned": ["nowhere"]});
     let want = vec![
         "tracker.accuracy.time_constant_s".to_string(),
         "tracker.accuracy.pinned[0]".to_string(),

@@ -787,15 +787,17 @@ mod tests {
         );
     }
 
-    /// Position NEES (2 dof) of the confirmed tracks at the end against
-    /// the nearest target, and the trackers' accuracy, for radars whose
-    /// true σ are `truth` and declared `declared`.
+    /// For radars whose true σ are `truth` and declared `declared`: the
+    /// tracker's accuracy at the end, the mean position NEES (2 dof) of
+    /// the confirmed tracks against their nearest target after every
+    /// instant of the last two minutes, its sample count, and the
+    /// confirmed tracks at the end.
     fn misdeclared_run(
         truth: &[(f64, f64)],
         declared: &[(f64, f64)],
         enabled: bool,
     ) -> (Vec<RadarAccuracy>, f64, usize, usize) {
-        use crate::tracking::tests::{Target, scene};
+        use crate::tracking::tests::{Target, feed_by_instants, scene};
         use crate::tracking::{Tracker, TrackerConfig};
         let sites = [
             [-30_000.0, 0.0, 0.0],
@@ -840,20 +842,10 @@ mod tests {
         cfg.accuracy.enabled = enabled;
         cfg.registration.enabled = false;
         let mut tracker = Tracker::new(cfg).unwrap();
-        // The last two minutes: NEES of every confirmed track after each
-        // scan group.
         let (mut nees, mut n) = (0.0, 0usize);
-        let mut start = 0;
-        while start < plots.len() {
-            let end = start
-                + plots[start..]
-                    .iter()
-                    .take_while(|p| p.t == plots[start].t)
-                    .count();
-            tracker.process(&plots[start..end]).unwrap();
-            start = end;
-            if plots[end - 1].t < 480.0 {
-                continue;
+        feed_by_instants(&mut tracker, &plots, |tracker, t| {
+            if t < 480.0 {
+                return;
             }
             for tr in tracker.confirmed_tracks() {
                 let (k, _) = targets
@@ -876,7 +868,7 @@ mod tests {
                 nees += (e.transpose() * cov.try_inverse().unwrap() * e)[0];
                 n += 1;
             }
-        }
+        });
         let tracks = tracker.confirmed_count();
         (tracker.accuracy(), nees / n as f64, n, tracks)
     }

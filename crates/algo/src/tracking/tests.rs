@@ -138,10 +138,13 @@ type Trace = Vec<(f64, [f64; 2])>;
 /// Per confirmed track id, its samples.
 type Samples = Vec<(u64, Trace)>;
 
-/// Feeds `plots` one time instant per call, checking every covariance, and
-/// returns per confirmed track id its (time, position) samples.
-fn run_by_instants(tracker: &mut Tracker, plots: &[Plot]) -> Samples {
-    let mut samples: Samples = Vec::new();
+/// Feeds `plots` (in time order) one time instant per call, calling
+/// `each` with the tracker and the instant after each.
+pub(super) fn feed_by_instants(
+    tracker: &mut Tracker,
+    plots: &[Plot],
+    mut each: impl FnMut(&Tracker, f64),
+) {
     let mut start = 0;
     while start < plots.len() {
         let end = start
@@ -151,8 +154,15 @@ fn run_by_instants(tracker: &mut Tracker, plots: &[Plot]) -> Samples {
                 .count();
         tracker.process(&plots[start..end]).unwrap();
         start = end;
-        record(tracker, &mut samples);
+        each(tracker, plots[end - 1].t);
     }
+}
+
+/// Feeds `plots` one time instant per call, checking every covariance, and
+/// returns per confirmed track id its (time, position) samples.
+fn run_by_instants(tracker: &mut Tracker, plots: &[Plot]) -> Samples {
+    let mut samples: Samples = Vec::new();
+    feed_by_instants(tracker, plots, |tr, _| record(tr, &mut samples));
     tracker.flush().unwrap();
     record(tracker, &mut samples);
     samples
