@@ -66,10 +66,16 @@
 //! the other way round, so the estimate moves toward the true σ; at the
 //! true σ the prediction is consistent and σ̂² is unbiased.
 //!
+//! **Convergence.** An estimate is applied after [`MIN_SAMPLES`] plots
+//! once σ(σ̂) ≤ [`CONVERGED_RELATIVE_SIGMA`] σ̂, or once it lies more
+//! than [`DECLARED_SIGMAS`] σ(σ̂) from the declared σ (a radar declared
+//! three times too accurate is known to be wrong long before its σ is
+//! known to 10 %).
+//!
 //! The detection probability and the clutter density are not estimated:
-//! the tracker judges misses from the beam's sweep without a coverage
-//! map, so a miss outside a radar's real coverage would read as a low
-//! detection probability.
+//! the tracker judges a sweep's misses against a track's last update by
+//! any radar, without a coverage map, so its misses are not one radar's;
+//! a per-radar P_D needs each track's last hit per radar.
 
 use nalgebra::{DMatrix, DVector};
 
