@@ -35,8 +35,8 @@
 //! it learns again), a flat datum and no data. Format 8 adds, at the
 //! end, the accuracy estimator's configuration (on, time constant, pinned
 //! radars) and per radar its data (last time; per component the decayed
-//! count, sums of the innovation, the information and the excess, and
-//! the winsorised count;
+//! count, sums of the innovation, the information, the excess and the
+//! sandwich variance's, and the winsorised count;
 //! [`algo::tracking::accuracy`]); formats 1 to 7 read it off (the
 //! declared σ applied, as that release did) without data.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
@@ -126,6 +126,7 @@ fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
         w.opt(d.t, Writer::f64);
         for k in &d.components {
             w.f64_run(&[k.weight, k.sum, k.information, k.excess]);
+            w.f64_run(&k.sandwich);
             w.u64(k.clipped);
         }
     }
@@ -155,6 +156,7 @@ fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), 
                     sum,
                     information,
                     excess,
+                    sandwich: r.f64_run::<3>()?,
                     clipped: r.u64()?,
                 };
             }
