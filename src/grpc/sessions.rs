@@ -12,8 +12,8 @@ use super::{
     correlation::{correlate_input, finite, pair_result, sample_in, system_track, track_ref},
     error::to_status,
     plot_fusion::{
-        asterix_in, asterix_out, bias_out, counters_out, plots_in, spec_in as plot_spec_in,
-        track_out,
+        accuracy_out, asterix_in, asterix_out, bias_out, counters_out, plots_in,
+        spec_in as plot_spec_in, track_out,
     },
 };
 use crate::{
@@ -174,11 +174,7 @@ fn plot_update_out(u: Update<pf::BatchUpdate>) -> pb::BatchUpdate {
             late_within_lag: b.late_within_lag,
             corrected_from_t: b.corrected_from_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
-            accuracy: b
-                .accuracy
-                .into_iter()
-                .map(super::plot_fusion::accuracy_out)
-                .collect(),
+            accuracy: b.accuracy.into_iter().map(accuracy_out).collect(),
             tracks: b
                 .tracks
                 .into_iter()
@@ -256,11 +252,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> pb::SessionState {
             approximate_from: b.approximate_from,
             late_before_t: b.late_before_t,
             registration: b.registration.into_iter().map(bias_out).collect(),
-            accuracy: b
-                .accuracy
-                .into_iter()
-                .map(super::plot_fusion::accuracy_out)
-                .collect(),
+            accuracy: b.accuracy.into_iter().map(accuracy_out).collect(),
             pressure_offset: b
                 .pressure_offset
                 .map(|o| super::plot_fusion::pressure_offset_out(*o)),

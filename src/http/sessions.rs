@@ -18,8 +18,8 @@ use super::{
     },
     plot_fusion::{
         AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, PlotIn, PlotRadar,
-        RadarBiasOut, TrackerCounters, TrackerOptions, asterix_in, asterix_out, bias_out,
-        cat062_out, counters_out, plots_in, spec_in, track_out,
+        RadarBiasOut, TrackerCounters, TrackerOptions, accuracy_out, asterix_in, asterix_out,
+        bias_out, cat062_out, counters_out, plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -559,7 +559,7 @@ pub(super) fn plot_update_out(u: Update<pf::BatchUpdate>) -> BatchUpdate {
             asterix: b.asterix.map(asterix_out),
             cat062: cat062_out(b.cat062),
             registration: b.registration.into_iter().map(bias_out).collect(),
-            accuracy: accuracy_out(b.accuracy),
+            accuracy: b.accuracy.into_iter().map(accuracy_out).collect(),
             plots: None,
         }),
         warnings: u.warnings,
@@ -627,7 +627,7 @@ fn plot_view_out(v: View<pf::SessionView>) -> SessionState {
             counters: counters_out(b.counters),
             tracks: b.tracks.into_iter().map(track_out).collect(),
             registration: b.registration.into_iter().map(bias_out).collect(),
-            accuracy: accuracy_out(b.accuracy),
+            accuracy: b.accuracy.into_iter().map(accuracy_out).collect(),
             pressure_offset: b
                 .pressure_offset
                 .map(|o| super::plot_fusion::pressure_offset_out(*o)),
@@ -826,12 +826,4 @@ pub async fn push(
                 .await?,
         ),
     }))
-}
-
-fn accuracy_out(
-    a: Vec<service::plot_fusion::RadarAccuracyView>,
-) -> Vec<super::plot_fusion::RadarAccuracyOut> {
-    a.into_iter()
-        .map(super::plot_fusion::accuracy_out)
-        .collect()
 }

@@ -494,13 +494,13 @@ mod tests {
         assert!(outside);
     }
 
-    #[test]
-    fn long_jobs_hold_their_lanes_and_new_work_goes_around_them() {
-        // A private pool of two lanes, both given a job that waits on a
-        // gate: once LONG_JOB has passed, both are held.
-        let lanes = Lanes::start(2);
-        let gate = Arc::new((Mutex::new(false), Condvar::new()));
-        for _ in 0..2 {
+    /// A gate the jobs of [`hold_every_lane`] wait on until [`open`].
+    type Gate = Arc<(Mutex<bool>, Condvar)>;
+
+    /// Gives each of `lanes`' lanes a job that waits on the returned gate.
+    fn hold_every_lane(lanes: &Lanes) -> Gate {
+        let gate: Gate = Arc::new((Mutex::new(false), Condvar::new()));
+        for _ in 0..lanes.started.len() {
             let gate = Arc::clone(&gate);
             lanes.push(Box::new(move || {
                 let (open, cv) = &*gate;
@@ -510,13 +510,27 @@ mod tests {
                 }
             }));
         }
+        gate
+    }
+
+    /// Lets the gate's jobs end.
+    fn open(gate: &Gate) {
+        *gate.0.lock().unwrap() = true;
+        gate.1.notify_all();
+    }
+
+    #[test]
+    fn long_jobs_hold_their_lanes_and_new_work_goes_around_them() {
+        // A private pool of two lanes, both given a job that waits on a
+        // gate: once LONG_JOB has passed, both are held.
+        let lanes = Lanes::start(2);
+        let gate = hold_every_lane(&lanes);
         let deadline = Instant::now() + Duration::from_secs(10);
         while !lanes.all_held() {
             assert!(Instant::now() < deadline, "the lanes never counted as held");
             std::thread::sleep(LONG_JOB / 2);
         }
-        *gate.0.lock().unwrap() = true;
-        gate.1.notify_all();
+        open(&gate);
         while lanes.started.iter().any(|s| s.load(Ordering::Relaxed) != 0) {
             assert!(Instant::now() < deadline, "the lanes never finished");
             std::thread::sleep(Duration::from_millis(1));
@@ -595,17 +609,7 @@ mod tests {
         // Hold every lane of the process with a job that waits on a gate
         // (other tests' jobs go to the blocking pool meanwhile).
         let lanes = Lanes::global();
-        let gate = Arc::new((Mutex::new(false), Condvar::new()));
-        for _ in 0..lanes.started.len() {
-            let gate = Arc::clone(&gate);
-            lanes.push(Box::new(move || {
-                let (open, cv) = &*gate;
-                let mut o = open.lock().unwrap();
-                while !*o {
-                    o = cv.wait(o).unwrap();
-                }
-            }));
-        }
+        let gate = hold_every_lane(lanes);
         let deadline = Instant::now() + Duration::from_secs(60);
         while !lanes.all_held() {
             assert!(Instant::now() < deadline, "the lanes never counted as held");
@@ -617,8 +621,7 @@ mod tests {
         // Under a bound of one: it runs there, and gives its place back.
         let one = Arc::new(BlockingBound::new(1, "FUSION_MAX_BLOCKING_JOBS"));
         let ran = admitted(Admitted::new((), Arc::clone(&one)), run(|| 2)).await;
-        *gate.0.lock().unwrap() = true;
-        gate.1.notify_all();
+        open(&gate);
         assert!(
             matches!(&refused, Err(ServiceError::Overloaded(m)) if m.contains("FUSION_MAX_BLOCKING_JOBS")),
             "{refused:?}"

@@ -84,7 +84,7 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
 use crate::kalman::PositionLayout;
-use crate::polar::{MIN_HORIZONTAL_RANGE, azimuth_of, wrap_angle};
+use crate::polar::{polar_measurement_model, wrap_angle};
 use crate::tracking::config::{Plot, RadarSpec};
 
 /// The components: range (m), azimuth (rad), elevation (rad), radial
@@ -359,14 +359,11 @@ pub fn innovation(
         x[layout.y] - site[1],
         layout.z.map_or(0.0, |k| x[k] - site[2]),
     ];
-    let [e, n, u] = rel;
-    let rho2 = e * e + n * n;
-    let rho = rho2.sqrt();
-    if rho.is_nan() || rho < MIN_HORIZONTAL_RANGE {
-        return None;
-    }
-    let r2 = rho2 + u * u;
-    let r = r2.sqrt();
+    let with_elevation =
+        plot.elevation.is_some() && radar.sigma_elevation.is_some() && layout.z.is_some();
+    // The EKF's model: h = [r, az(, el)] and ∂h/∂(e, n, u); degenerate at
+    // the site (azimuth undefined).
+    let (h, j) = polar_measurement_model(rel, with_elevation).ok()?;
     // Rows of H over the state (sparse: position and velocity columns).
     let quad = |row: &[(usize, f64)]| -> f64 {
         row.iter()
@@ -380,17 +377,15 @@ pub fn innovation(
             .enumerate()
             .filter_map(|(k, c)| c.map(|c| (k, c)))
     };
-    row.extend(positions().map(|(k, c)| (c, rel[k] / r)));
-    out.components[RANGE] = Some((plot.range - r, quad(&row)));
-    row.clear();
-    let ja = [n / rho2, -e / rho2, 0.0];
-    row.extend(positions().map(|(k, c)| (c, ja[k])));
-    out.components[AZIMUTH] = Some((wrap_angle(plot.azimuth - azimuth_of(e, n)), quad(&row)));
-    if let (Some(el), Some(_), Some(_)) = (plot.elevation, radar.sigma_elevation, layout.z) {
+    let mut row_of = |i: usize| {
         row.clear();
-        let je = [-e * u / (r2 * rho), -n * u / (r2 * rho), rho / r2];
-        row.extend(positions().map(|(k, c)| (c, je[k])));
-        out.components[ELEVATION] = Some((el - u.atan2(rho), quad(&row)));
+        row.extend(positions().map(|(k, c)| (c, j[(i, k)])));
+        quad(&row)
+    };
+    out.components[RANGE] = Some((plot.range - h[0], row_of(0)));
+    out.components[AZIMUTH] = Some((wrap_angle(plot.azimuth - h[1]), row_of(1)));
+    if let (Some(el), true) = (plot.elevation, with_elevation) {
+        out.components[ELEVATION] = Some((el - h[2], row_of(2)));
     }
     if let (Some(v), Some(_), true) = (
         plot.radial_velocity,
@@ -402,6 +397,8 @@ pub fn innovation(
             x[layout.y + 1],
             layout.z.map_or(0.0, |k| x[k + 1]),
         ];
+        let r = h[0];
+        let r2 = rel.iter().map(|v| v * v).sum::<f64>();
         let rdot = (0..3).map(|k| rel[k] * vel[k]).sum::<f64>() / r;
         row.clear();
         for (k, c) in positions() {

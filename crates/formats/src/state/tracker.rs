@@ -115,12 +115,9 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
 }
 
 fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
-    w.u8(u8::from(c.enabled));
+    w.bool(c.enabled);
     w.f64(c.time_constant);
-    w.usize(c.pinned.len());
-    for &r in &c.pinned {
-        w.usize(r);
-    }
+    radars(w, &c.pinned);
     w.usize(data.radars.len());
     for d in &data.radars {
         w.opt(d.t, Writer::f64);
@@ -133,14 +130,9 @@ fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
 }
 
 fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), FormatError> {
-    let enabled = match r.u8()? {
-        0 => false,
-        1 => true,
-        _ => return Err(corrupt("a flag not 0 or 1")),
-    };
+    let enabled = r.bool()?;
     let time_constant = r.f64()?;
-    let n = r.len(8)?;
-    let pinned = (0..n).map(|_| r.usize()).collect::<Result<_, _>>()?;
+    let pinned = read_radars(r)?;
     let n = r.len(8)?;
     let radars = (0..n)
         .map(|_| {
@@ -196,19 +188,13 @@ fn mode_c_height(w: &mut Writer, c: &TrackerConfig, data: &PressureOffset) {
 fn flags(w: &mut Writer, v: &[bool]) {
     w.usize(v.len());
     for &b in v {
-        w.u8(u8::from(b));
+        w.bool(b);
     }
 }
 
 fn read_flags(r: &mut Reader<'_>) -> Result<Vec<bool>, FormatError> {
     let n = r.len(1)?;
-    (0..n)
-        .map(|_| match r.u8()? {
-            0 => Ok(false),
-            1 => Ok(true),
-            _ => Err(corrupt("a flag not 0 or 1")),
-        })
-        .collect()
+    (0..n).map(|_| r.bool()).collect()
 }
 
 fn read_mode_c_height(

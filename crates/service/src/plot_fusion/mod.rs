@@ -159,6 +159,20 @@ pub struct RadarAccuracyView {
     pub pinned: bool,
 }
 
+impl RadarAccuracyView {
+    /// Each σ by its wire name (`range_m`, `azimuth_deg`, `elevation_deg`,
+    /// `radial_velocity_mps`: the radar's option is `sigma_` and the
+    /// name), `None` for a component the radar does not measure.
+    pub fn components(&self) -> [(&'static str, Option<&SigmaView>); 4] {
+        [
+            ("range_m", Some(&self.range_m)),
+            ("azimuth_deg", Some(&self.azimuth_deg)),
+            ("elevation_deg", self.elevation_deg.as_ref()),
+            ("radial_velocity_mps", self.radial_velocity_mps.as_ref()),
+        ]
+    }
+}
+
 /// The pressure-to-geometric offset as a 3D tracker applies it to Mode C
 /// (geometric height = h_p + offset_m + slope·h_p).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -871,19 +871,16 @@ pub const ACCURACY_WARNING_FACTOR: f64 = 1.5;
 pub fn accuracy_warnings(config: &TrackerConfig, views: &[RadarAccuracyView]) -> Vec<String> {
     let mut out = Vec::new();
     for (r, a) in views.iter().enumerate() {
-        let named = [
-            ("range", "sigma_range_m", " m", Some(a.range_m)),
-            ("azimuth", "sigma_azimuth_deg", "°", Some(a.azimuth_deg)),
-            ("elevation", "sigma_elevation_deg", "°", a.elevation_deg),
-            (
-                "radial velocity",
-                "sigma_radial_velocity_mps",
-                " m/s",
-                a.radial_velocity_mps,
-            ),
+        // In the order of `RadarAccuracyView::components`.
+        let words = [
+            ("range", " m"),
+            ("azimuth", "°"),
+            ("elevation", "°"),
+            ("radial velocity", " m/s"),
         ];
-        for (what, option, unit, s) in named {
+        for ((name, s), (what, unit)) in a.components().into_iter().zip(words) {
             let Some(s) = s else { continue };
+            let option = format!("sigma_{name}");
             let (Some(est), true) = (s.estimated, s.converged) else {
                 continue;
             };

@@ -129,16 +129,6 @@ const SIGMA_FAMILIES: &[SigmaFamily] = &[
     },
 ];
 
-/// A radar's σ by component name.
-fn components(a: &RadarAccuracyView) -> [(&'static str, Option<&SigmaView>); 4] {
-    [
-        ("range_m", Some(&a.range_m)),
-        ("azimuth_deg", Some(&a.azimuth_deg)),
-        ("elevation_deg", a.elevation_deg.as_ref()),
-        ("radial_velocity_mps", a.radial_velocity_mps.as_ref()),
-    ]
-}
-
 impl RadarGauges {
     /// How long a session's gauges stay without a batch applied here.
     pub const RETAIN: Duration = Duration::from_secs(15 * 60);
@@ -229,7 +219,7 @@ impl RadarGauges {
             for key in &keys {
                 let (_, _, accuracy) = &sessions[*key];
                 for a in accuracy {
-                    for (component, s) in components(a) {
+                    for (component, s) in a.components() {
                         if let Some(v) = s.and_then(|s| (f.value)(s)) {
                             let _ = writeln!(
                                 out,

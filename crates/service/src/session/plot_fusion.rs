@@ -983,12 +983,10 @@ impl SessionKind for PlotFusionSession {
         w.usize(u.accuracy.len());
         for a in &u.accuracy {
             w.str(&a.radar);
-            w.u8(u8::from(a.pinned));
-            for s in [Some(a.range_m), Some(a.azimuth_deg)] {
-                encode_sigma(w, s);
+            w.bool(a.pinned);
+            for (_, s) in a.components() {
+                encode_sigma(w, s.copied());
             }
-            encode_sigma(w, a.elevation_deg);
-            encode_sigma(w, a.radial_velocity_mps);
         }
     }
 
@@ -1086,7 +1084,7 @@ impl SessionKind for PlotFusionSession {
             (0..n)
                 .map(|_| {
                     let radar = r.str()?;
-                    let pinned = r.u8()? != 0;
+                    let pinned = r.bool()?;
                     let missing = || corrupt("a radar's range or azimuth accuracy");
                     Ok(RadarAccuracyView {
                         radar,
@@ -1125,7 +1123,7 @@ fn encode_sigma(w: &mut Writer, s: Option<SigmaView>) {
         w.f64_run(&[s.declared, s.plots, s.applied]);
         w.opt(s.estimated, Writer::f64);
         w.opt(s.sigma, Writer::f64);
-        w.u8(u8::from(s.converged));
+        w.bool(s.converged);
         w.u64(s.clipped);
     });
 }
@@ -1139,7 +1137,7 @@ fn decode_sigma(r: &mut Reader<'_>) -> Result<Option<SigmaView>, FormatError> {
             applied,
             estimated: r.opt(Reader::f64)?,
             sigma: r.opt(Reader::f64)?,
-            converged: r.u8()? != 0,
+            converged: r.bool()?,
             clipped: r.u64()?,
         })
     })
