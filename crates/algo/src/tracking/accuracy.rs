@@ -75,10 +75,38 @@
 //! three times too accurate is known to be wrong long before its σ is
 //! known to 10 %).
 //!
-//! The detection probability and the clutter density are not estimated:
-//! the tracker judges a sweep's misses against a track's last update by
-//! any radar, without a coverage map, so its misses are not one radar's;
-//! a per-radar P_D needs each track's last hit per radar.
+//! # The detection probability
+//!
+//! Each confirmed track keeps, per radar, the time of that radar's last
+//! hit ([`super::track::RadarHit`]). A hit by a later scan, k =
+//! round(Δt / scan period) scans after the radar's previous hit of the
+//! track, closes k trials of the radar's P_D with one detection: the
+//! scans between the two hits are the misses. From a track's first hit by
+//! the radar on, every scan is a Bernoulli trial of P_D whatever came
+//! before, so the counts over the intervals estimate it without a
+//! coverage map and without the sweeps' geometry (frames of a whole scan
+//! and beam-timed plots alike). What they leave out is biased: the misses
+//! after a track's last hit by the radar (it left the coverage, or the
+//! track ended: (1 − P_D)/P_D scans on average, against the hundreds a
+//! track lives), and an interval longer than [`MAX_GAP_SCANS`] (the track
+//! was out of the radar's coverage and came back; a run of that many
+//! misses has probability (1 − P_D)^10, 10⁻⁴ at P_D = 0.6). Both raise the
+//! estimate a little; a hit whose plot arrived after a later one of the
+//! radar (a late plot) closes no interval. The scan period is the declared
+//! one: an interval of k scans is counted right while the declared period
+//! is within 1/(2k) of the real one. The estimate is the posterior mean
+//! under a uniform prior, P̂ = (d + 1)/(n + 2) over the decayed counts n
+//! of trials and d of detections, with σ² = P̂(1 − P̂)/(n + 3); it is
+//! applied (within [[`MIN_DETECTION`], [`MAX_DETECTION`]]) after
+//! [`MIN_SAMPLES`] trials once σ ≤ [`CONVERGED_RELATIVE_SIGMA`] of the
+//! smaller of P̂ and 1 − P̂, or once it lies more than
+//! [`DECLARED_SIGMAS`] σ from the declared P_D, in the JPDA's weights of
+//! the radar's plots.
+//!
+//! The clutter density is not estimated: a track's gate holds λV ≈ 10⁻⁶
+//! false plots at the densities of surveillance radars, so the gates do
+//! not identify it, and the plots no track takes mix clutter with new
+//! aircraft over an area no coverage map bounds.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -125,6 +153,13 @@ const CLIPPED_MEAN: f64 = 0.995_007_278;
 /// The applied σ stays within [declared / LIMIT, declared × LIMIT]: an
 /// estimate at the bound says so in a warning.
 pub const LIMIT: f64 = 10.0;
+/// An interval between two hits of a track by a radar longer than this
+/// many scans is not counted (the track was out of the radar's coverage).
+pub const MAX_GAP_SCANS: u32 = 10;
+/// The applied detection probability stays at or above this …
+pub const MIN_DETECTION: f64 = 0.05;
+/// … and at or below this (a P_D of 1 would rule a miss out).
+pub const MAX_DETECTION: f64 = 0.999;
 
 /// The accuracy estimator's options.
 #[derive(Debug, Clone, PartialEq)]
@@ -188,13 +223,71 @@ pub struct ComponentData {
 }
 
 /// One radar's data: the four components and the time of its last plot
-/// learnt from (the decay's reference).
+/// learnt from (the decay's reference), and its detections.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RadarAccuracyData {
     /// Range, azimuth, elevation, radial velocity ([`RANGE`] …).
     pub components: [ComponentData; COMPONENTS],
     /// Time of the last plot learnt from.
     pub t: Option<f64>,
+    /// The detection probability's trials.
+    pub detection: DetectionData,
+}
+
+/// A radar's detection trials (see the module header), each count decayed
+/// by exp(−Δt/τ).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DetectionData {
+    /// Σ w over the trials.
+    pub trials: f64,
+    /// Σ w over the trials that found the track.
+    pub detections: f64,
+    /// Time of the last trials (the decay's reference).
+    pub t: Option<f64>,
+}
+
+impl DetectionData {
+    /// Adds `trials`, `detections` of them, at time `t`.
+    fn observe(&mut self, tau: f64, t: f64, trials: u32, detections: u32) {
+        if let Some(t0) = self.t {
+            if t > t0 {
+                let factor = (-(t - t0) / tau).exp();
+                self.trials *= factor;
+                self.detections *= factor;
+            }
+        }
+        self.t = Some(self.t.map_or(t, |t0| t0.max(t)));
+        self.trials += f64::from(trials);
+        self.detections += f64::from(detections);
+    }
+
+    /// The estimate against the declared P_D.
+    fn estimate(&self, declared: f64, applies: bool) -> SigmaEstimate {
+        let n = self.trials;
+        let (estimate, sigma) = if n > 0.0 {
+            let p = (self.detections + 1.0) / (n + 2.0);
+            (p, (p * (1.0 - p) / (n + 3.0)).sqrt())
+        } else {
+            (declared, f64::INFINITY)
+        };
+        let converged = n >= MIN_SAMPLES
+            && (sigma <= CONVERGED_RELATIVE_SIGMA * estimate.min(1.0 - estimate)
+                || (estimate - declared).abs() > DECLARED_SIGMAS * sigma);
+        let applied = if converged && applies {
+            estimate.clamp(MIN_DETECTION, MAX_DETECTION)
+        } else {
+            declared
+        };
+        SigmaEstimate {
+            declared,
+            estimate,
+            sigma,
+            samples: n,
+            converged,
+            clipped: 0,
+            applied,
+        }
+    }
 }
 
 /// A component's σ: declared, estimated, and the one applied.
@@ -229,6 +322,9 @@ pub struct RadarAccuracy {
     pub elevation: Option<SigmaEstimate>,
     /// Radial-velocity σ (m/s).
     pub radial_velocity: Option<SigmaEstimate>,
+    /// The detection probability (its `samples` are the trials; nothing
+    /// is winsorised).
+    pub detection_probability: SigmaEstimate,
     /// The declared σ are applied whatever the data say.
     pub pinned: bool,
 }
@@ -454,7 +550,10 @@ impl AccuracyState {
                         && c.sandwich.iter().all(|v| v.is_finite())
                         && c.sandwich[0] >= 0.0
                         && c.sandwich[2] >= 0.0
-                });
+                })
+                && d.detection.t.is_none_or(f64::is_finite)
+                && d.detection.trials.is_finite()
+                && (0.0..=d.detection.trials).contains(&d.detection.detections);
             if !ok {
                 return Err(bad(format!("accuracy data of radar {r} not finite")));
             }
@@ -476,6 +575,9 @@ impl AccuracyState {
             radial_velocity: declared
                 .sigma_radial_velocity
                 .map(|s| d[RADIAL_VELOCITY].estimate(s, applies)),
+            detection_probability: self.radars[r]
+                .detection
+                .estimate(declared.detection_probability, applies),
             pinned,
         }
     }
@@ -488,7 +590,21 @@ impl AccuracyState {
         spec.sigma_azimuth = a.azimuth.applied;
         spec.sigma_elevation = a.elevation.map(|s| s.applied);
         spec.sigma_radial_velocity = a.radial_velocity.map(|s| s.applied);
+        spec.detection_probability = a.detection_probability.applied;
         spec
+    }
+
+    /// Adds the intervals closed by radar `r`'s hits of a frame at time
+    /// `t`: each the scans since the radar's previous hit of the track (k
+    /// trials, one detection; none beyond [`MAX_GAP_SCANS`]).
+    pub fn detections(&mut self, cfg: &AccuracyConfig, r: usize, t: f64, scans: &[u32]) {
+        let counted = scans.iter().filter(|&&k| (1..=MAX_GAP_SCANS).contains(&k));
+        let (trials, detections) = counted.fold((0, 0), |(n, d), &k| (n + k, d + 1));
+        if trials > 0 {
+            self.radars[r]
+                .detection
+                .observe(cfg.time_constant, t, trials, detections);
+        }
     }
 
     /// Learns from radar `r`'s innovations at time `t` (the data decayed

@@ -36,7 +36,7 @@ use crate::assignment;
 use crate::error::AlgoError;
 use crate::gaussian::{mahalanobis_sq, symmetrize};
 use crate::kalman;
-use crate::tracking::config::Plot;
+use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
@@ -278,6 +278,7 @@ impl Initiator {
                     track.x = u.x;
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
+                    track.hit_by_plot(plot, &cfg.radars);
                     track.last_plot = plot.measured;
                     track.identity.observe_measured(plot.measured.as_ref());
                 }
@@ -350,7 +351,7 @@ impl Initiator {
                     continue;
                 }
                 let (x, p) = two_point(early, late, dt, cfg);
-                let track = new_tentative(next_id, x, p, at, early, late);
+                let track = new_tentative(next_id, x, p, at, early, late, &cfg.radars);
                 self.index.moved(self.tentatives.len(), &track);
                 self.tentatives.push(track);
                 out.started += 1;
@@ -593,6 +594,7 @@ fn new_tentative(
     t: f64,
     root: &CartesianPlot,
     plot: &CartesianPlot,
+    radars_spec: &[RadarSpec],
 ) -> Track {
     let id = *next_id;
     *next_id += 1;
@@ -600,7 +602,7 @@ fn new_tentative(
     radars.extend(&plot.radars);
     radars.sort_unstable();
     radars.dedup();
-    Track {
+    let mut track = Track {
         id,
         x,
         p,
@@ -621,7 +623,11 @@ fn new_tentative(
             identity.observe_measured(plot.measured.as_ref());
             identity
         },
-    }
+        detections: Vec::new(),
+    };
+    track.hit_by_plot(root, radars_spec);
+    track.hit_by_plot(plot, radars_spec);
+    track
 }
 
 /// Whether a plot may extend a tentative track: not another Mode S

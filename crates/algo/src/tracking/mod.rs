@@ -73,7 +73,7 @@ pub use config::{
 pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate};
 pub use identity::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentity};
 pub use state::{TrackerParts, TrackerState};
-pub use track::{Track, TrackOutput, TrackStatus};
+pub use track::{RadarHit, Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 
 use std::{ops::ControlFlow, sync::Arc};
@@ -595,6 +595,14 @@ impl Tracker {
             self.registrar
                 .learn_serial(&self.config, &self.applied, &self.tracks, index, &hits)?;
         }
+        let scans = &self.scratch.0.scans_since_hit;
+        if self.config.accuracy.enabled && !scans.is_empty() {
+            let cfg = &self.config;
+            self.accuracy.detections(&cfg.accuracy, index, t, scans);
+            self.applied[index] = self
+                .accuracy
+                .applied(&cfg.accuracy, index, &cfg.radars[index]);
+        }
         if !self.scratch.0.innovations.is_empty() {
             let cfg = &self.config;
             self.accuracy.learn(
@@ -897,6 +905,7 @@ impl Tracker {
             .undefined
             .extend(outcome.undefined.iter().map(|&c| self.tracks[slots[c]].id));
         scratch.innovations.clear();
+        scratch.scans_since_hit.clear();
         if let (
             Source::Radar {
                 spec, plots: raw, ..
@@ -991,6 +1000,11 @@ impl Tracker {
                 }
                 if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
+                    scratch.scans_since_hit.extend(
+                        track
+                            .hit_by_plot(&plots[j], &self.config.radars)
+                            .map(|h| h.1),
+                    );
                     track.identity.observe_measured(plots[j].measured.as_ref());
                 }
                 self.index.moved(k, track);
@@ -1037,6 +1051,11 @@ impl Tracker {
                     } else {
                         track.record(Some(plots[j].radars.clone()));
                     }
+                    scratch.scans_since_hit.extend(
+                        track
+                            .hit_by_plot(&plots[j], &self.config.radars)
+                            .map(|h| h.1),
+                    );
                     track.last_plot = plots[j].measured;
                     track.identity.observe_measured(plots[j].measured.as_ref());
                 }
@@ -1260,6 +1279,10 @@ struct Scratch {
     /// Serial mode: the frame's innovations the accuracy estimator learns
     /// from (plots that updated a confirmed track without ambiguity).
     innovations: Vec<accuracy::Innovation>,
+    /// The frame's hits of confirmed tracks by a later scan than the
+    /// radar's previous hit of the track: the scans since (the detection
+    /// probability's trials, [`accuracy`]).
+    scans_since_hit: Vec<u32>,
 }
 
 /// Serial mode: the innovations of the radar's plots (`spec`, corrected

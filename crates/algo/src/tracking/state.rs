@@ -240,6 +240,16 @@ impl Tracker {
             if t.started.is_some_and(|s| !s.is_finite()) {
                 return Err(bad(format!("track {} start time is not finite", t.id)));
             }
+            let hits = &t.detections;
+            radars(&hits.iter().map(|h| h.radar).collect::<Vec<_>>())?;
+            if hits.windows(2).any(|w| w[1].radar <= w[0].radar)
+                || hits.iter().any(|h| !h.last.is_finite())
+            {
+                return Err(bad(format!(
+                    "track {}'s hits per radar are not ascending by radar, or not finite",
+                    t.id
+                )));
+            }
             if let Some(p) = &t.last_plot {
                 c.validate_plot(p)?;
             }

@@ -13,7 +13,12 @@
 //! frame when its predicted azimuth lies in that sector moved back (against
 //! the rotation) by a margin (3 σ_θ + 0.5°), so that its own plot,
 //! wherever the noise put it, has arrived before; it then gets a miss only
-//! if no plot updated it in the last half scan of the radar. A plot that
+//! if no plot updated it since halfway between the beam's previous pass
+//! over it (at the latest t − period) and this one (at the earliest t₀):
+//! since (t − period + t₀)/2, which is half a scan before t when the
+//! frames are dense and almost a whole one when the beam swept a wide
+//! empty sector before this frame (a plot of the sector's beginning
+//! arrived then, more than half a scan ago). A plot that
 //! updates a track is a hit in whatever frame it comes. Frames that swept
 //! a whole turn (t − t₀ ≥ 0.95 period, or a radar's first frame) judge
 //! every track, as do sweeps that fit neither way.
@@ -30,7 +35,9 @@ pub(crate) enum View {
     /// Every track (a whole turn, or parallel mode).
     All,
     /// Tracks whose azimuth from `site` lies clockwise from `start`
-    /// within `width` (rad); a miss needs no update since `quiet_since`.
+    /// within `width` (rad); a miss needs no update since `quiet_since`,
+    /// the time between the beam's previous pass over the sector and this
+    /// one.
     Sector {
         site: [f64; 3],
         start: f64,
@@ -74,7 +81,7 @@ impl View {
             site: radar.site,
             start,
             width,
-            quiet_since: t - 0.5 * period,
+            quiet_since: 0.5 * (t - period + t0),
         }
     }
 
@@ -87,16 +94,20 @@ impl View {
     pub(crate) fn misses_at(&self, e: f64, n: f64, last_update: f64) -> bool {
         match *self {
             View::All => true,
+            View::Sector { quiet_since, .. } => last_update < quiet_since && self.swept(e, n),
+        }
+    }
+
+    /// Whether a target at (e, n) lies in the swept sector (never in a
+    /// whole-turn view, which knows no sweep).
+    pub(crate) fn swept(&self, e: f64, n: f64) -> bool {
+        match *self {
+            View::All => false,
             View::Sector {
-                site,
-                start,
-                width,
-                quiet_since,
+                site, start, width, ..
             } => {
-                last_update < quiet_since && {
-                    let az = (e - site[0]).atan2(n - site[1]);
-                    (az - start).rem_euclid(TAU) <= width
-                }
+                let az = (e - site[0]).atan2(n - site[1]);
+                (az - start).rem_euclid(TAU) <= width
             }
         }
     }
@@ -141,8 +152,11 @@ mod tests {
         ] {
             assert_eq!(v.misses(&at(deg), -10.0), judged, "{deg}°");
         }
-        // Updated within the last half scan (after t = −1.5 s): no miss.
-        assert!(!v.misses(&at(30.0), -1.0));
+        // Updated since halfway between the previous pass (at the latest
+        // t − period = −3.5 s) and this one (at the earliest t₀ = 0):
+        // after −1.75 s, no miss.
+        assert!(!v.misses(&at(30.0), -1.7));
+        assert!(v.misses(&at(30.0), -1.8));
         // Across north: from 350° to 20°.
         let v = View::of_frame(
             &r,

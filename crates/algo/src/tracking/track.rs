@@ -9,7 +9,8 @@ use crate::error::AlgoError;
 use crate::gating::chi2_threshold;
 use crate::kalman;
 use crate::motion::cv_transition;
-use crate::tracking::config::{Imm, NoiseModel, Plot};
+use crate::tracking::config::{Imm, NoiseModel, Plot, RadarSpec};
+use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::identity::TrackIdentity;
 use crate::tracking::predictor::{ModeState, Predictor, process_noise};
 
@@ -109,6 +110,20 @@ pub struct Track {
     /// What the track has learnt of its aircraft's identity from the
     /// secondary plots that updated it.
     pub identity: TrackIdentity,
+    /// Per radar that has updated it (ascending radar): the time of its
+    /// last hit, for the radar's detection probability
+    /// ([`super::accuracy`]). Empty for a track stored by a release that
+    /// did not keep it.
+    pub detections: Vec<RadarHit>,
+}
+
+/// A track's last hit by one radar.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RadarHit {
+    /// The radar (index).
+    pub radar: usize,
+    /// Time of the latest hit (s).
+    pub last: f64,
 }
 
 impl Track {
@@ -131,7 +146,44 @@ impl Track {
             last_plot: None,
             modes: Vec::new(),
             identity: TrackIdentity::default(),
+            detections: Vec::new(),
         }
+    }
+
+    /// Records a hit by radar `radar` (scan period `period`) at time `t`
+    /// and returns the scans since the radar's previous hit,
+    /// round(Δt / period) ≥ 1, when this hit is a later scan's (Δt at
+    /// least half a period; an earlier or the same scan's hit, a split
+    /// plot, returns `None` and only moves the time forward).
+    pub(crate) fn hit_by(&mut self, radar: usize, t: f64, period: f64) -> Option<u32> {
+        match self.detections.binary_search_by_key(&radar, |h| h.radar) {
+            Ok(i) => {
+                let h = &mut self.detections[i];
+                let dt = t - h.last;
+                if dt > 0.0 {
+                    h.last = t;
+                }
+                (dt >= 0.5 * period).then(|| (dt / period).round().clamp(1.0, 1e9) as u32)
+            }
+            Err(i) => {
+                self.detections.insert(i, RadarHit { radar, last: t });
+                None
+            }
+        }
+    }
+
+    /// [`Track::hit_by`] of a frame's plot when it is one radar's plot
+    /// (its own time; a fused plot of parallel mode records none): the
+    /// radar and the scans since its previous hit.
+    pub(crate) fn hit_by_plot(
+        &mut self,
+        plot: &CartesianPlot,
+        radars: &[RadarSpec],
+    ) -> Option<(usize, u32)> {
+        let m = plot.measured.as_ref()?;
+        let spec = radars.get(m.radar)?;
+        self.hit_by(m.radar, m.t, spec.scan_period)
+            .map(|k| (m.radar, k))
     }
 
     /// Records a frame: a hit with the radars of the plot(s), or a miss.
@@ -227,6 +279,14 @@ impl Track {
         self.radars = new.radars;
         self.last_update = new.last_update;
         self.last_plot = new.last_plot;
+        // The radars' hits: the later of the two tracks' per radar.
+        for h in new.detections {
+            match self.detections.binary_search_by_key(&h.radar, |d| d.radar) {
+                Ok(i) if self.detections[i].last < h.last => self.detections[i] = h,
+                Ok(_) => {}
+                Err(i) => self.detections.insert(i, h),
+            }
+        }
         let (mine, theirs) = (&mut self.identity, new.identity);
         if theirs.altitude.is_some() {
             mine.altitude = theirs.altitude;

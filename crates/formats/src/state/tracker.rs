@@ -3,7 +3,7 @@
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
-//! Layout: magic `RFTK`, format version (u32, currently 8), the
+//! Layout: magic `RFTK`, format version (u32, currently 9), the
 //! configuration, then the state: confirmed tracks, roots, tentative
 //! tracks, pending plots, next id, last time, last instant, counters.
 //! Format 2 adds the predictor (`motion`) after the configuration, each
@@ -38,7 +38,11 @@
 //! count, sums of the innovation, the information, the excess and the
 //! sandwich variance's, and the winsorised count;
 //! [`algo::tracking::accuracy`]); formats 1 to 7 read it off (the
-//! declared σ applied, as that release did) without data.
+//! declared σ applied, as that release did) without data. Format 9 adds
+//! each track's last hit per radar after its identity
+//! and, at the end, each radar's detection trials (decayed trials and
+//! detections, last time); format 8 reads them as none (the detection
+//! probability is then learnt from the next scans on).
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -47,9 +51,9 @@
 use algo::jpda::{Config as JpdaConfig, Method};
 use algo::tracking::{
     CartesianPlot, Counters, Deletion, Identity, Imm, Initiation, Mode, Motion, MotionModel,
-    NoiseModel, Plot, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig, TrackerParts,
-    VelocityGate,
-    accuracy::{AccuracyConfig, AccuracyState, ComponentData, RadarAccuracyData},
+    NoiseModel, Plot, RadarHit, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig,
+    TrackerParts, VelocityGate,
+    accuracy::{AccuracyConfig, AccuracyState, ComponentData, DetectionData, RadarAccuracyData},
     height::{HeightDatum, ModeCHeight, PressureOffset},
     predictor::ModeState,
     registration::{BiasPrior, RegistrationConfig, RegistrationState},
@@ -63,16 +67,17 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 8;
+pub const FORMAT_VERSION: u32 = 9;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     encode_tracker_as(tr, FORMAT_VERSION)
 }
 
-/// The tracker in format 5 to 8 (5: without identities, 6: without
-/// Mode C heights, 7: without the accuracy estimator, as earlier releases
-/// wrote them; for the tests of older formats).
+/// The tracker in format 5 to 9 (5: without identities, 6: without
+/// Mode C heights, 7: without the accuracy estimator, 8: without the
+/// detection trials, as earlier releases wrote them; for the tests of
+/// older formats).
 pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     assert!((5..=FORMAT_VERSION).contains(&version));
     let ids = version >= TRACKER_FORMAT;
@@ -83,7 +88,7 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     config(&mut w, s.config);
     w.usize(s.tracks.len());
     for t in s.tracks {
-        track(&mut w, t, ids);
+        track(&mut w, t, version);
     }
     w.usize(s.roots.len());
     for r in s.roots {
@@ -91,7 +96,7 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     }
     w.usize(s.tentatives.len());
     for t in s.tentatives {
-        track(&mut w, t, ids);
+        track(&mut w, t, version);
     }
     w.usize(s.pending.len());
     for p in s.pending {
@@ -110,6 +115,13 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     }
     if version >= 8 {
         accuracy(&mut w, &s.config.accuracy, s.accuracy);
+    }
+    if version >= 9 {
+        for d in &s.accuracy.radars {
+            let d = &d.detection;
+            w.f64_run(&[d.trials, d.detections]);
+            w.opt(d.t, Writer::f64);
+        }
     }
     w.buf
 }
@@ -427,8 +439,18 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         (PressureOffset::default(), Vec::new())
     };
     let accuracy = if version >= 8 {
-        let (c, data) = read_accuracy(&mut r)?;
+        let (c, mut data) = read_accuracy(&mut r)?;
         config.accuracy = c;
+        if version >= 9 {
+            for d in &mut data.radars {
+                let [trials, detections] = r.f64_run::<2>()?;
+                d.detection = DetectionData {
+                    trials,
+                    detections,
+                    t: r.opt(Reader::f64)?,
+                };
+            }
+        }
         Some(data)
     } else {
         // A tracker of an earlier release applied the declared σ.
@@ -698,7 +720,8 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
     })
 }
 
-fn track(w: &mut Writer, t: &Track, ids: bool) {
+fn track(w: &mut Writer, t: &Track, version: u32) {
+    let ids = version >= TRACKER_FORMAT;
     w.u64(t.id);
     w.f64s(t.x.as_slice());
     w.f64s(t.p.as_slice());
@@ -720,6 +743,13 @@ fn track(w: &mut Writer, t: &Track, ids: bool) {
     w.opt(t.last_plot.as_ref(), |w, p| plot_as(w, p, ids));
     if ids {
         write_track_identity(w, &t.identity);
+    }
+    if version >= 9 {
+        w.usize(t.detections.len());
+        for h in &t.detections {
+            w.usize(h.radar);
+            w.f64(h.last);
+        }
     }
 }
 
@@ -766,6 +796,7 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
         started: None,
         last_plot: None,
         identity: TrackIdentity::default(),
+        detections: Vec::new(),
     };
     if version >= 3 {
         track.started = r.opt(Reader::f64)?;
@@ -773,6 +804,17 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
     }
     if version >= TRACKER_FORMAT {
         track.identity = read_track_identity(r)?;
+    }
+    if version >= 9 {
+        let n = r.len(8 + 8)?;
+        track.detections = (0..n)
+            .map(|_| {
+                Ok(RadarHit {
+                    radar: r.usize()?,
+                    last: r.f64()?,
+                })
+            })
+            .collect::<Result<_, FormatError>>()?;
     }
     Ok(track)
 }
@@ -858,6 +900,7 @@ fn read_radars(r: &mut Reader<'_>) -> Result<Vec<usize>, FormatError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::TAU;
 
     fn radar(site: [f64; 3], period: f64, doppler: bool) -> RadarSpec {
         RadarSpec {
@@ -1054,6 +1097,41 @@ mod tests {
         assert!(v7.state().accuracy.radars.iter().all(|d| d.t.is_none()));
     }
 
+    /// Format 9: the tracks' last hits per radar and the radars' detection
+    /// trials (beam-timed plots: each plot at scan start + period·θ/2π)
+    /// round-trip bit for bit and the decoded tracker continues as the
+    /// original; written as format 8 it reads back without them (learnt
+    /// again from the next scans).
+    #[test]
+    fn detection_trials_round_trip_and_continue() {
+        let cfg = config(false);
+        let mut all = plots(&cfg, 200.0);
+        for p in &mut all {
+            p.t += cfg.radars[p.radar].scan_period * p.azimuth.rem_euclid(TAU) / TAU;
+        }
+        all.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        let trials: Vec<f64> = a
+            .accuracy()
+            .iter()
+            .map(|r| r.detection_probability.samples)
+            .collect();
+        assert!(trials.iter().all(|&n| n > 0.0), "{trials:?}");
+        assert!(a.state().tracks.iter().all(|t| t.detections.len() == 2));
+        round_trips_and_continues(&mut a, rest);
+        let v8 = decode_tracker(&encode_tracker_as(&a, 8)).unwrap();
+        assert!(v8.state().tracks.iter().all(|t| t.detections.is_empty()));
+        assert!(
+            v8.state()
+                .accuracy
+                .radars
+                .iter()
+                .all(|d| d.detection == Default::default() && d.t.is_some())
+        );
+    }
+
     /// Chunks fed to a tracker that is encoded and decoded between them
     /// give the bytes of one call with every plot (cuts inside a radar's
     /// scan group included); the fixtures of earlier sessions are decoded
@@ -1112,6 +1190,7 @@ mod tests {
         for tr in parts.tracks.iter_mut().chain(&mut parts.tentatives) {
             tr.started = None;
             tr.last_plot = None;
+            tr.detections.clear();
         }
         for root in &mut parts.roots {
             root.measured = None;
@@ -1143,6 +1222,7 @@ mod tests {
         for tr in replayed.tracks.iter_mut().chain(&mut replayed.tentatives) {
             tr.started = None;
             tr.last_plot = None;
+            tr.detections.clear();
         }
         for root in &mut replayed.roots {
             root.measured = None;
@@ -1226,9 +1306,11 @@ mod tests {
         assert!(!t.state().tracks.is_empty());
         let bytes = encode_tracker(&t);
         assert_eq!(decode_tracker(&bytes).unwrap(), t);
-        // Format 5 (no identities: none here) reads back the same.
+        // Format 5 (no identities: none here) reads back the same, but
+        // for the tracks' hits per radar (format 9), as format 8 does.
         let v5 = encode_tracker_as(&t, 5);
-        assert_eq!(decode_tracker(&v5).unwrap(), t);
+        let v8 = decode_tracker(&encode_tracker_as(&t, 8)).unwrap();
+        assert_eq!(decode_tracker(&v5).unwrap(), v8);
         // Format 4 (no judged beams) reads them as the last beams, where a
         // tracker of that release had judged its misses.
         let mut judged = Writer::default();

@@ -155,7 +155,11 @@ pub struct RadarAccuracyView {
     pub elevation_deg: Option<SigmaView>,
     /// Doppler radars.
     pub radial_velocity_mps: Option<SigmaView>,
-    /// Declared σ applied whatever the data say.
+    /// The detection probability per scan (`plots`: the tracks' sweeps
+    /// judged; nothing clipped); `None` in an update kept by an earlier
+    /// release.
+    pub detection_probability: Option<SigmaView>,
+    /// Declared σ (and P_D) applied whatever the data say.
     pub pinned: bool,
 }
 

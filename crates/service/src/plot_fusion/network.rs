@@ -907,8 +907,37 @@ pub fn accuracy_warnings(config: &TrackerConfig, views: &[RadarAccuracyView]) ->
                 ));
             }
         }
+        if let Some(w) = detection_warning(config, r, a) {
+            out.push(w);
+        }
     }
     out
+}
+
+/// A converged detection probability whose miss probability 1 − P_D is
+/// more than [`ACCURACY_WARNING_FACTOR`] from the declared one's (either
+/// way) and that differs from it by more than 0.02.
+fn detection_warning(config: &TrackerConfig, r: usize, a: &RadarAccuracyView) -> Option<String> {
+    let s = a.detection_probability.as_ref()?;
+    let est = s.estimated.filter(|_| s.converged)?;
+    let ratio = (1.0 - est) / (1.0 - s.declared).max(1e-9);
+    if (1.0 / ACCURACY_WARNING_FACTOR..=ACCURACY_WARNING_FACTOR).contains(&ratio)
+        || (est - s.declared).abs() <= 0.02
+    {
+        return None;
+    }
+    let use_ = if a.pinned || !config.accuracy.enabled {
+        "the declared one is applied (pinned or tracker.accuracy.enabled false)"
+    } else {
+        "the learnt one is applied"
+    };
+    Some(format!(
+        "radar {}'s detection probability is {est:.3} ± {:.3} from {:.0} sweeps of the tracks it covers, against the declared {:.3}: {use_}; set radars[{r}].detection_probability to the radar's real one",
+        a.radar,
+        s.sigma.unwrap_or(f64::NAN),
+        s.plots,
+        s.declared,
+    ))
 }
 
 /// Warnings about the registration's estimates: a bias beyond what a radar
@@ -1348,6 +1377,7 @@ impl Network {
                     .filter(|_| tracker.config().axes == 3)
                     .map(|s| view(s, deg)),
                 radial_velocity_mps: a.radial_velocity.map(|s| view(s, 1.0)),
+                detection_probability: Some(view(a.detection_probability, 1.0)),
                 pinned: a.pinned,
             })
             .collect()

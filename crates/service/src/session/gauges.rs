@@ -89,11 +89,13 @@ const FAMILIES: &[Family] = &[
 ];
 
 /// One accuracy gauge family (labelled by the σ's `component`): its name,
-/// help and the value of a σ (none: not shown).
+/// help and the value of a σ (none: not shown), and the same of the
+/// detection probability (unlabelled).
 struct SigmaFamily {
     name: &'static str,
     help: &'static str,
     value: fn(&SigmaView) -> Option<f64>,
+    detection: (&'static str, &'static str),
 }
 
 const SIGMA_FAMILIES: &[SigmaFamily] = &[
@@ -101,31 +103,55 @@ const SIGMA_FAMILIES: &[SigmaFamily] = &[
         name: "fusion_session_radar_sigma_declared",
         help: "A session's radar's declared measurement σ (component: range_m, azimuth_deg, elevation_deg, radial_velocity_mps)",
         value: |s| Some(s.declared),
+        detection: (
+            "fusion_session_radar_detection_probability_declared",
+            "A session's radar's declared detection probability per scan",
+        ),
     },
     SigmaFamily {
         name: "fusion_session_radar_sigma_estimated",
         help: "The radar's measurement σ learnt online from its plots' innovations",
         value: |s| s.estimated,
+        detection: (
+            "fusion_session_radar_detection_probability_estimated",
+            "The radar's detection probability learnt online from its sweeps of the confirmed tracks it covers",
+        ),
     },
     SigmaFamily {
         name: "fusion_session_radar_sigma_estimate_sigma",
         help: "Standard deviation of the learnt σ",
         value: |s| s.sigma,
+        detection: (
+            "fusion_session_radar_detection_probability_estimate_sigma",
+            "Standard deviation of the learnt detection probability",
+        ),
     },
     SigmaFamily {
         name: "fusion_session_radar_sigma_applied",
         help: "The measurement σ the tracker applies (the learnt one once converged, unless pinned)",
         value: |s| Some(s.applied),
+        detection: (
+            "fusion_session_radar_detection_probability_applied",
+            "The detection probability the tracker applies (the learnt one once converged, unless pinned)",
+        ),
     },
     SigmaFamily {
         name: "fusion_session_radar_sigma_converged",
         help: "1 when the learnt σ has converged",
         value: |s| Some(if s.converged { 1.0 } else { 0.0 }),
+        detection: (
+            "fusion_session_radar_detection_probability_converged",
+            "1 when the learnt detection probability has converged",
+        ),
     },
     SigmaFamily {
         name: "fusion_session_radar_sigma_plots",
         help: "Plots behind the learnt σ (decayed count)",
         value: |s| Some(s.plots),
+        detection: (
+            "fusion_session_radar_detection_probability_trials",
+            "Sweeps of covered confirmed tracks behind the learnt detection probability (decayed count)",
+        ),
     },
 ];
 
@@ -233,6 +259,19 @@ impl RadarGauges {
                 }
             }
         }
+        for f in SIGMA_FAMILIES {
+            let (name, help) = f.detection;
+            let _ = writeln!(out, "# HELP {name} {help}");
+            let _ = writeln!(out, "# TYPE {name} gauge");
+            for key in &keys {
+                let (_, _, accuracy) = &sessions[*key];
+                for a in accuracy {
+                    if let Some(v) = a.detection_probability.as_ref().and_then(f.value) {
+                        let _ = writeln!(out, "{name}{{{}}} {}", labels(key, &a.radar), number(v));
+                    }
+                }
+            }
+        }
         out
     }
 }
@@ -319,6 +358,7 @@ mod tests {
             azimuth_deg: sigma(0.1, None),
             elevation_deg: None,
             radial_velocity_mps: Some(sigma(1.0, Some(2.5))),
+            detection_probability: Some(sigma(0.9, Some(0.625))),
             pinned: false,
         };
         g.record_at(
@@ -341,6 +381,8 @@ mod tests {
             "fusion_session_radar_sigma_applied{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"radial_velocity_mps\"} 2.5",
             "fusion_session_radar_sigma_declared{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"azimuth_deg\"} 0.1",
             "fusion_session_radar_sigma_converged{tenant=\"acme\",session=\"s1\",radar=\"r2\",component=\"azimuth_deg\"} 0",
+            "fusion_session_radar_detection_probability_estimated{tenant=\"acme\",session=\"s1\",radar=\"r2\"} 0.625",
+            "fusion_session_radar_detection_probability_trials{tenant=\"acme\",session=\"s1\",radar=\"r2\"} 512",
         ] {
             assert!(text.contains(line), "{line}");
         }

@@ -92,8 +92,12 @@ const IDENTITY_FLAG: u32 = 1 << 25;
 /// Set in the frame count of a kept update that carries the radars'
 /// accuracy (after the biases).
 const ACCURACY_FLAG: u32 = 1 << 24;
+/// Set in the frame count of a kept update whose radars' accuracy carries
+/// the detection probability (after each radar's σ).
+const DETECTION_FLAG: u32 = 1 << 23;
 const FLAGS: u32 = ASTERIX_FLAG
     | ACCURACY_FLAG
+    | DETECTION_FLAG
     | MODES_FLAG
     | PROVENANCE_FLAG
     | CAT062_FLAG
@@ -931,6 +935,7 @@ impl SessionKind for PlotFusionSession {
                 | REGISTRATION_FLAG
                 | IDENTITY_FLAG
                 | ACCURACY_FLAG
+                | DETECTION_FLAG
                 | optional,
         );
         w.u32(u.pending_plots);
@@ -987,6 +992,7 @@ impl SessionKind for PlotFusionSession {
             for (_, s) in a.components() {
                 encode_sigma(w, s.copied());
             }
+            encode_sigma(w, a.detection_probability);
         }
     }
 
@@ -997,6 +1003,7 @@ impl SessionKind for PlotFusionSession {
         let has_late = frames & LATE_FLAG != 0;
         let has_registration = frames & REGISTRATION_FLAG != 0;
         let has_accuracy = frames & ACCURACY_FLAG != 0;
+        let has_detection = frames & DETECTION_FLAG != 0;
         let fields = TrackFields {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
@@ -1092,6 +1099,11 @@ impl SessionKind for PlotFusionSession {
                         azimuth_deg: decode_sigma(r)?.ok_or_else(missing)?,
                         elevation_deg: decode_sigma(r)?,
                         radial_velocity_mps: decode_sigma(r)?,
+                        detection_probability: if has_detection {
+                            decode_sigma(r)?
+                        } else {
+                            None
+                        },
                         pinned,
                     })
                 })
