@@ -95,13 +95,18 @@
 //! radar (a late plot) closes no interval. The scan period is the declared
 //! one: an interval of k scans is counted right while the declared period
 //! is within 1/(2k) of the real one. The estimate is the posterior mean
-//! under a uniform prior, P̂ = (d + 1)/(n + 2) over the decayed counts n
-//! of trials and d of detections, with σ² = P̂(1 − P̂)/(n + 3); it is
+//! under a uniform prior, (d + 1)/(n + 2) over the decayed counts n of
+//! trials and d of detections, with σ² = P̂(1 − P̂)/(n + 3), of the
+//! probability that a trial finds the track, P_D · P_G (P_G the track
+//! gate's probability, `track_gate_probability`): divided by P_G, it is
 //! applied (within [[`MIN_DETECTION`], [`MAX_DETECTION`]]) after
 //! [`MIN_SAMPLES`] trials once σ ≤ [`CONVERGED_RELATIVE_SIGMA`] of the
 //! smaller of P̂ and 1 − P̂, or once it lies more than
 //! [`DECLARED_SIGMAS`] σ from the declared P_D, in the JPDA's weights of
-//! the radar's plots.
+//! the radar's plots. Trials count from the time the radar's σ have
+//! converged (a σ declared too small makes the gates miss plots the
+//! radar detected), and on tracks with more than [`ESTABLISHED_HITS`]
+//! hits (a false track's misses are not the radar's).
 //!
 //! The clutter density is not estimated: a track's gate holds λV ≈ 10⁻⁶
 //! false plots at the densities of surveillance radars, so the gates do
@@ -153,6 +158,9 @@ const CLIPPED_MEAN: f64 = 0.995_007_278;
 /// The applied σ stays within [declared / LIMIT, declared × LIMIT]: an
 /// estimate at the bound says so in a warning.
 pub const LIMIT: f64 = 10.0;
+/// A track's hits count toward the detection probability once it has
+/// had more than this many.
+pub const ESTABLISHED_HITS: u32 = 10;
 /// An interval between two hits of a track by a radar longer than this
 /// many scans is not counted (the track was out of the radar's coverage).
 pub const MAX_GAP_SCANS: u32 = 10;
@@ -261,12 +269,15 @@ impl DetectionData {
         self.detections += f64::from(detections);
     }
 
-    /// The estimate against the declared P_D.
-    fn estimate(&self, declared: f64, applies: bool) -> SigmaEstimate {
+    /// The estimate against the declared P_D, for a tracker whose gates
+    /// hold a detected plot with probability `gate` (a trial finds the
+    /// track with probability P_D · P_G).
+    fn estimate(&self, declared: f64, applies: bool, gate: f64) -> SigmaEstimate {
         let n = self.trials;
         let (estimate, sigma) = if n > 0.0 {
             let p = (self.detections + 1.0) / (n + 2.0);
-            (p, (p * (1.0 - p) / (n + 3.0)).sqrt())
+            let sd = (p * (1.0 - p) / (n + 3.0)).sqrt();
+            ((p / gate).min(1.0), sd / gate)
         } else {
             (declared, f64::INFINITY)
         };
@@ -561,8 +572,15 @@ impl AccuracyState {
         Ok(())
     }
 
-    /// Radar `r`'s accuracy against its declared σ (`declared`).
-    pub fn radar(&self, cfg: &AccuracyConfig, r: usize, declared: &RadarSpec) -> RadarAccuracy {
+    /// Radar `r`'s accuracy against its declared σ and P_D (`declared`),
+    /// in a tracker of track gate probability `gate`.
+    pub fn radar(
+        &self,
+        cfg: &AccuracyConfig,
+        r: usize,
+        declared: &RadarSpec,
+        gate: f64,
+    ) -> RadarAccuracy {
         let pinned = cfg.pinned.contains(&r);
         let applies = cfg.enabled && !pinned;
         let d = &self.radars[r].components;
@@ -575,16 +593,25 @@ impl AccuracyState {
             radial_velocity: declared
                 .sigma_radial_velocity
                 .map(|s| d[RADIAL_VELOCITY].estimate(s, applies)),
-            detection_probability: self.radars[r]
-                .detection
-                .estimate(declared.detection_probability, applies),
+            detection_probability: self.radars[r].detection.estimate(
+                declared.detection_probability,
+                applies,
+                gate,
+            ),
             pinned,
         }
     }
 
-    /// Radar `r` as the tracker applies it: `declared` with the applied σ.
-    pub fn applied(&self, cfg: &AccuracyConfig, r: usize, declared: &RadarSpec) -> RadarSpec {
-        let a = self.radar(cfg, r, declared);
+    /// Radar `r` as the tracker applies it: `declared` with the applied σ
+    /// and P_D (track gate probability `gate`).
+    pub fn applied(
+        &self,
+        cfg: &AccuracyConfig,
+        r: usize,
+        declared: &RadarSpec,
+        gate: f64,
+    ) -> RadarSpec {
+        let a = self.radar(cfg, r, declared, gate);
         let mut spec = declared.clone();
         spec.sigma_range = a.range.applied;
         spec.sigma_azimuth = a.azimuth.applied;
@@ -596,8 +623,28 @@ impl AccuracyState {
 
     /// Adds the intervals closed by radar `r`'s hits of a frame at time
     /// `t`: each the scans since the radar's previous hit of the track (k
-    /// trials, one detection; none beyond [`MAX_GAP_SCANS`]).
-    pub fn detections(&mut self, cfg: &AccuracyConfig, r: usize, t: f64, scans: &[u32]) {
+    /// trials, one detection; none beyond [`MAX_GAP_SCANS`]). Not before
+    /// every σ of the radar has converged (unless it is pinned): with a σ
+    /// declared too small, the gates miss plots the radar detected.
+    pub fn detections(
+        &mut self,
+        cfg: &AccuracyConfig,
+        r: usize,
+        declared: &RadarSpec,
+        t: f64,
+        scans: &[u32],
+    ) {
+        // The σ only: any gate probability.
+        let a = self.radar(cfg, r, declared, 1.0);
+        let sigmas = [
+            Some(a.range),
+            Some(a.azimuth),
+            a.elevation,
+            a.radial_velocity,
+        ];
+        if !a.pinned && !sigmas.iter().flatten().all(|s| s.converged) {
+            return;
+        }
         let counted = scans.iter().filter(|&&k| (1..=MAX_GAP_SCANS).contains(&k));
         let (trials, detections) = counted.fold((0, 0), |(n, d), &k| (n + k, d + 1));
         if trials > 0 {
@@ -621,7 +668,8 @@ impl AccuracyState {
         if innovations.is_empty() {
             return;
         }
-        let current = self.radar(cfg, r, declared);
+        // The σ only: any gate probability.
+        let current = self.radar(cfg, r, declared, 1.0);
         let data = &mut self.radars[r];
         if let Some(t0) = data.t {
             if t > t0 {
@@ -857,7 +905,7 @@ mod tests {
             let batch: Vec<Innovation> = (0..5).map(|_| draw(&mut rng)).collect();
             state.learn(&cfg, 0, &declared, f64::from(i), &batch);
         }
-        let a = state.radar(&cfg, 0, &declared);
+        let a = state.radar(&cfg, 0, &declared, 0.99);
         assert!(a.range.converged);
         assert!(
             (a.range.estimate - 150.0).abs() < 3.0 * a.range.sigma,
@@ -865,16 +913,16 @@ mod tests {
         );
         assert_eq!(a.range.applied, a.range.estimate);
         assert_eq!(
-            state.applied(&cfg, 0, &declared).sigma_range,
+            state.applied(&cfg, 0, &declared, 0.99).sigma_range,
             a.range.estimate
         );
         cfg.pinned = vec![0];
-        let p = state.radar(&cfg, 0, &declared);
+        let p = state.radar(&cfg, 0, &declared, 0.99);
         assert!(p.pinned && p.range.converged);
         assert_eq!(p.range.applied, 50.0);
         cfg.pinned.clear();
         cfg.enabled = false;
-        assert_eq!(state.applied(&cfg, 0, &declared).sigma_range, 50.0);
+        assert_eq!(state.applied(&cfg, 0, &declared, 0.99).sigma_range, 50.0);
         cfg.enabled = true;
         // An innovation at 10 σ counts as one at 3σ.
         let before = state.radars[0].components[RANGE];
@@ -920,7 +968,7 @@ mod tests {
         // applied R the filter's P⁻ and the true error variance differ.
         let (mut p_filter, mut p_true) = (1e4f64, 1e4f64);
         for step in 0..6000 {
-            let r_applied = state.applied(&cfg, 0, &declared).sigma_range.powi(2);
+            let r_applied = state.applied(&cfg, 0, &declared, 0.99).sigma_range.powi(2);
             let (pm, pt) = (p_filter + q, p_true + q);
             let k = pm / (pm + r_applied);
             p_filter = (1.0 - k) * pm;
@@ -931,7 +979,7 @@ mod tests {
             };
             state.learn(&cfg, 0, &declared, f64::from(step), &[inn]);
         }
-        let a = state.radar(&cfg, 0, &declared);
+        let a = state.radar(&cfg, 0, &declared, 0.99);
         assert!(a.range.converged, "{a:?}");
         assert!(
             (a.range.estimate - truth).abs() < 0.05 * truth,

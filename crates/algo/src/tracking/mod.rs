@@ -289,7 +289,10 @@ impl Tracker {
     pub fn accuracy(&self) -> Vec<accuracy::RadarAccuracy> {
         let c = &self.config;
         (0..c.radars.len())
-            .map(|r| self.accuracy.radar(&c.accuracy, r, &c.radars[r]))
+            .map(|r| {
+                self.accuracy
+                    .radar(&c.accuracy, r, &c.radars[r], c.track_gate_probability)
+            })
             .collect()
     }
 
@@ -297,7 +300,10 @@ impl Tracker {
     fn refresh_applied(&mut self) {
         let c = &self.config;
         self.applied = (0..c.radars.len())
-            .map(|r| self.accuracy.applied(&c.accuracy, r, &c.radars[r]))
+            .map(|r| {
+                self.accuracy
+                    .applied(&c.accuracy, r, &c.radars[r], c.track_gate_probability)
+            })
             .collect();
     }
 
@@ -598,10 +604,14 @@ impl Tracker {
         let scans = &self.scratch.0.scans_since_hit;
         if self.config.accuracy.enabled && !scans.is_empty() {
             let cfg = &self.config;
-            self.accuracy.detections(&cfg.accuracy, index, t, scans);
-            self.applied[index] = self
-                .accuracy
-                .applied(&cfg.accuracy, index, &cfg.radars[index]);
+            self.accuracy
+                .detections(&cfg.accuracy, index, &cfg.radars[index], t, scans);
+            self.applied[index] = self.accuracy.applied(
+                &cfg.accuracy,
+                index,
+                &cfg.radars[index],
+                cfg.track_gate_probability,
+            );
         }
         if !self.scratch.0.innovations.is_empty() {
             let cfg = &self.config;
@@ -612,9 +622,12 @@ impl Tracker {
                 t,
                 &self.scratch.0.innovations,
             );
-            self.applied[index] = self
-                .accuracy
-                .applied(&cfg.accuracy, index, &cfg.radars[index]);
+            self.applied[index] = self.accuracy.applied(
+                &cfg.accuracy,
+                index,
+                &cfg.radars[index],
+                cfg.track_gate_probability,
+            );
         }
         if !offset_observations.is_empty() {
             let prior = self.config.mode_c_height;
@@ -1000,11 +1013,11 @@ impl Tracker {
                 }
                 if let Some(j) = outcome.hit[c] {
                     track.record_late_hit(scratch.behind_sweep);
-                    scratch.scans_since_hit.extend(
-                        track
-                            .hit_by_plot(&plots[j], &self.config.radars)
-                            .map(|h| h.1),
-                    );
+                    scratch.scans_since_hit.extend(detection_trials(
+                        track,
+                        &plots[j],
+                        &self.config.radars,
+                    ));
                     track.identity.observe_measured(plots[j].measured.as_ref());
                 }
                 self.index.moved(k, track);
@@ -1051,11 +1064,11 @@ impl Tracker {
                     } else {
                         track.record(Some(plots[j].radars.clone()));
                     }
-                    scratch.scans_since_hit.extend(
-                        track
-                            .hit_by_plot(&plots[j], &self.config.radars)
-                            .map(|h| h.1),
-                    );
+                    scratch.scans_since_hit.extend(detection_trials(
+                        track,
+                        &plots[j],
+                        &self.config.radars,
+                    ));
                     track.last_plot = plots[j].measured;
                     track.identity.observe_measured(plots[j].measured.as_ref());
                 }
@@ -1331,6 +1344,17 @@ fn innovations(
             with_range_rate,
         ));
     }
+}
+
+/// Records a hit of `track` by `plot` (its radar's last hit) and returns
+/// the scans since that radar's previous hit of the track, the detection
+/// probability's trials, when the track is established (more than
+/// [`accuracy::ESTABLISHED_HITS`] hits, this one counted: a false track of
+/// clutter or a duplicate, with its few hits, would count its misses).
+fn detection_trials(track: &mut Track, plot: &CartesianPlot, radars: &[RadarSpec]) -> Option<u32> {
+    let established = track.hits > accuracy::ESTABLISHED_HITS;
+    let scans = track.hit_by_plot(plot, radars)?.1;
+    established.then_some(scans)
 }
 
 /// The one mode of a single-model track's update in `single` (a

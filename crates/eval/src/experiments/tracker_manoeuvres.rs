@@ -60,6 +60,7 @@ use crate::truth::{Leg, Manoeuvre, TargetPlan, Trajectory, simulate, velocity};
 use crate::{STANDARD_GRAVITY, SimError, SimRng};
 use algo::assignment;
 use algo::gating::chi2_threshold;
+use algo::tracking::accuracy::{RadarAccuracy, SigmaEstimate};
 use algo::tracking::{
     Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Tracker, TrackerConfig,
 };
@@ -169,6 +170,19 @@ const ACCURACY_METHODS: [Method; 4] = [
 /// The factors a radar's declared σ are drawn from (`accuracy`).
 const MISDECLARED: [f64; 3] = [0.3, 1.0, 3.0];
 
+/// The detection probability a misdeclared radar declares (every radar's
+/// is 0.9): a datasheet's 0.99 with its σ × 0.3 (optimistic in both), the
+/// truth with × 1, and 0.7 with × 3.
+fn misdeclared_detection(factor: f64) -> f64 {
+    if factor < 1.0 {
+        0.99
+    } else if factor > 1.0 {
+        0.7
+    } else {
+        0.9
+    }
+}
+
 impl Method {
     fn name(self) -> &'static str {
         match self {
@@ -201,6 +215,7 @@ impl Method {
                 s.sigma_azimuth *= f;
                 s.sigma_elevation = s.sigma_elevation.map(|v| v * f);
                 s.sigma_radial_velocity = s.sigma_radial_velocity.map(|v| v * f);
+                s.detection_probability = misdeclared_detection(f);
             }
         }
         let mut c = TrackerConfig::new(3, specs);
@@ -255,9 +270,9 @@ struct MethodRun {
     /// Per radar and component (range, azimuth, elevation, radial
     /// velocity): the learnt σ at the end and its σ, with the time it
     /// first converged (when converged at the end).
-    learnt: Vec<[Option<Learnt>; 4]>,
+    learnt: Vec<[Option<Learnt>; ESTIMATED]>,
     /// The same against the truth ([`score_estimates`]).
-    estimates: Vec<[Option<EstimateScore>; 4]>,
+    estimates: Vec<[Option<EstimateScore>; ESTIMATED]>,
 }
 
 /// A learnt σ: the estimate, its σ, and when it first converged (if it
@@ -513,7 +528,13 @@ fn estimate_table(methods: &[Method], per_run: &[Vec<MethodRun>]) -> String {
     else {
         return String::new();
     };
-    let names = ["range", "azimuth", "elevation", "radial velocity"];
+    let names = [
+        "range",
+        "azimuth",
+        "elevation",
+        "radial velocity",
+        "detection probability",
+    ];
     let mut rows = Vec::new();
     for (k, name) in names.iter().enumerate() {
         for factor in MISDECLARED {
@@ -741,6 +762,21 @@ struct Scored {
     covariance: DMatrix<f64>,
 }
 
+/// What the accuracy estimator learns of a radar: its four σ and its
+/// detection probability.
+const ESTIMATED: usize = 5;
+
+/// A radar's learnt σ and P_D in the order of [`ESTIMATED`].
+fn estimated(a: &RadarAccuracy) -> [Option<SigmaEstimate>; ESTIMATED] {
+    [
+        Some(a.range),
+        Some(a.azimuth),
+        a.elevation,
+        a.radial_velocity,
+        Some(a.detection_probability),
+    ]
+}
+
 /// Runs `config` on `plots` and scores every frame.
 fn track(
     config: TrackerConfig,
@@ -752,18 +788,13 @@ fn track(
     let mut tracker = Tracker::new(config)?;
     let mut frames: Vec<(f64, Vec<Scored>)> = Vec::new();
     let learns = tracker.config().accuracy.enabled;
-    let mut converged_at = vec![[None::<f64>; 4]; tracker.config().radars.len()];
+    let mut converged_at = vec![[None::<f64>; ESTIMATED]; tracker.config().radars.len()];
     tracker.process_with(plots, true, &mut |tr: &Tracker| {
         if learns {
             let t = tr.last_time().unwrap_or(f64::NAN);
             for (at, a) in converged_at.iter_mut().zip(tr.accuracy()) {
-                let c = [
-                    Some(a.range),
-                    Some(a.azimuth),
-                    a.elevation,
-                    a.radial_velocity,
-                ];
-                for k in 0..4 {
+                let c = estimated(&a);
+                for k in 0..ESTIMATED {
                     if at[k].is_none() && c[k].is_some_and(|e| e.converged) {
                         at[k] = Some(t);
                     }
@@ -805,12 +836,7 @@ fn track(
             .iter()
             .zip(&converged_at)
             .map(|(a, at)| {
-                let c = [
-                    Some(a.range),
-                    Some(a.azimuth),
-                    a.elevation,
-                    a.radial_velocity,
-                ];
+                let c = estimated(a);
                 std::array::from_fn(|k| {
                     c[k].map(|e| (e.estimate, e.sigma, at[k].filter(|_| e.converged)))
                 })
@@ -992,6 +1018,7 @@ fn score_estimates(run: &mut MethodRun, specs: &[RadarSpec], factors: &[f64]) {
                 Some(spec.sigma_azimuth),
                 spec.sigma_elevation,
                 spec.sigma_radial_velocity,
+                Some(spec.detection_probability),
             ];
             std::array::from_fn(|k| {
                 let ((estimate, sigma, converged_at), t) = learnt[k].zip(truth[k])?;
