@@ -132,7 +132,17 @@ DECLARED_FACTORS: list[float] = []
 
 def declared_factor(index: int) -> float:
     return DECLARED_FACTORS[index] if index < len(DECLARED_FACTORS) else 1.0
+
+
 P_DETECTION = 0.9
+# Per radar: the detection probability it declares (--declared-p-detection;
+# the plots keep P_DETECTION). Stone Soup's JPDA takes one P_D for all
+# radars: it is given their mean.
+DECLARED_P_DETECTION: list[float] = []
+
+
+def declared_p_detection(index: int) -> float:
+    return DECLARED_P_DETECTION[index] if index < len(DECLARED_P_DETECTION) else P_DETECTION
 RANGE_MIN_M = 1_000.0
 ELEVATION_MIN_DEG = -0.5
 ELEVATION_MAX_DEG = 60.0
@@ -791,7 +801,9 @@ def run_stonesoup(scene: Scene, q: float, associator: str, models: dict,
     if associator == "jpda":
         hypothesiser = PDAHypothesiser(
             predictor=predictor, updater=updater, clutter_spatial_density=clutter_density,
-            prob_detect=P_DETECTION, prob_gate=0.99)
+            prob_detect=float(np.mean([declared_p_detection(k)
+                                       for k in range(len(scene.radars))])),
+            prob_gate=0.99)
         tracker = MultiTargetMixtureTracker(
             initiator=initiator, deleter=deleter, detector=StepReader(steps),
             data_associator=JPDAwithEHM2(hypothesiser=hypothesiser), updater=updater)
@@ -835,7 +847,8 @@ def build_request(scene: Scene, tracker: dict | None) -> dict:
                           "height_m": r.site.height_m},
                  "sigma_range_m": f * SIGMA_RANGE_M, "sigma_azimuth_deg": f * SIGMA_AZIMUTH_DEG,
                  "sigma_elevation_deg": f * SIGMA_ELEVATION_DEG, "scan_period_s": r.period_s,
-                 "p_detection": P_DETECTION, "clutter_density": scene.clutter_density()}
+                 "p_detection": declared_p_detection(k),
+                 "clutter_density": scene.clutter_density()}
         if scene.doppler:
             radar["sigma_radial_velocity_mps"] = f * SIGMA_RADIAL_VELOCITY_MPS
         radars.append(radar)
@@ -1121,11 +1134,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--declared-factors", metavar="F1,F2,...",
                     help="per radar, what its declared sigmas are multiplied by (ours and "
                          "Stone Soup alike; the plots keep the true sigmas), e.g. 0.3,3,1")
+    ap.add_argument("--declared-p-detection", metavar="P1,P2,...",
+                    help="per radar, the detection probability it declares (the plots keep "
+                         f"{P_DETECTION}; Stone Soup is given their mean), e.g. 0.99,0.7,0.9")
     ap.add_argument("--json-out", metavar="FILE")
     ap.add_argument("--truth-csv", metavar="FILE", help="write the 1-s truth table")
     args = ap.parse_args(argv)
     if args.declared_factors:
         DECLARED_FACTORS[:] = [float(x) for x in args.declared_factors.split(",")]
+    if args.declared_p_detection:
+        DECLARED_P_DETECTION[:] = [float(x) for x in args.declared_p_detection.split(",")]
     trackers = [json.loads(s) for s in args.tracker_json]
     for s, t in zip(args.tracker_json, trackers):
         if not isinstance(t, dict):
@@ -1174,7 +1192,8 @@ def main(argv: list[str] | None = None) -> int:
                       f"{', reference' if b['reference'] else ''}")
             for a in res.extra.get("accuracy") or []:
                 parts = []
-                for key in ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps"):
+                for key in ("range_m", "azimuth_deg", "elevation_deg", "radial_velocity_mps",
+                            "p_detection"):
                     c = a.get(key)
                     if c is None:
                         continue

@@ -74,7 +74,7 @@ pub(crate) fn accuracy_out(a: svc::RadarAccuracyView) -> pb::RadarAccuracyState 
         azimuth_deg: Some(sigma_out(a.azimuth_deg)),
         elevation_deg: a.elevation_deg.map(sigma_out),
         radial_velocity_mps: a.radial_velocity_mps.map(sigma_out),
-        detection_probability: a.detection_probability.map(sigma_out),
+        p_detection: a.p_detection.map(sigma_out),
         pinned: a.pinned,
     }
 }

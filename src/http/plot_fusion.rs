@@ -213,11 +213,11 @@ pub struct RadarAccuracyOut {
     /// Doppler radars.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radial_velocity_mps: Option<SigmaOut>,
-    /// The detection probability per scan, learnt from the sweeps that
-    /// judged the confirmed tracks the radar covers (`plots`: those
-    /// trials; nothing clipped).
+    /// The detection probability per scan (`p_detection`), learnt from
+    /// the scans between the radar's hits of the confirmed tracks
+    /// (`plots`: those trials; nothing clipped).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub detection_probability: Option<SigmaOut>,
+    pub p_detection: Option<SigmaOut>,
     /// `tracker.accuracy.pinned`: the declared σ and P_D are applied.
     pub pinned: bool,
 }
@@ -241,7 +241,7 @@ pub(crate) fn accuracy_out(a: svc::RadarAccuracyView) -> RadarAccuracyOut {
         azimuth_deg: sigma_out(a.azimuth_deg),
         elevation_deg: a.elevation_deg.map(sigma_out),
         radial_velocity_mps: a.radial_velocity_mps.map(sigma_out),
-        detection_probability: a.detection_probability.map(sigma_out),
+        p_detection: a.p_detection.map(sigma_out),
         pinned: a.pinned,
     }
 }

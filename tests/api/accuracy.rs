@@ -9,7 +9,7 @@ use tonic::Code;
 
 use crate::helpers::{assert_problem, grpc_fields, problem_fields, spawn_app};
 use crate::plot_fusion::plot_scene::{
-    ORIGIN, SIGMA_RANGE, Target, plots, radars_json, targets, two_radars,
+    ORIGIN, P_D, SIGMA_RANGE, Target, plots, radars_json, targets, two_radars,
 };
 use crate::plot_fusion::{proto_request, session_fed_in_batches};
 use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
@@ -119,6 +119,35 @@ async fn a_radar_declared_too_accurate_is_learnt_and_said() {
     let out = app.post_ok(PATH, &off).await;
     assert!(out["accuracy"][0]["range_m"].get("estimated").is_none());
     assert_eq!(f(&out["accuracy"][0]["range_m"]["plots"]), 0.0);
+}
+
+/// A radar declared to detect 99 % of the time whose plots come 90 % of
+/// the time (the scene's P_D): its detection probability is learnt within
+/// 3σ of 0.9 (σ from the binomial, ≈ 0.01 from ≈ 1,000 scans), applied,
+/// warned about naming `radars[0].p_detection`; the other radar, declared
+/// right, is not warned about; gRPC says the same.
+#[tokio::test]
+async fn a_radar_declared_to_detect_too_often_is_learnt_and_said() {
+    let app = spawn_app().await;
+    let mut req = misdeclared();
+    req["radars"][0]["sigma_range_m"] = json!(SIGMA_RANGE);
+    req["radars"][0]["p_detection"] = json!(0.99);
+    let out = app.post_ok(PATH, &req).await;
+    let p = &out["accuracy"][0]["p_detection"];
+    assert_eq!(f(&p["declared"]), 0.99, "{p}");
+    let est = f(&p["estimated"]);
+    assert!((est - P_D).abs() < 3.0 * f(&p["sigma"]), "{p}");
+    assert!(f(&p["sigma"]) < 0.02 && f(&p["plots"]) > 300.0, "{p}");
+    assert_eq!(p["converged"], true, "{p}");
+    assert_eq!(f(&p["applied"]), est, "{p}");
+    let warnings = out["warnings"].to_string();
+    assert!(warnings.contains("radars[0].p_detection"), "{warnings}");
+    assert!(!warnings.contains("radars[1].p_detection"), "{warnings}");
+    let mut grpc = PlotFusionServiceClient::new(app.channel().await);
+    let answer = grpc.track(proto_request(&req)).await.unwrap().into_inner();
+    let g = answer.accuracy[0].p_detection.as_ref().unwrap();
+    assert_eq!(g.estimated, Some(est));
+    assert!(g.converged);
 }
 
 #[tokio::test]

@@ -155,10 +155,10 @@ pub struct RadarAccuracyView {
     pub elevation_deg: Option<SigmaView>,
     /// Doppler radars.
     pub radial_velocity_mps: Option<SigmaView>,
-    /// The detection probability per scan (`plots`: the tracks' sweeps
-    /// judged; nothing clipped); `None` in an update kept by an earlier
-    /// release.
-    pub detection_probability: Option<SigmaView>,
+    /// The detection probability per scan (`plots`: the trials, scans
+    /// between the radar's hits of established tracks; nothing clipped);
+    /// `None` in an update kept by an earlier release.
+    pub p_detection: Option<SigmaView>,
     /// Declared σ (and P_D) applied whatever the data say.
     pub pinned: bool,
 }

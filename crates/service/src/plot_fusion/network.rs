@@ -918,7 +918,7 @@ pub fn accuracy_warnings(config: &TrackerConfig, views: &[RadarAccuracyView]) ->
 /// more than [`ACCURACY_WARNING_FACTOR`] from the declared one's (either
 /// way) and that differs from it by more than 0.02.
 fn detection_warning(config: &TrackerConfig, r: usize, a: &RadarAccuracyView) -> Option<String> {
-    let s = a.detection_probability.as_ref()?;
+    let s = a.p_detection.as_ref()?;
     let est = s.estimated.filter(|_| s.converged)?;
     let ratio = (1.0 - est) / (1.0 - s.declared).max(1e-9);
     if (1.0 / ACCURACY_WARNING_FACTOR..=ACCURACY_WARNING_FACTOR).contains(&ratio)
@@ -932,7 +932,7 @@ fn detection_warning(config: &TrackerConfig, r: usize, a: &RadarAccuracyView) ->
         "the learnt one is applied"
     };
     Some(format!(
-        "radar {}'s detection probability is {est:.3} ± {:.3} from {:.0} sweeps of the tracks it covers, against the declared {:.3}: {use_}; set radars[{r}].detection_probability to the radar's real one",
+        "radar {}'s detection probability is {est:.3} ± {:.3} from {:.0} scans of its tracks, against the declared {:.3}: {use_}; set radars[{r}].p_detection to the radar's real one",
         a.radar,
         s.sigma.unwrap_or(f64::NAN),
         s.plots,
@@ -1377,7 +1377,7 @@ impl Network {
                     .filter(|_| tracker.config().axes == 3)
                     .map(|s| view(s, deg)),
                 radial_velocity_mps: a.radial_velocity.map(|s| view(s, 1.0)),
-                detection_probability: Some(view(a.detection_probability, 1.0)),
+                p_detection: Some(view(a.detection_probability, 1.0)),
                 pinned: a.pinned,
             })
             .collect()

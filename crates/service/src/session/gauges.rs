@@ -114,7 +114,7 @@ const SIGMA_FAMILIES: &[SigmaFamily] = &[
         value: |s| s.estimated,
         detection: (
             "fusion_session_radar_detection_probability_estimated",
-            "The radar's detection probability learnt online from its sweeps of the confirmed tracks it covers",
+            "The radar's detection probability learnt online from the scans between its hits of the confirmed tracks",
         ),
     },
     SigmaFamily {
@@ -150,7 +150,7 @@ const SIGMA_FAMILIES: &[SigmaFamily] = &[
         value: |s| Some(s.plots),
         detection: (
             "fusion_session_radar_detection_probability_trials",
-            "Sweeps of covered confirmed tracks behind the learnt detection probability (decayed count)",
+            "Scans (trials) behind the learnt detection probability (decayed count)",
         ),
     },
 ];
@@ -266,7 +266,7 @@ impl RadarGauges {
             for key in &keys {
                 let (_, _, accuracy) = &sessions[*key];
                 for a in accuracy {
-                    if let Some(v) = a.detection_probability.as_ref().and_then(f.value) {
+                    if let Some(v) = a.p_detection.as_ref().and_then(f.value) {
                         let _ = writeln!(out, "{name}{{{}}} {}", labels(key, &a.radar), number(v));
                     }
                 }
@@ -358,7 +358,7 @@ mod tests {
             azimuth_deg: sigma(0.1, None),
             elevation_deg: None,
             radial_velocity_mps: Some(sigma(1.0, Some(2.5))),
-            detection_probability: Some(sigma(0.9, Some(0.625))),
+            p_detection: Some(sigma(0.9, Some(0.625))),
             pinned: false,
         };
         g.record_at(

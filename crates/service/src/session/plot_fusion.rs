@@ -992,7 +992,7 @@ impl SessionKind for PlotFusionSession {
             for (_, s) in a.components() {
                 encode_sigma(w, s.copied());
             }
-            encode_sigma(w, a.detection_probability);
+            encode_sigma(w, a.p_detection);
         }
     }
 
@@ -1099,7 +1099,7 @@ impl SessionKind for PlotFusionSession {
                         azimuth_deg: decode_sigma(r)?.ok_or_else(missing)?,
                         elevation_deg: decode_sigma(r)?,
                         radial_velocity_mps: decode_sigma(r)?,
-                        detection_probability: if has_detection {
+                        p_detection: if has_detection {
                             decode_sigma(r)?
                         } else {
                             None
