@@ -1064,7 +1064,7 @@ mod tests {
         declared: &[(f64, f64)],
         enabled: bool,
     ) -> (Vec<RadarAccuracy>, f64, usize, usize) {
-        use crate::tracking::tests::{Target, feed_by_instants, scene};
+        use crate::tracking::tests::{feed_by_instants, scene, twelve_crossing};
         use crate::tracking::{Tracker, TrackerConfig};
         let sites = [
             [-30_000.0, 0.0, 0.0],
@@ -1082,21 +1082,7 @@ mod tests {
             clutter_density: 1e-9,
         };
         let real: Vec<RadarSpec> = truth.iter().enumerate().map(|(k, &s)| spec(k, s)).collect();
-        // Twelve aircraft at 150–240 m/s on headings 30° apart, 8 km
-        // apart, crossing the 60 × 80 km area in 600 s.
-        let targets: Vec<Target> = (0..12)
-            .map(|i| {
-                let h = (30.0 * i as f64).to_radians();
-                let speed = 150.0 + 7.5 * i as f64;
-                let v = [speed * h.sin(), speed * h.cos(), 0.0];
-                let start = [
-                    -0.5 * v[0] * 600.0 + 8_000.0 * (i % 4) as f64,
-                    -0.5 * v[1] * 600.0 + 20_000.0 - 8_000.0 * (i / 4) as f64,
-                    0.0,
-                ];
-                Target { p0: start, v }
-            })
-            .collect();
+        let targets = twelve_crossing(600.0);
         let plots = scene(&real, &[0.0, 1.3, 2.9], &targets, 600.0, &mut Lcg(52));
         let mut cfg = TrackerConfig::new(
             2,

@@ -748,6 +748,24 @@ fn beam_timed_plots_are_tracked_like_whole_scans() {
     }
 }
 
+/// Twelve aircraft at 150–240 m/s on headings 30° apart, 8 km apart,
+/// crossing a 60 × 80 km area in `duration` s.
+pub(super) fn twelve_crossing(duration: f64) -> Vec<Target> {
+    (0..12)
+        .map(|i| {
+            let h = (30.0 * i as f64).to_radians();
+            let speed = 150.0 + 7.5 * i as f64;
+            let v = [speed * h.sin(), speed * h.cos(), 0.0];
+            let p0 = [
+                -0.5 * v[0] * duration + 8_000.0 * (i % 4) as f64,
+                -0.5 * v[1] * duration + 20_000.0 - 8_000.0 * (i / 4) as f64,
+                0.0,
+            ];
+            Target { p0, v }
+        })
+        .collect()
+}
+
 /// 2D plots of `radars` (radar i's scans starting at 0.3 i s) of
 /// `targets` until `duration`, each timed when the beam (clockwise, or
 /// not) crosses it and detected with probability `detection[i]`, with
@@ -823,20 +841,7 @@ fn each_radars_detection_probability_is_learnt_from_its_hits() {
             clutter_density: 1e-9,
         })
         .collect();
-    // Twelve aircraft at 150–240 m/s on headings 30° apart, 8 km apart.
-    let targets: Vec<Target> = (0..12)
-        .map(|i| {
-            let h = (30.0 * i as f64).to_radians();
-            let speed = 150.0 + 7.5 * i as f64;
-            let v = [speed * h.sin(), speed * h.cos(), 0.0];
-            let p0 = [
-                -0.5 * v[0] * 600.0 + 8_000.0 * (i % 4) as f64,
-                -0.5 * v[1] * 600.0 + 20_000.0 - 8_000.0 * (i / 4) as f64,
-                0.0,
-            ];
-            Target { p0, v }
-        })
-        .collect();
+    let targets = twelve_crossing(600.0);
     let plots = beam_timed(&radars, &targets, 600.0, false, &truth, 53);
     for declared_right in [false, true] {
         let mut cfg = TrackerConfig::new(2, radars.clone());
