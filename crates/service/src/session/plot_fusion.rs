@@ -1561,7 +1561,8 @@ pub(crate) mod tests {
                 | LATE_FLAG
                 | REGISTRATION_FLAG
                 | IDENTITY_FLAG
-                | ACCURACY_FLAG)
+                | ACCURACY_FLAG
+                | DETECTION_FLAG)
                 .to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
