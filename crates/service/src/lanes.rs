@@ -234,6 +234,73 @@ where
         .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
 }
 
+/// Runs `work` once on every compute lane (starting the lanes if they are
+/// not yet), each lane taking exactly one call, and waits for all of them:
+/// the start-up warm-up, so that what a lane's first job would pay once
+/// (the thread itself, its allocator heap, code and tables touched for the
+/// first time) is paid before the service reports ready. Lanes running
+/// other jobs take theirs after those. Returns the lanes' results in the
+/// order they finished.
+pub async fn on_every_lane<T, F>(work: F) -> Vec<T>
+where
+    F: Fn() -> T + Send + Sync + 'static,
+    T: Send + 'static,
+{
+    /// Waits at the barrier when dropped: after the work, or while a panic
+    /// in it unwinds (the other lanes must not wait for ever).
+    struct Meet(Arc<std::sync::Barrier>);
+    impl Drop for Meet {
+        fn drop(&mut self) {
+            self.0.wait();
+        }
+    }
+    let lanes = Lanes::global();
+    // A lane that could not start never takes a job: it is not counted.
+    let n = lanes
+        .started
+        .iter()
+        .filter(|s| s.load(Ordering::Relaxed) != NEVER_STARTED)
+        .count();
+    let (work, barrier) = (Arc::new(work), Arc::new(std::sync::Barrier::new(n)));
+    let mut answers = Vec::with_capacity(n);
+    for _ in 0..n {
+        let (work, meet) = (Arc::clone(&work), Meet(Arc::clone(&barrier)));
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        // A lane that took one job waits at the barrier until every lane
+        // has taken one, so no lane takes two.
+        lanes.push(Box::new(move || {
+            let _meet = meet;
+            let _ = tx.send(work());
+        }));
+        answers.push(rx);
+    }
+    let mut out = Vec::with_capacity(n);
+    for rx in answers {
+        if let Ok(v) = rx.await {
+            out.push(v);
+        }
+    }
+    out
+}
+
+/// Allocates `mib` MiB in blocks of 64 KiB, writes a byte in every 4 KiB
+/// page of them and frees them: the kernel hands the process those pages
+/// (zeroed) now, and the allocator keeps them for the next allocations of
+/// this thread, instead of the first request that needs them paying for it.
+pub fn touch_memory(mib: usize) {
+    const BLOCK: usize = 64 << 10;
+    let blocks: Vec<Box<[u8]>> = (0..mib * 16)
+        .map(|_| {
+            let mut block = vec![0u8; BLOCK].into_boxed_slice();
+            for page in block.chunks_mut(4096) {
+                page[0] = 1;
+            }
+            std::hint::black_box(block)
+        })
+        .collect();
+    drop(std::hint::black_box(blocks));
+}
+
 thread_local! {
     /// Whether this thread is running a job of [`run`].
     static IN_JOB: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
@@ -444,6 +511,27 @@ mod tests {
         .unwrap();
         assert_eq!(outer, inner);
         assert!(!IN_JOB.get(), "the async worker is not marked");
+    }
+
+    #[tokio::test]
+    async fn on_every_lane_runs_once_on_each_lane() {
+        // As many answers as lanes, each from a different lane thread.
+        let n = Lanes::global().started.len();
+        let mut names: Vec<String> = on_every_lane(|| {
+            std::thread::current()
+                .name()
+                .unwrap_or_default()
+                .to_string()
+        })
+        .await;
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), n, "{names:?}");
+        assert!(names.iter().all(|name| name.starts_with("compute-")));
+        // A panic on a lane is that lane's missing answer, not a hang.
+        let answers = on_every_lane(|| -> u8 { panic!("warm-up failed") }).await;
+        assert!(answers.is_empty());
+        assert_eq!(offload(|| Ok(1)).await.unwrap(), 1);
     }
 
     #[test]
