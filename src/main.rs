@@ -31,9 +31,9 @@ unsafe extern "C" {
 /// Keeps memory the service frees for its later requests instead of giving
 /// it back to the kernel a second after (mimalloc's default purge delay):
 /// every page given back is zeroed by the kernel again when a later request
-/// touches it, 500–800 page faults per warm dimension fusion of the issue
-/// 54 scene (against none kept), and the start-up warm-up's pages would be
-/// gone before the first request. The process keeps its high-water mark,
+/// touches it (a dimension fusion of issue 15's traffic after a pause of
+/// 1.5 s: 700–1,200 page faults, against none kept), and the start-up
+/// warm-up's pages would be gone before the first request. The process keeps its high-water mark,
 /// which the request limits bound. `MIMALLOC_PURGE_DELAY` (milliseconds)
 /// still decides when it is set.
 fn keep_freed_memory() {

@@ -235,46 +235,36 @@ where
 }
 
 /// Runs `work` once on every compute lane (starting the lanes if they are
-/// not yet), each lane taking exactly one call, and waits for all of them:
-/// the start-up warm-up, so that what a lane's first job would pay once
-/// (the thread itself, its allocator heap, code and tables touched for the
-/// first time) is paid before the service reports ready. Lanes running
-/// other jobs take theirs after those. Returns the lanes' results in the
-/// order they finished.
+/// not yet), each lane taking its own call before any queued work, and
+/// waits for all of them: the start-up warm-up, so that what a lane's first
+/// job would pay once (the thread itself, its allocator heap, code and
+/// tables touched for the first time) is paid before the service reports
+/// ready. A lane busy with a job takes its call after that job. Returns one
+/// result per lane (none for a lane whose call panicked).
 pub async fn on_every_lane<T, F>(work: F) -> Vec<T>
 where
     F: Fn() -> T + Send + Sync + 'static,
     T: Send + 'static,
 {
-    /// Waits at the barrier when dropped: after the work, or while a panic
-    /// in it unwinds (the other lanes must not wait for ever).
-    struct Meet(Arc<std::sync::Barrier>);
-    impl Drop for Meet {
-        fn drop(&mut self) {
-            self.0.wait();
-        }
-    }
     let lanes = Lanes::global();
-    // A lane that could not start never takes a job: it is not counted.
-    let n = lanes
-        .started
-        .iter()
-        .filter(|s| s.load(Ordering::Relaxed) != NEVER_STARTED)
-        .count();
-    let (work, barrier) = (Arc::new(work), Arc::new(std::sync::Barrier::new(n)));
-    let mut answers = Vec::with_capacity(n);
-    for _ in 0..n {
-        let (work, meet) = (Arc::clone(&work), Meet(Arc::clone(&barrier)));
+    let work = Arc::new(work);
+    let mut answers = Vec::with_capacity(lanes.started.len());
+    for (lane, started) in lanes.started.iter().enumerate() {
+        // A lane that could not start never takes a job: it is left out.
+        if started.load(Ordering::Relaxed) == NEVER_STARTED {
+            continue;
+        }
+        let work = Arc::clone(&work);
         let (tx, rx) = tokio::sync::oneshot::channel();
-        // A lane that took one job waits at the barrier until every lane
-        // has taken one, so no lane takes two.
-        lanes.push(Box::new(move || {
-            let _meet = meet;
-            let _ = tx.send(work());
-        }));
+        lanes.push_to(
+            lane,
+            Box::new(move || {
+                let _ = tx.send(work());
+            }),
+        );
         answers.push(rx);
     }
-    let mut out = Vec::with_capacity(n);
+    let mut out = Vec::with_capacity(answers.len());
     for rx in answers {
         if let Ok(v) = rx.await {
             out.push(v);
@@ -391,6 +381,8 @@ struct Lanes {
 #[derive(Default)]
 struct Queue {
     jobs: VecDeque<Job>,
+    /// Per lane: jobs for that lane alone ([`on_every_lane`]), taken first.
+    pinned: Vec<VecDeque<Job>>,
     /// Lanes waiting on `ready`.
     idle: usize,
 }
@@ -406,7 +398,10 @@ impl Lanes {
 
     fn start(n: usize) -> Arc<Lanes> {
         let lanes = Arc::new(Lanes {
-            queue: Mutex::new(Queue::default()),
+            queue: Mutex::new(Queue {
+                pinned: (0..n).map(|_| VecDeque::new()).collect(),
+                ..Queue::default()
+            }),
             ready: Condvar::new(),
             started: (0..n).map(|_| AtomicU64::new(0)).collect(),
             epoch: Instant::now(),
@@ -452,11 +447,27 @@ impl Lanes {
         }
     }
 
+    /// Queues `job` for `lane` alone; it runs before the shared queue's.
+    fn push_to(&self, lane: usize, job: Job) {
+        let wake = {
+            let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+            q.pinned[lane].push_back(job);
+            q.idle > 0
+        };
+        // Only that lane can take it: every sleeping lane looks.
+        if wake {
+            self.ready.notify_all();
+        }
+    }
+
     fn run(&self, lane: usize) {
         loop {
             let job = {
                 let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
                 loop {
+                    if let Some(job) = q.pinned[lane].pop_front() {
+                        break job;
+                    }
                     if let Some(job) = q.jobs.pop_front() {
                         break job;
                     }
@@ -532,6 +543,59 @@ mod tests {
         let answers = on_every_lane(|| -> u8 { panic!("warm-up failed") }).await;
         assert!(answers.is_empty());
         assert_eq!(offload(|| Ok(1)).await.unwrap(), 1);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+    async fn calls_side_by_side_all_finish() {
+        // Eight warm-ups at once (as servers starting side by side in one
+        // test process): each lane runs each call once, and all finish.
+        let n = Lanes::global().started.len();
+        let calls: Vec<_> = (0..8)
+            .map(|_| tokio::spawn(on_every_lane(|| 1usize)))
+            .collect();
+        let done = tokio::time::timeout(Duration::from_secs(30), async {
+            let mut total = 0;
+            for call in calls {
+                total += call.await.unwrap().iter().sum::<usize>();
+            }
+            total
+        })
+        .await
+        .expect("the warm-ups finished");
+        assert_eq!(done, 8 * n);
+    }
+
+    #[test]
+    fn a_lane_held_by_a_job_takes_its_call_after_it_and_the_others_serve() {
+        // Lane 0 of two is held by a job waiting for a gate; the call for
+        // lane 1 runs at once and shared work still runs (on lane 1); the
+        // call for lane 0 runs when the gate opens. (A warm-up that made
+        // every lane wait for the others at a barrier hung servers started
+        // while a test held a lane.)
+        let lanes = Lanes::start(2);
+        let (gate_tx, gate_rx) = std::sync::mpsc::channel::<()>();
+        let (held_tx, held_rx) = std::sync::mpsc::channel();
+        lanes.push_to(
+            0,
+            Box::new(move || {
+                held_tx.send(()).unwrap();
+                gate_rx.recv().unwrap();
+            }),
+        );
+        held_rx.recv().unwrap();
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        for lane in [0, 1] {
+            let done = done_tx.clone();
+            lanes.push_to(lane, Box::new(move || done.send(lane).unwrap()));
+        }
+        let shared = done_tx.clone();
+        lanes.push(Box::new(move || shared.send(7).unwrap()));
+        let wait = || done_rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        let mut first = [wait(), wait()];
+        first.sort();
+        assert_eq!(first, [1, 7], "lane 1's call and the shared job");
+        gate_tx.send(()).unwrap();
+        assert_eq!(wait(), 0);
     }
 
     #[test]
