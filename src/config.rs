@@ -200,8 +200,8 @@ pub struct Settings {
     pub max_blocking_jobs: usize,
     /// Memory (MiB) each compute lane touches and gives back to the
     /// allocator at start-up, before the service reports ready, so that the
-    /// first requests do not wait for the kernel to hand over fresh pages
-    /// (0: none; the lanes still run one small dimension fusion each).
+    /// first requests wait less for the kernel to hand over fresh pages (0:
+    /// none; the lanes still run one small dimension fusion each).
     #[arg(long, env = "FUSION_WARM_UP_MIB", default_value_t = 32)]
     pub warm_up_mib: usize,
     /// Longest time a graceful shutdown waits for in-flight requests.
