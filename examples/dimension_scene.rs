@@ -14,7 +14,10 @@
 //! with the service's defaults and prints:
 //! - compute: the median over `--repeat` runs of the wall time of
 //!   `algo::dimension::fuse_methods` for all three methods (filters,
-//!   association, fusion);
+//!   association, fusion), and of `fuse_methods_with(…, Samples::Latest)`
+//!   (each system track's latest sample only, as the service fuses an
+//!   answer without history), checked against the history's last samples
+//!   bit for bit;
 //! - NEES: the mean 3D position NEES of the samples of pure system tracks
 //!   (3 for a consistent estimator), over all samples and over the samples
 //!   with a 3D member, and the share above χ²₃(0.99) = 11.34;
@@ -32,7 +35,7 @@
 use std::time::Instant;
 
 use algo::{
-    dimension::{self, Config, Filter, KnnParams, Method},
+    dimension::{self, Config, Filter, KnnParams, Method, Samples},
     gating::chi2_threshold,
 };
 use anyhow::{Context, bail};
@@ -111,6 +114,34 @@ fn numbers(outs: &[dimension::Outcome]) -> (Vec<f64>, Vec<String>) {
         }
     }
     (v, kinds)
+}
+
+/// Whether `latest` (`Samples::Latest`) has the pairs, groups and conflicts
+/// of `all` and, per system track, one sample whose every bit is the last
+/// sample of the history.
+fn same_latest(all: &[dimension::Outcome], latest: &[dimension::Outcome]) -> bool {
+    let bits = |s: &dimension::Sample| {
+        std::iter::once(s.t)
+            .chain(s.x.iter().copied())
+            .chain(s.p.iter().copied())
+            .map(f64::to_bits)
+            .collect::<Vec<_>>()
+    };
+    all.len() == latest.len()
+        && all.iter().zip(latest).all(|(a, l)| {
+            a.pairs == l.pairs
+                && a.conflicts == l.conflicts
+                && a.system_tracks.len() == l.system_tracks.len()
+                && a.system_tracks
+                    .iter()
+                    .zip(&l.system_tracks)
+                    .all(|(ta, tl)| {
+                        ta.members == tl.members
+                            && tl.samples.len() == 1
+                            && ta.samples.last().map(bits) == Some(bits(&tl.samples[0]))
+                            && ta.samples.last().map(|s| s.altitude) == Some(tl.samples[0].altitude)
+                    })
+        })
 }
 
 /// (multi-radar aircraft, those in exactly one pure system track holding all
@@ -195,6 +226,23 @@ fn main() -> anyhow::Result<()> {
                 times.push(start.elapsed().as_secs_f64() * 1e3);
             }
             times.sort_by(f64::total_cmp);
+            // The same scene fusing only each system track's latest sample
+            // (the service's answer without history).
+            let mut latest_times = Vec::new();
+            let mut latest = Vec::new();
+            for _ in 0..repeat {
+                let start = Instant::now();
+                latest = dimension::fuse_methods_with(
+                    &scene.centre,
+                    &scene.radars,
+                    &scene.tracks,
+                    &METHODS,
+                    &cfg,
+                    Samples::Latest,
+                )?;
+                latest_times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            latest_times.sort_by(f64::total_cmp);
             let (values, kinds) = numbers(&outs);
             println!(
                 "  {fname:<10} compute (3 methods) median {:.2} ms (min {:.2}, max {:.2}), decisions {:016x}, estimates {:016x}",
@@ -203,6 +251,18 @@ fn main() -> anyhow::Result<()> {
                 times[times.len() - 1],
                 digest(&outs),
                 fnv(values.iter().flat_map(|v| v.to_bits().to_le_bytes()))
+            );
+            println!(
+                "  {:<10} latest samples only: median {:.2} ms (min {:.2}, max {:.2}), the history's last samples to the bit: {}",
+                "",
+                latest_times[latest_times.len() / 2],
+                latest_times[0],
+                latest_times[latest_times.len() - 1],
+                if same_latest(&outs, &latest) {
+                    "yes"
+                } else {
+                    "NO"
+                }
             );
             let header = format!("# seed {seed} {fname} {}\n", values.len());
             if dump.is_some() {

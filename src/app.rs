@@ -135,6 +135,13 @@ impl Application {
                 .await?;
         // Reloads (and the SIGHUP handler) from before readiness.
         let tls_watcher = tls.as_ref().map(Tls::spawn_watcher);
+        // What the first requests would pay once, paid before ready.
+        let (lanes, took) = crate::http::warm_up(state.settings().warm_up_mib).await;
+        tracing::info!(
+            lanes,
+            ms = took.as_secs_f64() * 1e3,
+            "compute lanes warmed up"
+        );
         set_health(&health, true, store_ok).await;
         state.set_ready(true);
         let monitor = tokio::spawn(follow_readiness(state.clone(), health.clone(), store_ok));

@@ -198,6 +198,12 @@ pub struct Settings {
     /// UNAVAILABLE naming this limit (0: never use the pool).
     #[arg(long, env = "FUSION_MAX_BLOCKING_JOBS", default_value_t = 64)]
     pub max_blocking_jobs: usize,
+    /// Memory (MiB) each compute lane touches and gives back to the
+    /// allocator at start-up, before the service reports ready, so that the
+    /// first requests wait less for the kernel to hand over fresh pages (0:
+    /// none; the lanes still run one small dimension fusion each).
+    #[arg(long, env = "FUSION_WARM_UP_MIB", default_value_t = 32)]
+    pub warm_up_mib: usize,
     /// Longest time a graceful shutdown waits for in-flight requests.
     #[arg(long, env = "FUSION_SHUTDOWN_GRACE_S", default_value_t = 30.0)]
     pub shutdown_grace_s: f64,
@@ -468,6 +474,9 @@ impl Settings {
         let mut s = Cli::parse_from(["radar-fusion"]).settings;
         s.http_addr = "127.0.0.1:0".parse().expect("literal address");
         s.grpc_addr = "127.0.0.1:0".parse().expect("literal address");
+        // Test servers share one process and its lanes: the lanes still run
+        // the small fusion at each start, without touching memory for it.
+        s.warm_up_mib = 0;
         s
     }
 

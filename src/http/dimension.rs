@@ -6,7 +6,7 @@ use utoipa::ToSchema;
 
 use super::{
     Timing,
-    problem::{JsonBody, Problem},
+    problem::{JsonBody, Problem, answer_json},
 };
 use crate::state::AppState;
 use service::dimension as svc;
@@ -217,6 +217,19 @@ pub async fn fuse(
     body: JsonBody<DimensionFuseRequest>,
 ) -> Result<Response, Problem> {
     body.compute(fuse_on_lane).await
+}
+
+/// The route's whole job (parse, the three methods, encode) on its
+/// documented example, a 3D and a 2D radar: what the start-up warm-up runs
+/// on every compute lane (`super::warm_up`). Returns the answer's length.
+pub fn warm_up() -> Result<usize, Problem> {
+    warm_up_answer().map(|answer| answer.len())
+}
+
+/// The answer [`warm_up`] encodes.
+pub(super) fn warm_up_answer() -> Result<Vec<u8>, Problem> {
+    let body = super::request_example_text("/v1/dimension/fuse").unwrap_or_default();
+    answer_json(body.as_bytes(), fuse_on_lane)
 }
 
 fn fuse_on_lane(req: DimensionFuseRequest) -> Result<DimensionFuseResponse, Problem> {

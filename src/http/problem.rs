@@ -264,21 +264,7 @@ impl<T: DeserializeOwned + 'static> JsonBody<T> {
         F: FnOnce(T) -> Result<R, Problem> + Send + 'static,
     {
         let bytes = self.bytes;
-        let encoded = service::lanes::run(move || -> Result<Vec<u8>, Problem> {
-            let answer = work(parse_json(&bytes)?)?;
-            // Answers are up to a few times their requests (a JPDA update
-            // returns each track it was given, 1.9×; AIS–radar every
-            // compensated sample, 2.2×): sized once, the buffer is not
-            // copied through doublings on the way (a 6.5 MB answer's one
-            // realloc was 15 % of its request's time, issue 54). Capacity
-            // never written costs address space, not memory.
-            let mut encoded = Vec::with_capacity((3 * bytes.len()).clamp(1 << 10, 1 << 26));
-            serde_json::to_writer(&mut encoded, &answer).map_err(|e| {
-                Problem::from(ServiceError::Internal(format!("response encoding: {e}")))
-            })?;
-            Ok(encoded)
-        })
-        .await??;
+        let encoded = service::lanes::run(move || answer_json(&bytes, work)).await??;
         Ok((
             [(
                 header::CONTENT_TYPE,
@@ -288,6 +274,26 @@ impl<T: DeserializeOwned + 'static> JsonBody<T> {
         )
             .into_response())
     }
+}
+
+/// A compute endpoint's job: `bytes` parsed into `T` (400, 422 as
+/// [`ApiJson`]), answered by `work`, the answer encoded as JSON.
+pub fn answer_json<T, R, F>(bytes: &[u8], work: F) -> Result<Vec<u8>, Problem>
+where
+    T: DeserializeOwned,
+    R: Serialize,
+    F: FnOnce(T) -> Result<R, Problem>,
+{
+    let answer = work(parse_json(bytes)?)?;
+    // Answers are up to a few times their requests (a JPDA update returns
+    // each track it was given, 1.9×; AIS–radar every compensated sample,
+    // 2.2×): sized once, the buffer is not copied through doublings on the
+    // way (a 6.5 MB answer's one realloc was 15 % of its request's time,
+    // issue 54). Capacity never written costs address space, not memory.
+    let mut encoded = Vec::with_capacity((3 * bytes.len()).clamp(1 << 10, 1 << 26));
+    serde_json::to_writer(&mut encoded, &answer)
+        .map_err(|e| Problem::from(ServiceError::Internal(format!("response encoding: {e}"))))?;
+    Ok(encoded)
 }
 
 impl<S, T> FromRequest<S> for JsonBody<T>

@@ -12,6 +12,7 @@ use algo::{
     AlgoError,
     dimension::{
         self, AltitudeSource, Config, Filter, KnnParams, LocalTrack, Method, Period, Plot, Radar,
+        Samples,
     },
     gating::chi2_threshold,
     geo::LocalFrame,
@@ -213,13 +214,19 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     let start = Instant::now();
     let mut results = Vec::new();
     // The local filters run once for all methods: their time is in the
-    // first method's compute_us.
-    let outs = dimension::fuse_methods(
+    // first method's compute_us. Without history only the samples answered
+    // are fused (the latest of each system track).
+    let outs = dimension::fuse_methods_with(
         &plan.centre,
         &plan.radars,
         &plan.tracks,
         &plan.methods,
         &plan.config,
+        if history {
+            Samples::All
+        } else {
+            Samples::Latest
+        },
     )
     .map_err(computation_error)?;
     for (&method, out) in plan.methods.iter().zip(outs) {

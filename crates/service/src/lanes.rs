@@ -234,6 +234,63 @@ where
         .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
 }
 
+/// Runs `work` once on every compute lane (starting the lanes if they are
+/// not yet), each lane taking its own call before any queued work, and
+/// waits for all of them: the start-up warm-up, so that what a lane's first
+/// job would pay once (the thread itself, its allocator heap, code and
+/// tables touched for the first time) is paid before the service reports
+/// ready. A lane busy with a job takes its call after that job. Returns one
+/// result per lane (none for a lane whose call panicked).
+pub async fn on_every_lane<T, F>(work: F) -> Vec<T>
+where
+    F: Fn() -> T + Send + Sync + 'static,
+    T: Send + 'static,
+{
+    let lanes = Lanes::global();
+    let work = Arc::new(work);
+    let mut answers = Vec::with_capacity(lanes.started.len());
+    for (lane, started) in lanes.started.iter().enumerate() {
+        // A lane that could not start never takes a job: it is left out.
+        if started.load(Ordering::Relaxed) == NEVER_STARTED {
+            continue;
+        }
+        let work = Arc::clone(&work);
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        lanes.push_to(
+            lane,
+            Box::new(move || {
+                let _ = tx.send(work());
+            }),
+        );
+        answers.push(rx);
+    }
+    let mut out = Vec::with_capacity(answers.len());
+    for rx in answers {
+        if let Ok(v) = rx.await {
+            out.push(v);
+        }
+    }
+    out
+}
+
+/// Allocates `mib` MiB in blocks of 64 KiB, writes a byte in every 4 KiB
+/// page of them and frees them: the kernel hands the process those pages
+/// (zeroed) now, and the allocator keeps them for the next allocations of
+/// this thread, instead of the first request that needs them paying for it.
+pub fn touch_memory(mib: usize) {
+    const BLOCK: usize = 64 << 10;
+    let blocks: Vec<Box<[u8]>> = (0..mib * 16)
+        .map(|_| {
+            let mut block = vec![0u8; BLOCK].into_boxed_slice();
+            for page in block.chunks_mut(4096) {
+                page[0] = 1;
+            }
+            std::hint::black_box(block)
+        })
+        .collect();
+    drop(std::hint::black_box(blocks));
+}
+
 thread_local! {
     /// Whether this thread is running a job of [`run`].
     static IN_JOB: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
@@ -324,6 +381,8 @@ struct Lanes {
 #[derive(Default)]
 struct Queue {
     jobs: VecDeque<Job>,
+    /// Per lane: jobs for that lane alone ([`on_every_lane`]), taken first.
+    pinned: Vec<VecDeque<Job>>,
     /// Lanes waiting on `ready`.
     idle: usize,
 }
@@ -339,7 +398,10 @@ impl Lanes {
 
     fn start(n: usize) -> Arc<Lanes> {
         let lanes = Arc::new(Lanes {
-            queue: Mutex::new(Queue::default()),
+            queue: Mutex::new(Queue {
+                pinned: (0..n).map(|_| VecDeque::new()).collect(),
+                ..Queue::default()
+            }),
             ready: Condvar::new(),
             started: (0..n).map(|_| AtomicU64::new(0)).collect(),
             epoch: Instant::now(),
@@ -385,11 +447,27 @@ impl Lanes {
         }
     }
 
+    /// Queues `job` for `lane` alone; it runs before the shared queue's.
+    fn push_to(&self, lane: usize, job: Job) {
+        let wake = {
+            let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+            q.pinned[lane].push_back(job);
+            q.idle > 0
+        };
+        // Only that lane can take it: every sleeping lane looks.
+        if wake {
+            self.ready.notify_all();
+        }
+    }
+
     fn run(&self, lane: usize) {
         loop {
             let job = {
                 let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
                 loop {
+                    if let Some(job) = q.pinned[lane].pop_front() {
+                        break job;
+                    }
                     if let Some(job) = q.jobs.pop_front() {
                         break job;
                     }
@@ -444,6 +522,80 @@ mod tests {
         .unwrap();
         assert_eq!(outer, inner);
         assert!(!IN_JOB.get(), "the async worker is not marked");
+    }
+
+    #[tokio::test]
+    async fn on_every_lane_runs_once_on_each_lane() {
+        // As many answers as lanes, each from a different lane thread.
+        let n = Lanes::global().started.len();
+        let mut names: Vec<String> = on_every_lane(|| {
+            std::thread::current()
+                .name()
+                .unwrap_or_default()
+                .to_string()
+        })
+        .await;
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), n, "{names:?}");
+        assert!(names.iter().all(|name| name.starts_with("compute-")));
+        // A panic on a lane is that lane's missing answer, not a hang.
+        let answers = on_every_lane(|| -> u8 { panic!("warm-up failed") }).await;
+        assert!(answers.is_empty());
+        assert_eq!(offload(|| Ok(1)).await.unwrap(), 1);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+    async fn calls_side_by_side_all_finish() {
+        // Eight warm-ups at once (as servers starting side by side in one
+        // test process): each lane runs each call once, and all finish.
+        let n = Lanes::global().started.len();
+        let calls: Vec<_> = (0..8)
+            .map(|_| tokio::spawn(on_every_lane(|| 1usize)))
+            .collect();
+        let done = tokio::time::timeout(Duration::from_secs(30), async {
+            let mut total = 0;
+            for call in calls {
+                total += call.await.unwrap().iter().sum::<usize>();
+            }
+            total
+        })
+        .await
+        .expect("the warm-ups finished");
+        assert_eq!(done, 8 * n);
+    }
+
+    #[test]
+    fn a_lane_held_by_a_job_takes_its_call_after_it_and_the_others_serve() {
+        // Lane 0 of two is held by a job waiting for a gate; the call for
+        // lane 1 runs at once and shared work still runs (on lane 1); the
+        // call for lane 0 runs when the gate opens. (A warm-up that made
+        // every lane wait for the others at a barrier hung servers started
+        // while a test held a lane.)
+        let lanes = Lanes::start(2);
+        let (gate_tx, gate_rx) = std::sync::mpsc::channel::<()>();
+        let (held_tx, held_rx) = std::sync::mpsc::channel();
+        lanes.push_to(
+            0,
+            Box::new(move || {
+                held_tx.send(()).unwrap();
+                gate_rx.recv().unwrap();
+            }),
+        );
+        held_rx.recv().unwrap();
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        for lane in [0, 1] {
+            let done = done_tx.clone();
+            lanes.push_to(lane, Box::new(move || done.send(lane).unwrap()));
+        }
+        let shared = done_tx.clone();
+        lanes.push(Box::new(move || shared.send(7).unwrap()));
+        let wait = || done_rx.recv_timeout(Duration::from_secs(10)).unwrap();
+        let mut first = [wait(), wait()];
+        first.sort();
+        assert_eq!(first, [1, 7], "lane 1's call and the shared job");
+        gate_tx.send(()).unwrap();
+        assert_eq!(wait(), 0);
     }
 
     #[test]

@@ -53,6 +53,21 @@ pub enum Method {
     Splitting,
 }
 
+/// Which samples of each system track [`fuse_methods_with`] fuses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Samples {
+    /// Every instant of its members, in time order (the whole history).
+    All,
+    /// Only its latest sample: the last one [`Samples::All`] gives, by the
+    /// same operations on the same numbers (so the same bits), without
+    /// fusing the instants before it. The pair tests and the groups do not
+    /// depend on the system tracks' samples (a sample fuses its members'
+    /// estimates at its instant, nothing of the samples before), so they
+    /// are the same too; only the height lifting and splitting borrow from
+    /// the 3D members reaches back, to the latest instant they cover.
+    Latest,
+}
+
 /// A radar of the scene: its site, whether it measures elevation, its
 /// measurement errors and its scan period.
 #[derive(Debug, Clone)]
@@ -237,6 +252,21 @@ pub fn fuse_methods(
     methods: &[Method],
     cfg: &Config,
 ) -> Result<Vec<Outcome>, AlgoError> {
+    fuse_methods_with(centre, radars, tracks, methods, cfg, Samples::All)
+}
+
+/// [`fuse_methods`] fusing `samples` of each system track: with
+/// [`Samples::Latest`] each system track holds its latest sample only (what
+/// an answer without history shows), and the pairs, groups and conflicts
+/// are those of [`Samples::All`].
+pub fn fuse_methods_with(
+    centre: &LocalFrame,
+    radars: &[Radar],
+    tracks: &[LocalTrack],
+    methods: &[Method],
+    cfg: &Config,
+    samples: Samples,
+) -> Result<Vec<Outcome>, AlgoError> {
     let mut started = std::time::Instant::now();
     let filtered = tracks
         .iter()
@@ -292,7 +322,7 @@ pub fn fuse_methods(
         share.pending_lifted =
             method == Method::Mapping && methods[n + 1..].iter().any(|&m| m != Method::Mapping);
         let mut out = fuse_one_sharing(
-            centre, radars, &sites, tracks, &filtered, centred, method, cfg, &mut share,
+            centre, radars, &sites, tracks, &filtered, centred, method, cfg, samples, &mut share,
         )?;
         out.compute_us = started.elapsed().as_secs_f64() * 1e6;
         started = std::time::Instant::now();
@@ -366,7 +396,16 @@ fn fuse_one(
     let mut share = Share::default();
     let sites: Vec<Site> = radars.iter().map(|r| Site::new(centre, r)).collect();
     fuse_one_sharing(
-        centre, radars, &sites, tracks, filtered, centred, method, cfg, &mut share,
+        centre,
+        radars,
+        &sites,
+        tracks,
+        filtered,
+        centred,
+        method,
+        cfg,
+        Samples::All,
+        &mut share,
     )
 }
 
@@ -401,6 +440,7 @@ fn fuse_one_sharing(
     centred: &[Vec<State6>],
     method: Method,
     cfg: &Config,
+    samples: Samples,
     share: &mut Share,
 ) -> Result<Outcome, AlgoError> {
     let mut points: Vec<Vec<TestPoint>> = Vec::with_capacity(centred.len());
@@ -482,23 +522,39 @@ fn fuse_one_sharing(
         .filter(|g| g.iter().any(|&i| !centred[i].is_empty()))
         .map(|g| {
             let fuse = |g: Vec<usize>, three: &ThreePass, spots: bool| {
-                fused_track(
-                    centre,
-                    radars,
-                    sites,
-                    filtered,
-                    centred,
-                    g,
-                    three,
-                    method,
-                    cfg.altitude_sigma,
-                    spots,
-                )
+                let track = |g: Vec<usize>, three: &ThreePass, samples: Samples| {
+                    fused_track(
+                        centre,
+                        radars,
+                        sites,
+                        filtered,
+                        centred,
+                        g,
+                        three,
+                        method,
+                        cfg.altitude_sigma,
+                        spots,
+                        samples,
+                    )
+                };
+                let fused = track(g, three, samples)?;
+                if samples == Samples::All || !fused.track.samples.is_empty() {
+                    return Ok(fused);
+                }
+                // No sample at the last instant, which only a negative scan
+                // period can do (a member's own instant out of its gap; the
+                // service refuses it): the latest of the whole history.
+                let g = fused.track.members;
+                let all = three_pass(radars, filtered, centred, &g, spots, Samples::All)?;
+                let mut fused = track(g, &all, Samples::All)?;
+                keep_latest(&mut fused);
+                Ok(fused)
             };
             if method == Method::Mapping {
                 // The 3D pass kept for lifting or splitting keeps the spots
                 // that splitting reads.
-                let three = three_pass(radars, filtered, centred, &g, share.pending_lifted)?;
+                let three =
+                    three_pass(radars, filtered, centred, &g, share.pending_lifted, samples)?;
                 let track = fuse(g.clone(), &three, false)?.track;
                 if share.pending_lifted {
                     share.three.insert(g, three);
@@ -511,7 +567,7 @@ fn fuse_one_sharing(
                     let spots = method == Method::Splitting || share.pending_other;
                     let three = match share.three.remove(&g) {
                         Some(three) => three,
-                        None => three_pass(radars, filtered, centred, &g, spots)?,
+                        None => three_pass(radars, filtered, centred, &g, spots, samples)?,
                     };
                     fuse(g.clone(), &three, spots)?
                 }
@@ -967,12 +1023,17 @@ struct ThreePass {
     ranges3: Vec<std::ops::Range<usize>>,
 }
 
+/// The 3D pass of a group over every instant of its members, or with
+/// [`Samples::Latest`] over the instants from the latest that a 3D member
+/// covers (the height lifting and splitting borrow at the last instant) to
+/// the last; none covered: the last instant alone.
 fn three_pass(
     radars: &[Radar],
     filtered: &[Filtered],
     centred: &[Vec<State6>],
     members: &[usize],
     keep_spots: bool,
+    samples: Samples,
 ) -> Result<ThreePass, AlgoError> {
     let mut times: Vec<f64> = members
         .iter()
@@ -985,6 +1046,24 @@ fn three_pass(
         .copied()
         .filter(|&i| radars[filtered[i].radar].three_d)
         .collect();
+    if samples == Samples::Latest {
+        // A member covers t when its latest sample at or before t is at
+        // most its gap old (`extrapolate`'s test).
+        let covers = |t: f64| {
+            three_d.iter().any(|&i| {
+                let tr = &centred[i];
+                let k = tr.partition_point(|s| s.t <= t);
+                let gap = 1.5 * radars[filtered[i].radar].scan_period;
+                k.checked_sub(1).is_some_and(|k| {
+                    let stale = t - tr[k].t > gap;
+                    !stale
+                })
+            })
+        };
+        let last = times.len().saturating_sub(1);
+        let from = (0..times.len()).rev().find(|&n| covers(times[n]));
+        times.drain(..from.unwrap_or(last));
+    }
     // `at_time` for non-decreasing t: each member's latest sample at or
     // before t found by a forward scan from the previous instant's.
     let mut cursor = vec![0; three_d.len()];
@@ -1032,7 +1111,9 @@ fn three_pass(
 /// The system track of a group: at every instant of its members, the 3D
 /// members' fusion (`three`, from [`three_pass`] with the spots when
 /// `keep_spots`), then the 2D members (under lifting and splitting at the
-/// 3D members' height) fused into it one by one.
+/// 3D members' height) fused into it one by one. With [`Samples::Latest`]
+/// (and `three` from [`three_pass`] under it) only the last instant's
+/// sample, the instants before it read for the height they give alone.
 #[allow(clippy::too_many_arguments)]
 fn fused_track(
     centre: &LocalFrame,
@@ -1045,6 +1126,7 @@ fn fused_track(
     method: Method,
     altitude_sigma: f64,
     keep_spots: bool,
+    wanted: Samples,
 ) -> Result<Fused, AlgoError> {
     let has_3d = members.iter().any(|&i| radars[filtered[i].radar].three_d);
     let (times, fused3) = (&three.times, &three.fused3);
@@ -1075,10 +1157,21 @@ fn fused_track(
     } else {
         (Vec::new(), Vec::new())
     };
-    let mut ranges3 = three.ranges3.iter();
+    // The first instant fused: the last one under `Samples::Latest`.
+    let first = match wanted {
+        Samples::All => 0,
+        Samples::Latest => times.len().saturating_sub(1),
+    };
+    // `ranges3` holds one range per instant with a 3D fusion (those skipped
+    // included).
+    let mut ranges3 = three.ranges3.iter().skip(if keep_spots {
+        fused3[..first].iter().filter(|f| f.is_some()).count()
+    } else {
+        0
+    });
     let mut cursor2 = vec![0; two_d.len()];
     let mut next_height = 0;
-    for (&t, f3) in times.iter().zip(fused3) {
+    for (&t, f3) in times.iter().zip(fused3).skip(first) {
         all.clear();
         while next_height + 1 < heights.len() && heights[next_height + 1].0 <= t {
             next_height += 1;
@@ -1141,7 +1234,6 @@ fn fused_track(
         };
 
         if keep_spots {
-            // `ranges3` holds one range per instant with a 3D fusion.
             split.push(match f3.as_ref().and_then(|_| ranges3.next()) {
                 Some(r) => {
                     let start = spots.len();
@@ -1163,6 +1255,15 @@ fn fused_track(
         split,
         spots,
     })
+}
+
+/// Keeps the latest sample of a fused track (and its spots' entry).
+fn keep_latest(fused: &mut Fused) {
+    let n = fused.track.samples.len().saturating_sub(1);
+    fused.track.samples.drain(..n);
+    if !fused.split.is_empty() {
+        fused.split.drain(..n);
+    }
 }
 
 /// Splitting's system track from the one lifting fuses: at every sample with

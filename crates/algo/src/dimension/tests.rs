@@ -536,6 +536,81 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
 }
 
 #[test]
+fn the_latest_sample_alone_is_the_last_of_the_whole_history_bit_for_bit() {
+    // `Samples::Latest` fuses only the last instant of each system track
+    // (and reads back to the latest instant a 3D member covers, for the
+    // height lifting and splitting borrow). Its one sample per system
+    // track must be the last sample of `Samples::All` to the bit, with the
+    // same pairs, groups and conflicts, for every method alone and for the
+    // combinations that share work (mapping's 3D pass, lifting's tracks
+    // kept for splitting), on three seeds of the benchmark scene and both
+    // filters; the comparison covers samples of every altitude source.
+    let sets: [&[Method]; 5] = [
+        &[Method::Mapping, Method::Lifting, Method::Splitting],
+        &[Method::Splitting, Method::Lifting],
+        &[Method::Mapping],
+        &[Method::Lifting],
+        &[Method::Splitting],
+    ];
+    let mut seen = [0usize; 3];
+    for seed in [1u64, 2, 3] {
+        let scene = bench_scene(20, 200.0, seed);
+        for filter in [
+            Filter::AlphaBeta { window: 4 },
+            Filter::Kalman { sigma_a: 5.0 },
+        ] {
+            let cfg = Config {
+                filter,
+                knn: KnnParams { n0: 5, k: 3 },
+                preset_altitude: 5000.0,
+                altitude_sigma: 5000.0,
+                gate_sigmas: 3.0,
+                chi2_2: 9.2103, // χ²₂(0.01) = −2 ln 0.01
+                chi2_3: 11.3449,
+            };
+            for methods in sets {
+                let run = |samples| {
+                    fuse_methods_with(
+                        &scene.centre,
+                        &scene.radars,
+                        &scene.tracks,
+                        methods,
+                        &cfg,
+                        samples,
+                    )
+                    .unwrap()
+                };
+                let (all, latest) = (run(Samples::All), run(Samples::Latest));
+                for (m, (a, l)) in methods.iter().zip(all.iter().zip(&latest)) {
+                    let at = format!("seed {seed} {filter:?} {m:?} of {methods:?}");
+                    assert_eq!(a.pairs, l.pairs, "{at}");
+                    assert_eq!(a.conflicts, l.conflicts, "{at}");
+                    assert_eq!(a.system_tracks.len(), l.system_tracks.len(), "{at}");
+                    for (ta, tl) in a.system_tracks.iter().zip(&l.system_tracks) {
+                        assert_eq!(ta.members, tl.members, "{at}");
+                        assert_eq!(ta.altitude_known, tl.altitude_known, "{at}");
+                        assert_eq!(tl.samples.len(), 1, "{at}");
+                        let (sa, sl) = (ta.samples.last().unwrap(), &tl.samples[0]);
+                        let bits = |s: &Sample| {
+                            std::iter::once(s.t)
+                                .chain(s.x.iter().copied())
+                                .chain(s.p.iter().copied())
+                                .map(f64::to_bits)
+                                .collect::<Vec<_>>()
+                        };
+                        assert_eq!(bits(sa), bits(sl), "{at} {:?}", ta.members);
+                        assert_eq!(sa.altitude, sl.altitude, "{at}");
+                        seen[sl.altitude as usize] += 1;
+                    }
+                }
+            }
+        }
+    }
+    // Every altitude source among the compared samples.
+    assert!(seen.iter().all(|&n| n > 10), "{seen:?}");
+}
+
+#[test]
 fn all_finite_agrees_with_is_finite() {
     let vals = [
         0.0,
