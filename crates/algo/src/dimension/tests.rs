@@ -446,6 +446,21 @@ fn reference_pair(
     state
 }
 
+/// The benchmark scene's configuration with `filter`: K-NN 3 of 5, a
+/// preset altitude of 5,000 ± 5,000 m, 3σ gates and the 1 % χ² thresholds
+/// (χ²₂(0.01) = −2 ln 0.01 = 9.2103, χ²₃(0.01) = 11.3449).
+fn bench_config(filter: Filter) -> Config {
+    Config {
+        filter,
+        knn: KnnParams { n0: 5, k: 3 },
+        preset_altitude: 5000.0,
+        altitude_sigma: 5000.0,
+        gate_sigmas: 3.0,
+        chi2_2: 9.2103,
+        chi2_3: 11.3449,
+    }
+}
+
 #[test]
 fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
     // The per-sample test coordinates with the linearised extrapolation and
@@ -458,15 +473,7 @@ fn fast_pair_tests_decide_as_the_exact_evaluation_on_the_benchmark_scene() {
             Filter::AlphaBeta { window: 4 },
             Filter::Kalman { sigma_a: 5.0 },
         ] {
-            let cfg = Config {
-                filter,
-                knn: KnnParams { n0: 5, k: 3 },
-                preset_altitude: 5000.0,
-                altitude_sigma: 5000.0,
-                gate_sigmas: 3.0,
-                chi2_2: 9.2103, // χ²₂(0.01) = −2 ln 0.01
-                chi2_3: 11.3449,
-            };
+            let cfg = bench_config(filter);
             let filtered: Vec<Filtered> = scene
                 .tracks
                 .iter()
@@ -559,15 +566,7 @@ fn the_latest_sample_alone_is_the_last_of_the_whole_history_bit_for_bit() {
             Filter::AlphaBeta { window: 4 },
             Filter::Kalman { sigma_a: 5.0 },
         ] {
-            let cfg = Config {
-                filter,
-                knn: KnnParams { n0: 5, k: 3 },
-                preset_altitude: 5000.0,
-                altitude_sigma: 5000.0,
-                gate_sigmas: 3.0,
-                chi2_2: 9.2103, // χ²₂(0.01) = −2 ln 0.01
-                chi2_3: 11.3449,
-            };
+            let cfg = bench_config(filter);
             for methods in sets {
                 let run = |samples| {
                     fuse_methods_with(
