@@ -55,6 +55,11 @@
 //! never the bias. (The registration's own σ is added to the update's
 //! variance separately, [`super::registration::inflated`].)
 //!
+//! **Which plots teach.** A plot that updates a confirmed track past its
+//! start ([`LEARNING_HITS`]) and lies in no other track's gate: in dense
+//! traffic the wrong associations and the young tracks' covariances made
+//! the σ 15–28 % too large.
+//!
 //! **Noise and process noise.** An IMM track's plot is compared with its
 //! most probable model's prediction, and only when that model's predicted
 //! probability is at least [`MIN_MODE_PROBABILITY`] (a manoeuvre under
@@ -171,6 +176,13 @@ const CLIPPED_MEAN: f64 = 0.995_007_278;
 /// The applied σ stays within [declared / LIMIT, declared × LIMIT]: an
 /// estimate at the bound says so in a warning.
 pub const LIMIT: f64 = 10.0;
+/// A track's plots teach the σ once it has had more than this many hits
+/// (its start's covariance is not yet its error's), and only plots in no
+/// other track's gate: among 4,000 aircraft under four radars declared
+/// right, learning from every track and plot took σ_range to 57–64 m for
+/// a true 50 (and the early lower bound then started 25 more tracks);
+/// with both rules 0.2 % more tracks than with the estimator off.
+pub const LEARNING_HITS: u32 = 4;
 /// A track's hits count toward the detection probability once it has
 /// had more than this many.
 pub const ESTABLISHED_HITS: u32 = 10;

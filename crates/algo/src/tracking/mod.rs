@@ -926,12 +926,14 @@ impl Tracker {
             true,
         ) = (&source, cfg.accuracy.enabled)
         {
+            let tracks = &self.tracks;
             innovations(
                 spec,
                 raw,
                 cfg.axes,
                 &outcome,
                 &scratch.predictions[..slots.len()],
+                &|c| tracks[slots[c]].hits > accuracy::LEARNING_HITS,
                 &mut scratch.innovations,
             );
         }
@@ -1304,19 +1306,32 @@ struct Scratch {
 /// the accuracy estimator, against the track's prediction
 /// (`predictions`): an IMM track's most probable model's when its
 /// predicted probability is at least [`accuracy::MIN_MODE_PROBABILITY`]
-/// (else the plot is not learnt from: the motion is in transition).
+/// (else the plot is not learnt from: the motion is in transition). Only
+/// tracks past their start (`established(c)`: more than
+/// [`accuracy::LEARNING_HITS`] hits; a young track's covariance is not
+/// yet its error's) and plots in no other track's gate teach.
 fn innovations(
     spec: &RadarSpec,
     raw: &[Plot],
     axes: usize,
     outcome: &Outcome,
     predictions: &[Prediction],
+    established: &dyn Fn(usize) -> bool,
     out: &mut Vec<accuracy::Innovation>,
 ) {
     let layout = polar_layout(spec, axes);
     let with_range_rate = range_rate_sigma(spec, raw).is_some();
+    let mut gated = vec![0u32; raw.len()];
+    for a in &outcome.associations {
+        for &(j, _) in &a.measurements {
+            gated[j] += 1;
+        }
+    }
     for (c, hit) in outcome.hit.iter().enumerate() {
         let Some(j) = *hit else { continue };
+        if gated[j] > 1 || !established(c) {
+            continue;
+        }
         let beta = outcome.associations[c]
             .measurements
             .iter()
