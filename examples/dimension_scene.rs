@@ -212,37 +212,22 @@ fn main() -> anyhow::Result<()> {
             ),
         ] {
             let cfg = config(filter)?;
-            let mut times = Vec::new();
-            let mut outs = Vec::new();
-            for _ in 0..repeat {
-                let start = Instant::now();
-                outs = dimension::fuse_methods(
-                    &scene.centre,
-                    &scene.radars,
-                    &scene.tracks,
-                    &METHODS,
-                    &cfg,
-                )?;
-                times.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-            times.sort_by(f64::total_cmp);
+            let timed = |samples| {
+                timed(repeat, || {
+                    dimension::fuse_methods_with(
+                        &scene.centre,
+                        &scene.radars,
+                        &scene.tracks,
+                        &METHODS,
+                        &cfg,
+                        samples,
+                    )
+                })
+            };
+            let (times, outs) = timed(Samples::All)?;
             // The same scene fusing only each system track's latest sample
             // (the service's answer without history).
-            let mut latest_times = Vec::new();
-            let mut latest = Vec::new();
-            for _ in 0..repeat {
-                let start = Instant::now();
-                latest = dimension::fuse_methods_with(
-                    &scene.centre,
-                    &scene.radars,
-                    &scene.tracks,
-                    &METHODS,
-                    &cfg,
-                    Samples::Latest,
-                )?;
-                latest_times.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-            latest_times.sort_by(f64::total_cmp);
+            let (latest_times, latest) = timed(Samples::Latest)?;
             let (values, kinds) = numbers(&outs);
             println!(
                 "  {fname:<10} compute (3 methods) median {:.2} ms (min {:.2}, max {:.2}), decisions {:016x}, estimates {:016x}",
@@ -305,4 +290,18 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `f` run `repeat` times (at least once): its wall times in ms, sorted,
+/// and its last outcome.
+fn timed<T, E>(repeat: usize, mut f: impl FnMut() -> Result<T, E>) -> Result<(Vec<f64>, T), E> {
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let start = Instant::now();
+        last = Some(f()?);
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((times, last.expect("at least one run")))
 }

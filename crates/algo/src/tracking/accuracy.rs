@@ -236,6 +236,18 @@ impl AccuracyConfig {
     }
 }
 
+/// Whether an estimate (`estimate` ± `sigma` from `samples`, declared
+/// `declared`) is applied: after [`MIN_SAMPLES`], once precise enough
+/// (σ ≤ [`CONVERGED_RELATIVE_SIGMA`] of `scale`) or already far (beyond
+/// [`DECLARED_SIGMAS`] of its σ) from the declared value: a radar declared
+/// three times too accurate is known to be wrong long before its σ is
+/// known to 10 %, and every scan with the declared σ starts false tracks.
+fn converged(samples: f64, estimate: f64, sigma: f64, scale: f64, declared: f64) -> bool {
+    samples >= MIN_SAMPLES
+        && (sigma <= CONVERGED_RELATIVE_SIGMA * scale
+            || (estimate - declared).abs() > DECLARED_SIGMAS * sigma)
+}
+
 /// One component's running sums (each decayed by exp(−Δt/τ), the
 /// squared weights by its square).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -306,9 +318,7 @@ impl DetectionData {
         } else {
             (declared, f64::INFINITY)
         };
-        let converged = n >= MIN_SAMPLES
-            && (sigma <= CONVERGED_RELATIVE_SIGMA * estimate.min(1.0 - estimate)
-                || (estimate - declared).abs() > DECLARED_SIGMAS * sigma);
+        let converged = converged(n, estimate, sigma, estimate.min(1.0 - estimate), declared);
         let applied = if converged && applies {
             estimate.clamp(MIN_DETECTION, MAX_DETECTION)
         } else {
@@ -384,7 +394,8 @@ impl ComponentData {
     /// The estimate against the declared σ (`applies`: learning on and the
     /// radar not pinned).
     fn estimate(&self, declared: f64, applies: bool) -> SigmaEstimate {
-        let (estimate, sigma) = match self.variance() {
+        let moments = self.variance();
+        let (estimate, sigma) = match moments {
             Some((var, var_var)) => {
                 // A variance at or below 0 (the tracks' own uncertainty
                 // explains the innovations): σ not identified.
@@ -398,13 +409,7 @@ impl ComponentData {
             }
             None => (declared, f64::INFINITY),
         };
-        // Precise enough, or already far (beyond DECLARED_SIGMAS of its
-        // σ) from the declared σ: a radar declared three times too
-        // accurate is known to be wrong long before its σ is known to
-        // 10 %, and every scan with the declared σ starts false tracks.
-        let converged = self.weight >= MIN_SAMPLES
-            && (sigma <= CONVERGED_RELATIVE_SIGMA * estimate
-                || (estimate - declared).abs() > DECLARED_SIGMAS * sigma);
+        let converged = converged(self.weight, estimate, sigma, estimate, declared);
         // Before convergence, a σ known (σ̂² less EARLY_SIGMAS of its σ) to
         // exceed the declared one is raised to that lower bound: a radar
         // declared three times too accurate starts false tracks every scan
@@ -412,9 +417,7 @@ impl ComponentData {
         // the variance's scale: where the tracks' own uncertainty hides σ,
         // σ̂² is near 0 with a wide σ, and σ(σ̂) by the delta method is
         // no bound.)
-        let floor = self
-            .variance()
-            .map_or(0.0, |(var, var_var)| var - EARLY_SIGMAS * var_var.sqrt());
+        let floor = moments.map_or(0.0, |(var, var_var)| var - EARLY_SIGMAS * var_var.sqrt());
         let applied = if converged && applies {
             estimate.clamp(declared / LIMIT, declared * LIMIT)
         } else if applies && self.weight >= EARLY_SAMPLES && floor > declared * declared {

@@ -601,27 +601,20 @@ impl Tracker {
             self.registrar
                 .learn_serial(&self.config, &self.applied, &self.tracks, index, &hits)?;
         }
-        let scans = &self.scratch.0.scans_since_hit;
-        if self.config.accuracy.enabled && !scans.is_empty() {
-            let cfg = &self.config;
+        // The frame's detection trials (judged against the σ as they stood
+        // before it) and innovations; the radar as applied, once.
+        let (scans, innovations) = (&self.scratch.0.scans_since_hit, &self.scratch.0.innovations);
+        let cfg = &self.config;
+        let learns_detection = cfg.accuracy.enabled && !scans.is_empty();
+        if learns_detection {
             self.accuracy
                 .detections(&cfg.accuracy, index, &cfg.radars[index], t, scans);
-            self.applied[index] = self.accuracy.applied(
-                &cfg.accuracy,
-                index,
-                &cfg.radars[index],
-                cfg.track_gate_probability,
-            );
         }
-        if !self.scratch.0.innovations.is_empty() {
-            let cfg = &self.config;
-            self.accuracy.learn(
-                &cfg.accuracy,
-                index,
-                &cfg.radars[index],
-                t,
-                &self.scratch.0.innovations,
-            );
+        if !innovations.is_empty() {
+            self.accuracy
+                .learn(&cfg.accuracy, index, &cfg.radars[index], t, innovations);
+        }
+        if learns_detection || !innovations.is_empty() {
             self.applied[index] = self.accuracy.applied(
                 &cfg.accuracy,
                 index,
@@ -928,13 +921,11 @@ impl Tracker {
         {
             let tracks = &self.tracks;
             innovations(
-                spec,
-                raw,
-                cfg.axes,
+                (spec, raw, cfg.axes),
                 &outcome,
-                &scratch.predictions[..slots.len()],
+                slots.len(),
                 &|c| tracks[slots[c]].hits > accuracy::LEARNING_HITS,
-                &mut scratch.innovations,
+                &mut scratch,
             );
         }
         let (hits, touched) = self.update(
@@ -1298,30 +1289,40 @@ struct Scratch {
     /// radar's previous hit of the track: the scans since (the detection
     /// probability's trials, [`accuracy`]).
     scans_since_hit: Vec<u32>,
+    /// Per plot of the frame, the tracks whose gates hold it (the
+    /// accuracy estimator's buffer).
+    gated: Vec<u32>,
 }
 
 /// Serial mode: the innovations of the radar's plots (`spec`, corrected
-/// plots `raw`) that updated a confirmed track without ambiguity
+/// plots `raw`, in a tracker of `axes` axes) that updated a confirmed track without ambiguity
 /// (association weight at least [`accuracy::MIN_ASSOCIATION_WEIGHT`]), for
-/// the accuracy estimator, against the track's prediction
-/// (`predictions`): an IMM track's most probable model's when its
-/// predicted probability is at least [`accuracy::MIN_MODE_PROBABILITY`]
+/// the accuracy estimator (into `scratch.innovations`), against the
+/// track's prediction (the first `candidates` of `scratch.predictions`):
+/// an IMM track's most probable model's when its predicted probability is
+/// at least [`accuracy::MIN_MODE_PROBABILITY`]
 /// (else the plot is not learnt from: the motion is in transition). Only
 /// tracks past their start (`established(c)`: more than
 /// [`accuracy::LEARNING_HITS`] hits; a young track's covariance is not
 /// yet its error's) and plots in no other track's gate teach.
 fn innovations(
-    spec: &RadarSpec,
-    raw: &[Plot],
-    axes: usize,
+    (spec, raw, axes): (&RadarSpec, &[Plot], usize),
     outcome: &Outcome,
-    predictions: &[Prediction],
+    candidates: usize,
     established: &dyn Fn(usize) -> bool,
-    out: &mut Vec<accuracy::Innovation>,
+    scratch: &mut Scratch,
 ) {
+    let Scratch {
+        predictions,
+        gated,
+        innovations: out,
+        ..
+    } = scratch;
+    let predictions = &predictions[..candidates];
     let layout = polar_layout(spec, axes);
     let with_range_rate = range_rate_sigma(spec, raw).is_some();
-    let mut gated = vec![0u32; raw.len()];
+    gated.clear();
+    gated.resize(raw.len(), 0);
     for a in &outcome.associations {
         for &(j, _) in &a.measurements {
             gated[j] += 1;
@@ -1368,7 +1369,7 @@ fn innovations(
 /// clutter or a duplicate, with its few hits, would count its misses).
 fn detection_trials(track: &mut Track, plot: &CartesianPlot, radars: &[RadarSpec]) -> Option<u32> {
     let established = track.hits > accuracy::ESTABLISHED_HITS;
-    let scans = track.hit_by_plot(plot, radars)?.1;
+    let scans = track.hit_by_plot(plot, radars)?;
     established.then_some(scans)
 }
 

@@ -155,7 +155,7 @@ impl Track {
     /// round(Δt / period) ≥ 1, when this hit is a later scan's (Δt at
     /// least half a period; an earlier or the same scan's hit, a split
     /// plot, returns `None` and only moves the time forward).
-    pub(crate) fn hit_by(&mut self, radar: usize, t: f64, period: f64) -> Option<u32> {
+    fn hit_by(&mut self, radar: usize, t: f64, period: f64) -> Option<u32> {
         match self.detections.binary_search_by_key(&radar, |h| h.radar) {
             Ok(i) => {
                 let h = &mut self.detections[i];
@@ -174,16 +174,15 @@ impl Track {
 
     /// [`Track::hit_by`] of a frame's plot when it is one radar's plot
     /// (its own time; a fused plot of parallel mode records none): the
-    /// radar and the scans since its previous hit.
+    /// scans since that radar's previous hit.
     pub(crate) fn hit_by_plot(
         &mut self,
         plot: &CartesianPlot,
         radars: &[RadarSpec],
-    ) -> Option<(usize, u32)> {
+    ) -> Option<u32> {
         let m = plot.measured.as_ref()?;
         let spec = radars.get(m.radar)?;
         self.hit_by(m.radar, m.t, spec.scan_period)
-            .map(|k| (m.radar, k))
     }
 
     /// Records a frame: a hit with the radars of the plot(s), or a miss.

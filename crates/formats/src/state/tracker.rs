@@ -68,6 +68,9 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
 pub const FORMAT_VERSION: u32 = 9;
+/// The format from which tracks keep their last hit per radar and the
+/// radars their detection trials.
+const DETECTION_FORMAT: u32 = 9;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
@@ -114,19 +117,14 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
         flags(&mut w, s.mode_s_radars);
     }
     if version >= 8 {
-        accuracy(&mut w, &s.config.accuracy, s.accuracy);
-    }
-    if version >= 9 {
-        for d in &s.accuracy.radars {
-            let d = &d.detection;
-            w.f64_run(&[d.trials, d.detections]);
-            w.opt(d.t, Writer::f64);
-        }
+        accuracy(&mut w, &s.config.accuracy, s.accuracy, version);
     }
     w.buf
 }
 
-fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
+/// The accuracy estimator's options and data (format 8), with the
+/// detection trials after them from [`DETECTION_FORMAT`] on.
+fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState, version: u32) {
     w.bool(c.enabled);
     w.f64(c.time_constant);
     radars(w, &c.pinned);
@@ -139,14 +137,24 @@ fn accuracy(w: &mut Writer, c: &AccuracyConfig, data: &AccuracyState) {
             w.u64(k.clipped);
         }
     }
+    if version >= DETECTION_FORMAT {
+        for d in &data.radars {
+            let d = &d.detection;
+            w.f64_run(&[d.trials, d.detections]);
+            w.opt(d.t, Writer::f64);
+        }
+    }
 }
 
-fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), FormatError> {
+fn read_accuracy(
+    r: &mut Reader<'_>,
+    version: u32,
+) -> Result<(AccuracyConfig, AccuracyState), FormatError> {
     let enabled = r.bool()?;
     let time_constant = r.f64()?;
     let pinned = read_radars(r)?;
     let n = r.len(8)?;
-    let radars = (0..n)
+    let mut radars = (0..n)
         .map(|_| {
             let t = r.opt(Reader::f64)?;
             let mut d = RadarAccuracyData {
@@ -166,7 +174,17 @@ fn read_accuracy(r: &mut Reader<'_>) -> Result<(AccuracyConfig, AccuracyState), 
             }
             Ok(d)
         })
-        .collect::<Result<_, FormatError>>()?;
+        .collect::<Result<Vec<RadarAccuracyData>, FormatError>>()?;
+    if version >= DETECTION_FORMAT {
+        for d in &mut radars {
+            let [trials, detections] = r.f64_run::<2>()?;
+            d.detection = DetectionData {
+                trials,
+                detections,
+                t: r.opt(Reader::f64)?,
+            };
+        }
+    }
     let config = AccuracyConfig {
         enabled,
         time_constant,
@@ -439,18 +457,8 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         (PressureOffset::default(), Vec::new())
     };
     let accuracy = if version >= 8 {
-        let (c, mut data) = read_accuracy(&mut r)?;
+        let (c, data) = read_accuracy(&mut r, version)?;
         config.accuracy = c;
-        if version >= 9 {
-            for d in &mut data.radars {
-                let [trials, detections] = r.f64_run::<2>()?;
-                d.detection = DetectionData {
-                    trials,
-                    detections,
-                    t: r.opt(Reader::f64)?,
-                };
-            }
-        }
         Some(data)
     } else {
         // A tracker of an earlier release applied the declared σ.
@@ -744,7 +752,7 @@ fn track(w: &mut Writer, t: &Track, version: u32) {
     if ids {
         write_track_identity(w, &t.identity);
     }
-    if version >= 9 {
+    if version >= DETECTION_FORMAT {
         w.usize(t.detections.len());
         for h in &t.detections {
             w.usize(h.radar);
@@ -805,7 +813,7 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
     if version >= TRACKER_FORMAT {
         track.identity = read_track_identity(r)?;
     }
-    if version >= 9 {
+    if version >= DETECTION_FORMAT {
         let n = r.len(8 + 8)?;
         track.detections = (0..n)
             .map(|_| {

@@ -95,15 +95,15 @@ const ACCURACY_FLAG: u32 = 1 << 24;
 /// Set in the frame count of a kept update whose radars' accuracy carries
 /// the detection probability (after each radar's σ).
 const DETECTION_FLAG: u32 = 1 << 23;
-const FLAGS: u32 = ASTERIX_FLAG
-    | ACCURACY_FLAG
-    | DETECTION_FLAG
-    | MODES_FLAG
+/// The flags every update this release writes carries.
+const WRITTEN_FLAGS: u32 = MODES_FLAG
     | PROVENANCE_FLAG
-    | CAT062_FLAG
     | LATE_FLAG
     | REGISTRATION_FLAG
-    | IDENTITY_FLAG;
+    | IDENTITY_FLAG
+    | ACCURACY_FLAG
+    | DETECTION_FLAG;
+const FLAGS: u32 = ASTERIX_FLAG | CAT062_FLAG | WRITTEN_FLAGS;
 
 /// A batch of plots.
 #[derive(Debug, Clone, Default)]
@@ -927,17 +927,7 @@ impl SessionKind for PlotFusionSession {
     fn encode_update(u: &BatchUpdate, w: &mut Writer) {
         let optional = if u.asterix.is_some() { ASTERIX_FLAG } else { 0 }
             | if u.cat062.is_some() { CAT062_FLAG } else { 0 };
-        w.u32(
-            u.frames
-                | MODES_FLAG
-                | PROVENANCE_FLAG
-                | LATE_FLAG
-                | REGISTRATION_FLAG
-                | IDENTITY_FLAG
-                | ACCURACY_FLAG
-                | DETECTION_FLAG
-                | optional,
-        );
+        w.u32(u.frames | WRITTEN_FLAGS | optional);
         w.u32(u.pending_plots);
         w.usize(u.late_plots.len());
         for &i in &u.late_plots {
