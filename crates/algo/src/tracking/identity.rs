@@ -326,6 +326,10 @@ pub struct TrackIdentity {
     pub last_mode_s: Option<f64>,
     /// Time of the last update by a primary (or combined) plot (s).
     pub last_primary: Option<f64>,
+    /// Time of the last update by a Mode S radar's secondary plot without
+    /// an address (s): the track's aircraft answers in Mode A/C only
+    /// ([`without_mode_s`]), so a reply with an address is another's.
+    pub last_mode_ac: Option<f64>,
 }
 
 impl TrackIdentity {
@@ -349,15 +353,21 @@ impl TrackIdentity {
     /// `mode_s_radar`: the plot's radar gives Mode S addresses, so a
     /// secondary plot of it without one is a Mode A/C transponder's
     /// ([`without_mode_s`]): against a track with an address it weighs
-    /// [`NO_ADDRESS_FROM_MODE_S`].
+    /// [`NO_ADDRESS_FROM_MODE_S`], and so does a plot with an address
+    /// against a track whose aircraft answered a Mode S radar without one
+    /// (`last_mode_ac`).
     pub fn ln_ratio(&self, plot: &Identity, t: f64, mode_s_radar: bool) -> Option<f64> {
         let mut ln = 0.0;
         match (self.address, plot.address) {
             (Some(a), Some(b)) if a.value != b => return None,
             (Some(_), Some(_)) => ln += ((1.0 - ADDRESS_ERROR) / ADDRESS_ERROR).ln(),
-            (address, _) => {
+            (address, reply) => {
                 ln += self.code_ln_ratio(plot);
-                if address.is_some() && without_mode_s(plot, mode_s_radar) {
+                let mode_ac_against_mode_s = match address {
+                    Some(_) => without_mode_s(plot, mode_s_radar),
+                    None => reply.is_some() && self.last_mode_ac.is_some(),
+                };
+                if mode_ac_against_mode_s {
                     ln += NO_ADDRESS_FROM_MODE_S.ln();
                 }
             }
@@ -459,11 +469,23 @@ impl TrackIdentity {
         }
     }
 
-    /// [`TrackIdentity::observe`] with the radar plot a Cartesian plot was
-    /// converted from, when it is one radar's (a fused plot says nothing).
-    pub(crate) fn observe_measured(&mut self, measured: Option<&super::Plot>) {
+    /// [`TrackIdentity::observe`], and whether the plot's radar gives Mode
+    /// S addresses (`mode_s_radar`): its secondary plot without one dates
+    /// `last_mode_ac`.
+    pub fn observe_from(&mut self, plot: &Identity, t: f64, mode_s_radar: bool) {
+        self.observe(plot, t);
+        if without_mode_s(plot, mode_s_radar) {
+            self.last_mode_ac = Some(self.last_mode_ac.map_or(t, |s| s.max(t)));
+        }
+    }
+
+    /// [`TrackIdentity::observe_from`] with the radar plot a Cartesian plot
+    /// was converted from, when it is one radar's (a fused plot says
+    /// nothing); `mode_s`: which radars give Mode S addresses.
+    pub(crate) fn observe_measured(&mut self, measured: Option<&super::Plot>, mode_s: &[bool]) {
         if let Some(m) = measured {
-            self.observe(&m.identity, m.t);
+            let mode_s_radar = mode_s.get(m.radar).copied().unwrap_or(false);
+            self.observe_from(&m.identity, m.t, mode_s_radar);
         }
     }
 
@@ -617,6 +639,32 @@ mod tests {
         let primary = Identity::default();
         assert_eq!(track.ln_ratio(&primary, 1.0, true), Some(0.0));
         assert!(without_mode_s(&mode_a, true) && !without_mode_s(&primary, true));
+    }
+
+    /// The reverse: a track whose aircraft answered a Mode S radar without
+    /// an address (a Mode A/C transponder) weighs a reply with an address
+    /// 0.05 (ln = −3.0), beside the code's own ratio (the discrete 0676
+    /// against the track's 7000: ln(0.02 / 0.999)); the same reply from a radar that gives no
+    /// addresses teaches nothing of the kind.
+    #[test]
+    fn a_mode_a_c_aircraft_is_not_the_one_that_gives_an_address() {
+        let mode_a = reply(None, Some(0o7000), None);
+        let mode_s = reply(Some(0x394A0A), Some(0o0676), None);
+        let mut ssr_only = TrackIdentity::default();
+        ssr_only.observe_from(&mode_a, 0.0, false);
+        assert_eq!(ssr_only.last_mode_ac, None);
+        let code = (0.02f64 / 0.999).ln();
+        let ln = ssr_only.ln_ratio(&mode_s, 1.0, true).unwrap();
+        assert!((ln - code).abs() < 1e-12, "{ln}");
+        let mut mode_ac = TrackIdentity::default();
+        mode_ac.observe_from(&mode_a, 0.0, true);
+        assert_eq!(mode_ac.last_mode_ac, Some(0.0));
+        let ln = mode_ac.ln_ratio(&mode_s, 1.0, true).unwrap();
+        assert!((ln - (code + 0.05f64.ln())).abs() < 1e-12, "{ln}");
+        // Its own replies and primary plots are unaffected.
+        let own = mode_ac.ln_ratio(&mode_a, 1.0, true).unwrap();
+        assert!((own - (0.98f64 / 0.25).ln()).abs() < 1e-12, "{own}");
+        assert_eq!(mode_ac.ln_ratio(&Identity::default(), 1.0, true), Some(0.0));
     }
 
     #[test]

@@ -257,7 +257,9 @@ impl Initiator {
                     let track = &mut self.tentatives[i];
                     carry(track, &retro, &up)?;
                     track.record_late_hit(false);
-                    track.identity.observe_measured(plot.measured.as_ref());
+                    track
+                        .identity
+                        .observe_measured(plot.measured.as_ref(), mode_s);
                     self.index.moved(i, track);
                     touched.push(i);
                 }
@@ -280,7 +282,9 @@ impl Initiator {
                     track.record(Some(plot.radars.clone()));
                     track.hit_by_plot(plot, &cfg.radars);
                     track.last_plot = plot.measured;
-                    track.identity.observe_measured(plot.measured.as_ref());
+                    track
+                        .identity
+                        .observe_measured(plot.measured.as_ref(), mode_s);
                 }
                 None => {
                     if let Misses::Judge(view) = misses {
@@ -350,8 +354,8 @@ impl Initiator {
                     out.refused += 1;
                     continue;
                 }
-                let (x, p) = two_point(early, late, dt, cfg);
-                let track = new_tentative(next_id, x, p, at, early, late, &cfg.radars);
+                let state = two_point(early, late, dt, cfg);
+                let track = new_tentative(next_id, state, at, early, late, &cfg.radars, mode_s);
                 self.index.moved(self.tentatives.len(), &track);
                 self.tentatives.push(track);
                 out.started += 1;
@@ -589,12 +593,12 @@ fn lift(plot: &CartesianPlot, cfg: &TrackerConfig) -> (DVector<f64>, DMatrix<f64
 
 fn new_tentative(
     next_id: &mut u64,
-    x: DVector<f64>,
-    p: DMatrix<f64>,
+    (x, p): (DVector<f64>, DMatrix<f64>),
     t: f64,
     root: &CartesianPlot,
     plot: &CartesianPlot,
     radars_spec: &[RadarSpec],
+    mode_s: &[bool],
 ) -> Track {
     let id = *next_id;
     *next_id += 1;
@@ -619,8 +623,8 @@ fn new_tentative(
         last_plot: plot.measured,
         identity: {
             let mut identity = TrackIdentity::default();
-            identity.observe_measured(root.measured.as_ref());
-            identity.observe_measured(plot.measured.as_ref());
+            identity.observe_measured(root.measured.as_ref(), mode_s);
+            identity.observe_measured(plot.measured.as_ref(), mode_s);
             identity
         },
         detections: Vec::new(),
@@ -631,7 +635,8 @@ fn new_tentative(
 }
 
 /// Whether a plot may extend a tentative track: not another Mode S
-/// address than the track's.
+/// address than the track's, and not a Mode A/C-only aircraft's reply to
+/// a Mode S radar against a track with an address, nor the reverse.
 fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot, mode_s: &[bool]) -> bool {
     let Some(m) = plot.measured else {
         return true;
@@ -639,7 +644,8 @@ fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot, mode_s: &[bool]) -
     match (track.address, m.identity.address) {
         (Some(a), Some(b)) => a.value == b,
         (Some(_), None) => !without_mode_s(&m.identity, is_mode_s(mode_s, m.radar)),
-        _ => true,
+        (None, Some(_)) => track.last_mode_ac.is_none(),
+        (None, None) => true,
     }
 }
 
@@ -686,6 +692,7 @@ const MAX_VERTICAL_RATE_FTPS: f64 = 10_000.0 / 60.0;
 mod tests {
     use super::*;
     use crate::tracking::config::RadarSpec;
+    use crate::tracking::identity::{Detection, Identity, Mode3A};
     use crate::tracking::tests::Lcg;
     use nalgebra::dvector;
 
@@ -760,6 +767,76 @@ mod tests {
             }
         }
         assert_eq!(confirmed_at, Some(2));
+    }
+
+    /// A plot at `(10 t, 100)` from radar 0 with a secondary reply.
+    fn reply(t: f64, identity: Identity) -> CartesianPlot {
+        let mut p = plot(t, 10.0 * t, 100.0);
+        p.measured = Some(Plot {
+            radar: 0,
+            t,
+            range: 100.0,
+            azimuth: 0.0,
+            elevation: None,
+            radial_velocity: None,
+            identity,
+        });
+        p
+    }
+
+    /// A Mode S radar's replies without an address (a Mode A/C
+    /// transponder squawking 7000) start a tentative track; a reply with
+    /// an address exactly where that track predicts is another aircraft's
+    /// and does not extend it (it waits as a root), while from a radar
+    /// that gives no addresses the same replies make one track.
+    #[test]
+    fn a_mode_a_c_tentative_does_not_take_a_mode_s_reply() {
+        let mode_a = Identity {
+            mode_3a: Some(Mode3A {
+                code: 0o7000,
+                validated: true,
+                garbled: false,
+            }),
+            detection: Some(Detection::Secondary),
+            ..Identity::default()
+        };
+        let mode_s = Identity {
+            address: Some(0x394A0A),
+            ..mode_a
+        };
+        let c = cfg();
+        for radar_gives_addresses in [true, false] {
+            let flags = [radar_gives_addresses];
+            let mut ini = Initiator::default();
+            let mut id = 0;
+            let mut step = |ini: &mut Initiator, t: f64, identity: Identity| {
+                ini.step(
+                    t,
+                    vec![reply(t, identity)],
+                    &c,
+                    Misses::Judge(View::All),
+                    &mut id,
+                    usize::MAX,
+                    &flags,
+                )
+                .unwrap()
+            };
+            step(&mut ini, 0.0, mode_a);
+            assert_eq!(step(&mut ini, 1.0, mode_a).started, 1);
+            assert_eq!(
+                ini.tentatives[0].identity.last_mode_ac.is_some(),
+                radar_gives_addresses
+            );
+            let out = step(&mut ini, 2.0, mode_s);
+            if radar_gives_addresses {
+                assert!(out.confirmed.is_empty());
+                assert_eq!(ini.tentatives[0].hits, 2);
+                assert_eq!(ini.live_roots().count(), 1);
+            } else {
+                assert_eq!(out.confirmed.len(), 1);
+                assert_eq!(out.confirmed[0].identity.address.unwrap().value, 0x394A0A);
+            }
+        }
     }
 
     #[test]

@@ -1011,7 +1011,9 @@ impl Tracker {
                         &plots[j],
                         &self.config.radars,
                     ));
-                    track.identity.observe_measured(plots[j].measured.as_ref());
+                    track
+                        .identity
+                        .observe_measured(plots[j].measured.as_ref(), &self.mode_s_radars);
                 }
                 self.index.moved(k, track);
                 touched.push(k);
@@ -1063,7 +1065,9 @@ impl Tracker {
                         &self.config.radars,
                     ));
                     track.last_plot = plots[j].measured;
-                    track.identity.observe_measured(plots[j].measured.as_ref());
+                    track
+                        .identity
+                        .observe_measured(plots[j].measured.as_ref(), &self.mode_s_radars);
                 }
                 None if !lazy => track.record(None),
                 None => {}

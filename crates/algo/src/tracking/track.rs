@@ -297,6 +297,7 @@ impl Track {
         mine.last_secondary = later(mine.last_secondary, theirs.last_secondary);
         mine.last_mode_s = later(mine.last_mode_s, theirs.last_mode_s);
         mine.last_primary = later(mine.last_primary, theirs.last_primary);
+        mine.last_mode_ac = later(mine.last_mode_ac, theirs.last_mode_ac);
         mine.spi_t = later(mine.spi_t, theirs.spi_t);
         match motion {
             super::Motion::Imm(imm) => self.start_modes(imm),

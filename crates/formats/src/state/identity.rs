@@ -201,5 +201,7 @@ pub(crate) fn read_track_identity(r: &mut Reader<'_>) -> Result<TrackIdentity, F
         last_secondary: r.opt(Reader::f64)?,
         last_mode_s: r.opt(Reader::f64)?,
         last_primary: r.opt(Reader::f64)?,
+        // Written after the track's detections (tracker format 10).
+        last_mode_ac: None,
     })
 }

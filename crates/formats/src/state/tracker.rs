@@ -67,20 +67,23 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 9;
+pub const FORMAT_VERSION: u32 = 10;
 /// The format from which tracks keep their last hit per radar and the
 /// radars their detection trials.
 const DETECTION_FORMAT: u32 = 9;
+/// The format from which tracks keep the time of their last Mode A/C-only
+/// reply to a Mode S radar (`TrackIdentity::last_mode_ac`).
+const MODE_AC_FORMAT: u32 = 10;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     encode_tracker_as(tr, FORMAT_VERSION)
 }
 
-/// The tracker in format 5 to 9 (5: without identities, 6: without
+/// The tracker in format 5 to 10 (5: without identities, 6: without
 /// Mode C heights, 7: without the accuracy estimator, 8: without the
-/// detection trials, as earlier releases wrote them; for the tests of
-/// older formats).
+/// detection trials, 9: without the tracks' Mode A/C-only replies, as
+/// earlier releases wrote them; for the tests of older formats).
 pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     assert!((5..=FORMAT_VERSION).contains(&version));
     let ids = version >= TRACKER_FORMAT;
@@ -759,6 +762,9 @@ fn track(w: &mut Writer, t: &Track, version: u32) {
             w.f64(h.last);
         }
     }
+    if version >= MODE_AC_FORMAT {
+        w.opt(t.identity.last_mode_ac, Writer::f64);
+    }
 }
 
 /// A track as stored; its dimension, covariance and radar indices are
@@ -823,6 +829,9 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
                 })
             })
             .collect::<Result<_, FormatError>>()?;
+    }
+    if version >= MODE_AC_FORMAT {
+        track.identity.last_mode_ac = r.opt(Reader::f64)?;
     }
     Ok(track)
 }
@@ -1141,6 +1150,45 @@ mod tests {
                 .iter()
                 .all(|d| d.detection == Default::default() && d.t.is_some())
         );
+    }
+
+    /// Format 10: a track whose aircraft answers the Mode S radars in Mode
+    /// A/C only (the other aircraft gives its address, so both radars give
+    /// addresses) keeps the time of that reply through a round trip and
+    /// continues as the original; written as format 9 it reads back
+    /// without it.
+    #[test]
+    fn mode_a_c_replies_round_trip_and_continue() {
+        use algo::tracking::{Detection, Mode3A};
+        let cfg = config(false);
+        let mut all = plots(&cfg, 100.0);
+        for (k, p) in all.iter_mut().enumerate() {
+            p.identity = Identity {
+                address: (k % 2 == 0).then_some(0x4CA2D1),
+                mode_3a: Some(Mode3A {
+                    code: [0o1234, 0o7000][k % 2],
+                    validated: true,
+                    garbled: false,
+                }),
+                detection: Some(Detection::Secondary),
+                ..Identity::default()
+            };
+        }
+        let (first, rest) = all.split_at(all.len() / 2);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        assert!(a.state().mode_s_radars.iter().all(|&m| m));
+        let mode_ac = |t: &Tracker| {
+            t.state()
+                .tracks
+                .iter()
+                .filter(|t| t.identity.last_mode_ac.is_some())
+                .count()
+        };
+        assert_eq!(mode_ac(&a), 1);
+        round_trips_and_continues(&mut a, rest);
+        let v9 = decode_tracker(&encode_tracker_as(&a, 9)).unwrap();
+        assert_eq!(mode_ac(&v9), 0);
     }
 
     /// Chunks fed to a tracker that is encoded and decoded between them
