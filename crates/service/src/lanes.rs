@@ -204,7 +204,11 @@ where
     if IN_JOB.get() {
         return Ok(work());
     }
-    Lanes::global().run(work).await
+    // Boxed at once: the futures below do not carry `work` (a debug build
+    // copies each level's state on the stack).
+    let (job, bound, rx, _abandon) = job_of(work);
+    Lanes::global().dispatch(job, bound).await?;
+    rx.await.map_err(panicked)
 }
 
 /// The answer of a job whose sender went without answering: the job
@@ -439,46 +443,49 @@ impl Lanes {
         lanes
     }
 
-    /// [`run`] off a job: on a lane, or on the blocking pool when every
-    /// lane is held now or becomes held while the job waits in the queue.
-    async fn run<T, F>(&self, work: F) -> Result<T, ServiceError>
-    where
-        F: FnOnce() -> T + Send + 'static,
-        T: Send + 'static,
-    {
+    /// Sends a request's `job` on its way: to the blocking pool when every
+    /// lane is held, else to the lanes ([`Lanes::queued`]).
+    async fn dispatch(
+        &self,
+        job: Job,
+        bound: Option<Arc<BlockingBound>>,
+    ) -> Result<(), ServiceError> {
         if self.all_held() {
-            let (job, bound, rx, _abandon) = job_of(work);
-            on_blocking_pool(job, bound.as_ref())?;
-            return rx.await.map_err(panicked);
+            return on_blocking_pool(job, bound.as_ref());
         }
-        self.run_queued(work).await
+        self.queued(job, bound).await
     }
 
-    /// [`Lanes::run`] of work queued for the lanes: it runs on the first
-    /// lane free, or on the blocking pool if the lanes' watch hands it back
-    /// (every lane became held while it waited).
+    /// Queues a request's `job` for the lanes and waits until a lane has
+    /// run it, or the lanes' watch hands it back (every lane became held
+    /// while it waited) and it goes to the blocking pool.
+    async fn queued(
+        &self,
+        job: Job,
+        bound: Option<Arc<BlockingBound>>,
+    ) -> Result<(), ServiceError> {
+        let (back, handed_back) = tokio::sync::oneshot::channel();
+        self.push_queued(Queued {
+            job,
+            back: Some(back),
+        });
+        // A lane drops the way back after the job has answered: an error
+        // here means the answer is there.
+        match handed_back.await {
+            Ok(job) => on_blocking_pool(job, bound.as_ref()),
+            Err(_) => Ok(()),
+        }
+    }
+
+    /// [`run`] of work queued for the lanes whatever they do now.
+    #[cfg(test)]
     async fn run_queued<T, F>(&self, work: F) -> Result<T, ServiceError>
     where
         F: FnOnce() -> T + Send + 'static,
         T: Send + 'static,
     {
-        let (job, bound, mut rx, _abandon) = job_of(work);
-        let (back, mut handed_back) = tokio::sync::oneshot::channel();
-        self.push_queued(Queued {
-            job,
-            back: Some(back),
-        });
-        tokio::select! {
-            biased;
-            answer = &mut rx => return answer.map_err(panicked),
-            job = &mut handed_back => {
-                // Every lane became held while the job waited (its way back
-                // dropped unused: a lane ran it, and the answer follows).
-                if let Ok(job) = job {
-                    on_blocking_pool(job, bound.as_ref())?;
-                }
-            }
-        }
+        let (job, bound, rx, _abandon) = job_of(work);
+        self.queued(job, bound).await?;
         rx.await.map_err(panicked)
     }
 
