@@ -381,6 +381,7 @@ pub fn router(state: AppState, grpc: Router) -> Router {
         .merge(streams)
         .route("/view/", get(view::page))
         .route("/view/view.js", get(view::script))
+        .route("/view/view.css", get(view::style))
         .route("/view", get(view::redirect))
         .route("/healthz", get(ops::healthz))
         .route("/readyz", get(ops::readyz))

@@ -284,7 +284,13 @@ where
     R: Serialize,
     F: FnOnce(T) -> Result<R, Problem>,
 {
-    let answer = work(parse_json(bytes)?)?;
+    // Between the steps, so that an abandoned request (its timeout
+    // passed, or its client left) stops: after its JSON is parsed and
+    // before its answer is encoded. Only stateless endpoints answer here.
+    let request = parse_json(bytes)?;
+    service::lanes::checkpoint()?;
+    let answer = work(request)?;
+    service::lanes::checkpoint()?;
     // Answers are up to a few times their requests (a JPDA update returns
     // each track it was given, 1.9×; AIS–radar every compensated sample,
     // 2.2×): sized once, the buffer is not copied through doublings on the

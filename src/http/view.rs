@@ -1,5 +1,5 @@
-//! `GET /view/`: the air-picture page, an HTML document with its CSS
-//! inline and its script beside it (`GET /view/view.js`), both embedded in
+//! `GET /view/`: the air-picture page, an HTML document with its script
+//! and its stylesheet beside it (`GET /view/view.js`, `GET /view/view.css`), all embedded in
 //! the binary (no CDN, no map tiles: it works offline). It lists the tenant's sessions and draws the
 //! chosen one live from `GET /v1/sessions/{id}/events`, read with `fetch`
 //! streaming so that it can send the API key (`EventSource` cannot send
@@ -16,11 +16,15 @@ pub const PAGE: &str = include_str!("view/index.html");
 /// Its script (`src/http/view/view.js`), a file of its own so that the
 /// page's Content-Security-Policy allows no inline script.
 pub const SCRIPT: &str = include_str!("view/view.js");
+/// Its stylesheet (`src/http/view/view.css`), a file of its own so that the
+/// page's Content-Security-Policy allows no inline style either.
+pub const STYLE: &str = include_str!("view/view.css");
 
-/// The page's Content-Security-Policy: scripts only from this origin's
-/// files (none inline, so an injected `<script>` or `on…` attribute does
-/// not run), calls only to this origin, and no framing by any page.
-pub const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'unsafe-inline'; \
+/// The page's Content-Security-Policy: scripts and styles only from this
+/// origin's files (none inline, so an injected `<script>`, `on…` or `style`
+/// attribute does nothing), calls only to this origin, and no framing by
+/// any page.
+pub const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; \
      connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; \
      frame-ancestors 'none'";
 
@@ -30,6 +34,10 @@ pub async fn page() -> Response {
 
 pub async fn script() -> Response {
     served("text/javascript; charset=utf-8", SCRIPT)
+}
+
+pub async fn style() -> Response {
+    served("text/css; charset=utf-8", STYLE)
 }
 
 fn served(content_type: &'static str, body: &'static str) -> Response {

@@ -418,6 +418,8 @@ async fn the_view_page_is_served_whole_and_offline() {
         .find(|d| d.starts_with("script-src"))
         .expect("a script-src directive");
     assert_eq!(script_src, "script-src 'self'", "{csp}");
+    // Nothing inline at all: styles from this origin's file too (issue 53).
+    assert!(!csp.contains("unsafe-inline"), "{csp}");
     assert!(csp.contains("frame-ancestors 'none'"), "{csp}");
     assert_eq!(r.headers()["x-frame-options"], "DENY");
     let page = r.text().await.unwrap();
@@ -425,6 +427,18 @@ async fn the_view_page_is_served_whole_and_offline() {
     assert_eq!(page.matches("<script").count(), 1);
     assert!(page.contains(r#"<script src="view.js"></script>"#));
     assert!(!page.contains(" onclick=") && !page.contains(" onload="));
+    // Its styles are its stylesheet: no <style> element, no style attribute.
+    assert!(!page.contains("<style") && !page.contains(" style="));
+    assert!(page.contains(r#"<link rel="stylesheet" href="view.css">"#));
+    let r = app
+        .client
+        .get(app.url("/view/view.css"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "text/css; charset=utf-8");
+    assert!(r.text().await.unwrap().contains("--conf:"));
     let r = app
         .client
         .get(app.url("/view/view.js"))

@@ -414,11 +414,12 @@ async fn with_every_lane_busy_a_request_past_the_blocking_bound_is_a_503_naming_
         if r.status() == 503 {
             break r;
         }
-        // 504: the small job was queued to a lane that a long job (this
-        // test's, or another test's in this process: the lanes are
-        // process-wide) then held, and waited there past the timeout; the
-        // shedding this test looks for comes once every lane is held.
-        assert!(r.status() == 200 || r.status() == 504, "{}", r.status());
+        // 200: a lane was free (the long jobs, this test's or another
+        // test's in this process, come and go). Never a 504: a small job
+        // queued while a lane was free is handed back by the lanes' watch
+        // once every lane is held, and then shed like new work (before,
+        // it waited behind the long jobs past its timeout).
+        assert_eq!(r.status(), 200);
         assert!(
             std::time::Instant::now() < deadline,
             "the lanes were never all held"

@@ -414,8 +414,12 @@ fn parse(input: AssociateInput) -> Result<Parsed, ServiceError> {
         "samples and AIS reports",
     );
     v.at_most("nmea", input.nmea.len(), MAX_NMEA_LINES, "lines");
+    // Between the steps, so that an abandoned request stops.
+    crate::lanes::checkpoint()?;
     let (ids, tracks) = parse_tracks(&mut v, &input.radar_tracks);
+    crate::lanes::checkpoint()?;
     let decoded = nmea::decode(&input.nmea);
+    crate::lanes::checkpoint()?;
     let reports = parse_reports(&mut v, &input.ais_reports, ais_time_sigma);
     let ais_total = reports.len() + decoded.positions.len();
     if tracks.len().saturating_mul(ais_total) > MAX_PAIR_SAMPLES {
@@ -555,6 +559,7 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let mut warnings = Vec::new();
     let nmea_errors = add_nmea_reports(&decoded, &mut reports, &mut warnings);
     let (mmsis, ships) = ships(&plane, &reports, &mut warnings);
+    crate::lanes::checkpoint()?;
     if ships.is_empty() {
         warnings.push("no AIS positions: nothing to associate, the bias is not estimated".into());
     }
@@ -568,6 +573,7 @@ pub fn associate(input: AssociateInput) -> Result<AssociateOutput, ServiceError>
     let unassociable_mmsis: Vec<u32> = out.unassociable_ais.iter().map(|&j| mmsis[j]).collect();
     warn_about_result(&out, &cfg, &ships, &mut warnings);
     let bias = out.estimate.map(|e| e.bias).unwrap_or_default();
+    crate::lanes::checkpoint()?;
     let compensated_tracks = compensated_tracks(&plane, &tracks, &ids, bias);
     let nmea = NmeaSummary {
         lines: decoded.lines,
@@ -915,6 +921,22 @@ mod tests {
             position: [x, 0.0],
             time_sigma: 0.3,
         }
+    }
+
+    #[test]
+    fn an_abandoned_request_stops_before_its_tracks_are_parsed() {
+        // A request without a site: a violation when someone waits for
+        // the answer, and stopped at the first checkpoint when nobody does.
+        let input = || AssociateInput::default();
+        assert!(matches!(
+            associate(input()),
+            Err(ServiceError::InvalidInput(_))
+        ));
+        let stopped = crate::lanes::as_abandoned(|| associate(input()));
+        assert!(
+            matches!(stopped, Err(ServiceError::Cancelled)),
+            "{stopped:?}"
+        );
     }
 
     /// Issue 17: of reports sharing a whole-second time the position report

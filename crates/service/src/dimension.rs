@@ -211,6 +211,9 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     let plan = validate(&input)?;
     let (history, all_pairs) = (input.history, input.all_pairs);
     drop(input);
+    // Between the steps (the filters and methods run as one call of
+    // `algo`), so that an abandoned request stops.
+    crate::lanes::checkpoint()?;
     let start = Instant::now();
     let mut results = Vec::new();
     // The local filters run once for all methods: their time is in the
@@ -230,6 +233,7 @@ pub fn fuse(input: FuseInput) -> Result<FuseOutput, ServiceError> {
     )
     .map_err(computation_error)?;
     for (&method, out) in plan.methods.iter().zip(outs) {
+        crate::lanes::checkpoint()?;
         results.push(method_output(&plan, method, &out, history, all_pairs)?);
     }
     let compute_us = micros_since(start);
@@ -395,6 +399,8 @@ fn validate(input: &FuseInput) -> Result<Plan, ServiceError> {
     let mut refs = Vec::new();
     let mut radar_ids = Ids::new();
     for (ri, r) in input.radars.iter().enumerate().take(MAX_RADARS) {
+        // Radar by radar, so that an abandoned request stops.
+        crate::lanes::checkpoint()?;
         let id = radar_ids
             .check(&mut v, r.id.as_deref(), ri, |i| format!("radars[{i}].id"))
             .unwrap_or_default();
@@ -675,4 +681,25 @@ fn parse_plots(v: &mut Violations, ft: &str, three_d: Option<bool>, t: &TrackInp
         }
     }
     plots
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_abandoned_request_stops_at_its_first_radar() {
+        // A radar without its fields: violations when someone waits for the
+        // answer, and stopped at the first radar when nobody does.
+        let input = || FuseInput {
+            radars: vec![RadarInput::default()],
+            ..FuseInput::default()
+        };
+        assert!(matches!(fuse(input()), Err(ServiceError::InvalidInput(_))));
+        let stopped = crate::lanes::as_abandoned(|| fuse(input()));
+        assert!(
+            matches!(stopped, Err(ServiceError::Cancelled)),
+            "{stopped:?}"
+        );
+    }
 }

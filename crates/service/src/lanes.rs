@@ -21,8 +21,13 @@
 //! work is queued to the lanes (served in order by the lanes not held);
 //! when every lane is held, new work goes to tokio's blocking pool as
 //! before, where the operating system shares the cores among all of it.
-//! So a 10 s request delays nobody by more than [`LONG_JOB`] per lane, and
-//! small requests never wait behind large ones.
+//! Work already queued goes there too: a job queued while a lane was free
+//! can find every lane taken by long jobs after it was queued (jobs queued
+//! before it, or started by the lanes meanwhile), and the lanes' watch (a
+//! thread that sleeps while nothing waits for a busy lane) hands it back to
+//! its request once they are all held. So a 10 s request delays nobody by
+//! more than [`LONG_JOB`] per lane, and small requests never wait behind
+//! large ones.
 //!
 //! A request the adapters admitted runs its jobs under [`admitted`]: its
 //! in-flight slot travels with them and is given back only when the
@@ -154,6 +159,13 @@ pub fn checkpoint() -> Result<(), ServiceError> {
     Ok(())
 }
 
+/// Runs `work` here as a job of a request that was abandoned: its first
+/// [`checkpoint`] stops it. For the tests of the computations' checkpoints.
+#[cfg(test)]
+pub(crate) fn as_abandoned<T>(work: impl FnOnce() -> T) -> T {
+    Context::current(Arc::new(AtomicBool::new(true))).in_job(work)
+}
+
 /// Sets a job's cancellation flag when the request awaiting it goes away
 /// before the job answered.
 struct Abandon(Arc<AtomicBool>);
@@ -192,46 +204,30 @@ where
     if IN_JOB.get() {
         return Ok(work());
     }
-    let admission = ADMITTED.try_with(Admitted::clone).ok();
-    let cancel = Arc::new(AtomicBool::new(false));
-    // Dropped with this future: when it goes before the answer came, the
-    // request was abandoned and the job stops.
-    let _abandon = Abandon(Arc::clone(&cancel));
-    let context = Context::current(cancel);
-    let lanes = Lanes::global();
-    if lanes.all_held() {
-        let seat = match &admission {
-            Some(a) => Some(a.blocking.take()?),
-            None => None,
-        };
-        metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
-        let ran = tokio::task::spawn_blocking(move || {
-            let _held = (admission, seat);
-            if context.cancel.load(Ordering::Relaxed) {
-                metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued").increment(1);
-                return None;
-            }
-            Some(context.in_job(work))
-        })
-        .await
-        .map_err(|e| ServiceError::Internal(format!("compute task failed: {e}")))?;
-        return ran.ok_or(ServiceError::Cancelled);
-    }
-    metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    lanes.push(Box::new(move || {
-        if context.cancel.load(Ordering::Relaxed) {
-            metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued").increment(1);
-            return;
-        }
-        let out = context.in_job(work);
-        // The slot goes back before the answer does, so that a client
-        // that sends its next request on the answer finds it free.
-        drop(admission);
-        let _ = tx.send(out);
+    // Boxed at once: the futures below do not carry `work` (a debug build
+    // copies each level's state on the stack).
+    let (job, bound, rx, _abandon) = job_of(work);
+    Lanes::global().dispatch(job, bound).await?;
+    rx.await.map_err(panicked)
+}
+
+/// The answer of a job whose sender went without answering: the job
+/// panicked (a job abandoned by its request is not awaited).
+fn panicked(_: tokio::sync::oneshot::error::RecvError) -> ServiceError {
+    ServiceError::Internal("compute task failed (it panicked)".into())
+}
+
+/// Runs `job` on tokio's blocking pool, within the blocking bound of the
+/// request that queued it (`None`: a job no request admitted).
+fn on_blocking_pool(job: Job, bound: Option<&Arc<BlockingBound>>) -> Result<(), ServiceError> {
+    let seat = bound.map(BlockingBound::take).transpose()?;
+    metrics::counter!("compute_jobs_total", "lane" => "blocking_pool").increment(1);
+    // Detached: the job answers its request itself.
+    drop(tokio::task::spawn_blocking(move || {
+        let _seat = seat;
+        job();
     }));
-    rx.await
-        .map_err(|_| ServiceError::Internal("compute task failed (it panicked)".into()))
+    Ok(())
 }
 
 /// Runs `work` once on every compute lane (starting the lanes if they are
@@ -368,10 +364,15 @@ pub fn block_on<F: std::future::Future>(future: F) -> F::Output {
     }
 }
 
-/// The process's lanes: one thread per available core, started on first use.
+/// The process's lanes: one thread per available core, started on first
+/// use, and their watch: a thread that hands the jobs waiting in the
+/// shared queue back to their requests once every lane is held.
 struct Lanes {
     queue: Mutex<Queue>,
+    /// Where idle lanes wait for work.
     ready: Condvar,
+    /// Where the watch waits for jobs to wait behind busy lanes.
+    watch: Condvar,
     /// Per lane: nanoseconds since `epoch` when its current job started
     /// (plus one, so that 0 means idle).
     started: Vec<AtomicU64>,
@@ -380,11 +381,21 @@ struct Lanes {
 
 #[derive(Default)]
 struct Queue {
-    jobs: VecDeque<Job>,
+    jobs: VecDeque<Queued>,
     /// Per lane: jobs for that lane alone ([`on_every_lane`]), taken first.
     pinned: Vec<VecDeque<Job>>,
     /// Lanes waiting on `ready`.
     idle: usize,
+    /// Whether the watch waits on `watch` with no time limit (nothing queued
+    /// then waited for a busy lane).
+    watch_asleep: bool,
+}
+
+/// A job in the shared queue, and the way back to the request that queued
+/// it (`None`: a job only a lane may run).
+struct Queued {
+    job: Job,
+    back: Option<tokio::sync::oneshot::Sender<Job>>,
 }
 
 impl Lanes {
@@ -403,6 +414,7 @@ impl Lanes {
                 ..Queue::default()
             }),
             ready: Condvar::new(),
+            watch: Condvar::new(),
             started: (0..n).map(|_| AtomicU64::new(0)).collect(),
             epoch: Instant::now(),
         });
@@ -410,7 +422,7 @@ impl Lanes {
             let lane = Arc::clone(&lanes);
             let started = std::thread::Builder::new()
                 .name(format!("compute-{i}"))
-                .spawn(move || lane.run(i));
+                .spawn(move || lane.run_lane(i));
             if let Err(e) = started {
                 // A lane that could not start counts as held for ever:
                 // work goes to the others, or to the blocking pool when
@@ -419,7 +431,62 @@ impl Lanes {
                 lanes.started[i].store(NEVER_STARTED, Ordering::Relaxed);
             }
         }
+        let watch = Arc::clone(&lanes);
+        if let Err(e) = std::thread::Builder::new()
+            .name("compute-watch".into())
+            .spawn(move || watch.watch())
+        {
+            // Queued jobs then wait for a lane, as they did before the
+            // watch existed.
+            tracing::error!(error = %e, "the compute lanes' watch could not start");
+        }
         lanes
+    }
+
+    /// Sends a request's `job` on its way: to the blocking pool when every
+    /// lane is held, else to the lanes ([`Lanes::queued`]).
+    async fn dispatch(
+        &self,
+        job: Job,
+        bound: Option<Arc<BlockingBound>>,
+    ) -> Result<(), ServiceError> {
+        if self.all_held() {
+            return on_blocking_pool(job, bound.as_ref());
+        }
+        self.queued(job, bound).await
+    }
+
+    /// Queues a request's `job` for the lanes and waits until a lane has
+    /// run it, or the lanes' watch hands it back (every lane became held
+    /// while it waited) and it goes to the blocking pool.
+    async fn queued(
+        &self,
+        job: Job,
+        bound: Option<Arc<BlockingBound>>,
+    ) -> Result<(), ServiceError> {
+        let (back, handed_back) = tokio::sync::oneshot::channel();
+        self.push_queued(Queued {
+            job,
+            back: Some(back),
+        });
+        // A lane drops the way back after the job has answered: an error
+        // here means the answer is there.
+        match handed_back.await {
+            Ok(job) => on_blocking_pool(job, bound.as_ref()),
+            Err(_) => Ok(()),
+        }
+    }
+
+    /// [`run`] of work queued for the lanes whatever they do now.
+    #[cfg(test)]
+    async fn run_queued<T, F>(&self, work: F) -> Result<T, ServiceError>
+    where
+        F: FnOnce() -> T + Send + 'static,
+        T: Send + 'static,
+    {
+        let (job, bound, rx, _abandon) = job_of(work);
+        self.queued(job, bound).await?;
+        rx.await.map_err(panicked)
     }
 
     fn now(&self) -> u64 {
@@ -428,22 +495,47 @@ impl Lanes {
 
     /// Whether every lane is running a job that started over `LONG_JOB` ago.
     fn all_held(&self) -> bool {
-        let now = self.now();
-        let long = LONG_JOB.as_nanos() as u64;
-        self.started.iter().all(|s| {
-            let t = s.load(Ordering::Relaxed);
-            t == NEVER_STARTED || (t != 0 && now.saturating_sub(t) > long)
-        })
+        self.until_all_held() == Some(Duration::ZERO)
     }
 
+    /// How long until every lane is held if none finishes its job first:
+    /// zero when they are, `None` while a lane is idle.
+    fn until_all_held(&self) -> Option<Duration> {
+        let now = self.now();
+        let long = LONG_JOB.as_nanos() as u64;
+        let mut wait = 0;
+        for s in &self.started {
+            let t = s.load(Ordering::Relaxed);
+            if t == NEVER_STARTED {
+                continue;
+            }
+            if t == 0 {
+                return None;
+            }
+            wait = wait.max((t + long).saturating_sub(now));
+        }
+        Some(Duration::from_nanos(wait))
+    }
+
+    /// Queues `job` for any lane; it runs after the jobs queued before it.
+    #[cfg(test)]
     fn push(&self, job: Job) {
-        let wake = {
+        self.push_queued(Queued { job, back: None });
+    }
+
+    fn push_queued(&self, queued: Queued) {
+        let (wake_lane, wake_watch) = {
             let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
-            q.jobs.push_back(job);
-            q.idle > 0
+            q.jobs.push_back(queued);
+            // More jobs than idle lanes: one waits for a busy lane, and the
+            // watch follows it.
+            (q.idle > 0, q.watch_asleep && q.jobs.len() > q.idle)
         };
-        if wake {
+        if wake_lane {
             self.ready.notify_one();
+        }
+        if wake_watch {
+            self.watch.notify_one();
         }
     }
 
@@ -460,29 +552,124 @@ impl Lanes {
         }
     }
 
-    fn run(&self, lane: usize) {
+    fn run_lane(&self, lane: usize) {
         loop {
-            let job = {
+            let (job, back) = {
                 let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
                 loop {
                     if let Some(job) = q.pinned[lane].pop_front() {
-                        break job;
+                        break (job, None);
                     }
-                    if let Some(job) = q.jobs.pop_front() {
-                        break job;
+                    if let Some(Queued { job, back }) = q.jobs.pop_front() {
+                        break (job, back);
                     }
                     q.idle += 1;
                     q = self.ready.wait(q).unwrap_or_else(|e| e.into_inner());
                     q.idle -= 1;
                 }
             };
+            if back.is_some() {
+                metrics::counter!("compute_jobs_total", "lane" => "compute").increment(1);
+            }
             self.started[lane].store(self.now(), Ordering::Relaxed);
             // The job reports its own result; a panic drops its sender,
             // which the waiting request reads as an internal error.
             let _ = catch_unwind(AssertUnwindSafe(job));
             self.started[lane].store(0, Ordering::Relaxed);
+            // Dropped after the answer, so that the request is woken once.
+            drop(back);
         }
     }
+
+    /// The watch: while jobs wait in the shared queue, looks again each
+    /// time every lane could have become held, and when every lane is held
+    /// hands each waiting job back to its request, which runs it on the
+    /// blocking pool (within its bound) as it would new work: a job queued
+    /// while a lane was free never waits behind long jobs that took the
+    /// lanes after it was queued. Asleep while nothing waits.
+    fn watch(&self) {
+        let mut q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            if q.jobs.len() <= q.idle {
+                q.watch_asleep = true;
+                q = self.watch.wait(q).unwrap_or_else(|e| e.into_inner());
+                q.watch_asleep = false;
+                continue;
+            }
+            let wait = match self.until_all_held() {
+                Some(Duration::ZERO) => {
+                    let mut handed = Vec::with_capacity(q.jobs.len());
+                    for queued in std::mem::take(&mut q.jobs) {
+                        match queued.back {
+                            Some(back) => handed.push((back, queued.job)),
+                            None => q.jobs.push_back(queued),
+                        }
+                    }
+                    drop(q);
+                    for (back, job) in handed {
+                        if back.send(job).is_err() {
+                            // Its request has gone: it would not have run.
+                            metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued")
+                                .increment(1);
+                        }
+                    }
+                    q = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+                    // Only jobs no request waits for are left: look again
+                    // a long job later.
+                    LONG_JOB
+                }
+                Some(wait) => wait,
+                None => LONG_JOB,
+            };
+            q = self
+                .watch
+                .wait_timeout(q, wait.max(WATCH_MIN_WAIT))
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+    }
+}
+
+/// The watch's shortest sleep, so that it never spins.
+const WATCH_MIN_WAIT: Duration = Duration::from_micros(100);
+
+/// A request's job of `work`: the job, which answers on the returned
+/// receiver (nothing when its request has gone first), the blocking bound
+/// of the request's admission, and the guard that marks the job abandoned
+/// when the request stops waiting.
+#[allow(clippy::type_complexity)]
+fn job_of<T, F>(
+    work: F,
+) -> (
+    Job,
+    Option<Arc<BlockingBound>>,
+    tokio::sync::oneshot::Receiver<T>,
+    Abandon,
+)
+where
+    F: FnOnce() -> T + Send + 'static,
+    T: Send + 'static,
+{
+    let admission = ADMITTED.try_with(Admitted::clone).ok();
+    let bound = admission.as_ref().map(|a| Arc::clone(&a.blocking));
+    let cancel = Arc::new(AtomicBool::new(false));
+    // Dropped with the request's future: when it goes before the answer
+    // came, the request was abandoned and the job stops.
+    let abandon = Abandon(Arc::clone(&cancel));
+    let context = Context::current(cancel);
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let job: Job = Box::new(move || {
+        if context.cancel.load(Ordering::Relaxed) {
+            metrics::counter!("compute_jobs_cancelled_total", "stage" => "queued").increment(1);
+            return;
+        }
+        let out = context.in_job(work);
+        // The slot goes back before the answer does, so that a client
+        // that sends its next request on the answer finds it free.
+        drop(admission);
+        let _ = tx.send(out);
+    });
+    (job, bound, rx, abandon)
 }
 
 #[cfg(test)]
@@ -688,6 +875,39 @@ mod tests {
             std::thread::sleep(Duration::from_millis(1));
         }
         assert!(!lanes.all_held());
+    }
+
+    #[tokio::test]
+    async fn a_job_queued_before_the_lanes_were_held_goes_around_them() {
+        // One lane, taken by a job that waits on a gate, and a small job
+        // queued behind it as a request queues one while a lane is not yet
+        // held. Before the lanes' watch, the small job waited in the queue
+        // until the gate opened (here: never, the test's bound). Now, once
+        // the lane counts as held (LONG_JOB), it is handed back to its
+        // request and runs on the blocking pool.
+        let lanes = Lanes::start(1);
+        let gate = hold_every_lane(&lanes);
+        let answered = tokio::time::timeout(Duration::from_secs(30), lanes.run_queued(|| 42)).await;
+        // Admitted under a bound of none on the blocking pool, it is shed
+        // (503) instead of waiting.
+        let none = Arc::new(BlockingBound::new(0, "FUSION_MAX_BLOCKING_JOBS"));
+        let shed = tokio::time::timeout(
+            Duration::from_secs(30),
+            admitted(Admitted::new((), none), lanes.run_queued(|| 7)),
+        )
+        .await;
+        open(&gate);
+        assert_eq!(
+            answered
+                .expect("the small job waited behind the long one")
+                .unwrap(),
+            42
+        );
+        let shed = shed.expect("the admitted job waited behind the long one");
+        assert!(
+            matches!(&shed, Err(ServiceError::Overloaded(m)) if m.contains("FUSION_MAX_BLOCKING_JOBS")),
+            "{shed:?}"
+        );
     }
 
     /// Polls `request` until its job says it started, then drops it (the

@@ -247,6 +247,8 @@ fn fill_scene(
     for (ni, node) in est.iter().enumerate() {
         let mut tracks = Vec::with_capacity(node.len());
         for (ti, samples) in node.iter().enumerate() {
+            // Track by track, so that an abandoned request stops.
+            crate::lanes::checkpoint()?;
             let mut out = Track::new(times.len(), dim);
             let at = |si: usize, e: AlgoError| {
                 Violations::from_param(&format!("nodes[{ni}].tracks[{ti}].samples[{si}]."), e)

@@ -122,6 +122,7 @@ pub fn correlate(input: CorrelateInput) -> Result<CorrelateOutput, ServiceError>
     let correlated = correlate_pairs(&scene, &plan, &name, &mut warnings)?;
     let correlate_us = micros_since(t_corr);
 
+    crate::lanes::checkpoint()?;
     let t_fuse = Instant::now();
     let (grouping, grouped, groups) = system_tracks(&scene, &plan, &correlated.links, name);
     let fuse_us = micros_since(t_fuse);
@@ -285,4 +286,31 @@ fn conflicts(
             ),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_abandoned_request_stops_at_its_first_track() {
+        // A track without samples: a violation when someone waits for the
+        // answer, and stopped at the first track when nobody does.
+        let input = || CorrelateInput {
+            nodes: vec![NodeInput {
+                id: Some("a".into()),
+                tracks: vec![TrackInput::default()],
+            }],
+            ..CorrelateInput::default()
+        };
+        assert!(matches!(
+            correlate(input()),
+            Err(ServiceError::InvalidInput(_))
+        ));
+        let stopped = crate::lanes::as_abandoned(|| correlate(input()));
+        assert!(
+            matches!(stopped, Err(ServiceError::Cancelled)),
+            "{stopped:?}"
+        );
+    }
 }

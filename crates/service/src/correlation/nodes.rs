@@ -49,6 +49,9 @@ pub(super) fn validate(input: &CorrelateInput) -> Result<Parsed, ServiceError> {
             tracks: Vec::with_capacity(node.tracks.len()),
         };
         for (ti, track) in node.tracks.iter().enumerate() {
+            // Track by track, so that an abandoned request stops (the batch
+            // endpoint's parser only: sessions parse their reports apart).
+            crate::lanes::checkpoint()?;
             let tfield = |t: usize| format!("nodes[{ni}].tracks[{t}]");
             let id = track_ids.check(&mut v, track.id.as_deref(), ti, |t| {
                 format!("{}.id", tfield(t))
