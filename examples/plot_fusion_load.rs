@@ -361,7 +361,8 @@ async fn main() -> anyhow::Result<()> {
         "end to end (gRPC stream, {} batches of {} s, late {}, store {}, snapshot every {} \
          batches): {:.0} plots/s, {:.1} batches/s; per-batch latency p50 {:.2} ms, p99 {:.2} \
          ms (slowest: {}); written to the store per batch {:.3} MB ({} snapshots, {} log \
-         entries); final counters {:?}; stored session {} bytes",
+         entries); final counters {:?}; stored session {} bytes; GetSession at the end {:.1} \
+         ms (a read of the store, decoded and replayed: {:.1} ms)",
         batches.len(),
         args.batch_s,
         args.late,
@@ -377,7 +378,9 @@ async fn main() -> anyhow::Result<()> {
         run.snapshots,
         run.entries,
         run.counters,
-        run.stored_bytes
+        run.stored_bytes,
+        run.get_ms,
+        run.read_ms
     );
     if let Some(at) = args.takeover_at {
         ensure!(
@@ -417,6 +420,11 @@ struct Run {
     stored_bytes: u64,
     /// The session's tracks at the end (GetSession).
     tracks: Vec<pb::FusedTrack>,
+    /// What that GetSession took (ms), and a read of the session from the
+    /// store (fetch, decode, replay, view: what a GET cost before it
+    /// answered from the replica's decoded copy).
+    get_ms: f64,
+    read_ms: f64,
     /// With a takeover: from the stop of the serving replica to the first
     /// batch the other accepted.
     takeover_ms: Option<f64>,
@@ -597,6 +605,7 @@ async fn stream(
     written += counter(&r.state, "fusion_session_written_bytes_total", None);
     snapshots += counter(&r.state, "fusion_session_writes_total", Some("snapshot"));
     entries += counter(&r.state, "fusion_session_writes_total", Some("\"log\""));
+    let started = Instant::now();
     let state_now = r
         .client
         .get_session(pb::GetSessionRequest {
@@ -604,6 +613,16 @@ async fn stream(
         })
         .await?
         .into_inner();
+    let get_ms = started.elapsed().as_secs_f64() * 1e3;
+    let started = Instant::now();
+    r.state
+        .sessions()
+        .get_as::<service::session::plot_fusion::PlotFusionSession>(
+            radar_fusion::auth::DEFAULT_TENANT,
+            &id,
+        )
+        .await?;
+    let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let tracks = state_now
         .plot_fusion
         .as_ref()
@@ -624,6 +643,8 @@ async fn stream(
         counters: last.and_then(|l| l.counters),
         stored_bytes: state_now.encoded_bytes,
         tracks,
+        get_ms,
+        read_ms,
         takeover_ms,
         reads,
     })

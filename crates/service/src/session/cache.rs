@@ -67,6 +67,28 @@ impl SessionCache {
         entry.value.downcast::<T>().ok().map(|v| (version, *v))
     }
 
+    /// Takes the decoded session `id` if it holds `version`, with its
+    /// encoded size (to put it back); another version stays.
+    pub fn take_at<T: Any + Send>(
+        &self,
+        tenant: &str,
+        id: &str,
+        version: u64,
+    ) -> Option<(usize, T)> {
+        if self.max_bytes == 0 {
+            return None;
+        }
+        let mut inner = self.lock();
+        let key = (tenant.to_string(), id.to_string());
+        if inner.entries.get(&key)?.version != version {
+            return None;
+        }
+        let entry = inner.entries.remove(&key)?;
+        inner.bytes -= entry.bytes;
+        let bytes = entry.bytes;
+        entry.value.downcast::<T>().ok().map(|v| (bytes, *v))
+    }
+
     /// Puts a decoded session at `version` (`bytes` its encoded size),
     /// unless a newer version is cached already; evicts the least recently
     /// used entries beyond the bound.

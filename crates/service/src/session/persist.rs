@@ -495,25 +495,48 @@ impl Sessions {
     /// The decoded session is kept in the cache (as a push keeps it): a
     /// replica that attaches a stream to a session another replica served
     /// reads and replays it once, not again for the first batch.
+    ///
+    /// The store is read for the version and token; a session this replica
+    /// holds decoded at that version, made by the same write, answers
+    /// without decoding and replaying the stored bytes (the state is the
+    /// same: `a_replica_that_replays_the_log_holds_the_serving_replicas_state`).
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
         let stored = self.read(tenant, id).await?;
         let (version, bytes) = (stored.version, stored.bytes());
+        let tag = stored_kind(&stored.data)?;
+        let kind = KindName::from_tag(tag).ok_or_else(|| {
+            ServiceError::Internal(format!(
+                "stored session: {} is not served by this release",
+                tag_name(tag)
+            ))
+        })?;
+        let cached = match kind {
+            KindName::Correlation => self
+                .cache
+                .take_at::<Hot<CorrelationSession>>(tenant, id, version)
+                .map(|(_, h)| AnyHot::Correlation(h)),
+            KindName::PlotFusion => self
+                .cache
+                .take_at::<Hot<PlotFusionSession>>(tenant, id, version)
+                .map(|(_, h)| AnyHot::PlotFusion(h)),
+        };
         let id2 = id.to_string();
-        let (view, hot) = offload(move || {
-            let tag = stored_kind(&stored.data)?;
-            match KindName::from_tag(tag) {
-                Some(KindName::Correlation) => {
-                    let (v, hot) = view_and_hot::<CorrelationSession>(&id2, &stored)?;
-                    Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
-                }
-                Some(KindName::PlotFusion) => {
-                    let (v, hot) = view_and_hot::<PlotFusionSession>(&id2, &stored)?;
-                    Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
-                }
-                None => Err(ServiceError::Internal(format!(
-                    "stored session: {} is not served by this release",
-                    tag_name(tag)
-                ))),
+        let (view, hot) = offload(move || match (kind, cached) {
+            (KindName::Correlation, Some(AnyHot::Correlation(h))) => {
+                let (v, hot) = view_from::<CorrelationSession>(&id2, &stored, Some(h))?;
+                Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
+            }
+            (KindName::Correlation, _) => {
+                let (v, hot) = view_from::<CorrelationSession>(&id2, &stored, None)?;
+                Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
+            }
+            (KindName::PlotFusion, Some(AnyHot::PlotFusion(h))) => {
+                let (v, hot) = view_from::<PlotFusionSession>(&id2, &stored, Some(h))?;
+                Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
+            }
+            (KindName::PlotFusion, _) => {
+                let (v, hot) = view_from::<PlotFusionSession>(&id2, &stored, None)?;
+                Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
             }
         })
         .await?;
@@ -1142,6 +1165,24 @@ fn view_and_hot<K: SessionKind>(
     Ok((view, hot))
 }
 
+/// The view of `stored`, from `cached` when it is the state of the same
+/// write (version and token), else from the stored bytes; with the decoded
+/// session to keep.
+fn view_from<K: SessionKind>(
+    id: &str,
+    stored: &Stored,
+    cached: Option<Hot<K>>,
+) -> Result<(View<K::View>, Hot<K>), ServiceError> {
+    match cached {
+        Some(hot) if hot.token == stored.token => {
+            metrics::counter!("fusion_session_cache_total", "outcome" => "read_hit").increment(1);
+            let view = hot.session.view(id, stored.version, stored.bytes())?;
+            Ok((view, hot))
+        }
+        _ => view_and_hot::<K>(id, stored),
+    }
+}
+
 fn view_of<K: SessionKind>(id: &str, stored: &Stored) -> Result<View<K::View>, ServiceError> {
     let hot = Hot::<K>::read(id, stored).map_err(|e| match e {
         DecodeError::WrongKind { stored } => ServiceError::NotFound(format!(
@@ -1438,6 +1479,57 @@ mod tests {
             sessions.snapshots_settled().await;
             assert_eq!(check_replica(&sessions, &id, i).await, i - 3);
         }
+    }
+
+    /// A GET of a session this replica holds decoded at the stored version
+    /// answers from it, as a replica that reads the store would: the same
+    /// view, and the serving replica's own copy kept (its background
+    /// snapshot still pending: a copy read from the store would know of
+    /// none). After another writer's batch (a version the copy does not
+    /// hold) the GET reads the store.
+    #[tokio::test]
+    async fn a_get_of_a_hot_session_answers_from_its_decoded_copy() {
+        let chunks: Vec<Vec<PlotInput>> = plots().chunks(4).map(<[_]>::to_vec).collect();
+        let sessions = gated(4, false).await;
+        let id = new_session(&sessions, None, None).await;
+        let mut version = 0;
+        for (i, chunk) in chunks[..4].iter().enumerate() {
+            version = push_chunk(&sessions, &id, i, chunk).await;
+        }
+        let fresh = sessions
+            .get_as::<PlotFusionSession>(TENANT, &id)
+            .await
+            .unwrap();
+        let AnyView::PlotFusion(view) = sessions.get(TENANT, &id).await.unwrap() else {
+            panic!("a plot-fusion session");
+        };
+        assert_eq!(view, fresh);
+        let (_, hot) = sessions
+            .cache
+            .take_at::<Hot<PlotFusionSession>>(TENANT, &id, version)
+            .expect("kept in the cache");
+        assert!(hot.shape.pending.is_some(), "the copy was read again");
+        // A batch the copy has not seen (as another replica's would be):
+        // the store moves on, and only the stale copy is cached.
+        push_chunk(&sessions, &id, 4, &chunks[4]).await;
+        let newer = sessions
+            .cache
+            .take_at::<Hot<PlotFusionSession>>(TENANT, &id, version + 1);
+        assert!(newer.is_some());
+        sessions.cache.put(TENANT, &id, version, 1, hot);
+        let AnyView::PlotFusion(after) = sessions.get(TENANT, &id).await.unwrap() else {
+            panic!("a plot-fusion session");
+        };
+        assert_eq!(after.version, version + 1);
+        assert_eq!(
+            after,
+            sessions
+                .get_as::<PlotFusionSession>(TENANT, &id)
+                .await
+                .unwrap()
+        );
+        open(&sessions);
+        sessions.snapshots_settled().await;
     }
 
     /// A background snapshot that fails loses nothing: the log still
