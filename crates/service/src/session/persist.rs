@@ -510,41 +510,23 @@ impl Sessions {
                 tag_name(tag)
             ))
         })?;
-        let cached = match kind {
-            KindName::Correlation => self
-                .cache
-                .take_at::<Hot<CorrelationSession>>(tenant, id, version)
-                .map(|(_, h)| AnyHot::Correlation(h)),
-            KindName::PlotFusion => self
-                .cache
-                .take_at::<Hot<PlotFusionSession>>(tenant, id, version)
-                .map(|(_, h)| AnyHot::PlotFusion(h)),
-        };
         let id2 = id.to_string();
-        let (view, hot) = offload(move || match (kind, cached) {
-            (KindName::Correlation, Some(AnyHot::Correlation(h))) => {
-                let (v, hot) = view_from::<CorrelationSession>(&id2, &stored, Some(h))?;
-                Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
+        Ok(match kind {
+            KindName::Correlation => {
+                let cached = self.cache.take_at(tenant, id, version).map(|(_, h)| h);
+                let (v, h) =
+                    offload(move || view_from::<CorrelationSession>(&id2, &stored, cached)).await?;
+                self.cache.put(tenant, id, version, bytes, h);
+                AnyView::Correlation(v)
             }
-            (KindName::Correlation, _) => {
-                let (v, hot) = view_from::<CorrelationSession>(&id2, &stored, None)?;
-                Ok((AnyView::Correlation(v), AnyHot::Correlation(hot)))
-            }
-            (KindName::PlotFusion, Some(AnyHot::PlotFusion(h))) => {
-                let (v, hot) = view_from::<PlotFusionSession>(&id2, &stored, Some(h))?;
-                Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
-            }
-            (KindName::PlotFusion, _) => {
-                let (v, hot) = view_from::<PlotFusionSession>(&id2, &stored, None)?;
-                Ok((AnyView::PlotFusion(v), AnyHot::PlotFusion(hot)))
+            KindName::PlotFusion => {
+                let cached = self.cache.take_at(tenant, id, version).map(|(_, h)| h);
+                let (v, h) =
+                    offload(move || view_from::<PlotFusionSession>(&id2, &stored, cached)).await?;
+                self.cache.put(tenant, id, version, bytes, h);
+                AnyView::PlotFusion(v)
             }
         })
-        .await?;
-        match hot {
-            AnyHot::Correlation(h) => self.cache.put(tenant, id, version, bytes, h),
-            AnyHot::PlotFusion(h) => self.cache.put(tenant, id, version, bytes, h),
-        }
-        Ok(view)
     }
 
     /// A session known to be of kind `K`; another kind is an error naming it.
@@ -1143,12 +1125,6 @@ async fn any_view(id: &str, stored: Stored) -> Result<AnyView, ServiceError> {
 
 /// A decoded session of any kind this release serves (one at a time, on
 /// its way into the cache: the variants' sizes do not matter).
-#[allow(clippy::large_enum_variant)]
-enum AnyHot {
-    Correlation(Hot<CorrelationSession>),
-    PlotFusion(Hot<PlotFusionSession>),
-}
-
 fn view_and_hot<K: SessionKind>(
     id: &str,
     stored: &Stored,
