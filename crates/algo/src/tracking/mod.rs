@@ -316,17 +316,20 @@ impl Tracker {
     /// one predicted to the time of the last frame (a track keeps its own
     /// time, that of its last update or miss; [`Track::t`]).
     pub fn tracks(&self) -> Vec<TrackOutput> {
-        let mut confirmed = self.confirmed_tracks();
+        let tentatives = &self.initiator.tentatives;
+        let mut out = Vec::with_capacity(self.tracks.len() + tentatives.len());
+        self.push_confirmed(&mut out);
         let mut cv = CvPredictor::of(&self.config);
-        let mut tentative: Vec<TrackOutput> = self
-            .initiator
-            .tentatives
-            .iter()
-            .map(|t| self.output(t, TrackStatus::Tentative, &mut cv))
-            .collect();
-        tentative.sort_by_key(|t| t.id);
-        confirmed.extend(tentative);
-        confirmed
+        // Ordered by id before the outputs are made (ids are unique): the
+        // outputs are large, the references small.
+        let mut order: Vec<&Track> = tentatives.iter().collect();
+        order.sort_unstable_by_key(|t| t.id);
+        out.extend(
+            order
+                .into_iter()
+                .map(|t| self.output(t, TrackStatus::Tentative, &mut cv)),
+        );
+        out
     }
 
     /// Accepts plots (any order; sorted by time inside, stably), processes
@@ -434,15 +437,22 @@ impl Tracker {
     /// The confirmed tracks by ascending id, predicted to the time of the
     /// last frame.
     pub fn confirmed_tracks(&self) -> Vec<TrackOutput> {
+        let mut out = Vec::with_capacity(self.tracks.len());
+        self.push_confirmed(&mut out);
+        out
+    }
+
+    /// The confirmed tracks' outputs by id, pushed onto `out`.
+    fn push_confirmed(&self, out: &mut Vec<TrackOutput>) {
         // One predictor for all (its IMM steps are asked again and again).
         let mut predictor = TrackPredictor::of(&self.config);
-        let mut confirmed: Vec<TrackOutput> = self
-            .tracks
-            .iter()
-            .map(|t| self.output(t, TrackStatus::Confirmed, &mut predictor))
-            .collect();
-        confirmed.sort_by_key(|t| t.id);
-        confirmed
+        let mut order: Vec<&Track> = self.tracks.iter().map(|t| &**t).collect();
+        order.sort_unstable_by_key(|t| t.id);
+        out.extend(
+            order
+                .into_iter()
+                .map(|t| self.output(t, TrackStatus::Confirmed, &mut predictor)),
+        );
     }
 
     /// A track predicted to the last frame's time by `predictor` (a
