@@ -182,6 +182,10 @@ pub struct Push {
     /// Ids of tracks a frame could not associate (at a radar's site:
     /// [`super::StepReport::undefined`]), replayed frames included.
     pub undefined: Vec<u64>,
+    /// Tracks whose numbers failed ([`super::StepReport::failed`]: dropped
+    /// or coasted), replayed frames included (so a failure already
+    /// reported may come again).
+    pub failed: Vec<super::TrackFailure>,
 }
 
 impl Push {
@@ -192,6 +196,7 @@ impl Push {
         self.refused += report.refused;
         self.deleted.extend(report.deleted);
         self.undefined.extend(report.undefined);
+        self.failed.extend(report.failed);
     }
 }
 
