@@ -45,6 +45,7 @@ use crate::tracking::predictor::ModeState;
 use crate::tracking::retrodiction::{Retro, carry, retrodict};
 use crate::tracking::sweep::View;
 use crate::tracking::track::{Prediction, Track, chi2_gates, position_selector, predict};
+use crate::tracking::{FailedStep, TrackFailure};
 
 /// Roots and tentative tracks, carried between frames.
 #[derive(Debug, Clone, Default)]
@@ -97,6 +98,9 @@ pub(crate) struct Initiated {
     pub started: usize,
     /// Starts refused: the tracker held its bound of tracks.
     pub refused: usize,
+    /// Tentative tracks whose numbers failed (prediction, gating or
+    /// update), dropped (counted in `dropped`).
+    pub failed: Vec<TrackFailure>,
 }
 
 /// How a frame treats the tentative tracks no plot extends.
@@ -205,35 +209,22 @@ impl Initiator {
         // what carries its update back to its time.
         let mut retros: Vec<Option<Retro>> = Vec::with_capacity(slots.len());
         let mut edges = Vec::new();
-        for (c, &i) in slots.iter().enumerate() {
-            let track = &self.tentatives[i];
-            let (x, p) = if track.t > t {
-                let mut pred = Prediction::default();
-                retros.push(Some(retrodict(cfg, track, t, &mut pred)?));
-                (pred.x, pred.p)
-            } else {
-                retros.push(None);
-                predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?
-            };
-            for (j, plot) in plots.iter().enumerate() {
-                if !identity_fits(&track.identity, plot, mode_s) {
-                    continue;
+        // The candidates predicted and gated (a tentative whose numbers
+        // fail there is dropped: `failed`, slots).
+        let mut kept = Vec::with_capacity(slots.len());
+        let mut failed = Vec::new();
+        for &i in &slots {
+            let c = kept.len();
+            match self.predict_and_gate(i, t, (&plots, &gates), cfg, mode_s, c, &mut edges) {
+                Ok((x, p, retro)) => {
+                    predicted.push((x, p));
+                    retros.push(retro);
+                    kept.push(i);
                 }
-                let k = plot.z.len();
-                // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
-                let nu0 = plot.z[0] - x[0];
-                if nu0 * nu0 > gates[k - 2] * (p[(0, 0)] + plot.r[(0, 0)]) {
-                    continue;
-                }
-                let h = position_selector(k, cfg.axes);
-                let s = &h * &p * h.transpose() + &plot.r;
-                let d2 = mahalanobis_sq(&(&plot.z - &h * &x), &s)?;
-                if d2 <= gates[k - 2] {
-                    edges.push((c, j, d2 / gates[k - 2]));
-                }
+                Err(e) => failed.push((i, e)),
             }
-            predicted.push((x, p));
         }
+        let slots = kept;
         let mut hit = vec![None; slots.len()];
         for (c, j) in assignment::solve(&edges, 1.0 + 1e-12) {
             hit[c] = Some(j);
@@ -248,14 +239,20 @@ impl Initiator {
                 if let Some(j) = hit {
                     let plot = &plots[j];
                     let h = position_selector(plot.z.len(), cfg.axes);
-                    let u = kalman::update_linear(&x, &p, &plot.z, &h, &plot.r)?;
-                    let up = [ModeState {
-                        probability: 1.0,
-                        x: u.x,
-                        p: u.p,
-                    }];
                     let track = &mut self.tentatives[i];
-                    carry(track, &retro, &up)?;
+                    let carried =
+                        kalman::update_linear(&x, &p, &plot.z, &h, &plot.r).and_then(|u| {
+                            let up = [ModeState {
+                                probability: 1.0,
+                                x: u.x,
+                                p: u.p,
+                            }];
+                            carry(track, &retro, &up)
+                        });
+                    if let Err(e) = carried {
+                        failed.push((i, e));
+                        continue;
+                    }
                     track.record_late_hit(false);
                     track
                         .identity
@@ -276,7 +273,13 @@ impl Initiator {
                 Some(j) => {
                     let plot = &plots[j];
                     let h = position_selector(plot.z.len(), cfg.axes);
-                    let u = kalman::update_linear(&track.x, &track.p, &plot.z, &h, &plot.r)?;
+                    let u = match kalman::update_linear(&track.x, &track.p, &plot.z, &h, &plot.r) {
+                        Ok(u) => u,
+                        Err(e) => {
+                            failed.push((i, e));
+                            continue;
+                        }
+                    };
                     track.x = u.x;
                     track.p = u.p;
                     track.record(Some(plot.radars.clone()));
@@ -396,7 +399,16 @@ impl Initiator {
             (0..self.tentatives.len()).collect()
         };
         let mut gone = Vec::new();
+        let mut failed_slots: Vec<usize> = failed.iter().map(|f| f.0).collect();
+        failed_slots.sort_unstable();
+        for (i, error) in failed {
+            out.failed.push(self.failure(i, t, error));
+            gone.push((i, false));
+        }
         for i in judged {
+            if failed_slots.binary_search(&i).is_ok() {
+                continue;
+            }
             match self.verdict(i, cfg) {
                 Verdict::Confirm => gone.push((i, true)),
                 Verdict::Drop => gone.push((i, false)),
@@ -405,6 +417,66 @@ impl Initiator {
         }
         self.remove(gone, &mut out);
         Ok(out)
+    }
+
+    /// Tentative `i` predicted to the frame at `t` (or retrodicted there,
+    /// with what carries its update back), its gated pairs with the
+    /// frame's plots pushed to `edges` as candidate `c`. Fails when a
+    /// number of the tentative does (then no edge of it is pushed).
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn predict_and_gate(
+        &self,
+        i: usize,
+        t: f64,
+        (plots, gates): (&[CartesianPlot], &[f64]),
+        cfg: &TrackerConfig,
+        mode_s: &[bool],
+        c: usize,
+        edges: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(DVector<f64>, DMatrix<f64>, Option<Retro>), AlgoError> {
+        let track = &self.tentatives[i];
+        let (x, p, retro) = if track.t > t {
+            let mut pred = Prediction::default();
+            let retro = retrodict(cfg, track, t, &mut pred)?;
+            (pred.x, pred.p, Some(retro))
+        } else {
+            let (x, p) = predict(&track.x, &track.p, t - track.t, &cfg.sigma_a, cfg.noise)?;
+            (x, p, None)
+        };
+        let first = edges.len();
+        for (j, plot) in plots.iter().enumerate() {
+            if !identity_fits(&track.identity, plot, mode_s) {
+                continue;
+            }
+            let k = plot.z.len();
+            // Exact pruning: ν'S⁻¹ν ≥ ν_0²/S_00 for any S > 0.
+            let nu0 = plot.z[0] - x[0];
+            if nu0 * nu0 > gates[k - 2] * (p[(0, 0)] + plot.r[(0, 0)]) {
+                continue;
+            }
+            let h = position_selector(k, cfg.axes);
+            let s = &h * &p * h.transpose() + &plot.r;
+            match mahalanobis_sq(&(&plot.z - &h * &x), &s) {
+                Ok(d2) if d2 <= gates[k - 2] => edges.push((c, j, d2 / gates[k - 2])),
+                Ok(_) => {}
+                Err(e) => {
+                    edges.truncate(first);
+                    return Err(e);
+                }
+            }
+        }
+        Ok((x, p, retro))
+    }
+
+    /// The report of tentative `i`, whose numbers failed at `t` (dropped).
+    fn failure(&self, i: usize, t: f64, error: AlgoError) -> TrackFailure {
+        TrackFailure {
+            id: self.tentatives[i].id,
+            confirmed: false,
+            t,
+            step: FailedStep::Initiate,
+            error,
+        }
     }
 
     /// Whether tentative `i` is confirmed, dropped or kept (7c).
@@ -442,13 +514,14 @@ impl Initiator {
     /// Misses judged from the beam (serial mode): every tentative `judge`
     /// says missed the sweep is predicted to `t` and gets a miss; those
     /// that can no longer be confirmed are dropped.
+    /// A tentative whose prediction fails is dropped (`out.failed`).
     pub(crate) fn judge(
         &mut self,
         t: f64,
         cfg: &TrackerConfig,
         judge: &dyn Fn(&Track) -> bool,
         out: &mut Initiated,
-    ) -> Result<(), AlgoError> {
+    ) {
         let mut gone = Vec::new();
         for i in 0..self.tentatives.len() {
             if !judge(&self.tentatives[i]) {
@@ -456,7 +529,11 @@ impl Initiator {
             }
             let track = &mut self.tentatives[i];
             if track.t <= t {
-                track.predict(t, &cfg.sigma_a, cfg.noise)?;
+                if let Err(error) = track.predict(t, &cfg.sigma_a, cfg.noise) {
+                    out.failed.push(self.failure(i, t, error));
+                    gone.push((i, false));
+                    continue;
+                }
             }
             track.record(None);
             self.index.moved(i, &self.tentatives[i]);
@@ -465,7 +542,6 @@ impl Initiator {
             }
         }
         self.remove(gone, out);
-        Ok(())
     }
 }
 

@@ -38,10 +38,14 @@
 //! processed instant) is *late*: it is dropped, counted, and its index
 //! returned in [`StepReport::late`] (no out-of-sequence update).
 //!
-//! Errors: plots are validated before the tracker changes; a numerical
-//! error later in a call leaves the tracker part-way through the call, so
-//! a caller that must stay consistent keeps the stored state and retries
-//! from it.
+//! Errors: plots are validated before the tracker changes. A track whose
+//! numbers fail in a frame (its prediction, IMM mixing, association
+//! likelihood or update non-finite or not positive definite; a tentative
+//! track's likewise) is dropped, or coasts past an out-of-sequence plot,
+//! and is named in [`StepReport::failed`] ([`FailedStep`] says which and
+//! why): the frame and the call go on. Any other numerical error leaves
+//! the tracker part-way through the call, so a caller that must stay
+//! consistent keeps the stored state and retries from it.
 
 pub mod accuracy;
 pub mod associator;
@@ -64,6 +68,8 @@ pub mod updater;
 pub mod window;
 
 #[cfg(test)]
+mod failure_tests;
+#[cfg(test)]
 mod tests;
 
 pub use config::{
@@ -77,6 +83,8 @@ pub use track::{RadarHit, Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
 
 use std::{ops::ControlFlow, sync::Arc};
+
+use nalgebra::{DMatrix, DVector};
 
 use crate::error::AlgoError;
 use crate::jpda::{self, TrackEstimate};
@@ -141,6 +149,78 @@ pub struct StepReport {
     /// [`crate::polar::MIN_HORIZONTAL_RANGE`]); they coast through that
     /// frame, the rest of the frame applies. One entry per such frame.
     pub undefined: Vec<u64>,
+    /// Tracks whose numbers failed in a frame (a non-finite value, a
+    /// covariance that is not positive definite): each dropped or coasted
+    /// as [`FailedStep`] says, the rest of the frame applied. A confirmed
+    /// track dropped so is not in `deleted` (its numbers are what failed):
+    /// its last good report is the caller's.
+    pub failed: Vec<TrackFailure>,
+}
+
+/// A track whose numbers failed in a frame ([`StepReport::failed`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackFailure {
+    /// The track's id.
+    pub id: u64,
+    /// Whether it was confirmed (else tentative).
+    pub confirmed: bool,
+    /// The frame's time.
+    pub t: f64,
+    /// Where it failed, and so what became of it.
+    pub step: FailedStep,
+    /// What failed.
+    pub error: AlgoError,
+}
+
+impl TrackFailure {
+    /// Whether the track was dropped (else it coasted).
+    pub fn dropped(&self) -> bool {
+        self.step != FailedStep::Carry
+    }
+}
+
+/// Where a track's numbers failed, and what the tracker does about it.
+///
+/// The rule: a failure that shows the track's own state broken is final,
+/// so the track is dropped; a failure of an approximation applied to a
+/// sound track is that step's, so the track coasts. The inputs of a
+/// track's prediction, association and update other than the track's
+/// state and covariance are checked before they reach the tracker (plots,
+/// radars: every R positive definite) or come from the frame's
+/// association (weights in [0, 1]). A prediction is F x, F P F′ + Q (IMM:
+/// mixing, then each model's step) of the track alone; an innovation
+/// covariance H P H′ + R with R positive definite fails only when P is no
+/// covariance; an update of a sound prediction by a valid plot (the polar
+/// EKF in Joseph form, the IMM's model probabilities) stays finite and
+/// positive definite. So a failure at any of them means the track's
+/// numbers are broken, and a coast would try the same numbers again at
+/// the next frame (and gate the plots of its target, which could then
+/// start no new track), so the track is dropped, like a track the
+/// deleter removes, and its target's next plots start a new one. The one
+/// approximation is the carry of an out-of-sequence plot's update back to
+/// a newer track (retrodiction, `retrodiction.rs`): its covariance
+/// reduction can lose positive definiteness for a sound track, so there
+/// the late plot is not applied and the track coasts as it was. A
+/// tentative track is dropped whatever failed: it has no history worth a
+/// coast, and its plots start it again. (Degenerate geometry at a radar's
+/// site is no failure of numbers: that track coasts, listed in
+/// [`StepReport::undefined`].)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailedStep {
+    /// The prediction (a confirmed track's, IMM mixing included, or its
+    /// retrodiction to an out-of-sequence plot; also for a miss judged
+    /// from the beam): dropped.
+    Predict,
+    /// The association's likelihood (the innovation covariance of its
+    /// prediction): dropped.
+    Associate,
+    /// The update with the frame's plots: dropped.
+    Update,
+    /// The carry of an out-of-sequence plot's update back to the track's
+    /// time: the plot is not applied, the track coasts.
+    Carry,
+    /// A tentative track's prediction, gating or update: dropped.
+    Initiate,
 }
 
 /// The tracker: configuration plus everything carried between calls.
@@ -743,45 +823,60 @@ impl Tracker {
             // A track newer than the sweep (updated by an out-of-sequence
             // radar's later plot) records the miss where it stands.
             if track.t <= t {
-                self.predictor.predict(track, t)?;
+                if let Err(error) = self.predictor.predict(track, t) {
+                    // Its prediction failed: dropped (see `FailedStep`).
+                    report.failed.push(TrackFailure {
+                        id: track.id,
+                        confirmed: true,
+                        t,
+                        step: FailedStep::Predict,
+                        error,
+                    });
+                    doomed.push((k, Doom::Failed));
+                    continue;
+                }
             }
             track.record(None);
             self.index.moved(k, track);
             if deleter::should_delete(track, &cfg.deletion) {
-                doomed.push((k, false));
+                doomed.push((k, Doom::Rule));
             }
         }
         self.delete(doomed, report);
         let mut dropped = Initiated::default();
-        self.initiator
-            .judge(t, &self.config, &judge, &mut dropped)?;
+        self.initiator.judge(t, &self.config, &judge, &mut dropped);
         self.counters.dropped += dropped.dropped as u64;
+        report.failed.extend(dropped.failed);
         Ok(())
     }
 
-    /// Removes tracks (slot, whether a duplicate), reporting each as it
-    /// was, by ascending slot (others take their places: `swap_remove`).
-    /// Returns the moves (from, to) of the tracks that took their places.
+    /// Removes tracks (slot, why), reporting each as it was in
+    /// [`StepReport::deleted`] (but those whose numbers failed: their
+    /// failure is reported), by ascending slot (others take their places:
+    /// `swap_remove`). Returns the moves (from, to) of the tracks that
+    /// took their places.
     fn delete(
         &mut self,
-        doomed: Vec<(usize, bool)>,
+        doomed: Vec<(usize, Doom)>,
         report: &mut StepReport,
     ) -> Vec<(usize, usize)> {
         if doomed.is_empty() {
             return Vec::new();
         }
-        let duplicates: std::collections::HashSet<usize> =
-            doomed.iter().filter(|d| d.1).map(|d| d.0).collect();
+        let why: std::collections::HashMap<usize, Doom> = doomed.iter().copied().collect();
         let slots = doomed.into_iter().map(|d| d.0).collect();
         let (removed, moves) =
             hypothesiser::swap_remove_all(&mut self.tracks, slots, &mut self.index);
         for (slot, track) in removed {
-            report.deleted.push(track.output(TrackStatus::Deleted));
-            if duplicates.contains(&slot) {
-                self.counters.merged += 1;
-            } else {
-                self.counters.deleted += 1;
+            match why[&slot] {
+                Doom::Duplicate => self.counters.merged += 1,
+                Doom::Rule => self.counters.deleted += 1,
+                Doom::Failed => {
+                    self.counters.deleted += 1;
+                    continue;
+                }
             }
+            report.deleted.push(track.output(TrackStatus::Deleted));
         }
         moves
     }
@@ -862,60 +957,64 @@ impl Tracker {
         plots: Vec<CartesianPlot>,
         report: &mut StepReport,
     ) -> Result<Vec<Hit>, AlgoError> {
-        let slots = self.hypothesise(t, &plots)?;
+        let mut slots = self.hypothesise(t, &plots)?;
         let mut scratch = std::mem::take(&mut self.scratch.0);
-        scratch.predict(&self.config, &mut self.predictor, &self.tracks, &slots, t)?;
-        let estimates = &scratch.estimates[..slots.len()];
+        // Confirmed tracks whose numbers failed before their update (slots):
+        // dropped with the deleter's.
+        let mut failed = Vec::new();
+        let outcome = loop {
+            let bad = scratch.predict(
+                &self.config,
+                &mut self.predictor,
+                &self.tracks,
+                &mut slots,
+                t,
+            );
+            for (k, error) in bad {
+                self.failure(k, t, FailedStep::Predict, error, report);
+                failed.push(k);
+            }
+            let estimates = &scratch.estimates[..slots.len()];
+            match self.associate(&source, &plots, &slots, estimates) {
+                Ok(outcome) => break outcome,
+                Err(e) => {
+                    // The tracks whose likelihood fails on their own
+                    // leave the frame, which is associated again without
+                    // them; an error no single track makes is the frame's.
+                    let culprits: Vec<(usize, AlgoError)> = (0..slots.len())
+                        .filter_map(|c| {
+                            let one = (&slots[c..=c], &estimates[c..=c]);
+                            self.associate(&source, &plots, one.0, one.1)
+                                .err()
+                                .map(|e| (c, e))
+                        })
+                        .collect();
+                    if culprits.is_empty() {
+                        self.scratch.0 = scratch;
+                        return Err(e);
+                    }
+                    for (c, error) in culprits.into_iter().rev() {
+                        let k = slots.remove(c);
+                        self.failure(k, t, FailedStep::Associate, error, report);
+                        failed.push(k);
+                    }
+                }
+            }
+        };
         let cfg = &self.config;
-        let (outcome, updater): (Outcome, Box<dyn Updater + '_>) = match &source {
+        let updater: Box<dyn Updater + '_> = match &source {
             Source::Radar {
                 spec,
                 plots: raw,
                 height,
-            } => (
-                {
-                    // Identity beside the position, when a plot carries
-                    // one (identity::TrackIdentity::ln_ratio).
-                    let tracks = &self.tracks;
-                    let mode_s = self.mode_s_radars[raw[0].radar];
-                    let evidence = |c: usize, j: usize| {
-                        tracks[slots[c]]
-                            .identity
-                            .ln_ratio(&raw[j].identity, raw[j].t, mode_s)
-                    };
-                    let any = raw.iter().any(|p| !p.identity.is_empty());
-                    associate_polar(
-                        estimates,
-                        spec,
-                        raw,
-                        cfg.axes,
-                        cfg.track_gate_probability,
-                        &cfg.association,
-                        any.then_some(&evidence as jpda::Evidence<'_>),
-                    )?
-                },
-                Box::new(PolarUpdater {
-                    radar: spec,
-                    layout: polar_layout(spec, cfg.axes),
-                    plots: raw,
-                    range_rate: range_rate_sigma(spec, raw),
-                    height: *height,
-                }),
-            ),
-            Source::Fused {
-                clutter,
-                detection_probability,
-            } => (
-                associate_cartesian(
-                    estimates,
-                    &plots,
-                    clutter,
-                    *detection_probability,
-                    cfg.track_gate_probability,
-                    &cfg.association,
-                )?,
-                Box::new(CartesianUpdater { plots: &plots }),
-            ),
+            } => Box::new(PolarUpdater {
+                radar: spec,
+                layout: polar_layout(spec, cfg.axes),
+                plots: raw,
+                range_rate: range_rate_sigma(spec, raw),
+                height: *height,
+            }),
+            Source::Fused { .. } => Box::new(CartesianUpdater { plots: &plots }),
         };
         report
             .undefined
@@ -944,16 +1043,86 @@ impl Tracker {
             &mut scratch,
             (&outcome, &*updater),
             &plots,
-            &mut report.undefined,
+            &mut failed,
+            report,
         )?;
         drop(updater);
         self.scratch.0 = scratch;
-        let hits = self.delete_after_update(hits, &touched, report)?;
+        let hits = self.delete_after_update(hits, &touched, &failed, report)?;
         self.initiate(t, plots, &outcome.used, report)?;
         self.last_time = Some(self.last_time.map_or(t, |last| last.max(t)));
         self.counters.frames += 1;
         report.frames += 1;
         Ok(hits)
+    }
+
+    /// The associator's part of a frame: the weights of the frame's plots
+    /// for the tracks `slots` predicted as `estimates` (JPDA through the
+    /// polar EKF's linearisation for one radar's plots, or against fused
+    /// Cartesian plots), with each plot's identity beside its position.
+    fn associate(
+        &self,
+        source: &Source,
+        plots: &[CartesianPlot],
+        slots: &[usize],
+        estimates: &[TrackEstimate],
+    ) -> Result<Outcome, AlgoError> {
+        let cfg = &self.config;
+        match source {
+            Source::Radar {
+                spec, plots: raw, ..
+            } => {
+                // Identity beside the position, when a plot carries one
+                // (identity::TrackIdentity::ln_ratio).
+                let tracks = &self.tracks;
+                let mode_s = self.mode_s_radars[raw[0].radar];
+                let evidence = |c: usize, j: usize| {
+                    tracks[slots[c]]
+                        .identity
+                        .ln_ratio(&raw[j].identity, raw[j].t, mode_s)
+                };
+                let any = raw.iter().any(|p| !p.identity.is_empty());
+                associate_polar(
+                    estimates,
+                    spec,
+                    raw,
+                    cfg.axes,
+                    cfg.track_gate_probability,
+                    &cfg.association,
+                    any.then_some(&evidence as jpda::Evidence<'_>),
+                )
+            }
+            Source::Fused {
+                clutter,
+                detection_probability,
+            } => associate_cartesian(
+                estimates,
+                plots,
+                clutter,
+                *detection_probability,
+                cfg.track_gate_probability,
+                &cfg.association,
+            ),
+        }
+    }
+
+    /// Reports that confirmed track `k`'s numbers failed at `step` of the
+    /// frame at `t` ([`StepReport::failed`]).
+    fn failure(
+        &self,
+        k: usize,
+        t: f64,
+        step: FailedStep,
+        error: AlgoError,
+        report: &mut StepReport,
+    ) {
+        report.failed.push(TrackFailure {
+            id: self.tracks[k].id,
+            confirmed: true,
+            t,
+            step,
+            error,
+        });
     }
 
     /// The hypothesiser: the tracks a frame's plots may gate, from the
@@ -972,11 +1141,17 @@ impl Tracker {
     /// gated (every one in parallel mode) taken and updated with the
     /// association's weights, one update path for single-model and IMM
     /// tracks; hits and misses recorded. Returns the hits and every track
-    /// whose life this frame recorded. A track one of whose IMM models is
-    /// predicted at a radar's site (its polar model undefined there, while
-    /// the combined prediction the association used was not) is left as it
-    /// was, as if it had gated nothing, and listed in `undefined`: it
-    /// coasts, and the rest of the frame applies.
+    /// whose life this frame recorded. A track whose update cannot be made
+    /// is left as it was, as if it had gated nothing, and the rest of the
+    /// frame applies: one of whose IMM models is predicted at a radar's
+    /// site (its polar model undefined there, while the combined
+    /// prediction the association used was not) is listed in
+    /// [`StepReport::undefined`]; one whose update failed numerically (an
+    /// error, or a result that is not finite) in [`StepReport::failed`]:
+    /// its slot is pushed to `failed` (dropped, [`FailedStep::Update`]),
+    /// but when the carry of an out-of-sequence plot's update failed (it
+    /// coasts, [`FailedStep::Carry`]).
+    #[allow(clippy::too_many_arguments)]
     fn update(
         &mut self,
         t: f64,
@@ -984,11 +1159,24 @@ impl Tracker {
         scratch: &mut Scratch,
         (outcome, updater): (&Outcome, &dyn Updater),
         plots: &[CartesianPlot],
-        undefined: &mut Vec<u64>,
+        failed: &mut Vec<usize>,
+        report: &mut StepReport,
     ) -> Result<(Vec<Hit>, Vec<usize>), AlgoError> {
         let lazy = !self.parallel;
         let mut hits = Vec::new();
         let mut touched = Vec::new();
+        // A track whose update could not be made: listed where its reason
+        // says.
+        let mut coast = |id: u64, why: Coast, step: FailedStep| match why {
+            Coast::Undefined => report.undefined.push(id),
+            Coast::Failed(error) => report.failed.push(TrackFailure {
+                id,
+                confirmed: true,
+                t,
+                step,
+                error,
+            }),
+        };
         for (c, &k) in slots.iter().enumerate() {
             let assoc = &outcome.associations[c];
             if lazy && assoc.measurements.is_empty() {
@@ -1000,18 +1188,23 @@ impl Tracker {
                 // the track's time; the hit recorded, the track's time and
                 // last update kept; no registration pair.
                 let pred = &mut scratch.predictions[c];
+                // What the carry changes, kept to restore when it fails.
+                let kept = (track.x.clone(), track.p.clone(), track.modes.clone());
                 let carried = if pred.modes.is_empty() {
                     let single = single_mode(&mut scratch.single);
                     std::mem::swap(&mut single[0].x, &mut pred.x);
                     std::mem::swap(&mut single[0].p, &mut pred.p);
-                    coasts(updater.update(single, assoc))?
-                        .map(|_| retrodiction::carry(track, &retro, single))
+                    coasts(updater.update(single, assoc)).and_then(|_| {
+                        retrodiction::carry(track, &retro, single).map_err(Coast::Failed)
+                    })
                 } else {
-                    coasts(updater.update(&mut pred.modes, assoc))?
-                        .map(|_| retrodiction::carry(track, &retro, &pred.modes))
+                    coasts(updater.update(&mut pred.modes, assoc)).and_then(|_| {
+                        retrodiction::carry(track, &retro, &pred.modes).map_err(Coast::Failed)
+                    })
                 };
-                if carried.transpose()?.is_none() {
-                    undefined.push(track.id);
+                if let Err(why) = carried {
+                    (track.x, track.p, track.modes) = kept;
+                    coast(track.id, why, FailedStep::Carry);
                     continue;
                 }
                 if let Some(j) = outcome.hit[c] {
@@ -1035,22 +1228,32 @@ impl Tracker {
                 let single = single_mode(&mut scratch.single);
                 std::mem::swap(&mut single[0].x, &mut track.x);
                 std::mem::swap(&mut single[0].p, &mut track.p);
-                let updated = coasts(updater.update(single, assoc))?;
-                if updated.is_none() {
-                    // The update failed before it changed the mode.
+                let updated = coasts(updater.update(single, assoc));
+                if updated.is_err() {
+                    // The track's buffers back (what the update left in
+                    // them is dropped below).
                     std::mem::swap(&mut single[0].x, &mut track.x);
                     std::mem::swap(&mut single[0].p, &mut track.p);
                 }
                 updated
             } else {
-                coasts(updater.update(&mut track.modes, assoc))?
+                coasts(updater.update(&mut track.modes, assoc))
             };
-            let Some((x, p)) = updated else {
-                // Back to the track as it was (the updaters fail before they
-                // change a mode): it coasts, predicted when needed.
-                track.commit_swap(before, &mut scratch.predictions[c]);
-                undefined.push(track.id);
-                continue;
+            let (x, p) = match updated {
+                Ok(u) => u,
+                Err(why) => {
+                    // Back to the track as it was before the frame (its
+                    // state, covariance and modes, whatever the update
+                    // changed of the prediction): an overflight's track
+                    // coasts, predicted when needed; one whose numbers
+                    // failed is dropped with the deleter's.
+                    track.commit_swap(before, &mut scratch.predictions[c]);
+                    if matches!(why, Coast::Failed(_)) {
+                        failed.push(k);
+                    }
+                    coast(track.id, why, FailedStep::Update);
+                    continue;
+                }
             };
             track.x = x;
             track.p = p;
@@ -1089,28 +1292,32 @@ impl Tracker {
     }
 
     /// The deleter's part of a frame: duplicates among the tracks a plot
-    /// updated, and every touched track its rule deletes. Returns the hits
-    /// of the tracks kept, at their slots after the deletions.
+    /// updated, every touched track its rule deletes, and the tracks whose
+    /// numbers failed before their update (`failed`, dropped: see
+    /// [`FailedStep`]). Returns the hits of the tracks kept, at their
+    /// slots after the deletions.
     fn delete_after_update(
         &mut self,
         hits: Vec<Hit>,
         touched: &[usize],
+        failed: &[usize],
         report: &mut StepReport,
     ) -> Result<Vec<Hit>, AlgoError> {
         let cfg = &self.config;
         let hit_plots: Vec<(usize, usize)> = hits.iter().map(|h| (h.slot, h.plot)).collect();
-        let mut doomed: Vec<(usize, bool)> =
+        let mut doomed: Vec<(usize, Doom)> =
             deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_probability)?
                 .into_iter()
-                .map(|k| (k, true))
+                .map(|k| (k, Doom::Duplicate))
                 .collect();
         for &k in touched {
             if !doomed.iter().any(|d| d.0 == k)
                 && deleter::should_delete(&self.tracks[k], &cfg.deletion)
             {
-                doomed.push((k, false));
+                doomed.push((k, Doom::Rule));
             }
         }
+        doomed.extend(failed.iter().map(|&k| (k, Doom::Failed)));
         let gone: std::collections::HashSet<usize> = doomed.iter().map(|d| d.0).collect();
         let moves = self.delete(doomed, report);
         Ok(hits
@@ -1165,6 +1372,7 @@ impl Tracker {
             &self.mode_s_radars,
         )?;
         report.refused += initiated.refused;
+        report.failed.extend(initiated.failed);
         self.counters.started += initiated.started as u64;
         self.counters.dropped += initiated.dropped as u64;
         for mut track in initiated.confirmed {
@@ -1249,6 +1457,17 @@ impl Tracker {
         }
         lost
     }
+}
+
+/// Why the deleter removes a confirmed track.
+#[derive(Debug, Clone, Copy)]
+enum Doom {
+    /// A deletion rule (misses, σ).
+    Rule,
+    /// A duplicate of another track.
+    Duplicate,
+    /// Its numbers failed ([`FailedStep`]).
+    Failed,
 }
 
 /// A newly confirmed track's aircraft already has a track
@@ -1403,15 +1622,18 @@ fn single_mode(single: &mut Vec<ModeState>) -> &mut Vec<ModeState> {
 impl Scratch {
     /// The predictor's part of a frame: the tracks `slots` predicted to
     /// `t` into `predictions` (and copied into `estimates`), in order; a
-    /// track newer than `t` retrodicted there.
+    /// track newer than `t` retrodicted there. A track whose prediction
+    /// fails is taken out of `slots` (the others keep their order, so
+    /// candidate c is `slots[c]` after the call) and returned with its
+    /// error, by slot.
     fn predict(
         &mut self,
         cfg: &TrackerConfig,
         predictor: &mut dyn Predictor,
         tracks: &[Arc<Track>],
-        slots: &[usize],
+        slots: &mut Vec<usize>,
         t: f64,
-    ) -> Result<(), AlgoError> {
+    ) -> Vec<(usize, AlgoError)> {
         if self.predictions.len() < slots.len() {
             self.predictions
                 .resize_with(slots.len(), Prediction::default);
@@ -1424,27 +1646,55 @@ impl Scratch {
         }
         self.retro.clear();
         self.retro.resize(slots.len(), None);
-        for (c, &k) in slots.iter().enumerate() {
+        let mut failed = Vec::new();
+        let mut c = 0;
+        for i in 0..slots.len() {
+            let k = slots[i];
             let pred = &mut self.predictions[c];
-            if tracks[k].t > t {
-                self.retro[c] = Some(retrodiction::retrodict(cfg, &tracks[k], t, pred)?);
+            let predicted = if tracks[k].t > t {
+                retrodiction::retrodict(cfg, &tracks[k], t, pred).map(Some)
             } else {
-                predictor.predict_into(&tracks[k], t, pred)?;
+                predictor.predict_into(&tracks[k], t, pred).map(|()| None)
+            };
+            match predicted {
+                Ok(retro) => self.retro[c] = retro,
+                Err(e) => {
+                    failed.push((k, e));
+                    continue;
+                }
             }
             track::copy_vector(&mut self.estimates[c].x, &pred.x);
             track::copy_matrix(&mut self.estimates[c].p, &pred.p);
+            slots[c] = k;
+            c += 1;
         }
-        Ok(())
+        slots.truncate(c);
+        self.retro.truncate(c);
+        failed
     }
 }
 
-/// `Ok(None)` for an update that failed because a model's polar
-/// measurement model is undefined where that model predicts the target (at
-/// a radar's site): the track coasts. Any other error is an error.
-fn coasts<T>(updated: Result<T, AlgoError>) -> Result<Option<T>, AlgoError> {
+/// Why a track's update was not made.
+enum Coast {
+    /// A model's polar measurement model is undefined where that model
+    /// predicts the target (at a radar's site).
+    Undefined,
+    /// The update failed numerically.
+    Failed(AlgoError),
+}
+
+/// An update (the combined state and covariance) as made, or why the
+/// track coasts instead: degenerate geometry, any other error, or a
+/// result that is not finite (which no later step could use).
+fn coasts(
+    updated: Result<(DVector<f64>, DMatrix<f64>), AlgoError>,
+) -> Result<(DVector<f64>, DMatrix<f64>), Coast> {
     match updated {
-        Ok(v) => Ok(Some(v)),
-        Err(AlgoError::DegenerateGeometry { .. }) => Ok(None),
-        Err(e) => Err(e),
+        Ok((x, p)) if x.iter().chain(p.iter()).all(|v| v.is_finite()) => Ok((x, p)),
+        Ok(_) => Err(Coast::Failed(AlgoError::NonFinite {
+            what: "updated state",
+        })),
+        Err(AlgoError::DegenerateGeometry { .. }) => Err(Coast::Undefined),
+        Err(e) => Err(Coast::Failed(e)),
     }
 }

@@ -90,6 +90,10 @@ pub struct LagWindow {
     /// plots; it keeps no plots and no base since, and late plots are
     /// retrodicted (stored).
     past_bound: bool,
+    /// Most live tracks of every tracker the window holds
+    /// ([`LagWindow::set_max_tracks`]; stored, since the picture's open
+    /// frame was flushed under it).
+    max_tracks: Option<usize>,
 }
 
 /// How a [`LagWindow`] takes a plot older than the newest it has received
@@ -178,6 +182,10 @@ pub struct Push {
     /// Ids of tracks a frame could not associate (at a radar's site:
     /// [`super::StepReport::undefined`]), replayed frames included.
     pub undefined: Vec<u64>,
+    /// Tracks whose numbers failed ([`super::StepReport::failed`]: dropped
+    /// or coasted), replayed frames included (so a failure already
+    /// reported may come again).
+    pub failed: Vec<super::TrackFailure>,
 }
 
 impl Push {
@@ -188,6 +196,7 @@ impl Push {
         self.refused += report.refused;
         self.deleted.extend(report.deleted);
         self.undefined.extend(report.undefined);
+        self.failed.extend(report.failed);
     }
 }
 
@@ -217,6 +226,8 @@ pub struct LagWindowParts {
     /// [`LatePolicy::Auto`] past its bound: no plots and no base kept,
     /// late plots retrodicted.
     pub past_bound: bool,
+    /// Most live tracks ([`LagWindow::set_max_tracks`]).
+    pub max_tracks: Option<usize>,
 }
 
 /// What a [`LagWindow`] stores, borrowed.
@@ -243,6 +254,8 @@ pub struct LagWindowState<'a> {
     /// [`LatePolicy::Auto`] past its bound: no plots and no base kept,
     /// late plots retrodicted.
     pub past_bound: bool,
+    /// Most live tracks ([`LagWindow::set_max_tracks`]).
+    pub max_tracks: Option<usize>,
 }
 
 /// Checks a lag (s): finite, in [0, [`MAX_LAG_LIMIT_S`]].
@@ -295,6 +308,7 @@ impl LagWindow {
             policy,
             approximate_from: None,
             past_bound: false,
+            max_tracks: None,
         })
     }
 
@@ -357,13 +371,17 @@ impl LagWindow {
         }
         let mut head = parts.head;
         head.set_out_of_sequence(policy == LatePolicy::Retrodict || past_bound);
+        // The picture is the head's open frame flushed under the limit the
+        // window held, as the window that stored these parts flushed it.
+        head.set_max_tracks(parts.max_tracks);
         let mut picture = head.clone();
         picture.flush()?;
-        let (base, window) = if past_bound {
+        let (mut base, window) = if past_bound {
             (Tracker::new(head.config().clone())?, Vec::new())
         } else {
             (parts.base, parts.window)
         };
+        base.set_max_tracks(parts.max_tracks);
         Ok(Self {
             policy,
             past_bound,
@@ -378,6 +396,7 @@ impl LagWindow {
             late: parts.late,
             snapshots: Vec::new(),
             max_plots: DEFAULT_MAX_WINDOW_PLOTS,
+            max_tracks: parts.max_tracks,
         })
     }
 
@@ -388,8 +407,13 @@ impl LagWindow {
     }
 
     /// Bounds the live tracks of every tracker the window holds (see
-    /// [`Tracker::set_max_tracks`]; not stored).
+    /// [`Tracker::set_max_tracks`]). Stored with the window: the picture
+    /// flushes the open frame under the limit, so a window rebuilt from
+    /// its parts must flush it under the same one to show the same tracks
+    /// (and, when the next plots close that frame, to continue from the
+    /// same tracker).
     pub fn set_max_tracks(&mut self, max: Option<usize>) {
+        self.max_tracks = max;
         self.base.set_max_tracks(max);
         self.head.set_max_tracks(max);
         self.picture.set_max_tracks(max);
@@ -416,6 +440,7 @@ impl LagWindow {
             horizon: self.horizon,
             newest: self.newest,
             late: self.late,
+            max_tracks: self.max_tracks,
         }
     }
 
@@ -439,6 +464,7 @@ impl LagWindow {
             policy: self.policy,
             approximate_from: self.approximate_from,
             past_bound: self.past_bound,
+            max_tracks: self.max_tracks,
         }
     }
 
@@ -455,6 +481,7 @@ impl LagWindow {
             horizon: self.horizon,
             newest: self.newest,
             late: self.late,
+            max_tracks: self.max_tracks,
         }
     }
 
@@ -595,6 +622,7 @@ impl LagWindow {
         self.window = Vec::new();
         self.snapshots = Vec::new();
         self.base = Tracker::new(self.head.config().clone())?;
+        self.base.set_max_tracks(self.max_tracks);
         self.head.set_out_of_sequence(true);
         Ok(())
     }

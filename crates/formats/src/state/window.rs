@@ -2,7 +2,12 @@
 //! within a lag (`algo::tracking::window`).
 //!
 //! Layout (after the magic `RFLW` and a `u32` format version):
-//! - format 3 (this release): format 2 with, under auto, whether the
+//! - format 4 (this release): format 3 followed by the limit of live
+//!   tracks the window applies (optional `usize`): the picture's open
+//!   frame is flushed under it, so a window decoded without it showed
+//!   tracks the serving one had refused (formats 1–3 decode without a
+//!   limit, as they were written);
+//! - format 3: format 2 with, under auto, whether the
 //!   window is past its bound (bool, after the bound) and then, past it,
 //!   no base and no plots (as under retrodiction), the approximate time
 //!   under reprocessing and auto either way; each plot with its identity
@@ -32,7 +37,7 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFLW";
 /// The format this release writes.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The bytes of `window` (see the module header).
 pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
@@ -67,10 +72,11 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     if s.policy != LatePolicy::Retrodict {
         w.opt(s.approximate_from, Writer::f64);
     }
+    w.opt(s.max_tracks, Writer::usize);
     w.buf
 }
 
-/// A window from [`encode_lag_window`]'s bytes (formats 1 and 2): bytes
+/// A window from [`encode_lag_window`]'s bytes (formats 1 to 4): bytes
 /// that are not such an encoding are [`FormatError::Corrupt`], parts the
 /// window rejects [`FormatError::Invalid`].
 pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
@@ -81,7 +87,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let version = r.u32()?;
     let (policy, past_bound) = match version {
         1 => (LatePolicy::Reprocess, false),
-        2 | 3 => match r.u8()? {
+        2..=4 => match r.u8()? {
             0 => (LatePolicy::Reprocess, false),
             1 => (LatePolicy::Retrodict, false),
             2 => {
@@ -114,9 +120,14 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let newest = r.opt(Reader::f64)?;
     let late = r.u64()?;
     let approximate_from = match version {
-        3 if policy != LatePolicy::Retrodict => r.opt(Reader::f64)?,
+        3 | 4 if policy != LatePolicy::Retrodict => r.opt(Reader::f64)?,
         2 if plots => r.opt(Reader::f64)?,
         _ => None,
+    };
+    let max_tracks = if version >= 4 {
+        r.opt(Reader::usize)?
+    } else {
+        None
     };
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
@@ -132,6 +143,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         horizon,
         newest,
         late,
+        max_tracks,
     })?)
 }
 
@@ -319,6 +331,43 @@ mod tests {
         // original could adopt an in-memory snapshot as its base).
         assert_eq!(a.picture(), b.picture());
         assert_eq!(a.counters(), b.counters());
+    }
+
+    /// The limit of live tracks is stored: a window at its limit, with an
+    /// open frame whose plots would start more tracks, decodes to the
+    /// same picture and goes on as the original. Format 3 (no limit)
+    /// decodes without one.
+    #[test]
+    fn a_window_at_its_track_limit_round_trips_with_it() {
+        let all = plots();
+        // 3 targets: two scans of radar 0 and radar 1's first plots
+        // open (its frame is the picture's open frame).
+        let cut = all.iter().position(|p| p.t > 4.7).unwrap();
+        let (first, rest) = all.split_at(cut);
+        let mut a = window();
+        a.set_max_tracks(Some(1));
+        a.push(first).unwrap();
+        assert!(a.pending() > 0);
+        assert_eq!(a.picture().track_ids().count(), 1);
+        let bytes = encode_lag_window(&a);
+        let mut b = decode_lag_window(&bytes).unwrap();
+        assert_eq!(a.to_parts(), b.to_parts());
+        assert_eq!(a.to_parts().max_tracks, Some(1));
+        assert_eq!(a.picture(), b.picture());
+        a.push(rest).unwrap();
+        b.push(rest).unwrap();
+        assert_eq!(a.picture(), b.picture());
+        assert_eq!(a.counters(), b.counters());
+        assert_eq!(b.picture().track_ids().count(), 1);
+        // Format 3: the same bytes without the limit (its `None` byte).
+        let mut c = window();
+        c.push(first).unwrap();
+        let mut v3 = encode_lag_window(&c);
+        assert_eq!(v3.pop(), Some(0));
+        v3[4..8].copy_from_slice(&3u32.to_le_bytes());
+        let d = decode_lag_window(&v3).unwrap();
+        assert_eq!(d.to_parts(), c.to_parts());
+        assert_eq!(d.to_parts().max_tracks, None);
     }
 
     #[test]

@@ -466,6 +466,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     warnings.extend(network::accuracy_warnings(tracker.config(), &accuracy));
     warnings.extend(ssr::height_warnings(&tracker, &tracks));
     warnings.extend(undefined_warning(&report.undefined));
+    warnings.extend(failed_warning(&report.failed));
     let motion = &tracker.config().motion;
     let tracks: Vec<TrackView> = tracks
         .iter()
@@ -507,6 +508,51 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         compute_us,
         warnings,
     })
+}
+
+/// The tracks whose numbers failed (a non-finite value, a covariance that
+/// is not positive definite), each named once with what became of it
+/// (`algo::tracking::FailedStep`: dropped, or coasted past an
+/// out-of-sequence plot), where and when it first failed; the rest of the
+/// data applied. A replay of late plots may report a failure again: each
+/// track is named once.
+pub fn failed_warning(failures: &[algo::tracking::TrackFailure]) -> Option<String> {
+    use algo::tracking::FailedStep;
+    let mut seen = std::collections::HashSet::new();
+    let first: Vec<&algo::tracking::TrackFailure> =
+        failures.iter().filter(|f| seen.insert(f.id)).collect();
+    if first.is_empty() {
+        return None;
+    }
+    let shown: Vec<String> = first
+        .iter()
+        .take(10)
+        .map(|f| {
+            let (kind, step) = match f.step {
+                FailedStep::Predict => ("confirmed track", "its prediction"),
+                FailedStep::Associate => ("confirmed track", "its association"),
+                FailedStep::Update => ("confirmed track", "its update"),
+                FailedStep::Carry => ("confirmed track", "a late plot's update"),
+                FailedStep::Initiate => ("tentative track", "its start"),
+            };
+            let fate = if f.dropped() {
+                "dropped"
+            } else {
+                "coasted (the late plot not applied)"
+            };
+            format!(
+                "{kind} {} {fate} at t = {}: {step} failed ({})",
+                f.id, f.t, f.error
+            )
+        })
+        .collect();
+    Some(format!(
+        "{} track(s) whose numbers failed: {}{}; the rest of the data applied (a dropped \
+         track's target starts a new track from its next plots)",
+        first.len(),
+        shown.join("; "),
+        if first.len() > 10 { "; …" } else { "" }
+    ))
 }
 
 /// The tracks a frame could not associate because their prediction lay at
@@ -605,4 +651,44 @@ pub fn computation_error(e: AlgoError) -> ServiceError {
         field: "plots".into(),
         message,
     }])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use algo::tracking::{FailedStep, TrackFailure};
+
+    /// Each failed track named once (a replay reports it again), with what
+    /// became of it and why.
+    #[test]
+    fn the_failure_warning_names_each_track_once_with_its_fate() {
+        let failure = |id, step| TrackFailure {
+            id,
+            confirmed: step != FailedStep::Initiate,
+            t: 12.5,
+            step,
+            error: algo::AlgoError::NotPositiveDefinite {
+                what: "innovation covariance",
+            },
+        };
+        assert_eq!(failed_warning(&[]), None);
+        let w = failed_warning(&[
+            failure(7, FailedStep::Associate),
+            failure(9, FailedStep::Carry),
+            failure(7, FailedStep::Associate),
+            failure(11, FailedStep::Initiate),
+        ])
+        .unwrap();
+        assert!(w.starts_with("3 track(s)"), "{w}");
+        assert_eq!(w.matches("track 7 ").count(), 1, "{w}");
+        assert!(
+            w.contains(
+                "confirmed track 7 dropped at t = 12.5: its association failed \
+                 (innovation covariance is not positive definite)"
+            ),
+            "{w}"
+        );
+        assert!(w.contains("confirmed track 9 coasted"), "{w}");
+        assert!(w.contains("tentative track 11 dropped"), "{w}");
+    }
 }

@@ -1303,8 +1303,19 @@ mod tests {
 
     /// Pushes `chunk` as batch `i + 1`; its version.
     async fn push_chunk(sessions: &Sessions, id: &str, i: usize, chunk: &[PlotInput]) -> u64 {
+        push_chunk_limited(sessions, id, i, chunk, 100).await
+    }
+
+    /// [`push_chunk`] at a limit of `max_tracks` tracks.
+    async fn push_chunk_limited(
+        sessions: &Sessions,
+        id: &str,
+        i: usize,
+        chunk: &[PlotInput],
+        max_tracks: usize,
+    ) -> u64 {
         let limits = Limits {
-            max_tracks: 100,
+            max_tracks,
             max_batch_reports: 1000,
         };
         let batch = Batch {
@@ -1421,6 +1432,38 @@ mod tests {
         // others replay; the decisions are the stored state's, so the
         // replicas agree.
         serve_and_rebuild_with(&memory(4).await, &swapped, None, Some(2)).await;
+    }
+
+    /// A session at its limit of tracks: the serving replica holds at most
+    /// the limit, and so does every read of the store (a `GET`, a replica
+    /// taking the next batch), bit for bit the serving state, whatever
+    /// the store holds at the time (a snapshot alone, or a snapshot and a
+    /// log). Before the limit was stored with the session, a decoded
+    /// window flushed its open frame without it: the extra tentative
+    /// tracks a read saw were confirmed by the log's replay (6 confirmed
+    /// tracks at a limit of 3 in `checks/hostile_probes.py`).
+    #[tokio::test]
+    async fn every_read_of_a_session_at_its_track_limit_holds_the_limit() {
+        // Two crossing targets, one track allowed; 4 plots a batch (one
+        // radar's scan of both targets, and the next scan's start).
+        let chunks: Vec<Vec<PlotInput>> = plots().chunks(3).map(<[_]>::to_vec).collect();
+        for max_entries in [1, 3, 32] {
+            let sessions = memory(max_entries).await;
+            let id = new_session(&sessions, None, None).await;
+            for (i, chunk) in chunks.iter().enumerate() {
+                push_chunk_limited(&sessions, &id, i, chunk, 1).await;
+                sessions.snapshots_settled().await;
+                check_replica(&sessions, &id, i).await;
+                let AnyView::PlotFusion(view) = sessions.get(TENANT, &id).await.unwrap() else {
+                    panic!("a plot-fusion session");
+                };
+                assert!(
+                    view.body.tracks.len() <= 1,
+                    "entries {max_entries}, batch {i}: {} tracks",
+                    view.body.tracks.len()
+                );
+            }
+        }
     }
 
     /// While a snapshot is being written a reader finds the snapshot

@@ -391,6 +391,7 @@ impl PlotFusionSession {
             &live,
         ));
         warnings.extend(crate::plot_fusion::undefined_warning(&push.undefined));
+        warnings.extend(crate::plot_fusion::failed_warning(&push.failed));
         let changes = if views {
             diff(&before, &live, &push)
         } else {
