@@ -484,8 +484,7 @@ impl TrackIdentity {
     /// nothing); `mode_s`: which radars give Mode S addresses.
     pub(crate) fn observe_measured(&mut self, measured: Option<&super::Plot>, mode_s: &[bool]) {
         if let Some(m) = measured {
-            let mode_s_radar = mode_s.get(m.radar).copied().unwrap_or(false);
-            self.observe_from(&m.identity, m.t, mode_s_radar);
+            self.observe_from(&m.identity, m.t, is_mode_s(mode_s, m.radar));
         }
     }
 
@@ -525,6 +524,11 @@ pub const NO_ADDRESS_FROM_MODE_S: f64 = 0.05;
 /// (`mode_s_radar`: the tracker has seen an address from it).
 pub fn without_mode_s(plot: &Identity, mode_s_radar: bool) -> bool {
     mode_s_radar && plot.address.is_none() && plot.is_secondary()
+}
+
+/// Whether radar `i` has given a Mode S address (`mode_s`: per radar).
+pub(crate) fn is_mode_s(mode_s: &[bool], i: usize) -> bool {
+    mode_s.get(i).copied().unwrap_or(false)
 }
 
 /// Variance of a plot's Mode C value (ft²): its quantisation, q²/12.

@@ -40,7 +40,7 @@ use crate::tracking::config::{Plot, RadarSpec};
 use crate::tracking::config::{TrackerConfig, VelocityGate};
 use crate::tracking::conversion::CartesianPlot;
 use crate::tracking::hypothesiser::{Grid, TrackIndex, swap_remove_all};
-use crate::tracking::identity::{TrackIdentity, without_mode_s};
+use crate::tracking::identity::{TrackIdentity, is_mode_s, without_mode_s};
 use crate::tracking::predictor::ModeState;
 use crate::tracking::retrodiction::{Retro, carry, retrodict};
 use crate::tracking::sweep::View;
@@ -723,11 +723,6 @@ fn identity_fits(track: &TrackIdentity, plot: &CartesianPlot, mode_s: &[bool]) -
         (None, Some(_)) => track.last_mode_ac.is_none(),
         (None, None) => true,
     }
-}
-
-/// Whether radar `i` has given a Mode S address.
-fn is_mode_s(mode_s: &[bool], i: usize) -> bool {
-    mode_s.get(i).copied().unwrap_or(false)
 }
 
 /// Whether two plots `dt` apart may be one aircraft's by what they say of

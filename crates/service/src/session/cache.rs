@@ -67,14 +67,9 @@ impl SessionCache {
         entry.value.downcast::<T>().ok().map(|v| (version, *v))
     }
 
-    /// Takes the decoded session `id` if it holds `version`, with its
-    /// encoded size (to put it back); another version stays.
-    pub fn take_at<T: Any + Send>(
-        &self,
-        tenant: &str,
-        id: &str,
-        version: u64,
-    ) -> Option<(usize, T)> {
+    /// Takes the decoded session `id` if it holds `version`; another
+    /// version stays.
+    pub fn take_at<T: Any + Send>(&self, tenant: &str, id: &str, version: u64) -> Option<T> {
         if self.max_bytes == 0 {
             return None;
         }
@@ -85,8 +80,7 @@ impl SessionCache {
         }
         let entry = inner.entries.remove(&key)?;
         inner.bytes -= entry.bytes;
-        let bytes = entry.bytes;
-        entry.value.downcast::<T>().ok().map(|v| (bytes, *v))
+        entry.value.downcast::<T>().ok().map(|v| *v)
     }
 
     /// Puts a decoded session at `version` (`bytes` its encoded size),

@@ -502,7 +502,6 @@ impl Sessions {
     /// same: `a_replica_that_replays_the_log_holds_the_serving_replicas_state`).
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
         let stored = self.read(tenant, id).await?;
-        let (version, bytes) = (stored.version, stored.bytes());
         let tag = stored_kind(&stored.data)?;
         let kind = KindName::from_tag(tag).ok_or_else(|| {
             ServiceError::Internal(format!(
@@ -510,23 +509,33 @@ impl Sessions {
                 tag_name(tag)
             ))
         })?;
-        let id2 = id.to_string();
         Ok(match kind {
-            KindName::Correlation => {
-                let cached = self.cache.take_at(tenant, id, version).map(|(_, h)| h);
-                let (v, h) =
-                    offload(move || view_from::<CorrelationSession>(&id2, &stored, cached)).await?;
-                self.cache.put(tenant, id, version, bytes, h);
-                AnyView::Correlation(v)
-            }
-            KindName::PlotFusion => {
-                let cached = self.cache.take_at(tenant, id, version).map(|(_, h)| h);
-                let (v, h) =
-                    offload(move || view_from::<PlotFusionSession>(&id2, &stored, cached)).await?;
-                self.cache.put(tenant, id, version, bytes, h);
-                AnyView::PlotFusion(v)
-            }
+            KindName::Correlation => AnyView::Correlation(
+                self.view_kept::<CorrelationSession>(tenant, id, stored)
+                    .await?,
+            ),
+            KindName::PlotFusion => AnyView::PlotFusion(
+                self.view_kept::<PlotFusionSession>(tenant, id, stored)
+                    .await?,
+            ),
         })
+    }
+
+    /// The view of `stored` (a session of kind `K`), from the cached copy
+    /// when it holds the same write ([`view_from`]); the copy, or the one
+    /// read from the bytes, kept in the cache.
+    async fn view_kept<K: SessionKind>(
+        &self,
+        tenant: &str,
+        id: &str,
+        stored: Stored,
+    ) -> Result<View<K::View>, ServiceError> {
+        let (version, bytes) = (stored.version, stored.bytes());
+        let cached = self.cache.take_at::<Hot<K>>(tenant, id, version);
+        let id2 = id.to_string();
+        let (view, hot) = offload(move || view_from::<K>(&id2, &stored, cached)).await?;
+        self.cache.put(tenant, id, version, bytes, hot);
+        Ok(view)
     }
 
     /// A session known to be of kind `K`; another kind is an error naming it.
@@ -1160,15 +1169,7 @@ fn view_from<K: SessionKind>(
 }
 
 fn view_of<K: SessionKind>(id: &str, stored: &Stored) -> Result<View<K::View>, ServiceError> {
-    let hot = Hot::<K>::read(id, stored).map_err(|e| match e {
-        DecodeError::WrongKind { stored } => ServiceError::NotFound(format!(
-            "session '{id}' is a {} session, not {}",
-            tag_name(stored),
-            K::NAME
-        )),
-        DecodeError::Other(e) => e,
-    })?;
-    hot.session.view(id, stored.version, stored.bytes())
+    view_and_hot::<K>(id, stored).map(|(view, _)| view)
 }
 
 #[cfg(test)]
@@ -1523,7 +1524,7 @@ mod tests {
             panic!("a plot-fusion session");
         };
         assert_eq!(view, fresh);
-        let (_, hot) = sessions
+        let hot = sessions
             .cache
             .take_at::<Hot<PlotFusionSession>>(TENANT, &id, version)
             .expect("kept in the cache");
