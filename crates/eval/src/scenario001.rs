@@ -79,6 +79,7 @@ pub fn scan_plots(
                         elevation: p.elevation,
                         radial_velocity: p.radial_velocity,
                         identity: Default::default(),
+                        report: None,
                     },
                     p.origin,
                 ));

@@ -797,6 +797,7 @@ mod tests {
             elevation: Some(0.16),
             radial_velocity: Some(-30.0),
             identity: Default::default(),
+            report: None,
         };
         let meas = polar_measurement(&radar, &plot);
         let u = kalman::update_polar_doppler(

@@ -153,12 +153,14 @@ pub fn associate_cartesian(
     detection_probability: f64,
     gate_probability: f64,
     config: &Config,
+    evidence: Option<jpda::Evidence<'_>>,
 ) -> Result<Outcome, AlgoError> {
     // γ per measurement dimension (a position of 2 or 3 components, then
-    // one per range rate of a moved plot).
+    // one per range rate of a moved plot, one per velocity component of a
+    // report).
     let max_dim = plots
         .iter()
-        .map(|p| p.z.len() + p.range_rates.len())
+        .map(|p| p.z.len() + p.range_rates.len() + p.velocity.len())
         .max()
         .unwrap_or(2)
         .max(3);
@@ -180,11 +182,21 @@ pub fn associate_cartesian(
     let gate_max = gates.iter().copied().fold(0.0, f64::max);
     let mut candidates: Vec<usize> = Vec::new();
     let mut hyps: Vec<Vec<Hypothesis>> = Vec::with_capacity(tracks.len());
-    for track in tracks.iter() {
+    for (c, track) in tracks.iter().enumerate() {
         let mut row = Vec::new();
         let reach = (gate_max * (track.p[(0, 0)] + max_r00)).sqrt() * (1.0 + 1e-9);
         by_first.within(track.x[0], reach, &mut candidates);
         for &j in &candidates {
+            // Identity beside the position: Λ multiplies the pairing's
+            // likelihood (its cost d² − 2 ln Λ for NN and GNN); `None`
+            // rules it out.
+            let ln_evidence = match evidence {
+                Some(e) => match e(c, j) {
+                    Some(l) => l.clamp(-jpda::MAX_LN_EVIDENCE, jpda::MAX_LN_EVIDENCE),
+                    None => continue,
+                },
+                None => 0.0,
+            };
             let lin = plots[j].linearise(&track.x);
             let k = lin.innovation.len();
             let mut s = &lin.h * &track.p * lin.h.transpose() + &lin.r;
@@ -201,8 +213,8 @@ pub fn associate_cartesian(
                 let ln_norm = -0.5 * (ln_det + k as f64 * (2.0 * std::f64::consts::PI).ln());
                 row.push(Hypothesis {
                     measurement: j,
-                    d2,
-                    ln_likelihood: ln_norm - 0.5 * d2,
+                    d2: d2 - 2.0 * ln_evidence,
+                    ln_likelihood: ln_norm - 0.5 * d2 + ln_evidence,
                 });
             }
         }
@@ -422,7 +434,7 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![var, var]),
             radars: vec![0],
             measured: None,
-            range_rates: Vec::new(),
+            range_rates: Vec::new(), velocity: Vec::new(),
         }
     }
 
@@ -440,7 +452,7 @@ mod tests {
         }];
         let plots = [plot(10.0, 0.0, 100.0)];
         let out =
-            associate_cartesian(&tracks, &plots, &[lambda], p_d, p_g, &cfg(Method::Exact)).unwrap();
+            associate_cartesian(&tracks, &plots, &[lambda], p_d, p_g, &cfg(Method::Exact), None).unwrap();
         let n = (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0);
         let a = p_d * n / lambda;
         let b = 1.0 - p_d * p_g;
@@ -485,6 +497,7 @@ mod tests {
             0.9,
             0.99,
             &cfg(Method::GlobalNearestNeighbour),
+            None,
         )
         .unwrap();
         assert_eq!(out.hit, vec![Some(1), Some(0)]);

@@ -99,6 +99,119 @@ pub struct Plot {
     /// What a secondary reply said of the aircraft (empty for a primary
     /// plot): Mode 3/A code, Mode C, Mode S address and identification.
     pub identity: Identity,
+    /// A cooperative report's own position (ADS-B, multilateration, AIS):
+    /// `Some` for a report, whose sensor is then `radar` =
+    /// [`TrackerConfig::radars`]'s length + its [`ReportKind`]'s index
+    /// ([`TrackerConfig::report_sensor`]); the polar fields then hold the
+    /// position seen from the fusion frame's origin (range, azimuth,
+    /// elevation of `report.position`, [`Plot::report`]), the radial
+    /// velocity none. `None` for a radar's plot.
+    pub report: Option<Report>,
+}
+
+/// The kinds of cooperative report, each one sensor of the tracker after
+/// the radars ([`TrackerConfig::report_sensor`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ReportKind {
+    /// ADS-B: the aircraft's own navigation (GNSS) position and velocity,
+    /// with its stated quality (NACp, NACv).
+    Adsb,
+    /// Multilateration (MLAT, WAM): a position from the transponder's
+    /// replies' times of arrival at ground stations, with its stated σ.
+    Mlat,
+    /// AIS: a ship's own GNSS position and its speed and course over
+    /// ground.
+    Ais,
+}
+
+impl ReportKind {
+    /// Every kind, in sensor order.
+    pub const ALL: [ReportKind; 3] = [ReportKind::Adsb, ReportKind::Mlat, ReportKind::Ais];
+
+    /// Its index among [`ReportKind::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Its wire name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ReportKind::Adsb => "adsb",
+            ReportKind::Mlat => "mlat",
+            ReportKind::Ais => "ais",
+        }
+    }
+
+    /// The kind of wire name `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    /// Whether the report is the target's own claim (ADS-B, AIS: what its
+    /// navigation says) rather than a measurement by the ground (MLAT):
+    /// such a report is checked against independent evidence
+    /// ([`crate::tracking::identity::Validation`]).
+    pub fn is_self_reported(self) -> bool {
+        self != ReportKind::Mlat
+    }
+
+    /// How long a track may go without any update before a report sensor
+    /// judges it missed, once per this period (s): ADS-B and MLAT update
+    /// an airborne aircraft every 0.5–1 s, so 5 s is several lost
+    /// reports; AIS reports every 2–10 s under way (Class A), 30 s for a
+    /// Class B ship, so 60 s.
+    pub fn coast_s(self) -> f64 {
+        match self {
+            ReportKind::Adsb | ReportKind::Mlat => 5.0,
+            ReportKind::Ais => 60.0,
+        }
+    }
+}
+
+/// A cooperative report's measurement, in the fusion ENU frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Report {
+    /// Which kind of report.
+    pub kind: ReportKind,
+    /// Position `[e, n, u]` (m). `u` is used only when `sigma_vertical`
+    /// is `Some` (a geometric height in a 3D tracker).
+    pub position: [f64; 3],
+    /// σ of each horizontal component (m), > 0: from the report's stated
+    /// accuracy (ADS-B NACp, MLAT's σ, AIS's accuracy flag).
+    pub sigma_horizontal: f64,
+    /// σ of the height (m): `Some` when the report gives a geometric
+    /// height the tracker may use.
+    pub sigma_vertical: Option<f64>,
+    /// Velocity `[v_e, v_n, v_u]` (m/s) with σ per horizontal component
+    /// (`v_u` is used only with `sigma_vertical_velocity`).
+    pub velocity: Option<[f64; 3]>,
+    /// σ of each horizontal velocity component (m/s), > 0 when `velocity`
+    /// is `Some`.
+    pub sigma_velocity: f64,
+    /// σ of the vertical rate (m/s) when the report gives a geometric
+    /// vertical rate the tracker may use.
+    pub sigma_vertical_velocity: Option<f64>,
+}
+
+impl Plot {
+    /// A cooperative report of sensor `sensor` (the radars' count + the
+    /// kind's index) at `t`, its polar fields those of the position seen
+    /// from the origin (a report exactly at the origin gets a range of
+    /// 1 mm).
+    pub fn report(sensor: usize, t: f64, report: Report, identity: Identity) -> Self {
+        let [e, n, u] = report.position;
+        let horizontal = e.hypot(n);
+        Plot {
+            radar: sensor,
+            t,
+            range: e.hypot(n).hypot(u).max(1e-3),
+            azimuth: e.atan2(n),
+            elevation: Some(u.atan2(horizontal.max(1e-3))),
+            radial_velocity: None,
+            identity,
+            report: Some(report),
+        }
+    }
 }
 
 /// The velocity gate of the logic-based initiation (step 7, 7a).
@@ -510,6 +623,9 @@ impl TrackerConfig {
     /// Checks a plot against its radar: radar index, finite values, range
     /// > 0, elevation iff the radar is 3D, radial velocity in parallel mode.
     pub fn validate_plot(&self, plot: &Plot) -> Result<(), AlgoError> {
+        if let Some(report) = &plot.report {
+            return self.validate_report(plot, report);
+        }
         let radar = self
             .radars
             .get(plot.radar)
@@ -543,6 +659,63 @@ impl TrackerConfig {
             ));
         }
         Ok(())
+    }
+}
+
+impl TrackerConfig {
+    /// The sensor index of a kind of cooperative report: after the radars.
+    pub fn report_sensor(&self, kind: ReportKind) -> usize {
+        self.radars.len() + kind.index()
+    }
+
+    /// The kind of report sensor `sensor` is, if it is one.
+    pub fn report_kind(&self, sensor: usize) -> Option<ReportKind> {
+        sensor
+            .checked_sub(self.radars.len())
+            .and_then(|i| ReportKind::ALL.get(i).copied())
+    }
+
+    /// Every sensor's count: the radars and one per kind of report.
+    pub fn sensors(&self) -> usize {
+        self.radars.len() + ReportKind::ALL.len()
+    }
+
+    /// Checks a cooperative report: its sensor is its kind's, finite
+    /// values, σ > 0; serial mode only (parallel mode fuses radar plots at
+    /// fusion instants by their Doppler).
+    fn validate_report(&self, plot: &Plot, report: &Report) -> Result<(), AlgoError> {
+        if self.is_parallel() {
+            return Err(invalid(
+                "report",
+                "cooperative reports need serial mode (parallel mode fuses radar plots only)"
+                    .into(),
+            ));
+        }
+        if self.report_kind(plot.radar) != Some(report.kind) {
+            return Err(invalid(
+                "radar",
+                format!(
+                    "a {} report's sensor is {}, got {}",
+                    report.kind.name(),
+                    self.report_sensor(report.kind),
+                    plot.radar
+                ),
+            ));
+        }
+        finite("t", plot.t)?;
+        finite_slice("report.position", &report.position)?;
+        positive("report.sigma_horizontal", report.sigma_horizontal)?;
+        if let Some(s) = report.sigma_vertical {
+            positive("report.sigma_vertical", s)?;
+        }
+        if let Some(v) = &report.velocity {
+            finite_slice("report.velocity", v)?;
+            positive("report.sigma_velocity", report.sigma_velocity)?;
+            if let Some(s) = report.sigma_vertical_velocity {
+                positive("report.sigma_vertical_velocity", s)?;
+            }
+        }
+        identity::validate(&plot.identity)
     }
 }
 

@@ -52,6 +52,21 @@ pub struct CartesianPlot {
     /// instant (parallel mode with Doppler radars; empty otherwise): the
     /// updater uses them as further measurements.
     pub range_rates: Vec<RangeRate>,
+    /// Velocity components a cooperative report measured (ADS-B's ground
+    /// vector, AIS's SOG/COG): further linear measurements of the state's
+    /// velocity. Empty for a radar's plot.
+    pub velocity: Vec<VelocityComponent>,
+}
+
+/// One measured velocity component of a [`CartesianPlot`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocityComponent {
+    /// The axis: 0 east, 1 north, 2 up.
+    pub axis: usize,
+    /// The velocity along it (m/s).
+    pub value: f64,
+    /// Its σ (m/s), > 0.
+    pub sigma: f64,
 }
 
 /// A radar plot's range rate carried by a plot moved to a fusion instant
@@ -110,7 +125,9 @@ impl CartesianPlot {
             .iter()
             .filter(|rr| range_rate_distance(rr, x) >= MIN_RANGE_FOR_RANGE_RATE)
             .collect();
-        let m = k + rates.len();
+        let velocity: Vec<&VelocityComponent> =
+            self.velocity.iter().filter(|v| v.axis < axes).collect();
+        let m = k + rates.len() + velocity.len();
         let mut h = DMatrix::zeros(m, 2 * axes);
         let mut innovation = DVector::zeros(m);
         let mut r = DMatrix::zeros(m, m);
@@ -139,6 +156,11 @@ impl CartesianPlot {
                 r[(row, i)] = rr.cross[i];
             }
         }
+        for (row, v) in velocity.iter().enumerate().map(|(i, v)| (k + rates.len() + i, v)) {
+            h[(row, 2 * v.axis + 1)] = 1.0;
+            innovation[row] = v.value - x[2 * v.axis + 1];
+            r[(row, row)] = v.sigma * v.sigma;
+        }
         Linearised { innovation, h, r }
     }
 
@@ -152,6 +174,51 @@ impl CartesianPlot {
     ) -> Result<crate::kalman::Update, AlgoError> {
         let lin = self.linearise(x);
         crate::kalman::update_linearised(x, p, lin.innovation, &lin.h, &lin.r)
+    }
+}
+
+/// A cooperative report ([`Plot::report`]) as a Cartesian measurement of
+/// a tracker of `axes` axes: its horizontal position, its height when it
+/// gives a geometric one (3D tracker), its velocity's components, each
+/// with its stated σ (independent components: the report's quality
+/// indicators bound each axis alike). Only for a report (a plot with
+/// [`Plot::report`]).
+pub(crate) fn report_plot(plot: &Plot, axes: usize) -> CartesianPlot {
+    let r = plot
+        .report
+        .expect("report_plot is given cooperative reports only");
+    let vertical = r.sigma_vertical.filter(|_| axes == 3);
+    let mut z = vec![r.position[0], r.position[1]];
+    let mut var = vec![r.sigma_horizontal.powi(2); 2];
+    if let Some(s) = vertical {
+        z.push(r.position[2]);
+        var.push(s * s);
+    }
+    let mut velocity = Vec::new();
+    if let Some(v) = r.velocity {
+        for axis in 0..2 {
+            velocity.push(VelocityComponent {
+                axis,
+                value: v[axis],
+                sigma: r.sigma_velocity,
+            });
+        }
+        if let (Some(s), 3) = (r.sigma_vertical_velocity, axes) {
+            velocity.push(VelocityComponent {
+                axis: 2,
+                value: v[2],
+                sigma: s,
+            });
+        }
+    }
+    CartesianPlot {
+        t: plot.t,
+        z: DVector::from_vec(z),
+        r: DMatrix::from_diagonal(&DVector::from_vec(var)),
+        radars: vec![plot.radar],
+        measured: Some(*plot),
+        range_rates: Vec::new(),
+        velocity,
     }
 }
 
@@ -312,7 +379,7 @@ fn to_cartesian(
         r,
         radars: vec![radar_index],
         measured: None,
-        range_rates: Vec::new(),
+        range_rates: Vec::new(), velocity: Vec::new(),
     })
 }
 
@@ -343,6 +410,7 @@ mod tests {
             elevation: None,
             radial_velocity: v,
             identity: Default::default(),
+            report: None,
         }
     }
 
@@ -463,7 +531,7 @@ mod tests {
                     dt,
                     horizontal,
                     cross: DVector::from_vec(vec![0.5, -0.2, 0.1]),
-                }],
+                }], velocity: Vec::new(),
             };
             let lin = plot.linearise(&x);
             assert_eq!(lin.innovation.len(), 4);
@@ -514,6 +582,7 @@ mod tests {
                 elevation: None,
                 radial_velocity: Some(-100.0 + 2.0 * gauss()),
                 identity: Default::default(),
+                report: None,
             };
             let c = extrapolate(&r, 0, &p, 3.0, 0.0, 0.0).unwrap();
             let v = p.radial_velocity.unwrap();
@@ -535,6 +604,7 @@ mod tests {
                 elevation: None,
                 radial_velocity: Some(-100.0),
                 identity: Default::default(),
+                report: None,
             },
             3.0,
             0.0,

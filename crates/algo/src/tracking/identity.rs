@@ -330,6 +330,100 @@ pub struct TrackIdentity {
     /// an address (s): the track's aircraft answers in Mode A/C only
     /// ([`without_mode_s`]), so a reply with an address is another's.
     pub last_mode_ac: Option<f64>,
+    /// What independent evidence (radars, multilateration) says of the
+    /// positions the aircraft reports itself (ADS-B, AIS).
+    pub validation: Validation,
+}
+
+/// Reports disagreeing in a row with a track held by independent evidence
+/// before its self-reported positions are distrusted: two (a radar scan or
+/// two, a few seconds), so that one bad report or one false reply does not
+/// flag an aircraft.
+pub const DISAGREEMENTS_TO_DISTRUST: u32 = 2;
+/// Self-reported positions agreeing in a row with the track before they
+/// are trusted again (about 5 s of ADS-B).
+pub const AGREEMENTS_TO_TRUST: u32 = 5;
+/// An independent update this recent (s) makes a track independently held:
+/// its self-reported positions can be checked, and are validated.
+pub const INDEPENDENT_WINDOW_S: f64 = 30.0;
+
+/// The check of a track's self-reported positions (ADS-B, AIS) against
+/// independent evidence (radar plots, multilateration): see
+/// docs/plot-fusion.md, "Cooperative reports".
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Validation {
+    /// Time of the last update by an independent sensor (a radar's plot,
+    /// a multilateration report) (s).
+    pub last_independent: Option<f64>,
+    /// Time of the last update by a self-reported position (s).
+    pub last_self_reported: Option<f64>,
+    /// Since when the self-reported positions are distrusted (they
+    /// disagreed with the independent evidence); `None`: trusted.
+    pub distrusted_since: Option<f64>,
+    /// Disagreements in a row (an independent plot of the track's address
+    /// outside the gate of its self-reported state, or a self-reported
+    /// position outside the gate of its independently held state).
+    pub disagreements: u32,
+    /// Self-reported positions agreeing in a row while distrusted.
+    pub agreements: u32,
+    /// The last disagreement.
+    pub last_disagreement: Option<Disagreement>,
+}
+
+/// One disagreement between a self-reported position and independent
+/// evidence.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disagreement {
+    /// When (s).
+    pub t: f64,
+    /// Horizontal distance between the self-reported position and the
+    /// independent evidence (m).
+    pub distance: f64,
+    /// The self-reported position's stated σ (m, per horizontal axis).
+    pub sigma: f64,
+}
+
+impl Validation {
+    /// Whether the track's self-reported positions are used.
+    pub fn trusted(&self) -> bool {
+        self.distrusted_since.is_none()
+    }
+
+    /// Whether an independent update at most [`INDEPENDENT_WINDOW_S`] old
+    /// at `t` holds the track.
+    pub fn independently_held(&self, t: f64) -> bool {
+        self.last_independent
+            .is_some_and(|s| t - s <= INDEPENDENT_WINDOW_S)
+    }
+
+    /// Records a disagreement; returns `true` when it makes the track
+    /// distrust its self-reported positions (it did not before).
+    pub fn disagree(&mut self, d: Disagreement) -> bool {
+        self.last_disagreement = Some(d);
+        self.agreements = 0;
+        self.disagreements = self.disagreements.saturating_add(1);
+        if self.trusted() && self.disagreements >= DISAGREEMENTS_TO_DISTRUST {
+            self.distrusted_since = Some(d.t);
+            return true;
+        }
+        false
+    }
+
+    /// Records a self-reported position that agrees with the track while
+    /// distrusted; returns `true` when trust is restored.
+    pub fn agree(&mut self) -> bool {
+        self.disagreements = 0;
+        if self.trusted() {
+            return false;
+        }
+        self.agreements = self.agreements.saturating_add(1);
+        if self.agreements >= AGREEMENTS_TO_TRUST {
+            self.distrusted_since = None;
+            self.agreements = 0;
+            return true;
+        }
+        false
+    }
 }
 
 impl TrackIdentity {

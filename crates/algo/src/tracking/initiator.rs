@@ -796,7 +796,7 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![1.0, 1.0]),
             radars: vec![0],
             measured: None,
-            range_rates: Vec::new(),
+            range_rates: Vec::new(), velocity: Vec::new(),
         }
     }
 
@@ -851,6 +851,7 @@ mod tests {
             elevation: None,
             radial_velocity: None,
             identity,
+            report: None,
         });
         p
     }

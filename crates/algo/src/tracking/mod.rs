@@ -65,19 +65,24 @@ mod state;
 mod sweep;
 mod track;
 pub mod updater;
+mod validation;
 pub mod window;
 
 #[cfg(test)]
 mod failure_tests;
 #[cfg(test)]
+mod report_tests;
+#[cfg(test)]
 mod tests;
 
 pub use config::{
-    Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec,
-    TrackerConfig, VelocityGate,
+    Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Report,
+    ReportKind, TrackerConfig, VelocityGate,
 };
-pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate};
-pub use identity::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentity};
+pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate, VelocityComponent};
+pub use identity::{
+    Detection, Disagreement, Emergency, Identity, Mode3A, ModeC, TrackIdentity, Validation,
+};
 pub use state::{TrackerParts, TrackerState};
 pub use track::{RadarHit, Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
@@ -92,7 +97,7 @@ use associator::{
     Outcome, associate_cartesian, associate_polar, cartesian_clutter, polar_layout,
     range_rate_sigma,
 };
-use conversion::{extrapolate, register};
+use conversion::{extrapolate, register, report_plot};
 use hypothesiser::TrackIndex;
 use initiator::{Initiated, Initiator, Misses};
 use plot_association::associate_and_fuse_members;
@@ -293,7 +298,40 @@ enum Source {
         clutter: Vec<f64>,
         detection_probability: f64,
     },
+    /// Serial mode: cooperative reports of one kind ([`ReportKind`]), as
+    /// they came (their identities beside their positions).
+    Reports {
+        kind: ReportKind,
+        plots: Vec<Plot>,
+        clutter: Vec<f64>,
+    },
 }
+
+/// Whether cooperative reports have updated `track` (its last hit, or a
+/// hit it keeps per sensor) and nothing has updated it for the shortest
+/// [`ReportKind::coast_s`] of their kinds by `t` (nor has a miss been
+/// judged since: a judged miss predicts the track to its time).
+fn report_coasted(cfg: &TrackerConfig, track: &Track, t: f64) -> bool {
+    track
+        .detections
+        .iter()
+        .map(|h| h.radar)
+        .chain(track.radars.iter().copied())
+        .filter_map(|i| cfg.report_kind(i))
+        .map(ReportKind::coast_s)
+        .reduce(f64::min)
+        .is_some_and(|c| t - track.last_update.max(track.t) >= c)
+}
+
+/// Density of false cooperative reports (per unit of the report's
+/// measurement space: m² or m³, times (m/s)² per velocity component):
+/// a report is an aircraft's or a ship's own, so clutter is negligible;
+/// small but positive, so that a report far in its gate still weighs
+/// against the miss.
+const REPORT_CLUTTER_DENSITY: f64 = 1e-12;
+/// Detection probability of a cooperative sensor within a frame: reports
+/// are lost on the air and at the ground station.
+const REPORT_DETECTION_PROBABILITY: f64 = 0.9;
 
 impl Tracker {
     /// A tracker without tracks; fails when the configuration is invalid.
@@ -644,6 +682,9 @@ impl Tracker {
     /// the misses of the sector its beam swept, when due.
     fn serial_frame(&mut self, frame: Vec<Plot>, report: &mut StepReport) -> Result<(), AlgoError> {
         let index = frame[0].radar;
+        if let Some(kind) = self.config.report_kind(index) {
+            return self.report_frame(kind, frame, report);
+        }
         if frame.iter().any(|p| p.identity.address.is_some()) {
             self.mode_s_radars[index] = true;
         }
@@ -721,6 +762,74 @@ impl Tracker {
             }
         }
         self.judge_sweep(index, &spec, t, last.azimuth, report)
+    }
+
+    /// Cooperative reports of one kind ([`ReportKind`]) at the time of the
+    /// last: each its own position (and velocity) with its stated σ, the
+    /// linear update; no bias, no beam. Then, once per second of the
+    /// tracker's time, the tracks reports have updated and nothing has
+    /// updated for their kind's [`ReportKind::coast_s`] are judged missed
+    /// ([`Tracker::judge_reports`]).
+    fn report_frame(
+        &mut self,
+        kind: ReportKind,
+        frame: Vec<Plot>,
+        report: &mut StepReport,
+    ) -> Result<(), AlgoError> {
+        let t = frame[frame.len() - 1].t;
+        let before = self.last_time;
+        let axes = self.config.axes;
+        let plots: Vec<CartesianPlot> = frame.iter().map(|p| report_plot(p, axes)).collect();
+        let clutter = vec![REPORT_CLUTTER_DENSITY; plots.len()];
+        let source = Source::Reports {
+            kind,
+            plots: frame,
+            clutter,
+        };
+        self.run_frame(t, source, plots, report)?;
+        if before.is_none_or(|b| b.floor() < t.floor()) {
+            self.judge_reports(t, report);
+        }
+        Ok(())
+    }
+
+    /// The misses of tracks that cooperative reports have updated: one when
+    /// nothing has updated the track for the shortest
+    /// [`ReportKind::coast_s`] of the kinds that did (a radar's own sweeps
+    /// judge it where a radar covers it), and again after as long.
+    fn judge_reports(&mut self, t: f64, report: &mut StepReport) {
+        let cfg = &self.config;
+        let coast = |tr: &Track| report_coasted(cfg, tr, t);
+        let mut doomed = Vec::new();
+        for (k, track) in self.tracks.iter_mut().enumerate() {
+            if !coast(track) {
+                continue;
+            }
+            let track = Arc::make_mut(track);
+            if let Err(error) = self.predictor.predict(track, t) {
+                report.failed.push(TrackFailure {
+                    id: track.id,
+                    confirmed: true,
+                    t,
+                    step: FailedStep::Predict,
+                    error,
+                });
+                doomed.push((k, Doom::Failed));
+                continue;
+            }
+            track.record(None);
+            self.index.moved(k, track);
+            if deleter::should_delete(track, &cfg.deletion) {
+                doomed.push((k, Doom::Rule));
+            }
+        }
+        self.delete(doomed, report);
+        let mut dropped = Initiated::default();
+        let cfg = &self.config;
+        let coast = |tr: &Track| report_coasted(cfg, tr, t);
+        self.initiator.judge(t, cfg, &coast, &mut dropped);
+        self.counters.dropped += dropped.dropped as u64;
+        report.failed.extend(dropped.failed);
     }
 
     /// The Mode C height measurement of this tracker's frames: a 3D
@@ -1014,7 +1123,9 @@ impl Tracker {
                 range_rate: range_rate_sigma(spec, raw),
                 height: *height,
             }),
-            Source::Fused { .. } => Box::new(CartesianUpdater { plots: &plots }),
+            Source::Fused { .. } | Source::Reports { .. } => {
+                Box::new(CartesianUpdater { plots: &plots })
+            }
         };
         report
             .undefined
@@ -1049,7 +1160,9 @@ impl Tracker {
         drop(updater);
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, &failed, report)?;
-        self.initiate(t, plots, &outcome.used, report)?;
+        let mut used = outcome.used;
+        self.check_leftovers(&plots, &mut used);
+        self.initiate(t, plots, &used, report)?;
         self.last_time = Some(self.last_time.map_or(t, |last| last.max(t)));
         self.counters.frames += 1;
         report.frames += 1;
@@ -1102,7 +1215,37 @@ impl Tracker {
                 *detection_probability,
                 cfg.track_gate_probability,
                 &cfg.association,
+                None,
             ),
+            Source::Reports {
+                kind,
+                plots: raw,
+                clutter,
+            } => {
+                // Identity beside the position; a track that distrusts
+                // its aircraft's own positions takes none of its address.
+                let tracks = &self.tracks;
+                let self_reported = kind.is_self_reported();
+                let evidence = |c: usize, j: usize| {
+                    let id = &tracks[slots[c]].identity;
+                    let own = id
+                        .address
+                        .is_some_and(|a| Some(a.value) == raw[j].identity.address);
+                    if self_reported && own && !id.validation.trusted() {
+                        return None;
+                    }
+                    id.ln_ratio(&raw[j].identity, raw[j].t, true)
+                };
+                associate_cartesian(
+                    estimates,
+                    plots,
+                    clutter,
+                    REPORT_DETECTION_PROBABILITY,
+                    cfg.track_gate_probability,
+                    &cfg.association,
+                    Some(&evidence),
+                )
+            }
         }
     }
 
@@ -1214,6 +1357,7 @@ impl Tracker {
                         &plots[j],
                         &self.config.radars,
                     ));
+                    validation::note_hit(&self.config, track, &plots[j]);
                     track
                         .identity
                         .observe_measured(plots[j].measured.as_ref(), &self.mode_s_radars);
@@ -1264,6 +1408,7 @@ impl Tracker {
                         plot: j,
                         previous: track.last_plot,
                     });
+                    validation::note_hit(&self.config, track, &plots[j]);
                     if scratch.behind_sweep && track.replace_miss() {
                         // Its radar's sweep judged it missed before the
                         // plot arrived: that miss was this hit.
@@ -1277,7 +1422,11 @@ impl Tracker {
                         &plots[j],
                         &self.config.radars,
                     ));
-                    track.last_plot = plots[j].measured;
+                    // A report is not a radar's plot (I062/340, the
+                    // registration's pairs): the last radar plot stays.
+                    if plots[j].measured.is_none_or(|m| m.report.is_none()) {
+                        track.last_plot = plots[j].measured;
+                    }
                     track
                         .identity
                         .observe_measured(plots[j].measured.as_ref(), &self.mode_s_radars);

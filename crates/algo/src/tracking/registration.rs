@@ -627,6 +627,7 @@ mod tests {
             elevation: None,
             radial_velocity: None,
             identity: Default::default(),
+            report: None,
         }
     }
 
@@ -641,6 +642,7 @@ mod tests {
             elevation: Some(0.1),
             radial_velocity: None,
             identity: Default::default(),
+            report: None,
         };
         let (_, j) = position(&r3, &p, 3);
         for k in 0..3 {
@@ -753,6 +755,7 @@ mod tests {
             elevation: Some(0.05),
             radial_velocity: None,
             identity: Default::default(),
+            report: None,
         };
         let c = correct(&p, &b);
         assert_eq!((c.range, c.azimuth), (9_900.0, 0.99));

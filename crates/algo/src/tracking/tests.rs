@@ -81,6 +81,7 @@ pub(super) fn scene(
                         .map(|s| rel[2].atan2(horizontal) + s * rng.normal()),
                     radial_velocity: r.sigma_radial_velocity.map(|s| radial + s * rng.normal()),
                     identity: Default::default(),
+                    report: None,
                 });
             }
             k += 1;
@@ -474,6 +475,7 @@ fn bad_input_is_an_error_without_a_state_change() {
         elevation: None,
         radial_velocity: None,
         identity: Default::default(),
+        report: None,
     };
     let bad = [
         Plot { radar: 2, ..good },
@@ -545,6 +547,7 @@ fn turning_plots(radars: &[RadarSpec], duration: f64, rng: &mut Lcg) -> Vec<Plot
                 elevation: None,
                 radial_velocity: None,
                 identity: Default::default(),
+                report: None,
             });
             t += r.scan_period;
         }
@@ -804,6 +807,7 @@ pub(super) fn beam_timed(
                     elevation: None,
                     radial_velocity: None,
                     identity: Default::default(),
+                    report: None,
                 });
             }
             start += r.scan_period;
@@ -1608,6 +1612,7 @@ fn overflight(motion: impl FnOnce(&mut TrackerConfig), why: &str) {
                 elevation: Some(p[2].atan2(horizontal)),
                 radial_velocity: None,
                 identity: Identity::default(),
+                report: None,
             });
         }
     }

@@ -64,8 +64,12 @@ pub struct TrackOutput {
     /// it).
     pub last_plot: Option<Plot>,
     /// What the track has learnt of its aircraft's identity (Mode S,
-    /// Mode 3/A, callsign, pressure altitude).
+    /// Mode 3/A, callsign, pressure altitude), and the check of its
+    /// self-reported positions.
     pub identity: TrackIdentity,
+    /// Per sensor that has updated it (radars, then report kinds,
+    /// ascending): the time of its last hit (its sources and their ages).
+    pub detections: Vec<RadarHit>,
 }
 
 /// A track inside the tracker (tentative or confirmed), with what its life
@@ -181,6 +185,12 @@ impl Track {
         radars: &[RadarSpec],
     ) -> Option<u32> {
         let m = plot.measured.as_ref()?;
+        if let Some(r) = &m.report {
+            // A report's sensor: its time kept (the track's sources and
+            // their ages); no scan, no detection trial.
+            self.hit_by(m.radar, m.t, r.kind.coast_s());
+            return None;
+        }
         let spec = radars.get(m.radar)?;
         self.hit_by(m.radar, m.t, spec.scan_period)
     }
@@ -334,6 +344,7 @@ impl Track {
             started: self.started,
             last_plot: self.last_plot,
             identity: self.identity.clone(),
+            detections: self.detections.clone(),
         }
     }
 }

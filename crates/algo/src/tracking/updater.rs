@@ -600,6 +600,7 @@ mod fixed {
                     elevation: three_d.then_some(0.16),
                     radial_velocity: doppler.then_some(-30.0),
                     identity: Default::default(),
+                    report: None,
                 };
                 let plots = [plot(0.0, 0.0), plot(80.0, 0.002)];
                 let layout = if three_d && axes == 3 {

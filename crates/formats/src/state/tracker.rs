@@ -864,7 +864,7 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
         },
         // The initiator keeps positions only (range rates are the
         // updater's, dropped before initiation).
-        range_rates: Vec::new(),
+        range_rates: Vec::new(), velocity: Vec::new(),
     })
 }
 
@@ -899,6 +899,7 @@ pub(crate) fn read_plot(r: &mut Reader<'_>, version: u32) -> Result<Plot, Format
         } else {
             Identity::default()
         },
+        report: None,
     })
 }
 
@@ -975,6 +976,7 @@ mod tests {
                             .sigma_radial_velocity
                             .map(|_| v[0] * unit[0] + v[1] * unit[1]),
                         identity: Default::default(),
+                        report: None,
                     });
                     n += 1;
                 }

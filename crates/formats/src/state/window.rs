@@ -185,6 +185,7 @@ mod tests {
                         elevation: None,
                         radial_velocity: None,
                         identity: Default::default(),
+                        report: None,
                     });
                 }
                 t += 4.0;

@@ -1281,6 +1281,7 @@ impl Network {
             elevation,
             radial_velocity,
             identity,
+            report: None,
         })
     }
 
