@@ -434,7 +434,8 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![var, var]),
             radars: vec![0],
             measured: None,
-            range_rates: Vec::new(), velocity: Vec::new(),
+            range_rates: Vec::new(),
+            velocity: Vec::new(),
         }
     }
 
@@ -451,8 +452,16 @@ mod tests {
             p: DMatrix::from_diagonal(&dvector![100.0, 1.0, 100.0, 1.0]),
         }];
         let plots = [plot(10.0, 0.0, 100.0)];
-        let out =
-            associate_cartesian(&tracks, &plots, &[lambda], p_d, p_g, &cfg(Method::Exact), None).unwrap();
+        let out = associate_cartesian(
+            &tracks,
+            &plots,
+            &[lambda],
+            p_d,
+            p_g,
+            &cfg(Method::Exact),
+            None,
+        )
+        .unwrap();
         let n = (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0);
         let a = p_d * n / lambda;
         let b = 1.0 - p_d * p_g;

@@ -156,7 +156,11 @@ impl CartesianPlot {
                 r[(row, i)] = rr.cross[i];
             }
         }
-        for (row, v) in velocity.iter().enumerate().map(|(i, v)| (k + rates.len() + i, v)) {
+        for (row, v) in velocity
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (k + rates.len() + i, v))
+        {
             h[(row, 2 * v.axis + 1)] = 1.0;
             innovation[row] = v.value - x[2 * v.axis + 1];
             r[(row, row)] = v.sigma * v.sigma;
@@ -379,7 +383,8 @@ fn to_cartesian(
         r,
         radars: vec![radar_index],
         measured: None,
-        range_rates: Vec::new(), velocity: Vec::new(),
+        range_rates: Vec::new(),
+        velocity: Vec::new(),
     })
 }
 
@@ -531,7 +536,8 @@ mod tests {
                     dt,
                     horizontal,
                     cross: DVector::from_vec(vec![0.5, -0.2, 0.1]),
-                }], velocity: Vec::new(),
+                }],
+                velocity: Vec::new(),
             };
             let lin = plot.linearise(&x);
             assert_eq!(lin.innovation.len(), 4);

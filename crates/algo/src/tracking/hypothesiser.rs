@@ -633,7 +633,8 @@ mod tests {
                 r: DMatrix::identity(2, 2) * (sz * sz / 2.0),
                 radars: vec![0],
                 measured: None,
-                range_rates: Vec::new(), velocity: Vec::new(),
+                range_rates: Vec::new(),
+                velocity: Vec::new(),
             };
             let found = index
                 .candidates(&tracks, std::slice::from_ref(&plot), t, &c)

@@ -796,7 +796,8 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![1.0, 1.0]),
             radars: vec![0],
             measured: None,
-            range_rates: Vec::new(), velocity: Vec::new(),
+            range_rates: Vec::new(),
+            velocity: Vec::new(),
         }
     }
 

@@ -157,7 +157,8 @@ pub fn fuse(a: &CartesianPlot, b: &CartesianPlot) -> Result<CartesianPlot, AlgoE
         r,
         radars,
         measured: None,
-        range_rates, velocity: Vec::new(),
+        range_rates,
+        velocity: Vec::new(),
     })
 }
 
@@ -173,7 +174,8 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![var[0], var[1]]),
             radars: vec![radar],
             measured: None,
-            range_rates: Vec::new(), velocity: Vec::new(),
+            range_rates: Vec::new(),
+            velocity: Vec::new(),
         }
     }
 
@@ -258,7 +260,8 @@ mod tests {
             r: DMatrix::from_diagonal(&dvector![100.0, 100.0, 100.0]),
             radars: vec![0],
             measured: None,
-            range_rates: Vec::new(), velocity: Vec::new(),
+            range_rates: Vec::new(),
+            velocity: Vec::new(),
         };
         let b = p2(1, 10.0, 0.0, [100.0, 100.0]);
         let f = fuse(&a, &b).unwrap();

@@ -89,11 +89,7 @@ fn adsb(
                 ],
                 sigma_horizontal: 10.0,
                 sigma_vertical: None,
-                velocity: Some([
-                    target.v[0] + rng.normal(),
-                    target.v[1] + rng.normal(),
-                    0.0,
-                ]),
+                velocity: Some([target.v[0] + rng.normal(), target.v[1] + rng.normal(), 0.0]),
                 sigma_velocity: 1.0,
                 sigma_vertical_velocity: None,
             };
@@ -174,7 +170,11 @@ fn adsb_reports_alone_track_each_aircraft_once() {
         let mine = track_of(&tracker, address);
         assert_eq!(mine.len(), 1);
         // σ 10 m per report, 1 m/s velocity: a few metres after a minute.
-        assert!(error(&mine[0], &target) < 30.0, "{}", error(&mine[0], &target));
+        assert!(
+            error(&mine[0], &target) < 30.0,
+            "{}",
+            error(&mine[0], &target)
+        );
         let sensors: Vec<usize> = mine[0].detections.iter().map(|h| h.radar).collect();
         assert_eq!(sensors, vec![cfg.report_sensor(ReportKind::Adsb)]);
     }
@@ -221,11 +221,18 @@ fn a_spoofed_adsb_is_distrusted_and_its_track_follows_the_radar() {
     let a = &track_of(&tracker, ADDRESS_A)[0];
     let v = a.identity.validation;
     let since = v.distrusted_since.expect("flagged");
-    assert!(since >= onset && since - onset <= 30.0, "flagged at {since}");
+    assert!(
+        since >= onset && since - onset <= 30.0,
+        "flagged at {since}"
+    );
     let d = v.last_disagreement.unwrap();
     assert!((d.distance - 3000.0).abs() < 500.0, "{d:?}");
     // On the radar (σ ≈ 100 m), not on the spoofed positions 3 km away.
-    assert!(error(a, &aircraft()[0].0) < 400.0, "{}", error(a, &aircraft()[0].0));
+    assert!(
+        error(a, &aircraft()[0].0) < 400.0,
+        "{}",
+        error(a, &aircraft()[0].0)
+    );
     // The other aircraft is untouched.
     let b = &track_of(&tracker, ADDRESS_B)[0];
     assert!(b.identity.validation.trusted());
@@ -335,10 +342,7 @@ fn a_bad_report_is_refused_naming_its_field() {
             ),
             "report.sigma_velocity",
         ),
-        (
-            bad(good, cfg.report_sensor(ReportKind::Mlat)),
-            "radar",
-        ),
+        (bad(good, cfg.report_sensor(ReportKind::Mlat)), "radar"),
     ];
     for (plot, field) in cases {
         match tracker.process(&[plot]) {

@@ -9,7 +9,7 @@
 
 use super::registrar::Registrar;
 use super::registration::RegistrationState;
-use super::{CartesianPlot, Counters, Motion, Plot, Track, Tracker, TrackerConfig};
+use super::{CartesianPlot, Counters, Motion, Plot, ReportKind, Track, Tracker, TrackerConfig};
 use crate::error::AlgoError;
 use crate::gaussian::check_covariance;
 use crate::tracking::accuracy::AccuracyState;
@@ -211,11 +211,13 @@ impl Tracker {
     pub fn from_parts(parts: TrackerParts) -> Result<Self, AlgoError> {
         let mut tr = Tracker::new(parts.config)?;
         let c = &tr.config;
+        // Radars, then one sensor per kind of cooperative report.
         let radars = |v: &[usize]| -> Result<(), AlgoError> {
-            match v.iter().find(|&&i| i >= c.radars.len()) {
+            match v.iter().find(|&&i| i >= c.sensors()) {
                 Some(i) => Err(bad(format!(
-                    "radar index {i} with {} radars",
-                    c.radars.len()
+                    "sensor index {i} with {} radars and {} kinds of report",
+                    c.radars.len(),
+                    ReportKind::ALL.len()
                 ))),
                 None => Ok(()),
             }

@@ -410,7 +410,8 @@ fn parts_that_no_tracker_could_hold_are_rejected() {
         }),
         ("not positive definite", |p| p.tracks[0].p[(0, 0)] = -1.0),
         ("not finite", |p| p.tracks[0].x[1] = f64::NAN),
-        ("radar index", |p| p.tracks[0].radars = vec![2]),
+        // 2 radars and 3 kinds of report: sensors 0 to 4.
+        ("sensor index", |p| p.tracks[0].radars = vec![5]),
         ("id at the next id", |p| p.next_id = p.tracks[0].id),
         ("pending plot", |p| p.pending[0].range = -1.0),
         ("pending order", |p| {

@@ -61,6 +61,18 @@ fn held_by_self_reports(cfg: &TrackerConfig, track: &Track) -> bool {
         .any(|&i| cfg.report_kind(i).is_some_and(|k| k.is_self_reported()))
 }
 
+/// Whether an independent sensor (a radar, multilateration) has updated
+/// `track` within [`INDEPENDENT_WINDOW_S`](super::identity::INDEPENDENT_WINDOW_S)
+/// of `t` (its hits per sensor, or the time its check keeps).
+fn independently_held(cfg: &TrackerConfig, track: &Track, t: f64) -> bool {
+    track.identity.validation.independently_held(t)
+        || track.detections.iter().any(|h| {
+            cfg.report_kind(h.radar)
+                .is_none_or(|k| !k.is_self_reported())
+                && t - h.last <= super::identity::INDEPENDENT_WINDOW_S
+        })
+}
+
 /// Records the sensor of a plot that updated `track` (before the track
 /// records the hit): the time of its last independent or self-reported
 /// update; an independent plot updating a track its self-reported
@@ -69,10 +81,23 @@ pub(crate) fn note_hit(cfg: &TrackerConfig, track: &mut Track, plot: &CartesianP
     let t = plot.measured.map_or(plot.t, |m| m.t);
     let later = |s: Option<f64>| Some(s.map_or(t, |s| s.max(t)));
     let held = held_by_self_reports(cfg, track);
+    let independent = |i: usize| cfg.report_kind(i).is_none_or(|k| !k.is_self_reported());
     let v = &mut track.identity.validation;
     if self_reported(plot) {
+        if v.last_self_reported.is_none() {
+            // The first self-reported position: the track's independent
+            // hits so far (kept per sensor) date its independent evidence.
+            v.last_independent = track
+                .detections
+                .iter()
+                .filter(|h| independent(h.radar))
+                .map(|h| h.last)
+                .reduce(f64::max);
+        }
         v.last_self_reported = later(v.last_self_reported);
-    } else {
+    } else if v.last_self_reported.is_some() {
+        // Kept only for tracks with self-reported positions: a radar-only
+        // tracker's state is what it was before reports existed.
         v.last_independent = later(v.last_independent);
         if held && v.trusted() {
             v.disagreements = 0;
@@ -135,7 +160,7 @@ impl Tracker {
             let v = track.identity.validation;
             let (d2, distance) = horizontal_distance(track, plot);
             if self_reported(plot) {
-                if !v.independently_held(m.t) {
+                if !independently_held(&self.config, track, m.t) {
                     continue;
                 }
                 used[j] = true;
@@ -185,7 +210,8 @@ impl Track {
         let mut p = nalgebra::DMatrix::zeros(n, n);
         for i in 0..n / 2 {
             p[(2 * i, 2 * i)] = self.p[(2 * i, 2 * i)];
-            p[(2 * i + 1, 2 * i + 1)] = self.p[(2 * i + 1, 2 * i + 1)].max(ANCHOR_SPEED_SIGMA.powi(2));
+            p[(2 * i + 1, 2 * i + 1)] =
+                self.p[(2 * i + 1, 2 * i + 1)].max(ANCHOR_SPEED_SIGMA.powi(2));
         }
         for a in 0..k {
             self.x[2 * a] = plot.z[a];

@@ -311,7 +311,8 @@ fn noisy_plot(
         r: DMatrix::identity(2, 2) * sigma * sigma,
         radars: vec![radar],
         measured: None,
-        range_rates: Vec::new(), velocity: Vec::new(),
+        range_rates: Vec::new(),
+        velocity: Vec::new(),
     }
 }
 

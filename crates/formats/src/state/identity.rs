@@ -203,5 +203,7 @@ pub(crate) fn read_track_identity(r: &mut Reader<'_>) -> Result<TrackIdentity, F
         last_primary: r.opt(Reader::f64)?,
         // Written after the track's detections (tracker format 10).
         last_mode_ac: None,
+        // Read from format 11 on (tracker::track).
+        validation: Default::default(),
     })
 }

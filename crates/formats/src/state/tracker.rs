@@ -42,7 +42,10 @@
 //! each track's last hit per radar after its identity
 //! and, at the end, each radar's detection trials (decayed trials and
 //! detections, last time); format 8 reads them as none (the detection
-//! probability is then learnt from the next scans on).
+//! probability is then learnt from the next scans on). Format 11 stores
+//! each plot's cooperative report (`Plot::report`, after its identity)
+//! and each track's check of its self-reported positions (after its last
+//! Mode A/C time); format 10 reads radar plots and unchecked tracks.
 //! Every f64 is stored bit for bit, so a decoded tracker continues exactly
 //! as the original would. Decoding validates the configuration, every plot
 //! against it, every state dimension and every covariance (finite,
@@ -50,9 +53,9 @@
 
 use algo::jpda::{Config as JpdaConfig, Method};
 use algo::tracking::{
-    CartesianPlot, Counters, Deletion, Identity, Imm, Initiation, Mode, Motion, MotionModel,
-    NoiseModel, Plot, RadarHit, RadarSpec, Track, TrackIdentity, Tracker, TrackerConfig,
-    TrackerParts, VelocityGate,
+    CartesianPlot, Counters, Deletion, Disagreement, Identity, Imm, Initiation, Mode, Motion,
+    MotionModel, NoiseModel, Plot, RadarHit, RadarSpec, Report, ReportKind, Track, TrackIdentity,
+    Tracker, TrackerConfig, TrackerParts, Validation, VelocityGate,
     accuracy::{AccuracyConfig, AccuracyState, ComponentData, DetectionData, RadarAccuracyData},
     height::{HeightDatum, ModeCHeight, PressureOffset},
     predictor::ModeState,
@@ -67,26 +70,30 @@ use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
-pub const FORMAT_VERSION: u32 = 10;
+pub const FORMAT_VERSION: u32 = 11;
 /// The format from which tracks keep their last hit per radar and the
 /// radars their detection trials.
 const DETECTION_FORMAT: u32 = 9;
 /// The format from which tracks keep the time of their last Mode A/C-only
 /// reply to a Mode S radar (`TrackIdentity::last_mode_ac`).
 const MODE_AC_FORMAT: u32 = 10;
+/// The format from which plots may be cooperative reports (`Plot::report`)
+/// and tracks keep the check of their self-reported positions
+/// (`TrackIdentity::validation`).
+pub(crate) const REPORT_FORMAT: u32 = 11;
 
 /// The tracker as bytes (configuration included), for [`decode_tracker`].
 pub fn encode_tracker(tr: &Tracker) -> Vec<u8> {
     encode_tracker_as(tr, FORMAT_VERSION)
 }
 
-/// The tracker in format 5 to 10 (5: without identities, 6: without
+/// The tracker in format 5 to 11 (5: without identities, 6: without
 /// Mode C heights, 7: without the accuracy estimator, 8: without the
-/// detection trials, 9: without the tracks' Mode A/C-only replies, as
-/// earlier releases wrote them; for the tests of older formats).
+/// detection trials, 9: without the tracks' Mode A/C-only replies, 10:
+/// without reports, as earlier releases wrote them; for the tests of
+/// older formats).
 pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     assert!((5..=FORMAT_VERSION).contains(&version));
-    let ids = version >= TRACKER_FORMAT;
     let s = tr.state();
     let mut w = Writer::default();
     w.buf.extend_from_slice(MAGIC);
@@ -98,7 +105,7 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     }
     w.usize(s.roots.len());
     for r in s.roots {
-        cartesian(&mut w, r, ids);
+        cartesian(&mut w, r, version);
     }
     w.usize(s.tentatives.len());
     for t in s.tentatives {
@@ -106,7 +113,7 @@ pub(crate) fn encode_tracker_as(tr: &Tracker, version: u32) -> Vec<u8> {
     }
     w.usize(s.pending.len());
     for p in s.pending {
-        plot_as(&mut w, p, ids);
+        plot_as(&mut w, p, version);
     }
     w.u64(s.next_id);
     w.opt(s.last_time, Writer::f64);
@@ -751,7 +758,7 @@ fn track(w: &mut Writer, t: &Track, version: u32) {
         w.f64_run(m.p.as_slice());
     }
     w.opt(t.started, Writer::f64);
-    w.opt(t.last_plot.as_ref(), |w, p| plot_as(w, p, ids));
+    w.opt(t.last_plot.as_ref(), |w, p| plot_as(w, p, version));
     if ids {
         write_track_identity(w, &t.identity);
     }
@@ -764,6 +771,48 @@ fn track(w: &mut Writer, t: &Track, version: u32) {
     }
     if version >= MODE_AC_FORMAT {
         w.opt(t.identity.last_mode_ac, Writer::f64);
+    }
+    if version >= REPORT_FORMAT {
+        write_validation(w, &t.identity.validation);
+    }
+}
+
+fn write_validation(w: &mut Writer, v: &Validation) {
+    for t in [v.last_independent, v.last_self_reported, v.distrusted_since] {
+        w.opt(t, Writer::f64);
+    }
+    w.u32(v.disagreements);
+    w.u32(v.agreements);
+    w.opt(v.last_disagreement, |w, d| {
+        w.f64(d.t);
+        w.f64(d.distance);
+        w.f64(d.sigma);
+    });
+}
+
+fn read_validation(r: &mut Reader<'_>) -> Result<Validation, FormatError> {
+    let v = Validation {
+        last_independent: r.opt(Reader::f64)?,
+        last_self_reported: r.opt(Reader::f64)?,
+        distrusted_since: r.opt(Reader::f64)?,
+        disagreements: r.u32()?,
+        agreements: r.u32()?,
+        last_disagreement: r.opt(|r| {
+            Ok(Disagreement {
+                t: r.f64()?,
+                distance: r.f64()?,
+                sigma: r.f64()?,
+            })
+        })?,
+    };
+    let times = [v.last_independent, v.last_self_reported, v.distrusted_since];
+    let finite = times.iter().flatten().all(|t| t.is_finite())
+        && v.last_disagreement
+            .is_none_or(|d| d.t.is_finite() && d.distance >= 0.0 && d.sigma >= 0.0);
+    if finite {
+        Ok(v)
+    } else {
+        Err(corrupt("validation of self-reported positions"))
     }
 }
 
@@ -833,15 +882,18 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
     if version >= MODE_AC_FORMAT {
         track.identity.last_mode_ac = r.opt(Reader::f64)?;
     }
+    if version >= REPORT_FORMAT {
+        track.identity.validation = read_validation(r)?;
+    }
     Ok(track)
 }
 
-fn cartesian(w: &mut Writer, p: &CartesianPlot, ids: bool) {
+fn cartesian(w: &mut Writer, p: &CartesianPlot, version: u32) {
     w.f64(p.t);
     w.f64s(p.z.as_slice());
     w.f64s(p.r.as_slice());
     radars(w, &p.radars);
-    w.opt(p.measured.as_ref(), |w, p| plot_as(w, p, ids));
+    w.opt(p.measured.as_ref(), |w, p| plot_as(w, p, version));
 }
 
 fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, FormatError> {
@@ -864,25 +916,63 @@ fn read_cartesian(r: &mut Reader<'_>, version: u32) -> Result<CartesianPlot, For
         },
         // The initiator keeps positions only (range rates are the
         // updater's, dropped before initiation).
-        range_rates: Vec::new(), velocity: Vec::new(),
+        range_rates: Vec::new(),
+        velocity: Vec::new(),
     })
 }
 
-/// A plot as this release stores it (format 6).
-pub(crate) fn plot(w: &mut Writer, p: &Plot) {
-    plot_as(w, p, true);
-}
-
-pub(crate) fn plot_as(w: &mut Writer, p: &Plot, ids: bool) {
+/// A plot as tracker format `version` stores it: its identity from
+/// format 6, its report from [`REPORT_FORMAT`] (an earlier format holds
+/// radar plots only).
+pub(crate) fn plot_as(w: &mut Writer, p: &Plot, version: u32) {
     w.usize(p.radar);
     w.f64(p.t);
     w.f64(p.range);
     w.f64(p.azimuth);
     w.opt(p.elevation, Writer::f64);
     w.opt(p.radial_velocity, Writer::f64);
-    if ids {
+    if version >= TRACKER_FORMAT {
         write_identity(w, &p.identity);
     }
+    if version >= REPORT_FORMAT {
+        w.opt(p.report.as_ref(), write_report);
+    }
+}
+
+fn write_report(w: &mut Writer, r: &Report) {
+    w.u8(r.kind.index() as u8);
+    for v in r.position {
+        w.f64(v);
+    }
+    w.f64(r.sigma_horizontal);
+    w.opt(r.sigma_vertical, Writer::f64);
+    w.opt(r.velocity, |w, v| {
+        for c in v {
+            w.f64(c);
+        }
+    });
+    w.f64(r.sigma_velocity);
+    w.opt(r.sigma_vertical_velocity, Writer::f64);
+}
+
+fn read_report(r: &mut Reader<'_>) -> Result<Report, FormatError> {
+    let kind = ReportKind::ALL
+        .get(usize::from(r.u8()?))
+        .copied()
+        .ok_or_else(|| corrupt("report kind"))?;
+    let three = |r: &mut Reader<'_>| -> Result<[f64; 3], FormatError> {
+        Ok([r.f64()?, r.f64()?, r.f64()?])
+    };
+    // Values are checked by the tracker (`TrackerConfig::validate_plot`).
+    Ok(Report {
+        kind,
+        position: three(r)?,
+        sigma_horizontal: r.f64()?,
+        sigma_vertical: r.opt(Reader::f64)?,
+        velocity: r.opt(three)?,
+        sigma_velocity: r.f64()?,
+        sigma_vertical_velocity: r.opt(Reader::f64)?,
+    })
 }
 
 /// A plot as tracker format `version` stores it.
@@ -899,7 +989,11 @@ pub(crate) fn read_plot(r: &mut Reader<'_>, version: u32) -> Result<Plot, Format
         } else {
             Identity::default()
         },
-        report: None,
+        report: if version >= REPORT_FORMAT {
+            r.opt(read_report)?
+        } else {
+            None
+        },
     })
 }
 
@@ -1191,6 +1285,82 @@ mod tests {
         round_trips_and_continues(&mut a, rest);
         let v9 = decode_tracker(&encode_tracker_as(&a, 9)).unwrap();
         assert_eq!(mode_ac(&v9), 0);
+    }
+
+    /// Format 11: radar plots with Mode S addresses beside ADS-B reports
+    /// of the same aircraft, one aircraft's ADS-B 3 km off from 40 s (its
+    /// track distrusts it), cut where reports are pending and tentatives
+    /// hold reports: round-trips bit for bit and continues as the original;
+    /// written as format 10 the tracks read back unchecked.
+    #[test]
+    fn reports_round_trip_and_continue() {
+        use algo::tracking::{Detection, ModeC};
+        let cfg = config(false);
+        let sensor = cfg.report_sensor(ReportKind::Adsb);
+        let identity = |address| Identity {
+            address: Some(address),
+            mode_c: Some(ModeC {
+                flight_level: 120.0,
+                validated: true,
+                garbled: false,
+            }),
+            detection: Some(Detection::Secondary),
+            ..Identity::default()
+        };
+        let mut all = plots(&cfg, 100.0);
+        let mut reports = Vec::new();
+        for (k, p) in all.iter_mut().enumerate() {
+            // Targets alternate within a radar's scan (plots() pushes them
+            // in order): address by target.
+            let address = [0x4CA2D1, 0x3C6586][k % 2];
+            p.identity = identity(address);
+            let site = cfg.radars[p.radar].site;
+            let spoof = if address == 0x3C6586 && p.t >= 40.0 {
+                3000.0
+            } else {
+                0.0
+            };
+            let report = Report {
+                kind: ReportKind::Adsb,
+                position: [
+                    site[0] + p.range * p.azimuth.sin(),
+                    site[1] + p.range * p.azimuth.cos() + spoof,
+                    0.0,
+                ],
+                sigma_horizontal: 15.0,
+                sigma_vertical: None,
+                velocity: None,
+                sigma_velocity: 0.0,
+                sigma_vertical_velocity: None,
+            };
+            reports.push(Plot::report(sensor, p.t + 0.5, report, identity(address)));
+        }
+        all.extend(reports);
+        all.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let (first, rest) = all.split_at(all.len() * 3 / 4);
+        let mut a = Tracker::new(cfg).unwrap();
+        a.process(first).unwrap();
+        let state = a.state();
+        assert!(state.pending.iter().any(|p| p.report.is_some()) || !state.pending.is_empty());
+        let distrusted = state
+            .tracks
+            .iter()
+            .filter(|t| !t.identity.validation.trusted())
+            .count();
+        assert_eq!(distrusted, 1);
+        round_trips_and_continues(&mut a, rest);
+        let v10 = decode_tracker(&encode_tracker_as(&a, 10));
+        // Format 10 cannot hold a report: its pending reports read back as
+        // radar plots of a report's sensor index, which the tracker refuses,
+        // or it holds none and its tracks read back unchecked.
+        if let Ok(v10) = v10 {
+            assert!(
+                v10.state()
+                    .tracks
+                    .iter()
+                    .all(|t| t.identity.validation.trusted())
+            );
+        }
     }
 
     /// Chunks fed to a tracker that is encoded and decoded between them

@@ -2,7 +2,9 @@
 //! within a lag (`algo::tracking::window`).
 //!
 //! Layout (after the magic `RFLW` and a `u32` format version):
-//! - format 4 (this release): format 3 followed by the limit of live
+//! - format 5 (this release): format 4 with plots that may be
+//!   cooperative reports (tracker format 11's plots);
+//! - format 4: format 3 followed by the limit of live
 //!   tracks the window applies (optional `usize`): the picture's open
 //!   frame is flushed under it, so a window decoded without it showed
 //!   tracks the serving one had refused (formats 1–3 decode without a
@@ -32,19 +34,34 @@
 
 use algo::tracking::{LagWindow, LagWindowParts, LatePolicy, Tracker};
 
-use super::tracker::{decode_tracker, encode_tracker, plot, read_plot};
+use super::tracker::{
+    FORMAT_VERSION as TRACKER_FORMAT_VERSION, decode_tracker, encode_tracker_as, plot_as, read_plot,
+};
 use crate::wire::{FormatError, Reader, Writer, corrupt};
 
 const MAGIC: &[u8; 4] = b"RFLW";
 /// The format this release writes.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// The bytes of `window` (see the module header).
 pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
+    encode_lag_window_as(window, FORMAT_VERSION)
+}
+
+/// The bytes of `window` in format 3 to 5 (3: without the limit of live
+/// tracks, 3 and 4: radar plots and tracker format 10, as earlier
+/// releases wrote them; for the tests of older formats).
+pub(crate) fn encode_lag_window_as(window: &LagWindow, version: u32) -> Vec<u8> {
+    assert!((3..=FORMAT_VERSION).contains(&version));
+    let tracker_format = if version >= 5 {
+        TRACKER_FORMAT_VERSION
+    } else {
+        10
+    };
     let s = window.state();
     let mut w = Writer::default();
     w.buf.extend_from_slice(MAGIC);
-    w.u32(FORMAT_VERSION);
+    w.u32(version);
     match s.policy {
         LatePolicy::Reprocess => w.u8(0),
         LatePolicy::Retrodict => w.u8(1),
@@ -57,13 +74,13 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     let plots = s.policy != LatePolicy::Retrodict && !s.past_bound;
     w.f64(s.max_lag);
     if plots {
-        w.bytes(&encode_tracker(s.base));
+        w.bytes(&encode_tracker_as(s.base, tracker_format));
     }
-    w.bytes(&encode_tracker(s.head));
+    w.bytes(&encode_tracker_as(s.head, tracker_format));
     if plots {
         w.usize(s.window.len());
         for p in s.window {
-            plot(&mut w, p);
+            plot_as(&mut w, p, tracker_format);
         }
     }
     w.opt(s.horizon, Writer::f64);
@@ -72,7 +89,9 @@ pub fn encode_lag_window(window: &LagWindow) -> Vec<u8> {
     if s.policy != LatePolicy::Retrodict {
         w.opt(s.approximate_from, Writer::f64);
     }
-    w.opt(s.max_tracks, Writer::usize);
+    if version >= 4 {
+        w.opt(s.max_tracks, Writer::usize);
+    }
     w.buf
 }
 
@@ -87,7 +106,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let version = r.u32()?;
     let (policy, past_bound) = match version {
         1 => (LatePolicy::Reprocess, false),
-        2..=4 => match r.u8()? {
+        2..=5 => match r.u8()? {
             0 => (LatePolicy::Reprocess, false),
             1 => (LatePolicy::Retrodict, false),
             2 => {
@@ -99,8 +118,13 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         },
         _ => return Err(corrupt(&format!("unknown lag window format {version}"))),
     };
-    // Format 3 stores plots with their identity (tracker format 6).
-    let plot_format = if version >= 3 { 6 } else { 5 };
+    // Format 3 stores plots with their identity (tracker format 6),
+    // format 5 with their cooperative report (tracker format 11).
+    let plot_format = match version {
+        5.. => super::tracker::REPORT_FORMAT,
+        3..=4 => 6,
+        _ => 5,
+    };
     let max_lag = r.f64()?;
     let plots = policy != LatePolicy::Retrodict && !past_bound;
     let (base, head, window) = if plots {
@@ -120,7 +144,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     let newest = r.opt(Reader::f64)?;
     let late = r.u64()?;
     let approximate_from = match version {
-        3 | 4 if policy != LatePolicy::Retrodict => r.opt(Reader::f64)?,
+        3.. if policy != LatePolicy::Retrodict => r.opt(Reader::f64)?,
         2 if plots => r.opt(Reader::f64)?,
         _ => None,
     };
@@ -288,7 +312,7 @@ mod tests {
         w.bytes(&encode_tracker_as(s.head, 5));
         w.usize(s.window.len());
         for p in s.window {
-            plot_as(&mut w, p, false);
+            plot_as(&mut w, p, 5);
         }
         w.opt(s.horizon, Writer::f64);
         w.opt(s.newest, Writer::f64);
@@ -363,9 +387,7 @@ mod tests {
         // Format 3: the same bytes without the limit (its `None` byte).
         let mut c = window();
         c.push(first).unwrap();
-        let mut v3 = encode_lag_window(&c);
-        assert_eq!(v3.pop(), Some(0));
-        v3[4..8].copy_from_slice(&3u32.to_le_bytes());
+        let v3 = encode_lag_window_as(&c, 3);
         let d = decode_lag_window(&v3).unwrap();
         assert_eq!(d.to_parts(), c.to_parts());
         assert_eq!(d.to_parts().max_tracks, None);
