@@ -221,6 +221,7 @@ fn pb_batch(id: &str, body: &Value) -> pb::PushBatchRequest {
         flush: body["flush"].as_bool().unwrap_or(false),
         plots: Vec::new(),
         asterix: None,
+        cooperative: Vec::new(),
     }
 }
 

@@ -20,7 +20,7 @@ impl PlotFusionService for PlotFusionGrpc {
         let req = request.into_inner();
         let input = svc::TrackInput {
             spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
-            plots: plots_in(req.plots),
+            plots: plots_in(req.plots, req.cooperative),
             asterix: req.asterix.map(asterix_in),
             history: req.history,
         };
@@ -242,7 +242,55 @@ pub(crate) fn pressure_offset_out(o: svc::PressureOffsetView) -> pb::PressureOff
     }
 }
 
-pub(crate) fn plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
+/// A request's plots, then its cooperative reports (the service names
+/// them `cooperative[i]` in its errors).
+pub(crate) fn plots_in(
+    plots: Vec<pb::RadarPlot>,
+    cooperative: Vec<pb::CooperativeReport>,
+) -> Vec<svc::PlotInput> {
+    let mut out = radar_plots_in(plots);
+    out.extend(cooperative.into_iter().map(report_in));
+    out
+}
+
+/// A protobuf `uint32` category as the service's `u8` (a value past 255
+/// is out of every category's range and kept out of it).
+fn category(v: Option<u32>) -> Option<u8> {
+    v.map(|v| u8::try_from(v).unwrap_or(u8::MAX))
+}
+
+fn report_in(r: pb::CooperativeReport) -> svc::PlotInput {
+    svc::PlotInput {
+        t: Some(r.t),
+        ssr: svc::SsrInput {
+            mode_3a: r.mode_3a,
+            flight_level: r.flight_level,
+            mode_s_address: r.mode_s_address,
+            callsign: r.callsign,
+            ..Default::default()
+        },
+        report: Some(svc::ReportInput {
+            source: Some(r.source),
+            lat_deg: Some(r.lat_deg),
+            lon_deg: Some(r.lon_deg),
+            geometric_height_m: r.geometric_height_m,
+            velocity_east_mps: r.velocity_east_mps,
+            velocity_north_mps: r.velocity_north_mps,
+            vertical_rate_mps: r.vertical_rate_mps,
+            sog_kn: r.sog_kn,
+            cog_deg: r.cog_deg,
+            nacp: category(r.nacp),
+            nacv: category(r.nacv),
+            position_accurate: r.position_accurate,
+            sigma_m: r.sigma_m,
+            sigma_height_m: r.sigma_height_m,
+            sigma_velocity_mps: r.sigma_velocity_mps,
+        }),
+        ..Default::default()
+    }
+}
+
+fn radar_plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
     plots
         .into_iter()
         .map(|p| svc::PlotInput {
@@ -264,6 +312,7 @@ pub(crate) fn plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
                 detection: p.detection,
                 spi: p.spi,
             },
+            report: None,
         })
         .collect()
 }

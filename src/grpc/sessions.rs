@@ -153,7 +153,7 @@ fn plot_batch_in(req: pb::PushBatchRequest) -> Batch<pf::BatchInput> {
     Batch {
         sequence: req.sequence,
         body: pf::BatchInput {
-            plots: plots_in(req.plots),
+            plots: plots_in(req.plots, req.cooperative),
             asterix: req.asterix.map(asterix_in),
             flush: req.flush,
         },

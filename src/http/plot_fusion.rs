@@ -603,6 +603,64 @@ pub(crate) fn asterix_out(s: svc::asterix::AsterixSummary) -> AsterixSummary {
     }
 }
 
+/// A cooperative report: an aircraft's ADS-B position (ASTERIX CAT021's
+/// content), a multilateration position (CAT020's), or a ship's AIS
+/// position report. Its σ comes from its own quality fields: `nacp` (ADS-B:
+/// σ = EPU / 2.448), `sigma_m` (multilateration's stated accuracy; any
+/// report's, over its quality fields), `position_accurate` (AIS).
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ReportIn {
+    /// `adsb`, `mlat` or `ais`.
+    #[schema(example = "adsb")]
+    pub source: String,
+    /// Time of applicability of the position (s, the plots' time scale).
+    #[schema(example = 12.5)]
+    pub t: f64,
+    #[schema(example = 48.71)]
+    pub lat_deg: f64,
+    #[schema(example = 2.37)]
+    pub lon_deg: f64,
+    /// Geometric (GNSS) height above the WGS84 ellipsoid (m).
+    pub geometric_height_m: Option<f64>,
+    /// Velocity east and north (m/s), both or neither (ADS-B's ground
+    /// vector).
+    pub velocity_east_mps: Option<f64>,
+    pub velocity_north_mps: Option<f64>,
+    /// Geometric vertical rate (m/s).
+    pub vertical_rate_mps: Option<f64>,
+    /// AIS: speed over ground (kn) and course over ground (° from north),
+    /// instead of the velocity's components.
+    pub sog_kn: Option<f64>,
+    pub cog_deg: Option<f64>,
+    /// ADS-B navigation accuracy category for position, 1 to 11 (required
+    /// from ADS-B unless `sigma_m` is given).
+    #[schema(example = 9, maximum = 11)]
+    pub nacp: Option<u8>,
+    /// ADS-B navigation accuracy category for velocity, 1 to 4 (required
+    /// with an ADS-B velocity unless `sigma_velocity_mps` is given).
+    #[schema(maximum = 4)]
+    pub nacv: Option<u8>,
+    /// AIS position-accuracy flag: true better than 10 m (default false).
+    pub position_accurate: Option<bool>,
+    /// σ per horizontal axis (m): required from multilateration.
+    pub sigma_m: Option<f64>,
+    /// σ of the geometric height (m); absent: from NACp 9–11, else the
+    /// height is not used.
+    pub sigma_height_m: Option<f64>,
+    /// σ per axis of the velocity (m/s).
+    pub sigma_velocity_mps: Option<f64>,
+    /// Mode S (ICAO 24-bit) address, six hexadecimal digits.
+    #[schema(example = "4CA2D1")]
+    pub mode_s_address: Option<String>,
+    /// Aircraft identification (callsign).
+    pub callsign: Option<String>,
+    /// Mode 3/A code, four octal digits.
+    pub mode_3a: Option<String>,
+    /// Barometric flight level (hundreds of feet).
+    pub flight_level: Option<f64>,
+}
+
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlotFusionRequest {
@@ -613,6 +671,10 @@ pub struct PlotFusionRequest {
     /// In any order; the service sorts them by time.
     #[serde(default)]
     pub plots: Vec<PlotIn>,
+    /// Cooperative reports (ADS-B, multilateration, AIS) beside the plots,
+    /// in any order.
+    #[serde(default)]
+    pub cooperative: Vec<ReportIn>,
     /// Raw ASTERIX beside (or instead of) `plots`.
     pub asterix: Option<AsterixIn>,
     pub tracker: Option<TrackerOptions>,
@@ -921,7 +983,46 @@ fn geo_in(g: GeoPoint) -> svc::GeoInput {
     }
 }
 
-pub(crate) fn plots_in(plots: Vec<PlotIn>) -> Vec<svc::PlotInput> {
+/// A request's plots, then its cooperative reports (the service names
+/// them `cooperative[i]` in its errors).
+pub(crate) fn plots_in(plots: Vec<PlotIn>, cooperative: Vec<ReportIn>) -> Vec<svc::PlotInput> {
+    let mut out = radar_plots_in(plots);
+    out.extend(cooperative.into_iter().map(report_in));
+    out
+}
+
+fn report_in(r: ReportIn) -> svc::PlotInput {
+    svc::PlotInput {
+        t: Some(r.t),
+        ssr: svc::SsrInput {
+            mode_3a: r.mode_3a,
+            flight_level: r.flight_level,
+            mode_s_address: r.mode_s_address,
+            callsign: r.callsign,
+            ..Default::default()
+        },
+        report: Some(svc::ReportInput {
+            source: Some(r.source),
+            lat_deg: Some(r.lat_deg),
+            lon_deg: Some(r.lon_deg),
+            geometric_height_m: r.geometric_height_m,
+            velocity_east_mps: r.velocity_east_mps,
+            velocity_north_mps: r.velocity_north_mps,
+            vertical_rate_mps: r.vertical_rate_mps,
+            sog_kn: r.sog_kn,
+            cog_deg: r.cog_deg,
+            nacp: r.nacp,
+            nacv: r.nacv,
+            position_accurate: r.position_accurate,
+            sigma_m: r.sigma_m,
+            sigma_height_m: r.sigma_height_m,
+            sigma_velocity_mps: r.sigma_velocity_mps,
+        }),
+        ..Default::default()
+    }
+}
+
+fn radar_plots_in(plots: Vec<PlotIn>) -> Vec<svc::PlotInput> {
     plots
         .into_iter()
         .map(|p| svc::PlotInput {
@@ -943,6 +1044,7 @@ pub(crate) fn plots_in(plots: Vec<PlotIn>) -> Vec<svc::PlotInput> {
                 detection: p.detection,
                 spi: p.spi,
             },
+            report: None,
         })
         .collect()
 }
@@ -1024,7 +1126,7 @@ pub async fn track(
 fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> {
     let input = svc::TrackInput {
         spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
-        plots: plots_in(req.plots),
+        plots: plots_in(req.plots, req.cooperative),
         asterix: asterix_in(req.asterix)?,
         history: req.history,
     };

@@ -18,8 +18,8 @@ use super::{
     },
     plot_fusion::{
         AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, PlotIn, PlotRadar,
-        RadarBiasOut, TrackerCounters, TrackerOptions, accuracy_out, asterix_in, asterix_out,
-        bias_out, cat062_out, counters_out, plots_in, spec_in, track_out,
+        RadarBiasOut, ReportIn, TrackerCounters, TrackerOptions, accuracy_out, asterix_in,
+        asterix_out, bias_out, cat062_out, counters_out, plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -97,6 +97,10 @@ pub struct PushBatchRequest {
     /// Plot-fusion sessions: radar plots, in any order.
     #[serde(default)]
     pub plots: Vec<PlotIn>,
+    /// Plot-fusion sessions: cooperative reports (ADS-B, multilateration,
+    /// AIS), in any order.
+    #[serde(default)]
+    pub cooperative: Vec<ReportIn>,
     /// Plot-fusion sessions: raw ASTERIX (its plots follow `plots`). Without
     /// `date`/`day_start_t` the times of day are taken nearest the session's
     /// last processed frame.
@@ -470,7 +474,7 @@ fn plot_batch_in(req: PushBatchRequest) -> Result<Batch<pf::BatchInput>, Problem
         sequence: req.sequence,
         body: pf::BatchInput {
             flush: req.flush,
-            plots: plots_in(req.plots),
+            plots: plots_in(req.plots, req.cooperative),
             asterix: asterix_in(req.asterix)?,
         },
     })

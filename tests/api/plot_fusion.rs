@@ -270,6 +270,7 @@ pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
         }),
         history: false,
         asterix: None,
+        cooperative: Vec::new(),
     }
 }
 

@@ -544,6 +544,7 @@ pub fn plot_fusion_scene(
                     elevation_deg: None,
                     radial_velocity_mps: doppler.then(|| rv + sv * normal(&mut rng)),
                     ssr: Default::default(),
+                    report: None,
                 });
             }
             for _ in 0..false_per_scan {
@@ -566,6 +567,7 @@ pub fn plot_fusion_scene(
                     elevation_deg: None,
                     radial_velocity_mps: radial,
                     ssr: Default::default(),
+                    report: None,
                 });
             }
             start += period;

@@ -320,6 +320,7 @@ pub fn plots(
                 None
             },
             ssr: super::SsrInput::from_asterix(r),
+            report: None,
         };
         match network.plot(&input, config, parallel) {
             Ok(p) => {

@@ -14,6 +14,7 @@ pub mod asterix;
 pub mod cat062;
 pub mod network;
 pub mod output;
+pub mod report;
 pub mod ssr;
 
 use std::{ops::ControlFlow, time::Instant};
@@ -25,6 +26,7 @@ use algo::{
 };
 pub use network::Network;
 pub use output::{HistoryEntry, LastPlotView, ModeView, TrackView, TrackerCounters, model_names};
+pub use report::ReportInput;
 pub use ssr::{IdentityItem, IdentityView, PressureAltitudeView, SsrInput};
 
 /// Most radars in a network.
@@ -320,8 +322,14 @@ pub struct PlotInput {
     pub azimuth_deg: Option<f64>,
     pub elevation_deg: Option<f64>,
     pub radial_velocity_mps: Option<f64>,
-    /// The plot's SSR and Mode S fields (none for a primary plot).
+    /// The plot's SSR and Mode S fields (none for a primary plot); a
+    /// report's identity (address, callsign, Mode 3/A, barometric flight
+    /// level).
     pub ssr: SsrInput,
+    /// A cooperative report (ADS-B, multilateration, AIS) instead of a
+    /// radar's plot: then `radar_id`, `range_m`, `azimuth_deg`,
+    /// `elevation_deg` and `radial_velocity_mps` are not used.
+    pub report: Option<ReportInput>,
 }
 
 /// A batch request: the network, its plots (any order) and whether to

@@ -141,6 +141,19 @@ fn wire_name(what: &str) -> &'static str {
     }
 }
 
+/// A plot's (or a report's) time, checked: given, finite, within
+/// ±[`MAX_ABS_T_S`].
+pub(super) fn checked_time(t: Option<f64>) -> Result<f64, (&'static str, String)> {
+    let t = t.ok_or(("t", "is required".to_string()))?;
+    if !(t.is_finite() && t.abs() <= MAX_ABS_T_S) {
+        return Err((
+            "t",
+            format!("must be finite and within ±{MAX_ABS_T_S:e} s, got {t}"),
+        ));
+    }
+    Ok(t)
+}
+
 /// The session's lag (`tracker.max_lag_s`, default
 /// [`algo::tracking::window::DEFAULT_MAX_LAG_S`]), checked: finite, in
 /// [0, [`algo::tracking::window::MAX_LAG_LIMIT_S`]].
@@ -1177,7 +1190,10 @@ impl Network {
 
     /// Validates plots against the network and re-expresses their angles in
     /// the fusion axes; violations name `{field}[i].…` (the radars' ids
-    /// are listed in the first violation of an unknown radar only).
+    /// are listed in the first violation of an unknown radar only). The
+    /// cooperative reports among `inputs` (after the plots, as the
+    /// adapters append a request's `cooperative` reports) are named
+    /// `cooperative[i]`.
     pub fn plots(
         &self,
         inputs: &[PlotInput],
@@ -1188,11 +1204,17 @@ impl Network {
         let mut out = Vec::with_capacity(inputs.len());
         let mut v = Violations::new();
         let mut radars = Listed::new();
-        for (i, p) in inputs.iter().enumerate() {
+        // Reports travel after the plots and are named in their own list.
+        let mut counts = [0usize; 2];
+        for p in inputs {
+            let list = usize::from(p.report.is_some());
+            let i = counts[list];
+            counts[list] += 1;
             match self.plot(p, config, parallel) {
                 Ok(plot) => out.push(plot),
                 Err((name, mut message)) => {
-                    let path = format!("{field}[{i}].{name}");
+                    let list_name = if list == 1 { "cooperative" } else { field };
+                    let path = format!("{list_name}[{i}].{name}");
                     if name == "radar_id" && self.is_unknown(p.radar_id.as_deref()) {
                         message =
                             format!("{message} (radars: {})", radars.ids(&self.radar_ids, &path));
@@ -1218,6 +1240,10 @@ impl Network {
         config: &TrackerConfig,
         parallel: bool,
     ) -> Result<Plot, (&'static str, String)> {
+        if let Some(r) = &p.report {
+            let identity = p.ssr.parse()?;
+            return self.report(p, r, config, identity);
+        }
         let id = p
             .radar_id
             .as_deref()
@@ -1230,13 +1256,7 @@ impl Network {
             .get(id)
             .ok_or_else(|| ("radar_id", format!("no radar '{id}' in the network")))?;
         let spec = &config.radars[radar];
-        let t = p.t.ok_or(("t", "is required".to_string()))?;
-        if !(t.is_finite() && t.abs() <= MAX_ABS_T_S) {
-            return Err((
-                "t",
-                format!("must be finite and within ±{MAX_ABS_T_S:e} s, got {t}"),
-            ));
-        }
+        let t = checked_time(p.t)?;
         let range = p.range_m.ok_or(("range_m", "is required".to_string()))?;
         if !(range.is_finite() && range > 0.0 && range <= MAX_RANGE_M) {
             return Err((
@@ -1325,6 +1345,18 @@ impl Network {
             azimuth,
             radial_velocity.map(|v| v / el.cos()),
         )
+    }
+
+    /// The wire name of a sensor: a radar's id, or a kind of report's
+    /// (`adsb`, `mlat`, `ais`).
+    pub fn sensor_name(&self, sensor: usize) -> String {
+        match self.radar_ids.get(sensor) {
+            Some(id) => id.clone(),
+            None => algo::tracking::ReportKind::ALL
+                .get(sensor - self.radar_ids.len())
+                .map_or("unknown", |k| k.name())
+                .to_string(),
+        }
     }
 
     /// A core track as a wire track (ids, and lat/lon from the frame).

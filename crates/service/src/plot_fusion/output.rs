@@ -159,11 +159,7 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
         lat_deg: geo.map(|g| g.0.to_degrees()),
         lon_deg: geo.map(|g| g.1.to_degrees()),
         height_m: geo.filter(|_| three_d).map(|g| g.2),
-        radars: t
-            .radars
-            .iter()
-            .map(|&r| network.radar_ids[r].clone())
-            .collect(),
+        radars: t.radars.iter().map(|&r| network.sensor_name(r)).collect(),
         hits: t.hits,
         misses: t.misses,
         consecutive_misses: t.consecutive_misses,

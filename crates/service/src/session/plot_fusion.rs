@@ -42,8 +42,8 @@ use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
-        LastPlotView, ModeView, Network, PlotInput, RadarAccuracyView, RadarBiasView, SigmaView,
-        SpecInput, SsrInput, TrackView, TrackerCounters,
+        LastPlotView, ModeView, Network, PlotInput, RadarAccuracyView, RadarBiasView, ReportInput,
+        SigmaView, SpecInput, SsrInput, TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
         computation_error, mode_name, network, output,
@@ -799,6 +799,7 @@ impl SessionKind for PlotFusionSession {
                 elevation_deg,
                 radial_velocity_mps,
                 ssr: _,
+                report: _,
             } = p;
             w.opt(radar_id.as_deref(), Writer::str);
             for x in [t, range_m, azimuth_deg, elevation_deg, radial_velocity_mps] {
@@ -826,9 +827,17 @@ impl SessionKind for PlotFusionSession {
         // Since SSR: each plot's secondary fields, after the batch (an
         // entry of an earlier release ends at `flush` and reads as
         // primary plots).
-        if plots.iter().any(|p| !p.ssr.is_empty()) {
+        let reports = plots.iter().any(|p| p.report.is_some());
+        if reports || plots.iter().any(|p| !p.ssr.is_empty()) {
             for p in plots {
                 p.ssr.encode(w);
+            }
+        }
+        // Since cooperative reports: each plot's report, after the SSR
+        // fields (an entry without reports ends there).
+        if reports {
+            for p in plots {
+                w.opt(p.report.as_ref(), |w, r| r.encode(w));
             }
         }
         true
@@ -847,6 +856,7 @@ impl SessionKind for PlotFusionSession {
                     elevation_deg: r.opt(Reader::f64)?,
                     radial_velocity_mps: r.opt(Reader::f64)?,
                     ssr: SsrInput::default(),
+                    report: None,
                 })
             })
             .collect::<Result<_, FormatError>>()?;
@@ -869,6 +879,11 @@ impl SessionKind for PlotFusionSession {
         if !r.is_empty() {
             for p in &mut plots {
                 p.ssr = SsrInput::decode(r)?;
+            }
+        }
+        if !r.is_empty() {
+            for p in &mut plots {
+                p.report = r.opt(ReportInput::decode)?;
             }
         }
         Ok(BatchInput {
