@@ -393,6 +393,24 @@ pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
             radial_velocity_mps: p.radial_velocity_mps,
         }),
         identity: t.identity.map(identity_out),
+        sources: t
+            .sources
+            .into_iter()
+            .map(|s| pb::TrackSource {
+                sensor: s.sensor,
+                last_t: s.last_t,
+            })
+            .collect(),
+        self_reported: t.self_reported.map(|v| pb::SelfReported {
+            trusted: v.trusted,
+            validated: v.validated,
+            distrusted_since_t: v.distrusted_since_t,
+            last_self_reported_t: v.last_self_reported_t,
+            last_independent_t: v.last_independent_t,
+            disagreement_t: v.disagreement.as_ref().map(|d| d.t),
+            disagreement_distance_m: v.disagreement.as_ref().map(|d| d.distance_m),
+            disagreement_stated_sigma_m: v.disagreement.as_ref().map(|d| d.stated_sigma_m),
+        }),
     }
 }
 

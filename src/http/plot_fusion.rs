@@ -785,6 +785,53 @@ pub struct FusedTrack {
     /// (absent when none updated it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub identity: Option<super::identity::TrackIdentity>,
+    /// Per sensor that has updated the track (radar ids, then `adsb`,
+    /// `mlat`, `ais`): the time of its last update.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<TrackSource>,
+    /// The check of its self-reported positions (ADS-B, AIS) against
+    /// radar and multilateration (absent when none updated it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub self_reported: Option<SelfReported>,
+}
+
+/// One sensor's last update of a track.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct TrackSource {
+    #[schema(example = "adsb")]
+    pub sensor: String,
+    pub last_t: f64,
+}
+
+/// A track's self-reported positions against independent evidence.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct SelfReported {
+    /// Its self-reported positions are used (false: they disagreed with
+    /// radar or multilateration beyond their stated quality, and are not
+    /// used until 5 in a row agree).
+    pub trusted: bool,
+    /// Radar or multilateration updated it within the last 30 s (false:
+    /// an ADS-B-only stretch, unvalidated).
+    pub validated: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distrusted_since_t: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_self_reported_t: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last_independent_t: Option<f64>,
+    /// The last disagreement.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub disagreement: Option<Disagreement>,
+}
+
+/// A self-reported position against independent evidence.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Disagreement {
+    pub t: f64,
+    /// Horizontal distance between the two (m).
+    pub distance_m: f64,
+    /// The self-reported position's stated σ per axis (m).
+    pub stated_sigma_m: f64,
 }
 
 /// One model's probability in an IMM track.
@@ -1084,6 +1131,26 @@ pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
             radial_velocity_mps: p.radial_velocity_mps,
         }),
         identity: t.identity.map(super::identity::identity_out),
+        sources: t
+            .sources
+            .into_iter()
+            .map(|s| TrackSource {
+                sensor: s.sensor,
+                last_t: s.last_t,
+            })
+            .collect(),
+        self_reported: t.self_reported.map(|v| SelfReported {
+            trusted: v.trusted,
+            validated: v.validated,
+            distrusted_since_t: v.distrusted_since_t,
+            last_self_reported_t: v.last_self_reported_t,
+            last_independent_t: v.last_independent_t,
+            disagreement: v.disagreement.map(|d| Disagreement {
+                t: d.t,
+                distance_m: d.distance_m,
+                stated_sigma_m: d.stated_sigma_m,
+            }),
+        }),
     }
 }
 

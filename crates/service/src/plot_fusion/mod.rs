@@ -25,7 +25,10 @@ use algo::{
     tracking::{Counters, Mode, Plot, Tracker, TrackerConfig},
 };
 pub use network::Network;
-pub use output::{HistoryEntry, LastPlotView, ModeView, TrackView, TrackerCounters, model_names};
+pub use output::{
+    DisagreementView, HistoryEntry, LastPlotView, ModeView, SelfReportedView, SourceView,
+    TrackView, TrackerCounters, model_names,
+};
 pub use report::ReportInput;
 pub use ssr::{IdentityItem, IdentityView, PressureAltitudeView, SsrInput};
 
@@ -469,6 +472,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         &tracks,
     ));
     warnings.extend(ssr::warnings(&tracks));
+    warnings.extend(output::self_reported_warnings(&tracks));
     let pressure_offset = network.pressure_offset_view(&tracker);
     let accuracy = network.accuracy_views(&tracker);
     warnings.extend(network::accuracy_warnings(tracker.config(), &accuracy));

@@ -54,6 +54,105 @@ pub struct TrackView {
     /// What the track knows of its aircraft from SSR and Mode S (absent
     /// when no secondary plot has updated it).
     pub identity: Option<super::ssr::IdentityView>,
+    /// Per sensor that has updated the track (radars in the network's
+    /// order, then `adsb`, `mlat`, `ais`): the time of its last update
+    /// (its sources and their ages).
+    pub sources: Vec<SourceView>,
+    /// The check of its self-reported positions (ADS-B, AIS) against
+    /// independent evidence (radar plots, multilateration); absent when no
+    /// self-reported position has updated it.
+    pub self_reported: Option<SelfReportedView>,
+}
+
+/// One sensor's last update of a track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SourceView {
+    pub sensor: String,
+    pub last_t: f64,
+}
+
+/// A track's self-reported positions checked against independent evidence
+/// (`algo::tracking::identity::Validation`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SelfReportedView {
+    /// Its self-reported positions are used (false: they disagreed with
+    /// the independent evidence and are not, until they agree again).
+    pub trusted: bool,
+    /// Independent evidence updated it within the last 30 s (false: an
+    /// ADS-B-only stretch, unvalidated).
+    pub validated: bool,
+    pub distrusted_since_t: Option<f64>,
+    pub last_self_reported_t: Option<f64>,
+    pub last_independent_t: Option<f64>,
+    /// The last disagreement.
+    pub disagreement: Option<DisagreementView>,
+}
+
+/// A self-reported position against independent evidence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DisagreementView {
+    pub t: f64,
+    /// Horizontal distance between the two (m).
+    pub distance_m: f64,
+    /// The self-reported position's stated σ per axis (m).
+    pub stated_sigma_m: f64,
+}
+
+/// The self-reported check of a core track, when it has one.
+pub fn self_reported_view(t: &TrackOutput) -> Option<SelfReportedView> {
+    let v = &t.identity.validation;
+    v.last_self_reported.map(|_| SelfReportedView {
+        trusted: v.trusted(),
+        validated: v.validated(t.t),
+        distrusted_since_t: v.distrusted_since,
+        last_self_reported_t: v.last_self_reported,
+        last_independent_t: v.last_independent,
+        disagreement: v.last_disagreement.map(|d| DisagreementView {
+            t: d.t,
+            distance_m: d.distance,
+            stated_sigma_m: d.sigma,
+        }),
+    })
+}
+
+/// The warnings of tracks whose self-reported positions are distrusted
+/// (one line each, with the numbers) and of confirmed tracks on
+/// self-reported positions alone (one line for all).
+pub fn self_reported_warnings(tracks: &[TrackOutput]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut unvalidated = Vec::new();
+    for t in tracks.iter().filter(|t| t.status == TrackStatus::Confirmed) {
+        let Some(v) = self_reported_view(t) else {
+            continue;
+        };
+        let address = t.identity.address.map_or_else(
+            || "no address".to_string(),
+            |a| format!("address {:06X}", a.value),
+        );
+        if let (false, Some(d)) = (v.trusted, v.disagreement) {
+            out.push(format!(
+                "track {} ({address}): its ADS-B/AIS positions disagree with independent                  evidence (radar, multilateration) by {:.0} m against a stated σ of {:.0} m,                  since t = {:.1} s; they are not used until {} in a row agree (faulty                  avionics or spoofing)",
+                t.id,
+                d.distance_m,
+                d.stated_sigma_m,
+                v.distrusted_since_t.unwrap_or(d.t),
+                algo::tracking::identity::AGREEMENTS_TO_TRUST
+            ));
+        } else if !v.validated {
+            unvalidated.push(t.id);
+        }
+    }
+    if !unvalidated.is_empty() {
+        let shown: Vec<String> = unvalidated.iter().take(10).map(u64::to_string).collect();
+        out.push(format!(
+            "{} confirmed tracks are held by ADS-B/AIS alone, unvalidated (no radar or              multilateration update in the last {} s): {}{}",
+            unvalidated.len(),
+            algo::tracking::identity::INDEPENDENT_WINDOW_S,
+            shown.join(", "),
+            if unvalidated.len() > 10 { ", …" } else { "" }
+        ));
+    }
+    out
 }
 
 /// The plot that last updated a track, as the radar measured it.
@@ -191,7 +290,7 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
         },
         start_t: t.started,
         last_plot: t.last_plot.map(|p| LastPlotView {
-            radar: network.radar_ids[p.radar].clone(),
+            radar: network.sensor_name(p.radar),
             t: p.t,
             range_m: p.range,
             azimuth_deg: p.azimuth.to_degrees().rem_euclid(360.0),
@@ -199,6 +298,15 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
             radial_velocity_mps: p.radial_velocity,
         }),
         identity: super::ssr::view(&t.identity, t.t),
+        sources: t
+            .detections
+            .iter()
+            .map(|h| SourceView {
+                sensor: network.sensor_name(h.radar),
+                last_t: h.last,
+            })
+            .collect(),
+        self_reported: self_reported_view(t),
     }
 }
 

@@ -42,8 +42,9 @@ use super::{Fnv, Limits, SessionKind, events::PlotMark};
 use crate::{
     ServiceError,
     plot_fusion::{
-        LastPlotView, ModeView, Network, PlotInput, RadarAccuracyView, RadarBiasView, ReportInput,
-        SigmaView, SpecInput, SsrInput, TrackView, TrackerCounters,
+        DisagreementView, LastPlotView, ModeView, Network, PlotInput, RadarAccuracyView,
+        RadarBiasView, ReportInput, SelfReportedView, SigmaView, SourceView, SpecInput, SsrInput,
+        TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
         computation_error, mode_name, network, output,
@@ -95,8 +96,12 @@ const ACCURACY_FLAG: u32 = 1 << 24;
 /// Set in the frame count of a kept update whose radars' accuracy carries
 /// the detection probability (after each radar's σ).
 const DETECTION_FLAG: u32 = 1 << 23;
+/// Set in the frame count of a kept update whose tracks carry their
+/// sources and the check of their self-reported positions.
+const SOURCES_FLAG: u32 = 1 << 22;
 /// The flags every update this release writes carries.
-const WRITTEN_FLAGS: u32 = MODES_FLAG
+const WRITTEN_FLAGS: u32 = SOURCES_FLAG
+    | MODES_FLAG
     | PROVENANCE_FLAG
     | LATE_FLAG
     | REGISTRATION_FLAG
@@ -386,6 +391,7 @@ impl PlotFusionSession {
         warnings.extend(network::accuracy_warnings(&config, &accuracy));
         warnings.extend(realigned(&biases_before, &registration));
         warnings.extend(crate::plot_fusion::ssr::warnings(&live));
+        warnings.extend(crate::plot_fusion::output::self_reported_warnings(&live));
         warnings.extend(crate::plot_fusion::ssr::height_warnings(
             self.tracker(),
             &live,
@@ -501,6 +507,59 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
         w.opt(p.radial_velocity_mps, Writer::f64);
     });
     crate::plot_fusion::ssr::encode_view(w, t.identity.as_ref());
+    w.usize(t.sources.len());
+    for s in &t.sources {
+        w.str(&s.sensor);
+        w.f64(s.last_t);
+    }
+    w.opt(t.self_reported.as_ref(), |w, v| {
+        w.bool(v.trusted);
+        w.bool(v.validated);
+        for x in [
+            v.distrusted_since_t,
+            v.last_self_reported_t,
+            v.last_independent_t,
+        ] {
+            w.opt(x, Writer::f64);
+        }
+        w.opt(v.disagreement.as_ref(), |w, d| {
+            w.f64(d.t);
+            w.f64(d.distance_m);
+            w.f64(d.stated_sigma_m);
+        });
+    });
+}
+
+/// A kept track's sources and self-reported check (after its identity).
+fn decode_sources(
+    r: &mut Reader<'_>,
+) -> Result<(Vec<SourceView>, Option<SelfReportedView>), FormatError> {
+    let k = r.len(16)?;
+    let sources = (0..k)
+        .map(|_| {
+            Ok(SourceView {
+                sensor: r.str()?,
+                last_t: r.f64()?,
+            })
+        })
+        .collect::<Result<_, FormatError>>()?;
+    let self_reported = r.opt(|r| {
+        Ok(SelfReportedView {
+            trusted: r.bool()?,
+            validated: r.bool()?,
+            distrusted_since_t: r.opt(Reader::f64)?,
+            last_self_reported_t: r.opt(Reader::f64)?,
+            last_independent_t: r.opt(Reader::f64)?,
+            disagreement: r.opt(|r| {
+                Ok(DisagreementView {
+                    t: r.f64()?,
+                    distance_m: r.f64()?,
+                    stated_sigma_m: r.f64()?,
+                })
+            })?,
+        })
+    })?;
+    Ok((sources, self_reported))
 }
 
 /// What a kept update's tracks carry, by the release that kept it.
@@ -509,6 +568,7 @@ struct TrackFields {
     modes: bool,
     provenance: bool,
     identity: bool,
+    sources: bool,
 }
 
 fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, FormatError> {
@@ -570,6 +630,11 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
     } else {
         None
     };
+    let (sources, self_reported) = if fields.sources {
+        decode_sources(r)?
+    } else {
+        (Vec::new(), None)
+    };
     Ok(TrackView {
         id,
         status,
@@ -590,6 +655,8 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
         start_t,
         last_plot,
         identity,
+        sources,
+        self_reported,
     })
 }
 
@@ -1014,6 +1081,7 @@ impl SessionKind for PlotFusionSession {
             modes: frames & MODES_FLAG != 0,
             provenance: frames & PROVENANCE_FLAG != 0,
             identity: frames & IDENTITY_FLAG != 0,
+            sources: frames & SOURCES_FLAG != 0,
         };
         let frames = frames & !FLAGS;
         let pending_plots = r.u32()?;
@@ -1568,7 +1636,8 @@ pub(crate) mod tests {
                 | REGISTRATION_FLAG
                 | IDENTITY_FLAG
                 | ACCURACY_FLAG
-                | DETECTION_FLAG)
+                | DETECTION_FLAG
+                | SOURCES_FLAG)
                 .to_le_bytes()
         );
         // An update kept by the release before the IMM (no bit 30, tracks
