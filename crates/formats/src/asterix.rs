@@ -339,6 +339,38 @@ mod tests {
     }
 
     const SCENE: &[u8] = include_bytes!("../../../tests/fixtures/asterix/scene.bin");
+    /// libasterix's CAT021, CAT020 and mixed fixtures
+    /// (`checks/cat021_fixture.py`).
+    const COOPERATIVE: [&[u8]; 3] = [
+        include_bytes!("../../../tests/fixtures/cat021/adsb.bin"),
+        include_bytes!("../../../tests/fixtures/cat021/mlat.bin"),
+        include_bytes!("../../../tests/fixtures/cat021/mixed.bin"),
+    ];
+
+    /// Every number of the tracker's view of a cooperative report is
+    /// finite (they are made from integers: no NaN may travel).
+    fn finite_view(r: &impl CooperativeReport) {
+        let pairs = [r.lat_lon_deg(), r.velocity_en_mps(), r.position_sigma_m()];
+        let singles = [
+            r.time_of_applicability_s(),
+            r.geometric_height_m(),
+            r.flight_level(),
+        ];
+        let all = pairs
+            .iter()
+            .flatten()
+            .flat_map(|&(a, b)| [a, b])
+            .chain(singles.iter().flatten().copied());
+        for x in all {
+            assert!(x.is_finite(), "{x}");
+        }
+        let _ = (
+            r.address(),
+            r.callsign(),
+            r.mode_3a(),
+            r.simulated_or_test(),
+        );
+    }
 
     /// Offsets lie in the data, records come in data order, and nothing
     /// panics.
@@ -394,6 +426,45 @@ mod tests {
             data[len_at] ^= 0x5A;
             let d = decode(&data);
             sound(&data, &d);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(512))]
+
+        #[test]
+        fn mutated_cooperative_fixtures_give_errors_never_a_panic(
+            which in 0..3usize,
+            edits in crate::mutation::edits(),
+        ) {
+            let data = crate::mutation::apply(COOPERATIVE[which], &edits);
+            let d = decode(&data);
+            sound(&data, &d);
+            for r in &d.adsb_reports {
+                finite_view(r);
+                let _ = (r.tomr_position_precise_s(), r.tomr_velocity_precise_s());
+            }
+            for r in &d.mlat_reports {
+                finite_view(r);
+            }
+        }
+
+        #[test]
+        fn a_truncated_mixed_datagram_keeps_every_record_before_the_cut(
+            cut in 0..COOPERATIVE[2].len()
+        ) {
+            let mixed = COOPERATIVE[2];
+            let whole = decode(mixed);
+            let d = decode(&mixed[..cut]);
+            sound(&mixed[..cut], &d);
+            for r in &d.adsb_reports {
+                let same = whole.adsb_reports.iter().find(|w| w.offset == r.offset);
+                proptest::prop_assert_eq!(Some(r), same);
+            }
+            for r in &d.mlat_reports {
+                let same = whole.mlat_reports.iter().find(|w| w.offset == r.offset);
+                proptest::prop_assert_eq!(Some(r), same);
+            }
         }
     }
 }
