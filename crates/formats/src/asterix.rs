@@ -7,8 +7,8 @@
 //! A data block is `CAT (1 byte) | LEN (2 bytes, big-endian, the whole
 //! block) | records`; a record is an FSPEC and the items it flags, each of
 //! a length given by the category's User Application Profile (UAP): one
-//! walker ([`uap`]) reads the records of every category by its UAP, and
-//! a category only says how its items fill its record type. Every item
+//! walker (`asterix/uap.rs`) reads the records of every category by its
+//! UAP, and a category only says how its items fill its record. Every item
 //! of a UAP is skipped by its rule (fixed, extended, repetitive,
 //! explicit, compound), so items we do not use cost nothing and never
 //! desynchronise the record.
@@ -38,8 +38,8 @@
 //!
 //! Checked against libasterix's encoder and decoder
 //! (`checks/asterix_fixture.py`, `tests/api/asterix.rs` for CAT048/034;
-//! `checks/cat021_fixture.py` and the fixture tests of this module for
-//! CAT021/020). Why not the `asterix` crate: docs/plot-fusion.md,
+//! `checks/cat021_fixture.py`, `crates/formats/tests/cooperative_fixture.rs`
+//! for CAT021/020). Why not the `asterix` crate: docs/plot-fusion.md,
 //! "ASTERIX input".
 
 pub mod cat020;

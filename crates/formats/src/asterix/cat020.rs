@@ -311,9 +311,9 @@ impl Category for MlatReport {
 /// CAT020 as a tracker reads it: time of applicability I020/140;
 /// position I020/041 (`None` with only the Cartesian I020/042); height
 /// I020/105; velocity I020/202 (the system's x, y taken as east, north:
-/// exact at its reference point, rotated by the meridian convergence
-/// away from it, under a tenth of a degree within 10 km at mid
-/// latitudes); σ of the position I020/500's SDP (σx, σy).
+/// exact at its reference point, turned away from it by the meridian
+/// convergence Δλ·sin φ, 0.09° 10 km east of a reference at 45° N); σ of
+/// the position I020/500's SDP (σx, σy), in the same axes.
 impl CooperativeReport for MlatReport {
     fn offset(&self) -> usize {
         self.offset

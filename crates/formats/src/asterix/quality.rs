@@ -3,10 +3,9 @@
 //! NACv (and NUCr, the same thresholds) → the 95 % horizontal velocity
 //! bound and a σ per axis; NIC → the containment radius Rc.
 //!
-//! Tables: RTCA DO-260B / EUROCAE ED-102A (and the MASPS DO-242A they
-//! implement): NACp §2.2.3.2.7.2.7 (table 2-71 in DO-260B's numbering),
-//! NACv table 2-79 (NUCr's HFOMr table of DO-260 has the same
-//! thresholds), NIC table 2-70.
+//! Tables: the NACp, NACv and NIC tables of RTCA DO-260B / EUROCAE
+//! ED-102A (and of the MASPS, RTCA DO-242A, they implement); NUCr's HFOMr
+//! table of DO-260 has NACv's thresholds.
 //!
 //! **From a 95 % radius to σ.** A horizontal error with independent
 //! zero-mean Gaussian components of equal σ (a circular Gaussian) has a
@@ -151,7 +150,7 @@ mod tests {
 
     #[test]
     fn nic_gives_the_containment_radius() {
-        // DO-260B table 2-70: 11 < 7.5 m, 10 < 25 m, 9 < 75 m, 8 < 0.1 NM,
+        // DO-260B's NIC table: 11 < 7.5 m, 10 < 25 m, 9 < 75 m, 8 < 0.1 NM,
         // 7 < 0.2 NM, 6 < 0.6 NM, 5 < 1 NM, 4 < 2 NM, 3 < 4 NM, 2 < 8 NM,
         // 1 < 20 NM (1 NM = 1852 m).
         let nm = [
