@@ -1,6 +1,6 @@
 //! Fuzzing of the decoders of untrusted bytes on stable Rust (issue 53):
-//! ASTERIX CAT048/CAT034 (`formats::asterix::decode`), NMEA AIVDM/AIVDO
-//! (`formats::nmea::decode`), stored sessions of both kinds
+//! ASTERIX CAT048/CAT034/CAT021/CAT020 (`formats::asterix::decode`), NMEA
+//! AIVDM/AIVDO (`formats::nmea::decode`), stored sessions of both kinds
 //! (`Envelope::decode`), stored tracker state (`decode_tracker`), session
 //! events (`events::decode`) and the X.509 fields the server reads from a
 //! client certificate (`tls::x509`). No nightly toolchain and no
@@ -81,6 +81,12 @@ fn corpus(target: &str) -> anyhow::Result<Vec<Vec<u8>>> {
             // Correlation sessions of both earlier formats (68 and 60 kB).
             for f in ["session_v1.bin", "session_v2.bin"] {
                 seeds.push(std::fs::read(root.join("tests/fixtures").join(f))?);
+            }
+        }
+        "asterix" => {
+            // CAT021, CAT020 and a datagram of all four categories.
+            for f in ["adsb.bin", "mlat.bin", "mixed.bin"] {
+                seeds.push(std::fs::read(root.join("tests/fixtures/cat021").join(f))?);
             }
         }
         "event" => seeds.push(events::encode_deleted("acme", "0123456789abcdef")),

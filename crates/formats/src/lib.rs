@@ -1,5 +1,6 @@
 //! Byte formats of the radar fusion service: EUROCONTROL ASTERIX input
-//! ([`asterix`]: CAT048 target reports, CAT034 service messages), NMEA 0183
+//! ([`asterix`]: CAT048 target reports, CAT034 service messages, CAT021
+//! ADS-B and CAT020 multilateration target reports), NMEA 0183
 //! AIS sentences ([`nmea`]: `!AIVDM`/`!AIVDO`), and the stored-state codecs
 //! of streaming sessions ([`wire`], [`state`]).
 //!

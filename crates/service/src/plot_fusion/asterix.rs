@@ -1,5 +1,7 @@
 //! ASTERIX input of the plot-fusion tracker: raw CAT048/CAT034 bytes
-//! (decoded by `formats::asterix`) made into the tracker's plots.
+//! (decoded by `formats::asterix`) made into the tracker's plots. CAT021
+//! (ADS-B) and CAT020 (MLAT) records are decoded too but not fused yet:
+//! each is listed in `errors` as not used.
 //!
 //! Mapping. A radar declares its `sac`/`sic`; a target report of another
 //! SAC/SIC is counted `unmapped` (with a warning naming the pairs) and
@@ -244,6 +246,22 @@ pub fn plots(
     }
     let parallel = config.is_parallel();
     let mut errors: Vec<DecodeError> = decoded.errors;
+    // CAT021 and CAT020 are decoded but not fused yet: each record is
+    // reported, as its block was when the decoder skipped those categories.
+    let adsb = decoded
+        .adsb_reports
+        .iter()
+        .map(|r| (r.offset, "CAT021 ADS-B"));
+    let mlat = decoded
+        .mlat_reports
+        .iter()
+        .map(|r| (r.offset, "CAT020 MLAT"));
+    for (offset, kind) in adsb.chain(mlat) {
+        errors.push(DecodeError {
+            offset,
+            reason: format!("{kind} target report not used: the plot tracker takes CAT048 plots"),
+        });
+    }
     let mut out = AsterixPlots::default();
     let mut unmapped: BTreeSet<(u8, u8)> = BTreeSet::new();
     let mut previous: Option<f64> = None;
@@ -395,6 +413,25 @@ mod tests {
         assert_eq!(parse_date("2026-13-01"), None);
         assert_eq!(parse_date("2026-1-01"), None);
         assert_eq!(parse_date("+026-01-01"), None);
+    }
+
+    #[test]
+    fn cooperative_reports_are_listed_as_not_used() {
+        // A CAT021 record (I021/010 1/2) at offset 3 and a CAT020 record
+        // (I020/010 3/4) at offset 9: decoded, not fused, so each is an
+        // error by its offset, never silently dropped.
+        let data = [21, 0, 6, 0x80, 1, 2, 20, 0, 6, 0x80, 3, 4];
+        let network = Network::from_parts(None, vec![], vec![], 0.0);
+        let config = TrackerConfig::new(2, vec![]);
+        let out = plots(&network, &config, &data, Clock::DayStart(0.0), None);
+        let e = &out.summary.errors;
+        assert_eq!(e.len(), 2, "{e:?}");
+        assert_eq!(e[0].offset, 3);
+        assert!(e[0].reason.contains("CAT021"), "{e:?}");
+        assert_eq!(e[1].offset, 9);
+        assert!(e[1].reason.contains("CAT020"), "{e:?}");
+        assert_eq!(out.summary.blocks, 2);
+        assert!(out.plots.is_empty());
     }
 
     #[test]
