@@ -650,6 +650,8 @@ class Result:
     extra: dict = field(default_factory=dict)
     # Our service only: (track id, t) -> (Mode S address, flight level).
     identity: dict = field(default_factory=dict)
+    # Our service only: the JSON answer (checks/ed87.py scores its history).
+    response: dict | None = None
 
 
 def result_from_rows(name, times, rows, wall_s, compute_s=None, extra=None) -> Result:
@@ -922,6 +924,7 @@ def run_ours(scene: Scene, url: str, tracker: dict | None, name: str, timeout_s:
     res = result_from_rows(name, times, rows, wall,
                            None if compute_us is None else compute_us / 1e6, extra)
     res.identity = identity
+    res.response = out
     return res
 
 

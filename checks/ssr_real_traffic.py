@@ -29,8 +29,17 @@ tracker with SSR: the states whose track carries the right Mode S address
 error against the recorded barometric altitude (states with a pressure
 altitude): share within 50 ft, median, 95th percentile.
 
+``--ed87`` adds checks/ed87.py's surveillance-evaluation measures (ED-87 /
+OpenATS COMPASS: probability of update, tracks per target, breaks, ID
+changes, along- and across-track error, latency, extra and false tracks,
+identity correct / false / missing) of every run (our three, and Stone
+Soup's unless --ours-only) against the recorded flights: one summary row
+per run, then ours with SSR per flight.
+
 Usage (a server on --url; checks/.venv from checks/setup_traffic.sh):
     checks/.venv/bin/python checks/ssr_real_traffic.py --flights 10 --minutes 6
+    checks/.venv/bin/python checks/ssr_real_traffic.py --flights 6 --minutes 4 \
+        --ours-only --ed87 [--ed87-period-s 5]
 """
 from __future__ import annotations
 
@@ -106,37 +115,45 @@ def pressure_altitude_ft(truth, t: float, args) -> float:
     return (h - args.pressure_offset_m) / (1.0 + args.pressure_slope) / FT
 
 
+def true_identity(scene, j: int, t: float) -> dict:
+    """What truth j's transponder replies at time t, ungarbled: its Mode S
+    address and callsign (none for the 7000 pair) and its Mode 3/A code:
+    the recorded squawk at t (a made-up discrete code when the flight has
+    none recorded), changed at the middle of the window for every third
+    real flight."""
+    truth = scene.truths[j]
+    callsign, icao = truth.name.split("/")
+    if icao == "7000":
+        return {"mode_3a": "7000"}
+    out = {"mode_s_address": icao.upper()}
+    cs = callsign.strip().upper()
+    if cs and cs != "?" and len(cs) <= 8 and all(c.isalnum() for c in cs):
+        out["callsign"] = cs
+    code = None
+    squawks = scene.info["squawks"]
+    if truth.name in squawks:
+        ts, codes = squawks[truth.name]
+        k = int(np.searchsorted(ts, t, side="right")) - 1
+        code = codes[max(k, 0)]
+    if code is None:
+        code = f"{(j * 97 + 0o1000) % 0o7777:04o}"
+    if j % 3 == 0 and j < scene.info["real_flights"] and t >= scene.duration_s / 2.0:
+        code = f"{(int(code, 8) + 0o123) % 0o7777:04o}"
+    out["mode_3a"] = code
+    return out
+
+
 def add_ssr(scene, body: dict, args) -> dict:
     """The request's plots with the Mode S radars' SSR fields."""
     rng = np.random.default_rng(args.seed + 1000)
     mode_s = {r.id for r in scene.radars[:2]}
-    squawks = scene.info["squawks"]
-    changed = {j for j in range(0, len(scene.truths), 3) if j < scene.info["real_flights"]}
-    mid = scene.duration_s / 2.0
     for plot, p in zip(body["plots"], scene.plots):
         if p.truth is None or p.radar not in mode_s:
             continue
         truth = scene.truths[p.truth]
-        callsign, icao = truth.name.split("/")
         h_ft = pressure_altitude_ft(truth, p.t, args)
         fields = {"flight_level": round(h_ft / 25.0) * 25.0 / 100.0, "detection": "combined"}
-        if icao == "7000":
-            fields["mode_3a"] = "7000"
-        else:
-            fields["mode_s_address"] = icao.upper()
-            cs = callsign.strip().upper()
-            if cs and cs != "?" and len(cs) <= 8 and all(c.isalnum() for c in cs):
-                fields["callsign"] = cs
-            code = None
-            if truth.name in squawks:
-                ts, codes = squawks[truth.name]
-                k = int(np.searchsorted(ts, p.t, side="right")) - 1
-                code = codes[max(k, 0)]
-            if code is None:
-                code = f"{(p.truth * 97 + 0o1000) % 0o7777:04o}"
-            if p.truth in changed and p.t >= mid:
-                code = f"{(int(code, 8) + 0o123) % 0o7777:04o}"
-            fields["mode_3a"] = code
+        fields.update(true_identity(scene, p.truth, p.t))
         if "mode_3a" in fields and rng.uniform() < GARBLE_RATE:
             bad = int(fields["mode_3a"], 8) ^ (1 << int(rng.integers(12)))
             fields["mode_3a"] = f"{bad:04o}"
@@ -144,6 +161,71 @@ def add_ssr(scene, body: dict, args) -> dict:
                 fields["mode_3a_garbled"] = True
         plot.update(fields)
     return body
+
+
+def ed87_references(scene, args) -> list:
+    """The truths as checks/ed87.py references: WGS-84 position and height
+    on a 1-s grid (and the ends of each flight), expected where at least
+    one radar covers the flight, with the identity its transponder replies
+    (``true_identity``, ungarbled) and its pressure altitude."""
+    import ed87
+
+    refs = []
+    for j, truth in enumerate(scene.truths):
+        grid = np.unique(np.concatenate([[truth.t0], np.arange(math.ceil(truth.t0),
+                                                                math.floor(truth.t1) + 1.0),
+                                         [truth.t1]]))
+        lat, lon, h = rt.ecef_to_geodetic(truth.ecef(grid))
+        ident = [true_identity(scene, j, float(t)) for t in grid]
+        fl = (h - args.pressure_offset_m) / (1.0 + args.pressure_slope) / FT / 100.0
+        refs.append(ed87.Reference(
+            truth.name, grid, lat, lon, h,
+            address=[i.get("mode_s_address") for i in ident],
+            callsign=[i.get("callsign") for i in ident],
+            mode_3a=[i.get("mode_3a") for i in ident],
+            flight_level=fl, expected=scene.covered(truth, grid)))
+    return refs
+
+
+def ed87_report(scene, runs: list, args) -> dict:
+    """checks/ed87.py's measures of every run against the recorded flights
+    (ours from the answer's history; Stone Soup's from its tracks' states,
+    without identity): one summary row per run, then the first run's (ours
+    with SSR) full table."""
+    import ed87
+
+    refs = ed87_references(scene, args)
+    cfg = ed87.Config(max_distance_m=args.cutoff_m, period_s=args.ed87_period_s,
+                      duration_s=scene.duration_s)
+    print()
+    print(f"ED-87 / COMPASS-style measures (checks/ed87.py) against the {len(refs)} flights "
+          f"(1-s reference, expected where a radar covers them); association within "
+          f"{cfg.max_distance_m:g} m horizontally, identity first; PU per {cfg.period_s:g} s; "
+          f"track states of the history (each (id, t) once); reported latency = history "
+          f"instant - t (0 by construction in the batch call: every state is at its processing "
+          f"instant), implied latency = -along-track error / ground speed")
+    print()
+    print(ed87.summary_header())
+    out = {}
+    origin = (scene.origin.lat_deg, scene.origin.lon_deg, scene.origin.height_m)
+    for res in runs:
+        if res.response is not None:
+            updates, _ = ed87.updates_from_response(res.response)
+        else:  # Stone Soup: its tracks' states in the fusion ENU frame, each (id, t) once
+            seen, recs = set(), []
+            for k in range(len(res.t)):
+                key = (res.ids[k], float(res.t[k]))
+                if key not in seen:
+                    seen.add(key)
+                    recs.append({"t": float(res.t[k]), "track": str(res.ids[k]),
+                                 "position_m": res.pos[k].tolist(),
+                                 "updated": bool(res.updated[k])})
+            updates = ed87.make_updates(recs, origin)
+        out[res.name] = ed87.evaluate(refs, updates, cfg)
+        print(ed87.summary_row(res.name, out[res.name]))
+    print()
+    print(ed87.text_report(out[runs[0].name], title=f"{runs[0].name}:"))
+    return out
 
 
 def identity_figures(scene, res, ident: dict, cutoff: float, args) -> dict:
@@ -232,6 +314,10 @@ def main() -> int:
                     help="geometric minus pressure altitude at h_p = 0 (m)")
     ap.add_argument("--pressure-slope", type=float, default=0.0,
                     help="geometric height per pressure altitude beyond 1 (ISA+dT: dT/288)")
+    ap.add_argument("--ed87", action="store_true",
+                    help="also print checks/ed87.py's measures of our runs (ED-87 / COMPASS)")
+    ap.add_argument("--ed87-period-s", type=float, default=5.0,
+                    help="the probability of update's period (s)")
     ap.add_argument("--json-out")
     args = ap.parse_args()
 
@@ -303,10 +389,12 @@ def main() -> int:
               f"{args.pressure_offset_m} m, slope {args.pressure_slope})")
     for w in ours_ssr.extra.get("warnings") or []:
         print(f"  warning: {w}")
+    ed87_figures = ed87_report(scene, results, args) if args.ed87 else None
     if args.json_out:
         with open(args.json_out, "w") as fh:
             json.dump({"scene": {k: v for k, v in scene.info.items() if k != "squawks"},
-                       "trackers": figures, "identity": idf}, fh, indent=1, default=str)
+                       "trackers": figures, "identity": idf, "ed87": ed87_figures},
+                      fh, indent=1, default=str)
     return 0
 
 
