@@ -1,7 +1,7 @@
 //! ASTERIX input of the plot-fusion tracker: raw CAT048/CAT034 bytes
-//! (decoded by `formats::asterix`) made into the tracker's plots. CAT021
-//! (ADS-B) and CAT020 (MLAT) records are decoded too but not fused yet:
-//! each is listed in `errors` as not used.
+//! (decoded by `formats::asterix`) made into the tracker's plots, and
+//! CAT021 (ADS-B) and CAT020 (MLAT) records into its cooperative reports
+//! ([`cooperative`]).
 //!
 //! Mapping. A radar declares its `sac`/`sic`; a target report of another
 //! SAC/SIC is counted `unmapped` (with a warning naming the pairs) and
@@ -30,7 +30,9 @@ use std::collections::BTreeSet;
 use super::{Network, PlotInput};
 use crate::{ServiceError, Violations};
 use algo::tracking::{Plot, TrackerConfig};
-use formats::asterix::{self, DecodeError, NORTH_MARKER, SECTOR_CROSSING};
+use formats::asterix::{
+    self, DecodeError, NORTH_MARKER, SECTOR_CROSSING, quality::nacv_sigma_mps,
+};
 
 /// Seconds in a day.
 const DAY_S: f64 = 86_400.0;
@@ -245,23 +247,7 @@ pub fn plots(
         }
     }
     let parallel = config.is_parallel();
-    let mut errors: Vec<DecodeError> = decoded.errors;
-    // CAT021 and CAT020 are decoded but not fused yet: each record is
-    // reported, as its block was when the decoder skipped those categories.
-    let adsb = decoded
-        .adsb_reports
-        .iter()
-        .map(|r| (r.offset, "CAT021 ADS-B"));
-    let mlat = decoded
-        .mlat_reports
-        .iter()
-        .map(|r| (r.offset, "CAT020 MLAT"));
-    for (offset, kind) in adsb.chain(mlat) {
-        errors.push(DecodeError {
-            offset,
-            reason: format!("{kind} target report not used: the plot tracker takes CAT048 plots"),
-        });
-    }
+    let mut errors: Vec<DecodeError> = decoded.errors.clone();
     let mut out = AsterixPlots::default();
     let mut unmapped: BTreeSet<(u8, u8)> = BTreeSet::new();
     let mut previous: Option<f64> = None;
@@ -360,6 +346,14 @@ pub fn plots(
             }
         }
     }
+    cooperative(
+        &decoded,
+        (network, config),
+        (&mut previous, clock, reception),
+        &mut s,
+        &mut errors,
+        &mut out,
+    );
     s.plots = out.plots.len();
     errors.sort_by_key(|e| e.offset);
     if !unmapped.is_empty() {
@@ -395,6 +389,107 @@ pub fn plots(
     out
 }
 
+/// The ADS-B (CAT021) and multilateration (CAT020) records of `decoded`
+/// made into the tracker's cooperative reports: timed like CAT048 records
+/// (their time of applicability, nearest the previous record's time), a
+/// simulated or test target skipped (`test_targets`), one without a time
+/// or a position `incomplete`, one that fails validation (an ADS-B report
+/// without NACp, say) `rejected` and listed in `errors`. They count among
+/// `target_reports` and, used, among `plots`. The velocity of an ADS-B
+/// report is used with its NACv; a multilateration report's is not (CAT020
+/// states no accuracy for it).
+fn cooperative(
+    decoded: &asterix::Decoded,
+    (network, config): (&Network, &TrackerConfig),
+    (previous, clock, reception): (&mut Option<f64>, Clock, Option<Reception>),
+    s: &mut AsterixSummary,
+    errors: &mut Vec<DecodeError>,
+    out: &mut AsterixPlots,
+) {
+    use formats::asterix::CooperativeReport;
+    let adsb = decoded.adsb_reports.iter().map(|r| {
+        let nacv = r.quality.and_then(|q| nacv_sigma_mps(q.nucr_nacv));
+        (r as &dyn CooperativeReport, "adsb", nacv)
+    });
+    let mlat = decoded
+        .mlat_reports
+        .iter()
+        .map(|r| (r as &dyn CooperativeReport, "mlat", None));
+    for (r, source, sigma_velocity) in adsb.chain(mlat) {
+        s.records += 1;
+        s.target_reports += 1;
+        if r.simulated_or_test() {
+            s.test_targets += 1;
+            continue;
+        }
+        let (Some(tod), Some((lat, lon))) = (r.time_of_applicability_s(), r.lat_lon_deg()) else {
+            s.incomplete += 1;
+            continue;
+        };
+        let t = match (*previous, clock) {
+            (Some(p), _) => nearest(tod, p),
+            (None, Clock::DayStart(d)) => d + tod,
+            (None, Clock::Near(n)) => nearest(tod, n),
+        };
+        if let Some(rx) = reception {
+            let off = t - rx.t;
+            if off.is_nan() || off.abs() > rx.max_offset_s {
+                s.rejected += 1;
+                errors.push(DecodeError {
+                    offset: r.offset(),
+                    reason: format!(
+                        "{source} report refused: its time of day is {off:.1} s from the time \
+                         of reception, beyond {} s (--asterix-max-clock-offset-s)",
+                        rx.max_offset_s
+                    ),
+                });
+                continue;
+            }
+        }
+        let velocity = r.velocity_en_mps().zip(sigma_velocity);
+        let input = PlotInput {
+            t: Some(t),
+            ssr: super::SsrInput {
+                mode_3a: r.mode_3a().map(|c| format!("{c:04o}")),
+                flight_level: r.flight_level(),
+                mode_s_address: r.address().map(|a| format!("{a:06X}")),
+                callsign: r.callsign().map(str::to_string),
+                ..Default::default()
+            },
+            report: Some(super::ReportInput {
+                source: Some(source.to_string()),
+                lat_deg: Some(lat),
+                lon_deg: Some(lon),
+                geometric_height_m: r.geometric_height_m(),
+                velocity_east_mps: velocity.map(|v| v.0.0),
+                velocity_north_mps: velocity.map(|v| v.0.1),
+                sigma_velocity_mps: velocity.map(|v| v.1),
+                // The larger axis's σ: the report's error ellipse taken
+                // as a circle that holds it.
+                sigma_m: r.position_sigma_m().map(|(e, n)| e.max(n)),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        match network.plot(&input, config, config.is_parallel()) {
+            Ok(p) => {
+                *previous = Some(t);
+                s.first_t.get_or_insert(t);
+                s.last_t = Some(t);
+                out.plots.push(p);
+                out.offsets.push(r.offset());
+            }
+            Err((name, message)) => {
+                s.rejected += 1;
+                errors.push(DecodeError {
+                    offset: r.offset(),
+                    reason: format!("{source} report refused: {name} {message}"),
+                });
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -416,22 +511,53 @@ mod tests {
     }
 
     #[test]
-    fn cooperative_reports_are_listed_as_not_used() {
-        // A CAT021 record (I021/010 1/2) at offset 3 and a CAT020 record
-        // (I020/010 3/4) at offset 9: decoded, not fused, so each is an
-        // error by its offset, never silently dropped.
+    fn cooperative_records_without_time_or_position_are_incomplete() {
+        // A CAT021 record (I021/010 1/2 only) at offset 3 and a CAT020
+        // record (I020/010 3/4) at offset 9: no time, no position.
         let data = [21, 0, 6, 0x80, 1, 2, 20, 0, 6, 0x80, 3, 4];
         let network = Network::from_parts(None, vec![], vec![], 0.0);
         let config = TrackerConfig::new(2, vec![]);
         let out = plots(&network, &config, &data, Clock::DayStart(0.0), None);
-        let e = &out.summary.errors;
-        assert_eq!(e.len(), 2, "{e:?}");
-        assert_eq!(e[0].offset, 3);
-        assert!(e[0].reason.contains("CAT021"), "{e:?}");
-        assert_eq!(e[1].offset, 9);
-        assert!(e[1].reason.contains("CAT020"), "{e:?}");
+        assert!(out.summary.errors.is_empty(), "{:?}", out.summary.errors);
+        assert_eq!(out.summary.incomplete, 2);
+        assert_eq!(out.summary.target_reports, 2);
         assert_eq!(out.summary.blocks, 2);
         assert!(out.plots.is_empty());
+    }
+
+    /// libasterix's CAT021 fixture (checks/cat021_fixture.py): its first
+    /// record, at 47.12345677° N 8.65432207° E (I021/131), time of
+    /// applicability 43,210.0078125 s, NACp 9, address 4B1A2C (4,921,900),
+    /// becomes an ADS-B report of the fusion frame at that point, σ =
+    /// 30 m / 2.4477 = 12.26 m.
+    #[test]
+    fn an_adsb_record_becomes_a_cooperative_report() {
+        let data = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../tests/fixtures/cat021/adsb.bin"
+        ))
+        .unwrap();
+        let frame = algo::geo::LocalFrame::new(
+            algo::geo::Ellipsoid::WGS84,
+            47.12345676496625f64.to_radians(),
+            8.654322065412998f64.to_radians(),
+            10_706.1,
+        )
+        .unwrap();
+        let network = Network::from_parts(Some(frame), vec![], vec![], 0.0);
+        let config = TrackerConfig::new(2, vec![]);
+        let out = plots(&network, &config, &data, Clock::DayStart(0.0), None);
+        let first = out
+            .plots
+            .first()
+            .unwrap_or_else(|| panic!("{:?}", out.summary));
+        let r = first.report.expect("a report");
+        assert_eq!(r.kind, algo::tracking::ReportKind::Adsb);
+        assert_eq!(first.radar, config.report_sensor(r.kind));
+        assert!((first.t - 43_210.007_812_5).abs() < 1e-9);
+        assert!(r.position.iter().all(|v| v.abs() < 0.01), "{:?}", r.position);
+        assert!((r.sigma_horizontal - 30.0 / 2.447_746_830_680_816).abs() < 1e-9);
+        assert_eq!(first.identity.address, Some(4_921_900));
     }
 
     #[test]

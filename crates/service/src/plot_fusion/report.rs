@@ -27,31 +27,13 @@ use super::network::Network;
 use algo::tracking::{Identity, Plot, Report, ReportKind, TrackerConfig};
 use formats::wire::{FormatError, Reader, Writer};
 
-/// The σ per horizontal axis of a 95 % radius (circular Gaussian):
-/// r₉₅ = σ √(−2 ln 0.05).
-pub const CIRCULAR_95: f64 = 2.447_746_830_680_816;
+pub use formats::asterix::quality::{K95 as CIRCULAR_95, nacp_sigma_m, nacv_sigma_mps};
+
 /// The σ of a one-dimensional 95 % bound: 1.96 σ.
 const LINEAR_95: f64 = 1.959_963_984_540_054;
 
 /// One nautical mile (m).
 const NM: f64 = 1852.0;
-
-/// NACp's 95 % horizontal radius EPU (m), index = NACp; `None` for 0
-/// (unknown).
-const EPU_M: [Option<f64>; 12] = [
-    None,
-    Some(10.0 * NM),
-    Some(4.0 * NM),
-    Some(2.0 * NM),
-    Some(NM),
-    Some(0.5 * NM),
-    Some(0.3 * NM),
-    Some(0.1 * NM),
-    Some(0.05 * NM),
-    Some(30.0),
-    Some(10.0),
-    Some(3.0),
-];
 
 /// NACp's 95 % vertical bound VEPU (m) for NACp 9 to 11.
 fn vepu_m(nacp: u8) -> Option<f64> {
@@ -61,28 +43,6 @@ fn vepu_m(nacp: u8) -> Option<f64> {
         11 => Some(4.0),
         _ => None,
     }
-}
-
-/// NACv's 95 % horizontal velocity bound (m/s), index = NACv.
-const NACV_MPS: [Option<f64>; 5] = [None, Some(10.0), Some(3.0), Some(1.0), Some(0.3)];
-
-/// σ per horizontal axis (m) of a NACp, `None` for 0 (unknown) or out of
-/// range.
-pub fn nacp_sigma_m(nacp: u8) -> Option<f64> {
-    EPU_M
-        .get(usize::from(nacp))
-        .copied()
-        .flatten()
-        .map(|e| e / CIRCULAR_95)
-}
-
-/// σ per horizontal axis (m/s) of a NACv, `None` for 0 or out of range.
-pub fn nacv_sigma_mps(nacv: u8) -> Option<f64> {
-    NACV_MPS
-        .get(usize::from(nacv))
-        .copied()
-        .flatten()
-        .map(|e| e / CIRCULAR_95)
 }
 
 /// σ (m) of an AIS position by its accuracy flag (module documentation).
@@ -425,19 +385,36 @@ mod tests {
     use super::*;
 
     #[test]
-    fn nacp_and_nacv_give_the_sigma_of_their_95_percent_bounds() {
-        // σ = EPU / √(−2 ln 0.05): NACp 9, EPU 30 m → 12.256 m; NACp 8,
-        // 0.05 NM = 92.6 m → 37.831 m; NACp 11, 3 m → 1.2256 m.
-        assert!((nacp_sigma_m(9).unwrap() - 12.256_272).abs() < 1e-5);
-        assert!((nacp_sigma_m(8).unwrap() - 37.830_906).abs() < 1e-5);
-        assert!((nacp_sigma_m(11).unwrap() - 1.225_627).abs() < 1e-5);
-        assert_eq!(nacp_sigma_m(0), None);
-        assert_eq!(nacp_sigma_m(12), None);
-        // NACv 2: 3 m/s → 1.2256 m/s.
-        assert!((nacv_sigma_mps(2).unwrap() - 1.225_627).abs() < 1e-5);
-        assert_eq!(nacv_sigma_mps(0), None);
+    fn an_adsb_report_takes_the_sigma_of_its_nacp_and_nacv() {
+        // NACp 9: EPU 30 m, σ = 30 / √(−2 ln 0.05) = 30 / 2.4477 =
+        // 12.2562 m; NACv 2: 3 m/s, σ 1.2256 m/s; NACp 9's VEPU 45 m
+        // (95 %, one-dimensional): σ = 45 / 1.96 = 22.96 m.
+        let r = ReportInput {
+            source: Some("adsb".into()),
+            nacp: Some(9),
+            nacv: Some(2),
+            velocity_east_mps: Some(200.0),
+            velocity_north_mps: Some(0.0),
+            geometric_height_m: Some(10_000.0),
+            ..Default::default()
+        };
+        let kind = r.kind().unwrap();
+        assert!((r.sigma_horizontal(kind).unwrap() - 12.256_169).abs() < 1e-5);
+        assert!((r.velocity(kind).unwrap().unwrap().1 - 1.225_617).abs() < 1e-5);
+        assert!((r.sigma_vertical().unwrap().unwrap() - 22.959_605).abs() < 1e-5);
         // The radius holds 95 %: 1 − exp(−(2.4477)²/2) = 0.95.
         assert!((1.0 - (-CIRCULAR_95 * CIRCULAR_95 / 2.0).exp() - 0.95).abs() < 1e-12);
+        // No NACp, no σ: refused naming the field.
+        let none = ReportInput {
+            nacp: None,
+            ..r.clone()
+        };
+        assert_eq!(none.sigma_horizontal(kind).unwrap_err().0, "nacp");
+        let zero = ReportInput {
+            nacp: Some(0),
+            ..r
+        };
+        assert_eq!(zero.sigma_horizontal(kind).unwrap_err().0, "nacp");
     }
 
     #[test]
