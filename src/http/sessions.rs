@@ -229,7 +229,8 @@ pub struct PlotFusionBatchUpdate {
 /// A plot of a batch, placed for display.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct PlotPosition {
-    /// Index of its radar in the session's `radars`.
+    /// Index of its radar in the session's `radars`; a cooperative
+    /// report's is past them (radars' count + 0 ADS-B, 1 MLAT, 2 AIS).
     pub radar: u32,
     pub t: f64,
     /// In the fusion ENU frame (m); a 2D plot at its slant range on the

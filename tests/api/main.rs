@@ -8,6 +8,7 @@ mod auth;
 mod cat062;
 mod compression;
 mod connections;
+mod cooperative;
 mod correlation;
 mod dimension;
 mod docs_examples;

@@ -270,7 +270,39 @@ pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
         }),
         history: false,
         asterix: None,
-        cooperative: Vec::new(),
+        cooperative: req["cooperative"]
+            .as_array()
+            .map(|a| a.iter().map(proto_report).collect())
+            .unwrap_or_default(),
+    }
+}
+
+/// A JSON cooperative report as its protobuf message.
+pub(crate) fn proto_report(r: &Value) -> pb::CooperativeReport {
+    let o = |k: &str| r[k].as_f64();
+    let s = |k: &str| r[k].as_str().map(str::to_string);
+    let u = |k: &str| r[k].as_u64().map(|v| v as u32);
+    pb::CooperativeReport {
+        source: r["source"].as_str().unwrap_or_default().into(),
+        t: r["t"].as_f64().unwrap_or(f64::NAN),
+        lat_deg: r["lat_deg"].as_f64().unwrap_or(f64::NAN),
+        lon_deg: r["lon_deg"].as_f64().unwrap_or(f64::NAN),
+        geometric_height_m: o("geometric_height_m"),
+        velocity_east_mps: o("velocity_east_mps"),
+        velocity_north_mps: o("velocity_north_mps"),
+        vertical_rate_mps: o("vertical_rate_mps"),
+        sog_kn: o("sog_kn"),
+        cog_deg: o("cog_deg"),
+        nacp: u("nacp"),
+        nacv: u("nacv"),
+        position_accurate: r["position_accurate"].as_bool(),
+        sigma_m: o("sigma_m"),
+        sigma_height_m: o("sigma_height_m"),
+        sigma_velocity_mps: o("sigma_velocity_mps"),
+        mode_s_address: s("mode_s_address"),
+        callsign: s("callsign"),
+        mode_3a: s("mode_3a"),
+        flight_level: o("flight_level"),
     }
 }
 

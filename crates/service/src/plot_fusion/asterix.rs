@@ -30,9 +30,7 @@ use std::collections::BTreeSet;
 use super::{Network, PlotInput};
 use crate::{ServiceError, Violations};
 use algo::tracking::{Plot, TrackerConfig};
-use formats::asterix::{
-    self, DecodeError, NORTH_MARKER, SECTOR_CROSSING, quality::nacv_sigma_mps,
-};
+use formats::asterix::{self, DecodeError, NORTH_MARKER, SECTOR_CROSSING, quality::nacv_sigma_mps};
 
 /// Seconds in a day.
 const DAY_S: f64 = 86_400.0;
@@ -555,7 +553,11 @@ mod tests {
         assert_eq!(r.kind, algo::tracking::ReportKind::Adsb);
         assert_eq!(first.radar, config.report_sensor(r.kind));
         assert!((first.t - 43_210.007_812_5).abs() < 1e-9);
-        assert!(r.position.iter().all(|v| v.abs() < 0.01), "{:?}", r.position);
+        assert!(
+            r.position.iter().all(|v| v.abs() < 0.01),
+            "{:?}",
+            r.position
+        );
         assert!((r.sigma_horizontal - 30.0 / 2.447_746_830_680_816).abs() < 1e-9);
         assert_eq!(first.identity.address, Some(4_921_900));
     }

@@ -611,8 +611,11 @@ pub fn outcome_warnings(
 ) -> Vec<String> {
     let mut warnings = Vec::new();
     let mut seen = vec![false; network.radar_ids.len()];
+    // Radars only (a cooperative report's sensor is past them).
     for p in plots {
-        seen[p.radar] = true;
+        if let Some(s) = seen.get_mut(p.radar) {
+            *s = true;
+        }
     }
     if !plots.is_empty() {
         let silent: Vec<&str> = network

@@ -410,10 +410,7 @@ mod tests {
             ..r.clone()
         };
         assert_eq!(none.sigma_horizontal(kind).unwrap_err().0, "nacp");
-        let zero = ReportInput {
-            nacp: Some(0),
-            ..r
-        };
+        let zero = ReportInput { nacp: Some(0), ..r };
         assert_eq!(zero.sigma_horizontal(kind).unwrap_err().0, "nacp");
     }
 

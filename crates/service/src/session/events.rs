@@ -75,8 +75,9 @@ impl Default for WatchLimits {
 }
 
 /// A plot of a batch, where it is, for display: the fusion frame's ENU
-/// position (m), its radar (index into the session's radars) and time. 2D
-/// plots are placed at their slant range on the horizontal plane.
+/// position (m), its radar (index into the session's radars; a
+/// cooperative report's sensor past them) and time. 2D plots are placed at
+/// their slant range on the horizontal plane, reports where they say.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlotMark {
     pub radar: u32,

@@ -233,7 +233,15 @@ pub struct SessionView {
 /// Where a plot is, for display: its ENU position from its radar's site; a
 /// 2D plot at its slant range on the horizontal plane, at the 2D target
 /// height.
-fn plot_mark(p: &algo::tracking::Plot, site: [f64; 3], target_height: f64) -> PlotMark {
+fn plot_mark(p: &algo::tracking::Plot, sites: &[[f64; 3]], target_height: f64) -> PlotMark {
+    let Some(site) = sites.get(p.radar).copied() else {
+        // A cooperative report: where it says.
+        return PlotMark {
+            radar: p.radar as u32,
+            t: p.t,
+            position: p.report.map_or([0.0; 3], |r| r.position),
+        };
+    };
     let (ground, up) = match p.elevation {
         Some(el) => (p.range * el.cos(), site[2] + p.range * el.sin()),
         None => (p.range, target_height),
@@ -331,7 +339,7 @@ impl PlotFusionSession {
             .iter()
             .enumerate()
             .filter(|(i, _)| !late.contains(i))
-            .map(|(_, p)| plot_mark(p, sites[p.radar], self.network.target_height))
+            .map(|(_, p)| plot_mark(p, &sites, self.network.target_height))
             .collect();
         let live = self.tracker().tracks();
         if push.refused > 0 {

@@ -1,0 +1,227 @@
+//! Cooperative reports through the real servers: ADS-B beside Mode S
+//! radars on REST, gRPC and a session; one track per aircraft, its
+//! sources, a spoofed ADS-B flagged with a warning; bad report fields
+//! named on both transports.
+
+use serde_json::{Value, json};
+use tonic::Code;
+
+use crate::helpers::{assert_problem, grpc_fields, problem_fields, spawn_app};
+use crate::plot_fusion::plot_scene::{
+    ORIGIN, origin_frame, plots_tagged, radars_json, targets, two_radars,
+};
+use crate::plot_fusion::{create_session, proto_request, session_create};
+use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
+
+const PATH: &str = "/v1/plot-fusion/track";
+const ADDRESSES: [&str; 3] = ["4CA2D1", "3C6586", "A1B2C3"];
+/// Target 1's ADS-B is 3 km north of it from this time on (spoofed).
+const SPOOF_FROM: f64 = 60.0;
+const SPOOF_M: f64 = 3000.0;
+
+/// ADS-B reports of each target every second of its life (offset by
+/// 0.1 s per target), NACp 9 (σ 12 m) but without noise, NACv 2, with its
+/// address and flight level; target 1's moved 3 km north from
+/// [`SPOOF_FROM`].
+fn adsb(duration: f64) -> Vec<Value> {
+    let frame = origin_frame();
+    let mut out = Vec::new();
+    for (i, g) in targets().iter().enumerate() {
+        let mut t = g.start.max(0.0) + 0.1 * i as f64;
+        while t <= duration.min(g.end) {
+            let p = g.at(t);
+            let north = if i == 1 && t >= SPOOF_FROM {
+                SPOOF_M
+            } else {
+                0.0
+            };
+            let (lat, lon, h) = frame.enu_to_geodetic([p[0], p[1] + north, p[2]]).unwrap();
+            out.push(json!({
+                "source": "adsb", "t": t,
+                "lat_deg": lat.to_degrees(), "lon_deg": lon.to_degrees(),
+                "geometric_height_m": h,
+                "velocity_east_mps": g.v[0], "velocity_north_mps": g.v[1],
+                "nacp": 9, "nacv": 2,
+                "mode_s_address": ADDRESSES[i], "flight_level": 262.5,
+            }));
+            t += 1.0;
+        }
+    }
+    out
+}
+
+/// Two 2D Mode S radars (every target plot carries its address) and the
+/// targets' ADS-B.
+fn request(duration: f64) -> Value {
+    let radars = two_radars(false);
+    let tag = |i: usize, _t: f64| {
+        Some(
+            json!({"mode_s_address": ADDRESSES[i], "flight_level": 262.5,
+                    "detection": "combined"}),
+        )
+    };
+    json!({
+        "origin": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
+        "radars": radars_json(&radars, 1e-7),
+        "plots": plots_tagged(&radars, &targets(), duration, 1.0, 11, &tag),
+        "cooperative": adsb(duration),
+    })
+}
+
+fn confirmed(tracks: &Value) -> Vec<&Value> {
+    tracks
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["status"] == "confirmed")
+        .collect()
+}
+
+#[tokio::test]
+async fn adsb_beside_mode_s_radars_is_one_track_per_aircraft_and_a_spoof_is_flagged() {
+    let app = spawn_app().await;
+    let req = request(95.0);
+    let out = app.post_ok(PATH, &req).await;
+    let tracks = confirmed(&out["tracks"]);
+    // Targets 0, 1 and 2 (30–100 s) are alive at 95 s: one track each.
+    let mut addresses: Vec<&str> = tracks
+        .iter()
+        .map(|t| t["identity"]["mode_s_address"]["value"].as_str().unwrap())
+        .collect();
+    addresses.sort_unstable();
+    assert_eq!(
+        addresses,
+        vec!["3C6586", "4CA2D1", "A1B2C3"],
+        "{}",
+        out["tracks"]
+    );
+    let by = |a: &str| {
+        *tracks
+            .iter()
+            .find(|t| t["identity"]["mode_s_address"]["value"] == a)
+            .unwrap()
+    };
+    // Its sources: both radars and ADS-B, each with its last time.
+    let sensors: Vec<&str> = by("4CA2D1")["sources"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["sensor"].as_str().unwrap())
+        .collect();
+    assert_eq!(sensors, vec!["west", "east", "adsb"]);
+    let honest = &by("4CA2D1")["self_reported"];
+    assert_eq!(honest["trusted"], true, "{honest}");
+    assert_eq!(honest["validated"], true, "{honest}");
+    // The spoofed aircraft: flagged within 30 s of the spoof, 3 km off,
+    // and its track on the radars' positions (truth, not 3 km north).
+    let spoofed = by("3C6586");
+    let check = &spoofed["self_reported"];
+    assert_eq!(check["trusted"], false, "{check}");
+    let since = check["distrusted_since_t"].as_f64().unwrap();
+    assert!((SPOOF_FROM..=SPOOF_FROM + 30.0).contains(&since), "{since}");
+    let d = check["disagreement"]["distance_m"].as_f64().unwrap();
+    assert!((d - SPOOF_M).abs() < 600.0, "{d}");
+    let at = spoofed["t"].as_f64().unwrap();
+    let truth = targets()[1].at(at);
+    let s = &spoofed["state"];
+    let off = (s[0].as_f64().unwrap() - truth[0]).hypot(s[2].as_f64().unwrap() - truth[1]);
+    assert!(off < 600.0, "{off} m from the aircraft");
+    let warnings = out["warnings"].to_string();
+    assert!(
+        warnings.contains(&format!("track {} (address 3C6586)", spoofed["id"])),
+        "{warnings}"
+    );
+
+    // gRPC: the same tracks, sources and flags.
+    let mut client = PlotFusionServiceClient::new(app.channel().await);
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    let g = client.track(p).await.unwrap().into_inner();
+    let rest: Vec<(u64, Option<bool>, usize)> = out["tracks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| {
+            (
+                t["id"].as_u64().unwrap(),
+                t["self_reported"]["trusted"].as_bool(),
+                t["sources"].as_array().map_or(0, Vec::len),
+            )
+        })
+        .collect();
+    let grpc: Vec<(u64, Option<bool>, usize)> = g
+        .tracks
+        .iter()
+        .map(|t| {
+            (
+                t.id,
+                t.self_reported.as_ref().map(|v| v.trusted),
+                t.sources.len(),
+            )
+        })
+        .collect();
+    assert_eq!(rest, grpc);
+
+    // A session fed in batches of one second (the log carries the reports)
+    // ends with the batch call's tracks.
+    let created = create_session(&app, &session_create(&req)).await;
+    let id = created["id"].as_str().unwrap().to_string();
+    let mut all: Vec<(f64, &str, &Value)> = Vec::new();
+    for p in req["plots"].as_array().unwrap() {
+        all.push((p["t"].as_f64().unwrap(), "plots", p));
+    }
+    for r in req["cooperative"].as_array().unwrap() {
+        all.push((r["t"].as_f64().unwrap(), "cooperative", r));
+    }
+    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut sequence = 0;
+    for second in all.chunk_by(|a, b| a.0.floor() == b.0.floor()) {
+        sequence += 1;
+        let pick = |list: &str| -> Vec<&Value> {
+            second.iter().filter(|x| x.1 == list).map(|x| x.2).collect()
+        };
+        let body = json!({"sequence": sequence, "plots": pick("plots"),
+                          "cooperative": pick("cooperative")});
+        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let session = confirmed(&state["plot_fusion"]["tracks"]);
+    assert_eq!(session.len(), 3, "{}", state["plot_fusion"]["tracks"]);
+    let flagged: Vec<&Value> = session
+        .iter()
+        .filter(|t| t["self_reported"]["trusted"] == false)
+        .copied()
+        .collect();
+    assert_eq!(flagged.len(), 1);
+    assert_eq!(flagged[0]["identity"]["mode_s_address"]["value"], "3C6586");
+}
+
+#[tokio::test]
+async fn bad_report_fields_are_named_on_both_transports() {
+    let app = spawn_app().await;
+    let mut req = request(20.0);
+    let reports = req["cooperative"].as_array_mut().unwrap();
+    reports[0].as_object_mut().unwrap().remove("nacp");
+    reports[1]["source"] = json!("gps");
+    reports[2]["lat_deg"] = json!(100.0);
+    reports[3]["nacv"] = json!(0);
+    reports[4]["mode_s_address"] = json!("XYZ");
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    let want = vec![
+        "cooperative[0].nacp",
+        "cooperative[1].source",
+        "cooperative[2].lat_deg",
+        "cooperative[3].nacv",
+        "cooperative[4].mode_s_address",
+    ];
+    assert_eq!(problem_fields(&body), want);
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    let status = PlotFusionServiceClient::new(app.channel().await)
+        .track(p)
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), Code::InvalidArgument);
+    assert_eq!(grpc_fields(&status), want);
+}
