@@ -281,6 +281,9 @@ pub struct Tracker {
     /// retrodiction ([`Tracker::set_out_of_sequence`]; set by the owner,
     /// not stored).
     out_of_sequence: Derived<bool>,
+    /// A self-reported position (ADS-B, AIS) has reached the tracker (the
+    /// check of [`validation`] runs only then; derived from the tracks).
+    reports_seen: Derived<bool>,
 }
 
 /// A frame's plots as the associator needs them.
@@ -361,6 +364,7 @@ impl Tracker {
             scratch: Derived::default(),
             max_tracks: Derived::default(),
             out_of_sequence: Derived::default(),
+            reports_seen: Derived::default(),
         })
     }
 
@@ -1161,7 +1165,12 @@ impl Tracker {
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, &failed, report)?;
         let mut used = outcome.used;
-        self.check_leftovers(&plots, &mut used);
+        if let Source::Reports { kind, .. } = &source {
+            self.reports_seen.0 |= kind.is_self_reported();
+        }
+        if self.reports_seen.0 {
+            self.check_leftovers(&plots, &mut used);
+        }
         self.initiate(t, plots, &used, report)?;
         self.last_time = Some(self.last_time.map_or(t, |last| last.max(t)));
         self.counters.frames += 1;

@@ -288,6 +288,12 @@ impl Tracker {
         if parts.last_time.is_some_and(|t| !t.is_finite()) {
             return Err(bad("last time is not finite"));
         }
+        tr.reports_seen.0 = parts.pending.iter().any(|p| p.report.is_some())
+            || parts
+                .tracks
+                .iter()
+                .chain(&parts.tentatives)
+                .any(|t| t.identity.validation.last_self_reported.is_some());
         tr.tracks = parts.tracks.into_iter().map(std::sync::Arc::new).collect();
         tr.initiator = Initiator::from_parts(parts.roots, parts.tentatives);
         tr.pending = parts.pending;
