@@ -16,19 +16,23 @@
 //!
 //!   σ̂² = Σ w g (y/ψ − c) / Σ w g,  y = min(ν², K² (c + s²)),
 //!
-//! the squared innovation winsorised at K = 3 standard deviations of the
-//! estimate s of the moment (the declared σ before any plot), and ψ =
-//! E[min(Z², K²)] = 0.99501 for a standard normal Z, which makes y/ψ
-//! unbiased for c + σ² when s = σ; g = 1/(c + s²)² weighs each plot by
+//! the squared innovation winsorised at K = 3 standard deviations (at
+//! the scale s of the moment's estimate, the declared σ before any plot),
+//! and ψ = E[min(Z², K²)] = 0.99501 for a standard normal Z, which makes
+//! y/ψ unbiased for c + σ² when s = σ; g = 1/(c + d²)² (d the declared σ) weighs each plot by
 //! the inverse variance of its y (2(c + σ²)²): one Fisher-scoring step of
 //! the maximum-likelihood σ² per plot. Its variance is the sandwich
 //! (Huber–White) Var(σ̂²) = Σ w² g² (e − σ̂²)² / (Σ w g)², e = y/ψ − c,
 //! never below the Fisher bound 2 / Σ w g (the Fisher variance alone was
 //! 1.2–3 times too small in the Monte Carlo: heavy tails, and a c that
 //! is not the prediction's true variance), and σ(σ̂) = σ(σ̂²) / (2σ̂). The
-//! weights' scale s is the estimate of the moment; the winsorising's the
-//! estimate once converged, before the larger of the estimate and the
-//! declared σ (so that an estimate near 0 cannot hold itself there).
+//! weights' scale is the declared σ, independent of the data (at the
+//! running estimate, a plot taken while it was near 0 with a sharp
+//! prediction, c of a few m² from a track ADS-B holds, weighed thousands
+//! of times the others and alone made the estimate: σ_range 182 ± 0.2 m
+//! for a 100-m radar); the winsorising's the estimate once converged,
+//! before the larger of the estimate and the declared σ (so that an
+//! estimate near 0 cannot hold itself there).
 //!
 //! Why winsorised: the innovations of real motion have heavy tails (a turn
 //! that begins between two plots gives a radial-velocity innovation of
@@ -40,9 +44,7 @@
 //! the estimate still grows from a σ declared too small: every plot
 //! counts, at most K² times the current variance. Why weighted: the
 //! azimuth's c grows as a target nears its radar, and the unweighted mean
-//! converged too slowly. (The weights follow s in scale: plots taken
-//! while s was still low count more until they fade; measured, not
-//! corrected.) The estimator needs four running sums per component,
+//! converged too slowly. The estimator needs four running sums per component,
 //! stored with the tracker. Variational Bayes (Särkkä and
 //! Nummenmaa 2009) estimates the same quantity per track with an inner
 //! iteration per update; ML over residuals (post-update) needs the
@@ -731,17 +733,19 @@ impl AccuracyState {
                 let (Some((nu, c)), Some(est)) = (innovation.components[k], est) else {
                     continue;
                 };
-                // The weights' scale: the estimate of the moment (the
-                // declared σ before any plot). The winsorising's: the
-                // estimate once converged; before, the larger of the
-                // estimate and the declared σ (an estimate still near 0,
-                // where c hides σ, would clip every later innovation and
-                // hold itself there).
-                let s = if est.samples > 0.0 && est.estimate > 0.0 {
-                    est.estimate
-                } else {
-                    est.declared
-                };
+                // The winsorising's scale: the estimate once converged;
+                // before, the larger of the estimate and the declared σ
+                // (an estimate still near 0, where c hides σ, would clip
+                // every later innovation and hold itself there). The
+                // weights': the declared σ, not the running estimate: where the
+                // tracks' own uncertainty c is small (tracks held by ADS-B,
+                // a few metres) the weight 1/(c + s²)² of a plot taken
+                // while the estimate was low was thousands of times the
+                // later plots', and that one plot the estimate for a time
+                // constant (σ_range 182 ± 0.2 m learnt for a 100-m
+                // radar). Weights that do not depend on the data keep the
+                // mean of the unbiased e unbiased.
+                let s = est.declared;
                 let clip = if est.converged {
                     est.estimate
                 } else {
@@ -1007,6 +1011,7 @@ mod tests {
         assert_eq!(state.applied(&cfg, 0, &declared, 0.99).sigma_range, 50.0);
         cfg.enabled = true;
         // An innovation at 10 σ counts as one at 3σ.
+        assert_eq!(declared.sigma_range, 50.0);
         let before = state.radars[0].components[RANGE];
         let far = Innovation {
             components: [
@@ -1020,8 +1025,10 @@ mod tests {
         let after = state.radars[0].components[RANGE];
         assert_eq!(after.clipped, before.clipped + 1);
         assert_eq!(after.weight, before.weight + 1.0);
+        // Clipped at 3σ of the converged estimate, weighed at the declared
+        // σ (50 m): g = 1/(c + 50²)².
         let s2 = a.range.estimate.powi(2);
-        let added = (9.0 * (c + s2) / CLIPPED_MEAN - c) / (c + s2).powi(2);
+        let added = (9.0 * (c + s2) / CLIPPED_MEAN - c) / (c + 50.0f64.powi(2)).powi(2);
         assert!((after.excess - before.excess - added).abs() < 1e-9 * added);
         // Decay: τ ln 2 later the count is half (plus the one plot).
         let w = state.radars[0].components[RANGE].weight;

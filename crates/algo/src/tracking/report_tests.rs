@@ -354,3 +354,56 @@ fn a_bad_report_is_refused_naming_its_field() {
     }
     assert_eq!(tracker.counters().plots, 0);
 }
+
+#[test]
+fn a_spoof_from_the_start_is_caught_by_the_radar() {
+    let cfg = config();
+    let mut rng = Lcg(29);
+    // Aircraft A's ADS-B is 3 km north from its first report: its track
+    // starts on the ADS-B (reports come every second, the radar every 4 s),
+    // and the Mode S radar's plots of its address disagree with it.
+    let spoof = |_: f64, a: u32| {
+        if a == ADDRESS_A {
+            [0.0, 3000.0]
+        } else {
+            [0.0; 2]
+        }
+    };
+    let mut plots = adsb(&cfg, (0.0, 120.0), &spoof, &mut rng);
+    plots.extend(radar_plots(120.0, &mut rng));
+    let tracker = run(&cfg, plots);
+    assert_eq!(
+        tracker.confirmed_tracks().len(),
+        2,
+        "one track per aircraft"
+    );
+    let a = &track_of(&tracker, ADDRESS_A)[0];
+    assert!(!a.identity.validation.trusted());
+    assert!(
+        error(a, &aircraft()[0].0) < 400.0,
+        "{}",
+        error(a, &aircraft()[0].0)
+    );
+}
+
+#[test]
+fn an_adsb_only_track_that_loses_its_aircraft_takes_it_again() {
+    let cfg = config();
+    let mut rng = Lcg(31);
+    // Aircraft A's reports jump 1.5 km east at 30 s (no radar): its track
+    // is set at them after two, not doubled.
+    let jump = |t: f64, a: u32| {
+        if a == ADDRESS_A && t >= 30.0 {
+            [1500.0, 0.0]
+        } else {
+            [0.0; 2]
+        }
+    };
+    let tracker = run(&cfg, adsb(&cfg, (0.0, 60.0), &jump, &mut rng));
+    assert_eq!(tracker.confirmed_tracks().len(), 2);
+    let a = &track_of(&tracker, ADDRESS_A)[0];
+    let p = aircraft()[0].0.at(a.t);
+    let off = (a.state[0] - p[0] - 1500.0).hypot(a.state[2] - p[1]);
+    assert!(off < 50.0, "{off} m from the reported positions");
+    assert!(a.identity.validation.trusted());
+}

@@ -161,6 +161,10 @@ impl Tracker {
             let (d2, distance) = horizontal_distance(track, plot);
             if self_reported(plot) {
                 if !independently_held(&self.config, track, m.t) {
+                    if held_by_self_reports(&self.config, track) {
+                        self.reacquire(k, plot, (d2, distance));
+                        used[j] = true;
+                    }
                     continue;
                 }
                 used[j] = true;
@@ -195,6 +199,44 @@ impl Tracker {
                     self.index.moved(k, track);
                 }
             }
+        }
+    }
+}
+
+impl Tracker {
+    /// A self-reported position of the address of track `k`, which only
+    /// self-reported positions hold, outside its gate (`d2`, distance
+    /// `distance`): the same aircraft (one address, one track), not a new
+    /// track. Two in a row, without a self-reported update between, set the
+    /// track at the report (it lost the aircraft: a manoeuvre, or positions
+    /// noisier than their stated quality).
+    fn reacquire(&mut self, k: usize, plot: &CartesianPlot, (d2, distance): (f64, f64)) {
+        let motion = self.config.motion.clone();
+        let track = Arc::make_mut(&mut self.tracks[k]);
+        let v = &mut track.identity.validation;
+        if d2 <= AGREEMENT_CHI2 {
+            return;
+        }
+        let t = plot.measured.map_or(plot.t, |m| m.t);
+        let in_a_row = v
+            .last_disagreement
+            .is_some_and(|d| v.last_self_reported.is_none_or(|s| d.t >= s));
+        v.disagreements = if in_a_row {
+            v.disagreements.saturating_add(1)
+        } else {
+            1
+        };
+        v.last_disagreement = Some(Disagreement {
+            t,
+            distance,
+            sigma: plot.r[(0, 0)].sqrt(),
+        });
+        if v.disagreements >= super::identity::DISAGREEMENTS_TO_DISTRUST {
+            v.disagreements = 0;
+            track.anchor(plot, &motion);
+            note_hit(&self.config, track, plot);
+            track.record(Some(plot.radars.clone()));
+            self.index.moved(k, track);
         }
     }
 }
