@@ -19,15 +19,16 @@
 //! the squared innovation winsorised at K = 3 standard deviations (at
 //! the scale s of the moment's estimate, the declared σ before any plot),
 //! and ψ = E[min(Z², K²)] = 0.99501 for a standard normal Z, which makes
-//! y/ψ unbiased for c + σ² when s = σ; g = 1/(c + d²)² (d the declared σ) weighs each plot by
+//! y/ψ unbiased for c + σ² when s = σ; g = 1/(c + d²)² (d the converged
+//! estimate, the declared σ before) weighs each plot by
 //! the inverse variance of its y (2(c + σ²)²): one Fisher-scoring step of
 //! the maximum-likelihood σ² per plot. Its variance is the sandwich
 //! (Huber–White) Var(σ̂²) = Σ w² g² (e − σ̂²)² / (Σ w g)², e = y/ψ − c,
 //! never below the Fisher bound 2 / Σ w g (the Fisher variance alone was
 //! 1.2–3 times too small in the Monte Carlo: heavy tails, and a c that
 //! is not the prediction's true variance), and σ(σ̂) = σ(σ̂²) / (2σ̂). The
-//! weights' scale is the declared σ, independent of the data (at the
-//! running estimate, a plot taken while it was near 0 with a sharp
+//! weights' scale is the estimate once converged, the declared σ before
+//! (at the running estimate, a plot taken while it was near 0 with a sharp
 //! prediction, c of a few m² from a track ADS-B holds, weighed thousands
 //! of times the others and alone made the estimate: σ_range 182 ± 0.2 m
 //! for a 100-m radar); the winsorising's the estimate once converged,
@@ -737,7 +738,8 @@ impl AccuracyState {
                 // before, the larger of the estimate and the declared σ
                 // (an estimate still near 0, where c hides σ, would clip
                 // every later innovation and hold itself there). The
-                // weights': the declared σ, not the running estimate: where the
+                // weights': the estimate once converged, the declared σ
+                // before, not the running estimate: where the
                 // tracks' own uncertainty c is small (tracks held by ADS-B,
                 // a few metres) the weight 1/(c + s²)² of a plot taken
                 // while the estimate was low was thousands of times the
@@ -745,7 +747,11 @@ impl AccuracyState {
                 // constant (σ_range 182 ± 0.2 m learnt for a 100-m
                 // radar). Weights that do not depend on the data keep the
                 // mean of the unbiased e unbiased.
-                let s = est.declared;
+                let s = if est.converged {
+                    est.estimate.max(est.declared / LIMIT)
+                } else {
+                    est.declared
+                };
                 let clip = if est.converged {
                     est.estimate
                 } else {
@@ -1011,7 +1017,6 @@ mod tests {
         assert_eq!(state.applied(&cfg, 0, &declared, 0.99).sigma_range, 50.0);
         cfg.enabled = true;
         // An innovation at 10 σ counts as one at 3σ.
-        assert_eq!(declared.sigma_range, 50.0);
         let before = state.radars[0].components[RANGE];
         let far = Innovation {
             components: [
@@ -1025,10 +1030,9 @@ mod tests {
         let after = state.radars[0].components[RANGE];
         assert_eq!(after.clipped, before.clipped + 1);
         assert_eq!(after.weight, before.weight + 1.0);
-        // Clipped at 3σ of the converged estimate, weighed at the declared
-        // σ (50 m): g = 1/(c + 50²)².
+        // Clipped at 3σ of the converged estimate and weighed at it.
         let s2 = a.range.estimate.powi(2);
-        let added = (9.0 * (c + s2) / CLIPPED_MEAN - c) / (c + 50.0f64.powi(2)).powi(2);
+        let added = (9.0 * (c + s2) / CLIPPED_MEAN - c) / (c + s2).powi(2);
         assert!((after.excess - before.excess - added).abs() < 1e-9 * added);
         // Decay: τ ln 2 later the count is half (plus the one plot).
         let w = state.radars[0].components[RANGE].weight;
