@@ -107,17 +107,18 @@ pub(crate) fn note_hit(cfg: &TrackerConfig, track: &mut Track, plot: &CartesianP
 
 /// The squared Mahalanobis distance and the distance (m) between the
 /// horizontal position of `plot` and `track`'s, extrapolated to the plot's
-/// time at constant velocity, over the sum of their covariances.
-fn horizontal_distance(track: &Track, plot: &CartesianPlot) -> (f64, f64) {
+/// time at constant velocity, over the sum of their covariances and
+/// `extra` (`[ee, en, nn]`).
+fn horizontal_distance(track: &Track, plot: &CartesianPlot, extra: [f64; 3]) -> (f64, f64) {
     let dt = plot.t - track.t;
     let d = [
         plot.z[0] - (track.x[0] + track.x[1] * dt),
         plot.z[1] - (track.x[2] + track.x[3] * dt),
     ];
     let s = [
-        track.p[(0, 0)] + plot.r[(0, 0)],
-        track.p[(0, 2)] + plot.r[(0, 1)],
-        track.p[(2, 2)] + plot.r[(1, 1)],
+        track.p[(0, 0)] + plot.r[(0, 0)] + extra[0],
+        track.p[(0, 2)] + plot.r[(0, 1)] + extra[1],
+        track.p[(2, 2)] + plot.r[(1, 1)] + extra[2],
     ];
     let det = s[0] * s[2] - s[1] * s[1];
     let d2 = if det > 0.0 {
@@ -158,8 +159,12 @@ impl Tracker {
             };
             let track = &self.tracks[k];
             let v = track.identity.validation;
-            let (d2, distance) = horizontal_distance(track, plot);
             if self_reported(plot) {
+                // Against what the independent sensor could say: the
+                // track's own covariance is the self-reports' (metres),
+                // and a manoeuvre they follow would be a disagreement.
+                let (d2, distance) =
+                    horizontal_distance(track, plot, self.independent_covariance(track));
                 if !independently_held(&self.config, track, m.t) {
                     if held_by_self_reports(&self.config, track) {
                         self.reacquire(k, plot, (d2, distance));
@@ -182,6 +187,7 @@ impl Tracker {
                 if !(v.trusted() && held_by_self_reports(&self.config, track)) {
                     continue;
                 }
+                let (_, distance) = horizontal_distance(track, plot, [0.0; 3]);
                 used[j] = true;
                 let sigma = (0.5 * (track.p[(0, 0)] + track.p[(2, 2)])).sqrt();
                 let motion = self.config.motion.clone();
@@ -204,6 +210,31 @@ impl Tracker {
 }
 
 impl Tracker {
+    /// The horizontal covariance (`[ee, en, nn]`, m²) of a plot of the
+    /// radar that last updated `track`, at the track's position: σ_ρ² along
+    /// the line of sight, (ρ σ_θ)² across; zero when no radar has.
+    fn independent_covariance(&self, track: &Track) -> [f64; 3] {
+        let Some(h) = track
+            .detections
+            .iter()
+            .filter(|h| h.radar < self.applied.len())
+            .max_by(|a, b| a.last.total_cmp(&b.last))
+        else {
+            return [0.0; 3];
+        };
+        let spec = &self.applied[h.radar];
+        let (e, n) = (track.x[0] - spec.site[0], track.x[2] - spec.site[1]);
+        let range = e.hypot(n).max(1.0);
+        let (ue, un) = (e / range, n / range);
+        let along = spec.sigma_range * spec.sigma_range;
+        let across = (range * spec.sigma_azimuth).powi(2);
+        [
+            along * ue * ue + across * un * un,
+            (along - across) * ue * un,
+            along * un * un + across * ue * ue,
+        ]
+    }
+
     /// A self-reported position of the address of track `k`, which only
     /// self-reported positions hold, outside its gate (`d2`, distance
     /// `distance`): the same aircraft (one address, one track), not a new
