@@ -200,10 +200,10 @@ pub(crate) fn report_plot(plot: &Plot, axes: usize) -> CartesianPlot {
     }
     let mut velocity = Vec::new();
     if let Some(v) = r.velocity {
-        for axis in 0..2 {
+        for (axis, &value) in v.iter().enumerate().take(2) {
             velocity.push(VelocityComponent {
                 axis,
-                value: v[axis],
+                value,
                 sigma: r.sigma_velocity,
             });
         }

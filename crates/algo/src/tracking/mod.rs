@@ -310,17 +310,17 @@ enum Source {
     },
 }
 
-/// Whether cooperative reports have updated `track` (its last hit, or a
+/// Whether cooperative reports (sensors past the `radars`) have updated `track` (its last hit, or a
 /// hit it keeps per sensor) and nothing has updated it for the shortest
 /// [`ReportKind::coast_s`] of their kinds by `t` (nor has a miss been
 /// judged since: a judged miss predicts the track to its time).
-fn report_coasted(cfg: &TrackerConfig, track: &Track, t: f64) -> bool {
+fn report_coasted(radars: usize, track: &Track, t: f64) -> bool {
     track
         .detections
         .iter()
         .map(|h| h.radar)
         .chain(track.radars.iter().copied())
-        .filter_map(|i| cfg.report_kind(i))
+        .filter_map(|i| ReportKind::ALL.get(i.checked_sub(radars)?).copied())
         .map(ReportKind::coast_s)
         .reduce(f64::min)
         .is_some_and(|c| t - track.last_update.max(track.t) >= c)
@@ -802,38 +802,8 @@ impl Tracker {
     /// [`ReportKind::coast_s`] of the kinds that did (a radar's own sweeps
     /// judge it where a radar covers it), and again after as long.
     fn judge_reports(&mut self, t: f64, report: &mut StepReport) {
-        let cfg = &self.config;
-        let coast = |tr: &Track| report_coasted(cfg, tr, t);
-        let mut doomed = Vec::new();
-        for (k, track) in self.tracks.iter_mut().enumerate() {
-            if !coast(track) {
-                continue;
-            }
-            let track = Arc::make_mut(track);
-            if let Err(error) = self.predictor.predict(track, t) {
-                report.failed.push(TrackFailure {
-                    id: track.id,
-                    confirmed: true,
-                    t,
-                    step: FailedStep::Predict,
-                    error,
-                });
-                doomed.push((k, Doom::Failed));
-                continue;
-            }
-            track.record(None);
-            self.index.moved(k, track);
-            if deleter::should_delete(track, &cfg.deletion) {
-                doomed.push((k, Doom::Rule));
-            }
-        }
-        self.delete(doomed, report);
-        let mut dropped = Initiated::default();
-        let cfg = &self.config;
-        let coast = |tr: &Track| report_coasted(cfg, tr, t);
-        self.initiator.judge(t, cfg, &coast, &mut dropped);
-        self.counters.dropped += dropped.dropped as u64;
-        report.failed.extend(dropped.failed);
+        let radars = self.config.radars.len();
+        self.judge_misses(t, &|tr: &Track| report_coasted(radars, tr, t), report);
     }
 
     /// The Mode C height measurement of this tracker's frames: a 3D
@@ -926,6 +896,15 @@ impl Tracker {
                 tr.last_update,
             )
         };
+        self.judge_misses(t, &judge, report);
+        Ok(())
+    }
+
+    /// Records a miss at `t` of every track `judge` says missed (confirmed:
+    /// predicted to `t` unless newer, an out-of-sequence radar's later plot
+    /// having updated it; deleted by the rule or when its prediction fails;
+    /// tentative: the initiator's judgement).
+    fn judge_misses(&mut self, t: f64, judge: &dyn Fn(&Track) -> bool, report: &mut StepReport) {
         let cfg = &self.config;
         let mut doomed = Vec::new();
         for (k, track) in self.tracks.iter_mut().enumerate() {
@@ -933,8 +912,6 @@ impl Tracker {
                 continue;
             }
             let track = Arc::make_mut(track);
-            // A track newer than the sweep (updated by an out-of-sequence
-            // radar's later plot) records the miss where it stands.
             if track.t <= t {
                 if let Err(error) = self.predictor.predict(track, t) {
                     // Its prediction failed: dropped (see `FailedStep`).
@@ -957,10 +934,9 @@ impl Tracker {
         }
         self.delete(doomed, report);
         let mut dropped = Initiated::default();
-        self.initiator.judge(t, &self.config, &judge, &mut dropped);
+        self.initiator.judge(t, &self.config, judge, &mut dropped);
         self.counters.dropped += dropped.dropped as u64;
         report.failed.extend(dropped.failed);
-        Ok(())
     }
 
     /// Removes tracks (slot, why), reporting each as it was in
