@@ -1553,10 +1553,21 @@ impl Tracker {
     /// manoeuvre it did not follow, a gap in coverage; primary plots may
     /// have kept it going elsewhere). Otherwise both are kept and named by the
     /// duplicate-address warning (both updated at once: a misconfigured
-    /// transponder, or two aircraft on one address).
+    /// transponder, or two aircraft on one address), but where either was
+    /// updated by the aircraft's own reports (ADS-B, AIS): then
+    /// [`SameAircraft::Here`] (its reports split over two tracks, one
+    /// aircraft).
     fn same_aircraft(&self, new: &Track) -> Option<SameAircraft> {
         let address = new.identity.address.map(|a| a.value)?;
+        let cfg = &self.config;
+        let self_reported = |tr: &Track| {
+            tr.radars
+                .iter()
+                .chain(tr.detections.iter().map(|h| &h.radar))
+                .any(|&i| cfg.report_kind(i).is_some_and(ReportKind::is_self_reported))
+        };
         let mut lost = None;
+        let mut merged = None;
         for (slot, old) in self.tracks.iter().enumerate() {
             if old.identity.address.is_none_or(|a| a.value != address) {
                 continue;
@@ -1587,9 +1598,16 @@ impl Tracker {
                 .map_or(old.last_update, |t| t.min(old.last_update));
             if new.started.is_some_and(|t0| since < t0) && lost.is_none() {
                 lost = Some(SameAircraft::Lost(slot));
+            } else if self_reported(new) || self_reported(old) {
+                // An address the aircraft reports itself (ADS-B): its own
+                // positions made (or hold) one of the two, one aircraft;
+                // the new one is merged away, and a disagreement between
+                // the old and the radar is the check's
+                // ([`validation`]).
+                merged = Some(SameAircraft::Here);
             }
         }
-        lost
+        lost.or(merged)
     }
 }
 

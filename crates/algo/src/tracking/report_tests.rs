@@ -407,3 +407,32 @@ fn an_adsb_only_track_that_loses_its_aircraft_takes_it_again() {
     assert!(off < 50.0, "{off} m from the reported positions");
     assert!(a.identity.validation.trusted());
 }
+
+#[test]
+fn reports_far_noisier_than_they_claim_start_one_track() {
+    let cfg = config();
+    // Aircraft A's reports are 300 m off at random while they claim 10 m
+    // (a NACp that lies): its reports rarely gate its own track, yet one
+    // address is one aircraft.
+    for seed in [37, 41, 43] {
+        let mut rng = Lcg(seed);
+        let mut noise = Lcg(seed + 1);
+        let mut plots = adsb(&cfg, (0.0, 90.0), &|_, _| [0.0; 2], &mut rng);
+        for p in plots.iter_mut() {
+            if p.identity.address == Some(ADDRESS_A) {
+                let r = p.report.as_mut().unwrap();
+                r.position[0] += 300.0 * noise.normal();
+                r.position[1] += 300.0 * noise.normal();
+            }
+        }
+        plots.extend(radar_plots(90.0, &mut rng));
+        plots.sort_by(|a, b| a.t.total_cmp(&b.t));
+        let mut tracker = Tracker::new(cfg.clone()).unwrap();
+        let mut most = 0;
+        for chunk in plots.chunks(8) {
+            tracker.process(chunk).unwrap();
+            most = most.max(track_of(&tracker, ADDRESS_A).len());
+        }
+        assert_eq!(most, 1, "seed {seed}: one track of its address at any time");
+    }
+}
