@@ -10,7 +10,8 @@ use crate::helpers::{assert_problem, grpc_fields, problem_fields, spawn_app};
 use crate::plot_fusion::plot_scene::{
     ORIGIN, origin_frame, plots_tagged, radars_json, targets, two_radars,
 };
-use crate::plot_fusion::{create_session, proto_request, session_create};
+use crate::plot_fusion::{create_session, proto_report, proto_request, session_create};
+use radar_fusion::proto as pb;
 use radar_fusion::proto::plot_fusion_service_client::PlotFusionServiceClient;
 
 const PATH: &str = "/v1/plot-fusion/track";
@@ -224,4 +225,78 @@ async fn bad_report_fields_are_named_on_both_transports() {
         .unwrap_err();
     assert_eq!(status.code(), Code::InvalidArgument);
     assert_eq!(grpc_fields(&status), want);
+}
+
+/// A gRPC stream session fed one second of plots and reports a batch
+/// (`PushBatchRequest.cooperative`): the picture at the end has one track
+/// per aircraft, the spoofed one flagged, the others' sources radar and
+/// ADS-B.
+#[tokio::test]
+async fn a_grpc_stream_takes_cooperative_reports() {
+    use radar_fusion::proto::session_service_client::SessionServiceClient;
+
+    let app = spawn_app().await;
+    let req = request(95.0);
+    let p = proto_request(&req);
+    let mut sessions = SessionServiceClient::new(app.channel().await);
+    let open = pb::CreateSessionRequest {
+        kind: "plot_fusion".into(),
+        plot_fusion: Some(pb::PlotFusionConfig {
+            cat062: None,
+            origin: p.origin,
+            radars: p.radars.clone(),
+            tracker: None,
+        }),
+        ..Default::default()
+    };
+    let (tx, mut updates) =
+        crate::sessions::data::open_stream(&mut sessions, pb::stream_request::Kind::Open(open))
+            .await;
+    let opened = updates.message().await.unwrap().unwrap();
+    let id = opened.session_id.clone();
+    let second = |t: f64| t.floor() as i64;
+    let mut seconds: Vec<i64> = p.plots.iter().map(|x| second(x.t.unwrap())).collect();
+    seconds.extend(p.cooperative.iter().map(|r| second(r.t)));
+    seconds.sort_unstable();
+    seconds.dedup();
+    for (i, s) in seconds.into_iter().enumerate() {
+        let plots = p
+            .plots
+            .iter()
+            .filter(|x| second(x.t.unwrap()) == s)
+            .cloned()
+            .collect();
+        let cooperative = req["cooperative"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| second(r["t"].as_f64().unwrap()) == s)
+            .map(proto_report)
+            .collect();
+        tx.send(pb::StreamRequest {
+            kind: Some(pb::stream_request::Kind::Batch(pb::PushBatchRequest {
+                sequence: Some(i as u64 + 1),
+                plots,
+                cooperative,
+                ..Default::default()
+            })),
+        })
+        .await
+        .unwrap();
+        let u = updates.message().await.unwrap().unwrap();
+        assert!(u.error.is_none(), "{:?}", u.error);
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let tracks = confirmed(&state["plot_fusion"]["tracks"]);
+    assert_eq!(tracks.len(), 3, "{}", state["plot_fusion"]["tracks"]);
+    for t in &tracks {
+        let address = t["identity"]["mode_s_address"]["value"].as_str().unwrap();
+        assert_eq!(
+            t["self_reported"]["trusted"] == false,
+            address == "3C6586",
+            "{t}"
+        );
+        let sources = t["sources"].to_string();
+        assert!(sources.contains("adsb"), "{sources}");
+    }
 }
