@@ -208,6 +208,18 @@ async fn bad_report_fields_are_named_on_both_transports() {
     reports[2]["lat_deg"] = json!(100.0);
     reports[3]["nacv"] = json!(0);
     reports[4]["mode_s_address"] = json!("XYZ");
+    // Parallel mode takes radar plots only: each report named.
+    let mut parallel = request(20.0);
+    parallel["tracker"] = json!({"mode": "parallel"});
+    for r in parallel["radars"].as_array_mut().unwrap() {
+        r["sigma_radial_velocity_mps"] = json!(1.0);
+    }
+    let body = assert_problem(app.post_json(PATH, &parallel).await, 422).await;
+    let fields = problem_fields(&body);
+    assert!(
+        fields.iter().any(|f| f == "cooperative[0].source"),
+        "{fields:?}"
+    );
     let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
     let want = vec![
         "cooperative[0].nacp",

@@ -321,6 +321,13 @@ impl Network {
         identity: Identity,
     ) -> Result<Plot, (&'static str, String)> {
         let t = super::network::checked_time(p.t)?;
+        if config.is_parallel() {
+            return Err(bad(
+                "source",
+                "cooperative reports need serial mode: tracker.mode parallel fuses radar \
+                 plots at fusion instants (use auto or serial)",
+            ));
+        }
         let frame = self.frame.as_ref().ok_or_else(|| {
             bad(
                 "lat_deg",
