@@ -285,6 +285,7 @@ fn report_in(r: pb::CooperativeReport) -> svc::PlotInput {
             sigma_m: r.sigma_m,
             sigma_height_m: r.sigma_height_m,
             sigma_velocity_mps: r.sigma_velocity_mps,
+            mmsi: r.mmsi,
         }),
         ..Default::default()
     }
@@ -411,6 +412,7 @@ pub(crate) fn track_out(t: svc::TrackView) -> pb::FusedTrack {
             disagreement_distance_m: v.disagreement.as_ref().map(|d| d.distance_m),
             disagreement_stated_sigma_m: v.disagreement.as_ref().map(|d| d.stated_sigma_m),
         }),
+        mmsi: t.mmsi,
     }
 }
 

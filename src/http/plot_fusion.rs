@@ -659,6 +659,9 @@ pub struct ReportIn {
     pub mode_3a: Option<String>,
     /// Barometric flight level (hundreds of feet).
     pub flight_level: Option<f64>,
+    /// AIS: the ship's MMSI (1 to 999999999).
+    #[schema(example = 227006760)]
+    pub mmsi: Option<u64>,
 }
 
 #[derive(Debug, Deserialize, ToSchema)]
@@ -793,6 +796,9 @@ pub struct FusedTrack {
     /// radar and multilateration (absent when none updated it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub self_reported: Option<SelfReported>,
+    /// A ship's AIS MMSI, from its reports.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mmsi: Option<u32>,
 }
 
 /// One sensor's last update of a track.
@@ -1064,6 +1070,7 @@ fn report_in(r: ReportIn) -> svc::PlotInput {
             sigma_m: r.sigma_m,
             sigma_height_m: r.sigma_height_m,
             sigma_velocity_mps: r.sigma_velocity_mps,
+            mmsi: r.mmsi,
         }),
         ..Default::default()
     }
@@ -1151,6 +1158,7 @@ pub(crate) fn track_out(t: svc::TrackView) -> FusedTrack {
                 stated_sigma_m: d.stated_sigma_m,
             }),
         }),
+        mmsi: t.mmsi,
     }
 }
 

@@ -312,3 +312,64 @@ async fn a_grpc_stream_takes_cooperative_reports() {
         assert!(sources.contains("adsb"), "{sources}");
     }
 }
+
+/// Two ships reporting by AIS (SOG/COG, the position-accuracy flag) every
+/// 6 s beside the radars' aircraft: a track each, which carries its MMSI
+/// on both transports; an MMSI of ten digits is refused naming it.
+#[tokio::test]
+async fn ais_reports_give_each_ship_its_mmsi() {
+    let app = spawn_app().await;
+    let frame = origin_frame();
+    let ships = [
+        (227_006_760u64, [2_000.0, -3_000.0], 10.0f64, 45.0f64),
+        (244_630_000u64, [-4_000.0, 1_000.0], 6.0f64, 270.0f64),
+    ];
+    let mut reports = Vec::new();
+    for (k, (mmsi, p0, sog_kn, cog_deg)) in ships.iter().enumerate() {
+        let v = sog_kn * 1852.0 / 3600.0;
+        let (ve, vn) = (
+            v * cog_deg.to_radians().sin(),
+            v * cog_deg.to_radians().cos(),
+        );
+        let mut t = 0.5 + k as f64;
+        while t <= 120.0 {
+            let (lat, lon, _) = frame
+                .enu_to_geodetic([p0[0] + ve * t, p0[1] + vn * t, 0.0])
+                .unwrap();
+            reports.push(json!({
+                "source": "ais", "t": t, "lat_deg": lat.to_degrees(),
+                "lon_deg": lon.to_degrees(), "sog_kn": sog_kn, "cog_deg": cog_deg,
+                "position_accurate": true, "mmsi": mmsi,
+            }));
+            t += 6.0;
+        }
+    }
+    let mut req = request(120.0);
+    req["cooperative"] = json!(reports);
+    let out = app.post_ok(PATH, &req).await;
+    let mut mmsis: Vec<u64> = confirmed(&out["tracks"])
+        .iter()
+        .filter_map(|t| t["mmsi"].as_u64())
+        .collect();
+    mmsis.sort_unstable();
+    assert_eq!(mmsis, vec![227_006_760, 244_630_000], "{}", out["tracks"]);
+    for t in confirmed(&out["tracks"]) {
+        if t.get("mmsi").is_some() {
+            assert_eq!(t["sources"][0]["sensor"], "ais", "{t}");
+        }
+    }
+    let mut p = proto_request(&req);
+    p.tracker = None;
+    let g = PlotFusionServiceClient::new(app.channel().await)
+        .track(p)
+        .await
+        .unwrap()
+        .into_inner();
+    let mut grpc: Vec<u32> = g.tracks.iter().filter_map(|t| t.mmsi).collect();
+    grpc.sort_unstable();
+    assert_eq!(grpc, vec![227_006_760, 244_630_000]);
+
+    req["cooperative"][0]["mmsi"] = json!(2_270_067_600u64);
+    let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
+    assert_eq!(problem_fields(&body), vec!["cooperative[0].mmsi"]);
+}

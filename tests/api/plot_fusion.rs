@@ -303,6 +303,7 @@ pub(crate) fn proto_report(r: &Value) -> pb::CooperativeReport {
         callsign: s("callsign"),
         mode_3a: s("mode_3a"),
         flight_level: o("flight_level"),
+        mmsi: r["mmsi"].as_u64(),
     }
 }
 

@@ -310,6 +310,22 @@ enum Source {
     },
 }
 
+/// Whether only cooperative reports (sensors past the `radars`), and
+/// never radar `radar`, have updated `track`: that radar's sweep says
+/// nothing of it (a ship an air surveillance radar does not see, an
+/// aircraft below its coverage), and the reports judge its misses
+/// ([`report_coasted`]). A track no report has updated is judged as ever.
+fn reports_only_for(track: &Track, radar: usize, radars: usize) -> bool {
+    let sensors = || {
+        track
+            .detections
+            .iter()
+            .map(|h| h.radar)
+            .chain(track.radars.iter().copied())
+    };
+    sensors().any(|i| i >= radars) && !sensors().any(|i| i == radar)
+}
+
 /// Whether cooperative reports (sensors past the `radars`) have updated `track` (its last hit, or a
 /// hit it keeps per sensor) and nothing has updated it for the shortest
 /// [`ReportKind::coast_s`] of their kinds by `t` (nor has a miss been
@@ -885,8 +901,9 @@ impl Tracker {
         }
         let view = View::of_frame(spec, self.judged[index], t, azimuth);
         self.judged[index] = Some((t, azimuth));
+        let radars = self.config.radars.len();
         let judge = |tr: &Track| -> bool {
-            if tr.last_update >= t {
+            if tr.last_update >= t || reports_only_for(tr, index, radars) {
                 return false;
             }
             let dt = t - tr.t;

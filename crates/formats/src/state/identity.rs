@@ -104,6 +104,8 @@ pub(crate) fn read_identity(r: &mut Reader<'_>) -> Result<Identity, FormatError>
         callsign,
         detection,
         spi: has(5),
+        // From tracker format 11, after the plot's report (tracker::plot_as).
+        mmsi: None,
     })
 }
 
@@ -115,7 +117,11 @@ fn callsign(r: &mut Reader) -> Result<Callsign, FormatError> {
     Ok(cs)
 }
 
-fn evidence<T: Copy>(w: &mut Writer, e: Option<Evidence<T>>, value: impl Fn(&mut Writer, T)) {
+pub(crate) fn evidence<T: Copy>(
+    w: &mut Writer,
+    e: Option<Evidence<T>>,
+    value: impl Fn(&mut Writer, T),
+) {
     w.opt(e, |w, e| {
         value(w, e.value);
         w.u32(e.plots);
@@ -124,7 +130,7 @@ fn evidence<T: Copy>(w: &mut Writer, e: Option<Evidence<T>>, value: impl Fn(&mut
     });
 }
 
-fn read_evidence<'a, T>(
+pub(crate) fn read_evidence<'a, T>(
     r: &mut Reader<'a>,
     value: impl Fn(&mut Reader<'a>) -> Result<T, FormatError>,
 ) -> Result<Option<Evidence<T>>, FormatError> {
@@ -205,5 +211,6 @@ pub(crate) fn read_track_identity(r: &mut Reader<'_>) -> Result<TrackIdentity, F
         last_mode_ac: None,
         // Read from format 11 on (tracker::track).
         validation: Default::default(),
+        mmsi: None,
     })
 }

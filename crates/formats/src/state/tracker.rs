@@ -58,13 +58,15 @@ use algo::tracking::{
     Tracker, TrackerConfig, TrackerParts, Validation, VelocityGate,
     accuracy::{AccuracyConfig, AccuracyState, ComponentData, DetectionData, RadarAccuracyData},
     height::{HeightDatum, ModeCHeight, PressureOffset},
+    identity::Evidence,
     predictor::ModeState,
     registration::{BiasPrior, RegistrationConfig, RegistrationState},
 };
 use nalgebra::{DMatrix, DVector};
 
 use super::identity::{
-    TRACKER_FORMAT, read_identity, read_track_identity, write_identity, write_track_identity,
+    TRACKER_FORMAT, evidence, read_evidence, read_identity, read_track_identity, write_identity,
+    write_track_identity,
 };
 use crate::wire::{FormatError, Reader, Writer, corrupt};
 
@@ -773,11 +775,12 @@ fn track(w: &mut Writer, t: &Track, version: u32) {
         w.opt(t.identity.last_mode_ac, Writer::f64);
     }
     if version >= REPORT_FORMAT {
-        write_validation(w, &t.identity.validation);
+        write_validation(w, &t.identity.validation, t.identity.mmsi);
     }
 }
 
-fn write_validation(w: &mut Writer, v: &Validation) {
+fn write_validation(w: &mut Writer, v: &Validation, mmsi: Option<Evidence<u32>>) {
+    evidence(w, mmsi, Writer::u32);
     for t in [v.last_independent, v.last_self_reported, v.distrusted_since] {
         w.opt(t, Writer::f64);
     }
@@ -790,7 +793,8 @@ fn write_validation(w: &mut Writer, v: &Validation) {
     });
 }
 
-fn read_validation(r: &mut Reader<'_>) -> Result<Validation, FormatError> {
+fn read_validation(r: &mut Reader<'_>) -> Result<(Validation, Option<Evidence<u32>>), FormatError> {
+    let mmsi = read_evidence(r, Reader::u32)?;
     let v = Validation {
         last_independent: r.opt(Reader::f64)?,
         last_self_reported: r.opt(Reader::f64)?,
@@ -810,7 +814,7 @@ fn read_validation(r: &mut Reader<'_>) -> Result<Validation, FormatError> {
         && v.last_disagreement
             .is_none_or(|d| d.t.is_finite() && d.distance >= 0.0 && d.sigma >= 0.0);
     if finite {
-        Ok(v)
+        Ok((v, mmsi))
     } else {
         Err(corrupt("validation of self-reported positions"))
     }
@@ -883,7 +887,7 @@ fn read_track(r: &mut Reader<'_>, version: u32) -> Result<Track, FormatError> {
         track.identity.last_mode_ac = r.opt(Reader::f64)?;
     }
     if version >= REPORT_FORMAT {
-        track.identity.validation = read_validation(r)?;
+        (track.identity.validation, track.identity.mmsi) = read_validation(r)?;
     }
     Ok(track)
 }
@@ -936,6 +940,7 @@ pub(crate) fn plot_as(w: &mut Writer, p: &Plot, version: u32) {
     }
     if version >= REPORT_FORMAT {
         w.opt(p.report.as_ref(), write_report);
+        w.opt(p.identity.mmsi, Writer::u32);
     }
 }
 
@@ -994,6 +999,12 @@ pub(crate) fn read_plot(r: &mut Reader<'_>, version: u32) -> Result<Plot, Format
         } else {
             None
         },
+    })
+    .and_then(|mut p: Plot| {
+        if version >= REPORT_FORMAT {
+            p.identity.mmsi = r.opt(Reader::u32)?;
+        }
+        Ok(p)
     })
 }
 
@@ -1108,6 +1119,7 @@ mod tests {
                 callsign: (i == 0).then_some(*b"EZY12AB "),
                 detection: Some([Detection::Combined, Detection::Secondary][i]),
                 spi: k % 13 == 0,
+                mmsi: None,
             };
         }
         let (first, rest) = all.split_at(all.len() / 2);
@@ -1305,6 +1317,8 @@ mod tests {
                 garbled: false,
             }),
             detection: Some(Detection::Secondary),
+            // Not an aircraft's, but stored alike (format 11).
+            mmsi: Some(address / 16 + 200_000_000),
             ..Identity::default()
         };
         let mut all = plots(&cfg, 100.0);
@@ -1348,6 +1362,7 @@ mod tests {
             .filter(|t| !t.identity.validation.trusted())
             .count();
         assert_eq!(distrusted, 1);
+        assert!(state.tracks.iter().all(|t| t.identity.mmsi.is_some()));
         round_trips_and_continues(&mut a, rest);
         let v10 = decode_tracker(&encode_tracker_as(&a, 10));
         // Format 10 cannot hold a report: its pending reports read back as

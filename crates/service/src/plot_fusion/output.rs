@@ -62,6 +62,8 @@ pub struct TrackView {
     /// independent evidence (radar plots, multilateration); absent when no
     /// self-reported position has updated it.
     pub self_reported: Option<SelfReportedView>,
+    /// A ship's AIS MMSI, from its reports.
+    pub mmsi: Option<u32>,
 }
 
 /// One sensor's last update of a track.
@@ -125,10 +127,11 @@ pub fn self_reported_warnings(tracks: &[TrackOutput]) -> Vec<String> {
         let Some(v) = self_reported_view(t) else {
             continue;
         };
-        let address = t.identity.address.map_or_else(
-            || "no address".to_string(),
-            |a| format!("address {:06X}", a.value),
-        );
+        let address = match (t.identity.address, t.identity.mmsi) {
+            (Some(a), _) => format!("address {:06X}", a.value),
+            (None, Some(m)) => format!("MMSI {:09}", m.value),
+            (None, None) => "no address".to_string(),
+        };
         if let (false, Some(d)) = (v.trusted, v.disagreement) {
             out.push(format!(
                 "track {} ({address}): its ADS-B/AIS positions disagree with independent                  evidence (radar, multilateration) by {:.0} m against a stated σ of {:.0} m,                  since t = {:.1} s; they are not used until {} in a row agree (faulty                  avionics or spoofing)",
@@ -307,6 +310,7 @@ pub(super) fn view(network: &Network, motion: &Motion, t: &TrackOutput) -> Track
             })
             .collect(),
         self_reported: self_reported_view(t),
+        mmsi: t.identity.mmsi.map(|m| m.value),
     }
 }
 

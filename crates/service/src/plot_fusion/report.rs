@@ -85,6 +85,8 @@ pub struct ReportInput {
     pub sigma_height_m: Option<f64>,
     /// σ per axis of the velocity (m/s).
     pub sigma_velocity_mps: Option<f64>,
+    /// AIS: the ship's MMSI (at most nine digits).
+    pub mmsi: Option<u64>,
 }
 
 impl ReportInput {
@@ -108,6 +110,7 @@ impl ReportInput {
             sigma_m,
             sigma_height_m,
             sigma_velocity_mps,
+            mmsi,
         } = self;
         w.opt(source.as_deref(), Writer::str);
         for x in [
@@ -128,6 +131,7 @@ impl ReportInput {
         w.opt(*nacp, Writer::u8);
         w.opt(*nacv, Writer::u8);
         w.opt(*position_accurate, Writer::bool);
+        w.opt(*mmsi, Writer::u64);
     }
 
     /// A report as [`ReportInput::encode`] stored it.
@@ -166,6 +170,7 @@ impl ReportInput {
             sigma_m,
             sigma_height_m,
             sigma_velocity_mps,
+            mmsi: r.opt(Reader::u64)?,
         })
     }
 }
@@ -318,7 +323,7 @@ impl Network {
         p: &PlotInput,
         r: &ReportInput,
         config: &TrackerConfig,
-        identity: Identity,
+        mut identity: Identity,
     ) -> Result<Plot, (&'static str, String)> {
         let t = super::network::checked_time(p.t)?;
         if config.is_parallel() {
@@ -335,6 +340,14 @@ impl Network {
             )
         })?;
         let kind = r.kind()?;
+        if let Some(m) = r.mmsi {
+            identity.mmsi = Some(
+                u32::try_from(m)
+                    .ok()
+                    .filter(|&m| m > 0 && m <= algo::tracking::identity::MAX_MMSI)
+                    .ok_or_else(|| bad("mmsi", format!("must be 1 to 999999999, got {m}")))?,
+            );
+        }
         let lat = finite_in(
             "lat_deg",
             r.lat_deg.ok_or_else(|| bad("lat_deg", "is required"))?,

@@ -157,6 +157,8 @@ impl SsrInput {
             callsign,
             detection,
             spi: self.spi.unwrap_or(false),
+            // A ship's, from its AIS report (report::ReportInput::mmsi).
+            mmsi: None,
         })
     }
 

@@ -536,12 +536,14 @@ fn encode_track(w: &mut Writer, t: &TrackView) {
             w.f64(d.stated_sigma_m);
         });
     });
+    w.opt(t.mmsi, Writer::u32);
 }
 
-/// A kept track's sources and self-reported check (after its identity).
-fn decode_sources(
-    r: &mut Reader<'_>,
-) -> Result<(Vec<SourceView>, Option<SelfReportedView>), FormatError> {
+/// A kept track's sources, self-reported check and MMSI.
+type Sources = (Vec<SourceView>, Option<SelfReportedView>, Option<u32>);
+
+/// A kept track's [`Sources`] (after its identity).
+fn decode_sources(r: &mut Reader<'_>) -> Result<Sources, FormatError> {
     let k = r.len(16)?;
     let sources = (0..k)
         .map(|_| {
@@ -567,7 +569,7 @@ fn decode_sources(
             })?,
         })
     })?;
-    Ok((sources, self_reported))
+    Ok((sources, self_reported, r.opt(Reader::u32)?))
 }
 
 /// What a kept update's tracks carry, by the release that kept it.
@@ -638,10 +640,10 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
     } else {
         None
     };
-    let (sources, self_reported) = if fields.sources {
+    let (sources, self_reported, mmsi) = if fields.sources {
         decode_sources(r)?
     } else {
-        (Vec::new(), None)
+        (Vec::new(), None, None)
     };
     Ok(TrackView {
         id,
@@ -665,6 +667,7 @@ fn decode_track(r: &mut Reader<'_>, fields: TrackFields) -> Result<TrackView, Fo
         identity,
         sources,
         self_reported,
+        mmsi,
     })
 }
 
