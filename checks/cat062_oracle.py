@@ -250,29 +250,34 @@ def compare(inp, dec):
         c.raw(i, it, ["080", "MRH"], int(h_ok))
         c.raw(i, it, ["080", "SRC"], s["altitude_source"] if h_ok else 0)
         c.raw(i, it, ["080", "CNF"], int(s["tentative"]))
-        ext1 = s["simulated"] or s["last_message"] or s["first_message"]
-        ext3 = s["coasting"] or s["psr_aged"] or s["ssr_aged"] or s["mode_s_aged"]
+        ext1 = s["simulated"] or s["last_message"] or s["first_message"] \
+            or s["adsb_inconsistent"]
+        ext3 = s["coasting"] or s["psr_aged"] or s["ssr_aged"] or s["mode_s_aged"] \
+            or s["adsb_aged"]
         octets = 4 if ext3 else 2 if ext1 else 1
         c.fields += 1
         if it["080"]["_octets"] != octets:
             c.fail(i, "080", f"{it['080']['_octets']} octets, expected {octets}")
         for name, key, octet in [("SIM", "simulated", 2), ("TSE", "last_message", 2),
-                                 ("TSB", "first_message", 2), ("CST", "coasting", 4),
-                                 ("PSR", "psr_aged", 4), ("SSR", "ssr_aged", 4),
-                                 ("MDS", "mode_s_aged", 4)]:
+                                 ("TSB", "first_message", 2), ("AFF", "adsb_inconsistent", 2),
+                                 ("CST", "coasting", 4), ("PSR", "psr_aged", 4),
+                                 ("SSR", "ssr_aged", 4), ("MDS", "mode_s_aged", 4),
+                                 ("ADS", "adsb_aged", 4)]:
             c.raw(i, it, ["080", name], int(s[key]) if octets >= octet else None)
         # Every other bit of I062/080 is 0.
         for name, v in it["080"].items():
             if name not in ("_octets", "MON", "SPI", "MRH", "SRC", "CNF", "SIM", "TSE",
-                            "TSB", "CST", "PSR", "SSR", "MDS"):
+                            "TSB", "AFF", "CST", "PSR", "SSR", "MDS", "ADS"):
                 c.fields += 1
                 if v["raw"] != 0:
                     c.fail(i, f"080/{name}", f"decoded {v['raw']}, expected 0")
-        # I062/290: 1/4 s, 0..=255 LSB, maximum or above.
+        # I062/290: 1/4 s, 0..=255 LSB, maximum or above; ES (1090 ES
+        # ADS-B) and MLT (multilateration) beside TRK, PSR, SSR, MDS.
         a = t["ages"]
-        for sub, key in [("TRK", "track"), ("PSR", "psr"), ("SSR", "ssr"), ("MDS", "mode_s")]:
+        for sub, key in [("TRK", "track"), ("PSR", "psr"), ("SSR", "ssr"), ("MDS", "mode_s"),
+                         ("ES", "adsb_es"), ("MLT", "mlat")]:
             c.value(i, it, ["290", sub], capped(a[key], 0.25, 255), 0.125)
-        if "290" in it and set(it["290"]) - {"TRK", "PSR", "SSR", "MDS"}:
+        if "290" in it and set(it["290"]) - {"TRK", "PSR", "SSR", "MDS", "ES", "MLT"}:
             c.fail(i, "290", f"unexpected subfields {sorted(it['290'])}")
         # I062/500.
         acc = t["accuracy"] or {}
