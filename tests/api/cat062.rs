@@ -379,22 +379,19 @@ pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
 }
 
 /// The latest radar's time among a track's `sources`, and its report
-/// sensors (`adsb`, `mlat`, `ais`) with theirs: the radars come first, so
-/// a name of both is the radar's the first time.
+/// sensors (`adsb`, `mlat`, `ais`) with theirs (the scenes' radars are
+/// `west` and `east`: no radar has a report sensor's name).
 fn radar_and_reports(track: &Value) -> (Option<f64>, Vec<(&str, f64)>) {
     let mut radar: Option<f64> = None;
     let mut reports = Vec::new();
-    let mut seen = Vec::new();
     for s in track["sources"].as_array().into_iter().flatten() {
         let name = s["sensor"].as_str().unwrap();
         let t = s["last_t"].as_f64().unwrap();
-        // The scenes' radars are `west` and `east`, never a report's name.
-        if ["adsb", "mlat", "ais"].contains(&name) && !seen.contains(&name) {
+        if ["adsb", "mlat", "ais"].contains(&name) {
             reports.push((name, t));
         } else {
             radar = Some(radar.map_or(t, |r| r.max(t)));
         }
-        seen.push(name);
     }
     (radar, reports)
 }
