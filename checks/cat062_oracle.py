@@ -44,7 +44,7 @@ import asterix.generated as gen
 
 SPEC = gen.Cat_062_1_20
 FT = 0.3048
-# I062/080 PSR/SSR/MDS: aged beyond this (s), as the service says
+# I062/080 PSR/SSR/MDS/ADS: aged beyond this (s), as the service says
 # (crates/service/src/plot_fusion/cat062.rs AGED_AFTER_S).
 AGED_AFTER_S = 12.0
 NM = 1852.0
@@ -250,29 +250,34 @@ def compare(inp, dec):
         c.raw(i, it, ["080", "MRH"], int(h_ok))
         c.raw(i, it, ["080", "SRC"], s["altitude_source"] if h_ok else 0)
         c.raw(i, it, ["080", "CNF"], int(s["tentative"]))
-        ext1 = s["simulated"] or s["last_message"] or s["first_message"]
-        ext3 = s["coasting"] or s["psr_aged"] or s["ssr_aged"] or s["mode_s_aged"]
+        ext1 = s["simulated"] or s["last_message"] or s["first_message"] \
+            or s["adsb_inconsistent"]
+        ext3 = s["coasting"] or s["psr_aged"] or s["ssr_aged"] or s["mode_s_aged"] \
+            or s["adsb_aged"]
         octets = 4 if ext3 else 2 if ext1 else 1
         c.fields += 1
         if it["080"]["_octets"] != octets:
             c.fail(i, "080", f"{it['080']['_octets']} octets, expected {octets}")
         for name, key, octet in [("SIM", "simulated", 2), ("TSE", "last_message", 2),
-                                 ("TSB", "first_message", 2), ("CST", "coasting", 4),
-                                 ("PSR", "psr_aged", 4), ("SSR", "ssr_aged", 4),
-                                 ("MDS", "mode_s_aged", 4)]:
+                                 ("TSB", "first_message", 2), ("AFF", "adsb_inconsistent", 2),
+                                 ("CST", "coasting", 4), ("PSR", "psr_aged", 4),
+                                 ("SSR", "ssr_aged", 4), ("MDS", "mode_s_aged", 4),
+                                 ("ADS", "adsb_aged", 4)]:
             c.raw(i, it, ["080", name], int(s[key]) if octets >= octet else None)
         # Every other bit of I062/080 is 0.
         for name, v in it["080"].items():
             if name not in ("_octets", "MON", "SPI", "MRH", "SRC", "CNF", "SIM", "TSE",
-                            "TSB", "CST", "PSR", "SSR", "MDS"):
+                            "TSB", "AFF", "CST", "PSR", "SSR", "MDS", "ADS"):
                 c.fields += 1
                 if v["raw"] != 0:
                     c.fail(i, f"080/{name}", f"decoded {v['raw']}, expected 0")
-        # I062/290: 1/4 s, 0..=255 LSB, maximum or above.
+        # I062/290: 1/4 s, 0..=255 LSB, maximum or above; ES (1090 ES
+        # ADS-B) and MLT (multilateration) beside TRK, PSR, SSR, MDS.
         a = t["ages"]
-        for sub, key in [("TRK", "track"), ("PSR", "psr"), ("SSR", "ssr"), ("MDS", "mode_s")]:
+        for sub, key in [("TRK", "track"), ("PSR", "psr"), ("SSR", "ssr"), ("MDS", "mode_s"),
+                         ("ES", "adsb_es"), ("MLT", "mlat")]:
             c.value(i, it, ["290", sub], capped(a[key], 0.25, 255), 0.125)
-        if "290" in it and set(it["290"]) - {"TRK", "PSR", "SSR", "MDS"}:
+        if "290" in it and set(it["290"]) - {"TRK", "PSR", "SSR", "MDS", "ES", "MLT"}:
             c.fail(i, "290", f"unexpected subfields {sorted(it['290'])}")
         # I062/500.
         acc = t["accuracy"] or {}
@@ -465,26 +470,65 @@ def service_compare(fixture, dec):
         c.raw(i, it, ["080", "MON"], int(len(req["radars"]) == 1))
         c.raw(i, it, ["080", "MRH"], int(three_d))
         c.raw(i, it, ["080", "SRC"], 2 if three_d else 0)
-        coasting = t["consecutive_misses"] > 0
-        c.raw(i, it, ["080", "CST"], 1 if coasting else None)
-        c.raw(i, it, ["080", "TSE"], None if not coasting else 0)
+        def flag(name, on):
+            """A bit of an I062/080 extension: as `on` where its octet is
+            written, and the octet written where it is set."""
+            present = c.get(it, ["080", name]) is not None
+            c.raw(i, it, ["080", name], int(on) if present else (1 if on else None))
+
+        flag("CST", t["consecutive_misses"] > 0)
         start = t.get("start_t")
         c.value(i, it, ["290", "TRK"], None if start is None else
                 capped(t["t"] - start, 0.25, 255), 0.125)
-        # Ages: a track that heard secondary replies gives its PSR, SSR
-        # and Mode S ages from their last updates; one that never did,
-        # PSR from its last update.
-        def age(key):
-            last = ident.get(key)
+        # Sources: the radars (by id) first, then the report sensors.
+        radar_ids = {r["id"] for r in req["radars"]}
+        radar_t, reports, seen = None, {}, set()
+        for src in t.get("sources", []):
+            name, last = src["sensor"], src["last_t"]
+            if name in ("adsb", "mlat", "ais") and (name not in radar_ids or name in seen):
+                reports[name] = last
+            else:
+                radar_t = last if radar_t is None else max(radar_t, last)
+            seen.add(name)
+        # Ages (I062/290 notes: t of I062/070 minus the last update of the
+        # kind; never received, not sent). Radar plots date the identity's
+        # primary, secondary and Mode S times. A track no radar's
+        # secondary plot updated had primary plots only: with no identity
+        # and no report, its last update; with reports, its latest radar.
+        def since(last):
             return None if last is None else t["t"] - last
 
-        psr = age("last_primary_t") if ident else t["t"] - t["last_update_t"]
-        ages = {"PSR": psr, "SSR": age("last_secondary_t"), "MDS": age("last_mode_s_t")}
+        if ident and ("last_secondary_t" in ident or not reports):
+            psr = since(ident.get("last_primary_t"))
+        elif not reports:
+            psr = since(t["last_update_t"])
+        else:
+            psr = since(radar_t)
+        ages = {"PSR": psr, "SSR": since(ident.get("last_secondary_t")),
+                "MDS": since(ident.get("last_mode_s_t")), "ES": since(reports.get("adsb")),
+                "MLT": since(reports.get("mlat"))}
+        # I062/080 PSR, SSR, MDS, ADS: that kind's update older than the
+        # threshold (MLT has no bit the service writes).
+        flags = {"PSR": "PSR", "SSR": "SSR", "MDS": "MDS", "ES": "ADS"}
         for sub, a in ages.items():
             c.value(i, it, ["290", sub], capped(a, 0.25, 255), 0.125)
-            flag = a is not None and a > AGED_AFTER_S
-            c.raw(i, it, ["080", sub], int(flag) if c.get(it, ["080", sub]) is not None
-                  else (None if not flag else 1))
+            if sub in flags:
+                flag(flags[sub], a is not None and a > AGED_AFTER_S)
+        if "290" in it and set(it["290"]) - {"TRK", "PSR", "SSR", "MDS", "ES", "MLT"}:
+            c.fail(i, "290", f"unexpected subfields {sorted(it['290'])}")
+        # AFF: ADS-B data inconsistent with other surveillance information,
+        # while the track distrusts its self-reported positions and ADS-B
+        # is among its sources.
+        sr = t.get("self_reported") or {}
+        flag("AFF", sr.get("trusted") is False and "adsb" in reports)
+        # Every other bit of I062/080 is 0 (a batch answer has no first or
+        # last message: TSB, TSE 0).
+        for name, v in it["080"].items():
+            if name not in ("_octets", "MON", "SPI", "MRH", "SRC", "CNF", "AFF", "CST", "PSR",
+                            "SSR", "MDS", "ADS"):
+                c.fields += 1
+                if v["raw"] != 0:
+                    c.fail(i, f"080/{name}", f"decoded {v['raw']}, expected 0")
         c.raw(i, it, ["080", "SPI"], int(bool(ident.get("spi"))))
         c.value(i, it, ["500", "APC", "X"], capped(math.sqrt(p[0][0]), 0.5, 65535), 0.25)
         c.value(i, it, ["500", "APC", "Y"], capped(math.sqrt(p[2][2]), 0.5, 65535), 0.25)

@@ -3,7 +3,8 @@
 # independent decoder: libasterix from PyPI in checks/.venv-asterix (shared
 # with cat062_oracle.sh). For each fixture under tests/fixtures/cat062/
 # (service_seed001.json: the plot-fusion tests' seed-001 scene;
-# service_asterix.json: the ASTERIX fixture scene), decodes the answer's
+# service_asterix.json: the ASTERIX fixture scene; service_cooperative.json:
+# ADS-B and multilateration beside Mode S radars), decodes the answer's
 # cat062 into *_decoded.json (checked in; `cargo test` compares the JSON
 # answer with it) and compares every record field by field with the JSON
 # track it stands for. Exits non-zero on a mismatch. Idempotent.
@@ -24,7 +25,7 @@ if ! "$venv/bin/python" -c 'import importlib.metadata as m, sys; sys.exit(m.vers
     "$venv/bin/python" -m pip install --quiet libasterix==0.36.3
 fi
 status=0
-for name in service_seed001 service_asterix; do
+for name in service_seed001 service_asterix service_cooperative; do
     "$venv/bin/python" "$here/cat062_oracle.py" service "$fixtures/$name.json" \
         "$fixtures/${name}_decoded.json" || status=1
 done

@@ -61,13 +61,14 @@ pub struct TrackIdentity {
     pub emergency: Option<&'static str>,
     /// Special position identification set in the last 18 s.
     pub spi: bool,
-    /// Time of the last update by a secondary plot.
+    /// Time of the last update by a radar's secondary plot (a cooperative
+    /// report dates none of these three times: `sources` has its time).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub last_secondary_t: Option<f64>,
-    /// Time of the last update by a plot with a Mode S address.
+    /// Time of the last update by a radar's plot with a Mode S address.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub last_mode_s_t: Option<f64>,
-    /// Time of the last update by a primary (or combined) plot.
+    /// Time of the last update by a radar's primary (or combined) plot.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub last_primary_t: Option<f64>,
 }

@@ -31,6 +31,10 @@ pub(crate) struct Record {
     pub psr_age: Option<f64>,
     /// I062/290 TRK age, s.
     pub track_age: Option<f64>,
+    /// I062/290 ES age (1090 ES ADS-B), s.
+    pub es_age: Option<f64>,
+    /// I062/290 MLT age (multilateration), s.
+    pub mlt_age: Option<f64>,
     /// I062/130, ft.
     pub altitude_ft: Option<f64>,
     /// I062/500 APC (x, y), m.
@@ -62,6 +66,15 @@ impl Record {
     /// TSB (bit 6 of the first extension): the first message.
     pub(crate) fn first_message(&self) -> bool {
         self.status.get(1).is_some_and(|o| o & 0x20 != 0)
+    }
+    /// AFF (bit 4 of the first extension): ADS-B data inconsistent with
+    /// other surveillance information.
+    pub(crate) fn adsb_inconsistent(&self) -> bool {
+        self.status.get(1).is_some_and(|o| o & 0x08 != 0)
+    }
+    /// ADS (bit 4 of the third extension): the last ADS-B update is aged.
+    pub(crate) fn adsb_aged(&self) -> bool {
+        self.status.get(3).is_some_and(|o| o & 0x08 != 0)
     }
 }
 
@@ -184,8 +197,11 @@ fn record(data: &[u8], at: &mut usize) -> Record {
             14 => {
                 // TRK PSR SSR MDS ADS(2) ES VDL | UAT LOP MLT, LSB 1/4 s.
                 let s = compound(data, at, &[1, 1, 1, 1, 2, 1, 1, 1, 1, 1]);
-                r.track_age = s[0].map(|b| f64::from(b[0]) / 4.0);
-                r.psr_age = s[1].map(|b| f64::from(b[0]) / 4.0);
+                let age = |i: usize| s[i].map(|b: &[u8]| f64::from(b[0]) / 4.0);
+                r.track_age = age(0);
+                r.psr_age = age(1);
+                r.es_age = age(5);
+                r.mlt_age = age(9);
             }
             18 => r.altitude_ft = Some(i16be(take(at, 2)) * 6.25),
             20 => {
@@ -271,19 +287,43 @@ pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
     let (vx, vy) = rec.velocity.expect("I062/185");
     assert!(near(vx, s(1), 0.25) && near(vy, s(3), 0.25));
     assert_eq!(rec.tentative(), track["status"] == "tentative");
-    // PSR age: from the last primary update when the track heard a
-    // secondary reply, else from its last update (docs/plot-fusion.md).
+    // PSR age: from the last primary update when a radar's secondary plot
+    // updated the track (or no report did), else from its last update
+    // without reports, its latest radar with them (docs/plot-fusion.md).
     let identity = track.get("identity");
-    let psr = match identity {
-        Some(i) => i["last_primary_t"]
-            .as_f64()
-            .map(|p| (f("t") - p).min(63.75)),
-        None => Some((f("t") - f("last_update_t")).min(63.75)),
+    let (radar_t, reports) = radar_and_reports(track);
+    let last = |name: &str| reports.iter().find(|r| r.0 == name).map(|r| r.1);
+    let any_report = !reports.is_empty();
+    let psr_t = match identity {
+        Some(i) if i.get("last_secondary_t").is_some() || !any_report => {
+            i["last_primary_t"].as_f64()
+        }
+        None if !any_report => Some(f("last_update_t")),
+        _ => radar_t,
     };
-    match psr {
-        Some(psr) => assert!(near(rec.psr_age.unwrap(), psr, 0.25), "{rec:?}"),
-        None => assert_eq!(rec.psr_age, None, "{rec:?}"),
+    let age = |at: Option<f64>| at.map(|a| (f("t") - a).min(63.75));
+    for (what, got, want) in [
+        ("PSR", rec.psr_age, age(psr_t)),
+        ("ES", rec.es_age, age(last("adsb"))),
+        ("MLT", rec.mlt_age, age(last("mlat"))),
+    ] {
+        match want {
+            Some(w) => assert!(near(got.unwrap(), w, 0.25), "{what}: {rec:?} {track}"),
+            None => assert_eq!(got, None, "{what}: {rec:?}"),
+        }
     }
+    // AFF while ADS-B is distrusted; ADS when it is older than 12 s.
+    let distrusted = track["self_reported"]["trusted"] == false;
+    assert_eq!(
+        rec.adsb_inconsistent(),
+        distrusted && last("adsb").is_some(),
+        "{rec:?}"
+    );
+    assert_eq!(
+        rec.adsb_aged(),
+        last("adsb").is_some_and(|a| f("t") - a > 12.0),
+        "{rec:?}"
+    );
     // Identity: I062/060, /380 ADR, /136 as the JSON says.
     let code = identity.and_then(|i| i["mode_3a"]["value"].as_str());
     assert_eq!(
@@ -336,6 +376,24 @@ pub(crate) fn assert_matches(rec: &Record, track: &Value, sac_sic: (u8, u8)) {
         }
         None => assert_eq!(rec.polar, None),
     }
+}
+
+/// The latest radar's time among a track's `sources`, and its report
+/// sensors (`adsb`, `mlat`, `ais`) with theirs (the scenes' radars are
+/// `west` and `east`: no radar has a report sensor's name).
+fn radar_and_reports(track: &Value) -> (Option<f64>, Vec<(&str, f64)>) {
+    let mut radar: Option<f64> = None;
+    let mut reports = Vec::new();
+    for s in track["sources"].as_array().into_iter().flatten() {
+        let name = s["sensor"].as_str().unwrap();
+        let t = s["last_t"].as_f64().unwrap();
+        if ["adsb", "mlat", "ais"].contains(&name) {
+            reports.push((name, t));
+        } else {
+            radar = Some(radar.map_or(t, |r| r.max(t)));
+        }
+    }
+    (radar, reports)
 }
 
 pub(crate) fn request_with_cat062() -> Value {
@@ -502,12 +560,72 @@ async fn a_session_sends_changed_tracks_first_and_last_messages() {
 }
 
 /// The requests of the libasterix fixtures: the seed-001 scene of the
-/// plot-fusion tests and the ASTERIX fixture scene.
-fn fixture_requests() -> [(&'static str, Value); 2] {
+/// plot-fusion tests, the ASTERIX fixture scene and the cooperative scene
+/// (ADS-B and multilateration beside Mode S radars).
+fn fixture_requests() -> [(&'static str, Value); 3] {
     [
         ("service_seed001", request_with_cat062()),
         ("service_asterix", crate::asterix::cat062_request()),
+        ("service_cooperative", crate::cooperative::cat062_request()),
     ]
+}
+
+#[tokio::test]
+async fn a_track_updated_by_adsb_carries_an_es_age_and_a_radar_only_track_none() {
+    let app = spawn_app().await;
+    let req = crate::cooperative::cat062_request();
+    let out = app.post_ok("/v1/plot-fusion/track", &req).await;
+    let tracks = out["tracks"].as_array().unwrap();
+    let records = decode(&b64_decode(out["cat062"].as_str().unwrap()));
+    assert_eq!(records.len(), tracks.len());
+    for (rec, track) in records.iter().zip(tracks) {
+        assert_matches(rec, track, (25, 100));
+    }
+    let by = |address: &str| {
+        let i = tracks
+            .iter()
+            .position(|t| {
+                t["status"] == "confirmed" && t["identity"]["mode_s_address"]["value"] == address
+            })
+            .unwrap_or_else(|| panic!("no track of {address}: {out}"));
+        (&tracks[i], &records[i])
+    };
+    let source = |t: &Value, name: &str| {
+        t["sources"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["sensor"] == name)
+            .map(|s| s["last_t"].as_f64().unwrap())
+    };
+    // Target 0: the radars only. No ES or MLT age, no ADS-B flag; its
+    // PSR age from its radar plots.
+    let (t0, r0) = by("4CA2D1");
+    assert_eq!(source(t0, "adsb"), None, "{t0}");
+    assert_eq!((r0.es_age, r0.mlt_age), (None, None), "{r0:?}");
+    assert!(!r0.adsb_inconsistent() && !r0.adsb_aged());
+    assert!(r0.psr_age.is_some());
+    // Target 1: ADS-B every second, spoofed from 60 s and distrusted
+    // (AFF): its ES age is that of the last report that updated it, the
+    // last honest one (the spoofed ones disagree and update nothing).
+    let (t1, r1) = by("3C6586");
+    assert_eq!(t1["self_reported"]["trusted"], false, "{t1}");
+    assert!(r1.adsb_inconsistent(), "{r1:?}");
+    let last = source(t1, "adsb").unwrap();
+    assert!((59.0..60.0).contains(&last), "{t1}");
+    let es = t1["t"].as_f64().unwrap() - last;
+    assert!(near(r1.es_age.unwrap(), es, 0.25), "{r1:?}");
+    assert_eq!(r1.adsb_aged(), es > 12.0);
+    assert_eq!(r1.mlt_age, None);
+    // Target 2: ADS-B until 50 s (at 75 s, about 25 s old: ADS aged) and
+    // multilateration every 2 s (an MLT age of at most 2 s).
+    let (t2, r2) = by("A1B2C3");
+    let last = source(t2, "adsb").unwrap();
+    assert!((49.0..=50.0).contains(&last), "{t2}");
+    let es = t2["t"].as_f64().unwrap() - last;
+    assert!(es > 12.0 && near(r2.es_age.unwrap(), es, 0.25), "{r2:?}");
+    assert!(r2.adsb_aged() && !r2.adsb_inconsistent(), "{r2:?}");
+    assert!(r2.mlt_age.unwrap() <= 2.25, "{r2:?}");
 }
 
 fn fixture_path(name: &str, suffix: &str) -> std::path::PathBuf {

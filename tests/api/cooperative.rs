@@ -69,6 +69,45 @@ fn request(duration: f64) -> Value {
     })
 }
 
+/// The scene for CAT062 out (`tests/fixtures/cat062/service_cooperative`):
+/// 75 s of the two Mode S radars; ADS-B of target 1 (spoofed from
+/// [`SPOOF_FROM`]: its track distrusts it) and of target 2 until 50 s
+/// (then aged), multilateration of target 2 every 2 s from 40 s (σ 30 m);
+/// target 0 has radar plots only.
+pub(crate) fn cat062_request() -> Value {
+    const DURATION: f64 = 75.0;
+    const TARGET_2_ADSB_UNTIL: f64 = 50.0;
+    let mut req = request(DURATION);
+    let reports = req["cooperative"].as_array_mut().unwrap();
+    reports.retain(|r| {
+        let address = r["mode_s_address"].as_str().unwrap();
+        let t = r["t"].as_f64().unwrap();
+        address == ADDRESSES[1] || (address == ADDRESSES[2] && t <= TARGET_2_ADSB_UNTIL)
+    });
+    let frame = origin_frame();
+    let g = &targets()[2];
+    let mut t = 40.05;
+    while t <= DURATION {
+        let p = g.at(t);
+        let (lat, lon, h) = frame.enu_to_geodetic(p).unwrap();
+        reports.push(json!({
+            "source": "mlat", "t": t,
+            "lat_deg": lat.to_degrees(), "lon_deg": lon.to_degrees(),
+            "geometric_height_m": h, "sigma_m": 30.0,
+            "mode_s_address": ADDRESSES[2],
+        }));
+        t += 2.0;
+    }
+    reports.sort_by(|a, b| {
+        a["t"]
+            .as_f64()
+            .unwrap()
+            .total_cmp(&b["t"].as_f64().unwrap())
+    });
+    req["cat062"] = json!({"sac": 25, "sic": 100, "service_id": 3});
+    req
+}
+
 fn confirmed(tracks: &Value) -> Vec<&Value> {
     tracks
         .as_array()

@@ -34,6 +34,8 @@ fn tracks(n: usize) -> Vec<SystemTrack> {
                     psr: Some(1.5),
                     ssr: Some(0.5),
                     mode_s: None,
+                    adsb_es: Some(0.5),
+                    mlat: None,
                 },
                 accuracy: Some(Accuracy {
                     xy: Some((40.0, 55.0)),

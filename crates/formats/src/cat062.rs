@@ -36,8 +36,10 @@
 //! - I062/185 velocity vx/vy, 0.25 m/s, 2 + 2 bytes signed;
 //! - I062/040 track number, 16 bits, as given (every `u16` is valid: the
 //!   item has no range narrower than its 16 bits, so nothing wraps);
-//! - I062/080 track status, extensible (see [`TrackStatusFlags`]);
-//! - I062/290 system track update ages (compound: TRK, PSR, SSR, MDS);
+//! - I062/080 track status, extensible (see [`TrackStatusFlags`]): MON,
+//!   SPI, MRH, SRC, CNF; SIM, TSE, TSB, AFF; CST, PSR, SSR, MDS, ADS;
+//! - I062/290 system track update ages (compound: TRK, PSR, SSR, MDS, ES,
+//!   MLT; see [`UpdateAges`]);
 //! - I062/060 track Mode 3/A code (V, G, CH, the code);
 //! - I062/245 target identification (STI 0, downlinked, and 8 ICAO 6-bit
 //!   characters). The 1.20 remark asks that it not be used beside I062/380
@@ -138,11 +140,19 @@ pub enum AltitudeSource {
 /// not coasting.
 ///
 /// Octets written: the first always (MON, SPI, MRH, SRC, CNF); the first
-/// extension (SIM, TSE, TSB; FPC, AFF, STP, KOS written 0) when one of
-/// its flags is set; the third extension (CST, PSR, SSR, MDS; ADS, SUC,
+/// extension (SIM, TSE, TSB, AFF; FPC, STP, KOS written 0) when one of
+/// its flags is set; the third extension (CST, PSR, SSR, MDS, ADS; SUC,
 /// AAC written 0) when one of its flags is set, with the second
 /// extension then written as zeros (AMA 0, MD4/MD5 "no interrogation",
-/// ME 0, MI 0) to reach it by FX. Later extensions are never written.
+/// ME 0, MI 0) to reach it by FX.
+///
+/// Later extensions are never written. The fourth (SDS, EMS, PFT, FPLT)
+/// has no value for "not known" in SDS and EMS (0 says "combined" and
+/// "no emergency"), so the fifth, whose MLAT bit (1.20; spare in
+/// 1.18–1.19) says the last multilateration update is aged, cannot be
+/// reached without claiming them: an aged MLAT update is not flagged
+/// (I062/290 MLT carries its age). Edition 1.20 has no bit for a track
+/// held by ADS-B alone (unvalidated).
 ///
 /// MRH and SRC are not set by the caller: MRH is 1 (geometric altitude
 /// more reliable) exactly when I062/130 is written, as the specification
@@ -166,6 +176,9 @@ pub struct TrackStatusFlags {
     pub last_message: bool,
     /// TSB: the first message transmitted to the user for the track.
     pub first_message: bool,
+    /// AFF: "ADS-B data inconsistent with other surveillance
+    /// information" (first extension, bit 4).
+    pub adsb_inconsistent: bool,
     /// CST: the age of the last track update is above the system's
     /// threshold (coasting).
     pub coasting: bool,
@@ -175,14 +188,21 @@ pub struct TrackStatusFlags {
     pub ssr_aged: bool,
     /// MDS: the age of the last Mode S update is above the threshold.
     pub mode_s_aged: bool,
+    /// ADS: the age of the last ADS-B update is above the threshold
+    /// (third extension, bit 4).
+    pub adsb_aged: bool,
 }
 
-/// I062/290 system track update ages, seconds (LSB 1/4 s, 0 to 63.75 s;
-/// above is written as 63.75 s). `None`: the subfield is not sent (the
-/// specification: "if the data has never been received, the
-/// corresponding subfield is not sent"). The item is left out when no
-/// subfield is written. ADS-C, ES, VDL, UAT, loop and MLAT ages are not
-/// written.
+/// I062/290 system track update ages, seconds (each written subfield one
+/// octet, LSB 1/4 s, 0 to 63.75 s; above is written as 63.75 s). `None`:
+/// the subfield is not sent (the specification: "if the data has never
+/// been received, the corresponding subfield is not sent"). The item is
+/// left out when no subfield is written.
+///
+/// The 1.20 subfields, in order: 1 TRK, 2 PSR, 3 SSR, 4 MDS, 5 ADS (ADS-C,
+/// two octets), 6 ES, 7 VDL, then in the primary subfield's second octet
+/// 8 UAT, 9 LOP, 10 MLT. Written: TRK, PSR, SSR, MDS, ES and MLT; ADS-C,
+/// VDL Mode 4, UAT and loop ages never are.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct UpdateAges {
     /// TRK: the track's age since it began.
@@ -194,6 +214,11 @@ pub struct UpdateAges {
     pub ssr: Option<f64>,
     /// MDS: age of the last Mode S detection used to update the track.
     pub mode_s: Option<f64>,
+    /// ES: age of the last 1090 MHz Extended Squitter ADS-B report used to
+    /// update the track (subfield 6).
+    pub adsb_es: Option<f64>,
+    /// MLT: age of the last multilateration detection (subfield 10).
+    pub mlat: Option<f64>,
 }
 
 /// I062/500 estimated accuracies (standard deviations), each subfield
@@ -557,6 +582,8 @@ const AGE_TRK: Quantity = Quantity::new("I062/290 TRK", "s", 0.25, 0, U8_MAX).sa
 const AGE_PSR: Quantity = Quantity::new("I062/290 PSR", "s", 0.25, 0, U8_MAX).saturating();
 const AGE_SSR: Quantity = Quantity::new("I062/290 SSR", "s", 0.25, 0, U8_MAX).saturating();
 const AGE_MDS: Quantity = Quantity::new("I062/290 MDS", "s", 0.25, 0, U8_MAX).saturating();
+const AGE_ES: Quantity = Quantity::new("I062/290 ES", "s", 0.25, 0, U8_MAX).saturating();
+const AGE_MLT: Quantity = Quantity::new("I062/290 MLT", "s", 0.25, 0, U8_MAX).saturating();
 
 const APC_X: Quantity = Quantity::new("I062/500 APC X", "m", 0.5, 0, U16_MAX).saturating();
 const APC_Y: Quantity = Quantity::new("I062/500 APC Y", "m", 0.5, 0, U16_MAX).saturating();
@@ -799,12 +826,15 @@ fn encode_record(
     let (status, n) = track_status(&t.status, height.is_some());
     rec.item(frn::I080, &status[..n]);
 
+    // Subfields in order: 5 (ADS-C), 7 (VDL), 8 (UAT), 9 (loop) never.
     let mut ages = CompoundBuf::new();
     for (n, q, v) in [
         (1, &AGE_TRK, t.ages.track),
         (2, &AGE_PSR, t.ages.psr),
         (3, &AGE_SSR, t.ages.ssr),
         (4, &AGE_MDS, t.ages.mode_s),
+        (6, &AGE_ES, t.ages.adsb_es),
+        (10, &AGE_MLT, t.ages.mlat),
     ] {
         if let Some(raw) = v.and_then(|v| q.quantise(v, notes)) {
             ages.sub(n, &be::<1>(raw));
@@ -868,11 +898,18 @@ fn track_status(s: &TrackStatusFlags, height_written: bool) -> ([u8; 4], usize) 
             | src << 2
             | bit(s.tentative, 1),
         // SIM TSE TSB FPC AFF STP KOS FX
-        bit(s.simulated, 7) | bit(s.last_message, 6) | bit(s.first_message, 5),
+        bit(s.simulated, 7)
+            | bit(s.last_message, 6)
+            | bit(s.first_message, 5)
+            | bit(s.adsb_inconsistent, 3),
         // AMA MD4(2) ME MI MD5(2) FX
         0,
         // CST PSR SSR MDS ADS SUC AAC FX
-        bit(s.coasting, 7) | bit(s.psr_aged, 6) | bit(s.ssr_aged, 5) | bit(s.mode_s_aged, 4),
+        bit(s.coasting, 7)
+            | bit(s.psr_aged, 6)
+            | bit(s.ssr_aged, 5)
+            | bit(s.mode_s_aged, 4)
+            | bit(s.adsb_aged, 3),
     ];
     let n = octets.iter().rposition(|&o| o != 0).map_or(1, |i| i + 1);
     for o in octets.iter_mut().take(n - 1) {

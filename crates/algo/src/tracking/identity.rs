@@ -324,11 +324,15 @@ pub struct TrackIdentity {
     pub altitude: Option<PressureAltitude>,
     /// Time of the last reply with SPI set (s).
     pub spi_t: Option<f64>,
-    /// Time of the last update by a secondary plot (s).
+    /// Time of the last update by a radar's secondary plot (s).
+    /// Cooperative reports (ADS-B, multilateration, AIS) date none of
+    /// these three ([`TrackIdentity::observe_report`]).
     pub last_secondary: Option<f64>,
-    /// Time of the last update by a plot with a Mode S address (s).
+    /// Time of the last update by a radar's plot with a Mode S address
+    /// (s).
     pub last_mode_s: Option<f64>,
-    /// Time of the last update by a primary (or combined) plot (s).
+    /// Time of the last update by a radar's primary (or combined) plot
+    /// (s).
     pub last_primary: Option<f64>,
     /// Time of the last update by a Mode S radar's secondary plot without
     /// an address (s): the track's aircraft answers in Mode A/C only
@@ -521,26 +525,42 @@ impl TrackIdentity {
         ((1.0 - eps) * density * ALTITUDE_SPAN_FT + eps).ln()
     }
 
-    /// Learns from a plot of identity `plot` at `t` that updated the track
-    /// (its most likely plot). A plot older than the pressure altitude
-    /// (out of sequence) adds its evidence but does not move the filter.
+    /// Learns from a radar plot of identity `plot` at `t` that updated the
+    /// track (its most likely plot): its identity, and the time of the
+    /// track's last primary, secondary and Mode S update. A plot older
+    /// than the pressure altitude (out of sequence) adds its evidence but
+    /// does not move the filter.
     pub fn observe(&mut self, plot: &Identity, t: f64) {
+        let later = |s: Option<f64>| Some(s.map_or(t, |s| s.max(t)));
         if plot.is_empty() {
             // A plot that says nothing of itself is a primary radar's: it
             // dates the track's last primary update once the track has
             // heard a secondary reply (a track that never has keeps an
             // empty identity: a primary-only tracker's state is as before).
             if !self.is_empty() {
-                self.last_primary = Some(self.last_primary.map_or(t, |s| s.max(t)));
+                self.last_primary = later(self.last_primary);
             }
             return;
         }
         if plot.is_secondary() {
-            self.last_secondary = Some(self.last_secondary.map_or(t, |s| s.max(t)));
+            self.last_secondary = later(self.last_secondary);
         }
         if plot.is_primary() {
-            self.last_primary = Some(self.last_primary.map_or(t, |s| s.max(t)));
+            self.last_primary = later(self.last_primary);
         }
+        if plot.address.is_some() {
+            self.last_mode_s = later(self.last_mode_s);
+        }
+        self.observe_report(plot, t);
+    }
+
+    /// Learns the identity of a cooperative report (ADS-B,
+    /// multilateration, AIS) at `t` that updated the track: its address
+    /// or MMSI, code, callsign, SPI and flight level, as a radar plot's
+    /// ([`TrackIdentity::observe`]), but not the times of the last
+    /// primary, secondary and Mode S update, which are radar plots' (a
+    /// report is none of them: CAT062 I062/290 has its own ages).
+    pub fn observe_report(&mut self, plot: &Identity, t: f64) {
         if let Some(m) = plot.mmsi {
             match &mut self.mmsi {
                 Some(e) if e.value == m => e.seen(t),
@@ -548,7 +568,6 @@ impl TrackIdentity {
             }
         }
         if let Some(a) = plot.address {
-            self.last_mode_s = Some(self.last_mode_s.map_or(t, |s| s.max(t)));
             match &mut self.address {
                 Some(e) if e.value == a => e.seen(t),
                 // A different address never pairs (ln_ratio), except where
@@ -591,10 +610,14 @@ impl TrackIdentity {
 
     /// [`TrackIdentity::observe_from`] with the radar plot a Cartesian plot
     /// was converted from, when it is one radar's (a fused plot says
-    /// nothing); `mode_s`: which radars give Mode S addresses.
+    /// nothing); `mode_s`: which radars give Mode S addresses. A
+    /// cooperative report teaches its identity only
+    /// ([`TrackIdentity::observe_report`]).
     pub(crate) fn observe_measured(&mut self, measured: Option<&super::Plot>, mode_s: &[bool]) {
-        if let Some(m) = measured {
-            self.observe_from(&m.identity, m.t, is_mode_s(mode_s, m.radar));
+        match measured {
+            Some(m) if m.report.is_some() => self.observe_report(&m.identity, m.t),
+            Some(m) => self.observe_from(&m.identity, m.t, is_mode_s(mode_s, m.radar)),
+            None => {}
         }
     }
 
@@ -818,6 +841,33 @@ mod tests {
         assert_eq!((t.last_secondary, t.last_primary), (Some(2.0), None));
         t.observe(&Identity::default(), 3.0);
         assert_eq!(t.last_primary, Some(3.0));
+    }
+
+    #[test]
+    fn a_report_teaches_its_identity_but_dates_no_radar_update() {
+        // An ADS-B report: address, code and flight level, no detection.
+        let mut adsb = reply(Some(0x4CA2D1), Some(0o1234), Some(350.0));
+        adsb.detection = None;
+        let mut t = TrackIdentity::default();
+        t.observe_report(&adsb, 5.0);
+        assert_eq!(
+            t.address.map(|a| (a.value, a.last_t)),
+            Some((0x4CA2D1, 5.0))
+        );
+        assert_eq!(t.mode_3a.map(|c| c.value), Some(0o1234));
+        assert!(t.altitude.is_some());
+        let radar_times = |t: &TrackIdentity| (t.last_primary, t.last_secondary, t.last_mode_s);
+        assert_eq!(radar_times(&t), (None, None, None));
+        // An AIS report (no identity) on that track is no primary plot.
+        t.observe_report(&Identity::default(), 6.0);
+        assert_eq!(radar_times(&t), (None, None, None));
+        // The radar's combined Mode S plot dates all three; a later
+        // report moves none of them, only the address's evidence.
+        t.observe(&reply(Some(0x4CA2D1), None, None), 7.0);
+        assert_eq!(radar_times(&t), (Some(7.0), Some(7.0), Some(7.0)));
+        t.observe_report(&adsb, 8.0);
+        assert_eq!(radar_times(&t), (Some(7.0), Some(7.0), Some(7.0)));
+        assert_eq!(t.address.map(|a| (a.plots, a.last_t)), Some((3, 8.0)));
     }
 
     #[test]

@@ -1565,8 +1565,8 @@ impl Tracker {
     /// (their horizontal positions, the old one extrapolated to `new`'s
     /// time, within the χ²₂ gate at 0.999 of their summed covariances,
     /// 13.8: one aircraft tracked twice); [`SameAircraft::Lost`] where the
-    /// old track had no update by a plot of its address since `new`'s
-    /// first plot (it lost the aircraft, which `new` found again: a
+    /// old track had no update by a plot or report of its address since
+    /// `new`'s first plot (it lost the aircraft, which `new` found again: a
     /// manoeuvre it did not follow, a gap in coverage; primary plots may
     /// have kept it going elsewhere). Otherwise both are kept and named by the
     /// duplicate-address warning (both updated at once: a misconfigured
@@ -1606,13 +1606,17 @@ impl Tracker {
             {
                 return Some(SameAircraft::Here);
             }
-            // Lost: no update by a plot of its address since the new
-            // track's first plot (primary plots may have kept it going,
-            // on another target or on clutter).
-            let since = old
-                .identity
-                .last_mode_s
-                .map_or(old.last_update, |t| t.min(old.last_update));
+            // Lost: no update by a plot or report of its address since
+            // the new track's first plot (primary plots may have kept it
+            // going, on another target or on clutter). The address's
+            // evidence is dated by both, `last_mode_s` by radar plots only
+            // but kept through a reacquisition (Track::reacquire).
+            let addressed = old.identity.address.map(|a| a.last_t);
+            let since = match (addressed, old.identity.last_mode_s) {
+                (Some(a), Some(m)) => Some(a.max(m)),
+                (a, m) => a.or(m),
+            }
+            .map_or(old.last_update, |t| t.min(old.last_update));
             if new.started.is_some_and(|t0| since < t0) && lost.is_none() {
                 lost = Some(SameAircraft::Lost(slot));
             } else if self_reported(new) || self_reported(old) {

@@ -456,6 +456,30 @@ fn track_status_octets_and_fx_chaining() {
         ..f
     };
     assert_eq!(status(all, None), [0x01, 0x41, 0x01, 0xF0]);
+    // AFF (ADS-B data inconsistent with other surveillance information)
+    // is bit 4 of the first extension: 0x08, with FX in the first octet.
+    let inconsistent = TrackStatusFlags {
+        adsb_inconsistent: true,
+        ..f
+    };
+    assert_eq!(status(inconsistent, None), [0x01, 0x08]);
+    // ADS (ADS-B update aged) is bit 4 of the third extension: 0x08 after
+    // three octets carrying FX only.
+    let adsb_aged = TrackStatusFlags {
+        adsb_aged: true,
+        ..f
+    };
+    assert_eq!(status(adsb_aged, None), [0x01, 0x01, 0x01, 0x08]);
+    // Both, with TSB 0x20: first extension 0x20 | 0x08 | FX = 0x29; third
+    // MDS 0x10 | ADS 0x08 = 0x18.
+    let both = TrackStatusFlags {
+        adsb_inconsistent: true,
+        adsb_aged: true,
+        mode_s_aged: true,
+        first_message: true,
+        ..f
+    };
+    assert_eq!(status(both, None), [0x01, 0x29, 0x01, 0x18]);
 }
 
 #[test]
@@ -469,6 +493,7 @@ fn update_ages_compound_and_saturation() {
         psr: Some(0.125),
         ssr: None,
         mode_s: Some(100.0),
+        ..UpdateAges::default()
     });
     // Primary: TRK 0x80 | PSR 0x40 | MDS (4th) 0x10 = 0xD0, no FX.
     assert_eq!(
@@ -495,6 +520,54 @@ fn update_ages_compound_and_saturation() {
     assert_eq!(e.skipped[0].item, "I062/290 PSR");
     // No age at all: no item, FSPEC octet 2 without FRN 14 (0x0C).
     assert_eq!(record(&base())[1], 0x0C);
+}
+
+#[test]
+fn adsb_es_and_mlat_ages_are_subfields_6_and_10() {
+    // I062/290 in 1.20: TRK PSR SSR MDS ADS(2 octets) ES VDL | UAT LOP
+    // MLT. ES is the 6th subfield, bit 3 of the primary's first octet
+    // (0x04); MLT the 10th, bit 6 of its second octet (0x20).
+    let ages = |a: UpdateAges| encode_one(&SystemTrack { ages: a, ..base() });
+    // ES alone: one primary octet 0x04; 2.6 s / 0.25 = 10.4 → 10 = 0x0A.
+    let e = ages(UpdateAges {
+        adsb_es: Some(2.6),
+        ..UpdateAges::default()
+    });
+    assert_eq!(item(&e.blocks[0][3..], 14).unwrap(), [0x04, 0x0A]);
+    // MLT alone: the primary's first octet is FX only (0x01), the second
+    // 0x20; 0.875 s / 0.25 = 3.5 → 4 (ties away from zero).
+    let e = ages(UpdateAges {
+        mlat: Some(0.875),
+        ..UpdateAges::default()
+    });
+    assert_eq!(item(&e.blocks[0][3..], 14).unwrap(), [0x01, 0x20, 0x04]);
+    // TRK, MDS, ES and MLT: primary 0x80 | 0x10 | 0x04 | FX = 0x95, then
+    // 0x20; values in subfield order: TRK 40 s → 160 = 0xA0, MDS 4.25 s →
+    // 17 = 0x11, ES 0 s → 0, MLT 70 s > 63.75 s → 255 = 0xFF (maximum
+    // value or above, a saturation).
+    let e = ages(UpdateAges {
+        track: Some(40.0),
+        mode_s: Some(4.25),
+        adsb_es: Some(0.0),
+        mlat: Some(70.0),
+        ..UpdateAges::default()
+    });
+    assert_eq!(
+        item(&e.blocks[0][3..], 14).unwrap(),
+        [0x95, 0x20, 0xA0, 0x11, 0x00, 0xFF]
+    );
+    assert_eq!(e.saturated.len(), 1);
+    assert_eq!(e.saturated[0].item, "I062/290 MLT");
+    assert_eq!(e.saturated[0].max, 63.75);
+    // A negative or NaN age is left out (never received is not sent).
+    let e = ages(UpdateAges {
+        adsb_es: Some(-0.5),
+        mlat: Some(f64::NAN),
+        ..UpdateAges::default()
+    });
+    assert_eq!(item(&e.blocks[0][3..], 14), None);
+    let left_out: Vec<&str> = e.skipped.iter().map(|s| s.item).collect();
+    assert_eq!(left_out, ["I062/290 ES", "I062/290 MLT"]);
 }
 
 #[test]
@@ -768,8 +841,10 @@ fn any_track() -> impl Strategy<Value = SystemTrack> {
     let pair = || (any_f64(), any_f64());
     (
         (any::<u16>(), any_f64(), opt(pair()), pair(), pair()),
-        (any::<[bool; 10]>(), 0u8..8),
+        (any::<[bool; 12]>(), 0u8..8),
         (
+            opt(any_f64()),
+            opt(any_f64()),
             opt(any_f64()),
             opt(any_f64()),
             opt(any_f64()),
@@ -816,12 +891,16 @@ fn any_track() -> impl Strategy<Value = SystemTrack> {
                     psr_aged: b[7],
                     ssr_aged: b[8],
                     mode_s_aged: b[9],
+                    adsb_inconsistent: b[10],
+                    adsb_aged: b[11],
                 },
                 ages: UpdateAges {
                     track: c.0,
                     psr: c.1,
                     ssr: c.2,
                     mode_s: c.3,
+                    adsb_es: c.4,
+                    mlat: c.5,
                 },
                 accuracy: Some(Accuracy {
                     xy: d.0,

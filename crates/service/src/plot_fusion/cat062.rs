@@ -21,10 +21,24 @@
 //! - I062/080: CNF for a tentative track, TSB on a session's first record
 //!   of a track, TSE on its last (deletion), CST when the track missed its
 //!   last frame (`consecutive_misses > 0`), MON when the network has a
-//!   single radar. PSR/SSR/MDS age flags are not set.
-//! - I062/290: TRK = t − `start_t`, PSR = t − `last_update_t` (the radars
-//!   are treated as primary surveillance radars: plots carry no SSR or
-//!   Mode S code).
+//!   single radar, SPI from the identity; PSR, SSR, MDS and ADS when that
+//!   kind's I062/290 age is above [`AGED_AFTER_S`]; AFF ("ADS-B data
+//!   inconsistent with other surveillance information") while the track
+//!   distrusts its self-reported positions (`self_reported.trusted`
+//!   false) and ADS-B is among its sources (AIS is not ADS-B: a track
+//!   whose self-reports are AIS only is never flagged).
+//!   `self_reported.validated` (ADS-B alone for 30 s) has no bit in 1.20;
+//!   MLAT's aged bit is not reached (`formats::cat062::TrackStatusFlags`).
+//! - I062/290, each t − the time of the last update of its kind, and
+//!   absent when no update of that kind has come: TRK from `start_t`;
+//!   PSR, SSR, MDS from the identity's `last_primary_t`,
+//!   `last_secondary_t`, `last_mode_s_t`, which radar plots date (never a
+//!   report). A track without an identity was updated by primary plots
+//!   only: PSR from `last_update_t`. A track a report has updated and no
+//!   radar's secondary plot has: PSR from its latest radar in `sources`
+//!   (its radar plots were primary; none: no PSR). ES from the `adsb`
+//!   source's `last_t`, MLT from the `mlat` source's (AIS has no
+//!   subfield).
 //! - I062/500 from the covariance P: APC √P_xx, √P_yy; COV P_xy; ATV √P_vxvx,
 //!   √P_vyvy; APW and AGA by first-order propagation J P Jᵀ through the
 //!   Jacobian J of (lat, lon, h) by (e, n, u) at the track's position
@@ -36,15 +50,16 @@
 //! A value outside its item's range is left out and counted (the encoder's
 //! `skipped`); the warnings say how many, with the first reason.
 
+use algo::tracking::ReportKind;
 use formats::asterix::FT_M;
 use formats::cat062::{
     self, Accuracy, AltitudeSource, Cat062Config, Encoded, LastMeasurement, SystemTrack,
     TrackMode3A, TrackStatusFlags, UpdateAges,
 };
 
-/// I062/080 PSR, SSR and MDS say a kind of update is aged beyond this
-/// (s): two scans of a 6-s en-route radar, as the track's I062/290 ages
-/// show them.
+/// I062/080 PSR, SSR, MDS and ADS say a kind of update is aged beyond
+/// this (s): two scans of a 6-s en-route radar, as the track's I062/290
+/// ages show them.
 pub const AGED_AFTER_S: f64 = 12.0;
 use formats::wire::{FormatError, Reader, Writer};
 
@@ -289,7 +304,9 @@ pub fn system_track(
         polar: Some((p.range_m, p.azimuth_deg)),
         height: None,
     });
-    let id = SecondaryItems::of(t);
+    let sources = Sources::of(t, network);
+    let id = SecondaryItems::of(t, &sources);
+    let adsb_age = sources.adsb.map(|l| t.t - l);
     // The rate of climb of the pressure altitude when the track has one
     // (Mode C: what ATC reads), else the geometric one of a 3D track.
     let vertical_rate = id.vertical_rate.or(vertical_rate);
@@ -318,6 +335,9 @@ pub fn system_track(
             psr_aged: id.psr_age.is_some_and(|a| a > AGED_AFTER_S),
             ssr_aged: id.ssr_age.is_some_and(|a| a > AGED_AFTER_S),
             mode_s_aged: id.mds_age.is_some_and(|a| a > AGED_AFTER_S),
+            adsb_aged: adsb_age.is_some_and(|a| a > AGED_AFTER_S),
+            adsb_inconsistent: sources.adsb.is_some()
+                && t.self_reported.as_ref().is_some_and(|v| !v.trusted),
             ..TrackStatusFlags::default()
         },
         ages: UpdateAges {
@@ -325,11 +345,58 @@ pub fn system_track(
             psr: id.psr_age,
             ssr: id.ssr_age,
             mode_s: id.mds_age,
+            adsb_es: adsb_age,
+            mlat: sources.mlat.map(|l| t.t - l),
         },
         accuracy: Some(accuracy),
         height,
         vertical_rate,
         last_measurement,
+    }
+}
+
+/// When a track's sensors last updated it, from its `sources` (radars by
+/// id in the network's order, then `adsb`, `mlat`, `ais`).
+struct Sources {
+    /// The latest radar's.
+    radar: Option<f64>,
+    /// Whether a cooperative report (any kind) has updated the track.
+    reports: bool,
+    adsb: Option<f64>,
+    mlat: Option<f64>,
+}
+
+impl Sources {
+    /// An entry named `adsb`, `mlat` or `ais` is that report sensor's,
+    /// unless a radar has that id and no earlier entry had the name (the
+    /// radars come first: a radar named `adsb` and the ADS-B reports are
+    /// two entries of one name).
+    fn of(t: &TrackView, network: &Network) -> Self {
+        let mut out = Self {
+            radar: None,
+            reports: false,
+            adsb: None,
+            mlat: None,
+        };
+        for (i, s) in t.sources.iter().enumerate() {
+            let report = ReportKind::from_name(&s.sensor).filter(|_| {
+                !network.radar_ids.contains(&s.sensor)
+                    || t.sources[..i].iter().any(|e| e.sensor == s.sensor)
+            });
+            let latest = |x: Option<f64>| Some(x.map_or(s.last_t, |x| x.max(s.last_t)));
+            match report {
+                None => out.radar = latest(out.radar),
+                Some(kind) => {
+                    out.reports = true;
+                    match kind {
+                        ReportKind::Adsb => out.adsb = latest(out.adsb),
+                        ReportKind::Mlat => out.mlat = latest(out.mlat),
+                        ReportKind::Ais => {}
+                    }
+                }
+            }
+        }
+        out
     }
 }
 
@@ -350,7 +417,7 @@ struct SecondaryItems {
 }
 
 impl SecondaryItems {
-    fn of(t: &TrackView) -> Self {
+    fn of(t: &TrackView, sources: &Sources) -> Self {
         let identity = t.identity.as_ref();
         let pressure = identity.and_then(|i| i.pressure_altitude.as_ref());
         let age = |last: Option<f64>| last.map(|l| t.t - l);
@@ -377,12 +444,16 @@ impl SecondaryItems {
             measured_flight_level: pressure.map(|a| a.measured_flight_level),
             vertical_rate: pressure.map(|a| a.rate_of_climb_ftpm * FT_M / 60.0),
             spi: identity.is_some_and(|i| i.spi),
-            // A track that has heard secondary replies knows whether its
-            // updates were primary; one that never has was updated by
-            // primary plots only.
+            // A track that has had a radar's secondary plot knows whether
+            // its radar updates were primary; one that never has was
+            // updated by primary plots only: its last update, or with
+            // reports (which are no primary plot) its latest radar's.
             psr_age: match identity {
-                Some(i) => age(i.last_primary_t),
-                None => Some(t.t - t.last_update_t),
+                Some(i) if i.last_secondary_t.is_some() || !sources.reports => {
+                    age(i.last_primary_t)
+                }
+                None if !sources.reports => Some(t.t - t.last_update_t),
+                _ => age(sources.radar),
             },
             ssr_age: age(identity.and_then(|i| i.last_secondary_t)),
             mds_age: age(identity.and_then(|i| i.last_mode_s_t)),
@@ -447,4 +518,197 @@ pub fn decode_options(r: &mut Reader<'_>) -> Result<Cat062Options, FormatError> 
         day_start_t,
         max_block_bytes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plot_fusion::output::{SelfReportedView, SourceView};
+    use crate::plot_fusion::{IdentityItem, IdentityView};
+
+    fn options() -> Cat062Options {
+        Cat062Options {
+            config: Cat062Config {
+                sac: 1,
+                sic: 2,
+                service_id: None,
+            },
+            day_start_t: 0.0,
+            max_block_bytes: DEFAULT_BLOCK_BYTES as usize,
+        }
+    }
+
+    fn network(radars: &[&str]) -> Network {
+        let sites = radars
+            .iter()
+            .map(|_| super::super::network::RadarSite {
+                rotation: None,
+                height: 0.0,
+            })
+            .collect();
+        Network::from_parts(
+            None,
+            radars.iter().map(|r| r.to_string()).collect(),
+            sites,
+            0.0,
+        )
+    }
+
+    /// A confirmed 2D track at t = 100 s, last updated at 99 s, with the
+    /// sources given (sensor, last time).
+    fn track(sources: &[(&str, f64)]) -> TrackView {
+        TrackView {
+            id: 7,
+            status: "confirmed",
+            t: 100.0,
+            state: vec![0.0; 4],
+            covariance: vec![vec![0.0; 4]; 4],
+            lat_deg: None,
+            lon_deg: None,
+            height_m: None,
+            radars: Vec::new(),
+            hits: 10,
+            misses: 0,
+            consecutive_misses: 0,
+            age: 10,
+            last_update_t: 99.0,
+            modes: Vec::new(),
+            turn_rate_dps: None,
+            start_t: Some(50.0),
+            last_plot: None,
+            identity: None,
+            sources: sources
+                .iter()
+                .map(|&(sensor, last_t)| SourceView {
+                    sensor: sensor.to_string(),
+                    last_t,
+                })
+                .collect(),
+            self_reported: None,
+        }
+    }
+
+    /// The identity an ADS-B report gives: an address, and no radar time.
+    fn adsb_identity() -> IdentityView {
+        IdentityView {
+            mode_s_address: Some(IdentityItem {
+                value: "4CA2D1".into(),
+                plots: 30,
+                first_t: 70.0,
+                last_t: 99.0,
+            }),
+            mode_3a: None,
+            pending_mode_3a: None,
+            callsign: None,
+            pressure_altitude: None,
+            emergency: None,
+            spi: false,
+            last_secondary_t: None,
+            last_mode_s_t: None,
+            last_primary_t: None,
+        }
+    }
+
+    fn record(network: &Network, t: &TrackView) -> SystemTrack {
+        system_track(&options(), network, t, Life::Continuing)
+    }
+
+    #[test]
+    fn adsb_and_mlat_sources_give_es_and_mlt_ages_and_no_radar_age() {
+        let mut t = track(&[("adsb", 99.5), ("mlat", 97.0)]);
+        t.identity = Some(adsb_identity());
+        let r = record(&network(&["west"]), &t);
+        // ES 100 − 99.5 = 0.5 s, MLT 100 − 97 = 3 s; no radar plot: no
+        // PSR, SSR or MDS age.
+        assert_eq!(r.ages.adsb_es, Some(0.5));
+        assert_eq!(r.ages.mlat, Some(3.0));
+        assert_eq!((r.ages.psr, r.ages.ssr, r.ages.mode_s), (None, None, None));
+        assert_eq!(r.ages.track, Some(50.0));
+        assert!(!r.status.adsb_aged && !r.status.adsb_inconsistent);
+    }
+
+    #[test]
+    fn a_radar_only_track_has_no_es_or_mlt_age() {
+        // No identity, no report: primary plots only, PSR from the last
+        // update (100 − 99 = 1 s).
+        let t = track(&[("west", 99.0)]);
+        let r = record(&network(&["west"]), &t);
+        assert_eq!((r.ages.adsb_es, r.ages.mlat), (None, None));
+        assert_eq!(r.ages.psr, Some(1.0));
+    }
+
+    #[test]
+    fn a_primary_radar_beside_reports_dates_the_psr_age_by_the_radar() {
+        // Primary plots of `west` until 90 s, then AIS (no identity): PSR
+        // 100 − 90 = 10 s, not the last update's 1 s; AIS has no subfield.
+        let t = track(&[("west", 90.0), ("ais", 99.0)]);
+        let r = record(&network(&["west"]), &t);
+        assert_eq!(r.ages.psr, Some(10.0));
+        assert_eq!((r.ages.adsb_es, r.ages.mlat), (None, None));
+        // ADS-B alone (an identity without radar times, no radar source):
+        // no PSR age at all.
+        let mut t = track(&[("adsb", 99.0)]);
+        t.identity = Some(adsb_identity());
+        assert_eq!(record(&network(&["west"]), &t).ages.psr, None);
+        // With a Mode S radar's combined plots (radar times in the
+        // identity), the identity's times: PSR 100 − 96 = 4 s, SSR 4 s,
+        // MDS 100 − 95 = 5 s.
+        let mut t = track(&[("west", 96.0), ("adsb", 99.0)]);
+        t.identity = Some(IdentityView {
+            last_primary_t: Some(96.0),
+            last_secondary_t: Some(96.0),
+            last_mode_s_t: Some(95.0),
+            ..adsb_identity()
+        });
+        let r = record(&network(&["west"]), &t);
+        assert_eq!(
+            (r.ages.psr, r.ages.ssr, r.ages.mode_s, r.ages.adsb_es),
+            (Some(4.0), Some(4.0), Some(5.0), Some(1.0))
+        );
+    }
+
+    #[test]
+    fn distrusted_adsb_sets_aff_and_an_old_adsb_update_sets_ads() {
+        let mut t = track(&[("west", 99.0), ("adsb", 80.0)]);
+        t.identity = Some(adsb_identity());
+        t.self_reported = Some(SelfReportedView {
+            trusted: false,
+            validated: true,
+            distrusted_since_t: Some(79.0),
+            last_self_reported_t: Some(80.0),
+            last_independent_t: Some(99.0),
+            disagreement: None,
+        });
+        let r = record(&network(&["west"]), &t);
+        // ES 100 − 80 = 20 s > 12 s: ADS aged.
+        assert_eq!(r.ages.adsb_es, Some(20.0));
+        assert!(r.status.adsb_inconsistent && r.status.adsb_aged);
+        // Trusted again, ADS-B 12 s old (not above the threshold).
+        t.sources[1].last_t = 88.0;
+        t.self_reported.as_mut().unwrap().trusted = true;
+        let r = record(&network(&["west"]), &t);
+        assert!(!r.status.adsb_inconsistent && !r.status.adsb_aged);
+        // Distrusted self-reports without ADS-B (AIS) are not ADS-B's.
+        let mut t = track(&[("west", 99.0), ("ais", 98.0)]);
+        t.self_reported = Some(SelfReportedView {
+            trusted: false,
+            validated: true,
+            distrusted_since_t: Some(90.0),
+            last_self_reported_t: Some(98.0),
+            last_independent_t: Some(99.0),
+            disagreement: None,
+        });
+        assert!(!record(&network(&["west"]), &t).status.adsb_inconsistent);
+    }
+
+    #[test]
+    fn a_radar_named_like_a_report_sensor_is_told_apart_by_order() {
+        // The radars come first: a radar `adsb` alone is a radar.
+        let net = network(&["adsb"]);
+        let r = record(&net, &track(&[("adsb", 99.0)]));
+        assert_eq!((r.ages.adsb_es, r.ages.psr), (None, Some(1.0)));
+        // Two entries `adsb`: the radar's (90 s), then the reports' (99.5 s).
+        let r = record(&net, &track(&[("adsb", 90.0), ("adsb", 99.5)]));
+        assert_eq!((r.ages.adsb_es, r.ages.psr), (Some(0.5), Some(10.0)));
+    }
 }

@@ -285,8 +285,9 @@ pub struct IdentityView {
     pub emergency: Option<&'static str>,
     /// SPI set by a reply in the last 18 s.
     pub spi: bool,
-    /// Times of the last update by a secondary plot, a Mode S plot and a
-    /// primary (or combined) plot.
+    /// Times of the last update by a radar's secondary plot, Mode S plot
+    /// and primary (or combined) plot (a cooperative report dates none:
+    /// `TrackView::sources` has its time).
     pub last_secondary_t: Option<f64>,
     pub last_mode_s_t: Option<f64>,
     pub last_primary_t: Option<f64>,

@@ -41,6 +41,8 @@ fn sample_tracks() -> Vec<SystemTrack> {
                 psr: Some(1.2),
                 ssr: Some(0.8),
                 mode_s: Some(0.8),
+                adsb_es: Some(0.5),
+                mlat: Some(0.3),
             },
             accuracy: Some(Accuracy {
                 xy: Some((35.2, 41.9)),
@@ -63,7 +65,8 @@ fn sample_tracks() -> Vec<SystemTrack> {
             callsign: Default::default(),
             mode_3a: Default::default(),
         },
-        // 1: 2D, tentative, first message.
+        // 1: 2D, tentative, first message; its ADS-B inconsistent with
+        // the other surveillance (AFF), an MLAT age alone.
         SystemTrack {
             track_number: 102,
             time_of_day: 45_297.0,
@@ -72,11 +75,13 @@ fn sample_tracks() -> Vec<SystemTrack> {
             status: TrackStatusFlags {
                 tentative: true,
                 first_message: true,
+                adsb_inconsistent: true,
                 ..f
             },
             ages: UpdateAges {
                 track: Some(2.0),
                 ssr: Some(2.0),
+                mlat: Some(7.1),
                 ..UpdateAges::default()
             },
             ..SystemTrack::default()
@@ -168,6 +173,8 @@ fn sample_tracks() -> Vec<SystemTrack> {
                 psr: Some(100.0),
                 ssr: Some(100.0),
                 mode_s: Some(100.0),
+                adsb_es: Some(100.0),
+                mlat: Some(64.0),
             },
             accuracy: Some(Accuracy {
                 xy: Some((40_000.0, 1e6)),
@@ -195,7 +202,7 @@ fn sample_tracks() -> Vec<SystemTrack> {
             vertical_rate: Some(-32_768.0 * 6.25 * 0.3048 / 60.0),
             ..SystemTrack::default()
         },
-        // 8: below the ellipsoid, descending, PSR and Mode S aged.
+        // 8: below the ellipsoid, descending, PSR, Mode S and ADS-B aged.
         SystemTrack {
             track_number: 0,
             time_of_day: 3_600.0,
@@ -205,8 +212,13 @@ fn sample_tracks() -> Vec<SystemTrack> {
             status: TrackStatusFlags {
                 psr_aged: true,
                 mode_s_aged: true,
+                adsb_aged: true,
                 altitude_source: AltitudeSource::Triangulation,
                 ..f
+            },
+            ages: UpdateAges {
+                adsb_es: Some(20.0),
+                ..UpdateAges::default()
             },
             height: Some(-400.0),
             vertical_rate: Some(-20.0),
@@ -310,9 +322,11 @@ fn input_json(tracks: &[SystemTrack]) -> String {
             s,
             "  {{\"track_number\": {}, \"time_of_day\": {}, \"wgs84\": {}, \"xy\": {}, \"velocity\": {},\n   \
              \"status\": {{\"monosensor\": {}, \"spi\": {}, \"altitude_source\": {}, \"tentative\": {}, \
-             \"simulated\": {}, \"last_message\": {}, \"first_message\": {}, \"coasting\": {}, \
-             \"psr_aged\": {}, \"ssr_aged\": {}, \"mode_s_aged\": {}}},\n   \
-             \"ages\": {{\"track\": {}, \"psr\": {}, \"ssr\": {}, \"mode_s\": {}}},\n   \
+             \"simulated\": {}, \"last_message\": {}, \"first_message\": {}, \
+             \"adsb_inconsistent\": {}, \"coasting\": {}, \
+             \"psr_aged\": {}, \"ssr_aged\": {}, \"mode_s_aged\": {}, \"adsb_aged\": {}}},\n   \
+             \"ages\": {{\"track\": {}, \"psr\": {}, \"ssr\": {}, \"mode_s\": {}, \
+             \"adsb_es\": {}, \"mlat\": {}}},\n   \
              \"accuracy\": {},\n   \"height\": {}, \"vertical_rate\": {},\n   \"last_measurement\": {}}}{}\n",
             t.track_number,
             num(t.time_of_day),
@@ -326,14 +340,18 @@ fn input_json(tracks: &[SystemTrack]) -> String {
             st.simulated,
             st.last_message,
             st.first_message,
+            st.adsb_inconsistent,
             st.coasting,
             st.psr_aged,
             st.ssr_aged,
             st.mode_s_aged,
+            st.adsb_aged,
             opt_num(a.track),
             opt_num(a.psr),
             opt_num(a.ssr),
             opt_num(a.mode_s),
+            opt_num(a.adsb_es),
+            opt_num(a.mlat),
             acc,
             opt_num(t.height),
             opt_num(t.vertical_rate),
@@ -716,8 +734,8 @@ fn libasterix_decodes_the_sample_to_its_inputs() {
         };
         k.exact(&["080", "SRC"], Some(src));
         k.exact(&["080", "CNF"], b(s.tentative));
-        let ext1 = s.simulated || s.last_message || s.first_message;
-        let ext3 = s.coasting || s.psr_aged || s.ssr_aged || s.mode_s_aged;
+        let ext1 = s.simulated || s.last_message || s.first_message || s.adsb_inconsistent;
+        let ext3 = s.coasting || s.psr_aged || s.ssr_aged || s.mode_s_aged || s.adsb_aged;
         let octets = if ext3 {
             4
         } else if ext1 {
@@ -735,10 +753,12 @@ fn libasterix_decodes_the_sample_to_its_inputs() {
         k.exact(&["080", "SIM"], when(octets >= 2, s.simulated));
         k.exact(&["080", "TSE"], when(octets >= 2, s.last_message));
         k.exact(&["080", "TSB"], when(octets >= 2, s.first_message));
+        k.exact(&["080", "AFF"], when(octets >= 2, s.adsb_inconsistent));
         k.exact(&["080", "CST"], when(octets >= 4, s.coasting));
         k.exact(&["080", "PSR"], when(octets >= 4, s.psr_aged));
         k.exact(&["080", "SSR"], when(octets >= 4, s.ssr_aged));
         k.exact(&["080", "MDS"], when(octets >= 4, s.mode_s_aged));
+        k.exact(&["080", "ADS"], when(octets >= 4, s.adsb_aged));
         // I062/290.
         let a = t.ages;
         for (name, sub, v) in [
@@ -746,6 +766,8 @@ fn libasterix_decodes_the_sample_to_its_inputs() {
             ("I062/290 PSR", "PSR", a.psr),
             ("I062/290 SSR", "SSR", a.ssr),
             ("I062/290 MDS", "MDS", a.mode_s),
+            ("I062/290 ES", "ES", a.adsb_es),
+            ("I062/290 MLT", "MLT", a.mlat),
         ] {
             k.capped(name, &["290", sub], v, 63.75, 0.25);
         }
@@ -856,6 +878,6 @@ fn libasterix_decodes_the_sample_to_its_inputs() {
         );
         compared += k.compared;
     }
-    // Every one of the 46 checks above, for each of the 10 records.
-    assert_eq!(compared, 46 * tracks.len());
+    // Every one of the 50 checks above, for each of the 10 records.
+    assert_eq!(compared, 50 * tracks.len());
 }
