@@ -999,7 +999,13 @@ mod tests {
             "{refused:?}"
         );
         assert_eq!(ran.unwrap(), 2);
-        assert_eq!(one.running(), 0);
+        // The job's place is given back as its thread lets go of it, which
+        // can be just after its answer arrived (seen on a loaded machine).
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while one.running() != 0 {
+            assert!(Instant::now() < deadline, "the job kept its place");
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
     }
 
     #[tokio::test]
