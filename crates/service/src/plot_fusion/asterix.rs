@@ -301,7 +301,7 @@ pub fn plots(
                 errors.push(DecodeError {
                     offset: r.offset,
                     reason: format!(
-                        "target report of radar '{}' refused: its time of day is {:.1} s from                          the time of reception, beyond {} s (--asterix-max-clock-offset-s; a                          radar clock glitch or a forged datagram)",
+                        "target report of radar '{}' refused: its time of day is {:.1} s from the time of reception, beyond {} s (--asterix-max-clock-offset-s; a radar clock glitch or a forged datagram)",
                         network.radar_ids[radar],
                         off,
                         rx.max_offset_s

@@ -134,7 +134,7 @@ pub fn self_reported_warnings(tracks: &[TrackOutput]) -> Vec<String> {
         };
         if let (false, Some(d)) = (v.trusted, v.disagreement) {
             out.push(format!(
-                "track {} ({address}): its ADS-B/AIS positions disagree with independent                  evidence (radar, multilateration) by {:.0} m against a stated σ of {:.0} m,                  since t = {:.1} s; they are not used until {} in a row agree (faulty                  avionics or spoofing)",
+                "track {} ({address}): its ADS-B/AIS positions disagree with independent evidence (radar, multilateration) by {:.0} m against a stated σ of {:.0} m, since t = {:.1} s; they are not used until {} in a row agree (faulty avionics or spoofing)",
                 t.id,
                 d.distance_m,
                 d.stated_sigma_m,
@@ -148,7 +148,7 @@ pub fn self_reported_warnings(tracks: &[TrackOutput]) -> Vec<String> {
     if !unvalidated.is_empty() {
         let shown: Vec<String> = unvalidated.iter().take(10).map(u64::to_string).collect();
         out.push(format!(
-            "{} confirmed tracks are held by ADS-B/AIS alone, unvalidated (no radar or              multilateration update in the last {} s): {}{}",
+            "{} confirmed tracks are held by ADS-B/AIS alone, unvalidated (no radar or multilateration update in the last {} s): {}{}",
             unvalidated.len(),
             algo::tracking::identity::INDEPENDENT_WINDOW_S,
             shown.join(", "),
