@@ -585,6 +585,7 @@ mod tests {
                 })
                 .collect(),
             self_reported: None,
+            mmsi: None,
         }
     }
 
