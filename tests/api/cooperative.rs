@@ -247,6 +247,14 @@ async fn bad_report_fields_are_named_on_both_transports() {
     reports[2]["lat_deg"] = json!(100.0);
     reports[3]["nacv"] = json!(0);
     reports[4]["mode_s_address"] = json!("XYZ");
+    // A radar may not be named as a kind of report.
+    let mut reserved = request(20.0);
+    reserved["radars"][0]["id"] = json!("adsb");
+    let body = assert_problem(app.post_json(PATH, &reserved).await, 422).await;
+    assert!(
+        problem_fields(&body).contains(&"radars[0].id".to_string()),
+        "{body}"
+    );
     // Parallel mode takes radar plots only: each report named.
     let mut parallel = request(20.0);
     parallel["tracker"] = json!({"mode": "parallel"});

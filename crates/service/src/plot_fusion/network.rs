@@ -319,6 +319,13 @@ fn parse_radar<'a>(
     let source = source(v, &f, r.sac, r.sic, i, source_of);
     let id = radar_ids.check(v, r.id.as_deref(), i, |j| format!("radars[{j}].id"));
     let id = id.unwrap_or_default().to_string();
+    // A track's `sources` name radars and kinds of report alike.
+    if algo::tracking::ReportKind::from_name(&id).is_some() {
+        v.add(
+            format!("{f}.id"),
+            format!("'{id}' is reserved: tracks name their cooperative sources adsb, mlat and ais"),
+        );
+    }
     let three_d = v.one_of(
         format!("{f}.kind"),
         r.kind.as_deref(),
