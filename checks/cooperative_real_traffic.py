@@ -168,20 +168,7 @@ def main() -> int:
     ap.add_argument("--json-out")
     args = ap.parse_args()
 
-    load = rt.load_truths
-
-    def with_pair(collection, n, minutes, start):
-        truths, w0, info = load(collection, n, minutes, start)
-        info["real_flights"] = len(truths)
-        info["squawks"] = ssr.squawk_table(collection, truths, w0)
-        return truths + ssr.side_by_side(truths), w0, info
-
-    rt.load_truths = with_pair
-    ns = argparse.Namespace(collection=args.collection, radars=args.radars,
-                            flights=args.flights, minutes=args.minutes, start=None,
-                            max_range_km=args.max_range_km, seed=args.seed,
-                            doppler=False, clutter=args.clutter)
-    scene = rt.make_scene(ns)
+    scene = ssr.scene_with_pair(args)
     body = ssr.add_ssr(scene, rt.build_request(scene, None), args)
     reports, info = adsb_reports(scene, args)
     print(f"scene: {scene.info['collection']} from {scene.info['window_start_utc']}, "
@@ -210,7 +197,6 @@ def main() -> int:
     print(f"spoof: {json.dumps(spoof)}")
     for w in fused.extra.get("warnings") or []:
         print(f"  warning: {w}")
-    args.cutoff_m = args.cutoff_m
     ed87_figures = ssr.ed87_report(scene, runs, args)
     if args.json_out:
         with open(args.json_out, "w") as fh:

@@ -296,6 +296,29 @@ def identity_figures(scene, res, ident: dict, cutoff: float, args) -> dict:
     }
 
 
+def scene_with_pair(args):
+    """The parent's scene (``rt.make_scene``) of ``args``' collection,
+    flights, minutes, radars, range, seed and clutter, with the recorded
+    squawks in its info and the two side-by-side 7000 aircraft added."""
+    load = rt.load_truths
+
+    def with_pair(collection, n, minutes, start):
+        truths, w0, info = load(collection, n, minutes, start)
+        info["real_flights"] = len(truths)
+        info["squawks"] = squawk_table(collection, truths, w0)
+        return truths + side_by_side(truths), w0, info
+
+    rt.load_truths = with_pair
+    try:
+        ns = argparse.Namespace(collection=args.collection, radars=args.radars,
+                                flights=args.flights, minutes=args.minutes, start=None,
+                                max_range_km=args.max_range_km, seed=args.seed,
+                                doppler=False, clutter=args.clutter)
+        return rt.make_scene(ns)
+    finally:
+        rt.load_truths = load
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--url", default="http://127.0.0.1:18080")
@@ -321,22 +344,7 @@ def main() -> int:
     ap.add_argument("--json-out")
     args = ap.parse_args()
 
-    load = rt.load_truths
-    holder = {}
-
-    def with_pair(collection, n, minutes, start):
-        truths, w0, info = load(collection, n, minutes, start)
-        info["real_flights"] = len(truths)
-        info["squawks"] = squawk_table(collection, truths, w0)
-        holder["info"] = info
-        return truths + side_by_side(truths), w0, info
-
-    rt.load_truths = with_pair
-    ns = argparse.Namespace(collection=args.collection, radars=args.radars,
-                            flights=args.flights, minutes=args.minutes, start=None,
-                            max_range_km=args.max_range_km, seed=args.seed,
-                            doppler=False, clutter=args.clutter)
-    scene = rt.make_scene(ns)
+    scene = scene_with_pair(args)
     print(f"scene: {scene.info['collection']} from {scene.info['window_start_utc']}, "
           f"{scene.info['real_flights']} real flights + 2 side by side (7000), "
           f"{len(scene.radars)} radars (Mode S: "

@@ -204,7 +204,7 @@ impl Plot {
         Plot {
             radar: sensor,
             t,
-            range: e.hypot(n).hypot(u).max(1e-3),
+            range: horizontal.hypot(u).max(1e-3),
             azimuth: e.atan2(n),
             elevation: Some(u.atan2(horizontal.max(1e-3))),
             radial_velocity: None,
@@ -673,6 +673,13 @@ impl TrackerConfig {
         sensor
             .checked_sub(self.radars.len())
             .and_then(|i| ReportKind::ALL.get(i).copied())
+    }
+
+    /// Whether sensor `sensor` reports the target's own position (ADS-B,
+    /// AIS: [`ReportKind::is_self_reported`]); a radar or MLAT does not.
+    pub fn is_self_reported(&self, sensor: usize) -> bool {
+        self.report_kind(sensor)
+            .is_some_and(ReportKind::is_self_reported)
     }
 
     /// Every sensor's count: the radars and one per kind of report.

@@ -316,14 +316,7 @@ enum Source {
 /// aircraft below its coverage), and the reports judge its misses
 /// ([`report_coasted`]). A track no report has updated is judged as ever.
 fn reports_only_for(track: &Track, radar: usize, radars: usize) -> bool {
-    let sensors = || {
-        track
-            .detections
-            .iter()
-            .map(|h| h.radar)
-            .chain(track.radars.iter().copied())
-    };
-    sensors().any(|i| i >= radars) && !sensors().any(|i| i == radar)
+    track.sensors().any(|i| i >= radars) && !track.sensors().any(|i| i == radar)
 }
 
 /// Whether cooperative reports (sensors past the `radars`) have updated `track` (its last hit, or a
@@ -332,10 +325,7 @@ fn reports_only_for(track: &Track, radar: usize, radars: usize) -> bool {
 /// judged since: a judged miss predicts the track to its time).
 fn report_coasted(radars: usize, track: &Track, t: f64) -> bool {
     track
-        .detections
-        .iter()
-        .map(|h| h.radar)
-        .chain(track.radars.iter().copied())
+        .sensors()
         .filter_map(|i| ReportKind::ALL.get(i.checked_sub(radars)?).copied())
         .map(ReportKind::coast_s)
         .reduce(f64::min)
@@ -1577,12 +1567,7 @@ impl Tracker {
     fn same_aircraft(&self, new: &Track) -> Option<SameAircraft> {
         let address = new.identity.address.map(|a| a.value)?;
         let cfg = &self.config;
-        let self_reported = |tr: &Track| {
-            tr.radars
-                .iter()
-                .chain(tr.detections.iter().map(|h| &h.radar))
-                .any(|&i| cfg.report_kind(i).is_some_and(ReportKind::is_self_reported))
-        };
+        let self_reported = |tr: &Track| tr.sensors().any(|i| cfg.is_self_reported(i));
         let mut lost = None;
         let mut merged = None;
         for (slot, old) in self.tracks.iter().enumerate() {

@@ -176,6 +176,15 @@ impl Track {
         }
     }
 
+    /// Every sensor that has updated the track: those it keeps a hit of,
+    /// then those of its last hit (a sensor may come twice).
+    pub(crate) fn sensors(&self) -> impl Iterator<Item = usize> + '_ {
+        self.detections
+            .iter()
+            .map(|h| h.radar)
+            .chain(self.radars.iter().copied())
+    }
+
     /// [`Track::hit_by`] of a frame's plot when it is one radar's plot
     /// (its own time; a fused plot of parallel mode records none): the
     /// scans since that radar's previous hit.

@@ -55,10 +55,7 @@ fn self_reported(plot: &CartesianPlot) -> bool {
 
 /// Whether the last update of `track` was a self-reported position.
 fn held_by_self_reports(cfg: &TrackerConfig, track: &Track) -> bool {
-    track
-        .radars
-        .iter()
-        .any(|&i| cfg.report_kind(i).is_some_and(|k| k.is_self_reported()))
+    track.radars.iter().any(|&i| cfg.is_self_reported(i))
 }
 
 /// Whether an independent sensor (a radar, multilateration) has updated
@@ -67,9 +64,7 @@ fn held_by_self_reports(cfg: &TrackerConfig, track: &Track) -> bool {
 fn independently_held(cfg: &TrackerConfig, track: &Track, t: f64) -> bool {
     track.identity.validation.independently_held(t)
         || track.detections.iter().any(|h| {
-            cfg.report_kind(h.radar)
-                .is_none_or(|k| !k.is_self_reported())
-                && t - h.last <= super::identity::INDEPENDENT_WINDOW_S
+            !cfg.is_self_reported(h.radar) && t - h.last <= super::identity::INDEPENDENT_WINDOW_S
         })
 }
 
@@ -81,7 +76,7 @@ pub(crate) fn note_hit(cfg: &TrackerConfig, track: &mut Track, plot: &CartesianP
     let t = plot.measured.map_or(plot.t, |m| m.t);
     let later = |s: Option<f64>| Some(s.map_or(t, |s| s.max(t)));
     let held = held_by_self_reports(cfg, track);
-    let independent = |i: usize| cfg.report_kind(i).is_none_or(|k| !k.is_self_reported());
+    let independent = |i: usize| !cfg.is_self_reported(i);
     let v = &mut track.identity.validation;
     if self_reported(plot) {
         if v.last_self_reported.is_none() {

@@ -229,7 +229,7 @@ pub fn plots(
     clock: Clock,
     reception: Option<Reception>,
 ) -> AsterixPlots {
-    let decoded = asterix::decode(data);
+    let mut decoded = asterix::decode(data);
     let mut s = AsterixSummary {
         bytes: data.len(),
         blocks: decoded.blocks,
@@ -245,7 +245,7 @@ pub fn plots(
         }
     }
     let parallel = config.is_parallel();
-    let mut errors: Vec<DecodeError> = decoded.errors.clone();
+    let mut errors: Vec<DecodeError> = std::mem::take(&mut decoded.errors);
     let mut out = AsterixPlots::default();
     let mut unmapped: BTreeSet<(u8, u8)> = BTreeSet::new();
     let mut previous: Option<f64> = None;

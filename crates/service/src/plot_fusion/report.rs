@@ -32,9 +32,6 @@ pub use formats::asterix::quality::{K95 as CIRCULAR_95, nacp_sigma_m, nacv_sigma
 /// The σ of a one-dimensional 95 % bound: 1.96 σ.
 const LINEAR_95: f64 = 1.959_963_984_540_054;
 
-/// One nautical mile (m).
-const NM: f64 = 1852.0;
-
 /// NACp's 95 % vertical bound VEPU (m) for NACp 9 to 11.
 fn vepu_m(nacp: u8) -> Option<f64> {
     match nacp {
@@ -250,7 +247,7 @@ impl ReportInput {
                 finite_in("velocity_north_mps", n, -2000.0, 2000.0)?,
             ],
             (None, None, Some(sog), Some(cog)) => {
-                let v = finite_in("sog_kn", sog, 0.0, 102.2)? * NM / 3600.0;
+                let v = finite_in("sog_kn", sog, 0.0, 102.2)? * formats::asterix::NM_M / 3600.0;
                 let c = finite_in("cog_deg", cog, 0.0, 360.0)?.to_radians();
                 [v * c.sin(), v * c.cos()]
             }
