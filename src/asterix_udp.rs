@@ -323,6 +323,7 @@ impl Listener {
                         max_offset_s: self.max_clock_offset_s,
                     }),
                 }),
+                nmea: None,
                 flush: false,
             },
         };

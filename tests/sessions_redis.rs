@@ -222,6 +222,7 @@ fn pb_batch(id: &str, body: &Value) -> pb::PushBatchRequest {
         plots: Vec::new(),
         asterix: None,
         cooperative: Vec::new(),
+        nmea: None,
     }
 }
 

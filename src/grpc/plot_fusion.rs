@@ -22,6 +22,7 @@ impl PlotFusionService for PlotFusionGrpc {
             spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
             plots: plots_in(req.plots, req.cooperative),
             asterix: req.asterix.map(asterix_in),
+            nmea: req.nmea.map(nmea_in),
             history: req.history,
         };
         let out = service::offload(move || svc::track(input))
@@ -316,6 +317,13 @@ fn radar_plots_in(plots: Vec<pb::RadarPlot>) -> Vec<svc::PlotInput> {
             report: None,
         })
         .collect()
+}
+
+pub(crate) fn nmea_in(n: pb::NmeaData) -> svc::nmea::NmeaInput {
+    svc::nmea::NmeaInput {
+        lines: n.lines,
+        time_offset_s: n.time_offset_s,
+    }
 }
 
 pub(crate) fn asterix_in(a: pb::AsterixData) -> svc::asterix::AsterixInput {

@@ -12,7 +12,7 @@ use super::{
     correlation::{correlate_input, finite, pair_result, sample_in, system_track, track_ref},
     error::to_status,
     plot_fusion::{
-        accuracy_out, asterix_in, asterix_out, bias_out, counters_out, plots_in,
+        accuracy_out, asterix_in, asterix_out, bias_out, counters_out, nmea_in, plots_in,
         spec_in as plot_spec_in, track_out,
     },
 };
@@ -155,6 +155,7 @@ fn plot_batch_in(req: pb::PushBatchRequest) -> Batch<pf::BatchInput> {
         body: pf::BatchInput {
             plots: plots_in(req.plots, req.cooperative),
             asterix: req.asterix.map(asterix_in),
+            nmea: req.nmea.map(nmea_in),
             flush: req.flush,
         },
     }

@@ -504,6 +504,29 @@ pub struct AsterixIn {
     pub day_start_t: Option<f64>,
 }
 
+/// AIS over NMEA 0183: `!AIVDM` lines (any talker), each with its tag
+/// block's receive time `\c:<Unix s>*hh\`. Each position report (types
+/// 1–3, 18, 19, 27) becomes an AIS report (`source` `ais`, its MMSI, SOG/COG
+/// and position-accuracy flag) at its fix time: the receive time taken
+/// back to the report's UTC second. Lines that cannot be used are counted
+/// in `warnings` with the first one's index and reason.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NmeaIn {
+    #[schema(example = json!(["\\c:1700000003*5C\\!AIVDM,1,1,,B,177KQJ5000G?tO`K>RA1wUbN0TKH,0*5C"]))]
+    pub lines: Vec<String>,
+    /// Subtracted from the tag blocks' Unix times, so that the reports
+    /// join the plots' time scale (s; default 0: plots in Unix seconds).
+    pub time_offset_s: Option<f64>,
+}
+
+pub(crate) fn nmea_in(n: Option<NmeaIn>) -> Option<svc::nmea::NmeaInput> {
+    n.map(|n| svc::nmea::NmeaInput {
+        lines: n.lines,
+        time_offset_s: n.time_offset_s,
+    })
+}
+
 /// An ASTERIX record that could not be decoded or used.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct AsterixError {
@@ -680,6 +703,8 @@ pub struct PlotFusionRequest {
     pub cooperative: Vec<ReportIn>,
     /// Raw ASTERIX beside (or instead of) `plots`.
     pub asterix: Option<AsterixIn>,
+    /// AIS over NMEA 0183 beside `plots`.
+    pub nmea: Option<NmeaIn>,
     pub tracker: Option<TrackerOptions>,
     /// Also answer `tracks` as ASTERIX CAT062 records (`cat062`).
     pub cat062: Option<Cat062Options>,
@@ -1203,6 +1228,7 @@ fn track_on_lane(req: PlotFusionRequest) -> Result<PlotFusionResponse, Problem> 
         spec: spec_in(req.origin, req.radars, req.tracker, req.cat062),
         plots: plots_in(req.plots, req.cooperative),
         asterix: asterix_in(req.asterix)?,
+        nmea: nmea_in(req.nmea),
         history: req.history,
     };
     let out = svc::track(input)?;

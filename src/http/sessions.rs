@@ -17,9 +17,9 @@ use super::{
         config_in, finite, pair_result, sample_in, system_track, track_ref,
     },
     plot_fusion::{
-        AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, PlotIn, PlotRadar,
+        AsterixIn, AsterixSummary, Cat062Options, FusedTrack, GeoPoint, NmeaIn, PlotIn, PlotRadar,
         RadarBiasOut, ReportIn, TrackerCounters, TrackerOptions, accuracy_out, asterix_in,
-        asterix_out, bias_out, cat062_out, counters_out, plots_in, spec_in, track_out,
+        asterix_out, bias_out, cat062_out, counters_out, nmea_in, plots_in, spec_in, track_out,
     },
     problem::{ApiJson, Problem},
 };
@@ -105,6 +105,9 @@ pub struct PushBatchRequest {
     /// `date`/`day_start_t` the times of day are taken nearest the session's
     /// last processed frame.
     pub asterix: Option<AsterixIn>,
+    /// Plot-fusion sessions: AIS over NMEA 0183 (its reports follow the
+    /// ASTERIX plots).
+    pub nmea: Option<NmeaIn>,
     /// Close the open alignment instant (correlation) or frame (plot
     /// fusion) now. Default false: it closes when a later report or plot
     /// arrives.
@@ -477,6 +480,7 @@ fn plot_batch_in(req: PushBatchRequest) -> Result<Batch<pf::BatchInput>, Problem
             flush: req.flush,
             plots: plots_in(req.plots, req.cooperative),
             asterix: asterix_in(req.asterix)?,
+            nmea: nmea_in(req.nmea),
         },
     })
 }

@@ -400,6 +400,7 @@ fn a_session_fed_asterix_in_two_batches_gives_the_batch_calls_tracks() {
     let whole = svc::track(svc::TrackInput {
         spec: spec(),
         plots: Vec::new(),
+        nmea: None,
         asterix: Some(AsterixInput {
             data: SCENE_BIN.to_vec(),
             date: Some(DATE.into()),
@@ -429,6 +430,7 @@ fn a_session_fed_asterix_in_two_batches_gives_the_batch_calls_tracks() {
             .apply(
                 &BatchInput {
                     plots: Vec::new(),
+                    nmea: None,
                     asterix: Some(AsterixInput {
                         data: part.to_vec(),
                         date: (i == 0).then(|| DATE.to_string()),

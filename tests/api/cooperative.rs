@@ -420,3 +420,184 @@ async fn ais_reports_give_each_ship_its_mmsi() {
     let body = assert_problem(app.post_json(PATH, &req).await, 422).await;
     assert_eq!(problem_fields(&body), vec!["cooperative[0].mmsi"]);
 }
+
+/// Ships under a lone coastal radar (2D, primary, 3-s scan) that measures
+/// 150 m long in range and 0.3° clockwise in azimuth, and their AIS as
+/// NMEA lines with tag blocks (Unix times; `time_offset_s` takes them to
+/// the plots' scale). `(request, ships' MMSIs)`.
+fn coastal_scene(duration: f64) -> (Value, Vec<u64>) {
+    use eval::ais::PositionReport;
+    const EPOCH: f64 = 1_700_000_000.0;
+    let frame = origin_frame();
+    // (MMSI, start e/n (m), SOG (kn), COG (°)).
+    let ships = [
+        (235_070_762u64, [3_000.0, 5_000.0], 8.0f64, 120.0f64),
+        (227_273_000u64, [-6_000.0, 2_000.0], 12.0, 30.0),
+        (311_855_000u64, [1_000.0, -7_000.0], 5.0, 250.0),
+    ];
+    let at = |k: usize, t: f64| {
+        let (_, p0, sog, cog) = ships[k];
+        let v = sog * 1852.0 / 3600.0;
+        let c = cog.to_radians();
+        [p0[0] + v * c.sin() * t, p0[1] + v * c.cos() * t]
+    };
+    let (bias_r, bias_az) = (150.0, 0.3f64);
+    let mut plots = Vec::new();
+    let mut scan = 0.0;
+    let mut n = 0.0f64;
+    while scan < duration {
+        for k in 0..ships.len() {
+            let p = at(k, scan);
+            let az = p[0].atan2(p[1]).rem_euclid(std::f64::consts::TAU);
+            let t = scan + 3.0 * az / std::f64::consts::TAU;
+            let p = at(k, t);
+            n += 1.0;
+            // Deterministic noise of about σ (20 m, 0.1°).
+            plots.push(json!({
+                "radar_id": "coast", "t": t,
+                "range_m": p[0].hypot(p[1]) + bias_r + 20.0 * (n * 1.7).sin(),
+                "azimuth_deg": p[0].atan2(p[1]).to_degrees() + bias_az + 0.1 * (n * 2.3).cos(),
+            }));
+        }
+        scan += 3.0;
+    }
+    // Each ship's AIS every 10 s, fixed at the middle of a whole second
+    // and received in the next (tag block c: one second later).
+    let mut lines = Vec::new();
+    let mut t = 0.5;
+    while t < duration {
+        for (k, ship) in ships.iter().enumerate() {
+            let tk = t + k as f64;
+            let p = at(k, tk);
+            let (lat, lon, _) = frame.enu_to_geodetic([p[0], p[1], 0.0]).unwrap();
+            let unix = EPOCH + tk;
+            let mut r = PositionReport::from_report(&eval::ais::AisReport {
+                mmsi: ship.0 as u32,
+                t: unix,
+                lat_deg: lat.to_degrees(),
+                lon_deg: lon.to_degrees(),
+                sog_knots: ship.2,
+                cog_deg: ship.3,
+                target: k,
+            });
+            r.accuracy = true;
+            let c = format!("c:{}", unix.floor() as u64 + 1);
+            let sum = eval::ais::nmea_checksum(&c);
+            lines.push(format!("\\{c}*{sum:02X}\\{}", r.sentence('A')));
+        }
+        t += 10.0;
+    }
+    let req = json!({
+        "origin": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
+        "radars": [{
+            "id": "coast", "kind": "2d",
+            "site": {"lat_deg": ORIGIN.0, "lon_deg": ORIGIN.1, "height_m": 0.0},
+            "sigma_range_m": 20.0, "sigma_azimuth_deg": 0.1, "scan_period_s": 3.0,
+            "p_detection": 0.95, "clutter_density": 1e-8,
+        }],
+        "plots": plots,
+        "nmea": {"lines": lines, "time_offset_s": EPOCH},
+    });
+    (req, ships.iter().map(|s| s.0).collect())
+}
+
+fn sorted_mmsis(tracks: &[&Value]) -> Vec<u64> {
+    let mut m: Vec<u64> = tracks.iter().filter_map(|t| t["mmsi"].as_u64()).collect();
+    m.sort_unstable();
+    m
+}
+
+#[tokio::test]
+async fn ais_nmea_beside_a_coastal_radar_registers_it_on_every_transport() {
+    let app = spawn_app().await;
+    let (req, mut mmsis) = coastal_scene(600.0);
+    mmsis.sort_unstable();
+    let out = app.post_ok(PATH, &req).await;
+    let tracks = confirmed(&out["tracks"]);
+    // One track per ship, each with its MMSI and both sources: no radar
+    // duplicate of an AIS track.
+    assert_eq!(tracks.len(), 3, "{}", out["tracks"]);
+    assert_eq!(sorted_mmsis(&tracks), mmsis);
+    for t in &tracks {
+        let sources: Vec<&str> = t["sources"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["sensor"].as_str().unwrap())
+            .collect();
+        assert!(
+            sources.contains(&"coast") && sources.contains(&"ais"),
+            "{t}"
+        );
+    }
+    // The lone radar registered against AIS: 150 m and 0.3°.
+    let b = &out["registration"][0];
+    assert_eq!(b["converged"], true, "{b}");
+    let (r, az) = (
+        b["range_m"].as_f64().unwrap(),
+        b["azimuth_deg"].as_f64().unwrap(),
+    );
+    assert!((r - 150.0).abs() < 30.0, "{b}");
+    assert!((az - 0.3).abs() < 0.05, "{b}");
+    // Every line used (the accuracy estimator's warnings may stand: the
+    // scene's detections are certain, and its noise is not Gaussian).
+    assert!(
+        !out["warnings"].to_string().contains("nmea"),
+        "{}",
+        out["warnings"]
+    );
+
+    // gRPC: the same ships.
+    let g = PlotFusionServiceClient::new(app.channel().await)
+        .track(proto_request(&req))
+        .await
+        .unwrap()
+        .into_inner();
+    let mut grpc: Vec<u64> = g
+        .tracks
+        .iter()
+        .filter_map(|t| t.mmsi.map(u64::from))
+        .collect();
+    grpc.sort_unstable();
+    assert_eq!(grpc, mmsis);
+
+    // A REST session fed 30-s batches of plots and NMEA lines ends with
+    // the same ships.
+    let created = create_session(&app, &session_create(&req)).await;
+    let id = created["id"].as_str().unwrap();
+    let lines = req["nmea"]["lines"].as_array().unwrap();
+    let plots = req["plots"].as_array().unwrap();
+    let unix = |l: &Value| -> f64 {
+        let s = l.as_str().unwrap();
+        s[3..s.find('*').unwrap()].parse::<f64>().unwrap() - 1_700_000_000.0
+    };
+    for (sequence, from) in (0..600).step_by(30).enumerate() {
+        let within = |t: f64| (from as f64..from as f64 + 30.0).contains(&t);
+        let body = json!({
+            "sequence": sequence + 1,
+            "plots": plots.iter().filter(|p| within(p["t"].as_f64().unwrap())).collect::<Vec<_>>(),
+            "nmea": {
+                "lines": lines.iter().filter(|l| within(unix(l))).collect::<Vec<_>>(),
+                "time_offset_s": 1_700_000_000.0,
+            },
+        });
+        app.post_ok(&format!("/v1/sessions/{id}/batches"), &body)
+            .await;
+    }
+    let state = app.get_ok(&format!("/v1/sessions/{id}")).await;
+    let session = confirmed(&state["plot_fusion"]["tracks"]);
+    assert_eq!(
+        sorted_mmsis(&session),
+        mmsis,
+        "{}",
+        state["plot_fusion"]["tracks"]
+    );
+    assert_eq!(session.len(), 3);
+
+    // Lines it cannot use are counted, named by index.
+    let mut bad = req.clone();
+    bad["nmea"]["lines"][0] = json!("!AIVDM,1,1,,A,177KQJ5000G?tO`K>RA1wUbN0TKH,0*00");
+    let out = app.post_ok(PATH, &bad).await;
+    let w = out["warnings"].to_string();
+    assert!(w.contains("nmea.lines[0]") && w.contains("checksum"), "{w}");
+}

@@ -190,6 +190,15 @@ async fn client(app: &TestApp) -> PlotFusionServiceClient<tonic::transport::Chan
 pub(crate) fn proto_request(req: &Value) -> pb::PlotFusionRequest {
     let o = |v: &Value| v.as_f64();
     pb::PlotFusionRequest {
+        nmea: req.get("nmea").map(|n| pb::NmeaData {
+            lines: n["lines"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|l| l.as_str().unwrap().to_string())
+                .collect(),
+            time_offset_s: n["time_offset_s"].as_f64(),
+        }),
         cat062: req.get("cat062").map(|c| {
             let u = |k: &str| c[k].as_u64().map(|x| x as u32);
             pb::Cat062Options {

@@ -29,6 +29,30 @@ pub struct AisPosition {
     pub sog_knots: Option<f64>,
     /// Course over ground in degrees, when available.
     pub cog_deg: Option<f64>,
+    /// The position-accuracy flag: true for better than 10 m (DGNSS),
+    /// false for worse (an autonomous GNSS fix).
+    pub position_accurate: bool,
+    /// The UTC second of the position's fix (0–59), when the message
+    /// gives it (types 1–3, 18, 19; 60–63 mean not available).
+    pub utc_second: Option<u8>,
+}
+
+impl AisPosition {
+    /// The time the position holds (s, the receive time's scale): the
+    /// latest instant at or before the receive time `t` whose UTC second
+    /// is the report's, at the middle of that second (the field truncates
+    /// the fix time to the second), never after the receive time. The
+    /// receive time without a UTC second (type 27, or not available).
+    /// `None` without a receive time.
+    pub fn time_of_applicability(&self) -> Option<f64> {
+        let t = self.t?;
+        let Some(second) = self.utc_second else {
+            return Some(t);
+        };
+        // Unix time has no leap seconds: t mod 60 is the UTC second.
+        let late = (t.rem_euclid(60.0) - f64::from(second)).rem_euclid(60.0);
+        Some((t - late + 0.5).min(t))
+    }
 }
 
 /// A line that could not be used, with its 0-based index.
@@ -294,7 +318,10 @@ fn interpret(out: &mut Decoded, m: &Message) {
     };
     let kind = kind as u8;
     // (needed bits, lon start, lon bits, lat start, lat bits, scale per degree,
-    //  sog start, sog bits, sog scale, cog start, cog bits, cog scale)
+    //  sog start, sog bits, sog scale, cog start, cog bits, cog scale);
+    // the accuracy flag is the bit before the longitude, and types 1–3 and
+    // 18/19 end their position block with the UTC second (6 bits after the
+    // 9-bit heading: 137 and 133), ITU-R M.1371-5 tables 48, 60, 62, 79.
     let layout = match kind {
         1..=3 => (168, 61, 28, 89, 27, 600_000.0, 50, 10, 10.0, 116, 12, 10.0),
         18 | 19 => (168, 57, 28, 85, 27, 600_000.0, 46, 10, 10.0, 112, 12, 10.0),
@@ -312,6 +339,11 @@ fn interpret(out: &mut Decoded, m: &Message) {
             m.bits.len()
         ),
     };
+    let second_at = match kind {
+        1..=3 => Some(137),
+        18 | 19 => Some(133),
+        _ => None,
+    };
     let read = (|| {
         Some((
             r.u(8, 30)? as u32,
@@ -319,9 +351,16 @@ fn interpret(out: &mut Decoded, m: &Message) {
             r.i(la0, lat_n)?,
             r.u(s0, sn)?,
             r.u(c0, cn)?,
+            r.u(lo0 - 1, 1)? == 1,
+            match second_at {
+                Some(at) => Some(r.u(at, 6)? as u8),
+                None => None,
+            },
         ))
     })();
-    let Some((mmsi, lon, lat, sog, cog)) = read.filter(|_| m.bits.len() >= need) else {
+    let Some((mmsi, lon, lat, sog, cog, position_accurate, second)) =
+        read.filter(|_| m.bits.len() >= need)
+    else {
         out.errors.push(short());
         return;
     };
@@ -345,6 +384,8 @@ fn interpret(out: &mut Decoded, m: &Message) {
         lon_deg,
         sog_knots: (sog != sog_na).then(|| sog as f64 / ss),
         cog_deg: (cog < cog_na).then(|| cog as f64 / cs),
+        position_accurate,
+        utc_second: second.filter(|s| *s < 60),
     });
 }
 
@@ -495,6 +536,56 @@ mod tests {
         assert_eq!(p.cog_deg, Some(51.0));
         assert_eq!(p.sog_knots, Some(0.0));
         assert_eq!(p.t, None);
+        // Checked with pyais 3.3.1: accuracy 0, second 15.
+        assert!(!p.position_accurate);
+        assert_eq!(p.utc_second, Some(15));
+        assert_eq!(p.time_of_applicability(), None);
+    }
+
+    /// A class B (type 18) report, decoded independently with pyais 3.3.1:
+    /// MMSI 423302100, accuracy 1, second 34, lon 53.010997°, lat
+    /// 40.005283°.
+    #[test]
+    fn type_18_accuracy_and_utc_second() {
+        let d = decode(&lines(&["!AIVDM,1,1,,A,B6CdCm0t3`tba35f@V9faHi7kP06,0*58"]));
+        let p = &d.positions[0];
+        assert_eq!((p.message_type, p.mmsi), (18, 423_302_100));
+        assert!(p.position_accurate);
+        assert_eq!(p.utc_second, Some(34));
+        assert!((p.lon_deg - 53.010997).abs() < 1e-6);
+        assert!((p.lat_deg - 40.005283).abs() < 1e-6);
+    }
+
+    /// The time a position holds from its UTC second and the receive time.
+    #[test]
+    fn time_of_applicability_from_the_utc_second() {
+        let at = |t: f64, second: Option<u8>| {
+            AisPosition {
+                line: 0,
+                message_type: 1,
+                mmsi: 1,
+                t: Some(t),
+                t_resolution: Some(1.0),
+                lat_deg: 0.0,
+                lon_deg: 0.0,
+                sog_knots: None,
+                cog_deg: None,
+                position_accurate: false,
+                utc_second: second,
+            }
+            .time_of_applicability()
+            .unwrap()
+        };
+        // 1 700 000 003 s is 22:13:23 UTC (1 700 000 003 mod 60 = 23).
+        // Fixed at second 20: 3 s before, mid-second: 20.5 s.
+        assert_eq!(at(1_700_000_003.0, Some(20)), 1_700_000_000.5);
+        // Fixed in the same second: the receive time (never after it).
+        assert_eq!(at(1_700_000_003.0, Some(23)), 1_700_000_003.0);
+        // Across the minute: received at :23, fixed at :59 of the minute
+        // before (24 s earlier), mid-second.
+        assert_eq!(at(1_700_000_003.0, Some(59)), 1_699_999_979.5);
+        // No second: the receive time.
+        assert_eq!(at(1_700_000_003.0, None), 1_700_000_003.0);
     }
 
     /// gpsd's two-fragment type 5 example (static and voyage data of

@@ -281,8 +281,9 @@ pub struct Tracker {
     /// retrodiction ([`Tracker::set_out_of_sequence`]; set by the owner,
     /// not stored).
     out_of_sequence: Derived<bool>,
-    /// A self-reported position (ADS-B, AIS) has reached the tracker (the
-    /// check of [`validation`] runs only then; derived from the tracks).
+    /// A cooperative report (ADS-B, MLAT, AIS) has reached the tracker
+    /// (the check of [`validation`] runs only then, and a lone radar is
+    /// registered against reports; derived from the tracks).
     reports_seen: Derived<bool>,
 }
 
@@ -347,7 +348,7 @@ impl Tracker {
     pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
         config.validate()?;
         let beams = vec![None; config.radars.len()];
-        let registrar = Registrar::new(&config, RegistrationState::new(&config.radars))?;
+        let registrar = Registrar::new(&config, RegistrationState::new(&config.radars), false)?;
         Ok(Self {
             registrar,
             pressure_offset: height::PressureOffset::default(),
@@ -793,10 +794,19 @@ impl Tracker {
         let clutter = vec![REPORT_CLUTTER_DENSITY; plots.len()];
         let source = Source::Reports {
             kind,
-            plots: frame,
+            plots: frame.clone(),
             clutter,
         };
-        self.run_frame(t, source, plots, report)?;
+        let hits = self.run_frame(t, source, plots, report)?;
+        if Registrar::learns(&self.config) {
+            self.registrar.learn_reports(
+                &self.config,
+                &self.applied,
+                &self.tracks,
+                &frame,
+                &hits,
+            )?;
+        }
         if before.is_none_or(|b| b.floor() < t.floor()) {
             self.judge_reports(t, report);
         }
@@ -1148,8 +1158,9 @@ impl Tracker {
         self.scratch.0 = scratch;
         let hits = self.delete_after_update(hits, &touched, &failed, report)?;
         let mut used = outcome.used;
-        if let Source::Reports { kind, .. } = &source {
-            self.reports_seen.0 |= kind.is_self_reported();
+        if matches!(source, Source::Reports { .. }) && !self.reports_seen.0 {
+            self.reports_seen.0 = true;
+            self.registrar.refer(&self.config)?;
         }
         if self.reports_seen.0 {
             self.check_leftovers(&plots, &mut used);

@@ -6,7 +6,9 @@
 //! A frame's pairs: in serial mode, a confirmed track updated by a plot of
 //! one radar whose previous update was another radar's plot; in parallel
 //! mode, every two time-consecutive plots of a fused cluster of several
-//! radars that updated a confirmed track. At most
+//! radars that updated a confirmed track; in a report frame, a confirmed
+//! track updated by a cooperative report it trusts, with its last radar
+//! plot (the report is the reference). At most
 //! [`registration::MAX_PAIRS_PER_FRAME`] pairs a frame are used.
 
 use nalgebra::{DMatrix, DVector};
@@ -37,6 +39,9 @@ pub(crate) struct Registrar {
     /// The solution for `state` once solved (derived: it depends on the
     /// data alone, which change only when a pair is added).
     solved: Option<(DVector<f64>, DMatrix<f64>)>,
+    /// Cooperative reports have reached the tracker (derived: the
+    /// tracker's own flag), so a lone radar has a reference.
+    references: bool,
 }
 
 impl PartialEq for Registrar {
@@ -47,21 +52,39 @@ impl PartialEq for Registrar {
 }
 
 impl Registrar {
-    /// The registrar of `cfg` from the estimator's data `state`.
-    pub(crate) fn new(cfg: &TrackerConfig, state: RegistrationState) -> Result<Self, AlgoError> {
+    /// The registrar of `cfg` from the estimator's data `state`, with
+    /// cooperative reports seen (`references`) or not.
+    pub(crate) fn new(
+        cfg: &TrackerConfig,
+        state: RegistrationState,
+        references: bool,
+    ) -> Result<Self, AlgoError> {
         let solved = registration::solve(&cfg.registration, &cfg.radars, &state)?;
-        let biases = registration::applied(&cfg.registration, &cfg.radars, &state, &solved);
+        let biases =
+            registration::applied(&cfg.registration, &cfg.radars, &state, &solved, references);
         Ok(Self {
             state,
             biases,
             solved: Some(solved),
+            references,
         })
     }
 
-    /// Whether frames learn: registration on, and two radars or more to
-    /// compare.
+    /// Cooperative reports have come: a lone radar's bias is now
+    /// uncertain against them (its prior widens its plots until the
+    /// reports register it).
+    pub(crate) fn refer(&mut self, cfg: &TrackerConfig) -> Result<(), AlgoError> {
+        if self.references {
+            return Ok(());
+        }
+        *self = Self::new(cfg, self.state.clone(), true)?;
+        Ok(())
+    }
+
+    /// Whether frames learn: registration on (a lone radar's frames find
+    /// no pairs; its report frames do).
     pub(crate) fn learns(cfg: &TrackerConfig) -> bool {
-        cfg.registration.enabled && cfg.radars.len() >= 2
+        cfg.registration.enabled
     }
 
     /// Serial mode: the pairs of a frame of radar `radar` (`hits` on
@@ -81,6 +104,33 @@ impl Registrar {
                 let newer = tracks[h.slot].last_plot.filter(|p| p.radar == radar)?;
                 let older = h.previous.filter(|p| p.radar != radar)?;
                 Some((h.slot, newer, older, true))
+            })
+            .collect();
+        self.learn(cfg, radars, tracks, &pairs)
+    }
+
+    /// A report frame's pairs (`frame`'s reports, `hits` on `tracks`):
+    /// each confirmed track a report updated, while the track trusts its
+    /// self-reported positions and has no disagreement pending, with its
+    /// last radar plot; then the estimate is solved again.
+    pub(crate) fn learn_reports(
+        &mut self,
+        cfg: &TrackerConfig,
+        radars: &[RadarSpec],
+        tracks: &[std::sync::Arc<Track>],
+        frame: &[Plot],
+        hits: &[Hit],
+    ) -> Result<(), AlgoError> {
+        let pairs: Vec<(usize, Plot, Plot, bool)> = hits
+            .iter()
+            .filter_map(|h| {
+                let track = &tracks[h.slot];
+                let v = &track.identity.validation;
+                if !v.trusted() || v.disagreements > 0 {
+                    return None;
+                }
+                let older = h.previous.filter(|p| p.report.is_none())?;
+                Some((h.slot, frame[h.plot], older, true))
             })
             .collect();
         self.learn(cfg, radars, tracks, &pairs)
@@ -160,7 +210,13 @@ impl Registrar {
         }
         if added {
             solved = registration::solve(&cfg.registration, radars, &self.state)?;
-            self.biases = registration::applied(&cfg.registration, radars, &self.state, &solved);
+            self.biases = registration::applied(
+                &cfg.registration,
+                radars,
+                &self.state,
+                &solved,
+                self.references,
+            );
         }
         self.solved = Some(solved);
         Ok(())

@@ -90,8 +90,9 @@ impl Default for BiasPrior {
 /// How the tracker registers its radars.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RegistrationConfig {
-    /// Estimate the biases (default: with two radars or more). Off, each
-    /// radar's prior mean is still applied as a known bias.
+    /// Estimate the biases (default on: two radars' common targets, or
+    /// one radar's targets that also send ADS-B, MLAT or AIS reports).
+    /// Off, each radar's prior mean is still applied as a known bias.
     pub enabled: bool,
     /// Per radar (empty: [`BiasPrior::default`] for every radar).
     pub priors: Vec<BiasPrior>,
@@ -107,10 +108,13 @@ pub struct RegistrationConfig {
 }
 
 impl RegistrationConfig {
-    /// The defaults for `radars` radars: on with two or more.
-    pub fn for_radars(radars: usize) -> Self {
+    /// The defaults for `radars` radars: on. A lone radar learns only
+    /// against cooperative reports; until it has any, nothing of its prior
+    /// is applied ([`applied`]), so a lone radar without reports tracks as
+    /// it would unregistered.
+    pub fn for_radars(_radars: usize) -> Self {
         Self {
-            enabled: radars >= 2,
+            enabled: true,
             priors: Vec::new(),
             reference: Vec::new(),
             min_pairs: 20,
@@ -158,7 +162,7 @@ impl RegistrationConfig {
                 ));
             }
         }
-        if self.enabled && radars >= 1 && (0..radars).all(|r| self.reference.contains(&r)) {
+        if self.enabled && radars >= 2 && (0..radars).all(|r| self.reference.contains(&r)) {
             return Err(bad(
                 "registration_reference",
                 "every radar is a reference: nothing to estimate (turn registration off)".into(),
@@ -324,12 +328,14 @@ pub fn solve(
     Ok((b, cov))
 }
 
-/// Every radar's bias as applied, from the solved estimate.
+/// Every radar's bias as applied, from the solved estimate; `references`:
+/// cooperative reports (a bias-free reference) have reached the tracker.
 pub fn applied(
     cfg: &RegistrationConfig,
     radars: &[RadarSpec],
     state: &RegistrationState,
     solved: &(DVector<f64>, DMatrix<f64>),
+    references: bool,
 ) -> Vec<RadarBias> {
     let (offsets, _) = layout(radars);
     radars
@@ -342,13 +348,18 @@ pub fn applied(
             // Before convergence a prior the caller gave is applied (a
             // known bias, its σ added to the plots'); the default prior is
             // only the estimator's regularisation: nothing is applied.
+            // The prior's σ widens the plots while the bias is unknown and
+            // there is something to be biased against: another radar, or
+            // cooperative reports (a lone radar's tracks are otherwise its
+            // own frame, and widening its plots would only cost accuracy).
             let given = !cfg.priors.is_empty();
+            let compared = radars.len() >= 2 || references;
             let mut bias = if given {
                 [p.range, p.azimuth, p.elevation]
             } else {
                 [0.0; 3]
             };
-            let mut sigma = if reference || !cfg.enabled && !given {
+            let mut sigma = if reference || !given && (!cfg.enabled || !compared) {
                 [0.0; 3]
             } else {
                 [p.sigma_range, p.sigma_azimuth, p.sigma_elevation]
@@ -447,13 +458,14 @@ fn polar_r(radar: &RadarSpec) -> DMatrix<f64> {
     DMatrix::from_diagonal(&DVector::from_vec(d))
 }
 
-/// A common-target pair: the newer plot (radar a), the older plot (radar
-/// b), the track's velocity at the newer plot's time and its covariance
-/// (per axis of the tracker's state), and the motion's spectral density q.
+/// A common-target pair: the newer plot (radar a, or a cooperative
+/// report), the older plot (radar b), the track's velocity at the newer
+/// plot's time and its covariance (per axis of the tracker's state), and
+/// the motion's spectral density q.
 pub struct Pair<'a> {
-    /// The plot that updated the track now.
+    /// The plot (or report) that updated the track now.
     pub newer: &'a Plot,
-    /// The plot of the track's previous update, another radar's.
+    /// The track's last plot of another radar before it.
     pub older: &'a Plot,
     /// The track's velocity `[ve, vn(, vu)]`.
     pub velocity: &'a [f64],
@@ -484,8 +496,83 @@ pub const MAX_PAIRS_PER_FRAME: usize = 256;
 /// learned from.
 const PAIR_GATE: [f64; 2] = [13.8155, 16.2662];
 
+/// One end of a pair as the estimator sees it: the position in the fusion
+/// frame, its columns in the joint bias vector with the Jacobian there
+/// (none for a cooperative report: its position carries no radar bias),
+/// and its noise covariance.
+struct End {
+    position: DVector<f64>,
+    columns: Option<(usize, DMatrix<f64>)>,
+    noise: DMatrix<f64>,
+}
+
+/// A pair's end from its plot, linearised about the plot corrected by the
+/// current estimate b̂ (an iterated linearisation: p(z − b̂) + J (b − b̂)).
+/// A report's end is its own position with its stated σ.
+fn end(
+    radars: &[RadarSpec],
+    solved: &(DVector<f64>, DMatrix<f64>),
+    plot: &Plot,
+    rows: usize,
+) -> End {
+    if let Some(rep) = &plot.report {
+        let mut noise = DMatrix::from_diagonal_element(rows, rows, rep.sigma_horizontal.powi(2));
+        if rows == 3 {
+            noise[(2, 2)] = rep.sigma_vertical.map_or(0.0, |s| s * s);
+        }
+        return End {
+            position: DVector::from_fn(rows, |i, _| rep.position[i]),
+            columns: None,
+            noise,
+        };
+    }
+    let (offsets, _) = layout(radars);
+    let r = plot.radar;
+    let radar = &radars[r];
+    let mut bias = [0.0; 3];
+    for (k, v) in bias.iter_mut().enumerate().take(dims(radar)) {
+        *v = solved.0[offsets[r] + k];
+    }
+    let current = RadarBias {
+        bias,
+        sigma: [0.0; 3],
+        pairs: 0.0,
+        converged: true,
+        reference: false,
+    };
+    let (position, j) = position(radar, &correct(plot, &current), rows);
+    let noise = &j * polar_r(radar) * j.transpose();
+    End {
+        position,
+        columns: Some((offsets[r], j)),
+        noise,
+    }
+}
+
+/// The rows a pair compares: the vertical too when both ends measure it
+/// (two 3D radars, or a 3D radar and a report with a geometric height)
+/// and the track has a vertical velocity.
+fn pair_rows(radars: &[RadarSpec], pair: &Pair<'_>) -> usize {
+    let vertical = |p: &Plot| match &p.report {
+        Some(rep) => rep.sigma_vertical.is_some(),
+        None => radars[p.radar].is_3d(),
+    };
+    if vertical(pair.newer) && vertical(pair.older) && pair.velocity.len() >= 3 {
+        3
+    } else {
+        2
+    }
+}
+
 /// Adds a pair to the state (decaying the information to the newer plot's
 /// time first). Returns whether it was used (inside the gate).
+///
+/// A pair of two radars' plots relates their biases; a pair of a radar's
+/// plot and a cooperative report of the same track (an ADS-B, MLAT or AIS
+/// position, which carries no radar bias; the caller passes only reports
+/// the track trusts) measures that radar's bias against a reference: the
+/// same residual with the report's side of H zero and its stated σ in S.
+/// One radar and reports are then enough to register it.
 pub fn add_pair(
     cfg: &RegistrationConfig,
     radars: &[RadarSpec],
@@ -493,64 +580,58 @@ pub fn add_pair(
     solved: &(DVector<f64>, DMatrix<f64>),
     pair: &Pair<'_>,
 ) -> Result<bool, AlgoError> {
-    let (a, b) = (pair.newer.radar, pair.older.radar);
-    if a == b || a >= radars.len() || b >= radars.len() {
+    let is_radar = |p: &Plot| p.report.is_none() && p.radar < radars.len();
+    let (newer, older) = (pair.newer, pair.older);
+    let usable = match (is_radar(newer), is_radar(older)) {
+        (true, true) => newer.radar != older.radar,
+        (true, false) => older.report.is_some(),
+        (false, true) => newer.report.is_some(),
+        (false, false) => false,
+    };
+    if !usable {
         return Ok(false);
     }
-    let dt = pair.newer.t - pair.older.t;
+    let dt = newer.t - older.t;
     if !(0.0..=cfg.max_pair_dt).contains(&dt) {
         return Ok(false);
     }
-    let (ra, rb) = (&radars[a], &radars[b]);
-    let rows = if ra.is_3d() && rb.is_3d() && pair.velocity.len() >= 3 {
-        3
-    } else {
-        2
-    };
-    // Linearised about the plots corrected by the current estimate b̂ (an
-    // iterated linearisation): d = p(z_a − b̂_a) − p(z_b − b̂_b) − vΔt
-    // ≈ J_a (b_a − b̂_a) − J_b (b_b − b̂_b), so y = d + J_a b̂_a − J_b b̂_b
-    // = H b. About the raw plots instead, the second-order terms
-    // (Δρ·Δθ across the beam: 6 m for 600 m and 0.6° at 50 km) made the
-    // azimuth σ overconfident for large biases.
-    let (offsets, _) = layout(radars);
-    let current = |r: usize| -> RadarBias {
-        let mut bias = [0.0; 3];
-        for (k, v) in bias.iter_mut().enumerate().take(dims(&radars[r])) {
-            *v = solved.0[offsets[r] + k];
-        }
-        RadarBias {
-            bias,
-            sigma: [0.0; 3],
-            pairs: 0.0,
-            converged: true,
-            reference: false,
-        }
-    };
-    let (ba, bb) = (current(a), current(b));
-    let (pa, ja) = position(ra, &correct(pair.newer, &ba), rows);
-    let (pb, jb) = position(rb, &correct(pair.older, &bb), rows);
-    let mut d = &pa - &pb;
+    let rows = pair_rows(radars, pair);
+    // d = p(z_a − b̂_a) − p(z_b − b̂_b) − vΔt ≈ J_a (b_a − b̂_a) − J_b (b_b −
+    // b̂_b), so y = d + J_a b̂_a − J_b b̂_b = H b. About the raw plots
+    // instead, the second-order terms (Δρ·Δθ across the beam: 6 m for
+    // 600 m and 0.6° at 50 km) made the azimuth σ overconfident for large
+    // biases.
+    let (ea, eb) = (
+        end(radars, solved, newer, rows),
+        end(radars, solved, older, rows),
+    );
+    let mut d = &ea.position - &eb.position;
     for i in 0..rows {
         d[i] -= pair.velocity[i] * dt;
     }
     // H = [J_a at radar a's columns, −J_b at radar b's, 0 elsewhere]: kept
     // as its non-zero columns `cols` only (≤ 6 of up to 3 × radars), so
     // every product below is over the two radars' blocks.
-    let (ca, cb) = (ja.ncols(), jb.ncols());
-    let cols: Vec<usize> = (offsets[a]..offsets[a] + ca)
-        .chain(offsets[b]..offsets[b] + cb)
+    let blocks: Vec<(usize, DMatrix<f64>)> = [(1.0, &ea), (-1.0, &eb)]
+        .into_iter()
+        .filter_map(|(sign, e)| e.columns.as_ref().map(|(o, j)| (*o, j * sign)))
+        .collect();
+    let cols: Vec<usize> = blocks
+        .iter()
+        .flat_map(|(o, j)| *o..*o + j.ncols())
         .collect();
     let m = cols.len();
     let mut h = DMatrix::zeros(rows, m);
-    h.view_mut((0, 0), (rows, ca)).copy_from(&ja);
-    let mut minus = h.view_mut((0, ca), (rows, cb));
-    minus -= &jb;
+    let mut c0 = 0;
+    for (_, j) in &blocks {
+        h.view_mut((0, c0), (rows, j.ncols())).copy_from(j);
+        c0 += j.ncols();
+    }
     let x = DVector::from_fn(m, |i, _| solved.0[cols[i]]);
     let p = DMatrix::from_fn(m, m, |i, k| solved.1[(cols[i], cols[k])]);
     let hx = &h * &x;
     d += &hx;
-    let mut s = &ja * polar_r(ra) * ja.transpose() + &jb * polar_r(rb) * jb.transpose();
+    let mut s = &ea.noise + &eb.noise;
     for i in 0..rows {
         for k in 0..rows {
             s[(i, k)] += pair.velocity_cov[(i, k)] * dt * dt;
@@ -575,14 +656,14 @@ pub fn add_pair(
     }
     // Decay to now, then add.
     if let Some(last) = state.last_t {
-        let f = (-(pair.newer.t - last).max(0.0) / cfg.time_constant).exp();
+        let f = (-(newer.t - last).max(0.0) / cfg.time_constant).exp();
         state.information *= f;
         state.vector *= f;
         for p in &mut state.pairs {
             *p *= f;
         }
     }
-    state.last_t = Some(state.last_t.map_or(pair.newer.t, |l| l.max(pair.newer.t)));
+    state.last_t = Some(state.last_t.map_or(newer.t, |l| l.max(newer.t)));
     let chol = cholesky("pair covariance", &s)?;
     let si_h = chol.solve(&h);
     let information = h.transpose() * &si_h;
@@ -594,8 +675,11 @@ pub fn add_pair(
         state.vector[ci] += vector[i];
     }
     symmetrize(&mut state.information);
-    state.pairs[a] += 1.0;
-    state.pairs[b] += 1.0;
+    for p in [newer, older] {
+        if is_radar(p) {
+            state.pairs[p.radar] += 1.0;
+        }
+    }
     Ok(true)
 }
 
@@ -715,7 +799,7 @@ mod tests {
             assert!(used, "pair {k}");
         }
         let solved = solve(&cfg, &radars, &state).unwrap();
-        let out = applied(&cfg, &radars, &state, &solved);
+        let out = applied(&cfg, &radars, &state, &solved, false);
         assert!(out[0].reference && !out[0].converged);
         assert_eq!(out[0].bias, [0.0; 3]);
         let b = out[1];

@@ -103,6 +103,11 @@ fn adsb(
 /// The radar's Mode S plots of each aircraft every scan in [0, to)
 /// (beam-timed: each at the time the beam crosses it).
 fn radar_plots(to: f64, rng: &mut Lcg) -> Vec<Plot> {
+    biased_radar_plots(to, [0.0; 2], rng)
+}
+
+/// As [`radar_plots`], the radar measuring ρ + `bias[0]`, θ + `bias[1]`.
+fn biased_radar_plots(to: f64, bias: [f64; 2], rng: &mut Lcg) -> Vec<Plot> {
     let r = mode_s_radar();
     let mut out = Vec::new();
     let mut scan = 0.0;
@@ -115,8 +120,8 @@ fn radar_plots(to: f64, rng: &mut Lcg) -> Vec<Plot> {
             out.push(Plot {
                 radar: 0,
                 t,
-                range: p[0].hypot(p[1]) + r.sigma_range * rng.normal(),
-                azimuth: p[0].atan2(p[1]) + r.sigma_azimuth * rng.normal(),
+                range: p[0].hypot(p[1]) + bias[0] + r.sigma_range * rng.normal(),
+                azimuth: p[0].atan2(p[1]) + bias[1] + r.sigma_azimuth * rng.normal(),
                 elevation: None,
                 radial_velocity: None,
                 identity: identity(address),
@@ -435,4 +440,49 @@ fn reports_far_noisier_than_they_claim_start_one_track() {
         }
         assert_eq!(most, 1, "seed {seed}: one track of its address at any time");
     }
+}
+
+#[test]
+fn a_lone_radar_is_registered_against_adsb() {
+    // The radar measures 300 m long in range and 0.4° clockwise in
+    // azimuth (≈ 250 m across at 36 km), about 2σ of the default prior.
+    let bias = [300.0, 0.4f64.to_radians()];
+    let cfg = config();
+    let mut rng = Lcg(29);
+    let mut plots = adsb(&cfg, (0.0, 240.0), &|_, _| [0.0; 2], &mut rng);
+    plots.extend(biased_radar_plots(240.0, bias, &mut rng));
+    let tracker = run(&cfg, plots);
+    assert_eq!(tracker.confirmed_tracks().len(), 2);
+    let b = tracker.biases()[0];
+    assert!(b.converged, "{b:?}");
+    // Each pair's radial residual has σ ≈ √(100² + 10²) ≈ 100 m (doubled
+    // in S for shared plots): two aircraft × 60 scans give ~120 radar
+    // plots, so the range bias is known to ≈ 100/√120 ≈ 9 m and the
+    // azimuth (45 m across at 30 km, 1.5 mrad) to ≈ 0.14 mrad.
+    assert!(
+        b.sigma[0] < 30.0 && b.sigma[1] < 0.05f64.to_radians(),
+        "{b:?}"
+    );
+    assert!((b.bias[0] - bias[0]).abs() < 4.0 * b.sigma[0], "{b:?}");
+    assert!((b.bias[1] - bias[1]).abs() < 4.0 * b.sigma[1], "{b:?}");
+    // The ADS-B stayed trusted throughout: the bias is the radar's.
+    for (target, address) in aircraft() {
+        let mine = track_of(&tracker, address);
+        assert_eq!(mine.len(), 1);
+        assert!(mine[0].identity.validation.trusted());
+        assert!(error(&mine[0], &target) < 30.0);
+    }
+}
+
+#[test]
+fn a_lone_radar_without_reports_applies_no_bias() {
+    let cfg = config();
+    assert!(cfg.registration.enabled);
+    let mut rng = Lcg(31);
+    let tracker = run(&cfg, biased_radar_plots(120.0, [300.0, 0.0], &mut rng));
+    // Nothing to compare with: no pair, no prior σ widening the plots.
+    assert_eq!(tracker.biases()[0].bias, [0.0; 3]);
+    assert_eq!(tracker.biases()[0].sigma, [0.0; 3]);
+    assert!(!tracker.biases()[0].converged);
+    assert_eq!(tracker.confirmed_tracks().len(), 2);
 }

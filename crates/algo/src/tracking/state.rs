@@ -288,12 +288,12 @@ impl Tracker {
         if parts.last_time.is_some_and(|t| !t.is_finite()) {
             return Err(bad("last time is not finite"));
         }
+        let radars = tr.config.radars.len();
         tr.reports_seen.0 = parts.pending.iter().any(|p| p.report.is_some())
-            || parts
-                .tracks
-                .iter()
-                .chain(&parts.tentatives)
-                .any(|t| t.identity.validation.last_self_reported.is_some());
+            || parts.tracks.iter().chain(&parts.tentatives).any(|t| {
+                t.identity.validation.last_self_reported.is_some()
+                    || t.detections.iter().any(|h| h.radar >= radars)
+            });
         tr.tracks = parts.tracks.into_iter().map(std::sync::Arc::new).collect();
         tr.initiator = Initiator::from_parts(parts.roots, parts.tentatives);
         tr.pending = parts.pending;
@@ -348,7 +348,9 @@ impl Tracker {
         }
         if let Some(state) = parts.registration {
             state.check(&tr.config.radars)?;
-            tr.registrar = Registrar::new(&tr.config, state)?;
+            tr.registrar = Registrar::new(&tr.config, state, tr.reports_seen.0)?;
+        } else if tr.reports_seen.0 {
+            tr.registrar.refer(&tr.config)?;
         }
         Ok(tr)
     }

@@ -17,7 +17,8 @@
 //! configuration (on or off, per-radar priors, reference radars, minimum
 //! pairs, longest pair interval, time constant) and its estimator's data
 //! (information matrix and vector, pair counts, last pair time); formats
-//! 1 to 3 read as registration by default (on with two radars or more)
+//! 1 to 3 read as registration by default (on; a lone radar learns only
+//! against cooperative reports, which those formats never held)
 //! from no data. Format 5 adds, at the end, each radar's beam position
 //! when its sweep was last judged for misses (trackers since issue 48
 //! judge a sweep in slices, not at every frame); formats 1 to 4 read it as

@@ -13,6 +13,7 @@
 pub mod asterix;
 pub mod cat062;
 pub mod network;
+pub mod nmea;
 pub mod output;
 pub mod report;
 pub mod ssr;
@@ -343,6 +344,8 @@ pub struct TrackInput {
     pub plots: Vec<PlotInput>,
     /// Raw ASTERIX beside (or instead of) `plots`.
     pub asterix: Option<asterix::AsterixInput>,
+    /// AIS over NMEA (`!AIVDM` lines) beside them.
+    pub nmea: Option<nmea::NmeaInput>,
     pub history: bool,
 }
 
@@ -393,11 +396,12 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         .asterix
         .as_ref()
         .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
-    if input.plots.len() + asterix_bound > MAX_PLOTS {
+    let nmea_lines = input.nmea.as_ref().map_or(0, |n| n.lines.len());
+    if input.plots.len() + asterix_bound + nmea_lines > MAX_PLOTS {
         return Err(ServiceError::TooLarge(format!(
-            "{} plots (ASTERIX counted as one per {} bytes); at most {MAX_PLOTS} per request \
-             (stream larger data through a plot_fusion session)",
-            input.plots.len() + asterix_bound,
+            "{} plots (ASTERIX counted as one per {} bytes, NMEA one per line); at most \
+             {MAX_PLOTS} per request (stream larger data through a plot_fusion session)",
+            input.plots.len() + asterix_bound + nmea_lines,
             asterix::MIN_PLOT_RECORD_BYTES
         )));
     }
@@ -416,13 +420,20 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         }
         _ => None,
     };
+    if let Some(n) = &input.nmea {
+        let from = nmea::reports(n, "nmea")?;
+        plots.extend(network.plots(&from.plots, &config, "nmea")?);
+        warnings.extend(from.warnings);
+    }
     if plots.is_empty() {
         warnings.push(if input.asterix.is_some() {
             "no plot to track: `plots` is empty and the ASTERIX data gave no usable target \
              report (see asterix.errors and its counts)"
                 .to_string()
         } else {
-            "no plot to track: give `plots`, an `asterix` block, or both".to_string()
+            "no plot to track: give `plots`, `cooperative` reports, an `asterix` or `nmea` \
+             block"
+                .to_string()
         });
     }
     // Stable: plots of equal time keep the request's order, as a session

@@ -1200,7 +1200,8 @@ impl Network {
     /// are listed in the first violation of an unknown radar only). The
     /// cooperative reports among `inputs` (after the plots, as the
     /// adapters append a request's `cooperative` reports) are named
-    /// `cooperative[i]`.
+    /// `cooperative[i]` (under another `field` than `plots`, `{field}[i]`:
+    /// the reports of an NMEA block).
     pub fn plots(
         &self,
         inputs: &[PlotInput],
@@ -1220,7 +1221,11 @@ impl Network {
             match self.plot(p, config, parallel) {
                 Ok(plot) => out.push(plot),
                 Err((name, mut message)) => {
-                    let list_name = if list == 1 { "cooperative" } else { field };
+                    let list_name = if list == 1 && field == "plots" {
+                        "cooperative"
+                    } else {
+                        field
+                    };
                     let path = format!("{list_name}[{i}].{name}");
                     if name == "radar_id" && self.is_unknown(p.radar_id.as_deref()) {
                         message =

@@ -47,7 +47,9 @@ use crate::{
         TrackView, TrackerCounters,
         asterix::{self, AsterixInput, AsterixSummary},
         cat062::{self, Cat062Data, Cat062Options, Life},
-        computation_error, mode_name, network, output,
+        computation_error, mode_name, network,
+        nmea::{self, NmeaInput},
+        output,
     },
 };
 use algo::tracking::{LagWindow, TrackOutput, TrackStatus, Tracker};
@@ -116,6 +118,8 @@ pub struct BatchInput {
     pub plots: Vec<PlotInput>,
     /// Raw ASTERIX; its plots follow `plots`.
     pub asterix: Option<AsterixInput>,
+    /// AIS over NMEA; its reports follow the ASTERIX plots.
+    pub nmea: Option<NmeaInput>,
     /// Accepted for clients of earlier releases; changes nothing (the
     /// tracks always include the open frame).
     pub flush: bool,
@@ -309,6 +313,11 @@ impl PlotFusionSession {
             offsets = from.offsets;
             warnings.extend(from.warnings);
             summary = Some(from.summary);
+        }
+        if let Some(n) = &batch.nmea {
+            let from = nmea::reports(n, "nmea")?;
+            plots.extend(self.network.plots(&from.plots, &config, "nmea")?);
+            warnings.extend(from.warnings);
         }
         let before: Vec<TrackOutput> = self
             .last_tracks
@@ -713,13 +722,13 @@ impl SessionKind for PlotFusionSession {
             .asterix
             .as_ref()
             .map_or(0, |a| a.data.len() / asterix::MIN_PLOT_RECORD_BYTES);
-        if asterix == 0 {
-            limits.check_batch(batch.plots.len(), "plots")
-        } else {
-            limits.check_batch(
-                batch.plots.len() + asterix,
-                "plots (ASTERIX counted as one per 10 bytes)",
-            )
+        let nmea = batch.nmea.as_ref().map_or(0, |n| n.lines.len());
+        match (asterix, nmea) {
+            (0, 0) => limits.check_batch(batch.plots.len(), "plots"),
+            _ => limits.check_batch(
+                batch.plots.len() + asterix + nmea,
+                "plots (ASTERIX counted as one per 10 bytes, NMEA one per line)",
+            ),
         }
     }
 
@@ -787,7 +796,8 @@ impl SessionKind for PlotFusionSession {
 
     fn fingerprint(batch: &BatchInput) -> Option<u64> {
         let asterix = batch.asterix.as_ref().filter(|a| !a.data.is_empty());
-        if batch.plots.is_empty() && asterix.is_none() {
+        let nmea = batch.nmea.as_ref().filter(|n| !n.lines.is_empty());
+        if batch.plots.is_empty() && asterix.is_none() && nmea.is_none() {
             return None;
         }
         let mut h = Fnv::default();
@@ -796,6 +806,12 @@ impl SessionKind for PlotFusionSession {
             h.bytes(&a.data);
             h.str(a.date.as_deref());
             h.opt_f64(a.day_start_t);
+        }
+        if let Some(n) = nmea {
+            for line in &n.lines {
+                h.str(Some(line));
+            }
+            h.opt_f64(n.time_offset_s);
         }
         for p in &batch.plots {
             h.str(p.radar_id.as_deref());
@@ -865,6 +881,7 @@ impl SessionKind for PlotFusionSession {
         let BatchInput {
             plots,
             asterix,
+            nmea,
             flush,
         } = batch;
         w.usize(plots.len());
@@ -913,10 +930,28 @@ impl SessionKind for PlotFusionSession {
         }
         // Since cooperative reports: each plot's report, after the SSR
         // fields (an entry without reports ends there).
-        if reports {
+        if reports || nmea.is_some() {
+            if !reports && plots.iter().all(|p| p.ssr.is_empty()) {
+                for p in plots {
+                    p.ssr.encode(w);
+                }
+            }
             for p in plots {
                 w.opt(p.report.as_ref(), |w, r| r.encode(w));
             }
+        }
+        // Since NMEA: its block, after the reports (an entry without one
+        // ends there).
+        if let Some(n) = nmea {
+            let NmeaInput {
+                lines,
+                time_offset_s,
+            } = n;
+            w.usize(lines.len());
+            for l in lines {
+                w.str(l);
+            }
+            w.opt(*time_offset_s, Writer::f64);
         }
         true
     }
@@ -964,9 +999,23 @@ impl SessionKind for PlotFusionSession {
                 p.report = r.opt(ReportInput::decode)?;
             }
         }
+        let nmea = if r.is_empty() {
+            None
+        } else {
+            // A line takes at least its length's bytes.
+            let n = r.len(1)?;
+            let lines = (0..n)
+                .map(|_| r.str())
+                .collect::<Result<Vec<_>, FormatError>>()?;
+            Some(NmeaInput {
+                lines,
+                time_offset_s: r.opt(Reader::f64)?,
+            })
+        };
         Ok(BatchInput {
             plots,
             asterix,
+            nmea,
             flush,
         })
     }
@@ -1449,6 +1498,7 @@ pub(crate) mod tests {
             spec: spec(),
             plots: all.clone(),
             asterix: None,
+            nmea: None,
             history: false,
         })
         .unwrap();
@@ -1673,5 +1723,52 @@ pub(crate) mod tests {
         PlotFusionSession::encode_update(&update, &mut w);
         let back = PlotFusionSession::decode_update(&mut Reader::new(&w.buf)).unwrap();
         assert_eq!(back, update);
+    }
+
+    /// A batch's NMEA block is logged and read back with its plots and
+    /// reports, with and without SSR fields before it.
+    #[test]
+    fn nmea_blocks_round_trip_through_the_log() {
+        let nmea = NmeaInput {
+            lines: vec![
+                "\\c:1700000003*5C\\!AIVDM,1,1,,B,177KQJ5000G?tO`K>RA1wUbN0TKH,0*5C".into(),
+            ],
+            time_offset_s: Some(1.7e9),
+        };
+        let primary = PlotInput {
+            radar_id: Some("coast".into()),
+            t: Some(1.0),
+            range_m: Some(5000.0),
+            azimuth_deg: Some(10.0),
+            ..Default::default()
+        };
+        let report = PlotInput {
+            t: Some(2.0),
+            report: Some(ReportInput {
+                source: Some("ais".into()),
+                lat_deg: Some(50.7),
+                lon_deg: Some(-1.1),
+                mmsi: Some(235_070_762),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        for plots in [vec![], vec![primary.clone()], vec![primary, report]] {
+            let batch = BatchInput {
+                plots,
+                asterix: None,
+                nmea: Some(nmea.clone()),
+                flush: false,
+            };
+            let mut w = Writer::default();
+            assert!(PlotFusionSession::encode_batch(&batch, &mut w));
+            let back = PlotFusionSession::decode_batch(&mut Reader::new(&w.buf)).unwrap();
+            assert_eq!(back.nmea, batch.nmea);
+            assert_eq!(back.plots.len(), batch.plots.len());
+            for (a, b) in back.plots.iter().zip(&batch.plots) {
+                assert_eq!((a.t, &a.radar_id, &a.ssr), (b.t, &b.radar_id, &b.ssr));
+                assert_eq!(a.report, b.report);
+            }
+        }
     }
 }
