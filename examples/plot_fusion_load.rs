@@ -7,8 +7,13 @@
 //!     [--batch-s 1] [--doppler] [--skip-compute] [--skip-end-to-end] \
 //!     [--motion imm|cv] [--late-plots reprocess|retrodict] [--no-registration] [--no-accuracy] [--timing beam|scan] \
 //!     [--late none|held|radars|both] [--store memory|redis://…] \
-//!     [--snapshot-batches 32] [--takeover-at 0.5]
+//!     [--snapshot-batches 32] [--takeover-at 0.5] [--adsb]
 //! ```
+//!
+//! `--adsb`: every target also sends ADS-B (the service's `cooperative`
+//! reports) once a second at its own phase, NACp 9 and NACv 2 with GNSS-like
+//! noise (σ 5 m, 0.5 m/s), its own address; the radars' plots stay
+//! primary, so radar and ADS-B meet by position alone.
 //!
 //! Plots are timed at the beam by default, as a real radar times them
 //! (CAT048 I048/140, 1/128 s: almost every plot has its own time);
@@ -84,6 +89,7 @@ struct Args {
     timing: PlotTiming,
     snapshot_batches: Option<usize>,
     takeover_at: Option<f64>,
+    adsb: bool,
 }
 
 fn parse_args() -> anyhow::Result<Args> {
@@ -105,6 +111,7 @@ fn parse_args() -> anyhow::Result<Args> {
         takeover_at: None,
         store: "memory".into(),
         timing: PlotTiming::Beam,
+        adsb: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -114,6 +121,7 @@ fn parse_args() -> anyhow::Result<Args> {
             "--skip-end-to-end" => args.skip_end_to_end = true,
             "--no-registration" => args.no_registration = true,
             "--no-accuracy" => args.no_accuracy = true,
+            "--adsb" => args.adsb = true,
             _ => {
                 let value = it.next().context("a flag needs a value")?;
                 match flag.as_str() {
@@ -205,6 +213,70 @@ fn pb_plot(p: &svc::PlotInput) -> pb::RadarPlot {
     }
 }
 
+/// ADS-B reports of every target of `scene` once a second up to `duration`
+/// (see the module header), in time order.
+fn adsb_reports(scene: &eval::benchmark::PlotFusionScene, duration: f64) -> Vec<svc::PlotInput> {
+    use rand::{RngExt, SeedableRng};
+    use rand_distr::StandardNormal;
+    let frame = algo::geo::LocalFrame::new(
+        algo::geo::Ellipsoid::WGS84,
+        52f64.to_radians(),
+        4f64.to_radians(),
+        0.0,
+    )
+    .expect("the scene's origin");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(51);
+    let mut out = Vec::new();
+    for (i, x) in scene.targets.iter().enumerate() {
+        let mut t = (i as f64 * 0.137).fract();
+        while t <= duration {
+            let mut noise = || -> f64 { rng.sample(StandardNormal) };
+            let (e, n) = (
+                x[0] + x[1] * t + 5.0 * noise(),
+                x[2] + x[3] * t + 5.0 * noise(),
+            );
+            let (lat, lon, _) = frame.enu_to_geodetic([e, n, 0.0]).expect("a position");
+            out.push(svc::PlotInput {
+                t: Some(t),
+                ssr: svc::SsrInput {
+                    mode_s_address: Some(format!("{:06X}", 0x10_0000 + i)),
+                    ..Default::default()
+                },
+                report: Some(svc::report::ReportInput {
+                    source: Some("adsb".into()),
+                    lat_deg: Some(lat.to_degrees()),
+                    lon_deg: Some(lon.to_degrees()),
+                    velocity_east_mps: Some(x[1] + 0.5 * noise()),
+                    velocity_north_mps: Some(x[3] + 0.5 * noise()),
+                    nacp: Some(9),
+                    nacv: Some(2),
+                    ..Default::default()
+                }),
+                ..Default::default()
+            });
+            t += 1.0;
+        }
+    }
+    out.sort_by(|a, b| a.t.unwrap_or(0.0).total_cmp(&b.t.unwrap_or(0.0)));
+    out
+}
+
+fn pb_report(p: &svc::PlotInput) -> pb::CooperativeReport {
+    let r = p.report.as_ref().expect("a report");
+    pb::CooperativeReport {
+        source: r.source.clone().unwrap_or_default(),
+        t: p.t.unwrap_or(0.0),
+        lat_deg: r.lat_deg.unwrap_or(0.0),
+        lon_deg: r.lon_deg.unwrap_or(0.0),
+        velocity_east_mps: r.velocity_east_mps,
+        velocity_north_mps: r.velocity_north_mps,
+        nacp: r.nacp.map(u32::from),
+        nacv: r.nacv.map(u32::from),
+        mode_s_address: p.ssr.mode_s_address.clone(),
+        ..Default::default()
+    }
+}
+
 /// The plots with their arrival times (see the module header), sorted by
 /// arrival.
 fn arrivals(
@@ -246,25 +318,31 @@ fn arrivals(
 /// Batches of `batch_s` seconds of arrival, the last one flushing.
 fn batches(plots: &[(f64, svc::PlotInput)], batch_s: f64) -> Vec<pb::PushBatchRequest> {
     let mut out: Vec<pb::PushBatchRequest> = Vec::new();
-    let mut current = Vec::new();
+    let (mut current, mut reports) = (Vec::new(), Vec::new());
     let mut edge = batch_s;
     for (t, p) in plots {
         let t = *t;
         while t >= edge {
-            if !current.is_empty() {
+            if !current.is_empty() || !reports.is_empty() {
                 out.push(pb::PushBatchRequest {
                     sequence: Some(out.len() as u64 + 1),
                     plots: std::mem::take(&mut current),
+                    cooperative: std::mem::take(&mut reports),
                     ..Default::default()
                 });
             }
             edge += batch_s;
         }
-        current.push(pb_plot(p));
+        if p.report.is_some() {
+            reports.push(pb_report(p));
+        } else {
+            current.push(pb_plot(p));
+        }
     }
     out.push(pb::PushBatchRequest {
         sequence: Some(out.len() as u64 + 1),
         plots: current,
+        cooperative: reports,
         flush: true,
         ..Default::default()
     });
@@ -282,7 +360,11 @@ async fn main() -> anyhow::Result<()> {
         args.doppler,
         args.timing,
     );
-    let (mut spec, plots) = (scene.spec.clone(), scene.plots.clone());
+    let (mut spec, mut plots) = (scene.spec.clone(), scene.plots.clone());
+    if args.adsb {
+        plots.extend(adsb_reports(&scene, args.duration));
+        plots.sort_by(|a, b| a.t.unwrap_or(0.0).total_cmp(&b.t.unwrap_or(0.0)));
+    }
     spec.tracker.motion = args.motion.clone();
     spec.tracker.late_plots = args.late_plots.clone();
     if args.no_registration {
@@ -300,7 +382,7 @@ async fn main() -> anyhow::Result<()> {
     let n = plots.len();
     println!(
         "scene: {} targets, {} radars, {} s, {} clutter plots per scan, doppler {}, motion {}, \
-         timing {}: {n} plots",
+         timing {}: {n} plots (ADS-B reports among them: {})",
         args.targets,
         args.radars,
         args.duration,
@@ -310,7 +392,8 @@ async fn main() -> anyhow::Result<()> {
         match args.timing {
             PlotTiming::Beam => "beam (1/128 s)",
             PlotTiming::ScanStart => "scan start",
-        }
+        },
+        plots.iter().filter(|p| p.report.is_some()).count()
     );
 
     if !args.skip_compute {
@@ -318,6 +401,7 @@ async fn main() -> anyhow::Result<()> {
             spec: spec.clone(),
             plots: plots.clone(),
             asterix: None,
+            nmea: None,
             history: false,
         };
         let wall = Instant::now();

@@ -797,8 +797,10 @@ impl Tracker {
             plots: frame.clone(),
             clutter,
         };
+        let probes = plots.clone();
         let hits = self.run_frame(t, source, plots, report)?;
         if Registrar::learns(&self.config) {
+            let hits = self.isolated(t, &probes, hits)?;
             self.registrar.learn_reports(
                 &self.config,
                 &self.applied,
@@ -811,6 +813,47 @@ impl Tracker {
             self.judge_reports(t, report);
         }
         Ok(())
+    }
+
+    /// The hits of a report frame (reports `probes`) whose track's last
+    /// radar plot no other track could have taken: no other confirmed
+    /// track passes the gate's pre-test at the report with that radar's
+    /// covariance as applied (its bias's σ included). Registration learns
+    /// only from them: in a crowd (moored ships a few tens of metres apart,
+    /// a bias of the same size) the plot a track took may be a neighbour's,
+    /// and the nearer of two plots is chosen, which would pull the estimate
+    /// towards zero.
+    fn isolated(
+        &mut self,
+        t: f64,
+        probes: &[CartesianPlot],
+        hits: Vec<Hit>,
+    ) -> Result<Vec<Hit>, AlgoError> {
+        let radars = self.config.radars.len();
+        let mut out = Vec::with_capacity(hits.len());
+        for h in hits {
+            let Some(older) = h
+                .previous
+                .filter(|p| p.report.is_none() && p.radar < radars)
+            else {
+                continue;
+            };
+            let bias = self.registrar.biases[older.radar];
+            let spec = registration::inflated(&self.applied[older.radar], &bias);
+            let radar_plot = register(&spec, older.radar, &registration::correct(&older, &bias))?;
+            let mut probe = probes[h.plot].clone();
+            probe.r = radar_plot.r;
+            let near = self.index.candidates(
+                &self.tracks,
+                std::slice::from_ref(&probe),
+                t,
+                &self.config,
+            )?;
+            if near.iter().all(|&s| s == h.slot) {
+                out.push(h);
+            }
+        }
+        Ok(out)
     }
 
     /// The misses of tracks that cooperative reports have updated: one when
