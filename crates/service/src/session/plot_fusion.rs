@@ -38,7 +38,7 @@
 
 use std::collections::HashSet;
 
-use super::{Fnv, Limits, SessionKind, events::PlotMark};
+use super::{Fnv, Limits, PlotMark, SessionKind};
 use crate::{
     ServiceError,
     plot_fusion::{
