@@ -101,13 +101,16 @@ impl KindName {
 /// Work done with a kind's type, the kind chosen at run time
 /// ([`KindName::visit`]).
 pub trait KindVisitor {
+    /// What the work gives.
     type Out;
+    /// The work, for kind `K`.
     fn visit<K: Registered>(self) -> Self::Out;
 }
 
 /// A kind this release serves: how its view and its events become the
 /// run-time enums.
 pub trait Registered: SessionKind {
+    /// The kind's view as any kind's.
     fn any_view(view: View<Self::View>) -> AnyView;
     /// The body of an update event with the plots it marks; an error when
     /// the kind marks none and the event holds some.
