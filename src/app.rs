@@ -155,7 +155,7 @@ impl Application {
         let stopped = |mut rx: watch::Receiver<bool>| async move {
             let _ = rx.wait_for(|stop| *stop).await;
         };
-        let limits = state.settings().connection_limits();
+        let limits = serve::ConnectionLimits::from_settings(state.settings());
         let access_log = state.settings().access_log;
         let http_server = tokio::spawn(serve::serve(
             http_listener,

@@ -506,19 +506,6 @@ impl Settings {
         Duration::from_secs_f64(self.body_read_timeout_s)
     }
 
-    /// The connection limits of both servers (`serve::serve`).
-    pub fn connection_limits(&self) -> crate::serve::ConnectionLimits {
-        crate::serve::ConnectionLimits {
-            header_read_timeout: Duration::from_secs_f64(self.header_read_timeout_s),
-            max_connections: self.max_connections,
-            max_per_client: self.max_connections_per_client,
-            h2_keepalive: Duration::from_secs_f64(self.h2_keepalive_s),
-            h2_max_concurrent_streams: self.h2_max_concurrent_streams,
-            max_age: (self.max_connection_age_s > 0.0)
-                .then(|| Duration::from_secs_f64(self.max_connection_age_s)),
-        }
-    }
-
     pub fn shutdown_grace(&self) -> Duration {
         Duration::from_secs_f64(self.shutdown_grace_s)
     }
@@ -656,7 +643,7 @@ impl Settings {
                 self.asterix_out_max_datagram
             ));
         }
-        crate::asterix_udp::Sources::parse(&self.asterix_allow)?;
+        crate::allowlist::Sources::parse("--asterix-allow", &self.asterix_allow)?;
         if !(self.asterix_max_clock_offset_s.is_finite() && self.asterix_max_clock_offset_s >= 0.0)
         {
             return Err(format!(
@@ -781,7 +768,6 @@ mod tests {
         let s = with(&[]);
         assert_eq!(s.max_buffered_body_bytes, 256 << 20);
         assert_eq!(s.h2_max_concurrent_streams, 100);
-        assert_eq!(s.connection_limits().h2_max_concurrent_streams, 100);
         let err = with(&[
             "--max-body-bytes",
             "4096",

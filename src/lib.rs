@@ -8,6 +8,7 @@
 //! dependency of this crate: the adapters see only service types. See
 //! ARCHITECTURE.md.
 
+pub mod allowlist;
 pub mod app;
 pub mod asterix_udp;
 pub mod auth;

@@ -65,7 +65,7 @@ use tokio::{
 use tokio_rustls::server::TlsStream;
 use tower::ServiceExt as _;
 
-use crate::{auth::CertTenant, tls::TlsPort};
+use crate::{auth::CertTenant, config::Settings, tls::TlsPort};
 
 /// The first bytes of every HTTP/2 connection (RFC 9113 §3.4).
 const H2_PREFACE: &[u8; 24] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n";
@@ -89,6 +89,21 @@ pub struct ConnectionLimits {
     /// Longest a connection stays open before it is closed gracefully
     /// (`None`: no limit); streams still open are cut [`AGE_GRACE`] later.
     pub max_age: Option<Duration>,
+}
+
+impl ConnectionLimits {
+    /// The connection limits of both servers, from the settings.
+    pub fn from_settings(s: &Settings) -> Self {
+        Self {
+            header_read_timeout: Duration::from_secs_f64(s.header_read_timeout_s),
+            max_connections: s.max_connections,
+            max_per_client: s.max_connections_per_client,
+            h2_keepalive: Duration::from_secs_f64(s.h2_keepalive_s),
+            h2_max_concurrent_streams: s.h2_max_concurrent_streams,
+            max_age: (s.max_connection_age_s > 0.0)
+                .then(|| Duration::from_secs_f64(s.max_connection_age_s)),
+        }
+    }
 }
 
 /// How long a connection closed for its age may take to finish the
@@ -514,6 +529,19 @@ impl Drop for ClientGuard {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_connection_limits_come_from_the_settings() {
+        let mut s = Settings::for_tests();
+        s.h2_max_concurrent_streams = 100;
+        s.max_connection_age_s = 0.0;
+        let limits = ConnectionLimits::from_settings(&s);
+        assert_eq!(limits.h2_max_concurrent_streams, 100);
+        assert_eq!(limits.max_age, None, "0 s: no limit");
+        s.max_connection_age_s = 2.5;
+        let limits = ConnectionLimits::from_settings(&s);
+        assert_eq!(limits.max_age, Some(Duration::from_millis(2500)));
+    }
 
     #[test]
     fn per_client_counts_are_bounded_and_released() {

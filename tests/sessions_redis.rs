@@ -30,23 +30,16 @@ mod helpers;
 
 use helpers::TestApp as App;
 
-#[path = "common/redis.rs"]
-mod redis_harness;
-
 #[path = "common/sessions.rs"]
 mod data;
 
 use data::{open_stream, pb_report, scenario};
-use redis_harness::{RedisServer, redis_is_up, redis_server_available, redis_url, unique};
+use test_support::{
+    cluster as cluster_nodes, procs,
+    redis::{RedisServer, redis_is_up, redis_server_available, redis_url, unique},
+    sentinel,
+};
 
-#[path = "../crates/store/tests/common/procs.rs"]
-mod procs;
-
-#[path = "../crates/store/tests/common/sentinel.rs"]
-mod sentinel;
-
-#[path = "../crates/store/tests/common/cluster.rs"]
-mod cluster_nodes;
 /// Reports per pushed batch.
 const CHUNK: usize = 8;
 

@@ -24,12 +24,11 @@ use crate::{
 use service::{
     ServiceError, Violations, correlation as corr,
     session::{
-        Batch, KindName, Spec, Update, View,
+        Batch, Spec, Update, View,
         correlation::{self as domain, CorrelationSession, change_name},
-        events::{EventBody, WatchItem},
-        persist::AnyView,
+        events::WatchItem,
         plot_fusion::{self as pf, PlotFusionSession, track_change_name},
-        refuse_foreign_fields,
+        registry::{AnyView, EventBody, KindName, refuse_foreign_fields},
     },
 };
 

@@ -34,7 +34,10 @@ use super::{
 use crate::{auth::Tenant, state::AppState};
 use service::{
     Violations,
-    session::events::{EventBody, SessionEvent, WatchItem},
+    session::{
+        events::{SessionEvent, WatchItem},
+        registry::EventBody,
+    },
 };
 
 /// The data of an `end` event.

@@ -27,11 +27,10 @@ use crate::{auth::Tenant, state::AppState};
 use service::{
     Rows, ServiceError, Violations, correlation as corr,
     session::{
-        Batch, KindName, Spec, Update, View,
+        Batch, Spec, Update, View,
         correlation::{self as domain, CorrelationSession, change_name},
-        persist::AnyView,
         plot_fusion::{self as pf, PlotFusionSession, track_change_name},
-        refuse_foreign_fields,
+        registry::{AnyView, KindName, refuse_foreign_fields},
     },
 };
 

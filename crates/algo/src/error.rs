@@ -4,11 +4,14 @@
 //! finite, a matrix that is not a covariance, a parameter outside its domain,
 //! a geometry where the measurement model is undefined, or a budget of work
 //! or memory a computation would exceed. Each variant names the
-//! offending quantity in `what` so that the service layer can map it to a
-//! field path and a message such as "covariance is not positive definite".
-//! A failed gate is a result, never an error.
+//! offending quantity in `what` (a tracker option by its typed
+//! [`TrackerParameter`]) so that the service layer can map it to a field
+//! path and a message such as "covariance is not positive definite". A
+//! failed gate is a result, never an error.
 
 use nalgebra::{DMatrix, DVector};
+
+use crate::tracking::TrackerParameter;
 
 /// Errors of the `algo` layer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -78,6 +81,15 @@ pub enum AlgoError {
         /// What is wrong with it.
         reason: String,
     },
+    /// A tracker option is outside its domain: the option is typed, so a
+    /// caller names its own field for it by a total `match`.
+    #[error("invalid {parameter}: {reason}")]
+    InvalidOption {
+        /// The option.
+        parameter: TrackerParameter,
+        /// What is wrong with it.
+        reason: String,
+    },
 }
 
 impl AlgoError {
@@ -92,6 +104,7 @@ impl AlgoError {
             | AlgoError::DegenerateGeometry { what, .. }
             | AlgoError::BudgetExceeded { what, .. }
             | AlgoError::InvalidParameter { what, .. } => what,
+            AlgoError::InvalidOption { parameter, .. } => parameter.name(),
         }
     }
 }

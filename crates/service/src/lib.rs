@@ -88,6 +88,10 @@ pub(crate) fn param_violation(prefix: &str, e: AlgoError) -> FieldViolation {
             field: format!("{prefix}{what}"),
             message: reason,
         },
+        AlgoError::InvalidOption { parameter, reason } => FieldViolation {
+            field: format!("{prefix}{parameter}"),
+            message: reason,
+        },
         // These name a quantity ("innovation covariance"), not a parameter:
         // the field is the prefix, and the message says which quantity.
         other @ (AlgoError::DimensionMismatch { .. }

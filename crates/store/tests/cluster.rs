@@ -15,16 +15,12 @@ use std::{
 
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings};
 
+use test_support::{
+    cluster::{Cluster, cluster_port},
+    procs::{Proc, cli, loud},
+};
+
 const PREFIX: &str = "cluster-test";
-
-#[path = "common/procs.rs"]
-mod procs;
-
-#[path = "common/cluster.rs"]
-mod cluster_nodes;
-
-use cluster_nodes::{Cluster, cluster_port};
-use procs::{Proc, cli, loud};
 
 async fn store(cluster: &Cluster) -> SessionStore {
     SessionStore::connect(&StoreSettings {

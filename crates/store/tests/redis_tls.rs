@@ -15,11 +15,8 @@ use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair,
     KeyUsagePurpose,
 };
-#[path = "common/procs.rs"]
-mod procs;
-
-use procs::{Proc, free_port, loud, redis_tools};
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings, access::RedisAccessSettings};
+use test_support::procs::{Proc, free_port, loud, redis_tools};
 
 const PASSWORD: &str = "s3cret-Pa55word-for-tls-test";
 

@@ -9,11 +9,7 @@ use std::time::{Duration, Instant};
 
 use store::{CasOutcome, SessionStore, StoreError, StoreSettings, events::Feed};
 
-#[path = "common/procs.rs"]
-mod procs;
-
-#[path = "common/sentinel.rs"]
-mod sentinel;
+use test_support::sentinel;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pushes_survive_a_primary_kill_exactly_once() {

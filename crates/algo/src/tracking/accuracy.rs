@@ -222,18 +222,19 @@ impl Default for AccuracyConfig {
 impl AccuracyConfig {
     /// Checks τ and the pinned radars' indices.
     pub fn validate(&self, radars: usize) -> Result<(), AlgoError> {
+        use crate::tracking::parameter::{TrackerParameter as P, invalid};
         let tau = self.time_constant;
         if !(tau.is_finite() && tau > 0.0) {
-            return Err(AlgoError::InvalidParameter {
-                what: "accuracy.time_constant",
-                reason: format!("must be finite and > 0, got {tau}"),
-            });
+            return Err(invalid(
+                P::AccuracyTimeConstant,
+                format!("must be finite and > 0, got {tau}"),
+            ));
         }
         if let Some(&r) = self.pinned.iter().find(|&&r| r >= radars) {
-            return Err(AlgoError::InvalidParameter {
-                what: "accuracy.pinned",
-                reason: format!("radar index {r} but {radars} radars"),
-            });
+            return Err(invalid(
+                P::AccuracyPinned,
+                format!("radar index {r} but {radars} radars"),
+            ));
         }
         Ok(())
     }

@@ -6,9 +6,12 @@
 //! simultaneous detections). Units are SI, angles in radians, azimuth
 //! clockwise from north, positions in the fusion centre's ENU frame.
 
-use crate::error::{AlgoError, finite, finite_slice, non_negative, positive};
+use crate::error::{self, AlgoError};
 use crate::jpda::{Config as JpdaConfig, Method};
 use crate::tracking::identity::{self, Identity};
+use crate::tracking::parameter::{
+    TrackerParameter, TrackerParameter as P, finite, finite_slice, invalid, non_negative, positive,
+};
 
 /// How plots reach the tracks (seed 001 step 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -456,7 +459,7 @@ pub struct TrackerConfig {
     /// is the same and whose states differ by less than the χ²_n quantile
     /// at this probability are one target; the younger is deleted. In
     /// [0, 1); 0 disables the rule.
-    pub duplicate_probability: f64,
+    pub duplicate_gate_probability: f64,
     /// Radar registration: online bias estimation and compensation
     /// ([`crate::tracking::registration`]); on with two radars or more.
     pub registration: crate::tracking::registration::RegistrationConfig,
@@ -470,6 +473,33 @@ pub struct TrackerConfig {
     /// Each radar's σ learnt online and applied once converged
     /// ([`crate::tracking::accuracy`]); on by default.
     pub accuracy: crate::tracking::accuracy::AccuracyConfig,
+}
+
+/// A [`TrackerConfig`] that passed its checks: made only by
+/// [`TrackerConfig::validated`] (or from a tracker's own configuration),
+/// so [`crate::tracking::Tracker::with_config`] takes it as it is; read
+/// through `Deref`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidTrackerConfig(TrackerConfig);
+
+impl ValidTrackerConfig {
+    /// The configuration, no longer marked as checked.
+    pub fn into_inner(self) -> TrackerConfig {
+        self.0
+    }
+
+    /// A configuration already checked (a tracker's own).
+    pub(crate) fn trusted(config: TrackerConfig) -> Self {
+        Self(config)
+    }
+}
+
+impl std::ops::Deref for ValidTrackerConfig {
+    type Target = TrackerConfig;
+
+    fn deref(&self) -> &TrackerConfig {
+        &self.0
+    }
 }
 
 impl TrackerConfig {
@@ -528,7 +558,7 @@ impl TrackerConfig {
             default_height: 0.0,
             default_height_sigma: 1000.0,
             sigma_tangential_speed: 300.0,
-            duplicate_probability: 0.99,
+            duplicate_gate_probability: 0.99,
             registration: crate::tracking::registration::RegistrationConfig::for_radars(radars_len),
             mode_c_height: Default::default(),
             height_datum: crate::tracking::height::HeightDatum::Flat,
@@ -559,58 +589,67 @@ impl TrackerConfig {
         self.mode == Mode::Parallel
     }
 
-    /// Checks every option; the error names the option.
-    pub fn validate(&self) -> Result<(), AlgoError> {
+    /// Checks every option: the configuration as a
+    /// [`ValidTrackerConfig`], which [`crate::tracking::Tracker::with_config`]
+    /// takes without checking it again. The error names the option
+    /// ([`AlgoError::InvalidOption`], or [`AlgoError::NonFinite`] for a
+    /// value that is not finite).
+    pub fn validated(self) -> Result<ValidTrackerConfig, AlgoError> {
+        self.validate()?;
+        Ok(ValidTrackerConfig(self))
+    }
+
+    fn validate(&self) -> Result<(), AlgoError> {
         if !(self.axes == 2 || self.axes == 3) {
             return Err(invalid(
-                "axes",
+                P::Axes,
                 format!("must be 2 or 3, got {}", self.axes),
             ));
         }
         if self.radars.is_empty() {
-            return Err(invalid("radars", "at least one radar is needed".into()));
+            return Err(invalid(P::Radars, "at least one radar is needed"));
         }
         for r in &self.radars {
             validate_radar(r, self.axes)?;
         }
         if self.mode == Mode::Parallel && !self.radars.iter().all(RadarSpec::has_doppler) {
             return Err(invalid(
-                "mode",
-                "parallel mode needs the radial velocity of every radar".into(),
+                P::Mode,
+                "parallel mode needs the radial velocity of every radar",
             ));
         }
-        positive("fusion_period", self.fusion_period)?;
-        finite("fusion_epoch", self.fusion_epoch)?;
-        non_negative("time_tolerance", self.time_tolerance)?;
+        positive(P::FusionPeriod, self.fusion_period)?;
+        finite(P::FusionEpoch, self.fusion_epoch)?;
+        non_negative(P::TimeTolerance, self.time_tolerance)?;
         // The JPDA endpoint's bound: exact enumeration beyond 128 tracks
         // in one cluster would never finish.
         if !(1..=128).contains(&self.association.max_exact_tracks) {
             return Err(invalid(
-                "max_exact_tracks",
+                P::MaxExactTracks,
                 format!(
                     "must lie in 1..=128, got {}",
                     self.association.max_exact_tracks
                 ),
             ));
         }
-        open_probability("plot_gate_probability", self.plot_gate_probability)?;
-        open_probability("track_gate_probability", self.track_gate_probability)?;
+        open_probability(P::PlotGateProbability, self.plot_gate_probability)?;
+        open_probability(P::TrackGateProbability, self.track_gate_probability)?;
         validate_initiation(&self.initiation)?;
         validate_deletion(&self.deletion)?;
         for &s in &self.sigma_a {
-            non_negative("sigma_a", s)?;
+            non_negative(P::SigmaA, s)?;
         }
         if let Motion::Imm(imm) = &self.motion {
             validate_imm(imm)?;
         }
         self.registration.validate(self.radars.len())?;
-        finite("default_height", self.default_height)?;
-        positive("default_height_sigma", self.default_height_sigma)?;
-        non_negative("sigma_tangential_speed", self.sigma_tangential_speed)?;
-        let p = self.duplicate_probability;
+        finite(P::DefaultHeight, self.default_height)?;
+        positive(P::DefaultHeightSigma, self.default_height_sigma)?;
+        non_negative(P::SigmaTangentialSpeed, self.sigma_tangential_speed)?;
+        let p = self.duplicate_gate_probability;
         if !(0.0..1.0).contains(&p) {
             return Err(invalid(
-                "duplicate_probability",
+                P::DuplicateGateProbability,
                 format!("must lie in [0, 1), got {p}"),
             ));
         }
@@ -629,31 +668,36 @@ impl TrackerConfig {
         let radar = self
             .radars
             .get(plot.radar)
-            .ok_or_else(|| invalid("radar", format!("no radar {}", plot.radar)))?;
-        finite("t", plot.t)?;
-        positive("range", plot.range)?;
-        finite("azimuth", plot.azimuth)?;
+            .ok_or_else(|| invalid_plot("radar", format!("no radar {}", plot.radar)))?;
+        error::finite("t", plot.t)?;
+        error::positive("range", plot.range)?;
+        error::finite("azimuth", plot.azimuth)?;
         match (radar.is_3d(), plot.elevation) {
             (true, Some(el)) => {
-                finite("elevation", el)?;
+                error::finite("elevation", el)?;
                 if el.abs() >= std::f64::consts::FRAC_PI_2 {
-                    return Err(invalid(
+                    return Err(invalid_plot(
                         "elevation",
                         format!("must lie in (-pi/2, pi/2), got {el}"),
                     ));
                 }
             }
-            (true, None) => return Err(invalid("elevation", "required from a 3D radar".into())),
+            (true, None) => {
+                return Err(invalid_plot("elevation", "required from a 3D radar".into()));
+            }
             (false, Some(_)) => {
-                return Err(invalid("elevation", "a 2D radar gives no elevation".into()));
+                return Err(invalid_plot(
+                    "elevation",
+                    "a 2D radar gives no elevation".into(),
+                ));
             }
             (false, None) => {}
         }
         identity::validate(&plot.identity)?;
         if let Some(v) = plot.radial_velocity {
-            finite("radial_velocity", v)?;
+            error::finite("radial_velocity", v)?;
         } else if self.is_parallel() {
-            return Err(invalid(
+            return Err(invalid_plot(
                 "radial_velocity",
                 "required in parallel mode (time registration)".into(),
             ));
@@ -692,14 +736,14 @@ impl TrackerConfig {
     /// fusion instants by their Doppler).
     fn validate_report(&self, plot: &Plot, report: &Report) -> Result<(), AlgoError> {
         if self.is_parallel() {
-            return Err(invalid(
+            return Err(invalid_plot(
                 "report",
                 "cooperative reports need serial mode (parallel mode fuses radar plots only)"
                     .into(),
             ));
         }
         if self.report_kind(plot.radar) != Some(report.kind) {
-            return Err(invalid(
+            return Err(invalid_plot(
                 "radar",
                 format!(
                     "a {} report's sensor is {}, got {}",
@@ -709,17 +753,17 @@ impl TrackerConfig {
                 ),
             ));
         }
-        finite("t", plot.t)?;
-        finite_slice("report.position", &report.position)?;
-        positive("report.sigma_horizontal", report.sigma_horizontal)?;
+        error::finite("t", plot.t)?;
+        error::finite_slice("report.position", &report.position)?;
+        error::positive("report.sigma_horizontal", report.sigma_horizontal)?;
         if let Some(s) = report.sigma_vertical {
-            positive("report.sigma_vertical", s)?;
+            error::positive("report.sigma_vertical", s)?;
         }
         if let Some(v) = &report.velocity {
-            finite_slice("report.velocity", v)?;
-            positive("report.sigma_velocity", report.sigma_velocity)?;
+            error::finite_slice("report.velocity", v)?;
+            error::positive("report.sigma_velocity", report.sigma_velocity)?;
             if let Some(s) = report.sigma_vertical_velocity {
-                positive("report.sigma_vertical_velocity", s)?;
+                error::positive("report.sigma_vertical_velocity", s)?;
             }
         }
         identity::validate(&plot.identity)
@@ -735,37 +779,37 @@ fn default_misses(mode: Mode, radars: &[RadarSpec]) -> u32 {
 }
 
 fn validate_radar(r: &RadarSpec, axes: usize) -> Result<(), AlgoError> {
-    finite_slice("site", &r.site)?;
-    positive("sigma_range", r.sigma_range)?;
-    positive("sigma_azimuth", r.sigma_azimuth)?;
+    finite_slice(P::RadarSite, &r.site)?;
+    positive(P::RadarSigmaRange, r.sigma_range)?;
+    positive(P::RadarSigmaAzimuth, r.sigma_azimuth)?;
     if let Some(s) = r.sigma_elevation {
-        positive("sigma_elevation", s)?;
+        positive(P::RadarSigmaElevation, s)?;
         if axes == 2 {
             return Err(invalid(
-                "sigma_elevation",
-                "a 2D tracker takes 2D radars only; use a 3D tracker".into(),
+                P::RadarSigmaElevation,
+                "a 2D tracker takes 2D radars only; use a 3D tracker",
             ));
         }
     }
     if let Some(s) = r.sigma_radial_velocity {
-        positive("sigma_radial_velocity", s)?;
+        positive(P::RadarSigmaRadialVelocity, s)?;
     }
-    positive("scan_period", r.scan_period)?;
+    positive(P::RadarScanPeriod, r.scan_period)?;
     let pd = r.detection_probability;
     if !(pd > 0.0 && pd <= 1.0) {
         return Err(invalid(
-            "detection_probability",
+            P::RadarDetectionProbability,
             format!("must lie in (0, 1], got {pd}"),
         ));
     }
-    positive("clutter_density", r.clutter_density)?;
+    positive(P::RadarClutterDensity, r.clutter_density)?;
     Ok(())
 }
 
 fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
     if !(2 <= i.confirm_m && i.confirm_m <= i.confirm_n && i.confirm_n <= 64) {
         return Err(invalid(
-            "confirm_m_of_n",
+            P::ConfirmMOfN,
             format!(
                 "need 2 <= M <= N <= 64, got {}/{}",
                 i.confirm_m, i.confirm_n
@@ -774,26 +818,26 @@ fn validate_initiation(i: &Initiation) -> Result<(), AlgoError> {
     }
     match i.velocity {
         VelocityGate::Speed { v_min, v_max } => {
-            non_negative("v_min", v_min)?;
-            positive("v_max", v_max)?;
+            non_negative(P::VMin, v_min)?;
+            positive(P::VMax, v_max)?;
             if v_min >= v_max {
-                return Err(invalid("v_max", format!("must exceed v_min = {v_min}")));
+                return Err(invalid(P::VMax, format!("must exceed v_min = {v_min}")));
             }
         }
         VelocityGate::PerAxis { v_min, v_max } => {
-            finite_slice("v_min", &v_min)?;
-            finite_slice("v_max", &v_max)?;
+            finite_slice(P::VMin, &v_min)?;
+            finite_slice(P::VMax, &v_max)?;
             if v_min.iter().zip(&v_max).any(|(lo, hi)| lo > hi) {
-                return Err(invalid("v_max", "must be >= v_min on every axis".into()));
+                return Err(invalid(P::VMax, "must be >= v_min on every axis"));
             }
         }
     }
-    open_probability("initiation_gate_probability", i.gate_probability)?;
-    positive("min_dt", i.min_dt)?;
-    positive("max_dt", i.max_dt)?;
+    open_probability(P::InitiationGateProbability, i.gate_probability)?;
+    positive(P::MinDt, i.min_dt)?;
+    positive(P::MaxDt, i.max_dt)?;
     if i.max_dt < i.min_dt {
         return Err(invalid(
-            "max_dt",
+            P::MaxDt,
             format!("must be >= min_dt = {}", i.min_dt),
         ));
     }
@@ -804,19 +848,19 @@ fn validate_imm(imm: &Imm) -> Result<(), AlgoError> {
     let r = imm.models.len();
     if !(2..=8).contains(&r) {
         return Err(invalid(
-            "models",
+            P::ImmModels,
             format!("an IMM needs 2 to 8 models, got {r}"),
         ));
     }
     for m in &imm.models {
         for s in m.sigma_a() {
-            non_negative("sigma_a", s)?;
+            non_negative(P::SigmaA, s)?;
         }
         if let MotionModel::CoordinatedTurn { turn_rate, .. } = m {
-            finite("turn_rate", *turn_rate)?;
+            finite(P::TurnRate, *turn_rate)?;
             if *turn_rate == 0.0 || turn_rate.abs() > 0.5 {
                 return Err(invalid(
-                    "turn_rate",
+                    P::TurnRate,
                     format!("must be non-zero with |ω| ≤ 0.5 rad/s, got {turn_rate}"),
                 ));
             }
@@ -824,7 +868,7 @@ fn validate_imm(imm: &Imm) -> Result<(), AlgoError> {
     }
     if imm.mean_sojourn.len() != r {
         return Err(invalid(
-            "mean_sojourn",
+            P::MeanSojourn,
             format!(
                 "one per model: {r} models, {} values",
                 imm.mean_sojourn.len()
@@ -832,19 +876,19 @@ fn validate_imm(imm: &Imm) -> Result<(), AlgoError> {
         ));
     }
     for &t in &imm.mean_sojourn {
-        positive("mean_sojourn", t)?;
+        positive(P::MeanSojourn, t)?;
     }
     let p = &imm.initial_probabilities;
     if p.len() != r {
         return Err(invalid(
-            "initial_probabilities",
+            P::InitialProbabilities,
             format!("one per model: {r} models, {} values", p.len()),
         ));
     }
     let sum: f64 = p.iter().sum();
     if p.iter().any(|v| !(v.is_finite() && *v > 0.0)) || (sum - 1.0).abs() > 1e-9 {
         return Err(invalid(
-            "initial_probabilities",
+            P::InitialProbabilities,
             format!("each must be > 0 and they must sum to 1, got {p:?}"),
         ));
     }
@@ -853,30 +897,30 @@ fn validate_imm(imm: &Imm) -> Result<(), AlgoError> {
 
 fn validate_deletion(d: &Deletion) -> Result<(), AlgoError> {
     if d.max_consecutive_misses == Some(0) {
-        return Err(invalid("max_consecutive_misses", "must be >= 1".into()));
+        return Err(invalid(P::MaxConsecutiveMisses, "must be >= 1"));
     }
     if let Some((m, n)) = d.misses_m_of_n {
         if !(1 <= m && m <= n && n <= 64) {
             return Err(invalid(
-                "deletion_m_of_n",
+                P::DeletionMOfN,
                 format!("need 1 <= M <= N <= 64, got {m}/{n}"),
             ));
         }
     }
     if let Some(s) = d.max_position_sigma {
-        positive("max_position_sigma", s)?;
+        positive(P::MaxPositionSigma, s)?;
     }
     Ok(())
 }
 
-fn open_probability(what: &'static str, p: f64) -> Result<(), AlgoError> {
+fn open_probability(parameter: TrackerParameter, p: f64) -> Result<(), AlgoError> {
     if !(p > 0.0 && p < 1.0) {
-        Err(invalid(what, format!("must lie in (0, 1), got {p}")))
+        Err(invalid(parameter, format!("must lie in (0, 1), got {p}")))
     } else if 1.0 - p == 1.0 {
         // The χ² gate is the quantile at 1 − p: below 2⁻⁵³ that is 1 in
         // floating point, a gate of zero width (and no quantile).
         Err(invalid(
-            what,
+            parameter,
             format!("must be at least 1.2e-16 (a gate of this probability has no width), got {p}"),
         ))
     } else {
@@ -884,24 +928,25 @@ fn open_probability(what: &'static str, p: f64) -> Result<(), AlgoError> {
     }
 }
 
-fn invalid(what: &'static str, reason: String) -> AlgoError {
+/// A plot's (not an option's) field outside its domain.
+fn invalid_plot(what: &'static str, reason: String) -> AlgoError {
     AlgoError::InvalidParameter { what, reason }
 }
 
 #[cfg(test)]
 mod probability_tests {
-    use super::open_probability;
+    use super::{P, open_probability};
 
     #[test]
     fn a_gate_probability_whose_complement_rounds_to_one_is_refused() {
         // 1 − 5e-324 and 1 − 2⁻⁵⁴ round to 1.0 in binary64 (the spacing of
         // doubles just below 1 is 2⁻⁵³): no χ² quantile exists there.
-        assert!(open_probability("p", 5e-324).is_err());
-        assert!(open_probability("p", 2f64.powi(-54)).is_err());
+        assert!(open_probability(P::PlotGateProbability, 5e-324).is_err());
+        assert!(open_probability(P::PlotGateProbability, 2f64.powi(-54)).is_err());
         // 1 − 2⁻⁵³ = 0.99999999999999989 is a double: a valid, tiny gate.
-        assert!(open_probability("p", 2f64.powi(-53)).is_ok());
-        assert!(open_probability("p", 0.99).is_ok());
-        assert!(open_probability("p", 0.0).is_err());
-        assert!(open_probability("p", 1.0).is_err());
+        assert!(open_probability(P::PlotGateProbability, 2f64.powi(-53)).is_ok());
+        assert!(open_probability(P::PlotGateProbability, 0.99).is_ok());
+        assert!(open_probability(P::PlotGateProbability, 0.0).is_err());
+        assert!(open_probability(P::PlotGateProbability, 1.0).is_err());
     }
 }

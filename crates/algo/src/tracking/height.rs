@@ -114,12 +114,12 @@ impl HeightDatum {
                 && radius.contains(&meridian)
                 && radius.contains(&prime_vertical))
             {
-                return Err(AlgoError::InvalidParameter {
-                    what: "height_datum",
-                    reason: format!(
+                return Err(crate::tracking::parameter::invalid(
+                    crate::tracking::TrackerParameter::HeightDatum,
+                    format!(
                         "an origin height within ±100 km and radii of curvature in [5000, 8000] km, got {origin_height} m, {meridian} m, {prime_vertical} m"
                     ),
-                });
+                ));
             }
         }
         Ok(())
@@ -162,27 +162,21 @@ impl Default for ModeCHeight {
 impl ModeCHeight {
     /// Checks the prior.
     pub fn validate(&self) -> Result<(), AlgoError> {
-        let bad = |what: &'static str, reason: &str| AlgoError::InvalidParameter {
-            what,
-            reason: reason.to_string(),
-        };
+        use crate::tracking::parameter::{TrackerParameter as P, invalid as bad};
         if !(self.offset.is_finite() && self.offset.abs() <= 2000.0) {
-            return Err(bad(
-                "mode_c_height.offset",
-                "must be finite, within ±2000 m",
-            ));
+            return Err(bad(P::ModeCHeightOffset, "must be finite, within ±2000 m"));
         }
         if !(self.sigma_offset.is_finite()
             && self.sigma_offset > 0.0
             && self.sigma_offset <= 2000.0)
         {
-            return Err(bad("mode_c_height.sigma_offset", "must be in (0, 2000] m"));
+            return Err(bad(P::ModeCHeightSigmaOffset, "must be in (0, 2000] m"));
         }
         if !(self.slope.is_finite() && self.slope.abs() <= 0.5) {
-            return Err(bad("mode_c_height.slope", "must be finite, within ±0.5"));
+            return Err(bad(P::ModeCHeightSlope, "must be finite, within ±0.5"));
         }
         if !(self.sigma_slope.is_finite() && self.sigma_slope > 0.0 && self.sigma_slope <= 0.5) {
-            return Err(bad("mode_c_height.sigma_slope", "must be in (0, 0.5]"));
+            return Err(bad(P::ModeCHeightSigmaSlope, "must be in (0, 0.5]"));
         }
         Ok(())
     }

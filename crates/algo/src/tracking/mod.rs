@@ -56,6 +56,7 @@ pub mod height;
 mod hypothesiser;
 pub mod identity;
 pub mod initiator;
+pub mod parameter;
 pub mod plot_association;
 pub mod predictor;
 mod registrar;
@@ -77,12 +78,13 @@ mod tests;
 
 pub use config::{
     Deletion, Imm, Initiation, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Report,
-    ReportKind, TrackerConfig, VelocityGate,
+    ReportKind, TrackerConfig, ValidTrackerConfig, VelocityGate,
 };
 pub use conversion::{CartesianPlot, Doppler, Linearised, RangeRate, VelocityComponent};
 pub use identity::{
     Detection, Disagreement, Emergency, Identity, Mode3A, ModeC, TrackIdentity, Validation,
 };
+pub use parameter::TrackerParameter;
 pub use state::{TrackerParts, TrackerState};
 pub use track::{RadarHit, Track, TrackOutput, TrackStatus};
 pub use window::{LagWindow, LagWindowParts, LagWindowState, LatePolicy, Push};
@@ -128,7 +130,7 @@ pub struct Counters {
     /// Confirmed tracks deleted.
     pub deleted: u64,
     /// Confirmed tracks deleted as duplicates of another (see
-    /// [`TrackerConfig::duplicate_probability`]).
+    /// [`TrackerConfig::duplicate_gate_probability`]).
     pub merged: u64,
 }
 
@@ -346,7 +348,12 @@ const REPORT_DETECTION_PROBABILITY: f64 = 0.9;
 impl Tracker {
     /// A tracker without tracks; fails when the configuration is invalid.
     pub fn new(config: TrackerConfig) -> Result<Self, AlgoError> {
-        config.validate()?;
+        Self::with_config(config.validated()?)
+    }
+
+    /// A tracker without tracks over a configuration already checked.
+    pub fn with_config(config: ValidTrackerConfig) -> Result<Self, AlgoError> {
+        let config = config.into_inner();
         let beams = vec![None; config.radars.len()];
         let registrar = Registrar::new(&config, RegistrationState::new(&config.radars), false)?;
         Ok(Self {
@@ -378,6 +385,11 @@ impl Tracker {
     /// The validated configuration.
     pub fn config(&self) -> &TrackerConfig {
         &self.config
+    }
+
+    /// A copy of the configuration, as checked when the tracker was made.
+    pub fn valid_config(&self) -> ValidTrackerConfig {
+        ValidTrackerConfig::trusted(self.config.clone())
     }
 
     /// The resolved mode: `Mode::Parallel` or `Mode::Serial`.
@@ -1501,7 +1513,7 @@ impl Tracker {
         let cfg = &self.config;
         let hit_plots: Vec<(usize, usize)> = hits.iter().map(|h| (h.slot, h.plot)).collect();
         let mut doomed: Vec<(usize, Doom)> =
-            deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_probability)?
+            deleter::duplicates(&self.tracks, &hit_plots, cfg.duplicate_gate_probability)?
                 .into_iter()
                 .map(|k| (k, Doom::Duplicate))
                 .collect();

@@ -130,10 +130,10 @@ impl RegistrationConfig {
 
     /// Checks the options for `radars` radars; the error names the option.
     pub fn validate(&self, radars: usize) -> Result<(), AlgoError> {
-        let bad = |what: &'static str, reason: String| AlgoError::InvalidParameter { what, reason };
+        use crate::tracking::parameter::{TrackerParameter as P, invalid as bad};
         if !self.priors.is_empty() && self.priors.len() != radars {
             return Err(bad(
-                "registration_priors",
+                P::RegistrationPriors,
                 format!(
                     "one per radar ({radars}) or none, got {}",
                     self.priors.len()
@@ -148,7 +148,7 @@ impl RegistrationConfig {
             ] {
                 if !v.is_finite() || !s.is_finite() || s < 0.0 {
                     return Err(bad(
-                        "registration_priors",
+                        P::RegistrationPriors,
                         format!("biases must be finite and σ finite and ≥ 0, got {v} ± {s}"),
                     ));
                 }
@@ -157,26 +157,26 @@ impl RegistrationConfig {
         for &r in &self.reference {
             if r >= radars {
                 return Err(bad(
-                    "registration_reference",
+                    P::RegistrationReference,
                     format!("radar {r} does not exist ({radars} radars)"),
                 ));
             }
         }
         if self.enabled && radars >= 2 && (0..radars).all(|r| self.reference.contains(&r)) {
             return Err(bad(
-                "registration_reference",
-                "every radar is a reference: nothing to estimate (turn registration off)".into(),
+                P::RegistrationReference,
+                "every radar is a reference: nothing to estimate (turn registration off)",
             ));
         }
         if !(self.max_pair_dt.is_finite() && self.max_pair_dt > 0.0) {
             return Err(bad(
-                "registration_max_pair_dt",
+                P::RegistrationMaxPairDt,
                 format!("must be finite and > 0, got {}", self.max_pair_dt),
             ));
         }
         if !(self.time_constant.is_finite() && self.time_constant > 0.0) {
             return Err(bad(
-                "registration_time_constant",
+                P::RegistrationTimeConstant,
                 format!("must be finite and > 0, got {}", self.time_constant),
             ));
         }

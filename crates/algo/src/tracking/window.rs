@@ -263,10 +263,10 @@ pub fn validate_lag(max_lag: f64) -> Result<(), AlgoError> {
     if max_lag.is_finite() && (0.0..=MAX_LAG_LIMIT_S).contains(&max_lag) {
         Ok(())
     } else {
-        Err(AlgoError::InvalidParameter {
-            what: "max_lag_s",
-            reason: format!("must be finite and in [0, {MAX_LAG_LIMIT_S}] s, got {max_lag}"),
-        })
+        Err(crate::tracking::parameter::invalid(
+            crate::tracking::TrackerParameter::MaxLag,
+            format!("must be finite and in [0, {MAX_LAG_LIMIT_S}] s, got {max_lag}"),
+        ))
     }
 }
 
@@ -291,7 +291,7 @@ impl LagWindow {
         let mut picture = tracker.clone();
         picture.flush()?;
         let base = match policy {
-            LatePolicy::Retrodict => Tracker::new(tracker.config().clone())?,
+            LatePolicy::Retrodict => Tracker::with_config(tracker.valid_config())?,
             _ => tracker.clone(),
         };
         Ok(Self {

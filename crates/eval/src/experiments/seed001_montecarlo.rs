@@ -92,7 +92,7 @@ struct Variant {
     sigma_t: Option<f64>,
     /// `Some`: consecutive misses that delete a track.
     max_misses: Option<u32>,
-    /// `Some`: `duplicate_probability` (0 disables duplicate deletion).
+    /// `Some`: `duplicate_gate_probability` (0 disables duplicate deletion).
     duplicate: Option<f64>,
     method: Method,
     /// `Some`: this IMM instead of the default one.
@@ -799,7 +799,7 @@ fn one_run(
                         c.deletion.max_consecutive_misses = v.max_misses;
                     }
                     if let Some(p) = v.duplicate {
-                        c.duplicate_probability = p;
+                        c.duplicate_gate_probability = p;
                     }
                     c.association.method = v.method;
                     if let Some(imm) = v.imm {

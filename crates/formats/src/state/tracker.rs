@@ -569,7 +569,7 @@ fn config(w: &mut Writer, c: &TrackerConfig) {
     w.f64(c.default_height);
     w.f64(c.default_height_sigma);
     w.f64(c.sigma_tangential_speed);
-    w.f64(c.duplicate_probability);
+    w.f64(c.duplicate_gate_probability);
     match &c.motion {
         Motion::ConstantVelocity => w.u8(0),
         Motion::Imm(imm) => {
@@ -699,7 +699,7 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
     let default_height = r.f64()?;
     let default_height_sigma = r.f64()?;
     let sigma_tangential_speed = r.f64()?;
-    let duplicate_probability = r.f64()?;
+    let duplicate_gate_probability = r.f64()?;
     let motion = if version >= 2 {
         read_motion(r)?
     } else {
@@ -730,7 +730,7 @@ fn read_config(r: &mut Reader<'_>, version: u32) -> Result<TrackerConfig, Format
         default_height,
         default_height_sigma,
         sigma_tangential_speed,
-        duplicate_probability,
+        duplicate_gate_probability,
         // Formats 1 to 3: the default; format 4 reads its own at the end.
         registration: RegistrationConfig::for_radars(radars_len),
         // Read from format 7's end, else off (decode_tracker).

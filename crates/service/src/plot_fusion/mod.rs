@@ -439,7 +439,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
     // Stable: plots of equal time keep the request's order, as a session
     // fed the same plots in order would.
     plots.sort_by(|a, b| a.t.total_cmp(&b.t));
-    let mut tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+    let mut tracker = Tracker::with_config(config).map_err(|e| network::config_error(&e))?;
     let mut history = input.history.then(Vec::new);
     let mut states = 0usize;
     let mut cancelled = Ok(());

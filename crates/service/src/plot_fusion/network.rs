@@ -45,7 +45,7 @@ use algo::{
     polar::{enu_to_polar_3d, polar_to_enu_3d},
     tracking::{
         Deletion, Imm, Mode, Motion, MotionModel, NoiseModel, Plot, RadarSpec, Tracker,
-        TrackerConfig, VelocityGate,
+        TrackerConfig, TrackerParameter, ValidTrackerConfig, VelocityGate,
         accuracy::AccuracyConfig,
         height::{HeightDatum, ModeCHeight, radii_of_curvature},
         registration::{BiasPrior, RegistrationConfig},
@@ -101,43 +101,59 @@ pub const ASSOCIATIONS: &[&str] = &[
     "nearest_neighbour",
 ];
 
-fn wire_name(what: &str) -> &'static str {
-    match what {
-        "axes" => "tracker.dimensions",
-        "mode" => "tracker.mode",
-        "fusion_period" => "tracker.fusion_period_s",
-        "fusion_epoch" => "tracker.fusion_epoch_s",
-        "time_tolerance" => "tracker.time_tolerance_s",
-        "max_exact_tracks" => "tracker.max_exact_cluster_tracks",
-        "plot_gate_probability" => "tracker.plot_gate_probability",
-        "track_gate_probability" => "tracker.track_gate_probability",
-        "confirm_m_of_n" => "tracker.initiation.m",
-        "v_min" => "tracker.initiation.v_min_mps",
-        "v_max" => "tracker.initiation.v_max_mps",
-        "initiation_gate_probability" => "tracker.initiation.gate_probability",
-        "min_dt" => "tracker.initiation.min_dt_s",
-        "max_dt" => "tracker.initiation.max_dt_s",
-        "max_consecutive_misses" => "tracker.deletion.max_consecutive_misses",
-        "deletion_m_of_n" => "tracker.deletion.m",
-        "max_position_sigma" => "tracker.deletion.max_position_sigma_m",
-        "sigma_a" => "tracker.sigma_a_mps2",
-        "default_height" => "tracker.default_height_m",
-        "default_height_sigma" => "tracker.default_height_sigma_m",
-        "sigma_tangential_speed" => "tracker.sigma_tangential_speed_mps",
-        "duplicate_probability" => "tracker.duplicate_gate_probability",
-        "max_lag_s" => "tracker.max_lag_s",
-        "registration_priors" => "radars[].bias",
-        "registration_reference" => "tracker.registration.reference",
-        "registration_max_pair_dt" => "tracker.registration.max_pair_dt_s",
-        "registration_time_constant" => "tracker.registration.time_constant_s",
-        "models" | "turn_rate" | "mean_sojourn" | "initial_probabilities" => "tracker.imm_models",
-        "mode_c_height.offset" => "tracker.mode_c_height.offset_m",
-        "mode_c_height.sigma_offset" => "tracker.mode_c_height.sigma_offset_m",
-        "mode_c_height.slope" => "tracker.mode_c_height.slope",
-        "mode_c_height.sigma_slope" => "tracker.mode_c_height.sigma_slope",
-        "accuracy.time_constant" => "tracker.accuracy.time_constant_s",
-        "accuracy.pinned" => "tracker.accuracy.pinned",
-        _ => "tracker",
+/// The wire field of a tracker option. The radars' own options are parsed
+/// (and their fields named) before the core sees them, as are the count of
+/// radars and the height datum (derived from the frame): those name the
+/// tracker as a whole.
+fn option_field(parameter: TrackerParameter) -> &'static str {
+    use TrackerParameter as P;
+    match parameter {
+        P::Axes => "tracker.dimensions",
+        P::Mode => "tracker.mode",
+        P::FusionPeriod => "tracker.fusion_period_s",
+        P::FusionEpoch => "tracker.fusion_epoch_s",
+        P::TimeTolerance => "tracker.time_tolerance_s",
+        P::MaxExactTracks => "tracker.max_exact_cluster_tracks",
+        P::PlotGateProbability => "tracker.plot_gate_probability",
+        P::TrackGateProbability => "tracker.track_gate_probability",
+        P::ConfirmMOfN => "tracker.initiation.m",
+        P::VMin => "tracker.initiation.v_min_mps",
+        P::VMax => "tracker.initiation.v_max_mps",
+        P::InitiationGateProbability => "tracker.initiation.gate_probability",
+        P::MinDt => "tracker.initiation.min_dt_s",
+        P::MaxDt => "tracker.initiation.max_dt_s",
+        P::MaxConsecutiveMisses => "tracker.deletion.max_consecutive_misses",
+        P::DeletionMOfN => "tracker.deletion.m",
+        P::MaxPositionSigma => "tracker.deletion.max_position_sigma_m",
+        P::SigmaA => "tracker.sigma_a_mps2",
+        P::DefaultHeight => "tracker.default_height_m",
+        P::DefaultHeightSigma => "tracker.default_height_sigma_m",
+        P::SigmaTangentialSpeed => "tracker.sigma_tangential_speed_mps",
+        P::DuplicateGateProbability => "tracker.duplicate_gate_probability",
+        P::MaxLag => "tracker.max_lag_s",
+        P::RegistrationPriors => "radars[].bias",
+        P::RegistrationReference => "tracker.registration.reference",
+        P::RegistrationMaxPairDt => "tracker.registration.max_pair_dt_s",
+        P::RegistrationTimeConstant => "tracker.registration.time_constant_s",
+        P::ImmModels | P::TurnRate | P::MeanSojourn | P::InitialProbabilities => {
+            "tracker.imm_models"
+        }
+        P::ModeCHeightOffset => "tracker.mode_c_height.offset_m",
+        P::ModeCHeightSigmaOffset => "tracker.mode_c_height.sigma_offset_m",
+        P::ModeCHeightSlope => "tracker.mode_c_height.slope",
+        P::ModeCHeightSigmaSlope => "tracker.mode_c_height.sigma_slope",
+        P::AccuracyTimeConstant => "tracker.accuracy.time_constant_s",
+        P::AccuracyPinned => "tracker.accuracy.pinned",
+        P::Radars
+        | P::RadarSite
+        | P::RadarSigmaRange
+        | P::RadarSigmaAzimuth
+        | P::RadarSigmaElevation
+        | P::RadarSigmaRadialVelocity
+        | P::RadarScanPeriod
+        | P::RadarDetectionProbability
+        | P::RadarClutterDensity
+        | P::HeightDatum => "tracker",
     }
 }
 
@@ -199,11 +215,22 @@ pub fn late_policy(spec: &SpecInput) -> Result<algo::tracking::LatePolicy, Servi
     Ok(policy)
 }
 
-/// A configuration error of the core, named by its wire field.
+/// A configuration error of the core: an option outside its domain named
+/// by its wire field; anything else (a non-finite option, a numeric
+/// failure while the tracker is built) against the tracker as a whole.
 pub fn config_error(e: &AlgoError) -> ServiceError {
     match e {
-        AlgoError::InvalidParameter { what, reason } => Violations::single(wire_name(what), reason),
-        other => Violations::single("tracker", other.to_string()),
+        AlgoError::InvalidOption { parameter, reason } => {
+            Violations::single(option_field(*parameter), reason)
+        }
+        AlgoError::InvalidParameter { reason, .. } => Violations::single("tracker", reason),
+        other @ (AlgoError::DimensionMismatch { .. }
+        | AlgoError::NotSquare { .. }
+        | AlgoError::NonFinite { .. }
+        | AlgoError::NotSymmetric { .. }
+        | AlgoError::NotPositiveDefinite { .. }
+        | AlgoError::DegenerateGeometry { .. }
+        | AlgoError::BudgetExceeded { .. }) => Violations::single("tracker", other.to_string()),
     }
 }
 
@@ -221,7 +248,9 @@ enum Site {
 /// input has its parser ([`parse_radar`], [`parse_site`], the tracker's
 /// choices, initiation, deletion), combined here in the order the
 /// violations are reported.
-pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>), ServiceError> {
+pub fn validate(
+    spec: &SpecInput,
+) -> Result<(Network, ValidTrackerConfig, Vec<String>), ServiceError> {
     max_lag(spec)?;
     late_policy(spec)?;
     let mut v = Violations::new();
@@ -289,7 +318,7 @@ pub fn validate(spec: &SpecInput) -> Result<(Network, TrackerConfig, Vec<String>
     if let Some(a) = &tracker.accuracy {
         config.accuracy = accuracy(a, &ids)?;
     }
-    config.validate().map_err(|e| config_error(&e))?;
+    let config = config.validated().map_err(|e| config_error(&e))?;
     warnings.extend(fusion_period_warnings(&config, &ids));
     Ok((
         Network::from_parts(frame, ids, radar_sites, config.default_height).with_sources(sources),
@@ -523,7 +552,7 @@ fn place_sites(
 }
 
 /// The tracker's scalar options over the defaults (checked by
-/// `TrackerConfig::validate` afterwards).
+/// `TrackerConfig::validated` afterwards).
 fn apply_scalars(config: &mut TrackerConfig, tracker: &super::TrackerInput) {
     if let Some(n) = tracker.max_exact_cluster_tracks {
         config.association.max_exact_tracks = n as usize;
@@ -559,7 +588,7 @@ fn apply_scalars(config: &mut TrackerConfig, tracker: &super::TrackerInput) {
         config.sigma_tangential_speed = s;
     }
     if let Some(p) = tracker.duplicate_gate_probability {
-        config.duplicate_probability = p;
+        config.duplicate_gate_probability = p;
     }
 }
 
@@ -584,7 +613,7 @@ fn height_datum(frame: Option<&LocalFrame>) -> HeightDatum {
 }
 
 /// `tracker.mode_c_height` over the defaults (checked by
-/// `TrackerConfig::validate`).
+/// `TrackerConfig::validated`).
 fn apply_mode_c_height(m: &mut ModeCHeight, input: &super::ModeCHeightInput) {
     if let Some(v) = input.enabled {
         m.enabled = v;

@@ -32,8 +32,8 @@ use formats::wire::{FormatError, Reader, Writer};
 use tokio::sync::{broadcast, watch};
 
 use super::{
-    KindName, SessionKind, Update, correlation::CorrelationSession, persist::AnyView,
-    plot_fusion::PlotFusionSession,
+    PlotMark, SessionKind, Update,
+    registry::{AnyView, EventBody, KindName, KindVisitor, Registered},
 };
 
 /// First byte of an event's encoding.
@@ -72,31 +72,6 @@ impl Default for WatchLimits {
             heartbeat: Duration::from_secs(15),
         }
     }
-}
-
-/// A plot of a batch, where it is, for display: the fusion frame's ENU
-/// position (m), its radar (index into the session's radars; a
-/// cooperative report's sensor past them) and time. 2D plots are placed at
-/// their slant range on the horizontal plane, reports where they say.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PlotMark {
-    pub radar: u32,
-    pub t: f64,
-    pub position: [f64; 3],
-}
-
-/// What an event says.
-// Always held once, behind the `Arc` every watcher shares.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, PartialEq)]
-pub enum EventBody {
-    Correlation(Update<<CorrelationSession as SessionKind>::Update>),
-    PlotFusion {
-        update: Update<<PlotFusionSession as SessionKind>::Update>,
-        plots: Vec<PlotMark>,
-    },
-    /// The session was deleted.
-    Deleted,
 }
 
 /// One event of one session.
@@ -163,55 +138,16 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
         let sequence = r.opt(Reader::u64)?;
         let n = r.len(8)?;
         let warnings = (0..n).map(|_| r.str()).collect::<Result<Vec<_>, _>>()?;
-        fn update<U>(
-            id: &str,
-            sequence: Option<u64>,
-            version: u64,
-            warnings: Vec<String>,
-            body: U,
-        ) -> Update<U> {
-            Update {
-                session_id: id.to_string(),
-                sequence,
-                version,
-                duplicate: false,
-                body,
-                warnings,
-            }
-        }
-        match KindName::from_tag(tag) {
-            Some(KindName::Correlation) => {
-                let body = CorrelationSession::decode_update(&mut r)?;
-                // `encode_update` writes the plot marks of every kind: a
-                // correlation session has none.
-                if r.len(36)? != 0 {
-                    return Err(formats::wire::corrupt("plot marks in a correlation event"));
-                }
-                EventBody::Correlation(update(&id, sequence, version, warnings, body))
-            }
-            Some(KindName::PlotFusion) => {
-                let body = PlotFusionSession::decode_update(&mut r)?;
-                let n = r.len(36)?;
-                let plots = (0..n)
-                    .map(|_| {
-                        Ok(PlotMark {
-                            radar: r.u32()?,
-                            t: r.f64()?,
-                            position: [r.f64()?, r.f64()?, r.f64()?],
-                        })
-                    })
-                    .collect::<Result<Vec<_>, FormatError>>()?;
-                EventBody::PlotFusion {
-                    update: update(&id, sequence, version, warnings, body),
-                    plots,
-                }
-            }
-            None => {
-                return Err(formats::wire::corrupt(&format!(
-                    "session event of unknown kind {tag}"
-                )));
-            }
-        }
+        let kind = KindName::from_tag(tag).ok_or_else(|| {
+            formats::wire::corrupt(&format!("session event of unknown kind {tag}"))
+        })?;
+        kind.visit(DecodeBody {
+            r: &mut r,
+            id: &id,
+            sequence,
+            version,
+            warnings,
+        })?
     };
     if !r.is_empty() {
         return Err(formats::wire::corrupt("trailing bytes in a session event"));
@@ -222,6 +158,44 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
         version,
         body,
     })
+}
+
+/// Reads the rest of an update event of a kind (its update, the plot
+/// marks), the envelope's fields read before.
+struct DecodeBody<'a, 'b> {
+    r: &'a mut Reader<'b>,
+    id: &'a str,
+    sequence: Option<u64>,
+    version: u64,
+    warnings: Vec<String>,
+}
+
+impl KindVisitor for DecodeBody<'_, '_> {
+    type Out = Result<EventBody, FormatError>;
+
+    fn visit<K: Registered>(self) -> Self::Out {
+        let r = self.r;
+        let body = K::decode_update(r)?;
+        let n = r.len(36)?;
+        let plots = (0..n)
+            .map(|_| {
+                Ok(PlotMark {
+                    radar: r.u32()?,
+                    t: r.f64()?,
+                    position: [r.f64()?, r.f64()?, r.f64()?],
+                })
+            })
+            .collect::<Result<Vec<_>, FormatError>>()?;
+        let update = Update {
+            session_id: self.id.to_string(),
+            sequence: self.sequence,
+            version: self.version,
+            duplicate: false,
+            body,
+            warnings: self.warnings,
+        };
+        K::event_body(update, plots)
+    }
 }
 
 /// What a replica's channel of one session carries.
@@ -576,6 +550,7 @@ pub(super) struct Joined {
 mod tests {
     use super::*;
     use crate::session::correlation::BatchUpdate;
+    use crate::session::correlation::CorrelationSession;
 
     /// The purge of idle channels looks at the entries past the grace
     /// period only (before, every join scanned every channel), and removes

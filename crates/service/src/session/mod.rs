@@ -18,8 +18,10 @@
 //!   compare-and-set retry loop, the decoded-session [`cache`], limits,
 //!   idle expiry and tenants.
 //!
-//! A new kind is one module implementing [`SessionKind`], plus its DTOs in
-//! the adapters and a variant of [`KindName`].
+//! The generic modules (this one, [`events`], [`persist`]) name no kind;
+//! [`registry`] names them all. A new kind is one module implementing
+//! [`SessionKind`], its entries in [`registry`] and its DTOs in the
+//! adapters.
 
 pub mod cache;
 pub mod correlation;
@@ -27,16 +29,20 @@ pub mod events;
 pub mod gauges;
 pub mod persist;
 pub mod plot_fusion;
+pub mod registry;
 
 use std::fmt;
 
-use super::{FieldViolation, ServiceError, Violations};
+use super::{ServiceError, Violations};
 use formats::wire::{FormatError, Reader, Writer};
 
 /// First byte of every session written by this release: the envelope's
 /// format. Correlation sessions of earlier releases start with their own
 /// format, 1 or 2, and are read as correlation sessions.
 pub const ENVELOPE_FORMAT: u8 = 4;
+/// The kind tag of the sessions written before the envelope (formats 1
+/// and 2): the first kind's, correlation's.
+pub const LEGACY_KIND_TAG: u8 = 1;
 /// Format of a log entry ([`Envelope::encode_entry`]).
 pub const ENTRY_FORMAT: u8 = 1;
 /// Unsequenced batches remembered by their fingerprint, so that a retry of
@@ -67,6 +73,17 @@ impl Limits {
         }
         Ok(())
     }
+}
+
+/// A plot of a batch, where it is, for display: the fusion frame's ENU
+/// position (m), its radar (index into the session's radars; a
+/// cooperative report's sensor past them) and time. 2D plots are placed at
+/// their slant range on the horizontal plane, reports where they say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlotMark {
+    pub radar: u32,
+    pub t: f64,
+    pub position: [f64; 3],
 }
 
 /// What a kind of session is: its configuration, batch, update and view
@@ -141,7 +158,7 @@ pub trait SessionKind: Sized + Send + 'static {
     fn view(&self) -> Result<Self::View, ServiceError>;
     /// What watchers are shown of the last applied batch besides its update
     /// (plot fusion: where its plots are), taken once; none by default.
-    fn take_marks(&mut self) -> Vec<events::PlotMark> {
+    fn take_marks(&mut self) -> Vec<PlotMark> {
         Vec::new()
     }
     /// The radars' registration after a batch, for `/metrics`
@@ -186,81 +203,10 @@ pub trait SessionKind: Sized + Send + 'static {
     }
 }
 
-/// The kinds of session this release serves, by name and by tag.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum KindName {
-    Correlation,
-    PlotFusion,
-}
-
-impl KindName {
-    pub const ALL: [KindName; 2] = [KindName::Correlation, KindName::PlotFusion];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Correlation => correlation::CorrelationSession::NAME,
-            Self::PlotFusion => plot_fusion::PlotFusionSession::NAME,
-        }
-    }
-
-    pub fn tag(self) -> u8 {
-        match self {
-            Self::Correlation => correlation::CorrelationSession::TAG,
-            Self::PlotFusion => plot_fusion::PlotFusionSession::TAG,
-        }
-    }
-
-    pub fn from_tag(tag: u8) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.tag() == tag)
-    }
-
-    /// The kind a create request names (`None`: the default, correlation);
-    /// an unknown name is a violation of `field`.
-    pub fn parse(name: Option<&str>, field: &str) -> Result<Self, ServiceError> {
-        match name {
-            None | Some("") => Ok(Self::Correlation),
-            Some(n) => Self::ALL
-                .into_iter()
-                .find(|k| k.name() == n)
-                .ok_or_else(|| {
-                    let known: Vec<&str> = Self::ALL.iter().map(|k| k.name()).collect();
-                    Violations::single(
-                        field,
-                        format!(
-                            "must be one of {}, got '{}'",
-                            known.join(", "),
-                            crate::validate::quoted(n)
-                        ),
-                    )
-                }),
-        }
-    }
-}
-
-/// Refuses the fields of a create request that belong to another kind than
-/// `kind`: `fields` lists (field, present, the kind it belongs to).
-pub fn refuse_foreign_fields(
-    kind: KindName,
-    fields: &[(&str, bool, KindName)],
-) -> Result<(), ServiceError> {
-    let mut v = Violations::new();
-    for (field, present, owner) in fields {
-        if *present && *owner != kind {
-            v.add(*field, format!("not a field of a {} session", kind.name()));
-        }
-    }
-    v.finish()
-}
-
-/// The name of a stored kind tag, for messages.
-pub fn tag_name(tag: u8) -> String {
-    KindName::from_tag(tag).map_or_else(|| format!("kind {tag}"), |k| k.name().to_string())
-}
-
 /// The kind tag of stored session bytes, without decoding them.
 pub fn stored_kind(buf: &[u8]) -> Result<u8, ServiceError> {
     match buf {
-        [1 | 2, ..] => Ok(correlation::CorrelationSession::TAG),
+        [1 | 2, ..] => Ok(LEGACY_KIND_TAG),
         [3 | ENVELOPE_FORMAT, tag, ..] => Ok(*tag),
         [f, ..] => Err(ServiceError::Internal(format!(
             "stored session has format {f}; this release reads 1 to {ENVELOPE_FORMAT}"
@@ -749,24 +695,5 @@ pub enum DecodeError {
 impl From<ServiceError> for DecodeError {
     fn from(e: ServiceError) -> Self {
         Self::Other(e)
-    }
-}
-
-impl DecodeError {
-    /// The error a request gets when it met a session of another kind:
-    /// a violation of the kind's batch field (`reports`).
-    pub fn for_request<K: SessionKind>(self, id: &str) -> ServiceError {
-        match self {
-            Self::WrongKind { stored } => ServiceError::InvalidInput(vec![FieldViolation {
-                field: K::BATCH_FIELD.into(),
-                message: format!(
-                    "session '{id}' is a {} session: a {} batch (`{}`) does not apply to it",
-                    tag_name(stored),
-                    K::NAME,
-                    K::BATCH_FIELD
-                ),
-            }]),
-            Self::Other(e) => e,
-        }
     }
 }

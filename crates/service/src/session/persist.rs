@@ -20,16 +20,14 @@ use std::{
 use tokio::sync::{broadcast, watch};
 
 use super::{
-    Admission, Batch, DecodeError, Envelope, KindName, Limits, SessionKind, Spec, Update, View,
+    Admission, Batch, DecodeError, Envelope, Limits, SessionKind, Spec, Update, View,
     cache::SessionCache,
-    correlation::CorrelationSession,
     events::{
-        self, EndReason, EventBody, EventHub, GAP_WAIT, Guard, HubItem, SessionEvent, WatchItem,
-        WatchLimits,
+        self, EndReason, EventHub, GAP_WAIT, Guard, HubItem, SessionEvent, WatchItem, WatchLimits,
     },
     gauges::RadarGauges,
-    plot_fusion::PlotFusionSession,
-    stored_kind, tag_name,
+    registry::{AnyView, EventBody, KindName, KindVisitor, Registered, tag_name},
+    stored_kind,
 };
 use crate::{ServiceError, offload};
 use store::{
@@ -302,13 +300,6 @@ fn new_token() -> u64 {
     rand::random::<u64>() | 1
 }
 
-/// A session of any kind this release serves, as a client reads it.
-#[derive(Debug, Clone, PartialEq)]
-pub enum AnyView {
-    Correlation(View<<CorrelationSession as SessionKind>::View>),
-    PlotFusion(View<<PlotFusionSession as SessionKind>::View>),
-}
-
 impl From<StoreError> for ServiceError {
     fn from(e: StoreError) -> Self {
         match e {
@@ -502,23 +493,14 @@ impl Sessions {
     /// same: `a_replica_that_replays_the_log_holds_the_serving_replicas_state`).
     pub async fn get(&self, tenant: &str, id: &str) -> Result<AnyView, ServiceError> {
         let stored = self.read(tenant, id).await?;
-        let tag = stored_kind(&stored.data)?;
-        let kind = KindName::from_tag(tag).ok_or_else(|| {
-            ServiceError::Internal(format!(
-                "stored session: {} is not served by this release",
-                tag_name(tag)
-            ))
-        })?;
-        Ok(match kind {
-            KindName::Correlation => AnyView::Correlation(
-                self.view_kept::<CorrelationSession>(tenant, id, stored)
-                    .await?,
-            ),
-            KindName::PlotFusion => AnyView::PlotFusion(
-                self.view_kept::<PlotFusionSession>(tenant, id, stored)
-                    .await?,
-            ),
+        let kind = served_kind(&stored)?;
+        kind.visit(ViewKept {
+            sessions: self,
+            tenant,
+            id,
+            stored,
         })
+        .await
     }
 
     /// The view of `stored` (a session of kind `K`), from the cached copy
@@ -552,14 +534,7 @@ impl Sessions {
     /// The kind of session `id` (from the store's bytes; for a batch whose
     /// items do not say it).
     pub async fn kind_of(&self, tenant: &str, id: &str) -> Result<KindName, ServiceError> {
-        let stored = self.read(tenant, id).await?;
-        let tag = stored_kind(&stored.data)?;
-        KindName::from_tag(tag).ok_or_else(|| {
-            ServiceError::Internal(format!(
-                "stored session: {} is not served by this release",
-                tag_name(tag)
-            ))
-        })
+        served_kind(&self.read(tenant, id).await?)
     }
 
     /// The stored session `id`, or 404.
@@ -1111,23 +1086,65 @@ impl Watch {
     }
 }
 
+/// The kind of a stored session; one this release does not serve is an
+/// internal error naming it.
+fn served_kind(stored: &Stored) -> Result<KindName, ServiceError> {
+    let tag = stored_kind(&stored.data)?;
+    KindName::from_tag(tag).ok_or_else(|| {
+        ServiceError::Internal(format!(
+            "stored session: {} is not served by this release",
+            tag_name(tag)
+        ))
+    })
+}
+
+/// [`Sessions::get`] for the stored session's kind: its view, kept in the
+/// cache ([`Sessions::view_kept`]).
+struct ViewKept<'a> {
+    sessions: &'a Sessions,
+    tenant: &'a str,
+    id: &'a str,
+    stored: Stored,
+}
+
+impl<'a> KindVisitor for ViewKept<'a> {
+    type Out = std::pin::Pin<
+        Box<dyn std::future::Future<Output = Result<AnyView, ServiceError>> + Send + 'a>,
+    >;
+
+    fn visit<K: Registered>(self) -> Self::Out {
+        Box::pin(async move {
+            let view = self
+                .sessions
+                .view_kept::<K>(self.tenant, self.id, self.stored)
+                .await?;
+            Ok(K::any_view(view))
+        })
+    }
+}
+
+/// The view of stored bytes of the kind visited.
+struct ViewOf<'a> {
+    id: &'a str,
+    stored: &'a Stored,
+}
+
+impl KindVisitor for ViewOf<'_> {
+    type Out = Result<AnyView, ServiceError>;
+
+    fn visit<K: Registered>(self) -> Self::Out {
+        view_of::<K>(self.id, self.stored).map(K::any_view)
+    }
+}
+
 /// The view of stored bytes of any kind, decoded off the async workers.
 async fn any_view(id: &str, stored: Stored) -> Result<AnyView, ServiceError> {
     let id = id.to_string();
     offload(move || {
-        let tag = stored_kind(&stored.data)?;
-        match KindName::from_tag(tag) {
-            Some(KindName::Correlation) => Ok(AnyView::Correlation(view_of::<CorrelationSession>(
-                &id, &stored,
-            )?)),
-            Some(KindName::PlotFusion) => Ok(AnyView::PlotFusion(view_of::<PlotFusionSession>(
-                &id, &stored,
-            )?)),
-            None => Err(ServiceError::Internal(format!(
-                "stored session: {} is not served by this release",
-                tag_name(tag)
-            ))),
-        }
+        served_kind(&stored)?.visit(ViewOf {
+            id: &id,
+            stored: &stored,
+        })
     })
     .await
 }
@@ -1179,7 +1196,7 @@ mod tests {
     use crate::session::{
         Batch, Spec,
         plot_fusion::{
-            BatchInput,
+            BatchInput, PlotFusionSession,
             tests::{plots, spec},
         },
     };

@@ -38,7 +38,7 @@
 
 use std::collections::HashSet;
 
-use super::{Fnv, Limits, SessionKind, events::PlotMark};
+use super::{Fnv, Limits, PlotMark, SessionKind};
 use crate::{
     ServiceError,
     plot_fusion::{
@@ -701,7 +701,7 @@ impl SessionKind for PlotFusionSession {
             Some(c) => Some(cat062::validate(c, &network, "cat062")?),
             None => None,
         };
-        let tracker = Tracker::new(config).map_err(|e| network::config_error(&e))?;
+        let tracker = Tracker::with_config(config).map_err(|e| network::config_error(&e))?;
         let window = LagWindow::with_policy(
             tracker,
             network::max_lag(&spec)?,

@@ -157,7 +157,7 @@ pub struct TrackView {
 }
 
 impl SessionKind for CorrelationSession {
-    const TAG: u8 = 1;
+    const TAG: u8 = super::LEGACY_KIND_TAG;
     const NAME: &'static str = "correlation";
     const BATCH_FIELD: &'static str = "reports";
 

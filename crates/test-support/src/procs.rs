@@ -1,11 +1,7 @@
 //! Processes for the Redis tests: a child killed (SIGKILL) and reaped when
 //! dropped, free loopback ports, waiting for a port, `redis-cli`, and loud
-//! lines the test harness does not capture. Included by path (as `procs`,
-//! at the crate root) with `common/sentinel.rs` and `common/cluster.rs`.
-
-// Shared by test targets: `pub` is for the modules that include it.
-#![allow(unreachable_pub)]
-#![allow(dead_code)] // each test crate uses its own part
+//! lines the test harness does not capture; the processes of
+//! [`crate::sentinel`] and [`crate::cluster`].
 
 use std::{
     io::Write,

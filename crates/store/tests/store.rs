@@ -14,10 +14,7 @@ use store::{
     CasOutcome, Compacted, Expected, SessionStore, StoreError, StoreSettings, Stored, Write,
 };
 
-#[path = "common/redis.rs"]
-mod redis_harness;
-
-use redis_harness::{
+use test_support::redis::{
     RedisServer, free_port, redis_is_up, redis_server_available, redis_url, unique,
 };
 const LONG: Duration = Duration::from_secs(60);

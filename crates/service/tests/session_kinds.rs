@@ -21,10 +21,7 @@ use service::{
 };
 use store::{SessionStore, StoreSettings};
 
-#[path = "common/redis.rs"]
-mod redis_harness;
-
-use redis_harness::{
+use test_support::redis::{
     RedisServer, free_port, redis_is_up, redis_server_available, redis_url, unique,
 };
 

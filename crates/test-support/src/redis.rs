@@ -3,11 +3,8 @@
 //! or a loud skip when redis-server is not installed (or
 //! `FUSION_SKIP_REDIS_TESTS=1`); unique key prefixes, and private
 //! `redis-server` processes for outage tests.
-//! Included by `tests/store.rs` and `tests/sessions_redis.rs`.
-
-// Helpers shared by test targets: `pub` is for the modules that use them.
-#![allow(unreachable_pub)]
-#![allow(dead_code)] // each test crate uses its own part
+//! Used by `crates/store/tests/store.rs`,
+//! `crates/service/tests/session_kinds.rs` and `tests/sessions_redis.rs`.
 
 use std::{
     net::{SocketAddr, TcpListener, TcpStream},

@@ -1,12 +1,8 @@
 //! A Sentinel deployment on loopback for tests: a primary, two replicas and
 //! three sentinels (`redis-server --sentinel`, quorum 2, down after 1 s) on
-//! free ports, each server in a scratch directory of its own. Included by
-//! path from `crates/store/tests/sentinel_failover.rs` and the server's
-//! `tests/sessions_sentinel.rs`.
-
-// Shared by test targets: `pub` is for the modules that include it.
-#![allow(unreachable_pub)]
-#![allow(dead_code)] // each test crate uses its own part
+//! free ports, each server in a scratch directory of its own. Used by
+//! `crates/store/tests/sentinel_failover.rs` and the server's
+//! `tests/sessions_redis.rs`.
 
 use std::{
     io::Write,

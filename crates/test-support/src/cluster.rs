@@ -1,12 +1,8 @@
 //! A Redis Cluster on loopback for tests: three primaries
 //! (`redis-server --cluster-enabled yes`, joined by `redis-cli --cluster
 //! create … --cluster-yes`) on free ports whose bus ports are free too.
-//! Included by path from `crates/store/tests/cluster.rs` and the server's
-//! `tests/sessions_redis.rs`, beside `common/procs.rs` (as `procs`).
-
-// Shared by test targets: `pub` is for the modules that include it.
-#![allow(unreachable_pub)]
-#![allow(dead_code)] // each test crate uses its own part
+//! Used by `crates/store/tests/cluster.rs` and the server's
+//! `tests/sessions_redis.rs`.
 
 use std::{
     net::TcpListener,
