@@ -222,7 +222,18 @@ def score(tracks, truths, t, args):
                 mmsi_wrong += 1
     counts = [len(v) for v in per.values()]
     moving = [len(per[m]) for m in under_way]
+    # Crowded: another vessel within 50 m (moored side by side, rafted).
+    now = positions(t)
+    crowded = {m for m in covered
+               if any(k != m and np.hypot(*(now[k] - now[m])) < 50.0 for k in now)}
+    # A radar duplicate: a vessel with a track of its MMSI and another
+    # without any MMSI.
+    duplicates = sum(1 for m, v in per.items()
+                     if any(tk.get("mmsi") == m for tk in v)
+                     and any(tk.get("mmsi") is None for tk in v))
     return {
+        "crowded": len(crowded),
+        "crowded_none": sum(1 for m in crowded if not per[m]),
         "under_way": len(under_way),
         "under_way_one_track": sum(1 for c in moving if c == 1),
         "under_way_none": sum(1 for c in moving if c == 0),
@@ -230,6 +241,7 @@ def score(tracks, truths, t, args):
         "one_track": sum(1 for c in counts if c == 1),
         "none": sum(1 for c in counts if c == 0),
         "two_or_more": sum(1 for c in counts if c >= 2),
+        "radar_duplicates": duplicates,
         "false_tracks": false,
         "unscored": unscored,
         "mmsi_right": mmsi_right,
@@ -331,7 +343,8 @@ def main() -> int:
           f"{out['radar_plots']} radar plots over {out['minutes']:.1f} min; radar bias "
           f"{args.bias_range_m:.0f} m, {args.bias_azimuth_deg:.2f}°")
     print("per minute, averaged over the second half of the data:")
-    hdr = ("run", "covered", "one track", "none", "2+", "under way", "its one track", "its none",
+    hdr = ("run", "covered", "one track", "none", "2+", "radar dup.", "under way", "its one track",
+           "its none",
            "false", "MMSI right", "MMSI wrong", "median m", "p90 m")
     print(" | ".join(hdr))
     for name in ("radar only", "radar + AIS reports", "radar + AIS NMEA"):
@@ -342,9 +355,16 @@ def main() -> int:
         def avg(k):
             return sum(x[k] or 0.0 for x in after) / n
         print(f"{name} | {avg('vessels'):.1f} | {avg('one_track'):.1f} | {avg('none'):.1f} | "
-              f"{avg('two_or_more'):.1f} | {avg('under_way'):.1f} | {avg('under_way_one_track'):.1f} | "
+              f"{avg('two_or_more'):.1f} | {avg('radar_duplicates'):.1f} | {avg('under_way'):.1f} | "
+              f"{avg('under_way_one_track'):.1f} | "
               f"{avg('under_way_none'):.1f} | {avg('false_tracks'):.1f} | {avg('mmsi_right'):.1f} | "
               f"{avg('mmsi_wrong'):.1f} | {avg('median_error_m'):.1f} | {avg('p90_error_m'):.1f}")
+    for name in ("radar only", "radar + AIS reports", "radar + AIS NMEA"):
+        per = out[name]["per_minute"]
+        after = per[len(per) // 2:] or [{"crowded": 0, "crowded_none": 0}]
+        print(f"{name}: vessels with another within 50 m "
+              f"{sum(x['crowded'] for x in after) / len(after):.1f}, of them without a track "
+              f"{sum(x['crowded_none'] for x in after) / len(after):.1f}")
     print("registration at the end (truth: "
           f"{args.bias_range_m:.0f} m, {args.bias_azimuth_deg:.3f}°):")
     for name in ("radar only", "radar + AIS reports", "radar + AIS NMEA"):
