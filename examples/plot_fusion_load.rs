@@ -235,7 +235,11 @@ fn adsb_reports(scene: &eval::benchmark::PlotFusionScene, duration: f64) -> Vec<
                 x[0] + x[1] * t + 5.0 * noise(),
                 x[2] + x[3] * t + 5.0 * noise(),
             );
-            let (lat, lon, _) = frame.enu_to_geodetic([e, n, 0.0]).expect("a position");
+            // The scene's targets fly in the tangent plane (the radars'
+            // horizontal ranges are in it): the report's height is the
+            // plane's there, or its horizontal position would move by up
+            // to h · range / R (≈ 80 m at 190 km).
+            let (lat, lon, h) = frame.enu_to_geodetic([e, n, 0.0]).expect("a position");
             out.push(svc::PlotInput {
                 t: Some(t),
                 ssr: svc::SsrInput {
@@ -246,6 +250,7 @@ fn adsb_reports(scene: &eval::benchmark::PlotFusionScene, duration: f64) -> Vec<
                     source: Some("adsb".into()),
                     lat_deg: Some(lat.to_degrees()),
                     lon_deg: Some(lon.to_degrees()),
+                    geometric_height_m: Some(h),
                     velocity_east_mps: Some(x[1] + 0.5 * noise()),
                     velocity_north_mps: Some(x[3] + 0.5 * noise()),
                     nacp: Some(9),
@@ -268,6 +273,7 @@ fn pb_report(p: &svc::PlotInput) -> pb::CooperativeReport {
         t: p.t.unwrap_or(0.0),
         lat_deg: r.lat_deg.unwrap_or(0.0),
         lon_deg: r.lon_deg.unwrap_or(0.0),
+        geometric_height_m: r.geometric_height_m,
         velocity_east_mps: r.velocity_east_mps,
         velocity_north_mps: r.velocity_north_mps,
         nacp: r.nacp.map(u32::from),
