@@ -42,8 +42,10 @@ pub(crate) fn horizontal_sigma(track: &Track) -> f64 {
 /// target from its plots, so neither would ever miss; without this they
 /// live on side by side. Two tracks that share their best plot and carry
 /// the same Mode S address are duplicates whatever their states (one
-/// aircraft). `probability` 0 disables the rule. Returns the duplicates'
-/// indices.
+/// aircraft); two that carry different Mode S addresses or different AIS
+/// MMSIs never are (two transponders: ships moored side by side, aircraft
+/// in formation, whose plots the tracks share). `probability` 0 disables
+/// the rule. Returns the duplicates' indices.
 pub(super) fn duplicates<T: std::borrow::Borrow<Track>>(
     tracks: &[T],
     hits: &[(usize, usize)],
@@ -78,10 +80,18 @@ pub(super) fn duplicates<T: std::borrow::Borrow<Track>>(
                     continue;
                 }
                 // One Mode S address: one aircraft, whatever the states.
+                let (a, b) = (&tracks(i).identity, &tracks(keeper).identity);
                 let same_address = matches!(
-                    (tracks(i).identity.address, tracks(keeper).identity.address),
+                    (a.address, b.address),
                     (Some(a), Some(b)) if a.value == b.value
                 );
+                let differ =
+                    |x: Option<u32>, y: Option<u32>| matches!((x, y), (Some(x), Some(y)) if x != y);
+                if differ(a.address.map(|e| e.value), b.address.map(|e| e.value))
+                    || differ(a.mmsi.map(|e| e.value), b.mmsi.map(|e| e.value))
+                {
+                    continue;
+                }
                 let d = &tracks(i).x - &tracks(keeper).x;
                 let s = &tracks(i).p + &tracks(keeper).p;
                 if same_address || mahalanobis_sq(&d, &s)? <= threshold {
@@ -144,6 +154,55 @@ mod tests {
             vec![1]
         );
         b.identity.address = address(0x4CA2D2);
+        assert_eq!(duplicates(&[a, b], &hits, 0.99).unwrap(), none);
+    }
+
+    #[test]
+    fn alike_tracks_of_two_transponders_are_not_duplicates() {
+        // Two ships moored 20 m apart, σ 100 m: alike (d² = 400/20,000 =
+        // 0.02 ≪ the χ²₄ quantile), sharing their best plot: a duplicate,
+        // unless their MMSIs (or Mode S addresses) differ.
+        use crate::tracking::identity::Evidence;
+        let p = DMatrix::<f64>::identity(4, 4) * 10_000.0;
+        let mut a = Track::fresh(1, dvector![0.0, 0.0, 0.0, 0.0], p.clone());
+        a.hits = 10;
+        let mut b = Track::fresh(2, dvector![20.0, 0.0, 0.0, 0.0], p);
+        b.hits = 4;
+        let hits = [(0, 3), (1, 3)];
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            vec![1]
+        );
+        let evidence = |v: u32| {
+            Some(Evidence {
+                value: v,
+                plots: 5,
+                first_t: 0.0,
+                last_t: 1.0,
+            })
+        };
+        a.identity.mmsi = evidence(235_070_762);
+        b.identity.mmsi = evidence(235_070_763);
+        let none: Vec<usize> = Vec::new();
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            none
+        );
+        // The same MMSI: alike, so one ship.
+        b.identity.mmsi = evidence(235_070_762);
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            vec![1]
+        );
+        // One MMSI and one unknown: alike, a duplicate.
+        b.identity.mmsi = None;
+        assert_eq!(
+            duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
+            vec![1]
+        );
+        a.identity.mmsi = None;
+        a.identity.address = evidence(0x4CA2D1);
+        b.identity.address = evidence(0x4CA2D2);
         assert_eq!(duplicates(&[a, b], &hits, 0.99).unwrap(), none);
     }
 
