@@ -824,6 +824,15 @@ impl SessionKind for PlotFusionSession {
             ] {
                 h.opt_f64(x);
             }
+            // A plot's secondary fields and a report's, as the log writes
+            // them (a primary plot hashes as it did before they existed,
+            // so a retry across the upgrade is still known).
+            if !p.ssr.is_empty() || p.report.is_some() {
+                let mut w = Writer::default();
+                p.ssr.encode(&mut w);
+                w.opt(p.report.as_ref(), |w, r| r.encode(w));
+                h.bytes(&w.buf);
+            }
         }
         Some(h.0)
     }
@@ -1770,5 +1779,44 @@ pub(crate) mod tests {
                 assert_eq!(a.report, b.report);
             }
         }
+    }
+
+    /// Two unsequenced batches that differ only in a report's position or
+    /// a plot's Mode S address are two batches, not a retry.
+    #[test]
+    fn fingerprints_cover_reports_and_secondary_fields() {
+        let report = |lat: f64| PlotInput {
+            t: Some(5.0),
+            report: Some(ReportInput {
+                source: Some("adsb".into()),
+                lat_deg: Some(lat),
+                lon_deg: Some(2.0),
+                nacp: Some(9),
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        let batch = |plots: Vec<PlotInput>| BatchInput {
+            plots,
+            ..Default::default()
+        };
+        let f = |b: &BatchInput| PlotFusionSession::fingerprint(b).unwrap();
+        assert_eq!(f(&batch(vec![report(48.0)])), f(&batch(vec![report(48.0)])));
+        assert_ne!(f(&batch(vec![report(48.0)])), f(&batch(vec![report(48.1)])));
+        let plot = |address: &str| PlotInput {
+            radar_id: Some("a".into()),
+            t: Some(5.0),
+            range_m: Some(1e4),
+            azimuth_deg: Some(10.0),
+            ssr: SsrInput {
+                mode_s_address: Some(address.into()),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        assert_ne!(
+            f(&batch(vec![plot("4CA2D1")])),
+            f(&batch(vec![plot("4CA2D2")]))
+        );
     }
 }
