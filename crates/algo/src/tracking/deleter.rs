@@ -111,6 +111,16 @@ mod tests {
     use super::*;
     use nalgebra::{DMatrix, dvector};
 
+    /// An identity value seen in five plots.
+    fn evidence(value: u32) -> Option<crate::tracking::identity::Evidence<u32>> {
+        Some(crate::tracking::identity::Evidence {
+            value,
+            plots: 5,
+            first_t: 0.0,
+            last_t: 1.0,
+        })
+    }
+
     fn track(frames: &[bool], var: f64) -> Track {
         let mut t = Track::fresh(
             0,
@@ -127,7 +137,6 @@ mod tests {
     fn two_tracks_of_one_mode_s_address_on_one_plot_are_one_aircraft() {
         // States 2 km apart (d² = 4·10⁶/200 = 20,000: never alike), the
         // same best plot: duplicates only when they carry one address.
-        use crate::tracking::identity::Evidence;
         let p = DMatrix::<f64>::identity(4, 4) * 100.0;
         let mut a = Track::fresh(1, dvector![0.0, 100.0, 0.0, 0.0], p.clone());
         a.hits = 10;
@@ -139,21 +148,13 @@ mod tests {
             duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
             none
         );
-        let address = |v: u32| {
-            Some(Evidence {
-                value: v,
-                plots: 5,
-                first_t: 0.0,
-                last_t: 1.0,
-            })
-        };
-        a.identity.address = address(0x4CA2D1);
-        b.identity.address = address(0x4CA2D1);
+        a.identity.address = evidence(0x4CA2D1);
+        b.identity.address = evidence(0x4CA2D1);
         assert_eq!(
             duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
             vec![1]
         );
-        b.identity.address = address(0x4CA2D2);
+        b.identity.address = evidence(0x4CA2D2);
         assert_eq!(duplicates(&[a, b], &hits, 0.99).unwrap(), none);
     }
 
@@ -162,7 +163,6 @@ mod tests {
         // Two ships moored 20 m apart, σ 100 m: alike (d² = 400/20,000 =
         // 0.02 ≪ the χ²₄ quantile), sharing their best plot: a duplicate,
         // unless their MMSIs (or Mode S addresses) differ.
-        use crate::tracking::identity::Evidence;
         let p = DMatrix::<f64>::identity(4, 4) * 10_000.0;
         let mut a = Track::fresh(1, dvector![0.0, 0.0, 0.0, 0.0], p.clone());
         a.hits = 10;
@@ -173,14 +173,6 @@ mod tests {
             duplicates(&[a.clone(), b.clone()], &hits, 0.99).unwrap(),
             vec![1]
         );
-        let evidence = |v: u32| {
-            Some(Evidence {
-                value: v,
-                plots: 5,
-                first_t: 0.0,
-                last_t: 1.0,
-            })
-        };
         a.identity.mmsi = evidence(235_070_762);
         b.identity.mmsi = evidence(235_070_763);
         let none: Vec<usize> = Vec::new();
