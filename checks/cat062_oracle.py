@@ -1,4 +1,4 @@
-"""Independent check of the CAT062 encoder (crates/formats/src/cat062.rs).
+"""Independent check of the CAT062 encoder (crates/wire-formats/src/cat062.rs).
 
 libasterix (PyPI, pure Python, generated from the asterix-specs definitions)
 decodes the encoder's bytes with its CAT062 edition 1.20 definition

@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
-# Check the CAT062 encoder (crates/formats/src/cat062.rs) with an
+# Check the CAT062 encoder (crates/wire-formats/src/cat062.rs) with an
 # independent decoder: libasterix from PyPI (pure Python), in its own venv,
 # checks/.venv-asterix (shared with asterix_fixture.sh). Decodes
 # tests/fixtures/cat062/sample.bin into sample_decoded.json (checked in;
-# `cargo test -p formats` compares it with the encoder), then compares it
+# `cargo test -p wire-formats` compares it with the encoder), then compares it
 # field by field with sample_input.json. Exits non-zero on a mismatch.
 # Idempotent.
 #
 # Regenerate sample.bin and sample_input.json first when the encoder or
 # the sample changes:
-#   cargo test -p formats regenerate_the_cat062_sample -- --ignored
+#   cargo test -p wire-formats regenerate_the_cat062_sample -- --ignored
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"

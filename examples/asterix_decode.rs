@@ -1,4 +1,4 @@
-//! Decoding speed of the ASTERIX decoder (`formats::asterix`) on the
+//! Decoding speed of the ASTERIX decoder (`wire_formats::asterix`) on the
 //! libasterix fixture, and of the whole input path (decoding, SAC/SIC
 //! mapping, time roll-over and plot validation) into a tracker's plots.
 //!
@@ -6,8 +6,8 @@
 
 use std::time::Instant;
 
-use formats::asterix;
 use service::plot_fusion::{self as svc, asterix as input, network};
+use wire_formats::asterix;
 
 const SCENE: &[u8] = include_bytes!("../tests/fixtures/asterix/scene.bin");
 

@@ -1,6 +1,6 @@
 //! Fuzzing of the decoders of untrusted bytes on stable Rust (issue 53):
-//! ASTERIX CAT048/CAT034/CAT021/CAT020 (`formats::asterix::decode`), NMEA
-//! AIVDM/AIVDO (`formats::nmea::decode`), stored sessions of both kinds
+//! ASTERIX CAT048/CAT034/CAT021/CAT020 (`wire_formats::asterix::decode`), NMEA
+//! AIVDM/AIVDO (`wire_formats::nmea::decode`), stored sessions of both kinds
 //! (`Envelope::decode`), stored tracker state (`decode_tracker`), session
 //! events (`events::decode`) and the X.509 fields the server reads from a
 //! client certificate (`tls::x509`). No nightly toolchain and no
@@ -114,11 +114,11 @@ fn corpus(target: &str) -> anyhow::Result<Vec<Vec<u8>>> {
 /// panic is a finding).
 fn run(target: &str, input: &[u8]) {
     match target {
-        "asterix" => drop(formats::asterix::decode(input)),
+        "asterix" => drop(wire_formats::asterix::decode(input)),
         "nmea" => {
             let text = String::from_utf8_lossy(input);
             let lines: Vec<String> = text.lines().map(str::to_string).collect();
-            drop(formats::nmea::decode(&lines));
+            drop(wire_formats::nmea::decode(&lines));
         }
         "session" => {
             drop(Envelope::<CorrelationSession>::decode(input));

@@ -9,10 +9,10 @@
 //! 1 ft = 0.3048 m).
 
 use base64::Engine as _;
-use formats::asterix;
 use radar_fusion::proto::{self as pb, plot_fusion_service_client::PlotFusionServiceClient};
 use serde_json::{Value, json};
 use service::plot_fusion::{self as svc, asterix::AsterixInput};
+use wire_formats::asterix;
 
 use crate::helpers::{assert_problem, problem_fields, spawn_app, spawn_app_with};
 

@@ -9,7 +9,7 @@ use rand_distr::StandardNormal;
 use super::truth::Trajectory;
 use super::{SimError, SimRng};
 use algo::geo::LocalFrame;
-use formats::nmea::{self, BitWriter};
+use wire_formats::nmea::{self, BitWriter};
 
 /// Metres per second in one knot.
 pub const MPS_PER_KNOT: f64 = 1852.0 / 3600.0;
@@ -181,7 +181,7 @@ impl PositionReport {
     }
 }
 
-/// NMEA 0183 checksum (shared with the decoder in `formats::nmea`).
+/// NMEA 0183 checksum (shared with the decoder in `wire_formats::nmea`).
 pub fn nmea_checksum(body: &str) -> u8 {
     nmea::checksum(body)
 }
@@ -475,7 +475,7 @@ mod tests {
         assert_eq!(msg.sentence('B'), PUBLISHED);
     }
 
-    /// Round trip through the service's decoder (`formats::nmea`).
+    /// Round trip through the service's decoder (`wire_formats::nmea`).
     #[test]
     fn encoded_sentences_decode_with_the_service_decoder() {
         let r = AisReport {

@@ -23,7 +23,7 @@
 //! cannot hold (a range beyond 256 NM, a time of day outside a day) is an
 //! [`EncodeError`], never a wrapped or saturated field.
 //!
-//! The decoder this is tested against is `formats::asterix::decode` (itself
+//! The decoder this is tested against is `wire_formats::asterix::decode` (itself
 //! checked against libasterix's encoder, `checks/asterix_fixture.py`); the
 //! expected bytes of one record are also worked out by hand in the tests.
 
@@ -158,8 +158,8 @@ pub fn blocks(reports: &[Report], max_block_bytes: usize) -> Result<Vec<Vec<u8>>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formats::asterix;
     use rand::RngExt;
+    use wire_formats::asterix;
 
     fn report(time_of_day_s: f64, range_m: f64, azimuth_deg: f64) -> Report {
         Report {

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use algo::correlation::scene::Scene;
 use formats::state::scene::{SCENE_FORMAT, decode_scene, encode_scene};
-use formats::wire::{Reader, Writer};
+use wire_formats::wire::{Reader, Writer};
 
 fn main() {
     let (dim, tracks, instants) = (4, 200, 60);

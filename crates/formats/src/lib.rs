@@ -1,19 +1,23 @@
-//! Byte formats of the radar fusion service: EUROCONTROL ASTERIX input
-//! ([`asterix`]: CAT048 target reports, CAT034 service messages, CAT021
-//! ADS-B and CAT020 multilateration target reports), NMEA 0183
-//! AIS sentences ([`nmea`]: `!AIVDM`/`!AIVDO`), and the stored-state codecs
-//! of streaming sessions ([`wire`], [`state`]).
+//! The stored-state codecs of streaming sessions ([`state`]): the bytes a
+//! session keeps of the numerical core's state (`algo`), written with the
+//! byte `Reader`/`Writer` of [`wire_formats::wire`].
 //!
-//! Decoders never panic on any input: every error carries where it was
-//! found and why, and decoding resumes at the next unit it can trust (the
-//! next ASTERIX data block, the next NMEA line).
-//! [`cat062`] encodes ASTERIX CAT062 SDPS track output, never panicking either.
+//! The wire formats themselves (ASTERIX, CAT062, NMEA) are in the
+//! `wire-formats` crate, which does not depend on `algo`.
+//! Decoders never panic on any input: a corrupt stored session is a
+//! [`wire_formats::wire::FormatError`].
 
-pub mod asterix;
-pub mod cat062;
-pub mod nmea;
 pub mod state;
-pub mod wire;
 
 #[cfg(test)]
-mod mutation;
+mod tests {
+    /// The wire formats keep their own foot (they do not depend on `algo`);
+    /// it is the numerical core's, exactly.
+    #[test]
+    fn the_wire_formats_foot_is_the_cores() {
+        assert_eq!(
+            wire_formats::asterix::FT_M.to_bits(),
+            algo::tracking::height::FT_M.to_bits()
+        );
+    }
+}

@@ -16,7 +16,7 @@ use algo::{
     },
     geo::Ellipsoid,
 };
-use formats::nmea;
+use wire_formats::nmea;
 
 /// Below this many associated ships the response warns that the bias is
 /// barely determined: one ship fits any (Δρ, Δθ) exactly, two fit it with no

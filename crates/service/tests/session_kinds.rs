@@ -9,7 +9,6 @@
 
 use std::{future::Future, task::Poll, time::Duration};
 
-use formats::wire::{self, FormatError, Reader, Writer};
 use service::{
     ServiceError, Violations,
     correlation::{CorrelateInput, MethodInput, MotionModelInput, NodeInput, RuleInput},
@@ -20,6 +19,7 @@ use service::{
     },
 };
 use store::{SessionStore, StoreSettings};
+use wire_formats::wire::{self, FormatError, Reader, Writer};
 
 use test_support::redis::{
     RedisServer, free_port, redis_is_up, redis_server_available, redis_url, unique,

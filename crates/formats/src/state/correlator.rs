@@ -1,14 +1,14 @@
 //! Binary encoding of a track-to-track correlator's state
 //! ([`CorrelatorState`]: its candidate pairs with their counters, history
 //! windows and cross-covariances, and the decided partners), with
-//! [`crate::wire`]. The layout is fixed: stored sessions of every earlier
+//! [`wire_formats::wire`]. The layout is fixed: stored sessions of every earlier
 //! version use it.
 
 use std::collections::VecDeque;
 
 use algo::correlation::engine::{CorrelatorState, PAIR_STATUSES, Pair, REASONS, Sample};
 
-use crate::wire::{FormatError, Reader, Writer, corrupt};
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt, invalid};
 
 /// Appends `state` to `w` (the format of [`decode_correlator`]); matrices
 /// hold `dim` × `dim` values.
@@ -118,11 +118,6 @@ pub fn decode_correlator(r: &mut Reader<'_>, dim: usize) -> Result<CorrelatorSta
             last_common,
         });
     }
-    Ok(CorrelatorState::from_parts(
-        pairs,
-        (partner_a, partner_b),
-        next,
-        singular_tests,
-        dim,
-    )?)
+    CorrelatorState::from_parts(pairs, (partner_a, partner_b), next, singular_tests, dim)
+        .map_err(invalid)
 }

@@ -17,7 +17,7 @@
 use algo::tracking::identity::{Callsign, Evidence, PressureAltitude};
 use algo::tracking::{Detection, Identity, Mode3A, ModeC, TrackIdentity};
 
-use crate::wire::{FormatError, Reader, Writer, corrupt};
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt};
 
 /// The first tracker format that stores identities.
 pub(crate) const TRACKER_FORMAT: u32 = 6;

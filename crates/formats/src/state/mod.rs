@@ -1,7 +1,7 @@
 //! The stored-state codecs: the bytes a streaming session keeps of the
 //! numerical core's state between batches. Each codec reads the state
 //! through the core's public parts and rebuilds it with the core's own
-//! checks, so a corrupt stored session is a [`crate::wire::FormatError`]
+//! checks, so a corrupt stored session is a [`wire_formats::wire::FormatError`]
 //! (never an algorithm error, never a panic).
 //!
 //! - [`tracker`]: a plot-fusion `Tracker`, configuration included.

@@ -1,9 +1,9 @@
 //! Binary encoding of a correlation [`Scene`] (the window of aligned local
-//! tracks a streaming correlation session holds), with [`crate::wire`].
+//! tracks a streaming correlation session holds), with [`wire_formats::wire`].
 
 use algo::correlation::scene::Scene;
 
-use crate::wire::{FormatError, Reader, Writer, corrupt};
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt, invalid};
 
 /// The scene's encoding written by [`encode_scene`].
 pub const SCENE_FORMAT: u8 = 2;
@@ -95,7 +95,7 @@ pub fn decode_scene(r: &mut Reader<'_>, format: u8) -> Result<Scene, FormatError
         .collect::<Result<Vec<_>, _>>()?;
     let first = r.usize()?;
     let times = r.f64s()?;
-    let mut scene = Scene::held_from(dim, pos, first, times)?;
+    let mut scene = Scene::held_from(dim, pos, first, times).map_err(invalid)?;
     let floats = |r: &mut Reader<'_>, n: usize| -> Result<Vec<f64>, FormatError> {
         (0..n).map(|_| r.f64()).collect()
     };

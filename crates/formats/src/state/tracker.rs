@@ -1,5 +1,5 @@
 //! Binary encoding of an `algo` [`Tracker`] (configuration and state) with
-//! [`crate::wire`], so that a service can keep a tracker in a session. The
+//! [`wire_formats::wire`], so that a service can keep a tracker in a session. The
 //! tracker lends its parts ([`Tracker::state`]) and is rebuilt from them
 //! ([`Tracker::from_parts`], which checks them).
 //!
@@ -69,7 +69,7 @@ use super::identity::{
     TRACKER_FORMAT, evidence, read_evidence, read_identity, read_track_identity, write_identity,
     write_track_identity,
 };
-use crate::wire::{FormatError, Reader, Writer, corrupt};
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt, invalid};
 
 const MAGIC: &[u8; 4] = b"RFTK";
 /// Version of the encoding written by [`encode_tracker`].
@@ -481,7 +481,7 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
-    Ok(Tracker::from_parts(TrackerParts {
+    Tracker::from_parts(TrackerParts {
         accuracy,
         config,
         registration,
@@ -497,7 +497,8 @@ pub fn decode_tracker(bytes: &[u8]) -> Result<Tracker, FormatError> {
         judged,
         pressure_offset,
         mode_s_radars,
-    })?)
+    })
+    .map_err(invalid)
 }
 
 fn config(w: &mut Writer, c: &TrackerConfig) {
@@ -1650,9 +1651,9 @@ mod tests {
         #[test]
         fn mutated_trackers_are_errors_or_trackers_never_panics(
             which in 0..2usize,
-            edits in crate::mutation::edits(),
+            edits in wire_formats::mutation::edits(),
         ) {
-            let bytes = crate::mutation::apply(&valid_encodings()[which], &edits);
+            let bytes = wire_formats::mutation::apply(&valid_encodings()[which], &edits);
             if let Ok(tracker) = decode_tracker(&bytes) {
                 let again = encode_tracker(&tracker);
                 proptest::prop_assert!(decode_tracker(&again).is_ok());

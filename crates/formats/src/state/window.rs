@@ -37,7 +37,7 @@ use algo::tracking::{LagWindow, LagWindowParts, LatePolicy, Tracker};
 use super::tracker::{
     FORMAT_VERSION as TRACKER_FORMAT_VERSION, decode_tracker, encode_tracker_as, plot_as, read_plot,
 };
-use crate::wire::{FormatError, Reader, Writer, corrupt};
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt, invalid};
 
 const MAGIC: &[u8; 4] = b"RFLW";
 /// The format this release writes.
@@ -137,7 +137,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         (base, head, window)
     } else {
         let head = decode_tracker(&r.bytes()?)?;
-        let base = Tracker::new(head.config().clone()).map_err(FormatError::from)?;
+        let base = Tracker::new(head.config().clone()).map_err(invalid)?;
         (base, head, Vec::new())
     };
     let horizon = r.opt(Reader::f64)?;
@@ -156,7 +156,7 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
     if !r.is_empty() {
         return Err(corrupt("trailing bytes"));
     }
-    Ok(LagWindow::from_parts(LagWindowParts {
+    LagWindow::from_parts(LagWindowParts {
         policy,
         past_bound,
         approximate_from,
@@ -168,7 +168,8 @@ pub fn decode_lag_window(bytes: &[u8]) -> Result<LagWindow, FormatError> {
         newest,
         late,
         max_tracks,
-    })?)
+    })
+    .map_err(invalid)
 }
 
 #[cfg(test)]
@@ -441,9 +442,9 @@ mod tests {
         #[test]
         fn mutated_windows_are_errors_or_windows_never_panics(
             which in 0..2usize,
-            edits in crate::mutation::edits(),
+            edits in wire_formats::mutation::edits(),
         ) {
-            let bytes = crate::mutation::apply(&valid_encodings()[which], &edits);
+            let bytes = wire_formats::mutation::apply(&valid_encodings()[which], &edits);
             if let Ok(window) = decode_lag_window(&bytes) {
                 let again = encode_lag_window(&window);
                 proptest::prop_assert!(decode_lag_window(&again).is_ok());

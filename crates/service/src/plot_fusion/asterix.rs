@@ -1,5 +1,5 @@
 //! ASTERIX input of the plot-fusion tracker: raw CAT048/CAT034 bytes
-//! (decoded by `formats::asterix`) made into the tracker's plots, and
+//! (decoded by `wire_formats::asterix`) made into the tracker's plots, and
 //! CAT021 (ADS-B) and CAT020 (MLAT) records into its cooperative reports
 //! ([`cooperative`]).
 //!
@@ -30,7 +30,9 @@ use std::collections::BTreeSet;
 use super::{Network, PlotInput};
 use crate::{ServiceError, Violations};
 use algo::tracking::{Plot, TrackerConfig};
-use formats::asterix::{self, DecodeError, NORTH_MARKER, SECTOR_CROSSING, quality::nacv_sigma_mps};
+use wire_formats::asterix::{
+    self, DecodeError, NORTH_MARKER, SECTOR_CROSSING, quality::nacv_sigma_mps,
+};
 
 /// Seconds in a day.
 const DAY_S: f64 = 86_400.0;
@@ -404,7 +406,7 @@ fn cooperative(
     errors: &mut Vec<DecodeError>,
     out: &mut AsterixPlots,
 ) {
-    use formats::asterix::CooperativeReport;
+    use wire_formats::asterix::CooperativeReport;
     let adsb = decoded.adsb_reports.iter().map(|r| {
         let nacv = r.quality.and_then(|q| nacv_sigma_mps(q.nucr_nacv));
         (r as &dyn CooperativeReport, "adsb", nacv)

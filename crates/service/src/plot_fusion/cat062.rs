@@ -1,5 +1,5 @@
 //! CAT062 out: the service's tracks as ASTERIX system track messages
-//! (`formats::cat062`, edition 1.20), for the batch call (`cat062`), the
+//! (`wire_formats::cat062`, edition 1.20), for the batch call (`cat062`), the
 //! `plot_fusion` session's updates and the ASTERIX UDP output.
 //!
 //! What each item holds, from a [`TrackView`] and the [`Network`]:
@@ -28,7 +28,7 @@
 //!   false) and ADS-B is among its sources (AIS is not ADS-B: a track
 //!   whose self-reports are AIS only is never flagged).
 //!   `self_reported.validated` (ADS-B alone for 30 s) has no bit in 1.20;
-//!   MLAT's aged bit is not reached (`formats::cat062::TrackStatusFlags`).
+//!   MLAT's aged bit is not reached (`wire_formats::cat062::TrackStatusFlags`).
 //! - I062/290, each t − the time of the last update of its kind, and
 //!   absent when no update of that kind has come: TRK from `start_t`;
 //!   PSR, SSR, MDS from the identity's `last_primary_t`,
@@ -51,8 +51,8 @@
 //! `skipped`); the warnings say how many, with the first reason.
 
 use algo::tracking::ReportKind;
-use formats::asterix::FT_M;
-use formats::cat062::{
+use wire_formats::asterix::FT_M;
+use wire_formats::cat062::{
     self, Accuracy, AltitudeSource, Cat062Config, Encoded, LastMeasurement, SystemTrack,
     TrackMode3A, TrackStatusFlags, UpdateAges,
 };
@@ -61,7 +61,7 @@ use formats::cat062::{
 /// this (s): two scans of a 6-s en-route radar, as the track's I062/290
 /// ages show them.
 pub const AGED_AFTER_S: f64 = 12.0;
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::wire::{FormatError, Reader, Writer};
 
 use super::{Network, TrackView};
 use crate::{ServiceError, validate::Violations};
@@ -507,7 +507,7 @@ pub fn decode_options(r: &mut Reader<'_>) -> Result<Cat062Options, FormatError> 
     if !day_start_t.is_finite()
         || !(MIN_BLOCK_BYTES as usize..=cat062::MAX_BLOCK_LEN).contains(&max_block_bytes)
     {
-        return Err(formats::wire::corrupt("cat062 options"));
+        return Err(wire_formats::wire::corrupt("cat062 options"));
     }
     Ok(Cat062Options {
         config: Cat062Config {

@@ -51,8 +51,8 @@ use algo::{
         registration::{BiasPrior, RegistrationConfig},
     },
 };
-use formats::asterix::FT_M;
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::asterix::FT_M;
+use wire_formats::wire::{FormatError, Reader, Writer, invalid};
 
 /// Longest plot range accepted (m): far beyond any radar's horizon.
 const MAX_RANGE_M: f64 = 1.0e7;
@@ -1516,7 +1516,7 @@ impl Network {
     pub fn decode(r: &mut Reader<'_>) -> Result<Self, FormatError> {
         let frame = r.opt(|r| {
             let (lat, lon, h) = (r.f64()?, r.f64()?, r.f64()?);
-            Ok(LocalFrame::new(Ellipsoid::WGS84, lat, lon, h)?)
+            LocalFrame::new(Ellipsoid::WGS84, lat, lon, h).map_err(invalid)
         })?;
         let target_height = r.f64()?;
         let n = r.len(17)?;
@@ -1527,7 +1527,7 @@ impl Network {
             let rotation = r.opt(|r| {
                 let v = r.f64s()?;
                 if v.len() != 9 {
-                    return Err(formats::wire::corrupt("radar rotation"));
+                    return Err(wire_formats::wire::corrupt("radar rotation"));
                 }
                 Ok(Matrix3::from_column_slice(&v))
             })?;

@@ -1,5 +1,5 @@
 //! AIS over NMEA 0183 into a plot-fusion batch (`nmea`): the `!AIVDM`
-//! lines a coastal receiver sends, decoded by `formats::nmea`, each
+//! lines a coastal receiver sends, decoded by `wire_formats::nmea`, each
 //! position report (types 1–3, 18, 19, 27) made a cooperative AIS report
 //! ([`ReportInput`] with source `ais`, MMSI, SOG/COG and the
 //! position-accuracy flag) that follows the batch's JSON plots and
@@ -21,7 +21,7 @@ use super::report::ReportInput;
 use crate::ServiceError;
 use crate::validate::{Interval, Violations};
 use algo::tracking::identity::MAX_MMSI;
-use formats::nmea::{self, AisPosition};
+use wire_formats::nmea::{self, AisPosition};
 
 /// AIVDM lines and the offset of their times.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -132,7 +132,7 @@ fn plot(p: &AisPosition, t: f64) -> PlotInput {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formats::nmea::checksum;
+    use wire_formats::nmea::checksum;
 
     /// A line with a tag block at Unix time `c`.
     fn tagged(c: u64, sentence: &str) -> String {

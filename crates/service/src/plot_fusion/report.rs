@@ -25,9 +25,9 @@
 use super::PlotInput;
 use super::network::Network;
 use algo::tracking::{Identity, Plot, Report, ReportKind, TrackerConfig};
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::wire::{FormatError, Reader, Writer};
 
-pub use formats::asterix::quality::{K95 as CIRCULAR_95, nacp_sigma_m, nacv_sigma_mps};
+pub use wire_formats::asterix::quality::{K95 as CIRCULAR_95, nacp_sigma_m, nacv_sigma_mps};
 
 /// The σ of a one-dimensional 95 % bound: 1.96 σ.
 const LINEAR_95: f64 = 1.959_963_984_540_054;
@@ -247,7 +247,8 @@ impl ReportInput {
                 finite_in("velocity_north_mps", n, -2000.0, 2000.0)?,
             ],
             (None, None, Some(sog), Some(cog)) => {
-                let v = finite_in("sog_kn", sog, 0.0, 102.2)? * formats::asterix::NM_M / 3600.0;
+                let v =
+                    finite_in("sog_kn", sog, 0.0, 102.2)? * wire_formats::asterix::NM_M / 3600.0;
                 let c = finite_in("cog_deg", cog, 0.0, 360.0)?.to_radians();
                 [v * c.sin(), v * c.cos()]
             }

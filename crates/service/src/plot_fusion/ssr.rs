@@ -15,8 +15,8 @@
 
 use algo::tracking::identity::{Evidence, FLIGHT_LEVEL_RANGE, MAX_ADDRESS};
 use algo::tracking::{Detection, Emergency, Identity, Mode3A, ModeC, TrackIdentity, TrackOutput};
-use formats::asterix::FT_M;
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::asterix::FT_M;
+use wire_formats::wire::{FormatError, Reader, Writer};
 
 /// A plot's secondary fields as received (every one optional).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -46,7 +46,7 @@ impl SsrInput {
     }
 
     /// The fields of a decoded ASTERIX target report.
-    pub fn from_asterix(r: &formats::asterix::TargetReport) -> Self {
+    pub fn from_asterix(r: &wire_formats::asterix::TargetReport) -> Self {
         Self {
             mode_3a: r.mode_3a.map(|c| format!("{c:04o}")),
             // A code not extracted in this scan (L = 1: the radar's
@@ -414,7 +414,7 @@ pub fn decode_view(r: &mut Reader<'_>) -> Result<Option<IdentityView>, FormatErr
                     .into_iter()
                     .map(Emergency::name)
                     .find(|n| *n == e)
-                    .ok_or_else(|| formats::wire::corrupt("emergency"))
+                    .ok_or_else(|| wire_formats::wire::corrupt("emergency"))
                 })
                 .transpose()?,
             spi: r.bool()?,

@@ -28,8 +28,8 @@ use std::{
     time::{Duration, Instant},
 };
 
-use formats::wire::{FormatError, Reader, Writer};
 use tokio::sync::{broadcast, watch};
+use wire_formats::wire::{FormatError, Reader, Writer};
 
 use super::{
     PlotMark, SessionKind, Update,
@@ -124,7 +124,7 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
     let mut r = Reader::new(buf);
     let format = r.u8()?;
     if format != EVENT_FORMAT {
-        return Err(formats::wire::corrupt(&format!(
+        return Err(wire_formats::wire::corrupt(&format!(
             "session event format {format}"
         )));
     }
@@ -139,7 +139,7 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
         let n = r.len(8)?;
         let warnings = (0..n).map(|_| r.str()).collect::<Result<Vec<_>, _>>()?;
         let kind = KindName::from_tag(tag).ok_or_else(|| {
-            formats::wire::corrupt(&format!("session event of unknown kind {tag}"))
+            wire_formats::wire::corrupt(&format!("session event of unknown kind {tag}"))
         })?;
         kind.visit(DecodeBody {
             r: &mut r,
@@ -150,7 +150,9 @@ pub fn decode(buf: &[u8]) -> Result<SessionEvent, FormatError> {
         })?
     };
     if !r.is_empty() {
-        return Err(formats::wire::corrupt("trailing bytes in a session event"));
+        return Err(wire_formats::wire::corrupt(
+            "trailing bytes in a session event",
+        ));
     }
     Ok(SessionEvent {
         tenant,

@@ -34,7 +34,7 @@ pub mod registry;
 use std::fmt;
 
 use super::{ServiceError, Violations};
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::wire::{FormatError, Reader, Writer};
 
 /// First byte of every session written by this release: the envelope's
 /// format. Correlation sessions of earlier releases start with their own
@@ -190,7 +190,9 @@ pub trait SessionKind: Sized + Send + 'static {
     /// Reads what [`SessionKind::encode_batch`] wrote.
     fn decode_batch(r: &mut Reader<'_>) -> Result<Self::Batch, FormatError> {
         let _ = r;
-        Err(formats::wire::corrupt("this session kind keeps no log"))
+        Err(wire_formats::wire::corrupt(
+            "this session kind keeps no log",
+        ))
     }
     /// A session this kind wrote before the envelope existed (its first byte
     /// is below [`ENVELOPE_FORMAT`]); only the first kind has one.

@@ -53,13 +53,11 @@ use crate::{
     },
 };
 use algo::tracking::{LagWindow, TrackOutput, TrackStatus, Tracker};
-use formats::{
-    state::{
-        tracker::{decode_counters, decode_tracker, encode_counters},
-        window::{decode_lag_window, encode_lag_window},
-    },
-    wire::{FormatError, Reader, Writer, corrupt},
+use formats::state::{
+    tracker::{decode_counters, decode_tracker, encode_counters},
+    window::{decode_lag_window, encode_lag_window},
 };
+use wire_formats::wire::{FormatError, Reader, Writer, corrupt, invalid};
 
 /// Format of the kind's payload: 2 = format 1 (the network and the
 /// tracker) plus the radars' ASTERIX SAC/SIC; 3 adds the `cat062` option;
@@ -1052,7 +1050,7 @@ impl SessionKind for PlotFusionSession {
         } else {
             let tracker = decode_tracker(&bytes).map_err(stored)?;
             LagWindow::new(tracker, algo::tracking::window::DEFAULT_MAX_LAG_S)
-                .map_err(|e| stored(e.into()))?
+                .map_err(|e| stored(invalid(e)))?
         };
         let network = if format >= 2 {
             network.decode_sources(r).map_err(stored)?
@@ -1414,7 +1412,7 @@ fn decode_summary(r: &mut Reader<'_>) -> Result<AsterixSummary, FormatError> {
     let k = r.len(9)?;
     let mut errors = Vec::with_capacity(k);
     for _ in 0..k {
-        errors.push(formats::asterix::DecodeError {
+        errors.push(wire_formats::asterix::DecodeError {
             offset: r.usize()?,
             reason: r.str()?,
         });
@@ -1722,7 +1720,7 @@ pub(crate) mod tests {
             late: 1,
             late_offsets: vec![17],
             first_t: Some(1.5),
-            errors: vec![formats::asterix::DecodeError {
+            errors: vec![wire_formats::asterix::DecodeError {
                 offset: 30,
                 reason: "cut".into(),
             }],

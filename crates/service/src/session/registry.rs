@@ -9,7 +9,7 @@
 //! [`AnyView`] and of [`EventBody`] and its [`Registered`] impl; and its
 //! DTOs in the adapters.
 
-use formats::wire::FormatError;
+use wire_formats::wire::FormatError;
 
 use super::{
     DecodeError, PlotMark, SessionKind, Update, View, correlation::CorrelationSession,
@@ -153,7 +153,9 @@ impl Registered for CorrelationSession {
         // `encode_update` writes the plot marks of every kind: a
         // correlation session has none.
         if !plots.is_empty() {
-            return Err(formats::wire::corrupt("plot marks in a correlation event"));
+            return Err(wire_formats::wire::corrupt(
+                "plot marks in a correlation event",
+            ));
         }
         Ok(EventBody::Correlation(update))
     }

@@ -21,13 +21,11 @@ use algo::correlation::{
     align::Estimate,
     engine::{self, Decision},
 };
-use formats::{
-    state::{
-        correlator::{decode_correlator, encode_correlator},
-        scene::{decode_scene, encode_scene},
-    },
-    wire::{self, FormatError, Reader, Writer},
+use formats::state::{
+    correlator::{decode_correlator, encode_correlator},
+    scene::{decode_scene, encode_scene},
 };
+use wire_formats::wire::{self, FormatError, Reader, Writer};
 
 /// Appends the session's payload (format 3).
 pub(super) fn encode(s: &CorrelationSession, w: &mut Writer) {

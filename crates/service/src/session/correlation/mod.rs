@@ -37,7 +37,7 @@ use crate::{
     Rows, ServiceError,
     correlation::{CorrelateInput, GroupOutput, PairOutput, SampleInput, TrackName},
 };
-use formats::wire::{FormatError, Reader, Writer};
+use wire_formats::wire::{FormatError, Reader, Writer};
 
 /// First byte of a correlation session's payload inside the envelope; a
 /// later release that changes it bumps it and keeps a decoder for the older
@@ -267,7 +267,9 @@ impl SessionKind for CorrelationSession {
             let values = r.f64s()?;
             Rows::from_flat(values, rows, cols)
                 .map(Some)
-                .ok_or_else(|| formats::wire::corrupt("a matrix's values do not fill its shape"))
+                .ok_or_else(|| {
+                    wire_formats::wire::corrupt("a matrix's values do not fill its shape")
+                })
         };
         // A report takes at least five bytes.
         let n = r.len(5)?;
@@ -277,8 +279,9 @@ impl SessionKind for CorrelationSession {
                 let track = r.opt(Reader::str)?;
                 let t = r.opt(Reader::f64)?;
                 let state = r.f64s()?;
-                let covariance = matrix(r)?
-                    .ok_or_else(|| formats::wire::corrupt("a report without its covariance"))?;
+                let covariance = matrix(r)?.ok_or_else(|| {
+                    wire_formats::wire::corrupt("a report without its covariance")
+                })?;
                 let gain = matrix(r)?;
                 Ok(ReportInput {
                     node,

@@ -38,7 +38,7 @@
 //!
 //! Checked against libasterix's encoder and decoder
 //! (`checks/asterix_fixture.py`, `tests/api/asterix.rs` for CAT048/034;
-//! `checks/cat021_fixture.py`, `crates/formats/tests/cooperative_fixture.rs`
+//! `checks/cat021_fixture.py`, `crates/wire-formats/tests/cooperative_fixture.rs`
 //! for CAT021/020). Why not the `asterix` crate: docs/plot-fusion.md,
 //! "ASTERIX input".
 
@@ -61,7 +61,7 @@ use uap::Item;
 /// One nautical mile in metres (exact, by definition).
 pub const NM_M: f64 = 1852.0;
 /// One foot in metres (exact, by definition).
-pub const FT_M: f64 = algo::tracking::height::FT_M;
+pub const FT_M: f64 = 0.3048;
 /// One knot in metres per second (exact: 1852 m per 3600 s).
 pub const KT_MPS: f64 = NM_M / 3600.0;
 

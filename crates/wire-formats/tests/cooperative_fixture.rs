@@ -12,9 +12,9 @@
 //! Values agree to 1e-9 relative: the two sides multiply the same raw
 //! integers by the same LSBs, in an order that may differ.
 
-use formats::asterix::cat021::AirSpeed;
-use formats::asterix::{self, AdsbReport, CooperativeReport, Decoded, MlatReport};
 use serde_json::Value;
+use wire_formats::asterix::cat021::AirSpeed;
+use wire_formats::asterix::{self, AdsbReport, CooperativeReport, Decoded, MlatReport};
 
 const ADSB: &[u8] = include_bytes!("../../../tests/fixtures/cat021/adsb.bin");
 const MLAT: &[u8] = include_bytes!("../../../tests/fixtures/cat021/mlat.bin");

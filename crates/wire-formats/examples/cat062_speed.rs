@@ -3,14 +3,14 @@
 //! extensions, ages, geometric altitude, rate of climb, accuracies,
 //! measured information), encoded 1,000 times into 1,024-byte blocks.
 //!
-//!     cargo run -p formats --release --example cat062_speed [tracks] [repetitions]
+//!     cargo run -p wire-formats --release --example cat062_speed [tracks] [repetitions]
 
-use formats::cat062::{
+use std::hint::black_box;
+use std::time::Instant;
+use wire_formats::cat062::{
     Accuracy, AltitudeSource, Cat062Config, DEFAULT_MAX_BLOCK, LastMeasurement, SystemTrack,
     TrackStatusFlags, UpdateAges, encode_records,
 };
-use std::hint::black_box;
-use std::time::Instant;
 
 fn tracks(n: usize) -> Vec<SystemTrack> {
     (0..n)

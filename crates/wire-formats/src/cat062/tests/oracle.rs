@@ -286,7 +286,7 @@ fn input_json(tracks: &[SystemTrack]) -> String {
     let mut s = String::new();
     let _ = write!(
         s,
-        "{{\n \"generator\": \"crates/formats/src/cat062/tests/oracle.rs (regenerate_the_cat062_sample)\",\n \
+        "{{\n \"generator\": \"crates/wire-formats/src/cat062/tests/oracle.rs (regenerate_the_cat062_sample)\",\n \
          \"config\": {{\"sac\": {}, \"sic\": {}, \"service_id\": {}}},\n \"max_block\": {},\n \"tracks\": [\n",
         c.sac,
         c.sic,

@@ -3,7 +3,7 @@
 //! encoding. Every read is bounds-checked: a truncated or corrupt buffer
 //! gives an error, never a panic.
 
-use algo::AlgoError;
+use std::error::Error;
 
 /// Why stored bytes could not be read back.
 #[derive(Debug, thiserror::Error)]
@@ -14,9 +14,15 @@ pub enum FormatError {
     Corrupt(String),
     /// The bytes decode, but to values the numerical core rejects (a
     /// configuration, a covariance that is not positive definite, an index
-    /// out of range).
+    /// out of range): that rejection, made with [`invalid`].
     #[error("encoded state is not valid: {0}")]
-    Invalid(#[from] AlgoError),
+    Invalid(#[source] Box<dyn Error + Send + Sync>),
+}
+
+/// The error of bytes that decode to values their type rejects (the
+/// numerical core's error, kept as the source).
+pub fn invalid(e: impl Into<Box<dyn Error + Send + Sync>>) -> FormatError {
+    FormatError::Invalid(e.into())
 }
 
 /// Appends values to a byte buffer.

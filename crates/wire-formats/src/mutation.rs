@@ -1,4 +1,5 @@
-//! Test-only: proptest strategies that mutate valid encodings, so that the
+//! Test-only (this crate's tests, and `formats`' through the `mutation`
+//! feature): proptest strategies that mutate valid encodings, so that the
 //! never-panics properties of the decoders reach past their first checks
 //! (magic, version, lengths) into the fields behind them. A mutation is a
 //! short list of edits of the kinds a corrupt store or a hostile sender
@@ -9,7 +10,7 @@ use proptest::prelude::*;
 
 /// One edit of a byte string; positions are taken modulo its length.
 #[derive(Debug, Clone)]
-pub(crate) enum Edit {
+pub enum Edit {
     Set(usize, u8),
     Xor(usize, u8),
     /// A little-endian u64 written over 8 bytes (a length, a count, an
@@ -44,12 +45,12 @@ fn edit() -> impl Strategy<Value = Edit> {
 }
 
 /// 1 to 6 edits.
-pub(crate) fn edits() -> impl Strategy<Value = Vec<Edit>> {
+pub fn edits() -> impl Strategy<Value = Vec<Edit>> {
     proptest::collection::vec(edit(), 1..=6)
 }
 
 /// `bytes` with `edits` applied in order.
-pub(crate) fn apply(bytes: &[u8], edits: &[Edit]) -> Vec<u8> {
+pub fn apply(bytes: &[u8], edits: &[Edit]) -> Vec<u8> {
     let mut b = bytes.to_vec();
     for e in edits {
         let at = |i: usize, b: &Vec<u8>| if b.is_empty() { 0 } else { i % b.len() };
