@@ -809,10 +809,9 @@ impl Tracker {
             plots: frame.clone(),
             clutter,
         };
-        let probes = plots.clone();
         let hits = self.run_frame(t, source, plots, report)?;
         if Registrar::learns(&self.config) {
-            let hits = self.isolated(t, &probes, hits)?;
+            let hits = self.reference_hits(t, &frame, hits)?;
             self.registrar.learn_reports(
                 &self.config,
                 &self.applied,
@@ -827,23 +826,27 @@ impl Tracker {
         Ok(())
     }
 
-    /// The hits of a report frame (reports `probes`) whose track's last
-    /// radar plot no other track could have taken: no other confirmed
-    /// track passes the gate's pre-test at the report with that radar's
-    /// covariance as applied (its bias's σ included). Registration learns
-    /// only from them: in a crowd (moored ships a few tens of metres apart,
-    /// a bias of the same size) the plot a track took may be a neighbour's,
-    /// and the nearer of two plots is chosen, which would pull the estimate
-    /// towards zero.
-    fn isolated(
+    /// The hits of a report frame (reports `frame`) that registration
+    /// learns from: the track trusts its self-reported positions with no
+    /// disagreement pending, has a last radar plot, and is isolated: no
+    /// other confirmed track passes the gate's pre-test at the report with
+    /// that radar's covariance as applied (its bias's σ included). In a
+    /// crowd (moored ships a few tens of metres apart, a bias of the same
+    /// size) the plot a track took may be a neighbour's, and the nearer of
+    /// two plots is chosen, which would pull the estimate towards zero.
+    fn reference_hits(
         &mut self,
         t: f64,
-        probes: &[CartesianPlot],
+        frame: &[Plot],
         hits: Vec<Hit>,
     ) -> Result<Vec<Hit>, AlgoError> {
         let radars = self.config.radars.len();
         let mut out = Vec::with_capacity(hits.len());
         for h in hits {
+            let v = &self.tracks[h.slot].identity.validation;
+            if !v.trusted() || v.disagreements > 0 {
+                continue;
+            }
             let Some(older) = h
                 .previous
                 .filter(|p| p.report.is_none() && p.radar < radars)
@@ -853,7 +856,7 @@ impl Tracker {
             let bias = self.registrar.biases[older.radar];
             let spec = registration::inflated(&self.applied[older.radar], &bias);
             let radar_plot = register(&spec, older.radar, &registration::correct(&older, &bias))?;
-            let mut probe = probes[h.plot].clone();
+            let mut probe = report_plot(&frame[h.plot], self.config.axes);
             probe.r = radar_plot.r;
             let near = self.index.candidates(
                 &self.tracks,

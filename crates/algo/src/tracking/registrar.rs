@@ -109,10 +109,10 @@ impl Registrar {
         self.learn(cfg, radars, tracks, &pairs)
     }
 
-    /// A report frame's pairs (`frame`'s reports, `hits` on `tracks`):
-    /// each confirmed track a report updated, while the track trusts its
-    /// self-reported positions and has no disagreement pending, with its
-    /// last radar plot; then the estimate is solved again.
+    /// A report frame's pairs (`frame`'s reports, `hits` on `tracks`, the
+    /// hits the tracker chose as references: trusted, isolated, with a
+    /// last radar plot): each report with that plot; then the estimate is
+    /// solved again.
     pub(crate) fn learn_reports(
         &mut self,
         cfg: &TrackerConfig,
@@ -123,15 +123,7 @@ impl Registrar {
     ) -> Result<(), AlgoError> {
         let pairs: Vec<(usize, Plot, Plot, bool)> = hits
             .iter()
-            .filter_map(|h| {
-                let track = &tracks[h.slot];
-                let v = &track.identity.validation;
-                if !v.trusted() || v.disagreements > 0 {
-                    return None;
-                }
-                let older = h.previous.filter(|p| p.report.is_none())?;
-                Some((h.slot, frame[h.plot], older, true))
-            })
+            .filter_map(|h| Some((h.slot, frame[h.plot], h.previous?, true)))
             .collect();
         self.learn(cfg, radars, tracks, &pairs)
     }

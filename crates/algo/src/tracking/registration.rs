@@ -511,6 +511,7 @@ struct End {
 /// A report's end is its own position with its stated σ.
 fn end(
     radars: &[RadarSpec],
+    offsets: &[usize],
     solved: &(DVector<f64>, DMatrix<f64>),
     plot: &Plot,
     rows: usize,
@@ -526,7 +527,6 @@ fn end(
             noise,
         };
     }
-    let (offsets, _) = layout(radars);
     let r = plot.radar;
     let radar = &radars[r];
     let mut bias = [0.0; 3];
@@ -601,9 +601,10 @@ pub fn add_pair(
     // instead, the second-order terms (Δρ·Δθ across the beam: 6 m for
     // 600 m and 0.6° at 50 km) made the azimuth σ overconfident for large
     // biases.
+    let (offsets, _) = layout(radars);
     let (ea, eb) = (
-        end(radars, solved, newer, rows),
-        end(radars, solved, older, rows),
+        end(radars, &offsets, solved, newer, rows),
+        end(radars, &offsets, solved, older, rows),
     );
     let mut d = &ea.position - &eb.position;
     for i in 0..rows {

@@ -421,9 +421,7 @@ pub fn track(input: TrackInput) -> Result<TrackOutput, ServiceError> {
         _ => None,
     };
     if let Some(n) = &input.nmea {
-        let from = nmea::reports(n, "nmea")?;
-        plots.extend(network.plots(&from.plots, &config, "nmea")?);
-        warnings.extend(from.warnings);
+        nmea::extend(n, (&network, &config), &mut plots, &mut warnings)?;
     }
     if plots.is_empty() {
         warnings.push(if input.asterix.is_some() {

@@ -17,10 +17,12 @@
 //! fails a batch.
 
 use super::PlotInput;
+use super::network::Network;
 use super::report::ReportInput;
 use crate::ServiceError;
 use crate::validate::{Interval, Violations};
 use algo::tracking::identity::MAX_MMSI;
+use algo::tracking::{Plot, TrackerConfig};
 use wire_formats::nmea::{self, AisPosition};
 
 /// AIVDM lines and the offset of their times.
@@ -104,6 +106,21 @@ pub fn reports(input: &NmeaInput, field: &str) -> Result<NmeaReports, ServiceErr
         ));
     }
     Ok(out)
+}
+
+/// The block's AIS reports as the tracker's plots of `network` (appended
+/// to `plots`), its warnings appended to `warnings`: what the batch call
+/// and a session batch do with an `nmea` block.
+pub fn extend(
+    input: &NmeaInput,
+    (network, config): (&Network, &TrackerConfig),
+    plots: &mut Vec<Plot>,
+    warnings: &mut Vec<String>,
+) -> Result<(), ServiceError> {
+    let from = reports(input, "nmea")?;
+    plots.extend(network.plots(&from.plots, config, "nmea")?);
+    warnings.extend(from.warnings);
+    Ok(())
 }
 
 /// A position report as a cooperative AIS report at `t`.

@@ -313,9 +313,7 @@ impl PlotFusionSession {
             summary = Some(from.summary);
         }
         if let Some(n) = &batch.nmea {
-            let from = nmea::reports(n, "nmea")?;
-            plots.extend(self.network.plots(&from.plots, &config, "nmea")?);
-            warnings.extend(from.warnings);
+            nmea::extend(n, (&self.network, &config), &mut plots, warnings)?;
         }
         let before: Vec<TrackOutput> = self
             .last_tracks
